@@ -1,0 +1,62 @@
+"""Pinhole camera model with OpenCV's radial-tangential distortion."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Intrinsics in OpenCV's convention (pixel centres at integers, distortion k1 k2 p1 p2 k3)."""
+
+    width: int = 512
+    height: int = 512
+    fx: float = 458.5
+    fy: float = 457.855
+    cx: float = 255.5
+    cy: float = 255.5
+    dist: tuple[float, float, float, float, float] = field(default=(0.0, 0.0, 0.0, 0.0, 0.0))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 camera matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        return np.asarray(self.dist, dtype=float)
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist_coeffs != 0.0))
+
+    def project(self, points_c: np.ndarray, distort: bool = True) -> np.ndarray:
+        """Project Nx3 points in the camera frame to Nx2 pixels (NaN behind the camera)."""
+        points_c = np.atleast_2d(np.asarray(points_c, dtype=float))
+        pixels = np.full((len(points_c), 2), np.nan)
+        in_front = points_c[:, 2] > 1e-9
+        if not np.any(in_front):
+            return pixels
+        if distort and self.has_distortion:
+            projected, _ = cv2.projectPoints(
+                points_c[in_front], np.zeros(3), np.zeros(3), self.matrix, self.dist_coeffs
+            )
+            pixels[in_front] = projected.reshape(-1, 2)
+        else:
+            normalised = points_c[in_front, :2] / points_c[in_front, 2:3]
+            pixels[in_front, 0] = self.fx * normalised[:, 0] + self.cx
+            pixels[in_front, 1] = self.fy * normalised[:, 1] + self.cy
+        return pixels
+
+    def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
+        """Remove lens distortion from Nx2 pixels (returns pixels of the ideal pinhole)."""
+        pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
+        if not self.has_distortion:
+            return pixels.copy()
+        undistorted = cv2.undistortPoints(
+            pixels.reshape(-1, 1, 2), self.matrix, self.dist_coeffs, P=self.matrix
+        )
+        return undistorted.reshape(-1, 2)

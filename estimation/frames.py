@@ -1,0 +1,121 @@
+"""The one place that defines the project's frames and conventions.
+
+Frames (all right-handed, metres, radians):
+
+* ``W`` world: x forward (north-ish), y left, z up; gravity along -z.  The ground is *not*
+  assumed to be at z = 0 for anything that matters (ground effect and touchdown use the
+  surface actually under the drone).
+* ``B`` drone body: FLU, x forward, y left, z up; origin at the centre of mass.
+* ``C`` camera: OpenCV, x right in the image, y down in the image, z along the optical axis.
+  The camera looks down the body's -z axis, with the image top towards the body's nose:
+  ``x_C = -y_B``, ``y_C = -x_B``, ``z_C = -z_B``.
+* ``P`` deck (top plate of the Stewart platform): origin at the centre of the top surface,
+  z along the surface normal (up), x towards the platform's bow, y to port.
+* ``D`` tag/deck-pose frame: origin at the tag centre on the deck surface, with the AprilTag
+  convention: x to the tag's right, y to the tag's bottom, z *into* the deck.  It is fixed to
+  ``P`` by ``R_PD = R_BC``, so a level drone at zero yaw above a level deck sees
+  ``R_CD = I``, and the deck 2 m below gives ``t_CD = (0, 0, 2)`` (as in CRHF Sec. 4.1).
+
+The deck pose that every estimator returns and the environment reports is ``T_CD``: the
+rotation ``R_CD`` (columns are the D axes in C) and the translation ``t_CD`` (the tag centre in
+C).  Euler angles are ZYX (intrinsic yaw, then pitch, then roll) and are reported as
+``(roll, pitch, yaw)``.
+
+Pixels follow OpenCV: the centre of the top-left pixel is (0, 0).  Tag corners are always in
+the AprilTag/IPPE_SQUARE order of :data:`TAG_CORNER_SIGNS`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+#: Camera axes expressed in the body frame (columns): x_C = -y_B, y_C = -x_B, z_C = -z_B.
+R_BC: np.ndarray = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+#: Tag frame axes expressed in the deck (top-plate) frame; equal to R_BC by construction.
+R_PD: np.ndarray = R_BC.copy()
+
+#: Corner order of a detected tag, in units of half the tag size, in the tag frame D:
+#: (-1, +1), (+1, +1), (+1, -1), (-1, -1).  This is pupil-apriltags' order and the order that
+#: OpenCV's SOLVEPNP_IPPE_SQUARE expects.  With y down this is bottom-left, bottom-right,
+#: top-right, top-left as seen by a camera with R_CD = I.
+TAG_CORNER_SIGNS: np.ndarray = np.array([[-1.0, 1.0], [1.0, 1.0], [1.0, -1.0], [-1.0, -1.0]])
+
+#: Distance of each ToF sensor from the camera and its angle to the camera axes (IHRCF Eq. 12).
+TOF_ARM_DISTANCE_M: float = 0.1
+TOF_ARM_ANGLE_RAD: float = np.deg2rad(45.0)
+
+
+def tag_corners_in_tag_frame(tag_size: float) -> np.ndarray:
+    """Return the 4x3 tag corners in the tag frame D (z = 0), in detection order."""
+    half = 0.5 * tag_size
+    corners = np.zeros((4, 3))
+    corners[:, :2] = TAG_CORNER_SIGNS * half
+    return corners
+
+
+def tof_positions_in_camera_frame(
+    distance: float = TOF_ARM_DISTANCE_M, angle: float = TOF_ARM_ANGLE_RAD
+) -> np.ndarray:
+    """Return the 4x3 ToF sensor origins in the camera frame C (IHRCF Eq. 12, centred).
+
+    The paper puts sensor 1 at its origin and numbers the others round the square
+    (Ps2 along +x, Ps3 diagonal, Ps4 along +y); here the same square is centred on the
+    camera: sensor i sits ``distance`` from the camera at ``angle`` to the camera axes.
+    All four lie in the camera's plane (z = 0) and measure along +z_C (the body's down axis).
+    """
+    dx = distance * np.cos(angle)
+    dy = distance * np.sin(angle)
+    return np.array([[-dx, -dy, 0.0], [dx, -dy, 0.0], [dx, dy, 0.0], [-dx, dy, 0.0]])
+
+
+def euler_zyx_from_matrix(rotation: np.ndarray) -> np.ndarray:
+    """Return (roll, pitch, yaw) in radians of a rotation matrix, ZYX (yaw-pitch-roll) order."""
+    yaw, pitch, roll = Rotation.from_matrix(rotation).as_euler("ZYX")
+    return np.array([roll, pitch, yaw])
+
+
+def matrix_from_euler_zyx(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Return the rotation matrix R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+
+
+def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """Return the 4x4 homogeneous transform of a rotation and a translation."""
+    transform = np.eye(4)
+    transform[:3, :3] = rotation
+    transform[:3, 3] = translation
+    return transform
+
+
+def invert_transform(transform: np.ndarray) -> np.ndarray:
+    """Return the inverse of a 4x4 rigid transform."""
+    rotation = transform[:3, :3]
+    inverse = np.eye(4)
+    inverse[:3, :3] = rotation.T
+    inverse[:3, 3] = -rotation.T @ transform[:3, 3]
+    return inverse
+
+
+def deck_pose_in_camera(
+    t_wb: np.ndarray,
+    r_wb: np.ndarray,
+    t_wp: np.ndarray,
+    r_wp: np.ndarray,
+    t_bc: np.ndarray,
+    tag_offset_p: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(R_CD, t_CD)`` from the world poses of the body and the top plate.
+
+    ``t_bc`` is the camera origin in the body frame; ``tag_offset_p`` the tag centre in the
+    top-plate frame (default: the plate origin).
+    """
+    offset = np.zeros(3) if tag_offset_p is None else np.asarray(tag_offset_p, dtype=float)
+    r_wc = r_wb @ R_BC
+    t_wc = t_wb + r_wb @ t_bc
+    r_wd = r_wp @ R_PD
+    t_wd = t_wp + r_wp @ offset
+    r_cd = r_wc.T @ r_wd
+    t_cd = r_wc.T @ (t_wd - t_wc)
+    return r_cd, t_cd

@@ -1,0 +1,1 @@
+"""deck-landing simulation: a quadrotor over a moving Stewart-platform deck (PyBullet)."""
