@@ -1,1 +1,15 @@
-"""deck-landing simulation: a quadrotor over a moving Stewart-platform deck (PyBullet)."""
+"""deck-landing simulation: a quadrotor over a moving Stewart-platform deck (PyBullet).
+
+Importing the package registers ``DeckLanding-v0`` with Gymnasium.
+"""
+
+from gymnasium.envs.registration import register, registry
+
+if "DeckLanding-v0" not in registry:
+    register(
+        id="DeckLanding-v0",
+        entry_point="landing_env.envs.deck_landing:DeckLandingEnv",
+        disable_env_checker=False,
+    )
+
+__all__ = ["register"]

@@ -1,54 +1,5 @@
-"""Errors raised by the simulator and its configuration."""
+"""Errors raised by the simulator and its configuration (defined in :mod:`estimation.errors`)."""
 
-from __future__ import annotations
+from estimation.errors import ConfigError, require_choice, require_range
 
-from collections.abc import Iterable
-from typing import Any
-
-
-class ConfigError(ValueError):
-    """A configuration key or value is not allowed; the message names the key and what is allowed.
-
-    Config dataclasses raise it from ``__post_init__`` with the bare field name as ``key``; the
-    loader re-raises it with the full dotted path (``camera.mode``).
-    """
-
-    def __init__(self, key: str, message: str) -> None:
-        self.key = key
-        self.detail = message
-        super().__init__(f"{key}: {message}")
-
-    def under(self, prefix: str) -> ConfigError:
-        """The same error with ``prefix.`` in front of the key."""
-        return ConfigError(f"{prefix}.{self.key}" if prefix else self.key, self.detail)
-
-
-def require_choice(key: str, value: Any, allowed: Iterable[Any]) -> None:
-    """Raise ConfigError unless ``value`` is one of ``allowed``."""
-    allowed = tuple(allowed)
-    if value not in allowed:
-        names = ", ".join(repr(a) for a in allowed)
-        raise ConfigError(key, f"{value!r} is not allowed; choose one of {names}")
-
-
-def require_range(
-    key: str,
-    value: float,
-    low: float | None = None,
-    high: float | None = None,
-    *,
-    low_inclusive: bool = True,
-    high_inclusive: bool = True,
-) -> None:
-    """Raise ConfigError unless ``low <= value <= high`` (bounds optional, inclusivity settable)."""
-    ok = True
-    if low is not None:
-        ok &= value >= low if low_inclusive else value > low
-    if high is not None:
-        ok &= value <= high if high_inclusive else value < high
-    if not ok:
-        lo = "-inf" if low is None else f"{low}"
-        hi = "inf" if high is None else f"{high}"
-        lb = "[" if low_inclusive else "("
-        hb = "]" if high_inclusive else ")"
-        raise ConfigError(key, f"{value!r} is out of range; allowed {lb}{lo}, {hi}{hb}")
+__all__ = ["ConfigError", "require_choice", "require_range"]

@@ -1,0 +1,38 @@
+"""The ``deck-landing`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from agents.demo import run_demo
+
+    log = run_demo(config=args.config, seed=args.seed, out_dir=Path(args.out))
+    return 0 if log.final_info.get("outcome") else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="deck-landing",
+        description="Quadrotor landing on a moving Stewart-platform deck.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    demo = sub.add_parser("demo", help="one seeded episode: summary, camera video, trajectory plot")
+    demo.add_argument("--config", default="default", help="a config name in configs/ or a path")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--out", default="results/demo", help="output directory")
+    demo.set_defaults(func=_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,148 @@
+"""One seeded episode of DeckLanding-v0 under the scripted descend policy: summary, video, plot."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import imageio.v2 as imageio
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+from tqdm import tqdm
+
+import landing_env  # noqa: F401  (registers the environments)
+from agents.scripted import DescendPolicy
+
+
+@dataclass
+class EpisodeLog:
+    """Per-step record of an episode, for plots and summaries."""
+
+    time: list[float] = field(default_factory=list)
+    drone: list[np.ndarray] = field(default_factory=list)
+    deck: list[np.ndarray] = field(default_factory=list)
+    pose_true: list[np.ndarray] = field(default_factory=list)
+    pose_observed: list[np.ndarray] = field(default_factory=list)
+    pose_valid: list[bool] = field(default_factory=list)
+    total_reward: float = 0.0
+    final_info: dict[str, Any] = field(default_factory=dict)
+
+    def record(self, observation: dict, info: dict) -> None:
+        self.time.append(info["time_s"])
+        self.drone.append(info["drone"]["position_w"])
+        self.deck.append(info["deck"]["position_w"])
+        self.pose_true.append(info["deck_pose_true"])
+        self.pose_observed.append(observation["deck_pose"].astype(float))
+        self.pose_valid.append(bool(observation["deck_pose_valid"][0]))
+
+
+def run_episode(
+    env: gym.Env, policy: DescendPolicy, seed: int, frames: list | None = None
+) -> EpisodeLog:
+    """Run one episode; append rendered frames to ``frames`` when given."""
+    log = EpisodeLog()
+    observation, info = env.reset(seed=seed)
+    policy.reset()
+    log.record(observation, info)
+    if frames is not None:
+        frames.append(env.render())
+    limit = env.unwrapped.max_steps
+    with tqdm(total=limit, desc="episode", unit="step", leave=False) as bar:
+        while True:
+            observation, reward, terminated, truncated, info = env.step(policy(observation))
+            log.total_reward += reward
+            log.record(observation, info)
+            if frames is not None:
+                frames.append(env.render())
+            bar.update()
+            if terminated or truncated:
+                break
+    log.final_info = info
+    return log
+
+
+def plot_trajectory(log: EpisodeLog, path: Path) -> None:
+    """Drone and deck heights against time, and the drone's track over the deck."""
+    t = np.asarray(log.time)
+    drone = np.asarray(log.drone)
+    deck = np.asarray(log.deck)
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    axes[0].plot(t, drone[:, 2], label="drone centre")
+    axes[0].plot(t, deck[:, 2], label="deck surface")
+    axes[0].set(xlabel="time (s)", ylabel="z (m)", title="Height")
+    axes[0].legend()
+    rel = drone - deck
+    axes[1].plot(t, rel[:, 0], label="x")
+    axes[1].plot(t, rel[:, 1], label="y")
+    axes[1].set(xlabel="time (s)", ylabel="drone - deck (m)", title="Horizontal offset")
+    axes[1].legend()
+    true = np.asarray(log.pose_true)
+    observed = np.asarray(log.pose_observed)
+    valid = np.asarray(log.pose_valid)
+    axes[2].plot(t, true[:, 2], "k-", label="true tag z in camera")
+    axes[2].plot(t[valid], observed[valid, 2], ".", ms=3, label="observed")
+    axes[2].set(xlabel="time (s)", ylabel="z_C (m)", title="Deck pose seen by the policy")
+    axes[2].legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def summarise(log: EpisodeLog, console: Console) -> None:
+    info = log.final_info
+    table = Table(title="DeckLanding-v0 episode")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("outcome", info["outcome"])
+    table.add_row("episode time (s)", f"{info['time_s']:.2f}")
+    table.add_row("return", f"{log.total_reward:.2f}")
+    touchdown = info.get("touchdown")
+    if touchdown:
+        table.add_row("relative normal speed (m/s)", f"{touchdown['relative_normal_speed']:.3f}")
+        table.add_row(
+            "relative tangential speed (m/s)", f"{touchdown['relative_tangential_speed']:.3f}"
+        )
+        table.add_row("deck tilt (deg)", f"{touchdown['deck_tilt_deg']:.2f}")
+        table.add_row("drone-to-deck attitude (deg)", f"{touchdown['relative_attitude_deg']:.2f}")
+        table.add_row("lateral offset (m)", f"{touchdown['lateral_offset_m']:.3f}")
+        table.add_row("all feet on deck", str(touchdown["all_feet_touched"]))
+        table.add_row("on deck 1 s later", str(touchdown["on_deck_after_settle"]))
+        failed = ", ".join(touchdown["failed_checks"]) or "none"
+        table.add_row("failed checks", failed)
+    if "crash_contact" in info:
+        table.add_row("crash contact", info["crash_contact"])
+    valid = np.asarray(log.pose_valid)
+    table.add_row("steps with a valid deck estimate", f"{valid.sum()}/{valid.size}")
+    console.print(table)
+
+
+def run_demo(
+    config: str = "default", seed: int = 0, out_dir: Path = Path("results/demo"), **kw
+) -> EpisodeLog:
+    """The `make demo` job: one seeded episode with the camera rendered and the tag detected."""
+    console = Console()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # the demo renders the camera and detects the tag for real (training uses `project`)
+    kw.setdefault("overrides", {}).setdefault("camera.mode", "render")
+    env = gym.make("DeckLanding-v0", config=config, render_mode="rgb_array", **kw)
+    policy = DescendPolicy(env.unwrapped.config.action)
+    frames: list[np.ndarray] = []
+    try:
+        log = run_episode(env, policy, seed, frames)
+    finally:
+        env.close()
+    summarise(log, console)
+    video = out_dir / "camera.mp4"
+    imageio.mimsave(video, frames, fps=env.unwrapped.config.simulation.env_hz, macro_block_size=1)
+    plot = out_dir / "trajectory.png"
+    plot_trajectory(log, plot)
+    console.print(f"camera video: {video}\ntrajectory plot: {plot}")
+    return log

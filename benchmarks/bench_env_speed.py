@@ -1,0 +1,83 @@
+"""Steps per second and real-time factor of DeckLanding-v0 (prints figures; not a test).
+
+    .venv/bin/python benchmarks/bench_env_speed.py [--seconds 60]
+
+Measures the `project` and `render` camera modes, one environment in this process and two
+environments in parallel (one process each, as SubprocVecEnv runs them).  The deck moves
+(sum of sinusoids), the four ToF rays are cast and the IMU is sampled at 240 Hz in every case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import time
+
+import gymnasium as gym
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+import landing_env  # noqa: F401
+
+
+def _run(mode: str, sim_seconds: float, seed: int, queue=None) -> tuple[int, float, float]:
+    env = gym.make(
+        "DeckLanding-v0", overrides={"camera.mode": mode, "simulation.max_episode_s": 1e4}
+    )
+    env.reset(seed=seed)
+    env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
+    steps = int(sim_seconds / env_dt)
+    # hover: the drone stays in the air, so every step runs the full pipeline
+    action = np.zeros(4, dtype=np.float32)
+    env.step(action)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset(seed=seed)
+    wall = time.perf_counter() - start
+    env.close()
+    result = (steps, wall, steps * env_dt)
+    if queue is not None:
+        queue.put(result)
+    return result
+
+
+def _parallel(mode: str, sim_seconds: float, n: int) -> tuple[int, float, float]:
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    procs = [ctx.Process(target=_run, args=(mode, sim_seconds, i, queue)) for i in range(n)]
+    for proc in procs:
+        proc.start()
+    results = [queue.get() for _ in procs]
+    for proc in procs:
+        proc.join()
+    steps = sum(r[0] for r in results)
+    wall = max(r[1] for r in results)
+    sim = sum(r[2] for r in results)
+    return steps, wall, sim
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per env")
+    parser.add_argument("--render-seconds", type=float, default=20.0)
+    args = parser.parse_args()
+    console = Console()
+    table = Table(title="DeckLanding-v0 speed (240 Hz physics, 20 Hz steps)")
+    for column in ("camera mode", "envs", "steps/s", "real-time factor"):
+        table.add_column(column, justify="right")
+    for mode, seconds in (("project", args.seconds), ("render", args.render_seconds)):
+        for n in (1, 2):
+            if n == 1:
+                steps, wall, sim = _run(mode, seconds, 0)
+            else:
+                steps, wall, sim = _parallel(mode, seconds, n)
+            table.add_row(mode, str(n), f"{steps / wall:.0f}", f"{sim / wall:.1f}x")
+            console.print(f"{mode} x{n}: {steps} steps in {wall:.1f} s")
+    console.print(table)
+
+
+if __name__ == "__main__":
+    main()

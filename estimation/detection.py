@@ -1,0 +1,116 @@
+"""AprilTag detection (pupil-apriltags) returning corners in the project's pixel convention.
+
+pupil-apriltags puts pixel centres at ``i + 0.5`` (measured: a black square over pixel columns
+100..199 gives corner x ~ 99.9 and ~ 199.9), while the project uses OpenCV's convention
+(centre of the top-left pixel at (0, 0)); corners are therefore shifted by -0.5.  Its corner
+order is kept: it is the order of :data:`estimation.frames.TAG_CORNER_SIGNS`.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import cv2
+import numpy as np
+from pupil_apriltags import Detector
+
+from estimation.types import TagDetection
+
+#: pupil-apriltags' pixel-centre offset relative to OpenCV's convention.
+PUPIL_TO_OPENCV_OFFSET_PX: float = -0.5
+
+
+def _release_safely(detector: Detector) -> None:
+    """Free a pupil-apriltags detector: the detector first, then its tag families.
+
+    pupil-apriltags' own ``__del__`` frees the family first, and freeing the detector then
+    reads the freed family (intermittent segfaults; pupil-labs/apriltags issues 34 and 46,
+    fixed the same way in the dt-apriltags fork).  Clearing the pointer makes its ``__del__``
+    a no-op.
+    """
+    pointer = getattr(detector, "tag_detector_ptr", None)
+    if pointer is None:
+        return
+    libc = detector.libc
+    libc.apriltag_detector_destroy.restype = None
+    libc.apriltag_detector_destroy(pointer)
+    for family, family_pointer in detector.tag_families.items():
+        destroy = getattr(libc, f"{family}_destroy")
+        destroy.restype = None
+        destroy(family_pointer)
+    detector.tag_detector_ptr = None
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """Return a contiguous uint8 grey image from a uint8 grey, RGB or RGBA image."""
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise TypeError(f"expected a uint8 image, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_RGBA2GRAY)
+    elif image.ndim == 3 and image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    elif image.ndim != 2:
+        raise ValueError(f"expected an HxW, HxWx3 or HxWx4 image, got shape {image.shape}")
+    return np.ascontiguousarray(image)
+
+
+class AprilTagDetector:
+    """A pupil-apriltags detector with the project's corner convention.
+
+    Parameters are pupil-apriltags' own: ``quad_decimate`` > 1 speeds detection up at the
+    cost of range (small tags are lost) but not of corner accuracy (edges are refined on the
+    full-resolution image when ``refine_edges`` is on).
+    """
+
+    def __init__(
+        self,
+        families: str = "tag36h11",
+        quad_decimate: float = 1.0,
+        quad_sigma: float = 0.0,
+        refine_edges: bool = True,
+        decode_sharpening: float = 0.25,
+        nthreads: int = 1,
+        max_hamming: int = 0,
+    ) -> None:
+        if quad_decimate < 1.0:
+            raise ValueError(f"quad_decimate must be >= 1, got {quad_decimate}")
+        if nthreads < 1:
+            raise ValueError(f"nthreads must be >= 1, got {nthreads}")
+        self.families = families
+        self.max_hamming = max_hamming
+        self._detector = Detector(
+            families=families,
+            nthreads=nthreads,
+            quad_decimate=quad_decimate,
+            quad_sigma=quad_sigma,
+            refine_edges=int(refine_edges),
+            decode_sharpening=decode_sharpening,
+        )
+        # runs when this wrapper is collected or at interpreter exit, before pupil's __del__
+        self._finalizer = weakref.finalize(self, _release_safely, self._detector)
+
+    def close(self) -> None:
+        """Free the C detector now (it is freed on collection otherwise)."""
+        self._finalizer()
+
+    def detect(self, gray_or_rgb: np.ndarray) -> tuple[TagDetection, ...]:
+        """Detect tags; corners are 4x2 OpenCV pixels in AprilTag order (see module doc)."""
+        if not self._finalizer.alive:
+            raise RuntimeError("the detector has been closed")
+        gray = to_gray(gray_or_rgb)
+        results = self._detector.detect(gray)
+        detections = []
+        for result in results:
+            if result.hamming > self.max_hamming:
+                continue
+            corners = np.asarray(result.corners, dtype=float) + PUPIL_TO_OPENCV_OFFSET_PX
+            detections.append(
+                TagDetection(
+                    tag_id=int(result.tag_id),
+                    corners_px=corners,
+                    decision_margin=float(result.decision_margin),
+                    hamming=int(result.hamming),
+                )
+            )
+        return tuple(detections)

@@ -1,0 +1,92 @@
+"""IHRCF: Inverse Homography Range Camera Fusion (Sefidgar & Landry, Sensors 2022).
+
+Steps (paper Sec. 2.4–2.7), in the project frames of :mod:`estimation.frames`:
+
+1. touch-point pixels of the four ToF sensors from the ToF–camera calibration at the
+   current ranges (Sec. 2.2);
+2. the homography H from the sensors' camera-plane (X, Y) (Eq. 12) to those pixels
+   (Eq. 13–18).  Every deck point's (X, Y) in C maps to its pixel by a homography (the deck
+   is a plane, its Z is affine in X and Y), and the touch point of sensor i has exactly the
+   sensor's (X, Y), so H is exact for noise-free data;
+3. the tag corners' (X, Y) by the inverse homography (Eq. 19);
+4. their Z from the deck plane through the four touch points ``(s_ix, s_iy, r_i)``
+   (Eq. 20–22; least squares over all four by default, the paper's 3-point cross product
+   as an option);
+5. the rigid transform from the tag model to the corners (Sec. 2.7), which is ``T_CD``.
+
+The paper's Sec. 2.8 axis flips and negated X only undo its simulator's image conventions;
+the frames here need no correction.  IHRCF needs no camera matrix: intrinsics are only
+used to undistort pixels when the lens has distortion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation import geometry
+from estimation.camera_model import CameraIntrinsics
+from estimation.errors import require_choice
+from estimation.estimator import (
+    DEGENERATE_HOMOGRAPHY,
+    RangeFusionConfig,
+    RangeFusionEstimator,
+)
+from estimation.tof_calibration import TofCameraCalibration
+from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
+
+
+@dataclass(frozen=True)
+class IHRCFConfig(RangeFusionConfig):
+    """IHRCF settings: ``homography`` is ``"dlt"`` (normalised DLT) or ``"opencv"``
+    (``cv2.findHomography``, method 0); both are exact with four noise-free points."""
+
+    homography: str = "dlt"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require_choice("homography", self.homography, geometry.HOMOGRAPHY_METHODS)
+
+
+class IhrcfEstimator(RangeFusionEstimator):
+    """The IHRCF deck-pose estimator."""
+
+    name = "ihrcf"
+
+    def __init__(
+        self,
+        *,
+        tag_size: float,
+        tag_id: int,
+        tof_calibration: TofCameraCalibration,
+        tof_positions_c: np.ndarray | None = None,
+        intrinsics: CameraIntrinsics | None = None,
+        config: IHRCFConfig | None = None,
+    ) -> None:
+        config = config or IHRCFConfig()
+        super().__init__(
+            tag_size=tag_size,
+            tag_id=tag_id,
+            tof_calibration=tof_calibration,
+            tof_positions_c=tof_positions_c,
+            intrinsics=intrinsics,
+            config=config,
+        )
+        self._homography_method = config.homography
+
+    def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        timestamp = float(frame.timestamp)
+        inputs = self._inputs(frame, ranges)
+        if isinstance(inputs, str):
+            return DeckPoseEstimate.invalid(self.name, timestamp, inputs)
+        sensors_xy = self.tof_positions_c[:, :2]
+        h = geometry.homography(sensors_xy, inputs.touch_px, self._homography_method)
+        if h is None:
+            return DeckPoseEstimate.invalid(self.name, timestamp, DEGENERATE_HOMOGRAPHY)
+        # Eq. 19: pixels back to the deck's (X, Y) in C through H⁻¹
+        corners_xy = geometry.apply_homography(np.linalg.inv(h), inputs.corners_px)
+        corners_c = np.empty((4, 3))
+        corners_c[:, :2] = corners_xy
+        corners_c[:, 2] = inputs.plane.z_at(corners_xy[:, 0], corners_xy[:, 1])
+        return self._pose_from_corners(timestamp, corners_c, inputs, {})

@@ -1,0 +1,212 @@
+"""The environment's configuration: one dataclass tree, loaded from YAML in ``configs/``.
+
+``load_config("paper-stewart", camera={"mode": "render"}, overrides={"tof.noise": "vl53l1x"})``
+starts from the dataclass defaults, applies the named YAML and then the overrides.  Unknown
+keys and bad values raise :class:`~landing_env.errors.ConfigError` naming the dotted key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.physics.controller import ControllerGains
+from landing_env.physics.wind import WindConfig
+from landing_env.scene.deck import DeckSurfaceConfig
+from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.imu import ImuConfig
+from landing_env.sensors.tof import TofConfig
+from landing_env.stewart.kinematics import StewartGeometry
+from landing_env.stewart.motion import MotionConfig
+
+#: Scenario and training configs shipped with the project.
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+
+#: Names an estimator can have in ``estimation.observed`` / ``estimation.compare``.
+ESTIMATOR_NAMES = ("truth", "atda", "ihrcf", "crhf")
+
+
+@dataclass
+class SimulationConfig:
+    """Rates and limits of the simulation."""
+
+    physics_hz: int = 240
+    env_hz: int = 20
+    #: episode time limit (truncation), seconds
+    max_episode_s: float = 30.0
+    #: leaving this horizontal distance from the deck's home position is a crash, metres
+    arena_half_extent_m: float = 8.0
+    #: flying higher than this above the deck's home surface is a crash, metres
+    arena_max_height_m: float = 12.0
+    #: attitude tilt beyond which the drone counts as flipped, degrees
+    flip_tilt_deg: float = 80.0
+    gui: bool = False
+
+    def __post_init__(self) -> None:
+        require_range("physics_hz", self.physics_hz, 1)
+        require_range("env_hz", self.env_hz, 1)
+        if self.physics_hz % self.env_hz != 0:
+            raise ConfigError(
+                "physics_hz",
+                f"{self.physics_hz} Hz is not a multiple of env_hz = {self.env_hz} Hz; "
+                "choose physics_hz = k * env_hz (e.g. 240 with env_hz 20, 30, 40, 48, 60, 80)",
+            )
+        require_range("max_episode_s", self.max_episode_s, 0.0, low_inclusive=False)
+        require_range("flip_tilt_deg", self.flip_tilt_deg, 0.0, 180.0)
+
+    @property
+    def substeps(self) -> int:
+        return self.physics_hz // self.env_hz
+
+
+@dataclass
+class ActionConfig:
+    """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
+
+    max_horizontal_speed: float = 1.5
+    max_vertical_speed: float = 1.0
+    max_yaw_rate_deg: float = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_horizontal_speed", "max_vertical_speed", "max_yaw_rate_deg"):
+            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+
+
+@dataclass
+class StartConfig:
+    """Where an episode starts, relative to the deck's home surface centre."""
+
+    #: height of the drone's centre above the deck home surface, min and max, metres
+    height_m: tuple[float, float] = (1.8, 2.2)
+    #: maximum horizontal offset from the deck centre, metres
+    max_offset_m: float = 0.3
+    #: maximum |yaw| at the start, degrees
+    max_yaw_deg: float = 10.0
+
+    def __post_init__(self) -> None:
+        low, high = self.height_m
+        if not 0.2 <= low <= high:
+            raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
+        require_range("max_offset_m", self.max_offset_m, 0.0)
+        require_range("max_yaw_deg", self.max_yaw_deg, 0.0, 180.0)
+
+
+@dataclass
+class TouchdownConfig:
+    """Success thresholds of a touchdown; every measured value is reported in ``info``."""
+
+    max_normal_speed: float = 0.5
+    max_deck_tilt_deg: float = 5.0
+    max_relative_attitude_deg: float = 10.0
+    #: the drone must still be on the deck this long after the first contact, seconds
+    settle_time_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        require_range("max_normal_speed", self.max_normal_speed, 0.0, low_inclusive=False)
+        require_range("max_deck_tilt_deg", self.max_deck_tilt_deg, 0.0, 90.0)
+        require_range("max_relative_attitude_deg", self.max_relative_attitude_deg, 0.0, 180.0)
+        require_range("settle_time_s", self.settle_time_s, 0.0)
+
+
+@dataclass
+class RewardConfig:
+    """Weights of the reward; see the README for the formula."""
+
+    success_bonus: float = 10.0
+    crash_penalty: float = 10.0
+    #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
+    shaping_weight: float = 1.0
+    vertical_weight: float = 0.5
+    #: per-second cost of flying
+    time_cost: float = 0.1
+    #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)
+    normal_speed_penalty: float = 4.0
+    tilt_penalty: float = 0.2
+    offset_penalty: float = 5.0
+
+
+@dataclass
+class EstimationConfig:
+    """Which deck-pose estimate the observation carries, and which others ``info`` compares."""
+
+    observed: str = "truth"
+    compare: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        require_choice("observed", self.observed, ESTIMATOR_NAMES)
+        for name in self.compare:
+            require_choice("compare", name, ESTIMATOR_NAMES)
+
+
+@dataclass
+class DeckLandingConfig:
+    """Everything DeckLanding-v0 needs; each section is documented by its dataclass."""
+
+    seed: int | None = None
+    simulation: SimulationConfig = field(default_factory=SimulationConfig)
+    action: ActionConfig = field(default_factory=ActionConfig)
+    start: StartConfig = field(default_factory=StartConfig)
+    touchdown: TouchdownConfig = field(default_factory=TouchdownConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    estimation: EstimationConfig = field(default_factory=EstimationConfig)
+    #: vehicle parameter file; empty means the shipped ``landing_env/assets/quadrotor.yaml``
+    vehicle: str = ""
+    controller: ControllerGains = field(default_factory=ControllerGains)
+    wind: WindConfig = field(default_factory=WindConfig)
+    deck: DeckSurfaceConfig = field(default_factory=DeckSurfaceConfig)
+    stewart: StewartGeometry = field(default_factory=StewartGeometry)
+    #: world position of the Stewart platform's base centre (the ship stand-in), metres
+    stewart_base_position: tuple[float, float, float] = (0.0, 0.0, 0.04)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    tof: TofConfig = field(default_factory=TofConfig)
+    imu: ImuConfig = field(default_factory=ImuConfig)
+
+
+def available_configs() -> list[str]:
+    """Names of the YAML scenarios in ``configs/``."""
+    return sorted(p.stem for p in CONFIG_DIR.glob("*.yaml"))
+
+
+def _read_yaml(name_or_path: str | Path) -> dict[str, Any]:
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml"):
+        path = CONFIG_DIR / f"{name_or_path}.yaml"
+    if not path.is_file():
+        names = ", ".join(available_configs())
+        raise ConfigError("config", f"{str(name_or_path)!r} not found; choose one of {names}")
+    with path.open() as handle:
+        data = yaml.safe_load(handle) or {}
+    if not isinstance(data, dict):
+        raise ConfigError("config", f"{path} does not hold a mapping")
+    parent = data.pop("extends", None)
+    if parent is not None:
+        data = deep_merge(_read_yaml(parent), data)
+    return data
+
+
+def load_config(
+    config: str | Path | DeckLandingConfig | None = "default",
+    overrides: dict[str, Any] | None = None,
+    **sections: Any,
+) -> DeckLandingConfig:
+    """Build a config from a YAML name/path (or an instance), then apply overrides.
+
+    ``sections`` are top-level keys with (possibly partial) mappings or values, e.g.
+    ``camera={"mode": "render"}``; ``overrides`` takes dotted keys (``"camera.mode"``).
+    """
+    if isinstance(config, DeckLandingConfig):
+        base: DeckLandingConfig | None = config
+        data: dict[str, Any] = {}
+    else:
+        base = None
+        data = _read_yaml(config) if config is not None else {}
+    data = deep_merge(data, dotted_to_nested(sections))
+    if overrides:
+        data = deep_merge(data, dotted_to_nested(overrides))
+    return build_dataclass(DeckLandingConfig, data, base=base)

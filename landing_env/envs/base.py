@@ -1,0 +1,308 @@
+"""The base Gymnasium environment over the simulated world; tasks override a few hooks."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from estimation.frames import euler_zyx_from_matrix
+from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
+from landing_env.config import DeckLandingConfig, load_config
+from landing_env.estimators import EstimatorBank
+from landing_env.physics.controller import VelocitySetpoint
+from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
+from landing_env.world import PhysicsReport, World
+
+#: bounds of the deck-pose observation: metres for x, y, z and radians for the angles
+POSE_LOW = np.array([-50.0, -50.0, -50.0, -math.pi, -math.pi / 2, -math.pi], dtype=np.float32)
+POSE_HIGH = -POSE_LOW
+#: full-scale range of the IMU (an ICM-20602-class part: ±16 g, ±2000 °/s); a mean reading
+#: beyond it is clipped to the range, as the part itself would, and flagged in info
+IMU_HIGH = np.array([16 * 9.81] * 3 + [math.radians(2000.0)] * 3, dtype=np.float32)
+
+
+@dataclass
+class Sensing:
+    """The sensor data and estimates of one control step."""
+
+    frame: CameraFrame
+    ranges: RangeReading
+    estimates: dict[str, DeckPoseEstimate]
+
+
+class DeckLandingBaseEnv(gym.Env):
+    """A quadrotor over a moving deck; the observation carries the *estimated* deck pose.
+
+    Subclasses define the task through ``_reward``, ``_terminated`` and friends.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        config: str | DeckLandingConfig | None = "default",
+        render_mode: str | None = None,
+        overrides: dict[str, Any] | None = None,
+        **sections: Any,
+    ) -> None:
+        super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            allowed = ", ".join(self.metadata["render_modes"])
+            raise ValueError(f"render_mode: {render_mode!r} is not allowed; choose {allowed}")
+        self.config = load_config(config, overrides, **sections)
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.config.simulation.env_hz}
+        sim = self.config.simulation
+        self.world = World(self.config, gui=render_mode == "human" or sim.gui)
+        self.bank = EstimatorBank(self.config, self.world)
+        self.max_steps = round(sim.max_episode_s * sim.env_hz)
+        self.env_dt = 1.0 / sim.env_hz
+
+        tof_max = float(self.config.tof.max_range)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        self.observation_space = spaces.Dict(
+            {
+                "deck_pose": spaces.Box(POSE_LOW, POSE_HIGH, dtype=np.float32),
+                "deck_pose_valid": spaces.MultiBinary(1),
+                "tof_range": spaces.Box(0.0, tof_max, shape=(4,), dtype=np.float32),
+                "tof_valid": spaces.MultiBinary(4),
+                "imu": spaces.Box(-IMU_HIGH, IMU_HIGH, dtype=np.float32),
+            }
+        )
+        self._steps = 0
+        self._sensing: Sensing | None = None
+        self._report = PhysicsReport()
+        self._outcome = Outcome.IN_FLIGHT
+        self._touchdown: TouchdownMetrics | None = None
+        self._potential = 0.0
+        self._last_image: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed if seed is not None else self._first_seed())
+        position, yaw = self._start_pose(options or {})
+        self.world.reset(self.np_random, position, yaw)
+        self.bank.reset()
+        self._steps = 0
+        self._outcome = Outcome.IN_FLIGHT
+        self._touchdown = None
+        self._report = PhysicsReport()
+        self._sensing = self._sense()
+        self._potential = self._shaping_potential()
+        return self._observation(), self._info()
+
+    def step(
+        self, action: np.ndarray
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if self._sensing is None:
+            raise RuntimeError("call reset() before step()")
+        if self._outcome is not Outcome.IN_FLIGHT:
+            raise RuntimeError("the episode has ended; call reset()")
+        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        if action.shape != (4,):
+            raise ValueError(
+                f"action must have 4 values (vx, vy, vz, yaw rate); got {action.shape}"
+            )
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be finite; got {action}")
+        self._action_clipped = bool(np.any(np.abs(action) > 1.0))
+        setpoint = self._action_to_setpoint(np.clip(action, -1.0, 1.0))
+        self._report = self.world.step(setpoint)
+        if self.render_mode is not None or self.config.camera.mode == "render":
+            # the legs are visual only: move them when someone (or the camera) looks
+            self.world.stewart.update_leg_visuals()
+        self._steps += 1
+        self._outcome = self._outcome_after(self._report)
+        self._sensing = self._sense()
+        reward = self._reward()
+        terminated = self._terminated()
+        truncated = not terminated and self._truncated()
+        if truncated:
+            self._outcome = Outcome.TIMEOUT
+        return self._observation(), reward, terminated, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        assert self._sensing is not None, "call reset() before render()"
+        return self.world.camera_image(self._sensing.frame)
+
+    def close(self) -> None:
+        self.world.close()
+
+    # ------------------------------------------------------------------ task hooks
+    def _action_to_setpoint(self, action: np.ndarray) -> VelocitySetpoint:
+        a = self.config.action
+        velocity = np.array(
+            [
+                action[0] * a.max_horizontal_speed,
+                action[1] * a.max_horizontal_speed,
+                action[2] * a.max_vertical_speed,
+            ]
+        )
+        return VelocitySetpoint(velocity, float(action[3] * math.radians(a.max_yaw_rate_deg)))
+
+    def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
+        start = self.config.start
+        rng = self.np_random
+        height = float(options.get("height_m", rng.uniform(*start.height_m)))
+        radius = start.max_offset_m * math.sqrt(rng.uniform())
+        bearing = rng.uniform(-math.pi, math.pi)
+        offset = np.asarray(
+            options.get("offset_m", (radius * math.cos(bearing), radius * math.sin(bearing))),
+            dtype=float,
+        )
+        yaw = float(options.get("yaw", math.radians(rng.uniform(-1.0, 1.0) * start.max_yaw_deg)))
+        position = self.world.deck_home_w + np.array([offset[0], offset[1], height])
+        return position, yaw
+
+    def _outcome_after(self, report: PhysicsReport) -> Outcome:
+        if report.forbidden_contact:
+            return Outcome.CRASH
+        if report.first_contact is not None:
+            feet, on_deck, forbidden, _ = self.world.settle(self.config.touchdown.settle_time_s)
+            metrics = report.first_contact
+            metrics.all_feet_touched = feet == set(self.world.foot_links)
+            metrics.on_deck_after_settle = on_deck
+            outcome, self._touchdown = evaluate_touchdown(metrics, self.config.touchdown)
+            if forbidden:
+                self._touchdown.failed_checks += (f"contact during settle: {forbidden}",)
+            return outcome
+        if self._flipped() or self._left_arena():
+            return Outcome.CRASH
+        return Outcome.IN_FLIGHT
+
+    def _flipped(self) -> bool:
+        rotation = self.world.drone_state().rotation_wb
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(rotation[2, 2])))))
+        return tilt > self.config.simulation.flip_tilt_deg
+
+    def _left_arena(self) -> bool:
+        sim = self.config.simulation
+        offset = self.world.drone_state().position_w - self.world.deck_home_w
+        return bool(
+            math.hypot(offset[0], offset[1]) > sim.arena_half_extent_m
+            or offset[2] > sim.arena_max_height_m
+        )
+
+    def _terminated(self) -> bool:
+        return self._outcome is not Outcome.IN_FLIGHT
+
+    def _truncated(self) -> bool:
+        return self._steps >= self.max_steps
+
+    def _shaping_potential(self) -> float:
+        r = self.config.reward
+        drone = self.world.drone_state().position_w
+        deck = self.world.deck_state()
+        offset = drone - deck.tag_centre_w
+        horizontal = math.hypot(offset[0], offset[1])
+        return -r.shaping_weight * (horizontal + r.vertical_weight * abs(offset[2]))
+
+    def _reward(self) -> float:
+        r = self.config.reward
+        potential = self._shaping_potential()
+        reward = potential - self._potential - r.time_cost * self.env_dt
+        self._potential = potential
+        if self._outcome is Outcome.CRASH:
+            reward -= r.crash_penalty
+        elif self._touchdown is not None:
+            m = self._touchdown
+            reward -= (
+                r.normal_speed_penalty * max(m.relative_normal_speed, 0.0)
+                + r.tilt_penalty * m.deck_tilt_deg
+                + r.offset_penalty * m.lateral_offset_m
+            )
+            if self._outcome is Outcome.SUCCESS:
+                reward += r.success_bonus
+        return float(reward)
+
+    # ------------------------------------------------------------------ observation and info
+    def _first_seed(self) -> int | None:
+        seed, self.config.seed = self.config.seed, None  # the config seed applies once
+        return seed
+
+    def _sense(self) -> Sensing:
+        frame = self.world.capture()
+        ranges = self.world.measure_ranges()
+        estimates = self.bank.estimate(frame, ranges)
+        return Sensing(frame, ranges, estimates)
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        assert self._sensing is not None
+        estimate = self._sensing.estimates[self.config.estimation.observed]
+        pose = np.zeros(6, dtype=np.float32)
+        if estimate.valid:
+            pose[:] = estimate.as_vector()
+        ranges = self._sensing.ranges
+        tof = np.where(ranges.valid, np.nan_to_num(ranges.ranges, nan=0.0), 0.0)
+        imu = np.zeros(6, dtype=np.float32)
+        if self._report.imu_samples:
+            samples = self._report.imu_samples
+            imu[:3] = np.mean([s.accel for s in samples], axis=0)
+            imu[3:] = np.mean([s.gyro for s in samples], axis=0)
+        self._imu_saturated = bool(np.any(np.abs(imu) > IMU_HIGH))
+        imu = np.clip(imu, -IMU_HIGH, IMU_HIGH)
+        return {
+            "deck_pose": pose,
+            "deck_pose_valid": np.array([int(estimate.valid)], dtype=np.int8),
+            "tof_range": tof.astype(np.float32),
+            "tof_valid": ranges.valid.astype(np.int8),
+            "imu": imu,
+        }
+
+    def _info(self) -> dict[str, Any]:
+        assert self._sensing is not None
+        world = self.world
+        state = world.drone_state()
+        deck = world.deck_state()
+        r_cd, t_cd = world.true_deck_pose_c()
+        report = self._report
+        info: dict[str, Any] = {
+            "time_s": world.time,
+            "outcome": self._outcome.value,
+            "deck_pose_true": np.concatenate([t_cd, euler_zyx_from_matrix(r_cd)]),
+            "estimates": {
+                name: {
+                    "pose": est.as_vector(),
+                    "valid": est.valid,
+                    "reason": est.reason,
+                    "predicted": est.predicted,
+                }
+                for name, est in self._sensing.estimates.items()
+            },
+            "tag_miss_reason": self._sensing.frame.miss_reason,
+            "tof_ranges": self._sensing.ranges.ranges.copy(),
+            "tof_valid": self._sensing.ranges.valid.copy(),
+            "drone": {
+                "position_w": state.position_w.copy(),
+                "velocity_w": state.velocity_w.copy(),
+                "euler_w": euler_zyx_from_matrix(state.rotation_wb),
+                "angular_velocity_b": state.angular_velocity_b.copy(),
+                "rotor_speeds": np.asarray(world.drone.rotor_speeds, dtype=float).copy(),
+            },
+            "deck": {
+                "position_w": deck.position_w.copy(),
+                "euler_w": euler_zyx_from_matrix(deck.rotation_wp),
+                "velocity_w": deck.velocity_w.copy(),
+            },
+            "imu_samples": np.array(
+                [[s.timestamp, *s.accel, *s.gyro] for s in report.imu_samples]
+            ).reshape(-1, 7),
+            "stewart_clamped": report.stewart_clamped,
+            "motor_saturated": report.motor_saturated,
+            "action_clipped": getattr(self, "_action_clipped", False),
+            "imu_saturated": getattr(self, "_imu_saturated", False),
+        }
+        if report.forbidden_contact:
+            info["crash_contact"] = report.forbidden_contact
+        if self._touchdown is not None:
+            info["touchdown"] = self._touchdown.as_dict()
+        return info

@@ -1,0 +1,617 @@
+"""The quadrotor: vehicle parameters, its state, and its rotor/drag/ground-effect physics.
+
+Frames follow :mod:`estimation.frames`: world W z-up, body B FLU with its origin at the centre of
+mass.  PyBullet integrates the rigid body; this module adds, once per physics step, the rotor
+thrusts and yaw torques (with a first-order motor lag), the linear body drag against the
+air-relative velocity (see :mod:`landing_env.physics.wind`), and ground effect computed from the
+surface actually under each rotor (one ray batch per step, so a moving deck at any height works).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pybullet as p
+import yaml
+from pybullet_utils.bullet_client import BulletClient
+
+from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.physics.wind import WindModel
+
+#: the vehicle YAML shipped with the package
+DEFAULT_PARAMS_PATH: Path = Path(__file__).resolve().parent.parent / "assets" / "quadrotor.yaml"
+
+GRAVITY: float = 9.81
+
+_GROUND_EFFECT_MODELS = ("cheeseman_bennett",)
+
+
+@dataclass(frozen=True)
+class QuadrotorParams:
+    """Vehicle parameters (SI units, body frame FLU); load them with :meth:`from_yaml`."""
+
+    name: str
+    urdf_path: Path
+    #: total mass (kg) and principal inertia about the CoM (kg m^2, body axes)
+    mass: float
+    inertia_diag: np.ndarray
+    #: horizontal distance from the CoM to each rotor hub (m)
+    arm_length: float
+    #: 4x3 rotor hub positions in B (m), order front-left, front-right, back-right, back-left
+    rotor_positions_b: np.ndarray
+    #: rotation sense of each rotor about body +z (+1 counter-clockwise seen from above)
+    spin_directions: np.ndarray
+    rotor_radius: float
+    #: thrust k_f w^2 (N) and yaw reaction torque k_m w^2 (N m) of one rotor at w rad/s
+    k_f: float
+    k_m: float
+    motor_time_constant: float
+    omega_min: float
+    omega_max: float
+    #: linear body drag: force_b = -diag(linear_drag_b) v_air_b (N per m/s)
+    linear_drag_b: np.ndarray
+    ground_effect_enabled: bool
+    ground_effect_model: str
+    ground_effect_coefficient: float
+    ground_effect_max_gain: float
+    ground_effect_ray_length: float
+    #: camera origin in B (m); the camera looks down body -z
+    camera_offset_b: np.ndarray
+    #: body z of the ToF sensors (m) and their distance from the camera axis (m)
+    tof_mount_z: float
+    tof_arm_distance: float
+
+    def __post_init__(self) -> None:
+        for name in ("inertia_diag", "rotor_positions_b", "spin_directions"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float))
+        for name in ("linear_drag_b", "camera_offset_b"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float))
+        object.__setattr__(self, "urdf_path", Path(self.urdf_path))
+        self._validate()
+
+    def _validate(self) -> None:
+        if not self.urdf_path.is_file():
+            raise ConfigError("urdf_path", f"{self.urdf_path} is not a file")
+        require_range("mass", self.mass, 0.0, 100.0, low_inclusive=False)
+        _require_shape("inertia_diag", self.inertia_diag, (3,))
+        ixx, iyy, izz = self.inertia_diag
+        if min(ixx, iyy, izz) <= 0.0:
+            raise ConfigError("inertia_diag", "all three moments must be > 0")
+        if ixx + iyy < izz or iyy + izz < ixx or izz + ixx < iyy:
+            raise ConfigError("inertia_diag", "moments violate the triangle inequality")
+        require_range("arm_length", self.arm_length, 0.0, 5.0, low_inclusive=False)
+        _require_shape("rotor_positions_b", self.rotor_positions_b, (4, 3))
+        radii = np.hypot(self.rotor_positions_b[:, 0], self.rotor_positions_b[:, 1])
+        if np.max(np.abs(radii - self.arm_length)) > 1e-3:
+            raise ConfigError(
+                "rotor_positions_b", f"hubs must lie arm_length={self.arm_length} m from the CoM"
+            )
+        # The mixer shifts all four rotors by the same thrust to keep roll/pitch authority; that
+        # leaves the torques unchanged only if the rotors' centroid is on the thrust axis.
+        if np.max(np.abs(self.rotor_positions_b[:, :2].mean(axis=0))) > 1e-3:
+            raise ConfigError(
+                "rotor_positions_b", "the rotors' centroid must be on the body z axis"
+            )
+        _require_shape("spin_directions", self.spin_directions, (4,))
+        if not np.all(np.isin(self.spin_directions, (-1.0, 1.0))) or self.spin_directions.sum():
+            raise ConfigError("spin_directions", "need two rotors of +1 and two of -1")
+        require_range("rotor_radius", self.rotor_radius, 0.0, self.arm_length, low_inclusive=False)
+        require_range("k_f", self.k_f, 0.0, low_inclusive=False)
+        require_range("k_m", self.k_m, 0.0, low_inclusive=False)
+        require_range(
+            "motor_time_constant", self.motor_time_constant, 0.0, 1.0, low_inclusive=False
+        )
+        require_range("omega_min", self.omega_min, 0.0)
+        require_range("omega_max", self.omega_max, self.omega_min, low_inclusive=False)
+        if self.thrust_to_weight <= 1.0:
+            raise ConfigError(
+                "omega_max",
+                f"thrust-to-weight {self.thrust_to_weight:.2f} must exceed 1 to hover",
+            )
+        _require_shape("linear_drag_b", self.linear_drag_b, (3,))
+        if np.any(self.linear_drag_b < 0.0):
+            raise ConfigError("linear_drag_b", "drag coefficients must be >= 0")
+        require_choice("ground_effect_model", self.ground_effect_model, _GROUND_EFFECT_MODELS)
+        require_range("ground_effect_coefficient", self.ground_effect_coefficient, 0.0, 10.0)
+        require_range("ground_effect_max_gain", self.ground_effect_max_gain, 1.0, 10.0)
+        require_range(
+            "ground_effect_ray_length",
+            self.ground_effect_ray_length,
+            0.0,
+            100.0,
+            low_inclusive=False,
+        )
+        _require_shape("camera_offset_b", self.camera_offset_b, (3,))
+        require_range("tof_arm_distance", self.tof_arm_distance, 0.0, low_inclusive=False)
+
+    @property
+    def kf(self) -> float:
+        """Alias of :attr:`k_f` (the name landing_env.world uses)."""
+        return self.k_f
+
+    @property
+    def camera_offset(self) -> np.ndarray:
+        """Alias of :attr:`camera_offset_b`, the camera origin t_bc in B (m)."""
+        return self.camera_offset_b
+
+    @property
+    def weight(self) -> float:
+        """Weight (N)."""
+        return self.mass * GRAVITY
+
+    @property
+    def max_rotor_thrust(self) -> float:
+        """Thrust of one rotor at omega_max (N)."""
+        return self.k_f * self.omega_max**2
+
+    @property
+    def min_rotor_thrust(self) -> float:
+        """Thrust of one rotor at omega_min (N)."""
+        return self.k_f * self.omega_min**2
+
+    @property
+    def thrust_to_weight(self) -> float:
+        """Total maximum thrust over weight."""
+        return 4.0 * self.max_rotor_thrust / self.weight
+
+    @property
+    def hover_omega(self) -> float:
+        """Rotor speed (rad/s) at which the four rotors carry the weight out of ground effect."""
+        return math.sqrt(self.weight / (4.0 * self.k_f))
+
+    @classmethod
+    def from_yaml(cls, path: Path | None = None) -> QuadrotorParams:
+        """Load and validate a vehicle YAML (default: the shipped ``quadrotor.yaml``)."""
+        path = DEFAULT_PARAMS_PATH if path is None else Path(path)
+        with path.open() as stream:
+            data = yaml.safe_load(stream)
+        if not isinstance(data, dict):
+            raise ConfigError(str(path), "the file must hold a mapping")
+        reader = _SectionReader(data, "")
+        body = reader.section("body")
+        rotors = reader.section("rotors")
+        motors = reader.section("motors")
+        drag = reader.section("drag")
+        ground = reader.section("ground_effect")
+        sensors = reader.section("sensors")
+        try:
+            params = cls(
+                name=str(reader.get("name")),
+                urdf_path=path.parent / str(reader.get("urdf")),
+                mass=body.number("mass"),
+                inertia_diag=body.get("inertia_diag"),
+                arm_length=body.number("arm_length"),
+                rotor_positions_b=rotors.get("positions_b"),
+                spin_directions=rotors.get("spin_directions"),
+                rotor_radius=rotors.number("radius"),
+                k_f=motors.number("k_f"),
+                k_m=motors.number("k_m"),
+                motor_time_constant=motors.number("time_constant"),
+                omega_min=motors.number("omega_min"),
+                omega_max=motors.number("omega_max"),
+                linear_drag_b=drag.get("linear_b"),
+                ground_effect_enabled=bool(ground.get("enabled")),
+                ground_effect_model=str(ground.get("model")),
+                ground_effect_coefficient=ground.number("coefficient"),
+                ground_effect_max_gain=ground.number("max_gain"),
+                ground_effect_ray_length=ground.number("ray_length"),
+                camera_offset_b=sensors.get("camera_offset_b"),
+                tof_mount_z=sensors.number("tof_mount_z"),
+                tof_arm_distance=sensors.number("tof_arm_distance"),
+            )
+        except ConfigError as error:
+            # Name the key as it is spelt in the YAML, not the dataclass field.
+            raise ConfigError(_YAML_KEYS.get(error.key, error.key), error.detail) from error
+        except (TypeError, ValueError) as error:
+            raise ConfigError(str(path), f"malformed value: {error}") from error
+        for section in (reader, body, rotors, motors, drag, ground, sensors):
+            section.reject_unused()
+        return params
+
+
+#: dataclass field -> dotted YAML key, for error messages
+_YAML_KEYS: dict[str, str] = {
+    "urdf_path": "urdf",
+    "mass": "body.mass",
+    "inertia_diag": "body.inertia_diag",
+    "arm_length": "body.arm_length",
+    "rotor_positions_b": "rotors.positions_b",
+    "spin_directions": "rotors.spin_directions",
+    "rotor_radius": "rotors.radius",
+    "k_f": "motors.k_f",
+    "k_m": "motors.k_m",
+    "motor_time_constant": "motors.time_constant",
+    "omega_min": "motors.omega_min",
+    "omega_max": "motors.omega_max",
+    "linear_drag_b": "drag.linear_b",
+    "ground_effect_model": "ground_effect.model",
+    "ground_effect_coefficient": "ground_effect.coefficient",
+    "ground_effect_max_gain": "ground_effect.max_gain",
+    "ground_effect_ray_length": "ground_effect.ray_length",
+    "camera_offset_b": "sensors.camera_offset_b",
+    "tof_arm_distance": "sensors.tof_arm_distance",
+}
+
+
+def _require_shape(key: str, value: np.ndarray, shape: tuple[int, ...]) -> None:
+    if value.shape != shape or not np.all(np.isfinite(value)):
+        raise ConfigError(key, f"needs finite values of shape {shape}, got shape {value.shape}")
+
+
+class _SectionReader:
+    """Reads one YAML mapping, naming missing or unknown keys by their dotted path."""
+
+    def __init__(self, data: Any, prefix: str) -> None:
+        if not isinstance(data, dict):
+            raise ConfigError(prefix or "<root>", "must be a mapping")
+        self._data = data
+        self._prefix = prefix
+        self._used: set[str] = set()
+
+    def _key(self, key: str) -> str:
+        return f"{self._prefix}.{key}" if self._prefix else key
+
+    def get(self, key: str) -> Any:
+        if key not in self._data:
+            raise ConfigError(self._key(key), "is missing")
+        self._used.add(key)
+        return self._data[key]
+
+    def number(self, key: str) -> float:
+        value = self.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(self._key(key), f"{value!r} is not a number")
+        return float(value)
+
+    def section(self, key: str) -> _SectionReader:
+        return _SectionReader(self.get(key), self._key(key))
+
+    def reject_unused(self) -> None:
+        unknown = sorted(set(self._data) - self._used)
+        if unknown:
+            raise ConfigError(self._key(unknown[0]), "is not a known key")
+
+
+@dataclass(frozen=True, slots=True)
+class DroneState:
+    """The drone's rigid-body state at one instant."""
+
+    #: body-frame origin in W (m): the base link's CoM, 0.7 mm above the whole vehicle's CoM
+    position_w: np.ndarray
+    #: orientation of B in W as a quaternion (x, y, z, w)
+    quaternion_xyzw: np.ndarray
+    #: R_WB: columns are the body axes in W
+    rotation_wb: np.ndarray
+    #: CoM velocity in W (m/s)
+    velocity_w: np.ndarray
+    #: angular velocity in the BODY frame (rad/s), as a gyro measures it
+    angular_velocity_b: np.ndarray
+    #: (roll, pitch, yaw) in radians, ZYX convention
+    euler: np.ndarray
+
+    @property
+    def yaw(self) -> float:
+        """Yaw (rad)."""
+        return float(self.euler[2])
+
+
+class Quadrotor:
+    """One quadrotor body in a PyBullet world, driven by rotor speed commands."""
+
+    def __init__(
+        self,
+        client: BulletClient,
+        params: QuadrotorParams | None = None,
+        wind: WindModel | None = None,
+        position_w: tuple[float, float, float] = (0.0, 0.0, 1.0),
+        yaw: float = 0.0,
+    ) -> None:
+        self.client = client
+        self.params = QuadrotorParams.from_yaml() if params is None else params
+        self.wind = wind
+        # The hot path calls pybullet's module functions with the client id directly: going
+        # through BulletClient's attribute lookup costs about a microsecond per call.
+        self._cid: int = client._client
+        self.body_id: int = client.loadURDF(
+            str(self.params.urdf_path),
+            basePosition=position_w,
+            baseOrientation=client.getQuaternionFromEuler((0.0, 0.0, yaw)),
+            flags=p.URDF_USE_INERTIA_FROM_FILE,
+        )
+        feet = []
+        for joint in range(client.getNumJoints(self.body_id)):
+            info = client.getJointInfo(self.body_id, joint)
+            if info[12].decode().startswith("foot"):
+                feet.append(joint)
+        #: link indices of the four landing feet (front, left, back, right)
+        self.foot_link_indices: tuple[int, ...] = tuple(feet)
+        # PyBullet's default linear/angular damping would be a second, unmodelled drag.
+        for link in (-1, *feet):
+            client.changeDynamics(self.body_id, link, linearDamping=0.0, angularDamping=0.0)
+
+        #: the whole body's centre of mass in the base frame (m): the feet lower it slightly
+        self.com_offset_b: tuple[float, float, float] = self._combined_com_offset()
+        prm = self.params
+        self._rotors = [tuple(float(v) for v in row) for row in prm.rotor_positions_b]
+        self._yaw_coeffs = [-float(s) * prm.k_m for s in prm.spin_directions]
+        self._drag = tuple(float(v) for v in prm.linear_drag_b)
+        self._alpha_dt = -1.0
+        self._alpha = 0.0
+        self._ge_const = prm.ground_effect_coefficient * (prm.rotor_radius / 4.0) ** 2
+        self._ge_min_denominator = 1.0 / prm.ground_effect_max_gain
+        self._zero3 = (0.0, 0.0, 0.0)
+        self._nan4 = (math.nan, math.nan, math.nan, math.nan)
+
+        #: True while the motors respond to commands; disarmed rotors spin down to zero
+        self.armed: bool = True
+        #: time advanced by :meth:`apply_rotor_commands` (s); drives the wind model
+        self.time: float = 0.0
+        self._omega = [prm.hover_omega] * 4
+        #: True when the last command had a rotor outside [omega_min, omega_max] (it was clamped)
+        self.last_saturated: bool = False
+        #: per-rotor thrust applied in the last step (N), ground effect included
+        self.last_thrusts: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
+        #: per-rotor distance from the hub to the surface below along body -z (m); NaN: none
+        self.last_ground_heights: tuple[float, ...] = self._nan4
+        #: per-rotor thrust gain T_IGE/T_OGE of the last step
+        self.last_ground_effect_gains: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
+        #: True when a rotor's ground-effect gain hit ground_effect_max_gain in the last step
+        self.last_ground_effect_capped: bool = False
+        #: wind velocity (m/s, W) used when no WindModel is attached: set it before each
+        #: apply_rotor_commands to drive the wind from outside
+        self.wind_velocity_w: np.ndarray | tuple[float, float, float] = self._zero3
+        #: wind velocity (m/s, W) used for the drag in the last step
+        self.last_wind_w: tuple[float, float, float] = self._zero3
+        self._last_state: DroneState | None = None
+        self._last_pose: tuple[Any, ...] = ()
+
+    def _combined_com_offset(self) -> tuple[float, float, float]:
+        """Centre of mass of base and feet together, in the base frame."""
+        client = self.client
+        base_pos, base_quat = client.getBasePositionAndOrientation(self.body_id)
+        rotation = np.array(client.getMatrixFromQuaternion(base_quat)).reshape(3, 3)
+        total = client.getDynamicsInfo(self.body_id, -1)[0]
+        moment = np.zeros(3)
+        for link in self.foot_link_indices:
+            mass = client.getDynamicsInfo(self.body_id, link)[0]
+            centre = np.array(client.getLinkState(self.body_id, link)[0]) - base_pos
+            moment += mass * (rotation.T @ centre)
+            total += mass
+        offset = moment / total
+        if math.hypot(offset[0], offset[1]) > 1e-6:
+            raise ConfigError("urdf", "the feet must not move the CoM off the body z axis")
+        return (0.0, 0.0, float(offset[2]))
+
+    # ------------------------------------------------------------------ state
+
+    def reset(
+        self,
+        position_w: np.ndarray | tuple[float, float, float],
+        yaw: float,
+        velocity_w: np.ndarray | tuple[float, float, float] | None = None,
+    ) -> None:
+        """Put the drone level at ``position_w`` (m, W) with ``yaw`` (rad), rotors at hover."""
+        position = [float(v) for v in position_w]
+        velocity = self._zero3 if velocity_w is None else [float(v) for v in velocity_w]
+        quaternion = (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+        self.client.resetBasePositionAndOrientation(self.body_id, position, quaternion)
+        self.client.resetBaseVelocity(self.body_id, velocity, self._zero3)
+        self._omega = [self.params.hover_omega] * 4
+        self.armed = True
+        self.last_saturated = False
+        self.last_thrusts = (0.0, 0.0, 0.0, 0.0)
+        self.last_ground_heights = self._nan4
+        self.last_ground_effect_gains = (1.0, 1.0, 1.0, 1.0)
+        self.last_ground_effect_capped = False
+        self._last_state = None
+
+    @property
+    def rotor_speeds(self) -> np.ndarray:
+        """Current (lagged) rotor speeds (rad/s)."""
+        return np.array(self._omega)
+
+    def set_rotor_speeds(self, omega: np.ndarray | list[float]) -> None:
+        """Set the actual rotor speeds (rad/s) directly, e.g. for a test or a warm start."""
+        self._omega = [float(v) for v in omega]
+
+    def read_state(self) -> DroneState:
+        """Query PyBullet (one pose and one velocity call) and return the state."""
+        cid = self._cid
+        pos, quat = p.getBasePositionAndOrientation(self.body_id, physicsClientId=cid)
+        vel, omega_w = p.getBaseVelocity(self.body_id, physicsClientId=cid)
+        rot = _rotation_from_quaternion(quat)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
+        wx, wy, wz = omega_w
+        omega_b = (
+            r00 * wx + r10 * wy + r20 * wz,
+            r01 * wx + r11 * wy + r21 * wz,
+            r02 * wx + r12 * wy + r22 * wz,
+        )
+        roll = math.atan2(r21, r22)
+        pitch = math.asin(-r20 if -1.0 <= -r20 <= 1.0 else math.copysign(1.0, -r20))
+        yaw = math.atan2(r10, r00)
+        state = DroneState(
+            position_w=np.array(pos),
+            quaternion_xyzw=np.array(quat),
+            rotation_wb=np.array(rot).reshape(3, 3),
+            velocity_w=np.array(vel),
+            angular_velocity_b=np.array(omega_b),
+            euler=np.array((roll, pitch, yaw)),
+        )
+        self._last_state = state
+        self._last_pose = (pos, rot, vel)
+        return state
+
+    # ---------------------------------------------------------------- actuation
+
+    def apply_rotor_commands(
+        self, omega_cmd: np.ndarray, dt: float, state: DroneState | None = None
+    ) -> None:
+        """Advance the motors by ``dt`` towards ``omega_cmd`` (rad/s) and apply this step's forces.
+
+        Commands are clamped to [omega_min, omega_max] and ``last_saturated`` reports it.  The
+        forces hold for the next ``stepSimulation`` only (PyBullet clears them).  ``state``:
+        the state read this step, which saves the pose queries; ``None`` queries PyBullet.
+        """
+        prm = self.params
+        if dt != self._alpha_dt:
+            # Exact discretisation of the first-order motor lag over one step.
+            self._alpha_dt = dt
+            self._alpha = 1.0 - math.exp(-dt / prm.motor_time_constant)
+        alpha = self._alpha
+        omega = self._omega
+        saturated = False
+        if self.armed:
+            lo = prm.omega_min
+            hi = prm.omega_max
+            commands = omega_cmd.tolist() if isinstance(omega_cmd, np.ndarray) else omega_cmd
+            for i in range(4):
+                c = commands[i]
+                if c < lo:
+                    c = lo
+                    saturated = True
+                elif c > hi:
+                    c = hi
+                    saturated = True
+                elif c != c:  # NaN: a broken controller; hold idle and say so
+                    c = lo
+                    saturated = True
+                omega[i] += (c - omega[i]) * alpha
+        else:
+            for i in range(4):
+                omega[i] -= omega[i] * alpha
+        self.last_saturated = saturated
+
+        # Pose and velocity: reuse the state read this step when given.
+        if state is not None and state is self._last_state:
+            pos, rot, vel = self._last_pose
+        elif state is not None:
+            pos = state.position_w.tolist()
+            rot = state.rotation_wb.ravel().tolist()
+            vel = state.velocity_w.tolist()
+        else:
+            cid = self._cid
+            pos, quat = p.getBasePositionAndOrientation(self.body_id, physicsClientId=cid)
+            vel = p.getBaseVelocity(self.body_id, physicsClientId=cid)[0]
+            rot = _rotation_from_quaternion(quat)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
+
+        gains = self._ground_effect(pos, rot) if prm.ground_effect_enabled else None
+
+        k_f = prm.k_f
+        thrusts = [k_f * w * w for w in omega]
+        if gains is not None:
+            thrusts = [t * g for t, g in zip(thrusts, gains, strict=True)]
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for i in range(4):
+            t = thrusts[i]
+            x, y, _ = self._rotors[i]
+            fz += t
+            tx += y * t  # r x (0, 0, T) = (y T, -x T, 0)
+            ty -= x * t
+            tz += self._yaw_coeffs[i] * omega[i] * omega[i]
+        self.last_thrusts = tuple(thrusts)
+
+        # Linear drag against the air-relative velocity, in the body frame.
+        self.time += dt
+        if self.wind is not None:
+            wind = self.wind.velocity_tuple(self.time, dt)
+        else:
+            outside = self.wind_velocity_w
+            wind = (float(outside[0]), float(outside[1]), float(outside[2]))
+        self.last_wind_w = wind
+        ax = vel[0] - wind[0]
+        ay = vel[1] - wind[1]
+        az = vel[2] - wind[2]
+        d0, d1, d2 = self._drag
+        fx = -d0 * (r00 * ax + r10 * ay + r20 * az)
+        fy = -d1 * (r01 * ax + r11 * ay + r21 * az)
+        fz -= d2 * (r02 * ax + r12 * ay + r22 * az)
+
+        # The net force acts at the whole body's CoM (drag through the CoM, as modelled); the
+        # thrusts' torques about it equal the torques computed above because the CoM lies on
+        # the body z axis, parallel to the thrusts.  One force and one torque call replace
+        # four per-rotor forces.
+        cid = self._cid
+        p.applyExternalForce(
+            self.body_id, -1, (fx, fy, fz), self.com_offset_b, p.LINK_FRAME, physicsClientId=cid
+        )
+        p.applyExternalTorque(self.body_id, -1, (tx, ty, tz), p.LINK_FRAME, physicsClientId=cid)
+
+    def _ground_effect(self, pos: Any, rot: Any) -> list[float]:
+        """Per-rotor T_IGE/T_OGE from one ray batch down body -z from the four hubs."""
+        prm = self.params
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
+        px, py, pz = pos
+        length = prm.ground_effect_ray_length
+        dx = -length * r02
+        dy = -length * r12
+        dz = -length * r22
+        starts = []
+        ends = []
+        for x, y, z in self._rotors:
+            hx = px + r00 * x + r01 * y + r02 * z
+            hy = py + r10 * x + r11 * y + r12 * z
+            hz = pz + r20 * x + r21 * y + r22 * z
+            starts.append((hx, hy, hz))
+            ends.append((hx + dx, hy + dy, hz + dz))
+        # The hubs lie outside the drone's collision shapes (frame box and feet), so the rays
+        # start at the hubs; a hit on the drone itself is ignored all the same.
+        hits = p.rayTestBatch(starts, ends, physicsClientId=self._cid)
+        heights = []
+        gains = []
+        capped = False
+        const = self._ge_const
+        min_den = self._ge_min_denominator
+        body = self.body_id
+        for hit in hits:
+            if hit[0] < 0 or hit[0] == body:
+                heights.append(math.nan)
+                gains.append(1.0)
+                continue
+            h = hit[2] * length
+            heights.append(h)
+            # Cheeseman–Bennett: T_IGE/T_OGE = 1/(1 - c (R/4h)^2), which diverges at h = R/4
+            # (c = 1); the gain is capped at max_gain and the cap is flagged.
+            denominator = 1.0 - const / (h * h) if h > 0.0 else -1.0
+            if denominator <= min_den:
+                gains.append(prm.ground_effect_max_gain)
+                capped = True
+            else:
+                gains.append(1.0 / denominator)
+        self.last_ground_heights = tuple(heights)
+        self.last_ground_effect_gains = tuple(gains)
+        self.last_ground_effect_capped = capped
+        return gains
+
+
+def _rotation_from_quaternion(q: Any) -> tuple[float, ...]:
+    """Row-major R_WB (9 floats) of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = q
+    xx = x * x
+    yy = y * y
+    zz = z * z
+    xy = x * y
+    xz = x * z
+    yz = y * z
+    wx = w * x
+    wy = w * y
+    wz = w * z
+    return (
+        1.0 - 2.0 * (yy + zz),
+        2.0 * (xy - wz),
+        2.0 * (xz + wy),
+        2.0 * (xy + wz),
+        1.0 - 2.0 * (xx + zz),
+        2.0 * (yz - wx),
+        2.0 * (xz - wy),
+        2.0 * (yz + wx),
+        1.0 - 2.0 * (xx + yy),
+    )

@@ -1,0 +1,179 @@
+"""Four downward Time-of-Flight range sensors on the drone's arms (IHRCF Eq. 12).
+
+Each sensor is a ray from its origin along the body's down axis (+z_C, so the rays tilt with
+the drone).  The range is the distance from the sensor origin to the first surface hit that
+is not the drone itself.  No hit, a hit beyond ``max_range`` or nearer than ``min_range`` gives
+NaN with ``valid = False``; a range is never clipped to a limit.
+
+How the drone's own shapes are kept out: ``rayTestBatch`` reports only the first hit of each
+ray, so every ray that hits ``exclude_body`` is cast again from just beyond that hit (up to
+``MAX_SELF_HITS`` times, only those rays, in one batch per round; a ray still blocked by the
+drone after that is reported invalid).  A ray that starts inside a
+convex shape (box, sphere, cylinder, hull) does not hit it in Bullet (measured), so a sensor
+mounted inside the drone's collision box never sees it; a hit on a face the ray leaves or on
+a part below the sensor (a leg, a guard) is stepped over by the re-cast.  The tests check
+both a sensor inside the drone's box and a leg right under a sensor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pybullet as p
+from pybullet_utils.bullet_client import BulletClient
+
+from estimation.frames import R_BC, tof_positions_in_camera_frame
+from estimation.types import RangeReading
+from landing_env.errors import ConfigError, require_choice, require_range
+
+#: Re-casts allowed per ray past the drone's own shapes (arms, legs, propeller guards...).
+MAX_SELF_HITS = 8
+
+#: How far past a self-hit the next cast starts, metres.  Bullet still reports a convex shape
+#: hit (at fraction 0) from a start up to about 0.1 mm inside it (measured), so the step is
+#: larger and doubles whenever a re-cast makes no progress.
+_SELF_HIT_STEP = 1e-3
+
+
+def _client_id(client: int | BulletClient) -> int:
+    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
+    ``_client``; it has no public accessor)."""
+    return int(getattr(client, "_client", client))
+
+
+def _default_mounts() -> tuple[tuple[float, float, float], ...]:
+    return tuple(tuple(float(v) for v in row) for row in tof_positions_in_camera_frame())
+
+
+@dataclass
+class TofConfig:
+    """The ToF sensors: geometry, range limits and the noise model.
+
+    ``noise = "vl53l1x"`` models a VL53L1X-class sensor in long-distance mode: Gaussian noise
+    with ``sigma = sigma_0 + sigma_per_m * range`` (defaults 2 mm + 2.5 mm/m: a few mm up
+    close, 12 mm at 4 m; chosen to be of the order of the +-20 mm ranging accuracy quoted
+    for the VL53L1X, with the spread growing as the return signal weakens with distance),
+    readings quantised to the sensor's 1 mm output, and an optional per-reading failure
+    probability (ranging status not valid).
+    """
+
+    #: beyond this the ranging status is invalid, metres (VL53L1X long mode: 4 m)
+    max_range: float = 4.0
+    #: nearer than this the reading is invalid, metres
+    min_range: float = 0.04
+    noise: Literal["none", "vl53l1x"] = "none"
+    sigma_0: float = 0.002
+    sigma_per_m: float = 0.0025
+    #: output resolution in vl53l1x mode, metres (0 = no quantisation)
+    resolution: float = 0.001
+    #: probability of an invalid ranging status on an in-range target (vl53l1x mode)
+    invalid_prob: float = 0.0
+    #: sensor origins in the camera frame C, metres (sensor order ps1..ps4)
+    mount_offsets_c: tuple[tuple[float, float, float], ...] = _default_mounts()
+
+    def __post_init__(self) -> None:
+        require_range("max_range", self.max_range, 0.0, low_inclusive=False)
+        require_range("min_range", self.min_range, 0.0)
+        if self.min_range >= self.max_range:
+            raise ConfigError(
+                "min_range", f"{self.min_range} must be below max_range = {self.max_range}"
+            )
+        require_choice("noise", self.noise, ("none", "vl53l1x"))
+        require_range("sigma_0", self.sigma_0, 0.0)
+        require_range("sigma_per_m", self.sigma_per_m, 0.0)
+        require_range("resolution", self.resolution, 0.0)
+        require_range("invalid_prob", self.invalid_prob, 0.0, 1.0)
+        if len(self.mount_offsets_c) == 0 or any(len(m) != 3 for m in self.mount_offsets_c):
+            raise ConfigError("mount_offsets_c", "need one or more (x, y, z) sensor origins")
+
+    def sigma(self, ranges: np.ndarray) -> np.ndarray:
+        """Noise standard deviation at the given ranges, metres (zero without noise)."""
+        if self.noise == "none":
+            return np.zeros_like(np.asarray(ranges, dtype=float))
+        return self.sigma_0 + self.sigma_per_m * np.asarray(ranges, dtype=float)
+
+
+class TofArray:
+    """The ToF sensors of one drone: ``measure`` casts all rays in one ``rayTestBatch``."""
+
+    def __init__(
+        self,
+        client: int | BulletClient,
+        config: TofConfig,
+        rng: np.random.Generator,
+        t_bc: np.ndarray,
+    ) -> None:
+        self.client = _client_id(client)
+        self.config = config
+        self.rng = rng
+        mounts_c = np.asarray(config.mount_offsets_c, dtype=float)
+        #: sensor origins in the body frame B
+        self.origins_b = np.asarray(t_bc, dtype=float) + (R_BC @ mounts_c.T).T
+        #: common measuring direction in B: the camera's optical axis, the body's down axis
+        self.direction_b = R_BC[:, 2].copy()
+
+    @property
+    def count(self) -> int:
+        return len(self.origins_b)
+
+    def true_ranges(
+        self, t_wb: np.ndarray, r_wb: np.ndarray, exclude_body: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free ranges (NaN where nothing within ``max_range``) and hit points in W."""
+        r_wb = np.asarray(r_wb, dtype=float)
+        origins = np.asarray(t_wb, dtype=float) + (r_wb @ self.origins_b.T).T
+        direction = r_wb @ self.direction_b
+        max_range = self.config.max_range
+        ranges = np.full(self.count, np.nan)
+        points = np.full((self.count, 3), np.nan)
+        # distance along each ray at which its current cast starts
+        start = np.zeros(self.count)
+        step = np.full(self.count, _SELF_HIT_STEP)
+        pending = np.arange(self.count)
+        for _ in range(MAX_SELF_HITS + 1):
+            froms = origins[pending] + start[pending, None] * direction
+            tos = origins[pending] + max_range * direction
+            results = p.rayTestBatch(froms.tolist(), tos.tolist(), physicsClientId=self.client)
+            again: list[int] = []
+            for index, result in zip(pending, results, strict=True):
+                body, fraction = result[0], result[2]
+                if body < 0:
+                    continue
+                distance = start[index] + fraction * (max_range - start[index])
+                if body == exclude_body:
+                    # a hit right at the start means the cast began inside the tolerance
+                    step[index] = 2.0 * step[index] if fraction <= 1e-9 else _SELF_HIT_STEP
+                    start[index] = distance + step[index]
+                    if start[index] < max_range:
+                        again.append(index)
+                    continue
+                ranges[index] = distance
+                points[index] = np.asarray(result[3], dtype=float)
+            if not again:
+                break
+            pending = np.asarray(again)
+        return ranges, points
+
+    def measure(
+        self, timestamp: float, t_wb: np.ndarray, r_wb: np.ndarray, exclude_body: int
+    ) -> RangeReading:
+        """The four readings at the body pose (t_wb, r_wb); invalid ones are NaN.
+
+        Validity is decided on the true distance (what the sensor's ranging status reflects);
+        the noisy value of a valid reading is reported as is.
+        """
+        cfg = self.config
+        ranges, _ = self.true_ranges(t_wb, r_wb, exclude_body)
+        # draw the random numbers every call so the stream does not depend on the scene
+        gauss = self.rng.standard_normal(self.count)
+        fails = self.rng.random(self.count) < cfg.invalid_prob
+        valid = np.isfinite(ranges) & (ranges >= cfg.min_range) & (ranges <= cfg.max_range)
+        if cfg.noise == "vl53l1x":
+            valid &= ~fails
+            ranges = ranges + cfg.sigma(ranges) * gauss
+            if cfg.resolution > 0.0:
+                ranges = np.round(ranges / cfg.resolution) * cfg.resolution
+        ranges = np.where(valid, ranges, np.nan)
+        return RangeReading(timestamp=timestamp, ranges=ranges, valid=valid)

@@ -1,0 +1,567 @@
+"""Motion sources for the Stewart platform: static, sums of sinusoids, a JONSWAP sea, CSV replay.
+
+Every source gives the commanded top-plate pose relative to the home frame as the 6-vector
+``(x, y, z, roll, pitch, yaw)`` in metres and radians (Euler ZYX, see
+:mod:`estimation.frames`) and its time derivative (m/s and Euler rates in rad/s).  Sources are
+deterministic: all randomness is drawn once, at construction, from the ``numpy.random.Generator``
+given to :func:`make_motion_source`.
+
+Unit convention of the *configs* and of CSV files: translations in metres, angles in DEGREES
+(they are written by people); the sources themselves work in radians.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from landing_env.errors import ConfigError, require_choice, require_range
+
+MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "csv")
+CSV_HEADER: tuple[str, ...] = ("t", "x", "y", "z", "roll", "pitch", "yaw")
+AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
+GRAVITY = 9.80665
+
+#: Typical (significant height m, peak period s) per WMO sea-state code.  Heights are the
+#: means of the open-ocean North Atlantic table of Bales, Lee & Voelker (DTNSRDC 1981), which
+#: fall inside the WMO/Douglas code bands; periods are that table's most probable modal
+#: periods.  Codes 0 and 1 (calm) have no tabulated period: 3 s is this project's choice.
+SEA_STATE_TABLE: dict[int, tuple[float, float]] = {
+    0: (0.0, 3.0),
+    1: (0.05, 3.0),
+    2: (0.3, 7.5),
+    3: (0.88, 7.5),
+    4: (1.88, 8.8),
+    5: (3.25, 9.7),
+    6: (5.0, 12.4),
+}
+
+
+@runtime_checkable
+class MotionSource(Protocol):
+    """Commanded top-plate motion relative to the home pose."""
+
+    def pose(self, t: float) -> np.ndarray:
+        """(x, y, z, roll, pitch, yaw) at time ``t`` (s): metres and radians, shape (6,)."""
+        ...
+
+    def velocity(self, t: float) -> np.ndarray:
+        """Time derivative of :meth:`pose`: m/s and Euler rates rad/s, shape (6,)."""
+        ...
+
+
+def sample_poses(source: MotionSource, times: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Poses (N, 6) of ``source`` at ``times`` (a convenience for plots and tests)."""
+    return np.array([source.pose(float(t)) for t in np.asarray(times, dtype=float)])
+
+
+def _pose_from_config(values: Sequence[float]) -> np.ndarray:
+    """(x, y, z [m], roll, pitch, yaw [deg]) -> SI pose."""
+    pose = np.asarray(values, dtype=float).copy()
+    pose[3:] = np.deg2rad(pose[3:])
+    return pose
+
+
+# ------------------------------------------------------------------------------- static
+@dataclass(frozen=True)
+class StaticMotionConfig:
+    """A constant pose (e.g. the papers' static test)."""
+
+    #: (x, y, z) in metres relative to home
+    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: (roll, pitch, yaw) in degrees
+    attitude_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("position_m", "attitude_deg"):
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 3:
+                raise ConfigError(name, f"needs 3 values, got {len(value)}")
+            object.__setattr__(self, name, value)
+
+
+class StaticMotion:
+    """A pose that never changes."""
+
+    def __init__(self, pose: np.ndarray) -> None:
+        self._pose = np.asarray(pose, dtype=float).reshape(6).copy()
+
+    def pose(self, t: float) -> np.ndarray:
+        return self._pose.copy()
+
+    def velocity(self, t: float) -> np.ndarray:
+        return np.zeros(6)
+
+
+# ------------------------------------------------------------------------------- sinusoids
+def _default_amplitudes() -> tuple[tuple[float, ...], ...]:
+    # Centimetres and a few degrees, like the papers' bench; peaks stay inside the default
+    # workspace so the default run is never clamped.
+    return ((0.03, 0.01), (0.03, 0.01), (0.05, 0.02), (5.0, 1.5), (5.0, 1.5), (3.0, 1.0))
+
+
+def _default_frequencies() -> tuple[tuple[float, ...], ...]:
+    # Periods of several seconds, incommensurate between axes so the motion does not repeat.
+    return (
+        (0.083, 0.21),
+        (0.071, 0.19),
+        (0.10, 0.27),
+        (0.091, 0.23),
+        (0.11, 0.25),
+        (0.053, 0.17),
+    )
+
+
+@dataclass(frozen=True)
+class SinusoidConfig:
+    """Per axis a sum of sinusoids ``sum_k A_k sin(2 pi f_k t + phi_k)``.
+
+    Each field holds six rows (x, y, z, roll, pitch, yaw); a row may hold any number of
+    components (possibly none), the same number in every field.
+    """
+
+    #: amplitudes: metres for x, y, z; degrees for roll, pitch, yaw
+    amplitudes: tuple[tuple[float, ...], ...] = field(default_factory=_default_amplitudes)
+    #: frequencies in Hz
+    frequencies_hz: tuple[tuple[float, ...], ...] = field(default_factory=_default_frequencies)
+    #: phases in degrees; None: drawn uniformly from the seed
+    phases_deg: tuple[tuple[float, ...], ...] | None = None
+
+    def __post_init__(self) -> None:
+        amplitudes = _six_rows("amplitudes", self.amplitudes)
+        frequencies = _six_rows("frequencies_hz", self.frequencies_hz)
+        _same_shape("frequencies_hz", frequencies, amplitudes)
+        for axis, row in zip(AXES, amplitudes, strict=True):
+            for value in row:
+                require_range(f"amplitudes[{axis}]", value, 0.0)
+        for axis, row in zip(AXES, frequencies, strict=True):
+            for value in row:
+                require_range(f"frequencies_hz[{axis}]", value, 0.0, low_inclusive=False)
+        object.__setattr__(self, "amplitudes", amplitudes)
+        object.__setattr__(self, "frequencies_hz", frequencies)
+        if self.phases_deg is not None:
+            phases = _six_rows("phases_deg", self.phases_deg)
+            _same_shape("phases_deg", phases, amplitudes)
+            object.__setattr__(self, "phases_deg", phases)
+
+
+def _six_rows(name: str, rows: Sequence[Sequence[float]]) -> tuple[tuple[float, ...], ...]:
+    try:
+        result = tuple(tuple(float(v) for v in row) for row in rows)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(name, f"needs six lists of numbers ({', '.join(AXES)})") from exc
+    if len(result) != 6:
+        raise ConfigError(name, f"needs six rows ({', '.join(AXES)}), got {len(result)}")
+    return result
+
+
+def _same_shape(name: str, rows: tuple[tuple[float, ...], ...], reference: tuple) -> None:
+    for axis, row, ref in zip(AXES, rows, reference, strict=True):
+        if len(row) != len(ref):
+            raise ConfigError(
+                name, f"row {axis} has {len(row)} values but amplitudes has {len(ref)}"
+            )
+
+
+class SinusoidMotion:
+    """Independent sums of sinusoids on the six axes (SI units: m, rad, Hz, rad)."""
+
+    def __init__(
+        self,
+        amplitudes: Sequence[Sequence[float]],
+        frequencies_hz: Sequence[Sequence[float]],
+        phases: Sequence[Sequence[float]],
+    ) -> None:
+        # Flatten to one component list with an axis index, so one call evaluates all axes.
+        axis, amp, omega, phase = [], [], [], []
+        for k in range(6):
+            n = len(amplitudes[k])
+            axis += [k] * n
+            amp += list(amplitudes[k])
+            omega += [2.0 * math.pi * f for f in frequencies_hz[k]]
+            phase += list(phases[k])
+        self._omega = np.array(omega, dtype=float)
+        self._phase = np.array(phase, dtype=float)
+        # Selection matrix (6, n_components) scaled by the amplitudes: pose = M @ sin(...)
+        self._mix = np.zeros((6, len(amp)))
+        self._mix[axis, np.arange(len(amp))] = amp
+
+    @classmethod
+    def from_config(cls, config: SinusoidConfig, rng: np.random.Generator) -> SinusoidMotion:
+        """Convert the config's degrees to radians; draw missing phases from ``rng``."""
+        amplitudes = [list(row) for row in config.amplitudes]
+        for k in range(3, 6):
+            amplitudes[k] = [math.radians(a) for a in amplitudes[k]]
+        if config.phases_deg is None:
+            phases = [list(rng.uniform(0.0, 2.0 * math.pi, len(row))) for row in amplitudes]
+        else:
+            phases = [[math.radians(p) for p in row] for row in config.phases_deg]
+        return cls(amplitudes, config.frequencies_hz, phases)
+
+    def pose(self, t: float) -> np.ndarray:
+        return self._mix @ np.sin(self._omega * t + self._phase)
+
+    def velocity(self, t: float) -> np.ndarray:
+        return self._mix @ (self._omega * np.cos(self._omega * t + self._phase))
+
+
+# ------------------------------------------------------------------------------- sea state
+@dataclass(frozen=True)
+class SeaStateConfig:
+    """A JONSWAP sea, a small vessel's response to it and its scaling onto the platform.
+
+    Give ``sea_state`` (WMO code 0-6, typical Hs and Tp from :data:`SEA_STATE_TABLE`) and/or
+    explicit ``significant_height_m`` and ``peak_period_s``, which take precedence.
+    """
+
+    sea_state: int | None = 4
+    significant_height_m: float | None = None
+    peak_period_s: float | None = None
+    #: JONSWAP peak enhancement factor (1 gives Pierson-Moskowitz)
+    gamma: float = 3.3
+    #: number of wave components (one per frequency bin)
+    n_components: int = 150
+    #: spectrum band as multiples of the peak frequency
+    band_low: float = 0.5
+    band_high: float = 5.0
+    #: direction the waves travel towards, from the platform's bow (x) counter-clockwise;
+    #: 0 following seas, 180 head seas, 90 beam seas from starboard
+    wave_direction_deg: float = 135.0
+    #: half-width of the uniform random spread of component directions
+    direction_spread_deg: float = 30.0
+    #: vessel natural periods (s) and damping ratios of its second-order responses
+    heave_period_s: float = 3.0
+    heave_damping: float = 0.3
+    roll_period_s: float = 5.0
+    roll_damping: float = 0.1
+    pitch_period_s: float = 3.5
+    pitch_damping: float = 0.25
+    surge_sway_period_s: float = 10.0
+    surge_sway_damping: float = 0.7
+    yaw_period_s: float = 8.0
+    yaw_damping: float = 0.5
+    #: platform motion = scale * vessel motion, per axis (x, y, z, roll, pitch, yaw); the
+    #: defaults make sea state 4 use most of the default workspace (occasional clamping)
+    scale: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.06, 0.7, 1.0, 3.5)
+
+    def __post_init__(self) -> None:
+        if self.sea_state is not None:
+            require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
+        elif self.significant_height_m is None or self.peak_period_s is None:
+            raise ConfigError(
+                "sea_state",
+                "None needs both significant_height_m and peak_period_s; "
+                f"or choose one of {', '.join(str(k) for k in SEA_STATE_TABLE)}",
+            )
+        if self.significant_height_m is not None:
+            require_range("significant_height_m", self.significant_height_m, 0.0, 20.0)
+        if self.peak_period_s is not None:
+            require_range("peak_period_s", self.peak_period_s, 0.5, 30.0)
+        require_range("gamma", self.gamma, 1.0, 10.0)
+        require_range("n_components", self.n_components, 1, 10_000)
+        require_range("band_low", self.band_low, 0.0, 1.0, low_inclusive=False)
+        require_range("band_high", self.band_high, 1.0, 20.0, low_inclusive=False)
+        require_range("direction_spread_deg", self.direction_spread_deg, 0.0, 180.0)
+        for name in ("heave", "roll", "pitch", "surge_sway", "yaw"):
+            for suffix in ("period_s", "damping"):
+                key = f"{name}_{suffix}"
+                require_range(key, getattr(self, key), 0.0, low_inclusive=False)
+        scale = tuple(float(v) for v in self.scale)
+        if len(scale) != 6:
+            raise ConfigError("scale", f"needs 6 values ({', '.join(AXES)}), got {len(scale)}")
+        for axis, value in zip(AXES, scale, strict=True):
+            require_range(f"scale[{axis}]", value, 0.0)
+        object.__setattr__(self, "scale", scale)
+
+    @property
+    def hs(self) -> float:
+        """Significant wave height in use (m)."""
+        if self.significant_height_m is not None:
+            return self.significant_height_m
+        return SEA_STATE_TABLE[int(self.sea_state)][0]  # type: ignore[arg-type]
+
+    @property
+    def tp(self) -> float:
+        """Peak period in use (s)."""
+        if self.peak_period_s is not None:
+            return self.peak_period_s
+        return SEA_STATE_TABLE[int(self.sea_state)][1]  # type: ignore[arg-type]
+
+
+def jonswap_shape(frequency_hz: np.ndarray, peak_period_s: float, gamma: float) -> np.ndarray:
+    """Unnormalised JONSWAP spectral shape S(f) (arbitrary scale; normalised by Hs later).
+
+    Pierson-Moskowitz f^-5 exp(-5/4 (fp/f)^4) times the peak enhancement
+    gamma^exp(-(f - fp)^2 / (2 sigma^2 fp^2)), sigma 0.07 below and 0.09 above the peak.
+    """
+    f = np.asarray(frequency_hz, dtype=float)
+    fp = 1.0 / peak_period_s
+    sigma = np.where(f <= fp, 0.07, 0.09)
+    peak = gamma ** np.exp(-((f - fp) ** 2) / (2.0 * sigma**2 * fp**2))
+    return f**-5 * np.exp(-1.25 * (fp / f) ** 4) * peak
+
+
+def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:
+    """Complex gain of 1 / (1 - (w/wn)^2 + 2 i zeta w/wn): unit gain at low frequency."""
+    ratio = np.asarray(omega) * period_s / (2.0 * math.pi)
+    return 1.0 / (1.0 - ratio**2 + 2j * damping * ratio)
+
+
+class SeaStateMotion:
+    """Platform motion that imitates a small vessel's deck in a JONSWAP sea.
+
+    The sea is a sum of ``n`` cosines, one per frequency bin of the band, each at a frequency
+    drawn uniformly inside its bin (so the record does not repeat), with a random phase and a
+    random direction around the mean wave direction.  Amplitudes follow the spectrum and are
+    normalised so the spectral m0 is exactly Hs^2 / 16.  The vessel (at the origin) responds
+    with second-order transfer functions of unit static gain:
+
+    * heave to the surface elevation; surge and sway to the horizontal orbital displacement
+      of the surface (deep water: as large as the elevation, 90 degrees ahead, along the
+      component's direction); roll to the surface slope along y and pitch to minus the slope
+      along x (a raft on the surface would take exactly the slope angles); yaw to a crude
+      proxy of the wave yaw moment, slope * sin(2 beta) / 2, beta the component direction.
+
+    The platform pose is ``scale * vessel motion`` per axis.  All of it is precomputed as one
+    complex amplitude per (axis, component), so a pose costs one complex exponential of n
+    frequencies and a (6, n) product.
+    """
+
+    def __init__(self, config: SeaStateConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        n = config.n_components
+        fp = 1.0 / config.tp
+        edges = np.linspace(config.band_low * fp, config.band_high * fp, n + 1)
+        width = np.diff(edges)
+        frequency = edges[:-1] + width * rng.uniform(0.0, 1.0, n)
+        phase = rng.uniform(0.0, 2.0 * math.pi, n)
+        spread = math.radians(config.direction_spread_deg)
+        direction = math.radians(config.wave_direction_deg) + rng.uniform(-spread, spread, n)
+        density = jonswap_shape(frequency, config.tp, config.gamma) * width
+        m0_target = config.hs**2 / 16.0
+        # Normalise the discrete spectrum so sum(a^2 / 2) = m0 = Hs^2 / 16 exactly.
+        total = float(np.sum(density))
+        amplitude = np.sqrt(2.0 * density * (m0_target / total))
+        self.frequencies_hz = frequency
+        self.amplitudes_m = amplitude
+        self.directions = direction
+        self.m0 = float(np.sum(amplitude**2) / 2.0)
+        omega = 2.0 * math.pi * frequency
+        self._omega = omega
+        wavenumber = omega**2 / GRAVITY  # deep-water dispersion
+        # Complex amplitudes at t = 0 (elevation = Re(a e^{i(w t + phi)})).
+        elevation = amplitude * np.exp(1j * phase)
+        self._elevation = elevation
+        slope = -1j * wavenumber * elevation  # d/dx of the travelling wave at the origin
+        orbital = -1j * elevation  # horizontal surface displacement along the direction
+        c = config
+        cos_b, sin_b = np.cos(direction), np.sin(direction)
+        heave = second_order_response(omega, c.heave_period_s, c.heave_damping)
+        roll = second_order_response(omega, c.roll_period_s, c.roll_damping)
+        pitch = second_order_response(omega, c.pitch_period_s, c.pitch_damping)
+        planar = second_order_response(omega, c.surge_sway_period_s, c.surge_sway_damping)
+        yaw = second_order_response(omega, c.yaw_period_s, c.yaw_damping)
+        vessel = np.array(
+            [
+                planar * orbital * cos_b,
+                planar * orbital * sin_b,
+                heave * elevation,
+                roll * slope * sin_b,
+                -pitch * slope * cos_b,
+                yaw * slope * 0.5 * np.sin(2.0 * direction),
+            ]
+        )
+        self._coefficients = np.asarray(c.scale)[:, None] * vessel  # (6, n)
+        self._rate_coefficients = self._coefficients * (1j * omega)
+
+    @property
+    def significant_height(self) -> float:
+        """4 sqrt(m0) of the synthesised (unscaled) elevation spectrum, metres."""
+        return 4.0 * math.sqrt(self.m0)
+
+    def elevation(self, t: float | np.ndarray) -> np.ndarray:
+        """Unscaled sea-surface elevation (m) at the vessel for a time or an array of times."""
+        t = np.asarray(t, dtype=float)
+        return np.real(np.exp(1j * np.multiply.outer(t, self._omega)) @ self._elevation)
+
+    def pose(self, t: float) -> np.ndarray:
+        return np.real(self._coefficients @ np.exp(1j * self._omega * t))
+
+    def velocity(self, t: float) -> np.ndarray:
+        return np.real(self._rate_coefficients @ np.exp(1j * self._omega * t))
+
+
+# ------------------------------------------------------------------------------- csv
+class CsvMotionError(ValueError):
+    """A motion CSV file is malformed; the message names the file and the row."""
+
+
+@dataclass(frozen=True)
+class CsvMotionConfig:
+    """Replay of a recorded motion file.
+
+    The file has the header ``t,x,y,z,roll,pitch,yaw``: time in seconds (strictly
+    increasing), translations in metres, angles in DEGREES.  Between samples the pose is
+    PCHIP-interpolated (no overshoot).  Before the first sample the first pose is held.
+    """
+
+    #: path of the CSV file (required when the motion kind is "csv")
+    path: str = ""
+    #: after the last sample: "hold" the last pose, or "loop" back to the first sample
+    end: Literal["hold", "loop"] = "hold"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "path", str(self.path))
+        require_choice("end", self.end, ("hold", "loop"))
+
+
+class CsvMotion:
+    """PCHIP replay of samples ``(t, pose)`` with angles already in radians."""
+
+    def __init__(
+        self, times: np.ndarray, poses: np.ndarray, end: Literal["hold", "loop"] = "hold"
+    ) -> None:
+        times = np.asarray(times, dtype=float)
+        poses = np.asarray(poses, dtype=float)
+        if times.ndim != 1 or len(times) < 2 or poses.shape != (len(times), 6):
+            raise CsvMotionError("need at least two samples of (t, x, y, z, roll, pitch, yaw)")
+        bad = np.flatnonzero(np.diff(times) <= 0.0)
+        if len(bad):
+            raise CsvMotionError(f"time must increase strictly; it does not at sample {bad[0] + 1}")
+        require_choice("end", end, ("hold", "loop"))
+        self.times = times
+        self.samples = poses
+        self.end = end
+        self._start, self._stop = float(times[0]), float(times[-1])
+        self._interp = PchipInterpolator(times, poses, axis=0, extrapolate=False)
+        self._rate = self._interp.derivative()
+
+    @classmethod
+    def from_file(cls, path: str | Path, end: Literal["hold", "loop"] = "hold") -> CsvMotion:
+        """Load a CSV (header ``t,x,y,z,roll,pitch,yaw``; s, m, degrees)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"motion CSV {str(path)!r} does not exist")
+        with path.open(newline="") as handle:
+            rows = [row for row in csv.reader(handle) if row and any(c.strip() for c in row)]
+        if not rows:
+            raise CsvMotionError(f"{path}: empty file; expected header {','.join(CSV_HEADER)}")
+        header = tuple(c.strip().lower() for c in rows[0])
+        if header != CSV_HEADER:
+            raise CsvMotionError(
+                f"{path}: header is {','.join(header)!r}; expected {','.join(CSV_HEADER)!r} "
+                "(seconds, metres, degrees)"
+            )
+        values = np.empty((len(rows) - 1, 7))
+        for i, row in enumerate(rows[1:]):
+            line = i + 2
+            if len(row) != 7:
+                raise CsvMotionError(f"{path}, line {line}: expected 7 columns, got {len(row)}")
+            try:
+                values[i] = [float(c) for c in row]
+            except ValueError as exc:
+                raise CsvMotionError(f"{path}, line {line}: not a number ({exc})") from exc
+        if not np.all(np.isfinite(values)):
+            raise CsvMotionError(f"{path}: contains non-finite values")
+        if len(values) < 2:
+            raise CsvMotionError(f"{path}: needs at least two samples")
+        bad = np.flatnonzero(np.diff(values[:, 0]) <= 0.0)
+        if len(bad):
+            raise CsvMotionError(
+                f"{path}, line {bad[0] + 3}: time {values[bad[0] + 1, 0]} does not increase "
+                f"(previous {values[bad[0], 0]})"
+            )
+        poses = values[:, 1:].copy()
+        poses[:, 3:] = np.deg2rad(poses[:, 3:])
+        return cls(values[:, 0], poses, end)
+
+    @property
+    def duration(self) -> float:
+        """Time span of the samples (s)."""
+        return self._stop - self._start
+
+    def _local_time(self, t: float) -> tuple[float, bool]:
+        """Map ``t`` into the sample span; the flag says the pose is being held (no motion)."""
+        if t <= self._start:
+            return self._start, True
+        if t >= self._stop:
+            if self.end == "hold":
+                return self._stop, True
+            return self._start + math.fmod(t - self._start, self.duration), False
+        return t, False
+
+    def pose(self, t: float) -> np.ndarray:
+        local, _ = self._local_time(t)
+        return self._interp(local)
+
+    def velocity(self, t: float) -> np.ndarray:
+        local, held = self._local_time(t)
+        return np.zeros(6) if held else self._rate(local)
+
+
+def write_motion_csv(path: str | Path, times: np.ndarray, poses: np.ndarray) -> None:
+    """Write poses (N, 6; metres and radians) as a motion CSV (angles converted to degrees)."""
+    poses = np.asarray(poses, dtype=float).copy()
+    poses[:, 3:] = np.rad2deg(poses[:, 3:])
+    with Path(path).open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(CSV_HEADER)
+        for t, row in zip(np.asarray(times, dtype=float), poses, strict=True):
+            writer.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
+
+
+# ------------------------------------------------------------------------------- factory
+_NESTED: dict[str, type] = {
+    "static": StaticMotionConfig,
+    "sinusoids": SinusoidConfig,
+    "sea_state": SeaStateConfig,
+    "csv": CsvMotionConfig,
+}
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Which motion source drives the platform, with one nested config per kind."""
+
+    kind: Literal["static", "sinusoids", "sea_state", "csv"] = "sinusoids"
+    static: StaticMotionConfig = field(default_factory=StaticMotionConfig)
+    sinusoids: SinusoidConfig = field(default_factory=SinusoidConfig)
+    sea_state: SeaStateConfig = field(default_factory=SeaStateConfig)
+    csv: CsvMotionConfig = field(default_factory=CsvMotionConfig)
+
+    def __post_init__(self) -> None:
+        require_choice("kind", self.kind, MOTION_KINDS)
+        # Accept plain mappings (from YAML) for the nested configs.
+        for item in fields(self):
+            if item.name == "kind":
+                continue
+            value = getattr(self, item.name)
+            if isinstance(value, dict):
+                try:
+                    value = _NESTED[item.name](**value)
+                except ConfigError as exc:
+                    raise exc.under(item.name) from exc
+                except TypeError as exc:
+                    raise ConfigError(item.name, str(exc)) from exc
+                object.__setattr__(self, item.name, value)
+        if self.kind == "csv" and not self.csv.path:
+            raise ConfigError("csv.path", "is required when kind is 'csv'")
+
+
+def make_motion_source(config: MotionConfig, rng: np.random.Generator) -> MotionSource:
+    """Build the source chosen by ``config.kind``; all its randomness comes from ``rng``."""
+    if config.kind == "static":
+        static = config.static
+        return StaticMotion(_pose_from_config((*static.position_m, *static.attitude_deg)))
+    if config.kind == "sinusoids":
+        return SinusoidMotion.from_config(config.sinusoids, rng)
+    if config.kind == "sea_state":
+        return SeaStateMotion(config.sea_state, rng)
+    return CsvMotion.from_file(config.csv.path, config.csv.end)

@@ -1,0 +1,301 @@
+"""The simulated world: PyBullet physics, the quadrotor, the Stewart-platform deck, the sensors.
+
+This is the core simulation layer; the Gymnasium environments in :mod:`landing_env.envs` are
+thin tasks on top of it.  One call to :meth:`World.step` advances one control period: the
+controller, motors, deck motion and IMU run at the physics rate and their results are
+aggregated for the step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+from pybullet_utils.bullet_client import BulletClient
+
+from estimation.frames import R_BC, R_PD, deck_pose_in_camera
+from estimation.types import CameraFrame, ImuSample, RangeReading
+from landing_env.config import DeckLandingConfig
+from landing_env.physics.controller import CascadeController, VelocitySetpoint
+from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
+from landing_env.physics.wind import WindModel
+from landing_env.scene.deck import create_deck_body
+from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.imu import ImuModel
+from landing_env.sensors.tof import TofArray
+from landing_env.stewart.motion import make_motion_source
+from landing_env.stewart.platform import StewartPlatform, StewartStatus
+from landing_env.touchdown import (
+    ContactSummary,
+    TouchdownMetrics,
+    contact_metrics,
+    summarise_contacts,
+)
+
+GRAVITY = 9.81
+#: mass of the top plate: heavy against the drone so that touchdowns do not deflect it
+TOP_PLATE_MASS_KG = 15.0
+
+
+@dataclass
+class DeckState:
+    """The top plate (frame P) and the tag frame D in the world, from PyBullet."""
+
+    position_w: np.ndarray
+    rotation_wp: np.ndarray
+    velocity_w: np.ndarray
+    angular_velocity_w: np.ndarray
+
+    @property
+    def tag_centre_w(self) -> np.ndarray:
+        return self.position_w
+
+    @property
+    def rotation_wd(self) -> np.ndarray:
+        return self.rotation_wp @ R_PD
+
+
+@dataclass
+class PhysicsReport:
+    """What happened during one control period."""
+
+    imu_samples: list[ImuSample] = field(default_factory=list)
+    first_contact: TouchdownMetrics | None = None
+    forbidden_contact: str = ""
+    stewart: StewartStatus | None = None
+    stewart_clamped: bool = False
+    motor_saturated: bool = False
+
+
+class World:
+    """One PyBullet world with the drone, the deck on its Stewart platform and the sensors."""
+
+    def __init__(self, config: DeckLandingConfig, gui: bool = False) -> None:
+        self.config = config
+        sim = config.simulation
+        self.dt = 1.0 / sim.physics_hz
+        self.substeps = sim.substeps
+        self.client = BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        c = self.client
+        c.setGravity(0.0, 0.0, -GRAVITY)
+        c.setTimeStep(self.dt)
+        c.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
+        if gui:
+            c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
+
+        # the sea / hangar floor; nothing assumes it is the landing surface
+        plane_shape = c.createCollisionShape(p.GEOM_PLANE)
+        plane_visual = c.createVisualShape(
+            p.GEOM_BOX, halfExtents=[30.0, 30.0, 0.001], rgbaColor=[0.16, 0.30, 0.42, 1.0]
+        )
+        self.ground_id = c.createMultiBody(0.0, plane_shape, plane_visual, [0.0, 0.0, 0.0])
+
+        self.params = QuadrotorParams.from_yaml(config.vehicle or None)
+        self.drone = Quadrotor(c, self.params)
+        self.controller = CascadeController(self.params, config.controller)
+        self.foot_links = frozenset(self.drone.foot_link_indices)
+        self._drone_colours = {
+            shape[1]: tuple(shape[7]) for shape in c.getVisualShapeData(self.drone.body_id)
+        }
+        self.t_bc = np.asarray(self.params.camera_offset_b, dtype=float)
+
+        rng = np.random.default_rng(0)
+        base_position = np.asarray(config.stewart_base_position, dtype=float)
+        self.deck_id = create_deck_body(
+            c, config.deck, TOP_PLATE_MASS_KG, base_position, [0.0, 0.0, 0.0, 1.0]
+        )
+        self.stewart = StewartPlatform(
+            c,
+            config.stewart,
+            base_position,
+            self.deck_id,
+            make_motion_source(config.motion, rng),
+        )
+        home_position, _ = self.stewart.home_pose_w()
+        self.deck_home_w = np.asarray(home_position, dtype=float)
+        self.camera = CameraSensor(c, config.camera, rng)
+        self.tof = TofArray(c, config.tof, rng, self.t_bc)
+        self.imu = ImuModel(config.imu, rng, sim.physics_hz)
+        self.wind = WindModel(config.wind, rng)
+        self.time = 0.0
+        self.armed = True
+        self._state: DroneState | None = None
+
+    # ------------------------------------------------------------------ episode control
+    def reset(self, rng: np.random.Generator, position_w: np.ndarray, yaw: float) -> None:
+        """Start an episode: new random streams, deck at t = 0, drone hovering at a pose."""
+        streams = rng.spawn(5)
+        self.stewart.motion = make_motion_source(self.config.motion, streams[0])
+        self.camera.rng = streams[1]
+        self.tof.rng = streams[2]
+        self.imu.rng = streams[3]
+        self.imu.reset()
+        self.wind = WindModel(self.config.wind, streams[4])
+        self.time = 0.0
+        self.stewart.reset(0.0)
+        self.drone.reset(position_w, yaw)
+        self.controller.reset()
+        self.armed = True
+        self._state = self.drone.read_state()
+        self._hover_rotors()
+
+    def _hover_rotors(self) -> None:
+        """Spin the rotors up to hover so that an episode does not start with a drop."""
+        hover = math.sqrt(self.params.mass * GRAVITY / (4.0 * self.params.k_f))
+        self.drone.set_rotor_speeds(np.full(4, hover))
+
+    def disarm(self) -> None:
+        """Cut the motors to idle (after touchdown, as a land detector does)."""
+        self.armed = False
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, setpoint: VelocitySetpoint, monitor_contacts: bool = True) -> PhysicsReport:
+        """Advance one control period (``substeps`` physics steps)."""
+        report = PhysicsReport()
+        c = self.client
+        idle = np.full(4, self.params.omega_min)
+        for _ in range(self.substeps):
+            state = self._state if self._state is not None else self.drone.read_state()
+            if self.armed:
+                command = self.controller.update(state, setpoint, self.dt)
+            else:
+                command = idle
+            self.drone.wind_velocity_w = self.wind.velocity(self.time, self.dt)
+            self.drone.apply_rotor_commands(command, self.dt, state)
+            report.motor_saturated |= bool(self.drone.last_saturated)
+            status = self.stewart.step_to(self.time + self.dt)
+            report.stewart = status
+            report.stewart_clamped |= bool(status.clamped)
+            deck_before = self.deck_state() if monitor_contacts else None
+            c.stepSimulation()
+            self.time += self.dt
+            new_state = self.drone.read_state()
+            accel_w = (new_state.velocity_w - state.velocity_w) / self.dt
+            report.imu_samples.append(
+                self.imu.sample(
+                    self.time, new_state.rotation_wb, accel_w, new_state.angular_velocity_b
+                )
+            )
+            self._state = new_state
+            if monitor_contacts:
+                contacts = self.contacts()
+                if contacts.forbidden and not report.forbidden_contact:
+                    report.forbidden_contact = contacts.forbidden_what
+                if contacts.feet_on_deck and report.first_contact is None:
+                    assert deck_before is not None
+                    report.first_contact = contact_metrics(
+                        self.time,
+                        state.position_w,
+                        state.velocity_w,
+                        state.rotation_wb,
+                        deck_before.position_w,
+                        deck_before.rotation_wp,
+                        deck_before.velocity_w,
+                        deck_before.angular_velocity_w,
+                        deck_before.tag_centre_w,
+                    )
+                if report.first_contact is not None or report.forbidden_contact:
+                    break
+        return report
+
+    def settle(self, duration_s: float) -> tuple[set[int], bool, str, set[int]]:
+        """Run disarmed for ``duration_s``; return feet seen on deck, on-deck-at-end, crash."""
+        self.disarm()
+        feet_seen: set[int] = set()
+        forbidden = ""
+        end_feet: set[int] = set()
+        zero = VelocitySetpoint(np.zeros(3), 0.0)
+        steps = max(1, round(duration_s * self.config.simulation.env_hz))
+        for _ in range(steps):
+            report = self.step(zero, monitor_contacts=False)
+            del report
+            contacts = self.contacts()
+            feet_seen |= set(contacts.feet_on_deck)
+            end_feet = set(contacts.feet_on_deck)
+            if contacts.forbidden and not forbidden:
+                forbidden = contacts.forbidden_what
+        self.stewart.update_leg_visuals()
+        return feet_seen, len(end_feet) >= 3 and not forbidden, forbidden, end_feet
+
+    def contacts(self) -> ContactSummary:
+        points = self.client.getContactPoints(bodyA=self.drone.body_id)
+        return summarise_contacts(points, self.foot_links, self.deck_id)
+
+    # ------------------------------------------------------------------ sensing and truth
+    def drone_state(self) -> DroneState:
+        if self._state is None:
+            self._state = self.drone.read_state()
+        return self._state
+
+    def deck_state(self) -> DeckState:
+        c = self.client
+        position, orientation = c.getBasePositionAndOrientation(self.deck_id)
+        velocity, angular = c.getBaseVelocity(self.deck_id)
+        rotation = np.asarray(c.getMatrixFromQuaternion(orientation)).reshape(3, 3)
+        return DeckState(np.asarray(position), rotation, np.asarray(velocity), np.asarray(angular))
+
+    def camera_pose_w(self) -> tuple[np.ndarray, np.ndarray]:
+        state = self.drone_state()
+        return state.position_w + state.rotation_wb @ self.t_bc, state.rotation_wb @ R_BC
+
+    def true_deck_pose_c(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ground truth ``(R_CD, t_CD)``: the tag frame in the camera frame."""
+        state = self.drone_state()
+        deck = self.deck_state()
+        return deck_pose_in_camera(
+            state.position_w, state.rotation_wb, deck.position_w, deck.rotation_wp, self.t_bc
+        )
+
+    def _drone_visible(self, visible: bool) -> None:
+        """Show or hide the drone's own visuals.
+
+        The camera hides its own airframe: parts within the near plane make TinyRenderer's
+        rasteriser blow up (seconds per frame), and a real camera on the belly does not see them.
+        """
+        alpha = 1.0 if visible else 0.0
+        for link, colour in self._drone_colours.items():
+            self.client.changeVisualShape(
+                self.drone.body_id, link, rgbaColor=[*colour[:3], alpha * colour[3]]
+            )
+
+    def camera_image(self, frame: CameraFrame) -> np.ndarray:
+        """A full camera render with ``frame``'s detections drawn (both camera modes)."""
+        self._drone_visible(False)
+        try:
+            return self.camera.annotated_image(frame, *self.camera_pose_w())
+        finally:
+            self._drone_visible(True)
+
+    def capture(self) -> CameraFrame:
+        t_wc, r_wc = self.camera_pose_w()
+        deck = self.deck_state()
+        if self.config.camera.mode == "render":
+            self._drone_visible(False)
+            try:
+                return self._capture(t_wc, r_wc, deck)
+            finally:
+                self._drone_visible(True)
+        return self._capture(t_wc, r_wc, deck)
+
+    def _capture(self, t_wc: np.ndarray, r_wc: np.ndarray, deck: DeckState) -> CameraFrame:
+        return self.camera.capture(
+            self.time,
+            t_wc,
+            r_wc,
+            deck.tag_centre_w,
+            deck.rotation_wd,
+            self.config.deck.tag_size,
+            self.config.deck.tag_id,
+        )
+
+    def measure_ranges(self) -> RangeReading:
+        state = self.drone_state()
+        return self.tof.measure(self.time, state.position_w, state.rotation_wb, self.drone.body_id)
+
+    def close(self) -> None:
+        try:
+            self.client.disconnect()
+        except p.error:
+            pass

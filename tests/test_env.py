@@ -1,0 +1,161 @@
+"""DeckLanding-v0 against the Gymnasium and SB3 API checks, seeding, vec envs, episodes."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+import landing_env  # noqa: F401
+from agents.scripted import DescendPolicy
+from landing_env.errors import ConfigError
+
+
+def make(**kwargs) -> gym.Env:
+    return gym.make("DeckLanding-v0", **kwargs)
+
+
+def test_both_ids_make_the_env() -> None:
+    for env_id in ("DeckLanding-v0", "landing_env:DeckLanding-v0"):
+        env = gym.make(env_id)
+        observation, _ = env.reset(seed=1)
+        assert env.observation_space.contains(observation)
+        env.close()
+
+
+def test_gymnasium_check_env() -> None:
+    env = make()
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_sb3_check_env() -> None:
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make()
+    sb3_check_env(env.unwrapped, warn=True)
+    env.close()
+
+
+def test_bad_keyword_fails_with_the_key() -> None:
+    with pytest.raises(ConfigError, match=r"tof\.noise"):
+        make(tof={"noise": "gaussian-ish"})
+
+
+def _rollout(seed: int, steps: int = 25) -> list[np.ndarray]:
+    env = make(overrides={"tof.noise": "vl53l1x", "camera.pixel_noise_px": 0.5})
+    observation, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(123)
+    trace = [np.concatenate([observation["deck_pose"], observation["tof_range"]])]
+    for _ in range(steps):
+        observation, _reward, terminated, truncated, info = env.step(
+            rng.uniform(-0.3, 0.3, 4).astype(np.float32)
+        )
+        trace.append(
+            np.concatenate(
+                [observation["deck_pose"], observation["tof_range"], info["drone"]["position_w"]]
+            )
+        )
+        if terminated or truncated:
+            break
+    env.close()
+    return trace
+
+
+def test_same_seed_same_episode_and_other_seed_differs() -> None:
+    first, second, other = _rollout(7), _rollout(7), _rollout(8)
+    assert len(first) == len(second)
+    for a, b in zip(first, second, strict=False):
+        np.testing.assert_array_equal(a, b)
+    assert not np.allclose(first[0], other[0])
+
+
+def test_runs_under_subproc_vec_env() -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    # the "module:id" form makes the worker processes import and register the package
+    vec = make_vec_env("landing_env:DeckLanding-v0", n_envs=2, seed=3, vec_env_cls=SubprocVecEnv)
+    try:
+        observations = vec.reset()
+        assert observations["deck_pose"].shape == (2, 6)
+        for _ in range(5):
+            observations, rewards, _dones, _infos = vec.step(np.zeros((2, 4), dtype=np.float32))
+        assert rewards.shape == (2,)
+        assert np.all(np.isfinite(observations["deck_pose"]))
+    finally:
+        vec.close()
+
+
+def test_info_carries_truth_state_and_imu_samples() -> None:
+    env = make()
+    _, info = env.reset(seed=0)
+    observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert info["deck_pose_true"].shape == (6,)
+    # the deck is below the camera: the tag is at positive z_C
+    assert 1.0 < info["deck_pose_true"][2] < 3.0
+    # 12 physics steps per control step, each with an IMU sample: t, accel(3), gyro(3)
+    assert info["imu_samples"].shape == (12, 7)
+    hover_accel = info["imu_samples"][:, 3].mean()
+    assert abs(hover_accel - 9.81) < 1.0
+    assert set(info["estimates"]) >= {"truth"}
+    assert observation["tof_valid"].sum() == 4
+    env.close()
+
+
+def test_scripted_descent_lands_on_the_moving_deck() -> None:
+    env = make()
+    policy = DescendPolicy(env.unwrapped.config.action)
+    observation, _ = env.reset(seed=0)
+    for _ in range(env.unwrapped.max_steps):
+        observation, _reward, terminated, truncated, info = env.step(policy(observation))
+        if terminated or truncated:
+            break
+    env.close()
+    assert info["outcome"] == "success", info.get("touchdown")
+    touchdown = info["touchdown"]
+    assert touchdown["relative_normal_speed"] <= 0.5
+    assert touchdown["all_feet_touched"]
+
+
+def test_flying_into_the_ground_off_the_deck_is_a_crash() -> None:
+    env = make(start={"max_offset_m": 0.0})
+    env.reset(seed=0)
+    outcome = "in_flight"
+    for _ in range(400):
+        # fly sideways off the deck and down: the feet hit the ground, not the deck
+        _, reward, terminated, truncated, info = env.step(
+            np.array([1.0, 0.0, -0.6, 0.0], dtype=np.float32)
+        )
+        if terminated or truncated:
+            outcome = info["outcome"]
+            break
+    env.close()
+    assert outcome == "crash"
+    assert reward < -5.0
+
+
+def test_time_limit_truncates() -> None:
+    env = make(simulation={"max_episode_s": 1.0})
+    env.reset(seed=0)
+    steps = 0
+    while True:
+        _, _, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
+        steps += 1
+        if terminated or truncated:
+            break
+    env.close()
+    assert truncated and not terminated
+    assert steps == 20
+    assert info["outcome"] == "timeout"
+
+
+def test_out_of_bounds_action_is_flagged_not_silently_clipped() -> None:
+    env = make()
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.array([2.0, 0.0, 0.0, 0.0], dtype=np.float32))
+    assert info["action_clipped"]
+    _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert not info["action_clipped"]
+    env.close()

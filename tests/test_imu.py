@@ -1,0 +1,106 @@
+"""IMU: specific force convention, white-noise discretisation and bias random walk."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation.frames import matrix_from_euler_zyx
+from landing_env.errors import ConfigError
+from landing_env.sensors.imu import ImuConfig, ImuModel
+
+QUIET = {"accel_bias_sigma": 0.0, "gyro_bias_sigma": 0.0}
+NO_DRIFT = {"accel_bias_random_walk": 0.0, "gyro_bias_random_walk": 0.0}
+
+
+def run(model: ImuModel, n: int, r_wb=None, accel_w=None, omega_b=None):
+    r_wb = np.eye(3) if r_wb is None else r_wb
+    accel_w = np.zeros(3) if accel_w is None else accel_w
+    omega_b = np.zeros(3) if omega_b is None else omega_b
+    samples = [model.sample(i / model.rate_hz, r_wb, accel_w, omega_b) for i in range(n)]
+    return np.array([s.accel for s in samples]), np.array([s.gyro for s in samples])
+
+
+def test_at_rest_reads_plus_g_on_body_z() -> None:
+    model = ImuModel(ImuConfig(**QUIET, **NO_DRIFT), np.random.default_rng(0), rate_hz=200.0)
+    accel, gyro = run(model, 2000)
+    np.testing.assert_allclose(accel.mean(axis=0), [0.0, 0.0, 9.81], atol=3e-3)
+    np.testing.assert_allclose(gyro.mean(axis=0), 0.0, atol=2e-4)
+
+
+def test_noise_free_kinematics() -> None:
+    zero = ImuConfig(accel_noise_density=0.0, gyro_noise_density=0.0, **QUIET, **NO_DRIFT)
+    model = ImuModel(zero, np.random.default_rng(0), rate_hz=100.0)
+    r_wb = matrix_from_euler_zyx(0.3, -0.2, 1.0)
+    # tilted at rest: gravity's reaction seen in the body frame
+    sample = model.sample(0.0, r_wb, np.zeros(3), np.array([0.1, -0.2, 0.3]))
+    np.testing.assert_allclose(sample.accel, r_wb.T @ [0.0, 0.0, 9.81], atol=1e-12)
+    np.testing.assert_allclose(sample.gyro, [0.1, -0.2, 0.3], atol=1e-12)
+    # free fall reads zero specific force
+    sample = model.sample(0.01, r_wb, np.array([0.0, 0.0, -9.81]), np.zeros(3))
+    np.testing.assert_allclose(sample.accel, 0.0, atol=1e-12)
+    # climbing at 2 m/s^2, level: 11.81 on body z
+    sample = model.sample(0.02, np.eye(3), np.array([0.0, 0.0, 2.0]), np.zeros(3))
+    np.testing.assert_allclose(sample.accel, [0.0, 0.0, 11.81], atol=1e-12)
+
+
+@pytest.mark.parametrize("rate_hz", [100.0, 400.0])
+def test_white_noise_std_is_density_times_sqrt_rate(rate_hz: float) -> None:
+    config = ImuConfig(**QUIET, **NO_DRIFT)
+    model = ImuModel(config, np.random.default_rng(1), rate_hz=rate_hz)
+    accel, gyro = run(model, 6000)
+    expected_a = config.accel_noise_density * np.sqrt(rate_hz)
+    expected_g = config.gyro_noise_density * np.sqrt(rate_hz)
+    np.testing.assert_allclose(accel.std(axis=0), expected_a, rtol=0.05)
+    np.testing.assert_allclose(gyro.std(axis=0), expected_g, rtol=0.05)
+
+
+def test_bias_random_walk_grows_like_sqrt_t() -> None:
+    config = ImuConfig(accel_noise_density=0.0, gyro_noise_density=0.0, **QUIET)
+    rng = np.random.default_rng(2)
+    rate, runs = 50.0, 300
+    times = (1.0, 4.0)
+    biases = {t: [] for t in times}
+    for _ in range(runs):
+        model = ImuModel(config, rng, rate_hz=rate)
+        for i in range(int(times[-1] * rate) + 1):
+            sample = model.sample(i / rate, np.eye(3), np.zeros(3), np.zeros(3))
+            if i / rate in biases:
+                biases[i / rate].append(np.concatenate([sample.accel, sample.gyro]))
+    for t in times:
+        values = np.array(biases[t])
+        values[:, 2] -= 9.81
+        std_a = values[:, :3].std()
+        std_g = values[:, 3:].std()
+        # 900 values per estimate: ~5 % standard error on a standard deviation
+        assert std_a == pytest.approx(config.accel_bias_random_walk * np.sqrt(t), rel=0.12)
+        assert std_g == pytest.approx(config.gyro_bias_random_walk * np.sqrt(t), rel=0.12)
+
+
+def test_reset_draws_initial_bias_and_is_seeded() -> None:
+    config = ImuConfig(accel_bias_sigma=0.05, gyro_bias_sigma=0.002)
+    rng = np.random.default_rng(3)
+    model = ImuModel(config, rng, rate_hz=100.0)
+    draws = []
+    for _ in range(2000):
+        model.reset()
+        draws.append(np.concatenate([model.accel_bias, model.gyro_bias]))
+    draws = np.array(draws)
+    assert draws[:, :3].std() == pytest.approx(0.05, rel=0.05)
+    assert draws[:, 3:].std() == pytest.approx(0.002, rel=0.05)
+    first = ImuModel(config, np.random.default_rng(9), 100.0)
+    second = ImuModel(config, np.random.default_rng(9), 100.0)
+    np.testing.assert_array_equal(run(first, 20)[0], run(second, 20)[0])
+
+
+def test_timestamps_must_not_go_backwards() -> None:
+    model = ImuModel(ImuConfig(), np.random.default_rng(0), rate_hz=100.0)
+    model.sample(1.0, np.eye(3), np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match="backwards"):
+        model.sample(0.5, np.eye(3), np.zeros(3), np.zeros(3))
+
+
+def test_config_errors_name_the_field() -> None:
+    with pytest.raises(ConfigError) as info:
+        ImuConfig(gyro_noise_density=-1.0)
+    assert info.value.key == "gyro_noise_density"
