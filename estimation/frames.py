@@ -27,6 +27,8 @@ the AprilTag/IPPE_SQUARE order of :data:`TAG_CORNER_SIGNS`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -71,9 +73,24 @@ def tof_positions_in_camera_frame(
 
 
 def euler_zyx_from_matrix(rotation: np.ndarray) -> np.ndarray:
-    """Return (roll, pitch, yaw) in radians of a rotation matrix, ZYX (yaw-pitch-roll) order."""
-    yaw, pitch, roll = Rotation.from_matrix(rotation).as_euler("ZYX")
-    return np.array([roll, pitch, yaw])
+    """Return (roll, pitch, yaw) in radians of a rotation matrix, ZYX (yaw-pitch-roll) order.
+
+    Closed form for R = Rz(yaw) Ry(pitch) Rx(roll) (it runs every step, where scipy's
+    general conversion costs ~100 µs); agrees with ``Rotation.as_euler("ZYX")`` away from
+    gimbal lock, where roll is set to 0 as scipy does.
+    """
+    r = rotation
+    sin_pitch = -float(r[2, 0])
+    if abs(sin_pitch) >= 1.0 - 1e-12:
+        pitch = math.copysign(math.pi / 2.0, sin_pitch)
+        return np.array([0.0, pitch, math.atan2(-float(r[0, 1]), float(r[1, 1]))])
+    return np.array(
+        [
+            math.atan2(float(r[2, 1]), float(r[2, 2])),
+            math.asin(sin_pitch),
+            math.atan2(float(r[1, 0]), float(r[0, 0])),
+        ]
+    )
 
 
 def matrix_from_euler_zyx(roll: float, pitch: float, yaw: float) -> np.ndarray:

@@ -45,6 +45,9 @@ class SimulationConfig:
     arena_max_height_m: float = 12.0
     #: attitude tilt beyond which the drone counts as flipped, degrees
     flip_tilt_deg: float = 80.0
+    #: pin the drone at its start pose, as on the papers' bench ("a motionless flying
+    #: quadrotor" over the moving platform); the action is then ignored
+    drone_fixed: bool = False
     gui: bool = False
 
     def __post_init__(self) -> None:

@@ -37,6 +37,9 @@ from landing_env.touchdown import (
 GRAVITY = 9.81
 #: mass of the top plate: heavy against the drone so that touchdowns do not deflect it
 TOP_PLATE_MASS_KG = 15.0
+#: below this height of the drone above the deck's home surface, contacts are checked every
+#: physics step; it exceeds the deck's heave reach plus the feet's depth with a wide margin
+CONTACT_WATCH_HEIGHT_M = 0.8
 
 
 @dataclass
@@ -121,6 +124,9 @@ class World:
         self.wind = WindModel(config.wind, rng)
         self.time = 0.0
         self.armed = True
+        #: the drone is held at its start pose (the papers' bench), see SimulationConfig
+        self.pinned = config.simulation.drone_fixed
+        self._pinned_pose: tuple[list[float], list[float]] = ([0.0] * 3, [0.0, 0.0, 0.0, 1.0])
         self._state: DroneState | None = None
 
     # ------------------------------------------------------------------ episode control
@@ -136,6 +142,10 @@ class World:
         self.time = 0.0
         self.stewart.reset(0.0)
         self.drone.reset(position_w, yaw)
+        self._pinned_pose = (
+            [float(v) for v in position_w],
+            [0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)],
+        )
         self.controller.reset()
         self.armed = True
         self._state = self.drone.read_state()
@@ -158,18 +168,27 @@ class World:
         idle = np.full(4, self.params.omega_min)
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
-            if self.armed:
-                command = self.controller.update(state, setpoint, self.dt)
-            else:
-                command = idle
-            self.drone.wind_velocity_w = self.wind.velocity(self.time, self.dt)
-            self.drone.apply_rotor_commands(command, self.dt, state)
-            report.motor_saturated |= bool(self.drone.last_saturated)
+            if not self.pinned:
+                if self.armed:
+                    command = self.controller.update(state, setpoint, self.dt)
+                else:
+                    command = idle
+                self.drone.wind_velocity_w = self.wind.velocity(self.time, self.dt)
+                self.drone.apply_rotor_commands(command, self.dt, state)
+                report.motor_saturated |= bool(self.drone.last_saturated)
             status = self.stewart.step_to(self.time + self.dt)
             report.stewart = status
             report.stewart_clamped |= bool(status.clamped)
-            deck_before = self.deck_state() if monitor_contacts else None
+            # contacts need the states just before the touch; nothing in the world stands
+            # higher than the deck's reach, so far above it the queries are skipped
+            near_deck = monitor_contacts and (
+                state.position_w[2] - self.deck_home_w[2] < CONTACT_WATCH_HEIGHT_M
+            )
+            deck_before = self.deck_state() if near_deck else None
             c.stepSimulation()
+            if self.pinned:
+                c.resetBasePositionAndOrientation(self.drone.body_id, *self._pinned_pose)
+                c.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3)
             self.time += self.dt
             new_state = self.drone.read_state()
             accel_w = (new_state.velocity_w - state.velocity_w) / self.dt
@@ -179,7 +198,7 @@ class World:
                 )
             )
             self._state = new_state
-            if monitor_contacts:
+            if near_deck:
                 contacts = self.contacts()
                 if contacts.forbidden and not report.forbidden_contact:
                     report.forbidden_contact = contacts.forbidden_what

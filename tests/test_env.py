@@ -159,3 +159,18 @@ def test_out_of_bounds_action_is_flagged_not_silently_clipped() -> None:
     _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
     assert not info["action_clipped"]
     env.close()
+
+
+def test_fixed_drone_stays_put_over_the_moving_deck() -> None:
+    env = make(simulation={"drone_fixed": True})
+    _, info = env.reset(seed=2)
+    start = info["drone"]["position_w"].copy()
+    deck_heights = []
+    for _ in range(40):
+        _, _, terminated, truncated, info = env.step(np.ones(4, dtype=np.float32))
+        deck_heights.append(info["deck"]["position_w"][2])
+        assert not (terminated or truncated)
+    env.close()
+    np.testing.assert_allclose(info["drone"]["position_w"], start, atol=1e-9)
+    assert np.ptp(deck_heights) > 0.005  # the deck moved under the motionless drone
+    assert abs(info["imu_samples"][:, 3].mean() - 9.81) < 0.5

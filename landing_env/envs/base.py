@@ -55,6 +55,7 @@ class DeckLandingBaseEnv(gym.Env):
             allowed = ", ".join(self.metadata["render_modes"])
             raise ValueError(f"render_mode: {render_mode!r} is not allowed; choose {allowed}")
         self.config = load_config(config, overrides, **sections)
+        self._config_seed = self.config.seed
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.config.simulation.env_hz}
         sim = self.config.simulation
@@ -226,7 +227,8 @@ class DeckLandingBaseEnv(gym.Env):
 
     # ------------------------------------------------------------------ observation and info
     def _first_seed(self) -> int | None:
-        seed, self.config.seed = self.config.seed, None  # the config seed applies once
+        """The config's seed applies to the first reset without a seed only."""
+        seed, self._config_seed = self._config_seed, None
         return seed
 
     def _sense(self) -> Sensing:

@@ -1,0 +1,54 @@
+"""The frame conventions: camera mount, tag corners, Euler angles."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from estimation.frames import (
+    R_BC,
+    deck_pose_in_camera,
+    euler_zyx_from_matrix,
+    matrix_from_euler_zyx,
+    tag_corners_in_tag_frame,
+    tof_positions_in_camera_frame,
+)
+
+
+def test_camera_mount_is_a_proper_rotation_looking_down() -> None:
+    assert np.isclose(np.linalg.det(R_BC), 1.0)
+    # the optical axis is the body's down axis, the image top the nose
+    np.testing.assert_array_equal(R_BC[:, 2], [0.0, 0.0, -1.0])
+    np.testing.assert_array_equal(R_BC[:, 1], [-1.0, 0.0, 0.0])
+
+
+def test_level_drone_over_level_deck_sees_identity_and_depth() -> None:
+    r_cd, t_cd = deck_pose_in_camera(
+        np.array([0.0, 0.0, 2.03]), np.eye(3), np.zeros(3), np.eye(3), np.array([0, 0, -0.03])
+    )
+    np.testing.assert_allclose(r_cd, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(t_cd, [0.0, 0.0, 2.0], atol=1e-12)
+
+
+def test_tof_layout_is_the_papers_square() -> None:
+    positions = tof_positions_in_camera_frame()
+    np.testing.assert_allclose(np.linalg.norm(positions, axis=1), 0.1)
+    np.testing.assert_allclose(positions.sum(axis=0), 0.0, atol=1e-15)
+    corners = tag_corners_in_tag_frame(0.3)
+    np.testing.assert_allclose(np.abs(corners[:, :2]), 0.15)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    roll=st.floats(-3.1, 3.1),
+    pitch=st.floats(-1.55, 1.55),
+    yaw=st.floats(-3.1, 3.1),
+)
+def test_euler_closed_form_matches_scipy(roll: float, pitch: float, yaw: float) -> None:
+    rotation = matrix_from_euler_zyx(roll, pitch, yaw)
+    ours = euler_zyx_from_matrix(rotation)
+    yaw_s, pitch_s, roll_s = Rotation.from_matrix(rotation).as_euler("ZYX")
+    np.testing.assert_allclose(ours, [roll_s, pitch_s, yaw_s], atol=1e-9)
+    np.testing.assert_allclose(matrix_from_euler_zyx(*ours), rotation, atol=1e-9)
