@@ -9,6 +9,7 @@ aggregated for the step.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -80,6 +81,12 @@ class World:
         sim = config.simulation
         self.dt = 1.0 / sim.physics_hz
         self.substeps = sim.substeps
+        if gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            # PyBullet's GUI aborts the whole process without a display: refuse cleanly instead
+            raise RuntimeError(
+                "render_mode='human' (simulation.gui) needs a display; none is set (DISPLAY). "
+                "Use render_mode='rgb_array' on a headless machine, or run under Xvfb."
+            )
         self.client = BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
         c = self.client
         c.setGravity(0.0, 0.0, -GRAVITY)
@@ -150,6 +157,11 @@ class World:
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
+
+    def place_drone(self, position_w: np.ndarray, yaw: float) -> None:
+        """Put the drone level at a pose without stepping time (a calibration rig's move)."""
+        self.drone.reset(position_w, yaw)
+        self._state = self.drone.read_state()
 
     def _hover_rotors(self) -> None:
         """Spin the rotors up to hover so that an episode does not start with a drop."""
@@ -284,6 +296,17 @@ class World:
         self._drone_visible(False)
         try:
             return self.camera.annotated_image(frame, *self.camera_pose_w())
+        finally:
+            self._drone_visible(True)
+
+    def render_camera_image(self) -> np.ndarray:
+        """A full camera render (HxWx3 RGB, lens distortion applied), drone hidden, no overlay.
+
+        For calibration rigs, which segment the raw image themselves (both camera modes).
+        """
+        self._drone_visible(False)
+        try:
+            return self.camera.render_image(*self.camera_pose_w())
         finally:
             self._drone_visible(True)
 

@@ -174,3 +174,24 @@ def test_fixed_drone_stays_put_over_the_moving_deck() -> None:
     np.testing.assert_allclose(info["drone"]["position_w"], start, atol=1e-9)
     assert np.ptp(deck_heights) > 0.005  # the deck moved under the motionless drone
     assert abs(info["imu_samples"][:, 3].mean() - 9.81) < 0.5
+
+
+def test_human_render_without_a_display_fails_clearly(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="needs a display"):
+        make(render_mode="human")
+
+
+def test_rgb_array_shows_the_camera_view_with_the_detection() -> None:
+    env = make(render_mode="rgb_array")
+    env.reset(seed=0)
+    image = env.render()
+    env.close()
+    assert image.shape == (512, 512, 3) and image.dtype == np.uint8
+    # the tag (black and white cells) is in the middle of the view, the sea round it
+    centre = image[206:306, 206:306].astype(int)
+    assert centre.min() < 40 and centre.max() > 200
+    # the detection outline is drawn in green
+    green = (image[..., 1] > 200) & (image[..., 0] < 80) & (image[..., 2] < 80)
+    assert green.sum() > 100
