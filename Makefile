@@ -26,6 +26,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_env_speed.py
+	$(PY) benchmarks/bench_estimators.py
+
+# both calibrations in the simulator; rewrites the shipped files in configs/calibration/
+calibrate: $(STAMP)
+	$(VENV)/bin/deck-landing calibrate --install
 
 clean-venv:
 	rm -rf $(VENV)

@@ -6,6 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from agents.calibrate import add_calibrate_parser
+from agents.evaluation import add_evaluate_parser
+
 
 def _demo(args: argparse.Namespace) -> int:
     from agents.demo import run_demo
@@ -25,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--out", default="results/demo", help="output directory")
     demo.set_defaults(func=_demo)
+    add_evaluate_parser(sub)
+    add_calibrate_parser(sub)
     return parser
 
 

@@ -97,6 +97,7 @@ class AtdaEstimator(GuardedEstimator):
         self._object_points = tag_corners_in_tag_frame(self.tag_size)
         self._k = intrinsics.matrix
         self._no_dist = np.zeros(5)
+        self._undistorter = geometry.Undistorter(intrinsics)
         self._previous: tuple[float, np.ndarray] | None = None
 
     def reset(self) -> None:
@@ -159,8 +160,8 @@ class AtdaEstimator(GuardedEstimator):
             return DeckPoseEstimate.invalid(self.name, timestamp, reason)
         if corners_degenerate(corners, self.config.min_corner_area_px):
             return DeckPoseEstimate.invalid(self.name, timestamp, DEGENERATE_CORNERS)
-        if self.intrinsics.has_distortion:
-            corners = geometry.undistort_pixels(corners, self.intrinsics)
+        if self._undistorter.active:
+            corners = self._undistorter(corners)
             if not np.all(np.isfinite(corners)):
                 return DeckPoseEstimate.invalid(self.name, timestamp, BAD_CORNERS)
         solver, solutions = self._solutions(corners)

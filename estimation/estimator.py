@@ -145,7 +145,7 @@ def finish_pose(
     """A valid estimate after a last sanity check (finite, proper rotation, deck in front)."""
     if not (np.isfinite(rotation).all() and np.isfinite(translation).all()):
         return DeckPoseEstimate.invalid(method, timestamp, NON_FINITE_RESULT)
-    if abs(float(np.linalg.det(rotation)) - 1.0) > 1e-6 or not translation[2] > 0.0:
+    if abs(geometry.det3(rotation) - 1.0) > 1e-6 or not translation[2] > 0.0:
         return DeckPoseEstimate.invalid(method, timestamp, NON_FINITE_RESULT)
     return DeckPoseEstimate(
         method=method,
@@ -234,6 +234,7 @@ class RangeFusionEstimator(GuardedEstimator):
         self._undistort = bool(
             config.undistort and intrinsics is not None and intrinsics.has_distortion
         )
+        self._undistorter = geometry.Undistorter(intrinsics) if self._undistort else None
         # the sensors' (x, y) never change: the least-squares plane's pseudo-inverse is fixed
         try:
             self._plane_fitter = geometry.ZPlaneFitter(positions[:, :2])
@@ -254,9 +255,8 @@ class RangeFusionEstimator(GuardedEstimator):
         if not np.all(lookup.valid):
             return TOUCH_POINT_UNAVAILABLE
         touch_px = lookup.pixels
-        if self._undistort:
-            assert self.intrinsics is not None
-            both = geometry.undistort_pixels(np.vstack([corners, touch_px]), self.intrinsics)
+        if self._undistorter is not None:
+            both = self._undistorter(np.vstack([corners, touch_px]))
             corners, touch_px = both[:4], both[4:]
             if not np.all(np.isfinite(both)):
                 return BAD_CORNERS

@@ -109,19 +109,26 @@ class ZPlaneFitter:
             raise ValueError("the (x, y) sites are collinear: they do not fix a plane")
         self._xy = xy
         self._pinv = np.linalg.pinv(design)
+        # plain floats for the per-frame fit: with a handful of sites it is all call overhead
+        self._pinv_rows = [row.tolist() for row in self._pinv]
+        self._sites = xy.tolist()
 
     def fit(self, z: np.ndarray) -> PlaneFit | None:
         """The plane through heights ``z`` at the sites; ``None`` if z is not finite."""
-        z = np.asarray(z, dtype=float)
-        if not np.isfinite(z).all():
+        zs = np.asarray(z, dtype=float).reshape(-1).tolist()
+        if len(zs) != len(self._sites) or not all(map(math.isfinite, zs)):
             return None
-        a, b, c = self._pinv @ z
-        residual = z - (self._xy[:, 0] * a + self._xy[:, 1] * b + c)
-        norm = float(np.sqrt(a * a + b * b + 1.0))
+        a, b, c = (
+            math.fsum(p * v for p, v in zip(row, zs, strict=True)) for row in self._pinv_rows
+        )
+        squares = math.fsum(
+            (v - (x * a + y * b + c)) ** 2 for (x, y), v in zip(self._sites, zs, strict=True)
+        )
+        norm = math.sqrt(a * a + b * b + 1.0)
         return PlaneFit(
-            normal=np.array([-a, -b, 1.0]) / norm,
-            offset=float(c) / norm,
-            rms_residual=float(np.sqrt((residual * residual).mean())),
+            normal=np.array([-a / norm, -b / norm, 1.0 / norm]),
+            offset=c / norm,
+            rms_residual=math.sqrt(squares / len(zs)),
         )
 
 
@@ -299,13 +306,20 @@ def apply_homography(h: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map Nx2 points through H; points sent to infinity (w ≈ 0) become NaN."""
     points = np.asarray(points, dtype=float)
     mapped = points @ h[:, :2].T + h[:, 2]
-    w = mapped[:, 2]
+    w = mapped[:, 2:3]
+    at_infinity = np.abs(w[:, 0]) <= 1e-12 * np.abs(mapped).max(axis=1)
+    if not at_infinity.any():
+        return mapped[:, :2] / w
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = mapped[:, :2] / w[:, None]
-    at_infinity = np.abs(w) <= 1e-12 * np.abs(mapped).max(axis=1)
-    if at_infinity.any():
-        out[at_infinity] = np.nan
+        out = mapped[:, :2] / w
+    out[at_infinity] = np.nan
     return out
+
+
+def det3(m: np.ndarray) -> float:
+    """Determinant of a 3x3 matrix in plain floats (np.linalg.det costs more than the sum)."""
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 class RigidFitter:
@@ -342,7 +356,7 @@ def _kabsch(
     if not np.isfinite(sing[0]) or sing[0] == 0.0 or sing[1] <= _RANK_TOL * sing[0]:
         return None
     rotation = vt.T @ u.T
-    if np.linalg.det(rotation) < 0.0:
+    if det3(rotation) < 0.0:
         # the reflection fix: V diag(1, 1, -1) Uᵀ
         vt = vt * np.array([[1.0], [1.0], [-1.0]])
         rotation = vt.T @ u.T
@@ -369,6 +383,31 @@ def fit_rigid(model: np.ndarray, measured: np.ndarray) -> RigidFit | None:
     c_meas = measured.mean(axis=0)
     cov = (model - c_model).T @ (measured - c_meas)
     return _kabsch(cov, model, c_model, measured, c_meas)
+
+
+class Undistorter:
+    """:func:`undistort_pixels` for one camera, with its matrices built once (per-frame use)."""
+
+    def __init__(self, intrinsics: CameraIntrinsics, iterations: int = 50) -> None:
+        self.active = intrinsics.has_distortion
+        self._k = intrinsics.matrix
+        self._dist = intrinsics.dist_coeffs
+        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-12)
+
+    def __call__(self, pixels: np.ndarray) -> np.ndarray:
+        """Ideal-pinhole pixels (N x 2) of the raw pixels (a copy when there is no distortion)."""
+        pixels = np.asarray(pixels, dtype=float)
+        if not self.active:
+            return pixels.copy()
+        out = cv2.undistortPoints(
+            pixels.reshape(-1, 1, 2),
+            self._k,
+            self._dist,
+            R=None,
+            P=self._k,
+            criteria=self._criteria,
+        )
+        return out.reshape(-1, 2)
 
 
 def undistort_pixels(

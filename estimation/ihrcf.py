@@ -74,18 +74,21 @@ class IhrcfEstimator(RangeFusionEstimator):
             config=config,
         )
         self._homography_method = config.homography
+        self._sensors_xy = self.tof_positions_c[:, :2].copy()
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
         timestamp = float(frame.timestamp)
         inputs = self._inputs(frame, ranges)
         if isinstance(inputs, str):
             return DeckPoseEstimate.invalid(self.name, timestamp, inputs)
-        sensors_xy = self.tof_positions_c[:, :2]
-        h = geometry.homography(sensors_xy, inputs.touch_px, self._homography_method)
-        if h is None:
+        # Eq. 13–19: H maps the sensors' (X, Y) to the touch pixels and H⁻¹ takes the corner
+        # pixels back to the deck's (X, Y) in C.  Four exact correspondences fix a
+        # homography uniquely, so H⁻¹ is estimated directly from the pixels to the (X, Y):
+        # the same map, without a matrix inversion per frame
+        h_inv = geometry.homography(inputs.touch_px, self._sensors_xy, self._homography_method)
+        if h_inv is None:
             return DeckPoseEstimate.invalid(self.name, timestamp, DEGENERATE_HOMOGRAPHY)
-        # Eq. 19: pixels back to the deck's (X, Y) in C through H⁻¹
-        corners_xy = geometry.apply_homography(np.linalg.inv(h), inputs.corners_px)
+        corners_xy = geometry.apply_homography(h_inv, inputs.corners_px)
         corners_c = np.empty((4, 3))
         corners_c[:, :2] = corners_xy
         corners_c[:, 2] = inputs.plane.z_at(corners_xy[:, 0], corners_xy[:, 1])

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -54,13 +54,18 @@ def chessboard_object_points(pattern: tuple[int, int], square_size: float) -> np
 
 @dataclass(frozen=True)
 class IntrinsicsCalibrationResult:
-    """Camera matrix K, distortion (k1, k2, p1, p2, k3), RMS and per-view errors (pixels)."""
+    """Camera matrix K, distortion (k1, k2, p1, p2, k3), RMS and per-view errors (pixels).
+
+    ``metadata``: free-form provenance saved with the result (e.g. which simulated camera
+    was calibrated, so that a user of the file can tell whether it fits their camera).
+    """
 
     K: np.ndarray
     dist: np.ndarray
     rms_reprojection_error: float
     per_view_errors: np.ndarray
     image_size: tuple[int, int]
+    metadata: dict = field(default_factory=dict)
 
     def to_intrinsics(self) -> CameraIntrinsics:
         """The result as the project's :class:`CameraIntrinsics`."""
@@ -87,6 +92,7 @@ class IntrinsicsCalibrationResult:
             "dist": self.dist.tolist(),
             "rms_reprojection_error_px": self.rms_reprojection_error,
             "per_view_errors_px": self.per_view_errors.tolist(),
+            "metadata": self.metadata,
         }
         Path(path).write_text(json.dumps(doc, indent=1))
 
@@ -104,6 +110,7 @@ class IntrinsicsCalibrationResult:
             rms_reprojection_error=float(doc["rms_reprojection_error_px"]),
             per_view_errors=np.asarray(doc["per_view_errors_px"], dtype=float),
             image_size=(int(doc["image_size"][0]), int(doc["image_size"][1])),
+            metadata=dict(doc.get("metadata", {})),
         )
 
 

@@ -11,5 +11,11 @@ if "DeckLanding-v0" not in registry:
         entry_point="landing_env.envs.deck_landing:DeckLandingEnv",
         disable_env_checker=False,
     )
+if "DeckLandingTiming-v0" not in registry:
+    register(
+        id="DeckLandingTiming-v0",
+        entry_point="landing_env.envs.timing:DeckLandingTimingEnv",
+        disable_env_checker=False,
+    )
 
 __all__ = ["register"]

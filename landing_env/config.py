@@ -13,6 +13,9 @@ from typing import Any
 
 import yaml
 
+from estimation.atda import ATDAConfig
+from estimation.crhf import CRHFConfig
+from estimation.ihrcf import IHRCFConfig
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
@@ -29,6 +32,15 @@ CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 
 #: Names an estimator can have in ``estimation.observed`` / ``estimation.compare``.
 ESTIMATOR_NAMES = ("truth", "atda", "ihrcf", "crhf")
+
+#: Where the estimators' calibrations come from: a calibration file or the exact model.
+CALIBRATION_SOURCES = ("file", "exact")
+
+#: Calibration files shipped for the default camera and ToF layout (``deck-landing
+#: calibrate --install`` rewrites them).
+CALIBRATION_DIR = CONFIG_DIR / "calibration"
+SHIPPED_INTRINSICS_FILE = CALIBRATION_DIR / "intrinsics.json"
+SHIPPED_TOF_CALIBRATION_FILE = CALIBRATION_DIR / "tof_camera.json"
 
 
 @dataclass
@@ -135,15 +147,79 @@ class RewardConfig:
 
 @dataclass
 class EstimationConfig:
-    """Which deck-pose estimate the observation carries, and which others ``info`` compares."""
+    """Which deck-pose estimate the observation carries, which others ``info`` compares, and
+    the calibrations and settings the estimators run with (see the README's "Estimators and
+    calibration").
+
+    ``intrinsics``: the camera model ATDA uses (and IHRCF/CRHF only to undistort):
+    ``"file"`` = the chessboard calibration in ``intrinsics_file``, ``"exact"`` = the
+    simulated camera's true model.  ``tof_calibration``: the range → touch-pixel map of
+    IHRCF/CRHF: ``"file"`` = the pad calibration in ``tof_calibration_file``, looked up by
+    ``tof_lookup`` (``"pchip"`` as the papers, or the ``"hyperbola"`` fit), ``"exact"`` =
+    the analytic map.  An empty file name means the file shipped in
+    ``configs/calibration/`` for the default camera and sensor layout.  ``tracking``: bridge
+    up to ``max_bridged_frames`` missed tag detections with the corner Kalman filter (CRHF
+    Sec. 2.6); bridged estimates are flagged as predicted.
+    """
 
     observed: str = "truth"
     compare: tuple[str, ...] = ()
+    intrinsics: str = "file"
+    intrinsics_file: str = ""
+    tof_calibration: str = "file"
+    tof_calibration_file: str = ""
+    tof_lookup: str = "pchip"
+    tracking: bool = False
+    max_bridged_frames: int = 3
+    atda: ATDAConfig = field(default_factory=ATDAConfig)
+    ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
+    crhf: CRHFConfig = field(default_factory=CRHFConfig)
 
     def __post_init__(self) -> None:
         require_choice("observed", self.observed, ESTIMATOR_NAMES)
         for name in self.compare:
             require_choice("compare", name, ESTIMATOR_NAMES)
+        require_choice("intrinsics", self.intrinsics, CALIBRATION_SOURCES)
+        require_choice("tof_calibration", self.tof_calibration, CALIBRATION_SOURCES)
+        require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
+        require_range("max_bridged_frames", self.max_bridged_frames, 0)
+        names = {self.observed, *self.compare}
+        if self.intrinsics == "file" and names & {"atda", "ihrcf", "crhf"}:
+            _require_file("intrinsics_file", self.intrinsics_path)
+        if self.tof_calibration == "file" and names & {"ihrcf", "crhf"}:
+            _require_file("tof_calibration_file", self.tof_calibration_path)
+
+    @property
+    def intrinsics_path(self) -> Path:
+        """The intrinsics file used (the shipped one when ``intrinsics_file`` is empty)."""
+        return _calibration_path(self.intrinsics_file, SHIPPED_INTRINSICS_FILE)
+
+    @property
+    def tof_calibration_path(self) -> Path:
+        """The ToF–camera file used (the shipped one when ``tof_calibration_file`` is empty)."""
+        return _calibration_path(self.tof_calibration_file, SHIPPED_TOF_CALIBRATION_FILE)
+
+
+def _calibration_path(name: str, shipped: Path) -> Path:
+    """``shipped`` for an empty name; a relative name from the working directory, or else
+    from the project root (so that ``configs/...`` in a scenario works from anywhere)."""
+    if not name:
+        return shipped
+    path = Path(name).expanduser()
+    if path.is_absolute() or path.exists():
+        return path
+    from_root = CONFIG_DIR.parent / path
+    return from_root if from_root.exists() else path
+
+
+def _require_file(key: str, path: Path) -> None:
+    if not path.is_file():
+        raise ConfigError(
+            key,
+            f"{str(path)!r} does not exist; give a calibration file, recompute the shipped "
+            "ones with `deck-landing calibrate --install`, or use the exact model "
+            f"(estimation.{key.removesuffix('_file')}: exact)",
+        )
 
 
 @dataclass

@@ -104,3 +104,42 @@ def test_config_errors_name_the_field() -> None:
     with pytest.raises(ConfigError) as info:
         ImuConfig(gyro_noise_density=-1.0)
     assert info.value.key == "gyro_noise_density"
+
+
+def test_sample_many_equals_consecutive_samples() -> None:
+    """One batch draws the same random stream as sample() by sample(), value for value."""
+    config = ImuConfig()
+    one = ImuModel(config, np.random.default_rng(5), rate_hz=240.0)
+    batch = ImuModel(config, np.random.default_rng(5), rate_hz=240.0)
+    motion = np.random.default_rng(6)
+    for block in range(3):
+        times = [(12 * block + k + 1) / 240.0 for k in range(12)]
+        rotations = [matrix_from_euler_zyx(*motion.normal(0.0, 0.3, 3)) for _ in times]
+        accels = [motion.normal(0.0, 2.0, 3) for _ in times]
+        omegas = [motion.normal(0.0, 1.0, 3) for _ in times]
+        singles = [one.sample(*args) for args in zip(times, rotations, accels, omegas, strict=True)]
+        # the batch takes plain floats too: R_WB row-major, vectors as tuples
+        many = batch.sample_many(
+            times,
+            [r.ravel().tolist() for r in rotations],
+            [tuple(a) for a in accels],
+            [tuple(w) for w in omegas],
+        )
+        for a, b in zip(singles, many, strict=True):
+            assert a.timestamp == b.timestamp
+            np.testing.assert_array_equal(a.accel, b.accel)
+            np.testing.assert_array_equal(a.gyro, b.gyro)
+    np.testing.assert_array_equal(one.accel_bias, batch.accel_bias)
+    np.testing.assert_array_equal(one.gyro_bias, batch.gyro_bias)
+    assert batch.sample_many([], [], [], []) == []
+
+
+def test_backwards_timestamp_in_a_batch_leaves_the_model_unchanged() -> None:
+    model = ImuModel(ImuConfig(), np.random.default_rng(0), rate_hz=100.0)
+    model.sample(1.0, np.eye(3), np.zeros(3), np.zeros(3))
+    bias = model.accel_bias
+    state = model.rng.bit_generator.state
+    with pytest.raises(ValueError, match="backwards"):
+        model.sample_many([1.01, 0.5], [np.eye(3)] * 2, [np.zeros(3)] * 2, [np.zeros(3)] * 2)
+    np.testing.assert_array_equal(model.accel_bias, bias)
+    assert model.rng.bit_generator.state == state

@@ -12,6 +12,7 @@ from landing_env.errors import ConfigError
 from landing_env.stewart.kinematics import StewartGeometry, StewartKinematics
 from landing_env.stewart.motion import (
     SEA_STATE_TABLE,
+    BatchMotionSource,
     CsvMotion,
     CsvMotionConfig,
     CsvMotionError,
@@ -252,6 +253,26 @@ def test_every_source_satisfies_the_protocol(tmp_path: Path) -> None:
         source = make_motion_source(config, rng())
         assert isinstance(source, MotionSource)
         assert source.pose(0.3).shape == (6,) and source.velocity(0.3).shape == (6,)
+
+
+@pytest.mark.parametrize("kind", ["static", "sinusoids", "sea_state", "csv-hold", "csv-loop"])
+def test_batch_poses_equal_single_poses(kind: str, tmp_path: Path) -> None:
+    path = tmp_path / "m.csv"
+    write_motion_csv(path, np.linspace(0.0, 4.0, 9), rng(1).normal(0.0, 0.02, (9, 6)))
+    config = MotionConfig(
+        kind=kind.split("-")[0],  # type: ignore[arg-type]
+        static=StaticMotionConfig((0.01, -0.02, 0.03), (1.0, -2.0, 3.0)),
+        csv=CsvMotionConfig(str(path), end=kind.split("-")[-1] if "csv" in kind else "hold"),
+    )
+    source = make_motion_source(config, rng(2))
+    assert isinstance(source, BatchMotionSource)
+    # before the start, across the samples, after the end (hold or loop), repeated times
+    times = np.concatenate([np.linspace(-1.0, 9.0, 401), [2.0, 2.0]])
+    batch = source.poses(times)
+    assert batch.shape == (len(times), 6)
+    single = np.array([source.pose(float(t)) for t in times])
+    np.testing.assert_allclose(batch, single, rtol=0.0, atol=1e-15)
+    np.testing.assert_array_equal(sample_poses(source, times), batch)
 
 
 def test_motion_config_errors_name_the_field() -> None:

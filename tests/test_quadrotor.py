@@ -18,6 +18,7 @@ from landing_env.errors import ConfigError
 from landing_env.physics.quadrotor import (
     DEFAULT_PARAMS_PATH,
     GRAVITY,
+    DroneState,
     Quadrotor,
     QuadrotorParams,
 )
@@ -204,6 +205,43 @@ def test_read_state_reports_frames_as_documented(params: QuadrotorParams) -> Non
     np.testing.assert_allclose(state.euler, euler_zyx_from_matrix(rotation.as_matrix()))
     np.testing.assert_allclose(state.euler, [0.3, -0.2, 0.7], atol=1e-12)
     assert state.yaw == pytest.approx(0.7)
+
+
+def test_state_floats_and_arrays_agree(params: QuadrotorParams) -> None:
+    client = make_world(gravity=0.0, ground=False)
+    drone = Quadrotor(client, params)
+    rotation = Rotation.from_euler("ZYX", [-2.5, 0.4, -0.1])
+    client.resetBasePositionAndOrientation(drone.body_id, [1.0, 2.0, 3.0], rotation.as_quat())
+    client.resetBaseVelocity(drone.body_id, [0.5, -0.4, 0.2], [0.3, -1.1, 2.0])
+    state = drone.read_state()
+    floats = state.floats
+    np.testing.assert_array_equal(state.position_w, floats.position_w)
+    np.testing.assert_array_equal(state.quaternion_xyzw, floats.quaternion_xyzw)
+    np.testing.assert_array_equal(state.rotation_wb.ravel(), floats.rotation_wb)
+    np.testing.assert_array_equal(state.velocity_w, floats.velocity_w)
+    np.testing.assert_array_equal(state.angular_velocity_b, floats.angular_velocity_b)
+    np.testing.assert_allclose(state.euler, [-0.1, 0.4, -2.5], atol=1e-12)
+    assert state.euler_tuple == tuple(state.euler.tolist())
+    assert state.yaw == pytest.approx(-2.5)
+    assert state.rotation_wb is state.rotation_wb  # built once
+    # A state built from arrays: its euler is the given one, else derived from the rotation.
+    given = DroneState(
+        state.position_w,
+        state.quaternion_xyzw,
+        state.rotation_wb,
+        state.velocity_w,
+        state.angular_velocity_b,
+        euler=np.array([0.0, 0.0, 1.0]),
+    )
+    assert given.yaw == 1.0 and given.floats == floats
+    derived = DroneState(
+        state.position_w,
+        state.quaternion_xyzw,
+        state.rotation_wb,
+        state.velocity_w,
+        state.angular_velocity_b,
+    )
+    np.testing.assert_array_equal(derived.euler, state.euler)
 
 
 def test_reset_places_level_drone_with_yaw_and_velocity(params: QuadrotorParams) -> None:

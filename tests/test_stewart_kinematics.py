@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from estimation.frames import matrix_from_euler_zyx
 from landing_env.errors import ConfigError
@@ -117,6 +118,24 @@ def test_jacobian_matches_finite_differences(kin: StewartKinematics) -> None:
             kin.inverse_kinematics(pose + delta) - kin.inverse_kinematics(pose - delta)
         ) / (2 * step)
     np.testing.assert_allclose(kin.jacobian(pose), numeric, atol=1e-8)
+
+
+def test_surely_reachable_is_sufficient_and_usually_decides(kin: StewartKinematics) -> None:
+    poses = random_poses(3000, 8, WIDE * 0.6)
+    quaternions = Rotation.from_matrix(rotation_matrix_zyx(*poses[:, 3:].T)).as_quat()
+    sure = np.array(
+        [
+            kin.surely_reachable(float(np.linalg.norm(pose[:3])), float(np.linalg.norm(q[:3])))
+            for pose, q in zip(poses, quaternions, strict=True)
+        ]
+    )
+    reachable = kin.is_reachable(poses)
+    assert np.all(reachable[sure])  # never admits an unreachable pose
+    assert sure.mean() > 0.2 and not reachable.all()  # ...yet decides many, near the edge too
+    assert kin.surely_reachable(0.0, 0.0)
+    # with a joint-angle limit it never decides
+    limited = StewartKinematics(StewartGeometry(max_base_joint_angle_deg=80.0))
+    assert not limited.surely_reachable(0.0, 0.0)
 
 
 def test_reachable_commands_pass_unchanged(kin: StewartKinematics) -> None:

@@ -240,3 +240,40 @@ def test_base_plate_is_a_static_collision_body(client: BulletClient) -> None:
     assert client.getDynamicsInfo(platform.base_body_id, -1)[0] == 0.0
     config = PlatformConfig()
     assert math.isclose(BASE_POSITION[2], config.base_plate_thickness)
+
+
+def test_advance_on_the_world_clock_matches_step_to(client: BulletClient) -> None:
+    """advance() on a cumulative clock (motion evaluated ahead in batches) commands the same
+    poses, clamps and plate motion as step_to() on t0 + k dt (one evaluation per step)."""
+    other = BulletClient(connection_mode=pybullet.DIRECT)
+    other.setGravity(0.0, 0.0, -GRAVITY)
+    other.setTimeStep(DT)
+    try:
+        platforms = []
+        for c in (client, other):
+            # sea state 4, seed 5 leaves the workspace from t = 3.6 s: clamping is exercised
+            motion = make_motion_source(MotionConfig(kind="sea_state"), np.random.default_rng(5))
+            platform = make_platform(c, motion)
+            platform.reset(3.0)
+            platforms.append(platform)
+        batched, single = platforms
+        clock = 3.0
+        clamped = 0
+        for k in range(1, 241):
+            was_clamped = batched.advance(clock + DT)
+            clock += DT
+            status = single.step_to(3.0 + k * DT)
+            client.stepSimulation()
+            other.stepSimulation()
+            reference = batched.last_status
+            assert reference is not None
+            assert was_clamped == reference.clamped == status.clamped
+            assert reference.violated_legs == status.violated_legs
+            np.testing.assert_allclose(reference.t, status.t, atol=1e-12)
+            np.testing.assert_allclose(reference.applied_pose, status.applied_pose, atol=1e-12)
+            np.testing.assert_allclose(reference.leg_lengths, status.leg_lengths, atol=1e-12)
+            clamped += was_clamped
+        assert clamped > 0
+        np.testing.assert_allclose(batched.measured_pose(), single.measured_pose(), atol=1e-9)
+    finally:
+        other.disconnect()

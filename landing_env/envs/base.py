@@ -13,7 +13,7 @@ from gymnasium import spaces
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 from landing_env.config import DeckLandingConfig, load_config
-from landing_env.estimators import EstimatorBank
+from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
 from landing_env.world import PhysicsReport, World
@@ -60,7 +60,7 @@ class DeckLandingBaseEnv(gym.Env):
         self.metadata = {**self.metadata, "render_fps": self.config.simulation.env_hz}
         sim = self.config.simulation
         self.world = World(self.config, gui=render_mode == "human" or sim.gui)
-        self.bank = EstimatorBank(self.config, self.world)
+        self.bank = EstimatorBank(self.config, self.world, (POSE_LOW, POSE_HIGH))
         self.max_steps = round(sim.max_episode_s * sim.env_hz)
         self.env_dt = 1.0 / sim.env_hz
 
@@ -70,6 +70,7 @@ class DeckLandingBaseEnv(gym.Env):
             {
                 "deck_pose": spaces.Box(POSE_LOW, POSE_HIGH, dtype=np.float32),
                 "deck_pose_valid": spaces.MultiBinary(1),
+                "deck_pose_predicted": spaces.MultiBinary(1),
                 "tof_range": spaces.Box(0.0, tof_max, shape=(4,), dtype=np.float32),
                 "tof_valid": spaces.MultiBinary(4),
                 "imu": spaces.Box(-IMU_HIGH, IMU_HIGH, dtype=np.float32),
@@ -255,6 +256,8 @@ class DeckLandingBaseEnv(gym.Env):
         return {
             "deck_pose": pose,
             "deck_pose_valid": np.array([int(estimate.valid)], dtype=np.int8),
+            # bridged by the corner tracker rather than measured (estimation.tracking)
+            "deck_pose_predicted": np.array([int(estimate.predicted)], dtype=np.int8),
             "tof_range": tof.astype(np.float32),
             "tof_valid": ranges.valid.astype(np.int8),
             "imu": imu,
@@ -272,13 +275,7 @@ class DeckLandingBaseEnv(gym.Env):
             "outcome": self._outcome.value,
             "deck_pose_true": np.concatenate([t_cd, euler_zyx_from_matrix(r_cd)]),
             "estimates": {
-                name: {
-                    "pose": est.as_vector(),
-                    "valid": est.valid,
-                    "reason": est.reason,
-                    "predicted": est.predicted,
-                }
-                for name, est in self._sensing.estimates.items()
+                name: describe_estimate(est) for name, est in self._sensing.estimates.items()
             },
             "tag_miss_reason": self._sensing.frame.miss_reason,
             "tof_ranges": self._sensing.ranges.ranges.copy(),

@@ -164,7 +164,7 @@ class CascadeController:
                 -prm.spin_directions * prm.k_m / prm.k_f,
             ]
         )
-        self._mix = [tuple(row) for row in np.linalg.inv(allocation).tolist()]
+        self._mix = tuple(tuple(row) for row in np.linalg.inv(allocation).tolist())
         self._tan_tilt = math.tan(self.gains.max_tilt)
         self.reset()
 
@@ -197,10 +197,11 @@ class CascadeController:
     def update(self, state: DroneState, setpoint: VelocitySetpoint, dt: float) -> np.ndarray:
         """One control step of ``dt`` seconds; returns the 4 rotor speed commands (rad/s)."""
         g = self.gains
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = state.rotation_wb.ravel().tolist()
-        vx, vy, vz = state.velocity_w.tolist()
-        wx, wy, wz = state.angular_velocity_b.tolist()
-        yaw = state.euler.item(2)
+        floats = state.floats
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = floats.rotation_wb
+        vx, vy, vz = floats.velocity_w
+        wx, wy, wz = floats.angular_velocity_b
+        yaw = state.yaw
         if not self._initialised:
             self._initialised = True
             self.yaw_setpoint = yaw
@@ -385,19 +386,29 @@ class CascadeController:
         self.last_torque_setpoint_b = (tau_x, tau_y, tau_z)
 
         # ---- mixer with priorities: roll/pitch, then collective thrust, then yaw
+        # (written out per rotor: four named floats are much faster than lists here)
         f_min = self._f_min
         f_max = self._f_max
-        mix = self._mix
-        rp = [row[1] * tau_x + row[2] * tau_y for row in mix]
-        span = max(rp) - min(rp)
+        (a0, b0, c0, d0), (a1, b1, c1, d1), (a2, b2, c2, d2), (a3, b3, c3, d3) = self._mix
+        rp0 = b0 * tau_x + c0 * tau_y
+        rp1 = b1 * tau_x + c1 * tau_y
+        rp2 = b2 * tau_x + c2 * tau_y
+        rp3 = b3 * tau_x + c3 * tau_y
+        span = max(rp0, rp1, rp2, rp3) - min(rp0, rp1, rp2, rp3)
         room = f_max - f_min
         rp_reduced = span > room
         if rp_reduced:
             scale = room / span
-            rp = [v * scale for v in rp]
-        f = [row[0] * thrust + v for row, v in zip(mix, rp, strict=True)]
-        low = min(f)
-        high = max(f)
+            rp0 *= scale
+            rp1 *= scale
+            rp2 *= scale
+            rp3 *= scale
+        f0 = a0 * thrust + rp0
+        f1 = a1 * thrust + rp1
+        f2 = a2 * thrust + rp2
+        f3 = a3 * thrust + rp3
+        low = min(f0, f1, f2, f3)
+        high = max(f0, f1, f2, f3)
         shift = 0.0
         if low < f_min:
             shift = f_min - low
@@ -405,15 +416,21 @@ class CascadeController:
             shift = f_max - high
         thrust_shifted = shift != 0.0
         if thrust_shifted:
-            f = [v + shift for v in f]
-        yaw_part = [row[3] * tau_z for row in mix]
+            f0 += shift
+            f1 += shift
+            f2 += shift
+            f3 += shift
+        # per rotor: thrust without yaw, and the thrust change the full yaw torque asks for
+        rotors = ((f0, d0 * tau_z), (f1, d1 * tau_z), (f2, d2 * tau_z), (f3, d3 * tau_z))
+        # s: the largest share of the yaw torque (0..1) that keeps every rotor in range
         s = 1.0
-        for fi, yi in zip(f, yaw_part, strict=True):
-            if yi > 0.0:
-                s = min(s, (f_max - fi) / yi)
-            elif yi < 0.0:
-                s = min(s, (f_min - fi) / yi)
-        s = max(s, 0.0)
+        for fi, yi in rotors:
+            if yi != 0.0:
+                limit = ((f_max if yi > 0.0 else f_min) - fi) / yi
+                if limit < s:
+                    s = limit
+        if s < 0.0:
+            s = 0.0
         yaw_reduced = s < 1.0
 
         # Rate integrators: frozen on an axis whose torque the mixer could not deliver.
@@ -431,10 +448,10 @@ class CascadeController:
         omega_min = self._omega_min
         omega_max = self._omega_max
         omegas = []
-        for fi, yi in zip(f, yaw_part, strict=True):
+        for fi, yi in rotors:
             w = math.sqrt(max(fi + s * yi, 0.0) / k_f)
             # Guard against rounding only: f is already within [f_min, f_max].
-            omegas.append(min(max(w, omega_min), omega_max))
+            omegas.append(omega_min if w < omega_min else omega_max if w > omega_max else w)
 
         self._flags = [
             sp_limited,

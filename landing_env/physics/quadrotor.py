@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pybullet as p
@@ -276,27 +276,136 @@ class _SectionReader:
             raise ConfigError(self._key(unknown[0]), "is not a known key")
 
 
-@dataclass(frozen=True, slots=True)
-class DroneState:
-    """The drone's rigid-body state at one instant."""
+class StateFloats(NamedTuple):
+    """A :class:`DroneState` as plain Python floats, for the per-physics-step code.
 
-    #: body-frame origin in W (m): the base link's CoM, 0.7 mm above the whole vehicle's CoM
-    position_w: np.ndarray
+    Tiny numpy arrays cost far more to make and to index than tuples, and the controller,
+    the motors and the IMU run 240 times per simulated second.
+    """
+
+    #: body-frame origin in W (m)
+    position_w: tuple[float, ...]
     #: orientation of B in W as a quaternion (x, y, z, w)
-    quaternion_xyzw: np.ndarray
-    #: R_WB: columns are the body axes in W
-    rotation_wb: np.ndarray
+    quaternion_xyzw: tuple[float, ...]
+    #: R_WB row-major: (r00, r01, r02, r10, ..., r22)
+    rotation_wb: tuple[float, ...]
     #: CoM velocity in W (m/s)
-    velocity_w: np.ndarray
-    #: angular velocity in the BODY frame (rad/s), as a gyro measures it
-    angular_velocity_b: np.ndarray
-    #: (roll, pitch, yaw) in radians, ZYX convention
-    euler: np.ndarray
+    velocity_w: tuple[float, ...]
+    #: angular velocity in the BODY frame (rad/s)
+    angular_velocity_b: tuple[float, ...]
+
+
+class DroneState:
+    """The drone's rigid-body state at one instant (read-only).
+
+    The state is held as plain floats (:attr:`floats`); the numpy arrays below are built from
+    them on first access and then kept, because most physics steps never look at them.
+    """
+
+    __slots__ = ("_arrays", "_euler", "floats")
+
+    floats: StateFloats
+
+    def __init__(
+        self,
+        position_w: np.ndarray,
+        quaternion_xyzw: np.ndarray,
+        rotation_wb: np.ndarray,
+        velocity_w: np.ndarray,
+        angular_velocity_b: np.ndarray,
+        euler: np.ndarray | None = None,
+    ) -> None:
+        """A state from arrays (``euler`` defaults to the ZYX angles of ``rotation_wb``)."""
+        self.floats = StateFloats(
+            _float_tuple(position_w, 3),
+            _float_tuple(quaternion_xyzw, 4),
+            _float_tuple(rotation_wb, 9),
+            _float_tuple(velocity_w, 3),
+            _float_tuple(angular_velocity_b, 3),
+        )
+        self._euler: tuple[float, ...] | None = None if euler is None else _float_tuple(euler, 3)
+        self._arrays: dict[str, np.ndarray] | None = None
+
+    @classmethod
+    def from_floats(cls, values: StateFloats) -> DroneState:
+        """Wrap plain floats without copying (what :meth:`Quadrotor.read_state` uses)."""
+        state = cls.__new__(cls)
+        state.floats = values
+        state._euler = None
+        state._arrays = None
+        return state
+
+    def _array(self, name: str) -> np.ndarray:
+        arrays = self._arrays
+        if arrays is None:
+            arrays = self._arrays = {}
+        array = arrays.get(name)
+        if array is None:
+            if name == "rotation_wb":
+                array = np.array(self.floats.rotation_wb).reshape(3, 3)
+            elif name == "euler":
+                array = np.array(self.euler_tuple)
+            else:
+                array = np.array(getattr(self.floats, name))
+            arrays[name] = array
+        return array
+
+    @property
+    def position_w(self) -> np.ndarray:
+        """Body-frame origin in W (m): the base link's CoM, 0.7 mm above the vehicle's CoM."""
+        return self._array("position_w")
+
+    @property
+    def quaternion_xyzw(self) -> np.ndarray:
+        """Orientation of B in W as a quaternion (x, y, z, w)."""
+        return self._array("quaternion_xyzw")
+
+    @property
+    def rotation_wb(self) -> np.ndarray:
+        """R_WB (3, 3): columns are the body axes in W."""
+        return self._array("rotation_wb")
+
+    @property
+    def velocity_w(self) -> np.ndarray:
+        """CoM velocity in W (m/s)."""
+        return self._array("velocity_w")
+
+    @property
+    def angular_velocity_b(self) -> np.ndarray:
+        """Angular velocity in the BODY frame (rad/s), as a gyro measures it."""
+        return self._array("angular_velocity_b")
+
+    @property
+    def euler(self) -> np.ndarray:
+        """(roll, pitch, yaw) in radians, ZYX convention."""
+        return self._array("euler")
+
+    @property
+    def euler_tuple(self) -> tuple[float, ...]:
+        """:attr:`euler` as plain floats."""
+        if self._euler is None:
+            r00, _, _, r10, _, _, r20, r21, r22 = self.floats.rotation_wb
+            self._euler = (
+                math.atan2(r21, r22),
+                math.asin(-r20 if -1.0 <= -r20 <= 1.0 else math.copysign(1.0, -r20)),
+                math.atan2(r10, r00),
+            )
+        return self._euler
 
     @property
     def yaw(self) -> float:
         """Yaw (rad)."""
-        return float(self.euler[2])
+        if self._euler is not None:
+            return self._euler[2]
+        rotation = self.floats.rotation_wb
+        return math.atan2(rotation[3], rotation[0])
+
+    def __repr__(self) -> str:
+        f = self.floats
+        return (
+            f"DroneState(position_w={f.position_w}, quaternion_xyzw={f.quaternion_xyzw}, "
+            f"velocity_w={f.velocity_w}, angular_velocity_b={f.angular_velocity_b})"
+        )
 
 
 class Quadrotor:
@@ -336,15 +445,22 @@ class Quadrotor:
         #: the whole body's centre of mass in the base frame (m): the feet lower it slightly
         self.com_offset_b: tuple[float, float, float] = self._combined_com_offset()
         prm = self.params
-        self._rotors = [tuple(float(v) for v in row) for row in prm.rotor_positions_b]
-        self._yaw_coeffs = [-float(s) * prm.k_m for s in prm.spin_directions]
-        self._drag = tuple(float(v) for v in prm.linear_drag_b)
-        self._alpha_dt = -1.0
-        self._alpha = 0.0
-        self._ge_const = prm.ground_effect_coefficient * (prm.rotor_radius / 4.0) ** 2
-        self._ge_min_denominator = 1.0 / prm.ground_effect_max_gain
         self._zero3 = (0.0, 0.0, 0.0)
         self._nan4 = (math.nan, math.nan, math.nan, math.nan)
+        # Plain-float copies of the parameters for the per-step path, refreshed by
+        # _sync_constants whenever ``params`` is replaced or the step length changes.
+        self._constants_for: tuple[QuadrotorParams, float] | None = None
+        self._alpha = 0.0
+        self._k_f = 0.0
+        self._omega_range = (0.0, 0.0)
+        self._rotor_terms: tuple[tuple[float, float, float], ...] = ()
+        self._rotors: tuple[tuple[float, float, float], ...] = ()
+        self._drag = self._zero3
+        self._ground_effect_on = False
+        self._ge_const = 0.0
+        self._ge_min_denominator = 1.0
+        self._ge_max_gain = 1.0
+        self._ge_ray_length = 0.0
 
         #: True while the motors respond to commands; disarmed rotors spin down to zero
         self.armed: bool = True
@@ -366,8 +482,6 @@ class Quadrotor:
         self.wind_velocity_w: np.ndarray | tuple[float, float, float] = self._zero3
         #: wind velocity (m/s, W) used for the drag in the last step
         self.last_wind_w: tuple[float, float, float] = self._zero3
-        self._last_state: DroneState | None = None
-        self._last_pose: tuple[Any, ...] = ()
 
     def _combined_com_offset(self) -> tuple[float, float, float]:
         """Centre of mass of base and feet together, in the base frame."""
@@ -407,7 +521,6 @@ class Quadrotor:
         self.last_ground_heights = self._nan4
         self.last_ground_effect_gains = (1.0, 1.0, 1.0, 1.0)
         self.last_ground_effect_capped = False
-        self._last_state = None
 
     @property
     def rotor_speeds(self) -> np.ndarray:
@@ -422,34 +535,44 @@ class Quadrotor:
         """Query PyBullet (one pose and one velocity call) and return the state."""
         cid = self._cid
         pos, quat = p.getBasePositionAndOrientation(self.body_id, physicsClientId=cid)
-        vel, omega_w = p.getBaseVelocity(self.body_id, physicsClientId=cid)
+        vel, (wx, wy, wz) = p.getBaseVelocity(self.body_id, physicsClientId=cid)
         rot = _rotation_from_quaternion(quat)
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
-        wx, wy, wz = omega_w
         omega_b = (
             r00 * wx + r10 * wy + r20 * wz,
             r01 * wx + r11 * wy + r21 * wz,
             r02 * wx + r12 * wy + r22 * wz,
         )
-        roll = math.atan2(r21, r22)
-        pitch = math.asin(-r20 if -1.0 <= -r20 <= 1.0 else math.copysign(1.0, -r20))
-        yaw = math.atan2(r10, r00)
-        state = DroneState(
-            position_w=np.array(pos),
-            quaternion_xyzw=np.array(quat),
-            rotation_wb=np.array(rot).reshape(3, 3),
-            velocity_w=np.array(vel),
-            angular_velocity_b=np.array(omega_b),
-            euler=np.array((roll, pitch, yaw)),
-        )
-        self._last_state = state
-        self._last_pose = (pos, rot, vel)
-        return state
+        return DroneState.from_floats(StateFloats(pos, quat, rot, vel, omega_b))
 
     # ---------------------------------------------------------------- actuation
 
+    def _sync_constants(self, dt: float) -> None:
+        """Copy the parameters the per-step path needs into plain floats."""
+        prm = self.params
+        self._constants_for = (prm, dt)
+        # Exact discretisation of the first-order motor lag over one step.
+        self._alpha = 1.0 - math.exp(-dt / prm.motor_time_constant)
+        self._k_f = float(prm.k_f)
+        self._omega_range = (float(prm.omega_min), float(prm.omega_max))
+        self._rotors = tuple(
+            (float(x), float(y), float(z)) for x, y, z in prm.rotor_positions_b.tolist()
+        )
+        # per rotor: hub x, hub y (m) and the yaw reaction torque per (rad/s)^2 (N m)
+        self._rotor_terms = tuple(
+            (x, y, -float(spin) * prm.k_m)
+            for (x, y, _), spin in zip(self._rotors, prm.spin_directions.tolist(), strict=True)
+        )
+        d0, d1, d2 = prm.linear_drag_b.tolist()
+        self._drag = (float(d0), float(d1), float(d2))
+        self._ground_effect_on = bool(prm.ground_effect_enabled)
+        self._ge_const = prm.ground_effect_coefficient * (prm.rotor_radius / 4.0) ** 2
+        self._ge_min_denominator = 1.0 / prm.ground_effect_max_gain
+        self._ge_max_gain = float(prm.ground_effect_max_gain)
+        self._ge_ray_length = float(prm.ground_effect_ray_length)
+
     def apply_rotor_commands(
-        self, omega_cmd: np.ndarray, dt: float, state: DroneState | None = None
+        self, omega_cmd: np.ndarray | list[float], dt: float, state: DroneState | None = None
     ) -> None:
         """Advance the motors by ``dt`` towards ``omega_cmd`` (rad/s) and apply this step's forces.
 
@@ -457,17 +580,14 @@ class Quadrotor:
         forces hold for the next ``stepSimulation`` only (PyBullet clears them).  ``state``:
         the state read this step, which saves the pose queries; ``None`` queries PyBullet.
         """
-        prm = self.params
-        if dt != self._alpha_dt:
-            # Exact discretisation of the first-order motor lag over one step.
-            self._alpha_dt = dt
-            self._alpha = 1.0 - math.exp(-dt / prm.motor_time_constant)
+        constants_for = self._constants_for
+        if constants_for is None or constants_for[0] is not self.params or constants_for[1] != dt:
+            self._sync_constants(dt)
         alpha = self._alpha
         omega = self._omega
         saturated = False
         if self.armed:
-            lo = prm.omega_min
-            hi = prm.omega_max
+            lo, hi = self._omega_range
             commands = omega_cmd.tolist() if isinstance(omega_cmd, np.ndarray) else omega_cmd
             for i in range(4):
                 c = commands[i]
@@ -486,13 +606,12 @@ class Quadrotor:
                 omega[i] -= omega[i] * alpha
         self.last_saturated = saturated
 
-        # Pose and velocity: reuse the state read this step when given.
-        if state is not None and state is self._last_state:
-            pos, rot, vel = self._last_pose
-        elif state is not None:
-            pos = state.position_w.tolist()
-            rot = state.rotation_wb.ravel().tolist()
-            vel = state.velocity_w.tolist()
+        # Pose and velocity: the state read this step when given.
+        if state is not None:
+            floats = state.floats
+            pos = floats.position_w
+            rot = floats.rotation_wb
+            vel = floats.velocity_w
         else:
             cid = self._cid
             pos, quat = p.getBasePositionAndOrientation(self.body_id, physicsClientId=cid)
@@ -500,23 +619,21 @@ class Quadrotor:
             rot = _rotation_from_quaternion(quat)
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
 
-        gains = self._ground_effect(pos, rot) if prm.ground_effect_enabled else None
-
-        k_f = prm.k_f
+        k_f = self._k_f
         thrusts = [k_f * w * w for w in omega]
-        if gains is not None:
-            thrusts = [t * g for t, g in zip(thrusts, gains, strict=True)]
+        if self._ground_effect_on:
+            gains = self._ground_effect(pos, rot)
+            if gains is not None:
+                thrusts = [t * g for t, g in zip(thrusts, gains, strict=True)]
         fz = 0.0
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        for i in range(4):
-            t = thrusts[i]
-            x, y, _ = self._rotors[i]
+        for t, w, (x, y, yaw_coeff) in zip(thrusts, omega, self._rotor_terms, strict=True):
             fz += t
             tx += y * t  # r x (0, 0, T) = (y T, -x T, 0)
             ty -= x * t
-            tz += self._yaw_coeffs[i] * omega[i] * omega[i]
+            tz += yaw_coeff * w * w
         self.last_thrusts = tuple(thrusts)
 
         # Linear drag against the air-relative velocity, in the body frame.
@@ -525,7 +642,8 @@ class Quadrotor:
             wind = self.wind.velocity_tuple(self.time, dt)
         else:
             outside = self.wind_velocity_w
-            wind = (float(outside[0]), float(outside[1]), float(outside[2]))
+            ox, oy, oz = outside.tolist() if isinstance(outside, np.ndarray) else outside
+            wind = (float(ox), float(oy), float(oz))
         self.last_wind_w = wind
         ax = vel[0] - wind[0]
         ay = vel[1] - wind[1]
@@ -545,32 +663,44 @@ class Quadrotor:
         )
         p.applyExternalTorque(self.body_id, -1, (tx, ty, tz), p.LINK_FRAME, physicsClientId=cid)
 
-    def _ground_effect(self, pos: Any, rot: Any) -> list[float]:
-        """Per-rotor T_IGE/T_OGE from one ray batch down body -z from the four hubs."""
-        prm = self.params
+    def _ground_effect(self, pos: Any, rot: Any) -> list[float] | None:
+        """Per-rotor T_IGE/T_OGE from one ray batch down body -z from the four hubs.
+
+        ``None`` when no ray hits anything (all gains 1, the usual case in flight).
+        """
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
         px, py, pz = pos
-        length = prm.ground_effect_ray_length
+        length = self._ge_ray_length
         dx = -length * r02
         dy = -length * r12
         dz = -length * r22
-        starts = []
-        ends = []
-        for x, y, z in self._rotors:
-            hx = px + r00 * x + r01 * y + r02 * z
-            hy = py + r10 * x + r11 * y + r12 * z
-            hz = pz + r20 * x + r21 * y + r22 * z
-            starts.append((hx, hy, hz))
-            ends.append((hx + dx, hy + dy, hz + dz))
+        starts = [
+            (
+                px + r00 * x + r01 * y + r02 * z,
+                py + r10 * x + r11 * y + r12 * z,
+                pz + r20 * x + r21 * y + r22 * z,
+            )
+            for x, y, z in self._rotors
+        ]
+        ends = [(hx + dx, hy + dy, hz + dz) for hx, hy, hz in starts]
         # The hubs lie outside the drone's collision shapes (frame box and feet), so the rays
         # start at the hubs; a hit on the drone itself is ignored all the same.
         hits = p.rayTestBatch(starts, ends, physicsClientId=self._cid)
+        body = self.body_id
+        for hit in hits:
+            if hit[0] >= 0 and hit[0] != body:
+                break
+        else:
+            # Nothing within reach (the usual case in flight).
+            self.last_ground_heights = self._nan4
+            self.last_ground_effect_gains = (1.0, 1.0, 1.0, 1.0)
+            self.last_ground_effect_capped = False
+            return None
         heights = []
         gains = []
         capped = False
         const = self._ge_const
         min_den = self._ge_min_denominator
-        body = self.body_id
         for hit in hits:
             if hit[0] < 0 or hit[0] == body:
                 heights.append(math.nan)
@@ -582,7 +712,7 @@ class Quadrotor:
             # (c = 1); the gain is capped at max_gain and the cap is flagged.
             denominator = 1.0 - const / (h * h) if h > 0.0 else -1.0
             if denominator <= min_den:
-                gains.append(prm.ground_effect_max_gain)
+                gains.append(self._ge_max_gain)
                 capped = True
             else:
                 gains.append(1.0 / denominator)
@@ -590,6 +720,11 @@ class Quadrotor:
         self.last_ground_effect_gains = tuple(gains)
         self.last_ground_effect_capped = capped
         return gains
+
+
+def _float_tuple(value: Any, size: int) -> tuple[float, ...]:
+    """``value`` (array-like of ``size`` numbers, any shape) as a tuple of floats."""
+    return tuple(np.asarray(value, dtype=float).reshape(size).tolist())
 
 
 def _rotation_from_quaternion(q: Any) -> tuple[float, ...]:

@@ -11,6 +11,8 @@ fits give for consumer MEMS IMUs of this class.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,8 +20,9 @@ import numpy as np
 from estimation.types import ImuSample
 from landing_env.errors import require_range
 
-#: Gravity in the world frame, m/s^2 (z up).
-GRAVITY_W = np.array([0.0, 0.0, -9.81])
+#: Gravity's magnitude (m/s^2) and the gravity vector in the world frame (z up).
+GRAVITY = 9.81
+GRAVITY_W = np.array([0.0, 0.0, -GRAVITY])
 
 
 @dataclass
@@ -53,7 +56,15 @@ class ImuConfig:
 
 
 class ImuModel:
-    """Turns true motion into IMU samples at ``rate_hz`` (see the module docstring)."""
+    """Turns true motion into IMU samples at ``rate_hz`` (see the module docstring).
+
+    Random numbers: each sample draws 12 standard normals from ``rng`` in one call, in the
+    order accelerometer bias step, gyro bias step, accelerometer noise, gyro noise (3 each; the
+    first sample after :meth:`reset` has no bias step and draws 6), and :meth:`sample_many`
+    draws a whole batch in one call: the same stream, value for value, as drawing each group
+    of 3 separately.  The per-sample arithmetic is plain Python floats: this runs at the
+    physics rate.
+    """
 
     def __init__(self, config: ImuConfig, rng: np.random.Generator, rate_hz: float) -> None:
         if rate_hz <= 0.0:
@@ -61,8 +72,8 @@ class ImuModel:
         self.config = config
         self.rng = rng
         self.rate_hz = float(rate_hz)
-        self.accel_bias = np.zeros(3)
-        self.gyro_bias = np.zeros(3)
+        self._accel_bias = [0.0, 0.0, 0.0]
+        self._gyro_bias = [0.0, 0.0, 0.0]
         self._last_timestamp: float | None = None
         self.reset()
 
@@ -74,46 +85,118 @@ class ImuModel:
         self._last_timestamp = None
 
     @property
+    def accel_bias(self) -> np.ndarray:
+        """Current accelerometer bias (3,), m/s^2 (a copy)."""
+        return np.array(self._accel_bias)
+
+    @accel_bias.setter
+    def accel_bias(self, value: np.ndarray) -> None:
+        self._accel_bias = np.asarray(value, dtype=float).reshape(3).tolist()
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        """Current gyroscope bias (3,), rad/s (a copy)."""
+        return np.array(self._gyro_bias)
+
+    @gyro_bias.setter
+    def gyro_bias(self, value: np.ndarray) -> None:
+        self._gyro_bias = np.asarray(value, dtype=float).reshape(3).tolist()
+
+    @property
     def accel_sigma(self) -> float:
         """Discrete accelerometer white-noise sigma per sample, m/s^2."""
-        return self.config.accel_noise_density * np.sqrt(self.rate_hz)
+        return self.config.accel_noise_density * math.sqrt(self.rate_hz)
 
     @property
     def gyro_sigma(self) -> float:
         """Discrete gyroscope white-noise sigma per sample, rad/s."""
-        return self.config.gyro_noise_density * np.sqrt(self.rate_hz)
-
-    def _advance_bias(self, timestamp: float) -> None:
-        """Random-walk the biases over the time since the last sample (none at the first)."""
-        last = self._last_timestamp
-        self._last_timestamp = timestamp
-        if last is None:
-            return
-        dt = timestamp - last
-        if dt < 0.0:
-            raise ValueError(f"IMU timestamps went backwards: {last} -> {timestamp}")
-        root_dt = np.sqrt(dt)
-        cfg = self.config
-        self.accel_bias = self.accel_bias + (
-            self.rng.normal(0.0, 1.0, 3) * cfg.accel_bias_random_walk * root_dt
-        )
-        self.gyro_bias = self.gyro_bias + (
-            self.rng.normal(0.0, 1.0, 3) * cfg.gyro_bias_random_walk * root_dt
-        )
+        return self.config.gyro_noise_density * math.sqrt(self.rate_hz)
 
     def sample(
-        self, timestamp: float, r_wb: np.ndarray, accel_w: np.ndarray, omega_b: np.ndarray
+        self,
+        timestamp: float,
+        r_wb: np.ndarray | Sequence[float],
+        accel_w: np.ndarray | Sequence[float],
+        omega_b: np.ndarray | Sequence[float],
     ) -> ImuSample:
         """One sample from the attitude ``r_wb``, the world acceleration of the IMU point
-        (m/s^2) and the body angular rate ``omega_b`` (rad/s, in B)."""
-        self._advance_bias(timestamp)
-        specific_force = np.asarray(r_wb, dtype=float).T @ (
-            np.asarray(accel_w, dtype=float) - GRAVITY_W
-        )
-        accel = specific_force + self.accel_bias + self.rng.normal(0.0, 1.0, 3) * self.accel_sigma
-        gyro = (
-            np.asarray(omega_b, dtype=float)
-            + self.gyro_bias
-            + self.rng.normal(0.0, 1.0, 3) * self.gyro_sigma
-        )
-        return ImuSample(timestamp=timestamp, accel=accel, gyro=gyro)
+        (m/s^2) and the body angular rate ``omega_b`` (rad/s, in B).
+
+        ``r_wb`` is R_WB as a (3, 3) array or as 9 row-major floats; the vectors are arrays or
+        sequences of 3 floats.
+        """
+        return self.sample_many((timestamp,), (r_wb,), (accel_w,), (omega_b,))[0]
+
+    def sample_many(
+        self,
+        timestamps: Sequence[float],
+        rotations_wb: Sequence[np.ndarray | Sequence[float]],
+        accels_w: Sequence[np.ndarray | Sequence[float]],
+        omegas_b: Sequence[np.ndarray | Sequence[float]],
+    ) -> list[ImuSample]:
+        """Consecutive samples, as many :meth:`sample` calls, with one random draw for all.
+
+        The arguments are parallel sequences, one item per sample, in :meth:`sample`'s form.
+        """
+        count = len(timestamps)
+        if not (len(rotations_wb) == len(accels_w) == len(omegas_b) == count):
+            raise ValueError("timestamps, rotations_wb, accels_w and omegas_b differ in length")
+        if count == 0:
+            return []
+        # Check every timestamp before drawing, so that an error leaves the model unchanged.
+        last = self._last_timestamp
+        previous = last
+        for timestamp in timestamps:
+            if previous is not None and timestamp - previous < 0.0:
+                raise ValueError(f"IMU timestamps went backwards: {previous} -> {timestamp}")
+            previous = timestamp
+        normals = self.rng.standard_normal(12 * count - (6 if last is None else 0)).tolist()
+        cfg = self.config
+        root_rate = math.sqrt(self.rate_hz)
+        accel_sigma = cfg.accel_noise_density * root_rate
+        gyro_sigma = cfg.gyro_noise_density * root_rate
+        accel_walk = cfg.accel_bias_random_walk
+        gyro_walk = cfg.gyro_bias_random_walk
+        ba0, ba1, ba2 = self._accel_bias
+        bg0, bg1, bg2 = self._gyro_bias
+        samples = []
+        k = 0
+        for timestamp, r_wb, accel_w, omega_b in zip(
+            timestamps, rotations_wb, accels_w, omegas_b, strict=True
+        ):
+            if last is not None:
+                # Random-walk the biases over the time since the last sample.
+                root_dt = math.sqrt(timestamp - last)
+                n0, n1, n2, n3, n4, n5 = normals[k : k + 6]
+                k += 6
+                ba0 += n0 * accel_walk * root_dt
+                ba1 += n1 * accel_walk * root_dt
+                ba2 += n2 * accel_walk * root_dt
+                bg0 += n3 * gyro_walk * root_dt
+                bg1 += n4 * gyro_walk * root_dt
+                bg2 += n5 * gyro_walk * root_dt
+            last = timestamp
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
+                r_wb.ravel().tolist() if isinstance(r_wb, np.ndarray) else r_wb
+            )
+            ax, ay, az = accel_w.tolist() if isinstance(accel_w, np.ndarray) else accel_w
+            wx, wy, wz = omega_b.tolist() if isinstance(omega_b, np.ndarray) else omega_b
+            # specific force f_B = R_WB^T (a_W - g_W), g_W = (0, 0, -GRAVITY)
+            az += GRAVITY
+            n0, n1, n2, n3, n4, n5 = normals[k : k + 6]
+            k += 6
+            accel = (
+                r00 * ax + r10 * ay + r20 * az + ba0 + n0 * accel_sigma,
+                r01 * ax + r11 * ay + r21 * az + ba1 + n1 * accel_sigma,
+                r02 * ax + r12 * ay + r22 * az + ba2 + n2 * accel_sigma,
+            )
+            gyro = (
+                wx + bg0 + n3 * gyro_sigma,
+                wy + bg1 + n4 * gyro_sigma,
+                wz + bg2 + n5 * gyro_sigma,
+            )
+            samples.append(ImuSample(timestamp, np.array(accel), np.array(gyro)))
+        self._accel_bias = [ba0, ba1, ba2]
+        self._gyro_bias = [bg0, bg1, bg2]
+        self._last_timestamp = last
+        return samples

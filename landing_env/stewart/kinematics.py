@@ -154,6 +154,16 @@ class StewartKinematics:
         self.home_leg_lengths = self.inverse_kinematics(np.zeros(POSE_SIZE))
         self._cos_base = _cos_deg(geometry.max_base_joint_angle_deg)
         self._cos_top = _cos_deg(geometry.max_top_joint_angle_deg)
+        # For surely_reachable: how far any leg may stretch or shrink from its home length
+        # (less a rounding guard far above the float error of the full check), and the
+        # largest distance of a top anchor from P's origin.
+        margin = min(
+            float(np.min(self.home_leg_lengths)) - geometry.min_leg_length,
+            geometry.max_leg_length - float(np.max(self.home_leg_lengths)),
+        )
+        joint_limits = self._cos_base is not None or self._cos_top is not None
+        self._stroke_margin = -1.0 if joint_limits else margin - 1e-9
+        self._top_anchor_reach = float(np.max(np.linalg.norm(self.top_anchors_p, axis=1)))
 
     # ---------------------------------------------------------------- inverse kinematics
     def leg_vectors(self, pose: np.ndarray) -> np.ndarray:
@@ -251,6 +261,20 @@ class StewartKinematics:
             ):
                 violated.append(i)
         return lengths, tuple(violated)
+
+    def surely_reachable(self, translation_norm: float, sin_half_angle: float) -> bool:
+        """A cheap sufficient test of reachability, for the per-physics-step path.
+
+        ``translation_norm``: |(x, y, z)| of the pose (m); ``sin_half_angle``: sin(theta / 2)
+        of its rotation angle theta (the norm of its unit quaternion's vector part).  True
+        guarantees that every leg is within its stroke; False says nothing (run the full
+        check).  Leg i's vector changes from home by t + (R - I) p_i, and
+        |(R - I) p| <= 2 sin(theta / 2) |p|, so no length moves from home by more than
+        |t| + 2 sin(theta / 2) max|p_i|.  Joint-angle limits are not bounded this way: when
+        either is configured this always returns False.
+        """
+        deviation = translation_norm + 2.0 * sin_half_angle * self._top_anchor_reach
+        return deviation < self._stroke_margin
 
     def _lengths_and_violations(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         legs = self.leg_vectors(pose)

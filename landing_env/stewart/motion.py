@@ -57,9 +57,24 @@ class MotionSource(Protocol):
         ...
 
 
+@runtime_checkable
+class BatchMotionSource(MotionSource, Protocol):
+    """A motion source that is a pure function of time and evaluates many times at once.
+
+    The platform evaluates such a source a few physics steps ahead in one call.
+    """
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        """Poses (N, 6) at the times (N,): equal to ``pose`` at each time (to rounding)."""
+        ...
+
+
 def sample_poses(source: MotionSource, times: Sequence[float] | np.ndarray) -> np.ndarray:
     """Poses (N, 6) of ``source`` at ``times`` (a convenience for plots and tests)."""
-    return np.array([source.pose(float(t)) for t in np.asarray(times, dtype=float)])
+    times = np.asarray(times, dtype=float).reshape(-1)
+    if isinstance(source, BatchMotionSource):
+        return source.poses(times)
+    return np.array([source.pose(float(t)) for t in times]).reshape(-1, 6)
 
 
 def _pose_from_config(values: Sequence[float]) -> np.ndarray:
@@ -95,6 +110,9 @@ class StaticMotion:
 
     def pose(self, t: float) -> np.ndarray:
         return self._pose.copy()
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        return np.tile(self._pose, (len(times), 1))
 
     def velocity(self, t: float) -> np.ndarray:
         return np.zeros(6)
@@ -207,6 +225,9 @@ class SinusoidMotion:
 
     def pose(self, t: float) -> np.ndarray:
         return self._mix @ np.sin(self._omega * t + self._phase)
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        return np.sin(np.multiply.outer(times, self._omega) + self._phase) @ self._mix.T
 
     def velocity(self, t: float) -> np.ndarray:
         return self._mix @ (self._omega * np.cos(self._omega * t + self._phase))
@@ -394,6 +415,10 @@ class SeaStateMotion:
     def pose(self, t: float) -> np.ndarray:
         return np.real(self._coefficients @ np.exp(1j * self._omega * t))
 
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        phasors = np.exp(1j * np.multiply.outer(times, self._omega))
+        return np.real(phasors @ self._coefficients.T)
+
     def velocity(self, t: float) -> np.ndarray:
         return np.real(self._rate_coefficients @ np.exp(1j * self._omega * t))
 
@@ -500,6 +525,16 @@ class CsvMotion:
     def pose(self, t: float) -> np.ndarray:
         local, _ = self._local_time(t)
         return self._interp(local)
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        times = np.asarray(times, dtype=float)
+        local = np.maximum(times, self._start)
+        after = times >= self._stop
+        if self.end == "hold":
+            local[after] = self._stop
+        else:
+            local[after] = self._start + np.fmod(times[after] - self._start, self.duration)
+        return self._interp(local).reshape(-1, 6)
 
     def velocity(self, t: float) -> np.ndarray:
         local, held = self._local_time(t)

@@ -24,12 +24,19 @@ Legs are visual-only bodies (no collision shape, so rays, the drone and the deck
 them): each is a cylinder fixed at the base joint and a rod fixed at the top joint, sliding
 inside each other like a real actuator.  They are only moved by
 :meth:`StewartPlatform.update_leg_visuals`, at the environment rate.
+
+Cost per physics step (it runs 240 times per simulated second): :meth:`StewartPlatform.advance`
+is :meth:`~StewartPlatform.step_to` without building the :class:`StewartStatus` (built when
+``last_status`` is read); a cheap sufficient reachability test
+(:meth:`StewartKinematics.surely_reachable`) leaves the exact leg check and clamping to poses
+near the workspace boundary; the motion source is evaluated several steps ahead in one call.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import pybullet
@@ -43,7 +50,7 @@ from landing_env.stewart.kinematics import (
     angular_velocity_from_euler_rates,
     rotation_matrix_zyx,
 )
-from landing_env.stewart.motion import MotionSource
+from landing_env.stewart.motion import BatchMotionSource, MotionSource
 
 Quaternion = tuple[float, float, float, float]
 
@@ -72,7 +79,11 @@ class PlatformConfig:
 
 @dataclass(frozen=True)
 class StewartStatus:
-    """What :meth:`StewartPlatform.step_to` commanded for one physics step."""
+    """What :meth:`StewartPlatform.step_to` commanded for one physics step.
+
+    The leg lengths and stroke usage are computed from the applied pose when first asked
+    for: most physics steps never look at them.
+    """
 
     #: simulation time the pose is commanded for (end of the coming physics step), s
     t: float
@@ -82,12 +93,20 @@ class StewartStatus:
     applied_pose: np.ndarray
     #: True when the workspace clamp modified the command
     clamped: bool
-    #: leg lengths of the applied pose (6,), m
-    leg_lengths: np.ndarray
     #: legs whose limits the commanded pose violated (empty unless clamped)
     violated_legs: tuple[int, ...]
-    #: fraction of the stroke in use per leg (6,): 0 fully retracted, 1 fully extended
-    stroke_usage: np.ndarray
+    #: the platform's kinematics (computes the leg lengths)
+    kinematics: StewartKinematics = field(repr=False, compare=False)
+
+    @cached_property
+    def leg_lengths(self) -> np.ndarray:
+        """Leg lengths of the applied pose (6,), m."""
+        return self.kinematics.inverse_kinematics(self.applied_pose)
+
+    @cached_property
+    def stroke_usage(self) -> np.ndarray:
+        """Fraction of the stroke in use per leg (6,): 0 fully retracted, 1 fully extended."""
+        return self.kinematics.stroke_usage(self.leg_lengths)
 
     @property
     def max_stroke_usage(self) -> float:
@@ -109,6 +128,9 @@ class StewartPlatform:
     the servo needs no centre-of-mass correction, for multibodies and maximal bodies alike.)
     """
 
+    #: physics steps of motion evaluated ahead in one call (see _motion_pose)
+    _PLAN_STEPS = 24
+
     def __init__(
         self,
         client: BulletClient,
@@ -121,6 +143,9 @@ class StewartPlatform:
         config: PlatformConfig | None = None,
     ) -> None:
         self.client = client
+        # The per-step path calls pybullet with the client id directly (BulletClient's
+        # attribute lookup costs about a microsecond per call).
+        self._cid: int = client._client
         self.geometry = geometry
         self.kinematics = StewartKinematics(geometry)
         self.motion = motion
@@ -134,6 +159,8 @@ class StewartPlatform:
         self._home_position_w = self.base_position_w + self.rotation_wb @ np.array(
             [0.0, 0.0, geometry.home_height]
         )
+        hx, hy, hz = self._home_position_w.tolist()
+        self._home_floats = (hx, hy, hz)
         self.base_anchors_w = (
             self.base_position_w + self.kinematics.base_anchors @ self.rotation_wb.T
         )
@@ -150,7 +177,19 @@ class StewartPlatform:
         self._dt = 0.0
         self._gravity_step = (0.0, 0.0, 0.0)
         self._read_engine_parameters()
-        self.last_status: StewartStatus | None = None
+        #: world position and quaternion of P for the last commanded pose
+        self._target: tuple[tuple[float, float, float], Quaternion] = ((0.0, 0.0, 0.0), _IDENTITY)
+        # The last command, from which last_status is built when asked for:
+        # (t, commanded pose, applied pose or None when it is the commanded one, clamped,
+        # violated legs), and the status once built.
+        self._record: tuple[float, np.ndarray, np.ndarray | None, bool, tuple[int, ...]] | None
+        self._record = None
+        self._status: StewartStatus | None = None
+        # Motion commands evaluated ahead (see _motion_pose): time -> (pose, pose as floats)
+        self._plan: dict[float, tuple[np.ndarray, list[float]]] = {}
+        self._plan_motion: MotionSource | None = None
+        self._last_t: float | None = None
+        self._batch_check: tuple[MotionSource | None, bool] = (None, False)
 
     # ---------------------------------------------------------------- creation
     def _create_base_plate(self) -> int:
@@ -253,8 +292,11 @@ class StewartPlatform:
         Re-reads the time step and gravity from PyBullet, so call it after changing them.
         """
         self._read_engine_parameters()
-        status = self._command(t0)
-        position, quaternion = self._target_world(status.applied_pose)
+        self._plan = {}
+        self._command(t0)
+        status = self.last_status
+        assert status is not None
+        position, quaternion = self._target
         c = self.client
         c.resetBasePositionAndOrientation(self.top_plate_body_id, position, quaternion)
         if status.clamped:
@@ -268,15 +310,36 @@ class StewartPlatform:
         self.update_leg_visuals()
         return status
 
+    @property
+    def last_status(self) -> StewartStatus | None:
+        """What the last :meth:`step_to`, :meth:`advance` or :meth:`reset` commanded."""
+        if self._status is None and self._record is not None:
+            t, commanded, applied, clamped, violated = self._record
+            if applied is None:
+                applied = commanded.copy()
+            self._status = StewartStatus(t, commanded, applied, clamped, violated, self.kinematics)
+        return self._status
+
     def step_to(self, t: float) -> StewartStatus:
         """Command the pose for time ``t``; call once per physics step before stepSimulation.
 
         ``t`` is the simulation time at the *end* of the coming step: after
         ``stepSimulation`` the plate is at ``motion.pose(t)`` (clamped to the workspace).
         """
-        status = self._command(t)
-        target_position, target_q = self._target_world(status.applied_pose)
-        position, q = self.client.getBasePositionAndOrientation(self.top_plate_body_id)
+        self.advance(t)
+        status = self.last_status
+        assert status is not None
+        return status
+
+    def advance(self, t: float) -> bool:
+        """:meth:`step_to` without building the status; returns whether the command was clamped.
+
+        The per-physics-step form: :attr:`last_status` still describes the command when read.
+        """
+        clamped = self._command(t)
+        (tx, ty, tz), target_q = self._target
+        body, cid = self.top_plate_body_id, self._cid
+        (px, py, pz), q = pybullet.getBasePositionAndOrientation(body, physicsClientId=cid)
         inv_dt = 1.0 / self._dt
         # Required rotation over the step, in the world frame: q_rel = q_target * conj(q).
         rx, ry, rz, rw = _quat_multiply(target_q, (-q[0], -q[1], -q[2], q[3]))
@@ -285,40 +348,80 @@ class StewartPlatform:
         sin_half = math.sqrt(rx * rx + ry * ry + rz * rz)
         gain = 2.0 * math.atan2(sin_half, rw) / sin_half if sin_half > 1e-12 else 2.0
         angular = (rx * gain * inv_dt, ry * gain * inv_dt, rz * gain * inv_dt)
-        dx = target_position[0] - position[0]
-        dy = target_position[1] - position[1]
-        dz = target_position[2] - position[2]
-        g = self._gravity_step
-        linear = (dx * inv_dt - g[0], dy * inv_dt - g[1], dz * inv_dt - g[2])
-        self.client.resetBaseVelocity(self.top_plate_body_id, linear, angular)
-        return status
+        gx, gy, gz = self._gravity_step
+        linear = ((tx - px) * inv_dt - gx, (ty - py) * inv_dt - gy, (tz - pz) * inv_dt - gz)
+        pybullet.resetBaseVelocity(body, linear, angular, physicsClientId=cid)
+        return clamped
 
-    def _command(self, t: float) -> StewartStatus:
-        commanded = np.asarray(self.motion.pose(t), dtype=float)
-        result = self.kinematics.clamp_to_workspace(commanded)
-        status = StewartStatus(
-            t=float(t),
-            commanded_pose=commanded,
-            applied_pose=result.pose,
-            clamped=result.clamped,
-            leg_lengths=result.leg_lengths,
-            violated_legs=result.violated_legs,
-            stroke_usage=self.kinematics.stroke_usage(result.leg_lengths),
-        )
-        self.last_status = status
-        return status
+    def _command(self, t: float) -> bool:
+        """Work out the (clamped) pose for time ``t``; record it and its world target.
 
-    def _target_world(self, pose: np.ndarray) -> tuple[tuple[float, float, float], Quaternion]:
-        """World position and PyBullet quaternion (x, y, z, w) of P for a pose (fast path)."""
-        x, y, z, roll, pitch, yaw = pose.tolist()
+        Returns whether the command was clamped.
+        """
+        commanded, (x, y, z, roll, pitch, yaw) = self._motion_pose(t)
+        q = _quat_from_euler_zyx(roll, pitch, yaw)
+        applied = None
+        violated: tuple[int, ...] = ()
+        clamped = False
+        # A cheap sufficient test first; the exact check (and clamping) only near the limits.
+        if not self.kinematics.surely_reachable(
+            math.sqrt(x * x + y * y + z * z), math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+        ):
+            result = self.kinematics.clamp_to_workspace(commanded)
+            applied, clamped, violated = result.pose, result.clamped, result.violated_legs
+            if clamped:
+                x, y, z, roll, pitch, yaw = applied.tolist()
+                q = _quat_from_euler_zyx(roll, pitch, yaw)
+        self._record = (float(t), commanded, applied, clamped, violated)
+        self._status = None
+        self._target = self._target_world(x, y, z, q)
+        return clamped
+
+    def _motion_pose(self, t: float) -> tuple[np.ndarray, list[float]]:
+        """``motion.pose(t)`` as an array and as floats.
+
+        When the calls step by exactly the physics time step (as the world's do), a
+        :class:`BatchMotionSource` is evaluated ``_PLAN_STEPS`` steps ahead in one call: 24
+        poses cost what 3 (sinusoids) to 12 (150-component sea state) single ones do.  The
+        planned times are summed exactly as the caller's clock is, so they match it bit for bit.
+        """
+        motion = self.motion
+        last_t, self._last_t = self._last_t, t
+        if motion is self._plan_motion:
+            planned = self._plan.get(t)
+            if planned is not None:
+                return planned
+        if last_t is not None and t == last_t + self._dt and self._batch_capable(motion):
+            times = [t]
+            for _ in range(self._PLAN_STEPS - 1):
+                times.append(times[-1] + self._dt)  # the same sums as the caller's clock
+            poses = np.asarray(motion.poses(np.array(times)), dtype=float)
+            self._plan = {
+                time: (pose, floats)
+                for time, pose, floats in zip(times, poses, poses.tolist(), strict=True)
+            }
+            self._plan_motion = motion
+            return self._plan[t]
+        pose = np.asarray(motion.pose(t), dtype=float)
+        return pose, pose.tolist()
+
+    def _batch_capable(self, motion: MotionSource) -> bool:
+        """Whether ``motion`` is a :class:`BatchMotionSource` (remembered: the check is slow)."""
+        known, capable = self._batch_check
+        if known is not motion:
+            capable = isinstance(motion, BatchMotionSource)
+            self._batch_check = (motion, capable)
+        return capable
+
+    def _target_world(
+        self, x: float, y: float, z: float, q: Quaternion
+    ) -> tuple[tuple[float, float, float], Quaternion]:
+        """World position and quaternion (x, y, z, w) of P for a pose relative to home, given
+        as its translation and its quaternion in the base frame."""
         cos_b, sin_b = self._cos_yaw, self._sin_yaw
-        home = self._home_position_w
-        position = (
-            home[0] + cos_b * x - sin_b * y,
-            home[1] + sin_b * x + cos_b * y,
-            home[2] + z,
-        )
-        return position, _quat_multiply(self._half_yaw_q, _quat_from_euler_zyx(roll, pitch, yaw))
+        hx, hy, hz = self._home_floats
+        position = (hx + cos_b * x - sin_b * y, hy + sin_b * x + cos_b * y, hz + z)
+        return position, _quat_multiply(self._half_yaw_q, q)
 
     # ---------------------------------------------------------------- legs
     def leg_anchor_points_w(self) -> tuple[np.ndarray, np.ndarray]:
@@ -339,6 +442,9 @@ class StewartPlatform:
             orientation = _quat_z_to(u)
             reset(self.cylinder_body_ids[i], (base[i] + half_cylinder * u).tolist(), orientation)
             reset(self.rod_body_ids[i], (top[i] - half_rod * u).tolist(), orientation)
+
+
+_IDENTITY: Quaternion = (0.0, 0.0, 0.0, 1.0)
 
 
 def _quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:

@@ -1,0 +1,376 @@
+"""Landing policies that read only the observation (the estimated deck pose and the ToF).
+
+* ``align-descend`` (``DeckLanding-v0``, Box actions): visual servoing on the estimated deck
+  pose: centre over the tag while descending to a hold height, flare there until a calm
+  window is predicted, then the final descent to touchdown.
+* ``quiescent`` (``DeckLandingTiming-v0``): commit when a calm window at least as long as the
+  descent is predicted from the recent deck motion (the classic landing-period heuristic).
+* ``land-now`` (``DeckLandingTiming-v0``): commit at once; the lower bar.
+* ``timing-ppo`` (``DeckLandingTiming-v0``): the trained SB3 policy shipped in
+  ``agents/models/timing_ppo.zip`` (or any model file trained by :mod:`agents.training`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from landing_env.config import ActionConfig
+from landing_env.envs.timing import (
+    HISTORY_FEATURES,
+    DeckGuidance,
+    DeckMotionHistory,
+    GuidanceGains,
+    TimingObservationLayout,
+)
+from landing_env.errors import ConfigError, require_range
+from landing_env.physics.controller import VelocitySetpoint
+
+#: the trained timing policy shipped with the package
+SHIPPED_TIMING_MODEL = Path(__file__).resolve().parent / "models" / "timing_ppo.zip"
+
+_Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
+_VALID = HISTORY_FEATURES.index("valid")
+
+
+# ------------------------------------------------------------------------------ calm windows
+@dataclass
+class CalmConfig:
+    """When the deck counts as calm enough to start the final descent."""
+
+    #: sliding window of estimated deck motion that must have been calm, seconds
+    window_s: float = 1.0
+    #: duration of the final descent the calm must last for (the prediction horizon), seconds
+    descent_s: float = 1.3
+    #: largest deck tilt relative to the camera, now and predicted at touchdown, degrees
+    max_tilt_deg: float = 3.0
+    #: largest heave rate of the deck relative to the camera, m/s
+    max_heave_rate: float = 0.15
+    #: fewer valid estimates than this fraction of the window: not calm (nothing to judge by)
+    min_valid_fraction: float = 0.8
+
+    def __post_init__(self) -> None:
+        require_range("window_s", self.window_s, 0.1, 10.0)
+        require_range("descent_s", self.descent_s, 0.0, 10.0)
+        require_range("max_tilt_deg", self.max_tilt_deg, 0.0, 45.0, low_inclusive=False)
+        require_range("max_heave_rate", self.max_heave_rate, 0.0, low_inclusive=False)
+        require_range("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0)
+
+
+@dataclass
+class CalmPrediction:
+    """The outcome of :func:`predict_calm`, with the figures it was decided on."""
+
+    calm: bool
+    #: largest tilt over the window (deg); NaN without valid samples
+    window_max_tilt_deg: float
+    #: tilt extrapolated to the end of the descent (deg)
+    predicted_tilt_deg: float
+    #: fitted heave rate of the deck relative to the camera (m/s)
+    heave_rate: float
+    reason: str = ""
+
+
+def tilt_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
+    """Angle between the tag's z axis and the optical axis for ZYX roll and pitch, degrees."""
+    cosine = np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)
+    return np.degrees(np.arccos(cosine))
+
+
+def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPrediction:
+    """Is a calm window at least ``config.descent_s`` long ahead?
+
+    ``history`` holds rows of :data:`~landing_env.envs.timing.HISTORY_FEATURES` (SI units),
+    oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all show
+    a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
+    rates, and the tilt extrapolated ``descent_s`` ahead and the heave rate must be within the
+    limits too (the tilt is convex in (roll, pitch), so on a straight line its largest value
+    is at one end: checking now and at the end of the descent covers the whole descent).
+    """
+    n = max(2, round(config.window_s / dt))
+    window = np.asarray(history, dtype=float)[-n:]
+    valid = window[:, _VALID] > 0.5
+    nan = math.nan
+    if valid.sum() < max(2, math.ceil(config.min_valid_fraction * n)):
+        return CalmPrediction(False, nan, nan, nan, "too few valid estimates")
+    t = np.arange(len(window))[valid] * dt
+    values = window[valid][:, [_ROLL, _PITCH, _Z]]
+    centred = t - t.mean()
+    slopes = (centred @ (values - values.mean(axis=0))) / float(centred @ centred)
+    now = values.mean(axis=0) + slopes * (t[-1] - t.mean())
+    ahead = now + slopes * config.descent_s
+    window_tilt = float(np.max(tilt_deg(values[:, 0], values[:, 1])))
+    predicted = float(tilt_deg(ahead[0], ahead[1]))
+    current = float(tilt_deg(now[0], now[1]))
+    # the tag's z in the camera grows when the deck falls away: heave rate = -dz/dt
+    heave_rate = -float(slopes[2])
+    reason = ""
+    if window_tilt > config.max_tilt_deg:
+        reason = "tilt in the window"
+    elif max(predicted, current) > config.max_tilt_deg:
+        reason = "tilt predicted"
+    elif abs(heave_rate) > config.max_heave_rate:
+        reason = "heave rate"
+    return CalmPrediction(not reason, window_tilt, predicted, heave_rate, reason)
+
+
+# ------------------------------------------------------------------------------ timing policies
+class TimingPolicy(Protocol):
+    """A policy of the timing task: 0 = wait, 1 = commit."""
+
+    name: str
+
+    def reset(self) -> None: ...
+
+    def act(self, observation: np.ndarray) -> int: ...
+
+
+class LandNowPolicy:
+    """Commit at the first decision: the lower bar."""
+
+    name = "land-now"
+
+    def reset(self) -> None:
+        """Stateless."""
+
+    def act(self, observation: np.ndarray) -> int:
+        return 1
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+class QuiescentPolicy:
+    """Commit when :func:`predict_calm` predicts a calm window as long as the descent."""
+
+    name = "quiescent"
+
+    def __init__(
+        self, layout: TimingObservationLayout, dt: float, config: CalmConfig | None = None
+    ) -> None:
+        self.layout = layout
+        self.dt = dt
+        self.config = config or CalmConfig()
+        self.last: CalmPrediction | None = None
+
+    def reset(self) -> None:
+        self.last = None
+
+    def act(self, observation: np.ndarray) -> int:
+        parts = self.layout.decode(observation)
+        self.last = predict_calm(parts.history, self.dt, self.config)
+        return int(self.last.calm)
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+def _model_class(path: Path) -> Any:
+    """PPO or DQN, read from the saved model's metadata (no trial loading)."""
+    from stable_baselines3 import DQN, PPO
+
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read("data"))
+    module = str(data.get("policy_class", {}).get("__module__", ""))
+    return DQN if ".dqn." in module else PPO
+
+
+class TrainedTimingPolicy:
+    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically."""
+
+    name = "timing-ppo"
+
+    def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(
+                f"no trained timing model at {self.path}; train one with "
+                "`deck-landing train timing --config configs/train/timing_ppo.yaml`"
+            )
+        self.model = _model_class(self.path).load(self.path, device=device)
+
+    def check_layout(self, observation_size: int) -> None:
+        """Refuse an environment whose observation does not match the model's."""
+        expected = self.model.observation_space.shape
+        if expected != (observation_size,):
+            raise ConfigError(
+                "timing",
+                f"the model {self.path.name} expects observations of shape {expected}, the "
+                f"environment gives ({observation_size},): use the timing settings it was "
+                "trained with (history_s, env_hz)",
+            )
+
+    def reset(self) -> None:
+        """The policy is a feed-forward network: nothing to forget."""
+
+    def act(self, observation: np.ndarray) -> int:
+        action, _ = self.model.predict(observation, deterministic=True)
+        return int(np.asarray(action).reshape(-1)[0])
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+# ------------------------------------------------------------------------------ align-descend
+class Phase(str, Enum):
+    """Phases of :class:`AlignDescendPolicy`."""
+
+    APPROACH = "approach"
+    FLARE = "flare"
+    DESCENT = "descent"
+
+
+@dataclass
+class AlignDescendConfig:
+    """Settings of the align-descend policy (heights are camera ranges above the deck)."""
+
+    #: height of the flare, where the policy waits for a calm window, metres
+    hold_height_m: float = 0.7
+    #: the flare starts when the range is within this of the hold height, metres
+    hold_tolerance_m: float = 0.1
+    #: the final descent starts regardless after this long in the flare, seconds
+    max_flare_s: float = 20.0
+    #: climb speed while the tag is not seen (to widen the view), m/s
+    search_climb_speed: float = 0.3
+    #: back to the approach after this long without a tag in the flare, seconds
+    lost_tag_s: float = 1.0
+    #: length of the motion history kept for the calm prediction, seconds
+    history_s: float = 2.0
+    rate_window_s: float = 0.5
+    calm: CalmConfig = field(default_factory=CalmConfig)
+    guidance: GuidanceGains = field(default_factory=GuidanceGains)
+
+    def __post_init__(self) -> None:
+        require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
+        require_range("hold_tolerance_m", self.hold_tolerance_m, 0.0, low_inclusive=False)
+        require_range("max_flare_s", self.max_flare_s, 0.0)
+        require_range("search_climb_speed", self.search_climb_speed, 0.0)
+        require_range("lost_tag_s", self.lost_tag_s, 0.0)
+        require_range("history_s", self.history_s, self.calm.window_s, 10.0)
+        require_range("rate_window_s", self.rate_window_s, 0.1, self.history_s)
+
+
+class AlignDescendPolicy:
+    """Visual servoing for ``DeckLanding-v0`` on the estimated deck pose.
+
+    Approach: centre over the tag (climbing while it is not seen) and descend while aligned
+    to the hold height; flare: hold there, aligned, until :func:`predict_calm` predicts a calm
+    window as long as the descent (or ``max_flare_s`` has passed); descent: the final descent
+    of :class:`~landing_env.envs.timing.DeckGuidance` down to touchdown.  Output: the Box(4)
+    action, normalised by :class:`ActionConfig`.
+    """
+
+    name = "align-descend"
+
+    def __init__(
+        self,
+        action: ActionConfig | None = None,
+        config: AlignDescendConfig | None = None,
+        dt: float = 0.05,
+    ) -> None:
+        self.action = action or ActionConfig()
+        self.config = config or AlignDescendConfig()
+        self.dt = dt
+        self.guidance = DeckGuidance(self.config.guidance)
+        self.history = DeckMotionHistory(
+            max(1, round(self.config.history_s / dt)),
+            max(2, round(self.config.rate_window_s / dt)),
+            dt,
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        self.phase = Phase.APPROACH
+        self.guidance.reset()
+        self.history.reset()
+        self._flare_s = 0.0
+        self._unseen_s = 0.0
+        self.last: CalmPrediction | None = None
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        return self.act(observation)
+
+    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        c = self.config
+        seen = bool(observation["deck_pose_valid"][0])
+        self._unseen_s = 0.0 if seen else self._unseen_s + self.dt
+        self.history.push(observation["deck_pose"].astype(float) if seen else None)
+        height = self.guidance.range_m(observation)
+
+        if self.phase is Phase.FLARE and self._unseen_s > c.lost_tag_s:
+            self.phase = Phase.APPROACH
+        if self.phase is Phase.APPROACH and self.guidance.aligned(observation):
+            if abs(height - c.hold_height_m) < c.hold_tolerance_m:
+                self.phase, self._flare_s = Phase.FLARE, 0.0
+        if self.phase is Phase.FLARE:
+            self._flare_s += self.dt
+            if self._flare_s >= c.calm.window_s:
+                self.last = predict_calm(self.history.rows(), self.dt, c.calm)
+                if self.last.calm or self._flare_s >= c.max_flare_s:
+                    self.phase = Phase.DESCENT
+
+        if self.phase is Phase.DESCENT:
+            setpoint = self.guidance.descend(observation)
+        elif self.phase is Phase.FLARE:
+            setpoint = self.guidance.hold(observation, c.hold_height_m)
+        elif seen:
+            setpoint = self.guidance.hold(observation, c.hold_height_m)
+            if not self.guidance.aligned(observation):
+                # centre first, then descend: the tag stays in view on the way down
+                setpoint = VelocitySetpoint(
+                    np.array([*setpoint.velocity_h[:2], max(setpoint.velocity_h[2], 0.0)]),
+                    setpoint.yaw_rate,
+                )
+        else:
+            setpoint = VelocitySetpoint(np.array([0.0, 0.0, c.search_climb_speed]), 0.0)
+        return normalise_setpoint(setpoint, self.action)
+
+
+def normalise_setpoint(setpoint: VelocitySetpoint, action: ActionConfig) -> np.ndarray:
+    """A heading-frame set-point as the Box(4) action in [-1, 1] of ``DeckLanding-v0``."""
+    v = setpoint.velocity_h
+    command = np.array(
+        [
+            v[0] / action.max_horizontal_speed,
+            v[1] / action.max_horizontal_speed,
+            v[2] / action.max_vertical_speed,
+            setpoint.yaw_rate / math.radians(action.max_yaw_rate_deg),
+        ]
+    )
+    # the guidance's limits lie inside the action's; this clip only guards hand-set gains
+    return np.clip(command, -1.0, 1.0).astype(np.float32)
+
+
+# ------------------------------------------------------------------------------ registry
+#: policy name -> the environment it acts in
+POLICY_ENVS: dict[str, str] = {
+    "align-descend": "DeckLanding-v0",
+    "quiescent": "DeckLandingTiming-v0",
+    "land-now": "DeckLandingTiming-v0",
+    "timing-ppo": "DeckLandingTiming-v0",
+}
+POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
+
+
+def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> Any:
+    """Build the policy ``name`` for ``env`` (an environment of ``POLICY_ENVS[name]``)."""
+    if name not in POLICY_ENVS:
+        raise ConfigError("policy", f"{name!r} is not allowed; choose one of {POLICY_NAMES}")
+    base = env.unwrapped
+    dt = base.env_dt
+    if name == "align-descend":
+        return AlignDescendPolicy(base.config.action, dt=dt)
+    if name == "land-now":
+        return LandNowPolicy()
+    if name == "quiescent":
+        return QuiescentPolicy(base.layout, dt)
+    policy = TrainedTimingPolicy(model_path or SHIPPED_TIMING_MODEL)
+    policy.check_layout(base.layout.size)
+    return policy

@@ -1,0 +1,313 @@
+"""ToF–camera calibration run in the simulator (IHRCF Sec. 2.2, CRHF Sec. 2.3).
+
+The rig is the environment's own world with the deck turned into the calibration target:
+the tag is left out, a coloured pad (blue, green, yellow, red for sensors 1–4) is centred on
+each sensor's touch point, and the Stewart platform holds the deck still and level.  The
+drone, level and at zero yaw with its camera above the deck centre, is *placed* at each of
+``stages`` heights from ``min_range_m`` up to just below the sensors' maximum range (it is a
+calibration rig: the pose is set directly, without flying, so every stage is exactly level
+and centred and no controller transient leaks into the data).  At each stage the camera image
+is rendered (lens distortion included, the drone's own airframe hidden), each pad is
+segmented with the papers' YCbCr thresholds (Table 1), closed with a convex hull and its
+centroid kept with the sensor's range (the mean of ``readings_per_stage`` readings: the rig
+holds still, and a sensor noise of a few millimetres would otherwise scramble the order of
+the closely spaced near stages).  The range → pixel pairs give the PCHIP look-up
+(:class:`~estimation.tof_calibration.TofCameraCalibration`) and the hyperbola fits of CRHF
+Table 4.
+
+Stages are spaced evenly in log-range (the pixel offset of a touch point falls as 1/r, so
+this keeps the pixel steps between stages similar instead of crowding the far end).
+The floor round the deck is made neutral grey in the rig: the scene's sea blue passes
+Table 1's blue thresholds and would be taken for the blue pad.  A stage where a pad is not
+found, is clipped by the image border or whose range is invalid is skipped for that sensor
+and counted (``skipped``), never filled in.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from estimation.camera_model import CameraIntrinsics
+from estimation.frames import R_BC, R_PD
+from estimation.tof_calibration import (
+    PAD_COLOURS,
+    HyperbolaFit,
+    TofCameraCalibration,
+    segment_pad,
+)
+from landing_env.calibration.intrinsics_sim import camera_metadata
+from landing_env.config import DeckLandingConfig, load_config
+from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.world import World
+
+#: Skip reasons counted per sensor.
+PAD_NOT_FOUND = "pad_not_found"
+PAD_CLIPPED = "pad_clipped"
+RANGE_INVALID = "range_invalid"
+SKIP_REASONS = (PAD_NOT_FOUND, PAD_CLIPPED, RANGE_INVALID)
+
+
+@dataclass(frozen=True)
+class TofRigConfig:
+    """The pad rig and the climb.
+
+    ``stages``: heights visited (papers: about 120).  ``min_range_m``: first sensor-to-deck
+    range.  ``max_range_fraction``: the last stage's range as a fraction of ``tof.max_range``
+    (a reading at exactly the maximum is invalid).  ``spacing``: ``"log"`` or ``"linear"``
+    in range.  ``readings_per_stage``: ToF readings averaged at each stage (the rig holds
+    still, so averaging only removes sensor noise; a sensor needs at least half of them
+    valid).  ``pad_radius_m``: pads must stay apart (< half the distance between adjacent
+    touch points) and be large enough to be segmented at the top stage (0.06 m is about
+    7 px of radius at 4 m with the default camera).  ``min_pad_area_px``: fewer segmented
+    pixels than this is "not found".  ``floor_rgb``: the rig's floor colour (0–1).
+    """
+
+    stages: int = 120
+    min_range_m: float = 0.3
+    max_range_fraction: float = 0.995
+    spacing: str = "log"
+    readings_per_stage: int = 10
+    pad_radius_m: float = 0.06
+    min_pad_area_px: float = 12.0
+    floor_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
+
+    def __post_init__(self) -> None:
+        require_range("stages", self.stages, 2)
+        require_range("min_range_m", self.min_range_m, 0.0, low_inclusive=False)
+        require_range("max_range_fraction", self.max_range_fraction, 0.0, 1.0, low_inclusive=False)
+        require_choice("spacing", self.spacing, ("log", "linear"))
+        require_range("readings_per_stage", self.readings_per_stage, 1)
+        require_range("pad_radius_m", self.pad_radius_m, 0.0, low_inclusive=False)
+        require_range("min_pad_area_px", self.min_pad_area_px, 1.0)
+        if len(self.floor_rgb) != 3 or any(not 0.0 <= c <= 1.0 for c in self.floor_rgb):
+            raise ConfigError("floor_rgb", f"{self.floor_rgb!r}: need three values in [0, 1]")
+
+    def stage_ranges(self, max_range: float) -> np.ndarray:
+        """The sensor-to-deck ranges of the stages, metres."""
+        top = self.max_range_fraction * max_range
+        if not self.min_range_m < top:
+            raise ConfigError(
+                "min_range_m", f"{self.min_range_m} must be below the top stage at {top:.3f} m"
+            )
+        if self.spacing == "log":
+            return np.geomspace(self.min_range_m, top, self.stages)
+        return np.linspace(self.min_range_m, top, self.stages)
+
+
+@dataclass(frozen=True)
+class TofSimReport:
+    """The calibration with the raw pairs, what was skipped and its error against the truth.
+
+    ``ranges`` (stages, sensors) and ``pixels`` (stages, sensors, 2) hold NaN where a stage
+    was skipped for a sensor.  ``exact_error_px`` is the largest distance between the PCHIP
+    look-up and the analytic touch-point pixel over each sensor's calibrated span;
+    ``sample_error_px`` the RMS distance of the measured centroids from it.
+    """
+
+    calibration: TofCameraCalibration
+    ranges: np.ndarray
+    pixels: np.ndarray
+    skipped: dict[str, list[int]]
+    exact: TofCameraCalibration
+    exact_error_px: np.ndarray
+    sample_error_px: np.ndarray
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def hyperbolas(self) -> list[tuple[HyperbolaFit, HyperbolaFit]]:
+        """Per sensor, the (u, v) fits ``pixel = a / r + c`` (CRHF Table 4)."""
+        cal = self.calibration
+        return list(zip(cal.hyperbola_u, cal.hyperbola_v, strict=True))
+
+
+def rig_config(config: DeckLandingConfig, rig: TofRigConfig) -> DeckLandingConfig:
+    """The environment config turned into the pad rig (same camera, drone and sensors)."""
+    mounts = np.asarray(config.tof.mount_offsets_c, dtype=float)
+    # a level, zero-yaw drone over a level deck sees R_CD = I: sensor (x, y) in C touches the
+    # deck at (x, y) in D, i.e. R_PD (x, y, 0) in P
+    pads_p = (R_PD @ np.column_stack([mounts[:, :2], np.zeros(len(mounts))]).T).T
+    if len(mounts) != len(PAD_COLOURS):
+        raise ConfigError(
+            "tof.mount_offsets_c",
+            f"the pad rig has {len(PAD_COLOURS)} pad colours; the config has {len(mounts)} sensors",
+        )
+    return load_config(
+        config,
+        overrides={
+            "deck.tag": False,
+            "deck.pads": True,
+            "deck.pad_radius": rig.pad_radius_m,
+            "deck.pad_centres_p": [tuple(float(v) for v in row[:2]) for row in pads_p],
+            "motion.kind": "static",
+            "motion.static.position_m": (0.0, 0.0, 0.0),
+            "motion.static.attitude_deg": (0.0, 0.0, 0.0),
+            "camera.mode": "project",
+            "camera.use_egl": False,
+            "simulation.gui": False,
+            "wind.enabled": False,
+        },
+    )
+
+
+def pad_centroid_in_image(mask: np.ndarray, min_area_px: float) -> tuple[np.ndarray | None, str]:
+    """Centroid (u, v) of the convex hull of the mask's largest blob, or None and a reason.
+
+    A blob touching the image border is refused: the part outside would pull the centroid.
+    """
+    mask8 = mask.astype(np.uint8)
+    contours, _ = cv2.findContours(mask8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None, PAD_NOT_FOUND
+    largest = max(contours, key=cv2.contourArea)
+    hull = cv2.convexHull(largest)
+    moments = cv2.moments(hull)
+    if moments["m00"] < min_area_px:
+        return None, PAD_NOT_FOUND
+    x, y, w, h = cv2.boundingRect(hull)
+    height, width = mask.shape
+    if x <= 0 or y <= 0 or x + w >= width or y + h >= height:
+        return None, PAD_CLIPPED
+    return np.array([moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]]), ""
+
+
+def _touch_point_error(
+    calibration: TofCameraCalibration, exact: TofCameraCalibration, n: int = 400
+) -> np.ndarray:
+    """Per sensor, the worst |look-up - exact| (px) over the sensor's calibrated span."""
+    spans = calibration.range_span
+    worst = np.zeros(calibration.n_sensors)
+    for ratio in np.linspace(0.0, 1.0, n):
+        ranges = spans[:, 0] + ratio * (spans[:, 1] - spans[:, 0])
+        diff = calibration.lookup(ranges).pixels - exact.lookup(ranges).pixels
+        worst = np.maximum(worst, np.linalg.norm(diff, axis=1))
+    return worst
+
+
+def calibrate_tof_camera_in_sim(
+    config: DeckLandingConfig | None = None,
+    rig: TofRigConfig | None = None,
+    rng: np.random.Generator | None = None,
+    progress: Callable[[], None] | None = None,
+) -> TofSimReport:
+    """Climb through the stages over the pad deck and build the ToF–camera calibration.
+
+    ``config``: the environment config whose camera, ToF sensors and drone are calibrated
+    (default: ``configs/default.yaml``); its ToF noise model applies.  ``rng`` seeds the
+    sensor noise.  ``progress`` is called once per stage.  Raises ``RuntimeError`` when a
+    sensor has fewer than two usable stages.
+    """
+    config = config if config is not None else load_config("default")
+    rig = rig or TofRigConfig()
+    rng = rng if rng is not None else np.random.default_rng(0)
+    rig_cfg = rig_config(config, rig)
+    world = World(rig_cfg)
+    try:
+        world.client.changeVisualShape(world.ground_id, -1, rgbaColor=[*rig.floor_rgb, 1.0])
+        # the deck at home, still; the drone placed anywhere for now
+        world.reset(rng, world.deck_home_w + np.array([0.0, 0.0, 1.0]), 0.0)
+        deck = world.deck_state()
+        mounts_c = np.asarray(rig_cfg.tof.mount_offsets_c, dtype=float)
+        # sensor origins in B: their common height decides where the body goes for a range
+        sensors_b = world.t_bc + (R_BC @ mounts_c.T).T
+        n_sensors = len(mounts_c)
+        stage_ranges = rig.stage_ranges(rig_cfg.tof.max_range)
+        ranges = np.full((len(stage_ranges), n_sensors), np.nan)
+        pixels = np.full((len(stage_ranges), n_sensors, 2), np.nan)
+        skipped: dict[str, list[int]] = {reason: [0] * n_sensors for reason in SKIP_REASONS}
+        for stage, target in enumerate(stage_ranges):
+            position = deck.position_w.copy()
+            position[:2] -= world.t_bc[:2]  # camera above the deck centre
+            position[2] += target - float(np.mean(sensors_b[:, 2]))
+            world.place_drone(position, 0.0)
+            image = world.render_camera_image()
+            readings = [world.measure_ranges() for _ in range(rig.readings_per_stage)]
+            valid = np.array([r.valid for r in readings])
+            valid_count = valid.sum(axis=0)
+            summed = np.where(valid, np.array([r.ranges for r in readings]), 0.0).sum(axis=0)
+            mean_range = summed / np.maximum(valid_count, 1)
+            for i, colour in enumerate(PAD_COLOURS[:n_sensors]):
+                if 2 * valid_count[i] < len(readings):
+                    skipped[RANGE_INVALID][i] += 1
+                    continue
+                centroid, reason = pad_centroid_in_image(
+                    segment_pad(image, colour), rig.min_pad_area_px
+                )
+                if centroid is None:
+                    skipped[reason][i] += 1
+                    continue
+                ranges[stage, i] = mean_range[i]
+                pixels[stage, i] = centroid
+            if progress is not None:
+                progress()
+    finally:
+        world.close()
+    camera = rig_cfg.camera.intrinsics
+    metadata = {
+        "source": "simulator",
+        "camera": camera_metadata(camera),
+        "tof_mount_offsets_c": mounts_c.tolist(),
+        "tof_max_range_m": rig_cfg.tof.max_range,
+        "tof_noise": rig_cfg.tof.noise,
+        "readings_per_stage": rig.readings_per_stage,
+        "stages": len(stage_ranges),
+        "stage_spacing": rig.spacing,
+        "pad_radius_m": rig.pad_radius_m,
+        "skipped": skipped,
+    }
+    usable = np.isfinite(ranges).sum(axis=0)
+    if np.any(usable < 2):
+        raise RuntimeError(
+            f"usable stages per sensor {usable.tolist()}: at least 2 are needed "
+            f"(skipped: {skipped})"
+        )
+    calibration = TofCameraCalibration.from_measurements(
+        ranges, pixels, method="pchip", out_of_range="hyperbola", metadata=metadata
+    )
+    exact = _exact_calibration(camera, mounts_c, calibration)
+    sample_error = np.zeros(n_sensors)
+    for i, samples in enumerate(calibration.samples):
+        truth = _project_touch_points(camera, mounts_c[i], samples[:, 0])
+        sample_error[i] = math.sqrt(float(np.mean(np.sum((samples[:, 1:] - truth) ** 2, axis=1))))
+    return TofSimReport(
+        calibration=calibration,
+        ranges=ranges,
+        pixels=pixels,
+        skipped=skipped,
+        exact=exact,
+        exact_error_px=_touch_point_error(calibration, exact),
+        sample_error_px=sample_error,
+        metadata=metadata,
+    )
+
+
+def _project_touch_points(
+    camera: CameraIntrinsics, sensor_c: np.ndarray, ranges: np.ndarray
+) -> np.ndarray:
+    points = np.column_stack(
+        [np.full(len(ranges), sensor_c[0]), np.full(len(ranges), sensor_c[1]), ranges]
+    )
+    return camera.project(points)
+
+
+def _exact_calibration(
+    camera: CameraIntrinsics, mounts_c: np.ndarray, calibration: TofCameraCalibration
+) -> TofCameraCalibration:
+    spans = calibration.range_span
+    return TofCameraCalibration.exact(
+        camera, mounts_c, float(spans[:, 0].min()), float(spans[:, 1].max())
+    )
+
+
+__all__ = [
+    "SKIP_REASONS",
+    "TofRigConfig",
+    "TofSimReport",
+    "calibrate_tof_camera_in_sim",
+    "pad_centroid_in_image",
+    "rig_config",
+]

@@ -1,0 +1,523 @@
+"""``DeckLandingTiming-v0``: hold over the moving deck and choose the moment to land.
+
+A scripted guidance (:class:`DeckGuidance`, which reads only the estimated deck pose and the
+ToF ranges) holds the drone aligned over the tag at a hold height.  Each step the agent
+chooses ``0`` (wait) or ``1`` (commit); on commit the same guidance flies a fixed final
+descent to touchdown **within that one step** (its control periods run inside ``step``), and
+the episode ends with the touchdown's outcome.  Running the descent inside the step keeps the
+decision problem a clean stopping problem: no steps with ignored actions reach the learner.
+
+Observation (a flat ``Box``, documented by :class:`TimingObservationLayout`): the last
+``history_s`` seconds of the configured estimator's deck pose and of its rates (a
+least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
+with their validity and the fraction of the wait limit used.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from landing_env.config_loading import build_dataclass
+from landing_env.envs.base import DeckLandingBaseEnv
+from landing_env.errors import ConfigError, require_range
+from landing_env.physics.controller import VelocitySetpoint
+from landing_env.touchdown import Outcome
+
+#: the camera sits this far below the drone's centre of mass (body z), metres; the start
+#: height puts the *camera* at the hold height
+CAMERA_BELOW_COM_M = 0.03
+
+
+# ------------------------------------------------------------------------------ guidance
+@dataclass
+class GuidanceGains:
+    """Gains and limits of the deck-relative guidance (hold, approach and final descent)."""
+
+    #: horizontal velocity per metre of horizontal error, 1/s
+    k_xy: float = 0.8
+    max_horizontal_speed: float = 1.0
+    #: yaw rate per radian of tag yaw, 1/s
+    k_yaw: float = 0.8
+    #: vertical velocity per metre of height error while holding, 1/s
+    k_z: float = 1.2
+    max_vertical_speed: float = 0.8
+    #: final descent: speed = descent_gain * range, between touchdown_speed and descent_speed
+    descent_gain: float = 1.5
+    descent_speed: float = 0.8
+    touchdown_speed: float = 0.25
+    #: below this range the tag no longer fits the image: descend on the ToF alone, metres
+    blind_range_m: float = 0.3
+    #: aligned when the horizontal error is below this plus ``align_tolerance_per_m`` * range
+    align_tolerance_m: float = 0.08
+    align_tolerance_per_m: float = 0.08
+
+    def __post_init__(self) -> None:
+        for name in (
+            "k_xy",
+            "max_horizontal_speed",
+            "k_z",
+            "max_vertical_speed",
+            "descent_gain",
+            "descent_speed",
+            "touchdown_speed",
+        ):
+            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+        for name in ("k_yaw", "blind_range_m", "align_tolerance_m", "align_tolerance_per_m"):
+            require_range(name, getattr(self, name), 0.0)
+        if self.touchdown_speed > self.descent_speed:
+            raise ConfigError(
+                "touchdown_speed",
+                f"{self.touchdown_speed} must not exceed descent_speed = {self.descent_speed}",
+            )
+
+
+class DeckGuidance:
+    """Velocity set-points from the *observation* (estimated deck pose and ToF), never the truth.
+
+    The deck pose is the tag in the camera frame (x right, y down the image, z along the
+    optical axis, image top = nose), so the tag lies ``-y_C`` ahead and ``-x_C`` to the left
+    of the camera.  Set-points are in the heading frame (x forward, y left, z up), m/s, rad/s.
+    """
+
+    def __init__(self, gains: GuidanceGains | None = None) -> None:
+        self.gains = gains or GuidanceGains()
+        self._last_range = math.inf
+
+    def reset(self) -> None:
+        self._last_range = math.inf
+
+    def range_m(self, observation: dict[str, np.ndarray]) -> float:
+        """Camera height above the deck: the mean of the valid ToF ranges, else the tag's z.
+
+        The four sensors sit symmetrically about the camera, so on a tilted plane their mean
+        is the range at the centre.  NaN when neither is available.
+        """
+        valid = observation["tof_valid"].astype(bool)
+        if valid.all():
+            return float(np.mean(observation["tof_range"]))
+        if observation["deck_pose_valid"][0]:
+            return float(observation["deck_pose"][2])
+        if valid.any():
+            return float(np.mean(observation["tof_range"][valid]))
+        return math.nan
+
+    def horizontal_error(self, observation: dict[str, np.ndarray]) -> tuple[float, float] | None:
+        """(forward, left) offset of the tag centre from the camera, metres; None if unseen."""
+        if not observation["deck_pose_valid"][0]:
+            return None
+        x_c, y_c = (float(v) for v in observation["deck_pose"][:2])
+        return -y_c, -x_c
+
+    def aligned(self, observation: dict[str, np.ndarray]) -> bool:
+        """The tag is seen and the drone is centred over it within the tolerance."""
+        error = self.horizontal_error(observation)
+        if error is None:
+            return False
+        height = self.range_m(observation)
+        g = self.gains
+        tolerance = g.align_tolerance_m + g.align_tolerance_per_m * max(height, 0.0)
+        return math.hypot(*error) < tolerance
+
+    def _centre(self, observation: dict[str, np.ndarray]) -> tuple[float, float, float]:
+        """Horizontal velocity and yaw rate that centre the drone over the tag."""
+        error = self.horizontal_error(observation)
+        if error is None:
+            return 0.0, 0.0, 0.0
+        g = self.gains
+        vx, vy = g.k_xy * error[0], g.k_xy * error[1]
+        speed = math.hypot(vx, vy)
+        if speed > g.max_horizontal_speed:
+            vx, vy = vx * g.max_horizontal_speed / speed, vy * g.max_horizontal_speed / speed
+        yaw_rate = -g.k_yaw * float(observation["deck_pose"][5])
+        return vx, vy, yaw_rate
+
+    def hold(self, observation: dict[str, np.ndarray], target_range_m: float) -> VelocitySetpoint:
+        """Centre over the tag and hold the camera ``target_range_m`` above the deck.
+
+        With nothing seen the drone holds its height (zero vertical set-point).
+        """
+        g = self.gains
+        vx, vy, yaw_rate = self._centre(observation)
+        height = self.range_m(observation)
+        vz = 0.0
+        if math.isfinite(height):
+            self._last_range = height
+            vz = float(
+                np.clip(
+                    g.k_z * (target_range_m - height), -g.max_vertical_speed, g.max_vertical_speed
+                )
+            )
+        return VelocitySetpoint(np.array([vx, vy, vz]), yaw_rate)
+
+    def descend(self, observation: dict[str, np.ndarray]) -> VelocitySetpoint:
+        """The final descent: centre while the tag is seen, slow to ``touchdown_speed`` near the
+        deck, and keep going down on the last range when everything is lost close to it."""
+        g = self.gains
+        height = self.range_m(observation)
+        if math.isfinite(height):
+            self._last_range = height
+        else:
+            height = self._last_range
+        vx = vy = yaw_rate = 0.0
+        if height > g.blind_range_m:
+            vx, vy, yaw_rate = self._centre(observation)
+        if math.isfinite(height):
+            speed = float(np.clip(g.descent_gain * height, g.touchdown_speed, g.descent_speed))
+        else:
+            speed = g.touchdown_speed
+        return VelocitySetpoint(np.array([vx, vy, -speed]), yaw_rate)
+
+
+# ------------------------------------------------------------------------------ history
+#: per-sample features of the history, in this order
+HISTORY_FEATURES: tuple[str, ...] = (
+    "x",
+    "y",
+    "z",
+    "roll",
+    "pitch",
+    "yaw",
+    "z_rate",
+    "roll_rate",
+    "pitch_rate",
+    "valid",
+)
+#: scale from SI units (m, rad, m/s, rad/s) to the observation: decimetres, tenths of a
+#: radian, so that typical values are of order one
+HISTORY_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 10.0, 10.0, 10.0, 1.0])
+TOF_SCALE = 10.0
+#: bound of every scaled observation value; beyond it a value is clipped and flagged
+OBSERVATION_LIMIT = 50.0
+
+
+class DeckMotionHistory:
+    """A sliding window of estimated deck poses with least-squares rates (SI units).
+
+    Each row holds :data:`HISTORY_FEATURES`; an invalid sample is a row of zeros with
+    ``valid = 0``.  The rates of z, roll and pitch are the slope of a straight line fitted to
+    the valid samples of the last ``rate_window`` samples (a finite difference of one step
+    would amplify the estimator's noise twentyfold at 20 Hz).
+    """
+
+    def __init__(self, length: int, rate_window: int, dt: float) -> None:
+        if length < 1 or rate_window < 2:
+            raise ValueError("need length >= 1 and rate_window >= 2")
+        self.length = length
+        self.dt = dt
+        self._rows: deque[np.ndarray] = deque(maxlen=length)
+        self._recent: deque[tuple[float, np.ndarray | None]] = deque(maxlen=rate_window)
+        self._t = 0.0
+
+    def reset(self) -> None:
+        self._rows.clear()
+        self._recent.clear()
+        self._t = 0.0
+
+    def push(self, pose: np.ndarray | None) -> None:
+        """Add the next sample: ``(x, y, z, roll, pitch, yaw)`` or None when invalid."""
+        self._t += self.dt
+        row = np.zeros(len(HISTORY_FEATURES))
+        if pose is not None and np.all(np.isfinite(pose)):
+            pose = np.asarray(pose, dtype=float)
+            self._recent.append((self._t, pose))
+            row[:6] = pose
+            row[6:9] = self._rates()
+            row[9] = 1.0
+        else:
+            self._recent.append((self._t, None))
+        self._rows.append(row)
+
+    def _rates(self) -> np.ndarray:
+        samples = [(t, p) for t, p in self._recent if p is not None]
+        if len(samples) < 2:
+            return np.zeros(3)
+        t = np.array([s[0] for s in samples])
+        values = np.array([s[1][2:5] for s in samples])
+        t = t - t.mean()
+        return (t @ (values - values.mean(axis=0))) / float(t @ t)
+
+    def rows(self) -> np.ndarray:
+        """(length, features), oldest first; missing leading samples are invalid rows."""
+        out = np.zeros((self.length, len(HISTORY_FEATURES)))
+        if self._rows:
+            out[self.length - len(self._rows) :] = np.array(self._rows)
+        return out
+
+
+@dataclass
+class TimingObservationParts:
+    """The decoded observation of the timing task, in SI units."""
+
+    #: (n, features) history, oldest first: m, rad, m/s, rad/s, validity
+    history: np.ndarray
+    #: the four ToF ranges (m; NaN where invalid)
+    tof_range: np.ndarray
+    tof_valid: np.ndarray
+    #: waited time / wait limit
+    wait_fraction: float
+
+
+@dataclass(frozen=True)
+class TimingObservationLayout:
+    """Layout of the flat observation: ``n_history`` rows of :data:`HISTORY_FEATURES`
+    (scaled by :data:`HISTORY_SCALES`, z and the ToF ranges relative to the hold height),
+    then 4 ToF ranges, 4 ToF validities and the wait fraction."""
+
+    n_history: int
+    hold_height_m: float
+
+    @property
+    def size(self) -> int:
+        return self.n_history * len(HISTORY_FEATURES) + 9
+
+    @property
+    def space(self) -> spaces.Box:
+        return spaces.Box(-OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.size,), dtype=np.float32)
+
+    def encode(
+        self,
+        history: np.ndarray,
+        tof_range: np.ndarray,
+        tof_valid: np.ndarray,
+        wait_fraction: float,
+    ) -> tuple[np.ndarray, bool]:
+        """The flat observation and whether any value had to be clipped to the bounds."""
+        rows = np.array(history, dtype=float)
+        valid = rows[:, 9] > 0.5
+        rows[valid, 2] -= self.hold_height_m
+        rows *= HISTORY_SCALES
+        tof_valid = np.asarray(tof_valid, dtype=bool)
+        tof = np.where(tof_valid, np.nan_to_num(tof_range) - self.hold_height_m, 0.0)
+        flat = np.concatenate(
+            [rows.ravel(), tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]]
+        )
+        clipped = bool(np.any(np.abs(flat) > OBSERVATION_LIMIT))
+        flat = np.clip(flat, -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
+        return flat.astype(np.float32), clipped
+
+    def decode(self, observation: np.ndarray) -> TimingObservationParts:
+        """Undo :meth:`encode` (up to clipping and float32 rounding)."""
+        flat = np.asarray(observation, dtype=float).reshape(-1)
+        if flat.size != self.size:
+            raise ValueError(f"observation has {flat.size} values; the layout needs {self.size}")
+        n = self.n_history * len(HISTORY_FEATURES)
+        rows = flat[:n].reshape(self.n_history, len(HISTORY_FEATURES)) / HISTORY_SCALES
+        valid = rows[:, 9] > 0.5
+        rows[valid, 2] += self.hold_height_m
+        tof_valid = flat[n + 4 : n + 8] > 0.5
+        tof = np.where(tof_valid, flat[n : n + 4] / TOF_SCALE + self.hold_height_m, np.nan)
+        return TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]))
+
+
+# ------------------------------------------------------------------------------ the task
+@dataclass
+class TimingConfig:
+    """The timing task's settings (``gym.make("DeckLandingTiming-v0", timing={...})``)."""
+
+    #: camera height above the deck (along the tag's z / the ToF mean) while waiting, metres
+    hold_height_m: float = 0.7
+    #: length of the pose history in the observation, seconds
+    history_s: float = 2.0
+    #: window of the least-squares rates, seconds
+    rate_window_s: float = 0.5
+    #: control periods per decision (a wait lasts this many periods)
+    steps_per_decision: int = 2
+    #: the descent is committed regardless once the drone has waited this long, seconds
+    wait_limit_s: float = 15.0
+    #: a descent that has not touched down after this long ends the episode (timeout), seconds
+    descent_timeout_s: float = 6.0
+    guidance: GuidanceGains = field(default_factory=GuidanceGains)
+
+    def __post_init__(self) -> None:
+        require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
+        require_range("history_s", self.history_s, 0.1, 10.0)
+        require_range("rate_window_s", self.rate_window_s, 0.1, self.history_s)
+        require_range("steps_per_decision", self.steps_per_decision, 1, 20)
+        require_range("wait_limit_s", self.wait_limit_s, 0.0, low_inclusive=False)
+        require_range("descent_timeout_s", self.descent_timeout_s, 0.5)
+
+
+class DeckLandingTimingEnv(DeckLandingBaseEnv):
+    """Wait or commit over the moving deck (see the module docstring).
+
+    Action: ``Discrete(2)``, 0 = wait one decision period, 1 = commit to the final descent.
+    Reward: ``-reward.time_cost`` per second waited; at the end ``+reward.success_bonus`` on a
+    successful touchdown, minus ``normal_speed_penalty * v_n + tilt_penalty * tilt_deg +
+    offset_penalty * offset_m`` on any touchdown, minus ``crash_penalty`` on a crash or a
+    descent that does not touch down.  The episode starts after a warm-up of ``history_s``
+    (the guidance holds, the history fills), so ``time_s`` at touchdown includes it.
+    """
+
+    def __init__(
+        self,
+        config: Any = "default",
+        render_mode: str | None = None,
+        overrides: dict[str, Any] | None = None,
+        timing: TimingConfig | dict[str, Any] | None = None,
+        **sections: Any,
+    ) -> None:
+        if isinstance(timing, TimingConfig):
+            self.timing = timing
+        else:
+            self.timing = build_dataclass(TimingConfig, timing or {}, "timing")
+        super().__init__(config, render_mode, overrides, **sections)
+        if self.config.simulation.drone_fixed:
+            self.world.close()
+            raise ConfigError(
+                "simulation.drone_fixed",
+                "True pins the drone (the papers' bench); the timing task flies it: set it false",
+            )
+        sim = self.config.simulation
+        n_history = max(1, round(self.timing.history_s * sim.env_hz))
+        rate_window = max(2, round(self.timing.rate_window_s * sim.env_hz))
+        self.layout = TimingObservationLayout(n_history, self.timing.hold_height_m)
+        self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
+        self.guidance = DeckGuidance(self.timing.guidance)
+        self.action_space = spaces.Discrete(2)
+        self.observation_space = self.layout.space
+        self.frames_of_last_step: list[np.ndarray] = []
+        self._reset_episode_state()
+
+    def _reset_episode_state(self) -> None:
+        self._wait_s = 0.0
+        self._committed = False
+        self._forced = False
+        self._descent_s = 0.0
+        self._observation_clipped = False
+        self._base_observation: dict[str, np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        base_observation, _ = super().reset(seed=seed, options=options)
+        self._reset_episode_state()
+        self.guidance.reset()
+        self.history.reset()
+        self._base_observation = base_observation
+        self._record()
+        self.frames_of_last_step = []
+        # warm-up: hold until the history is full; the agent decides only from then on
+        for _ in range(self.history.length - 1):
+            self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
+            if self._outcome is not Outcome.IN_FLIGHT:
+                raise RuntimeError(
+                    f"the episode ended ({self._outcome.value}) during the warm-up hold; "
+                    f"raise timing.hold_height_m ({self.timing.hold_height_m} m)"
+                )
+        return self._flat_observation(), self._info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._base_observation is None:
+            raise RuntimeError("call reset() before step()")
+        if self._outcome is not Outcome.IN_FLIGHT:
+            raise RuntimeError("the episode has ended; call reset()")
+        choice = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
+        if choice not in (0, 1):
+            raise ValueError(f"action must be 0 (wait) or 1 (commit); got {action!r}")
+        self.frames_of_last_step = []
+        r = self.config.reward
+        reward = 0.0
+        if choice == 0:
+            waited = 0.0
+            for _ in range(self.timing.steps_per_decision):
+                self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
+                waited += self.env_dt
+                if self._outcome is not Outcome.IN_FLIGHT:
+                    break
+            self._wait_s += waited
+            reward -= r.time_cost * waited
+            if self._outcome is Outcome.IN_FLIGHT and self._wait_s >= self.timing.wait_limit_s:
+                self._forced = True
+                self._descend()
+        else:
+            self._descend()
+        reward += self._end_reward()
+        terminated = self._outcome is not Outcome.IN_FLIGHT
+        return self._flat_observation(), float(reward), terminated, False, self._info()
+
+    # ------------------------------------------------------------------ internals
+    def _advance(self, setpoint: VelocitySetpoint) -> None:
+        """One control period of the world under ``setpoint``, then sense and record."""
+        self._report = self.world.step(setpoint)
+        if self.render_mode is not None or self.config.camera.mode == "render":
+            self.world.stewart.update_leg_visuals()
+        self._steps += 1
+        self._outcome = self._outcome_after(self._report)
+        self._sensing = self._sense()
+        self._base_observation = self._observation()
+        self._record()
+        if self.render_mode == "rgb_array":
+            self.frames_of_last_step.append(self.world.camera_image(self._sensing.frame))
+
+    def _record(self) -> None:
+        assert self._base_observation is not None
+        observation = self._base_observation
+        valid = bool(observation["deck_pose_valid"][0])
+        self.history.push(observation["deck_pose"].astype(float) if valid else None)
+
+    def _descend(self) -> None:
+        """The final descent, run to touchdown (or crash, or the descent timeout)."""
+        self._committed = True
+        start = self.world.time
+        while self._outcome is Outcome.IN_FLIGHT:
+            if self.world.time - start >= self.timing.descent_timeout_s:
+                # no touchdown: a failed landing of this task, not a time limit of the MDP
+                self._outcome = Outcome.TIMEOUT
+                break
+            assert self._base_observation is not None
+            self._advance(self.guidance.descend(self._base_observation))
+        end = self._touchdown.time_s if self._touchdown is not None else self.world.time
+        self._descent_s = end - start
+
+    def _end_reward(self) -> float:
+        r = self.config.reward
+        if self._outcome in (Outcome.CRASH, Outcome.TIMEOUT):
+            return -r.crash_penalty
+        if self._touchdown is None or self._outcome is Outcome.IN_FLIGHT:
+            return 0.0
+        m = self._touchdown
+        reward = -(
+            r.normal_speed_penalty * max(m.relative_normal_speed, 0.0)
+            + r.tilt_penalty * m.deck_tilt_deg
+            + r.offset_penalty * m.lateral_offset_m
+        )
+        if self._outcome is Outcome.SUCCESS:
+            reward += r.success_bonus
+        return float(reward)
+
+    def _flat_observation(self) -> np.ndarray:
+        assert self._base_observation is not None
+        tof_valid = self._base_observation["tof_valid"].astype(bool)
+        observation, self._observation_clipped = self.layout.encode(
+            self.history.rows(),
+            self._base_observation["tof_range"].astype(float),
+            tof_valid,
+            min(self._wait_s / self.timing.wait_limit_s, 1.0),
+        )
+        return observation
+
+    def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
+        """At the hold height over the deck, offset and yawed within ``start``'s limits."""
+        options = {**options}
+        options.setdefault("height_m", self.timing.hold_height_m + CAMERA_BELOW_COM_M)
+        return super()._start_pose(options)
+
+    def _info(self) -> dict[str, Any]:
+        info = super()._info()
+        info.update(
+            {
+                "wait_s": self._wait_s,
+                "committed": self._committed,
+                "forced_commit": self._forced,
+                "descent_s": self._descent_s,
+                "observation_clipped": getattr(self, "_observation_clipped", False),
+            }
+        )
+        return info
