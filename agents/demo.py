@@ -31,6 +31,8 @@ class EpisodeLog:
     pose_true: list[np.ndarray] = field(default_factory=list)
     pose_observed: list[np.ndarray] = field(default_factory=list)
     pose_valid: list[bool] = field(default_factory=list)
+    #: every estimator's pose per step (NaN when invalid), for the error summary
+    estimates: dict[str, list[np.ndarray]] = field(default_factory=dict)
     total_reward: float = 0.0
     final_info: dict[str, Any] = field(default_factory=dict)
 
@@ -41,6 +43,8 @@ class EpisodeLog:
         self.pose_true.append(info["deck_pose_true"])
         self.pose_observed.append(observation["deck_pose"].astype(float))
         self.pose_valid.append(bool(observation["deck_pose_valid"][0]))
+        for name, estimate in info["estimates"].items():
+            self.estimates.setdefault(name, []).append(np.asarray(estimate["pose"], dtype=float))
 
 
 def run_episode(
@@ -122,6 +126,28 @@ def summarise(log: EpisodeLog, console: Console) -> None:
     valid = np.asarray(log.pose_valid)
     table.add_row("steps with a valid deck estimate", f"{valid.sum()}/{valid.size}")
     console.print(table)
+    errors = Table(title="Deck-pose estimates against the truth over the episode")
+    for column in ("estimator", "valid steps", "MAE x, y, z (mm)", "MAE roll, pitch, yaw (deg)"):
+        errors.add_column(column, justify="right")
+    truth = np.asarray(log.pose_true)
+    for name, poses in log.estimates.items():
+        poses = np.asarray(poses)
+        ok = np.all(np.isfinite(poses), axis=1)
+        if not ok.any():
+            errors.add_row(name, f"0/{ok.size}", "-", "-")
+            continue
+        err = np.abs(poses[ok] - truth[ok])
+        err[:, 3:] = np.degrees(
+            np.abs((poses[ok, 3:] - truth[ok, 3:] + np.pi) % (2 * np.pi) - np.pi)
+        )
+        mae = err.mean(axis=0)
+        errors.add_row(
+            name,
+            f"{ok.sum()}/{ok.size}",
+            ", ".join(f"{1000 * v:.1f}" for v in mae[:3]),
+            ", ".join(f"{v:.2f}" for v in mae[3:]),
+        )
+    console.print(errors)
 
 
 def run_demo(
@@ -131,7 +157,10 @@ def run_demo(
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
-    kw.setdefault("overrides", {}).setdefault("camera.mode", "render")
+    overrides = kw.setdefault("overrides", {})
+    overrides.setdefault("camera.mode", "render")
+    # run the other estimators beside the observed one, for the record in info["estimates"]
+    overrides.setdefault("estimation.compare", ["atda", "crhf"])
     env = gym.make("DeckLanding-v0", config=config, render_mode="rgb_array", **kw)
     policy = DescendPolicy(env.unwrapped.config.action)
     frames: list[np.ndarray] = []

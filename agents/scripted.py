@@ -22,12 +22,12 @@ class DescendGains:
     align_tolerance_per_m: float = 0.08
     #: descent speed per metre of height, 1/s, bounded below and above (m/s)
     k_descent: float = 0.45
-    min_descent_speed: float = 0.2
+    min_descent_speed: float = 0.15
     max_descent_speed: float = 0.7
     #: below this camera-to-deck range the tag no longer fits in the image: descend on ToF
     blind_range_m: float = 0.45
     #: steady final descent speed on ToF alone, m/s
-    final_descent_speed: float = 0.35
+    final_descent_speed: float = 0.25
     #: climb speed when the tag is lost above the blind range, m/s
     search_climb_speed: float = 0.3
 

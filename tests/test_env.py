@@ -99,7 +99,10 @@ def test_info_carries_truth_state_and_imu_samples() -> None:
     assert info["imu_samples"].shape == (12, 7)
     hover_accel = info["imu_samples"][:, 3].mean()
     assert abs(hover_accel - 9.81) < 1.0
-    assert set(info["estimates"]) >= {"truth"}
+    # the default observation is the IHRCF estimate, close to the truth with noise-free ranges
+    assert set(info["estimates"]) == {"ihrcf"}
+    assert info["estimates"]["ihrcf"]["valid"]
+    np.testing.assert_allclose(observation["deck_pose"][:3], info["deck_pose_true"][:3], atol=0.01)
     assert observation["tof_valid"].sum() == 4
     env.close()
 
