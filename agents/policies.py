@@ -45,12 +45,16 @@ _VALID = HISTORY_FEATURES.index("valid")
 class CalmConfig:
     """When the deck counts as calm enough to start the final descent."""
 
-    #: sliding window of estimated deck motion that must have been calm, seconds
-    window_s: float = 1.0
+    #: sliding window of estimated deck motion that must have been calm, seconds (as long as
+    #: the descent: the deck has been calm for a descent's length)
+    window_s: float = 1.3
     #: duration of the final descent the calm must last for (the prediction horizon), seconds
     descent_s: float = 1.3
+    #: fraction of the fitted trend extrapolated over the descent: 0 predicts that the calm
+    #: persists, 1 extrapolates the straight line (which overshoots on an oscillating deck)
+    trend_weight: float = 0.25
     #: largest deck tilt relative to the camera, now and predicted at touchdown, degrees
-    max_tilt_deg: float = 3.0
+    max_tilt_deg: float = 4.0
     #: largest heave rate of the deck relative to the camera, m/s
     max_heave_rate: float = 0.15
     #: fewer valid estimates than this fraction of the window: not calm (nothing to judge by)
@@ -59,6 +63,7 @@ class CalmConfig:
     def __post_init__(self) -> None:
         require_range("window_s", self.window_s, 0.1, 10.0)
         require_range("descent_s", self.descent_s, 0.0, 10.0)
+        require_range("trend_weight", self.trend_weight, 0.0, 1.0)
         require_range("max_tilt_deg", self.max_tilt_deg, 0.0, 45.0, low_inclusive=False)
         require_range("max_heave_rate", self.max_heave_rate, 0.0, low_inclusive=False)
         require_range("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0)
@@ -90,9 +95,10 @@ def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPred
     ``history`` holds rows of :data:`~landing_env.envs.timing.HISTORY_FEATURES` (SI units),
     oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all show
     a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
-    rates, and the tilt extrapolated ``descent_s`` ahead and the heave rate must be within the
-    limits too (the tilt is convex in (roll, pitch), so on a straight line its largest value
-    is at one end: checking now and at the end of the descent covers the whole descent).
+    rates, and the tilt extrapolated ``descent_s`` ahead (``trend_weight`` of the trend) and
+    the heave rate must be within the limits too (the tilt is convex in (roll, pitch), so on a
+    straight line its largest value is at one end: checking now and at the end of the descent
+    covers the whole descent).
     """
     n = max(2, round(config.window_s / dt))
     window = np.asarray(history, dtype=float)[-n:]
@@ -105,7 +111,7 @@ def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPred
     centred = t - t.mean()
     slopes = (centred @ (values - values.mean(axis=0))) / float(centred @ centred)
     now = values.mean(axis=0) + slopes * (t[-1] - t.mean())
-    ahead = now + slopes * config.descent_s
+    ahead = now + slopes * (config.trend_weight * config.descent_s)
     window_tilt = float(np.max(tilt_deg(values[:, 0], values[:, 1])))
     predicted = float(tilt_deg(ahead[0], ahead[1]))
     current = float(tilt_deg(now[0], now[1]))

@@ -176,39 +176,41 @@ class World:
     def step(self, setpoint: VelocitySetpoint, monitor_contacts: bool = True) -> PhysicsReport:
         """Advance one control period (``substeps`` physics steps)."""
         report = PhysicsReport()
-        c = self.client
-        idle = np.full(4, self.params.omega_min)
+        cid = self.client._client
+        dt = self.dt
+        idle = [self.params.omega_min] * 4
+        watch_below = self.deck_home_w[2] + CONTACT_WATCH_HEIGHT_M
+        # the hot loop works on plain floats: small numpy arrays cost more than the physics
+        times: list[float] = []
+        rotations: list[tuple[float, ...]] = []
+        accels: list[tuple[float, float, float]] = []
+        rates: list[tuple[float, float, float]] = []
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
             if not self.pinned:
-                if self.armed:
-                    command = self.controller.update(state, setpoint, self.dt)
-                else:
-                    command = idle
-                self.drone.wind_velocity_w = self.wind.velocity(self.time, self.dt)
-                self.drone.apply_rotor_commands(command, self.dt, state)
-                report.motor_saturated |= bool(self.drone.last_saturated)
-            status = self.stewart.step_to(self.time + self.dt)
-            report.stewart = status
-            report.stewart_clamped |= bool(status.clamped)
+                command = self.controller.update(state, setpoint, dt) if self.armed else idle
+                self.drone.wind_velocity_w = self.wind.velocity_tuple(self.time, dt)
+                self.drone.apply_rotor_commands(command, dt, state)
+                report.motor_saturated |= self.drone.last_saturated
+            report.stewart_clamped |= self.stewart.advance(self.time + dt)
             # contacts need the states just before the touch; nothing in the world stands
             # higher than the deck's reach, so far above it the queries are skipped
-            near_deck = monitor_contacts and (
-                state.position_w[2] - self.deck_home_w[2] < CONTACT_WATCH_HEIGHT_M
-            )
+            near_deck = monitor_contacts and state.floats.position_w[2] < watch_below
             deck_before = self.deck_state() if near_deck else None
-            c.stepSimulation()
+            p.stepSimulation(physicsClientId=cid)
             if self.pinned:
-                c.resetBasePositionAndOrientation(self.drone.body_id, *self._pinned_pose)
-                c.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3)
-            self.time += self.dt
-            new_state = self.drone.read_state()
-            accel_w = (new_state.velocity_w - state.velocity_w) / self.dt
-            report.imu_samples.append(
-                self.imu.sample(
-                    self.time, new_state.rotation_wb, accel_w, new_state.angular_velocity_b
+                p.resetBasePositionAndOrientation(
+                    self.drone.body_id, *self._pinned_pose, physicsClientId=cid
                 )
-            )
+                p.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3, physicsClientId=cid)
+            self.time += dt
+            new_state = self.drone.read_state()
+            v0, new = state.floats.velocity_w, new_state.floats
+            v1 = new.velocity_w
+            times.append(self.time)
+            rotations.append(new.rotation_wb)
+            accels.append(((v1[0] - v0[0]) / dt, (v1[1] - v0[1]) / dt, (v1[2] - v0[2]) / dt))
+            rates.append(new.angular_velocity_b)
             self._state = new_state
             if near_deck:
                 contacts = self.contacts()
@@ -229,6 +231,8 @@ class World:
                     )
                 if report.first_contact is not None or report.forbidden_contact:
                     break
+        report.imu_samples = self.imu.sample_many(times, rotations, accels, rates)
+        report.stewart = self.stewart.last_status
         return report
 
     def settle(self, duration_s: float) -> tuple[set[int], bool, str, set[int]]:
