@@ -198,3 +198,18 @@ def test_rgb_array_shows_the_camera_view_with_the_detection() -> None:
     # the detection outline is drawn in green
     green = (image[..., 1] > 200) & (image[..., 0] < 80) & (image[..., 2] < 80)
     assert green.sum() > 100
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_at_the_start_the_tag_spans_60_px_and_all_tof_rays_hit_the_deck(seed: int) -> None:
+    env = make(camera={"mode": "render"}, estimation={"observed": "atda"})
+    observation, info = env.reset(seed=seed)
+    frame = env.unwrapped._sensing.frame
+    env.close()
+    assert len(frame.detections) == 1, info["tag_miss_reason"]
+    corners = frame.detections[0].corners_px
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)
+    assert sides.min() >= 60.0
+    assert observation["tof_valid"].tolist() == [1, 1, 1, 1]
+    # each ray meets the deck plate, not the sea: ranges agree with the camera-to-deck depth
+    assert np.all(np.abs(observation["tof_range"] - info["deck_pose_true"][2]) < 0.1)
