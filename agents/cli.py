@@ -8,6 +8,7 @@ from pathlib import Path
 
 from agents.calibrate import add_calibrate_parser
 from agents.evaluation import add_evaluate_parser
+from agents.evaluation.landing import add_landing_commands
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="results/demo", help="output directory")
     demo.set_defaults(func=_demo)
     add_evaluate_parser(sub)
+    add_landing_commands(sub)
     add_calibrate_parser(sub)
     return parser
 

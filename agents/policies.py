@@ -32,6 +32,7 @@ from landing_env.envs.timing import (
 )
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.sensors.tof import TofConfig
 
 #: the trained timing policy shipped with the package
 SHIPPED_TIMING_MODEL = Path(__file__).resolve().parent / "models" / "timing_ppo.zip"
@@ -55,6 +56,10 @@ class CalmConfig:
     trend_weight: float = 0.25
     #: largest deck tilt relative to the camera, now and predicted at touchdown, degrees
     max_tilt_deg: float = 4.0
+    #: also require every valid sample of the window to be within ``max_tilt_deg`` (the deck
+    #: has been calm for a window, the landing-period heuristic); False judges by the fitted
+    #: line alone
+    require_calm_window: bool = True
     #: largest heave rate of the deck relative to the camera, m/s
     max_heave_rate: float = 0.15
     #: fewer valid estimates than this fraction of the window: not calm (nothing to judge by)
@@ -118,7 +123,7 @@ def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPred
     # the tag's z in the camera grows when the deck falls away: heave rate = -dz/dt
     heave_rate = -float(slopes[2])
     reason = ""
-    if window_tilt > config.max_tilt_deg:
+    if config.require_calm_window and window_tilt > config.max_tilt_deg:
         reason = "tilt in the window"
     elif max(predicted, current) > config.max_tilt_deg:
         reason = "tilt predicted"
@@ -233,24 +238,43 @@ class Phase(str, Enum):
     DESCENT = "descent"
 
 
+def _flare_calm() -> CalmConfig:
+    # low over the deck the descent is short (about 1 s), so a straight-line extrapolation of
+    # the last half second predicts the tilt at touchdown well, even on the papers' slow bench
+    return CalmConfig(
+        window_s=0.5,
+        descent_s=1.0,
+        trend_weight=1.0,
+        max_tilt_deg=3.5,
+        require_calm_window=False,
+    )
+
+
 @dataclass
 class AlignDescendConfig:
     """Settings of the align-descend policy (heights are camera ranges above the deck)."""
 
-    #: height of the flare, where the policy waits for a calm window, metres
-    hold_height_m: float = 0.7
+    #: height of the flare, where the policy waits for a calm window, metres (low, so that
+    #: the final descent is short and the calm prediction short-range; the tag still fits
+    #: the image)
+    hold_height_m: float = 0.4
     #: the flare starts when the range is within this of the hold height, metres
     hold_tolerance_m: float = 0.1
     #: the final descent starts regardless after this long in the flare, seconds
-    max_flare_s: float = 20.0
-    #: climb speed while the tag is not seen (to widen the view), m/s
+    max_flare_s: float = 25.0
+    #: search speed without an estimate: climb (to widen the view) while a ToF sees a
+    #: surface, descend while none does (every surface is beyond the ToF range), m/s
     search_climb_speed: float = 0.3
+    #: horizontal speed towards the deck when the ToF ranges show its edge, m/s
+    edge_seek_speed: float = 0.3
+    #: ToF ranges shorter than the longest by more than this are taken as on the deck, metres
+    edge_step_m: float = 0.1
     #: back to the approach after this long without a tag in the flare, seconds
     lost_tag_s: float = 1.0
     #: length of the motion history kept for the calm prediction, seconds
     history_s: float = 2.0
     rate_window_s: float = 0.5
-    calm: CalmConfig = field(default_factory=CalmConfig)
+    calm: CalmConfig = field(default_factory=_flare_calm)
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
 
     def __post_init__(self) -> None:
@@ -258,6 +282,8 @@ class AlignDescendConfig:
         require_range("hold_tolerance_m", self.hold_tolerance_m, 0.0, low_inclusive=False)
         require_range("max_flare_s", self.max_flare_s, 0.0)
         require_range("search_climb_speed", self.search_climb_speed, 0.0)
+        require_range("edge_seek_speed", self.edge_seek_speed, 0.0)
+        require_range("edge_step_m", self.edge_step_m, 0.0, low_inclusive=False)
         require_range("lost_tag_s", self.lost_tag_s, 0.0)
         require_range("history_s", self.history_s, self.calm.window_s, 10.0)
         require_range("rate_window_s", self.rate_window_s, 0.1, self.history_s)
@@ -266,10 +292,13 @@ class AlignDescendConfig:
 class AlignDescendPolicy:
     """Visual servoing for ``DeckLanding-v0`` on the estimated deck pose.
 
-    Approach: centre over the tag (climbing while it is not seen) and descend while aligned
-    to the hold height; flare: hold there, aligned, until :func:`predict_calm` predicts a calm
-    window as long as the descent (or ``max_flare_s`` has passed); descent: the final descent
-    of :class:`~landing_env.envs.timing.DeckGuidance` down to touchdown.  Output: the Box(4)
+    Approach: centre over the tag and descend while aligned to the hold height; without a
+    valid estimate, move towards the deck when the ToF ranges show its edge (IHRCF and CRHF
+    need every ToF spot on the deck), else climb to bring the tag into view (or descend when
+    no ToF sees anything: every surface is then beyond its range).  Flare: hold
+    there, aligned, until :func:`predict_calm` predicts a calm window as long as the descent
+    (or ``max_flare_s`` has passed).  Descent: the final descent of
+    :class:`~landing_env.envs.timing.DeckGuidance` down to touchdown.  Output: the Box(4)
     action, normalised by :class:`ActionConfig`.
     """
 
@@ -280,10 +309,19 @@ class AlignDescendPolicy:
         action: ActionConfig | None = None,
         config: AlignDescendConfig | None = None,
         dt: float = 0.05,
+        tof_mounts_c: np.ndarray | None = None,
     ) -> None:
         self.action = action or ActionConfig()
         self.config = config or AlignDescendConfig()
         self.dt = dt
+        mounts = np.asarray(
+            tof_mounts_c if tof_mounts_c is not None else TofConfig().mount_offsets_c, dtype=float
+        )
+        # each sensor's direction from the camera in the heading frame (forward = -y_C,
+        # left = -x_C), for seeking the deck with the ranges
+        directions = np.column_stack([-mounts[:, 1], -mounts[:, 0]])
+        norms = np.linalg.norm(directions, axis=1, keepdims=True)
+        self._tof_directions = directions / np.where(norms > 0.0, norms, 1.0)
         self.guidance = DeckGuidance(self.config.guidance)
         self.history = DeckMotionHistory(
             max(1, round(self.config.history_s / dt)),
@@ -335,8 +373,30 @@ class AlignDescendPolicy:
                     setpoint.yaw_rate,
                 )
         else:
-            setpoint = VelocitySetpoint(np.array([0.0, 0.0, c.search_climb_speed]), 0.0)
+            towards = self._deck_direction(observation)
+            if towards is not None:
+                setpoint = VelocitySetpoint(np.array([*(c.edge_seek_speed * towards), 0.0]), 0.0)
+            elif observation["tof_valid"].any():
+                setpoint = VelocitySetpoint(np.array([0.0, 0.0, c.search_climb_speed]), 0.0)
+            else:
+                # nothing within the ToF range below: high above the sea, safe to come down
+                setpoint = VelocitySetpoint(np.array([0.0, 0.0, -c.search_climb_speed]), 0.0)
         return normalise_setpoint(setpoint, self.action)
+
+    def _deck_direction(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
+        """Unit heading-frame direction towards the deck when the ToF ranges straddle its edge.
+
+        The deck stands above the sea: sensors whose ranges are clearly shorter than the
+        longest (a sensor without a return counts as longest) are over the deck.
+        """
+        valid = observation["tof_valid"].astype(bool)
+        ranges = np.where(valid, observation["tof_range"].astype(float), np.inf)
+        on_deck = ranges < np.max(ranges) - self.config.edge_step_m
+        if not on_deck.any():
+            return None
+        vector = self._tof_directions[on_deck].sum(axis=0)
+        norm = float(np.linalg.norm(vector))
+        return vector / norm if norm > 0.0 else None
 
 
 def normalise_setpoint(setpoint: VelocitySetpoint, action: ActionConfig) -> np.ndarray:
@@ -372,7 +432,9 @@ def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> An
     base = env.unwrapped
     dt = base.env_dt
     if name == "align-descend":
-        return AlignDescendPolicy(base.config.action, dt=dt)
+        return AlignDescendPolicy(
+            base.config.action, dt=dt, tof_mounts_c=base.config.tof.mount_offsets_c
+        )
     if name == "land-now":
         return LandNowPolicy()
     if name == "quiescent":

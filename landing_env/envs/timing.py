@@ -381,6 +381,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.guidance = DeckGuidance(self.timing.guidance)
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
+        #: with ``render_mode="rgb_array"``, set True to keep the camera image of every control
+        #: period of a step in ``frames_of_last_step`` (a commit step holds the whole descent);
+        #: off by default, because SB3's ``make_vec_env`` asks for ``rgb_array`` by default
+        self.record_frames = False
         self.frames_of_last_step: list[np.ndarray] = []
         self._reset_episode_state()
 
@@ -453,7 +457,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._sensing = self._sense()
         self._base_observation = self._observation()
         self._record()
-        if self.render_mode == "rgb_array":
+        if self.record_frames and self.render_mode == "rgb_array":
             self.frames_of_last_step.append(self.world.camera_image(self._sensing.frame))
 
     def _record(self) -> None:
@@ -518,6 +522,8 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "forced_commit": self._forced,
                 "descent_s": self._descent_s,
                 "observation_clipped": getattr(self, "_observation_clipped", False),
+                # read by SB3's EvalCallback for its success rate
+                "is_success": self._outcome is Outcome.SUCCESS,
             }
         )
         return info

@@ -1,0 +1,399 @@
+"""Training the landing-timing policy with stable-baselines3 (PPO by default, DQN as an option).
+
+``deck-landing train timing --config configs/train/timing_ppo.yaml`` reads a YAML with two
+top-level keys:
+
+* the environment id (``DeckLandingTiming-v0``) holding the hyper-parameters in rl-zoo3's
+  format (``n_envs``, ``n_timesteps``, ``policy``, ``policy_kwargs`` as a ``"dict(...)"``
+  string, ``learning_rate`` as a number or ``"lin_<x>"``, and the algorithm's own keyword
+  arguments), so that ``python -m rl_zoo3.train --conf-file`` can read the same file;
+* ``deck_landing``, which rl-zoo3 ignores: the algorithm, the seed, the environment's keyword
+  arguments (scenario, overrides, timing settings), the evaluation and checkpoint schedule, the
+  target success rate and the wall-clock budget.
+
+Training runs the environments in a ``SubprocVecEnv`` (one process per core), shows SB3's
+progress bar, saves checkpoints, evaluates on held-out seeds (``EvalCallback``, which also
+keeps the best model), logs to TensorBoard and stops early once the evaluation success rate
+reaches the target.
+"""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+
+from agents.policies import SHIPPED_TIMING_MODEL
+from landing_env.config_loading import build_dataclass
+from landing_env.errors import ConfigError, require_choice, require_range
+
+ENV_ID = "DeckLandingTiming-v0"
+#: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
+ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
+ALGOS = ("ppo", "dqn")
+
+
+@dataclass
+class EvalSettings:
+    """The evaluation during training (``EvalCallback``) on held-out seeds."""
+
+    #: evaluate every this many environment steps (summed over the parallel environments)
+    freq: int = 10_000
+    episodes: int = 40
+    #: seed of the evaluation environment; far from the training seeds
+    seed: int = 900_000
+
+    def __post_init__(self) -> None:
+        require_range("freq", self.freq, 1)
+        require_range("episodes", self.episodes, 1)
+
+
+@dataclass
+class TrainSettings:
+    """The ``deck_landing`` section of a training YAML."""
+
+    algo: Literal["ppo", "dqn"] = "ppo"
+    seed: int = 0
+    #: keyword arguments of ``gym.make(ENV_ID, ...)``: config, overrides, timing
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval: EvalSettings = field(default_factory=EvalSettings)
+    #: save a checkpoint every this many environment steps (summed over the environments)
+    checkpoint_freq: int = 50_000
+    #: stop when the evaluation success rate reaches this (1 or more: never stop early)
+    target_success_rate: float = 0.95
+    #: stop after this much wall-clock time, minutes (the run keeps what it has learnt)
+    max_minutes: float = 30.0
+    out_dir: str = "results/train/timing_ppo"
+    #: "subproc" runs one process per environment; "dummy" runs them in this process
+    vec_env: Literal["subproc", "dummy"] = "subproc"
+
+    def __post_init__(self) -> None:
+        require_choice("algo", self.algo, ALGOS)
+        require_choice("vec_env", self.vec_env, ("subproc", "dummy"))
+        require_range("checkpoint_freq", self.checkpoint_freq, 1)
+        require_range("target_success_rate", self.target_success_rate, 0.0)
+        require_range("max_minutes", self.max_minutes, 0.0, low_inclusive=False)
+
+
+@dataclass
+class TrainConfig:
+    """A training run: the zoo hyper-parameters and the deck-landing settings."""
+
+    hyperparams: dict[str, Any]
+    settings: TrainSettings
+    source: str = ""
+
+    @property
+    def n_envs(self) -> int:
+        return int(self.hyperparams.get("n_envs", 1))
+
+    @property
+    def n_timesteps(self) -> int:
+        return int(float(self.hyperparams.get("n_timesteps", 100_000)))
+
+
+@dataclass
+class TrainResult:
+    """What a training run produced."""
+
+    model_path: Path
+    best_model_path: Path | None
+    timesteps: int
+    wall_time_s: float
+    #: (timesteps, success rate) of every evaluation
+    evaluations: list[tuple[int, float]]
+    stopped_because: str
+
+
+def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
+    """Read a training YAML (see the module docstring); ``algo`` overrides its ``algo``."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("config", f"{str(path)!r} does not exist")
+    data = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(data, dict) or ENV_ID not in data:
+        raise ConfigError("config", f"{path} needs a top-level {ENV_ID!r} section (rl-zoo3 style)")
+    section = dict(data.get("deck_landing") or {})
+    if algo is not None:
+        section["algo"] = algo
+    settings = build_dataclass(TrainSettings, section, "deck_landing")
+    hyperparams = dict(data[ENV_ID] or {})
+    return TrainConfig(hyperparams, settings, str(path))
+
+
+# ------------------------------------------------------------------------------ zoo syntax
+def _literal(node: ast.AST, names: dict[str, Any]) -> Any:
+    """Evaluate the small subset of Python rl-zoo3 uses in ``policy_kwargs`` strings."""
+    if isinstance(node, ast.Constant):
+        return node.value
+    if isinstance(node, (ast.List, ast.Tuple)):
+        values = [_literal(v, names) for v in node.elts]
+        return values if isinstance(node, ast.List) else tuple(values)
+    if isinstance(node, ast.Dict):
+        if any(k is None for k in node.keys):
+            raise ValueError("dict unpacking (**) is not supported")
+        pairs = zip(node.keys, node.values, strict=True)
+        return {_literal(k, names): _literal(v, names) for k, v in pairs}  # type: ignore[arg-type]
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict":
+        if node.args:
+            raise ValueError("dict(...) takes keyword arguments only")
+        return {kw.arg: _literal(kw.value, names) for kw in node.keywords}
+    if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+        key = f"{node.value.id}.{node.attr}"
+        if key in names:
+            return names[key]
+    raise ValueError(f"unsupported expression {ast.dump(node)}")
+
+
+def parse_policy_kwargs(value: Any) -> dict[str, Any]:
+    """``policy_kwargs`` as rl-zoo3 writes it (``"dict(net_arch=[64, 64])"``) or a mapping."""
+    if isinstance(value, dict):
+        return dict(value)
+    from torch import nn
+
+    names = {f"nn.{n}": getattr(nn, n) for n in ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU")}
+    try:
+        parsed = _literal(ast.parse(str(value), mode="eval").body, names)
+    except (SyntaxError, ValueError) as exc:
+        raise ConfigError("policy_kwargs", f"{value!r}: {exc}") from None
+    if not isinstance(parsed, dict):
+        raise ConfigError("policy_kwargs", f"{value!r} is not a dict(...)")
+    return parsed
+
+
+def _schedule(value: Any, key: str) -> float | Callable[[float], float]:
+    """A number, or rl-zoo3's ``"lin_<x>"`` (linear decay from x to 0 over the run)."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        start = float(value[4:])
+        return lambda progress_remaining: progress_remaining * start
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(key, f"{value!r} is neither a number nor 'lin_<number>'") from None
+
+
+def algorithm_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """The algorithm's keyword arguments from the zoo section (meta keys removed)."""
+    kwargs = {k: v for k, v in hyperparams.items() if k not in ZOO_META_KEYS}
+    if "policy_kwargs" in kwargs:
+        kwargs["policy_kwargs"] = parse_policy_kwargs(kwargs["policy_kwargs"])
+    for key in ("learning_rate", "clip_range"):
+        if key in kwargs:
+            kwargs[key] = _schedule(kwargs[key], key)
+    if isinstance(kwargs.get("train_freq"), list):
+        kwargs["train_freq"] = tuple(kwargs["train_freq"])
+    return kwargs
+
+
+# ------------------------------------------------------------------------------ callbacks
+def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) -> tuple[Any, Any]:
+    from stable_baselines3.common.callbacks import (
+        BaseCallback,
+        CallbackList,
+        CheckpointCallback,
+        EvalCallback,
+    )
+
+    settings = config.settings
+    n_envs = max(config.n_envs, 1)
+
+    class StopOnSuccessRate(BaseCallback):
+        """After an evaluation: stop once its success rate reaches the target."""
+
+        def _on_step(self) -> bool:
+            successes = getattr(self.parent, "evaluations_successes", [])
+            if successes and float(np.mean(successes[-1])) >= settings.target_success_rate:
+                self.model._stopped_because = (  # type: ignore[attr-defined]
+                    f"evaluation success rate {np.mean(successes[-1]):.3f} reached the target "
+                    f"{settings.target_success_rate}"
+                )
+                return False
+            return True
+
+    class WallClockBudget(BaseCallback):
+        """Stop after ``max_minutes`` of wall-clock time (a budget, not a measurement)."""
+
+        def _on_step(self) -> bool:
+            if time.perf_counter() - started > 60.0 * settings.max_minutes:
+                self.model._stopped_because = (  # type: ignore[attr-defined]
+                    f"wall-clock budget of {settings.max_minutes} min"
+                )
+                return False
+            return True
+
+    evaluation = EvalCallback(
+        eval_env,
+        # SB3 counts callback steps per vectorised step: divide by the number of environments
+        eval_freq=max(settings.eval.freq // n_envs, 1),
+        n_eval_episodes=settings.eval.episodes,
+        best_model_save_path=str(out),
+        log_path=str(out / "eval"),
+        deterministic=True,
+        callback_after_eval=StopOnSuccessRate(),
+        verbose=1,
+    )
+    checkpoints = CheckpointCallback(
+        save_freq=max(settings.checkpoint_freq // n_envs, 1),
+        save_path=str(out / "checkpoints"),
+        name_prefix=f"timing_{settings.algo}",
+    )
+    return CallbackList([checkpoints, evaluation, WallClockBudget()]), evaluation
+
+
+def make_envs(config: TrainConfig) -> tuple[Any, Any]:
+    """The training VecEnv (SubprocVecEnv over ``n_envs`` processes) and the evaluation env."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    s = config.settings
+    vec_cls = SubprocVecEnv if s.vec_env == "subproc" and config.n_envs > 1 else DummyVecEnv
+    # the "module:id" form makes the worker processes import and register the package
+    env_id = f"landing_env:{ENV_ID}"
+    # make_vec_env asks for render_mode="rgb_array" unless told otherwise: nothing is rendered
+    env_kwargs = {"render_mode": None, **s.env_kwargs}
+    train_env = make_vec_env(
+        env_id,
+        n_envs=config.n_envs,
+        seed=s.seed,
+        vec_env_cls=vec_cls,
+        env_kwargs=env_kwargs,
+    )
+    eval_env = make_vec_env(env_id, n_envs=1, seed=s.eval.seed, env_kwargs=env_kwargs)
+    return train_env, eval_env
+
+
+def train(
+    config: TrainConfig,
+    out_dir: str | Path | None = None,
+    total_timesteps: int | None = None,
+    progress_bar: bool = True,
+    install: bool = False,
+) -> TrainResult:
+    """Train, evaluate and save; with ``install`` copy the best model to the shipped path."""
+    from stable_baselines3 import DQN, PPO
+
+    settings = config.settings
+    out = Path(out_dir or settings.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "train_config.yaml").write_text(
+        yaml.safe_dump(
+            {"hyperparams": config.hyperparams, "source": config.source}, sort_keys=False
+        )
+    )
+    algo_cls = {"ppo": PPO, "dqn": DQN}[settings.algo]
+    steps = int(total_timesteps if total_timesteps is not None else config.n_timesteps)
+    started = time.perf_counter()
+    train_env, eval_env = make_envs(config)
+    try:
+        model = algo_cls(
+            config.hyperparams.get("policy", "MlpPolicy"),
+            train_env,
+            seed=settings.seed,
+            tensorboard_log=str(out / "tb"),
+            device="cpu",
+            verbose=0,
+            **algorithm_kwargs(config.hyperparams),
+        )
+        callbacks, evaluation = _callbacks(config, out, eval_env, started)
+        model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
+        model.learn(
+            total_timesteps=steps,
+            callback=callbacks,
+            progress_bar=progress_bar,
+            tb_log_name=f"timing_{settings.algo}",
+        )
+        model_path = out / f"timing_{settings.algo}_final.zip"
+        model.save(model_path)
+    finally:
+        train_env.close()
+        eval_env.close()
+    wall = time.perf_counter() - started
+    best = out / "best_model.zip"
+    evaluations = [
+        (int(t), float(np.mean(s)))
+        for t, s in zip(
+            evaluation.evaluations_timesteps, evaluation.evaluations_successes, strict=False
+        )
+    ]
+    result = TrainResult(
+        model_path=model_path,
+        best_model_path=best if best.is_file() else None,
+        timesteps=int(model.num_timesteps),
+        wall_time_s=wall,
+        evaluations=evaluations,
+        stopped_because=model._stopped_because,  # type: ignore[attr-defined]
+    )
+    (out / "train_summary.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "timesteps": result.timesteps,
+                "wall_time_s": round(wall, 1),
+                "stopped_because": result.stopped_because,
+                "evaluations": [[t, round(s, 4)] for t, s in evaluations],
+            },
+            sort_keys=False,
+        )
+    )
+    if install:
+        source = result.best_model_path or model_path
+        SHIPPED_TIMING_MODEL.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, SHIPPED_TIMING_MODEL)
+    return result
+
+
+# ------------------------------------------------------------------------------ command line
+def _train_timing(args: Any) -> int:
+    from rich.console import Console
+
+    console = Console()
+    config = load_train_config(args.config, algo=args.algo)
+    if args.seed is not None:
+        config.settings.seed = args.seed
+    if args.n_envs is not None:
+        config.hyperparams["n_envs"] = args.n_envs
+    result = train(
+        config,
+        out_dir=args.out,
+        total_timesteps=args.timesteps,
+        progress_bar=not args.no_progress,
+        install=args.install,
+    )
+    minutes = result.wall_time_s / 60.0
+    console.print(
+        f"trained {result.timesteps} steps in {minutes:.1f} min ({result.stopped_because})"
+    )
+    for steps, rate in result.evaluations:
+        console.print(f"  evaluation at {steps:>8d} steps: success rate {rate:.3f}")
+    console.print(f"final model: {result.model_path}\nbest model: {result.best_model_path}")
+    if args.install:
+        console.print(f"installed as {SHIPPED_TIMING_MODEL}")
+    return 0
+
+
+def add_train_parser(subparsers: Any) -> None:
+    """Add ``train timing`` to the ``deck-landing`` command."""
+    train_parser = subparsers.add_parser("train", help="train a landing policy with SB3")
+    which = train_parser.add_subparsers(dest="training", required=True)
+    timing = which.add_parser(
+        "timing", help="the landing-timing policy of DeckLandingTiming-v0 (PPO or DQN)"
+    )
+    timing.add_argument("--config", default="configs/train/timing_ppo.yaml", help="training YAML")
+    timing.add_argument("--algo", choices=ALGOS, default=None, help="default: the YAML's")
+    timing.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps")
+    timing.add_argument("--seed", type=int, default=None, help="default: the YAML's")
+    timing.add_argument("--n-envs", type=int, default=None, help="default: the YAML's n_envs")
+    timing.add_argument("--out", default=None, help="output directory (default: the YAML's)")
+    timing.add_argument("--no-progress", action="store_true", help="no progress bar")
+    timing.add_argument(
+        "--install",
+        action="store_true",
+        help="copy the best model to agents/models/timing_ppo.zip (the shipped policy)",
+    )
+    timing.set_defaults(func=_train_timing)

@@ -1,0 +1,171 @@
+"""The landing policies: calm prediction, the timing heuristics, align-descend, the registry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.evaluation.landing import (
+    EpisodeResult,
+    make_env_and_policy,
+    markdown_table,
+    run_episode,
+    scenario_overrides,
+    summarise,
+    wilson_interval,
+)
+from agents.policies import (
+    AlignDescendPolicy,
+    CalmConfig,
+    LandNowPolicy,
+    Phase,
+    make_policy,
+    predict_calm,
+    tilt_deg,
+)
+from landing_env.envs.timing import HISTORY_FEATURES
+from landing_env.errors import ConfigError
+
+DT = 0.05
+
+
+def history_of(roll_deg: np.ndarray, pitch_deg: np.ndarray, z: float = 0.7) -> np.ndarray:
+    """History rows (SI) of a deck with the given roll and pitch traces."""
+    rows = np.zeros((len(roll_deg), len(HISTORY_FEATURES)))
+    rows[:, 2] = z
+    rows[:, 3] = np.radians(roll_deg)
+    rows[:, 4] = np.radians(pitch_deg)
+    rows[:, 9] = 1.0
+    return rows
+
+
+def test_tilt_is_the_angle_of_the_deck_normal() -> None:
+    assert tilt_deg(0.0, 0.0) == pytest.approx(0.0)
+    assert tilt_deg(math.radians(3.0), 0.0) == pytest.approx(3.0)
+    assert tilt_deg(math.radians(3.0), math.radians(4.0)) == pytest.approx(5.0, abs=0.01)
+
+
+def test_calm_prediction_judges_level_tilted_and_turning_decks() -> None:
+    config = CalmConfig(window_s=1.0, descent_s=1.0, trend_weight=1.0, max_tilt_deg=3.0)
+    n = 40
+    level = predict_calm(history_of(np.full(n, 1.0), np.full(n, -1.0)), DT, config)
+    assert level.calm and level.reason == ""
+    tilted = predict_calm(history_of(np.full(n, 4.0), np.zeros(n)), DT, config)
+    assert not tilted.calm and tilted.reason == "tilt in the window"
+    # level now but rolling at 4 deg/s: 4 degrees within the 1 s descent (the last 0.5 s
+    # stayed within 2 degrees)
+    ramp = 4.0 * (np.arange(n) - (n - 1)) * DT
+    short_window = CalmConfig(window_s=0.5, descent_s=1.0, trend_weight=1.0, max_tilt_deg=3.0)
+    rising = predict_calm(history_of(ramp, np.zeros(n)), DT, short_window)
+    assert not rising.calm and rising.reason == "tilt predicted"
+    assert rising.predicted_tilt_deg == pytest.approx(4.0, abs=1e-6)
+    # the same ramp with a persistence prediction (no trend) counts as calm
+    persistent = predict_calm(
+        history_of(ramp, np.zeros(n)), DT, CalmConfig(window_s=0.2, trend_weight=0.0)
+    )
+    assert persistent.calm
+    # the deck falling away at 0.3 m/s (tag z growing) fails the heave check
+    falling = history_of(np.zeros(n), np.zeros(n))
+    falling[:, 2] = 0.7 + 0.3 * np.arange(n) * DT
+    heave = predict_calm(falling, DT, config)
+    assert heave.reason == "heave rate" and heave.heave_rate == pytest.approx(-0.3)
+    # too few valid estimates: no judgement, no commit
+    blind = history_of(np.zeros(n), np.zeros(n))
+    blind[-10:, 9] = 0.0
+    assert predict_calm(blind, DT, config).reason == "too few valid estimates"
+
+
+def test_calm_config_is_validated() -> None:
+    with pytest.raises(ConfigError, match="trend_weight"):
+        CalmConfig(trend_weight=2.0)
+    with pytest.raises(ConfigError, match="max_tilt_deg"):
+        CalmConfig(max_tilt_deg=0.0)
+
+
+def test_align_descend_seeks_the_deck_with_the_tof_ranges() -> None:
+    policy = AlignDescendPolicy()
+    mounts = np.asarray(policy._tof_directions)
+    # the two sensors on the forward side see the deck (0.6 m nearer than the sea)
+    forward = mounts[:, 0] > 0.0
+    observation = {
+        "deck_pose": np.zeros(6, dtype=np.float32),
+        "deck_pose_valid": np.array([0], dtype=np.int8),
+        "tof_range": np.where(forward, 2.0, 2.6).astype(np.float32),
+        "tof_valid": np.ones(4, dtype=np.int8),
+    }
+    action = policy.act(observation)
+    assert action[0] > 0.1 and abs(action[1]) < 1e-6 and action[2] == 0.0
+    # every sensor on the sea: climb to bring the tag into view
+    observation["tof_range"] = np.full(4, 2.6, dtype=np.float32)
+    assert policy.act(observation)[2] > 0.0
+    # nothing within the ToF range: far above everything, come down
+    observation["tof_valid"] = np.zeros(4, dtype=np.int8)
+    assert policy.act(observation)[2] < 0.0
+
+
+def test_align_descend_lands_from_far_off_the_deck_on_the_papers_bench() -> None:
+    env, policy = make_env_and_policy("align-descend", "paper-stewart")
+    try:
+        # 3.5 m up and 0.8 m off: the tag is seen, every ToF spot on the sea
+        observation, _ = env.reset(seed=4, options={"height_m": 3.5, "offset_m": (0.8, 0.0)})
+        policy.reset()
+        phases = set()
+        while True:
+            observation, _, terminated, truncated, info = env.step(policy(observation))
+            phases.add(policy.phase)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert phases == {Phase.APPROACH, Phase.FLARE, Phase.DESCENT}
+    assert info["outcome"] == "success", info.get("touchdown")
+    assert info["touchdown"]["deck_tilt_deg"] < 5.0
+
+
+def test_timing_heuristics_on_a_sea_state_deck() -> None:
+    env, quiescent = make_env_and_policy("quiescent", "sea-state-4")
+    try:
+        land_now = make_policy("land-now", env)
+        assert isinstance(land_now, LandNowPolicy)
+        now = run_episode(env, land_now, 7, "land-now", "sea-state-4")
+        waited = run_episode(env, quiescent, 7, "quiescent", "sea-state-4")
+    finally:
+        env.close()
+    assert now.wait_s == 0.0
+    assert math.isfinite(now.relative_normal_speed)
+    # the quiescent policy commits only on a calm prediction (or at the wait limit)
+    assert waited.wait_s >= 0.0
+    if waited.wait_s < 15.0:
+        assert quiescent.last is not None and quiescent.last.calm
+    assert waited.deck_tilt_deg < 5.0
+
+
+def test_unknown_policy_and_scenario_name_the_choices() -> None:
+    with pytest.raises(ConfigError, match=r"policy.*align-descend"):
+        make_env_and_policy("hover", "sea-state-4")
+    with pytest.raises(ConfigError, match=r"scenario.*sea-state-3"):
+        scenario_overrides("sea-state-9", "DeckLanding-v0")
+
+
+def test_wilson_interval_and_summary() -> None:
+    low, high = wilson_interval(95, 100)
+    # Wilson: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n), z = 1.95996
+    z, n, p = 1.959964, 100, 0.95
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    assert low == pytest.approx(centre - half, abs=1e-6)
+    assert high == pytest.approx(centre + half, abs=1e-6)
+    results = [
+        EpisodeResult("p", "s", 0, "success", True, 0.2, 1.0, 0.01, 1.0, 5.0),
+        EpisodeResult("p", "s", 1, "hard_landing", False, 0.6, 6.0, 0.03, 6.0, 7.0),
+        EpisodeResult("p", "s", 2, "crash", False),
+    ]
+    summary = summarise(results)
+    assert summary.successes == 1 and summary.success_rate == pytest.approx(1 / 3)
+    assert summary.normal_speed_mean == pytest.approx(0.4)
+    assert summary.time_to_land_mean_s == pytest.approx(6.0)
+    assert summary.outcomes == {"success": 1, "hard_landing": 1, "crash": 1}
+    table = markdown_table([summary])
+    assert "33.3%" in table and table.count("\n") == 2

@@ -1,0 +1,100 @@
+"""Training the timing policy: the YAML, a short SB3 run, the shipped policy against land-now."""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from agents.evaluation.landing import evaluate_policy
+from agents.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
+from agents.training import (
+    ENV_ID,
+    ZOO_META_KEYS,
+    algorithm_kwargs,
+    load_train_config,
+    parse_policy_kwargs,
+    train,
+)
+from landing_env.errors import ConfigError
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "timing_ppo.yaml"
+
+
+def test_the_yaml_is_rl_zoo_style_and_complete() -> None:
+    from stable_baselines3 import PPO
+
+    data = yaml.safe_load(CONFIG.read_text())
+    zoo = data[ENV_ID]
+    # every key of the zoo section is a zoo meta key or a PPO keyword argument
+    ppo_args = set(inspect.signature(PPO.__init__).parameters)
+    assert set(zoo) <= set(ZOO_META_KEYS) | ppo_args
+    assert isinstance(zoo["policy_kwargs"], str) and zoo["policy_kwargs"].startswith("dict(")
+    config = load_train_config(CONFIG)
+    assert config.settings.algo == "ppo" and config.n_envs == 2
+    assert config.settings.env_kwargs["overrides"]["estimation.observed"] in ("ihrcf", "crhf")
+    kwargs = algorithm_kwargs(config.hyperparams)
+    assert "n_envs" not in kwargs and "n_timesteps" not in kwargs
+    assert isinstance(kwargs["policy_kwargs"]["net_arch"], dict)
+
+
+def test_zoo_policy_kwargs_strings_are_parsed_without_eval() -> None:
+    from torch import nn
+
+    parsed = parse_policy_kwargs(
+        "dict(net_arch=[32, dict(pi=[16], vf=[8])], activation_fn=nn.ReLU)"
+    )
+    assert parsed == {"net_arch": [32, {"pi": [16], "vf": [8]}], "activation_fn": nn.ReLU}
+    with pytest.raises(ConfigError, match="policy_kwargs"):
+        parse_policy_kwargs("__import__('os').system('true')")
+    assert algorithm_kwargs({"learning_rate": "lin_0.001"})["learning_rate"](0.5) == 0.0005
+
+
+def test_bad_settings_name_the_key(tmp_path: Path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 1}, "deck_landing": {"algo": "sac"}}))
+    with pytest.raises(ConfigError, match=r"deck_landing\.algo"):
+        load_train_config(path)
+    path.write_text(yaml.safe_dump({"CartPole-v1": {}}))
+    with pytest.raises(ConfigError, match=ENV_ID):
+        load_train_config(path)
+
+
+def test_a_short_training_run_saves_a_policy_that_loads_again(tmp_path: Path) -> None:
+    from stable_baselines3 import PPO
+
+    config = load_train_config(CONFIG)
+    settings = config.settings
+    # a quick variant of the task: short history, short settle, a small network
+    settings.env_kwargs["timing"] = {"history_s": 0.5, "wait_limit_s": 2.0}
+    settings.env_kwargs["overrides"]["touchdown.settle_time_s"] = 0.2
+    settings.eval.freq = 1024
+    settings.eval.episodes = 3
+    settings.checkpoint_freq = 1024
+    config.hyperparams.update(n_steps=256, batch_size=128, n_epochs=2)
+    config.hyperparams["policy_kwargs"] = "dict(net_arch=[32, 32])"
+    result = train(config, out_dir=tmp_path, total_timesteps=2048, progress_bar=False)
+    assert result.timesteps >= 2048
+    assert result.model_path.is_file() and result.best_model_path is not None
+    assert len(result.evaluations) == 2
+    assert list((tmp_path / "checkpoints").glob("*.zip"))
+    assert list((tmp_path / "tb").iterdir())  # TensorBoard logs
+    model = PPO.load(result.model_path, device="cpu")
+    policy = TrainedTimingPolicy(result.model_path)
+    observation = np.zeros(model.observation_space.shape, dtype=np.float32)
+    assert policy.act(observation) in (0, 1)
+    assert (tmp_path / "train_summary.yaml").is_file()
+
+
+@pytest.mark.skipif(not SHIPPED_TIMING_MODEL.is_file(), reason="no shipped timing model")
+def test_the_shipped_policy_beats_land_now_on_held_out_seeds() -> None:
+    episodes, first = 24, 2_000_000
+    learned = evaluate_policy("timing-ppo", "sea-state-4", episodes, first)
+    now = evaluate_policy("land-now", "sea-state-4", episodes, first)
+    learned_rate = np.mean([r.success for r in learned])
+    now_rate = np.mean([r.success for r in now])
+    assert learned_rate > now_rate
+    assert learned_rate >= 0.9
