@@ -8,7 +8,8 @@ from pathlib import Path
 
 from agents.calibrate import add_calibrate_parser
 from agents.evaluation import add_evaluate_parser
-from agents.evaluation.landing import add_landing_commands
+from agents.evaluation.approach import add_approach_parser
+from agents.evaluation.landing import _subparser_group, add_landing_commands
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_demo)
     add_evaluate_parser(sub)
     add_landing_commands(sub)
+    add_approach_parser(_subparser_group(sub.choices["evaluate"]))
     add_calibrate_parser(sub)
     return parser
 

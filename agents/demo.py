@@ -151,9 +151,14 @@ def summarise(log: EpisodeLog, console: Console) -> None:
 
 
 def run_demo(
-    config: str = "default", seed: int = 0, out_dir: Path = Path("results/demo"), **kw
+    config: str = "default",
+    seed: int = 0,
+    out_dir: Path = Path("results/demo"),
+    timing: bool = True,
+    **kw,
 ) -> EpisodeLog:
-    """The `make demo` job: one seeded episode with the camera rendered and the tag detected."""
+    """The `make demo` job: one seeded episode with the camera rendered and the tag detected,
+    then (``timing``) the trained timing policy landing on a sea-state deck."""
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
@@ -174,4 +179,116 @@ def run_demo(
     plot = out_dir / "trajectory.png"
     plot_trajectory(log, plot)
     console.print(f"camera video: {video}\ntrajectory plot: {plot}")
+    if timing:
+        run_timing_demo(seed=seed, out_dir=out_dir)
+    return log
+
+
+# ---------------------------------------------------------------------------------------------
+# Part 2: the trained landing-timing policy on a sea-state deck (see agents/policies.py)
+@dataclass
+class TimingDemoLog:
+    """Every control period of a DeckLandingTiming-v0 episode, and its end."""
+
+    periods: list[dict[str, Any]] = field(default_factory=list)
+    commit_time_s: float = float("nan")
+    final_info: dict[str, Any] = field(default_factory=dict)
+
+
+def plot_timing(log: TimingDemoLog, path: Path, limit_deg: float) -> None:
+    """Deck tilt (true and as estimated) and the drone's height over the deck, with the commit."""
+    t = np.array([p["time_s"] for p in log.periods])
+    deck = np.array([p["deck_euler_w"] for p in log.periods])
+    true_tilt = np.degrees(np.arccos(np.cos(deck[:, 0]) * np.cos(deck[:, 1])))
+    observed = np.array([p["deck_pose_observed"] for p in log.periods])
+    valid = np.array([p["deck_pose_valid"] for p in log.periods])
+    seen_tilt = np.degrees(np.arccos(np.cos(observed[:, 3]) * np.cos(observed[:, 4])))
+    height = np.array([p["drone_position_w"][2] - p["deck_position_w"][2] for p in log.periods])
+    fig, (ax_tilt, ax_height) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    ax_tilt.plot(t, true_tilt, "k-", label="deck tilt (truth)")
+    ax_tilt.plot(t[valid], seen_tilt[valid], ".", ms=3, label="deck relative to camera (observed)")
+    ax_tilt.axhline(limit_deg, color="r", linestyle="--", linewidth=1, label="touchdown limit")
+    ax_height.plot(t, height, label="drone centre above deck centre")
+    touchdown = log.final_info.get("touchdown")
+    for ax in (ax_tilt, ax_height):
+        ax.axvline(log.commit_time_s, color="g", linewidth=1.2, label="commit")
+        if touchdown:
+            ax.axvline(touchdown["time_s"], color="m", linewidth=1.2, label="touchdown")
+    ax_tilt.set(ylabel="tilt (deg)", title="Waiting for a calm deck, then the final descent")
+    ax_height.set(xlabel="time (s)", ylabel="height (m)")
+    ax_tilt.legend(fontsize=8)
+    ax_height.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run_timing_demo(
+    seed: int = 0,
+    out_dir: Path = Path("results/demo"),
+    scenario: str = "sea-state-4",
+    policy_name: str = "timing-dqn",
+) -> TimingDemoLog | None:
+    """`make demo`, part 2: the shipped timing policy waits over a sea-state deck and lands.
+
+    The camera is rendered and the tag detected for real (the policy was trained with the
+    projected camera); IHRCF's estimate is in the observation.  Writes
+    ``timing_camera.mp4`` and ``timing_trajectory.png``.  The seed is offset into the held-out
+    range, so that the episode is not one the policy was trained on.
+    """
+    from agents.evaluation.landing import HELD_OUT_SEED, make_env_and_policy
+    from agents.policies import shipped_timing_model
+
+    console = Console()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    model = shipped_timing_model(policy_name.removeprefix("timing-"))
+    if not model.is_file():
+        console.print(f"[yellow]no trained timing policy at {model}: part 2 skipped[/yellow]")
+        return None
+    env, policy = make_env_and_policy(
+        policy_name, scenario, camera_mode="render", render_mode="rgb_array"
+    )
+    base = env.unwrapped
+    base.record_periods = True
+    log = TimingDemoLog()
+    frames: list[np.ndarray] = []
+    try:
+        observation, info = env.reset(seed=HELD_OUT_SEED + seed)
+        policy.reset()
+        log.periods += base.periods_of_last_step
+        frames += base.frames_of_last_step
+        while True:
+            action = policy(observation)
+            observation, _, terminated, truncated, info = env.step(action)
+            if info["committed"] and np.isnan(log.commit_time_s):
+                first = next(p for p in base.periods_of_last_step if p["committed"])
+                log.commit_time_s = first["time_s"] - base.env_dt
+            log.periods += base.periods_of_last_step
+            frames += base.frames_of_last_step
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    log.final_info = info
+    table = Table(title=f"DeckLandingTiming-v0 on {scenario}: {policy_name}")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("outcome", info["outcome"])
+    table.add_row("waited before committing (s)", f"{info['wait_s']:.2f}")
+    table.add_row("forced by the wait limit", str(info["forced_commit"]))
+    table.add_row("final descent (s)", f"{info['descent_s']:.2f}")
+    touchdown = info.get("touchdown")
+    if touchdown:
+        table.add_row("time to land (s)", f"{touchdown['time_s']:.2f}")
+        table.add_row("relative normal speed (m/s)", f"{touchdown['relative_normal_speed']:.3f}")
+        table.add_row("deck tilt (deg)", f"{touchdown['deck_tilt_deg']:.2f}")
+        table.add_row("lateral offset (m)", f"{touchdown['lateral_offset_m']:.3f}")
+        table.add_row("failed checks", ", ".join(touchdown["failed_checks"]) or "none")
+    console.print(table)
+    video = out_dir / "timing_camera.mp4"
+    imageio.mimsave(video, frames, fps=base.config.simulation.env_hz, macro_block_size=1)
+    plot = out_dir / "timing_trajectory.png"
+    plot_timing(log, plot, base.config.touchdown.max_deck_tilt_deg)
+    console.print(f"timing camera video: {video}\ntiming plot: {plot}")
     return log

@@ -6,8 +6,9 @@
 * ``quiescent`` (``DeckLandingTiming-v0``): commit when a calm window at least as long as the
   descent is predicted from the recent deck motion (the classic landing-period heuristic).
 * ``land-now`` (``DeckLandingTiming-v0``): commit at once; the lower bar.
-* ``timing-ppo`` (``DeckLandingTiming-v0``): the trained SB3 policy shipped in
-  ``agents/models/timing_ppo.zip`` (or any model file trained by :mod:`agents.training`).
+* ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
+  ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
+  by :mod:`agents.training`.
 """
 
 from __future__ import annotations
@@ -34,8 +35,16 @@ from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
 
+MODEL_DIR = Path(__file__).resolve().parent / "models"
+
+
+def shipped_timing_model(algo: str) -> Path:
+    """Where the trained timing policy of ``algo`` (``dqn`` or ``ppo``) is installed."""
+    return MODEL_DIR / f"timing_{algo}.zip"
+
+
 #: the trained timing policy shipped with the package
-SHIPPED_TIMING_MODEL = Path(__file__).resolve().parent / "models" / "timing_ppo.zip"
+SHIPPED_TIMING_MODEL = shipped_timing_model("dqn")
 
 _Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
 _VALID = HISTORY_FEATURES.index("valid")
@@ -196,16 +205,16 @@ def _model_class(path: Path) -> Any:
 class TrainedTimingPolicy:
     """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically."""
 
-    name = "timing-ppo"
-
     def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
         self.path = Path(path)
         if not self.path.is_file():
+            algo = "ppo" if "ppo" in self.path.name else "dqn"
             raise FileNotFoundError(
-                f"no trained timing model at {self.path}; train one with "
-                "`deck-landing train timing --config configs/train/timing_ppo.yaml`"
+                f"no trained timing model at {self.path}; train one with `deck-landing train "
+                f"timing --config configs/train/timing_{algo}.yaml --install`"
             )
         self.model = _model_class(self.path).load(self.path, device=device)
+        self.name = f"timing-{'dqn' if type(self.model).__name__ == 'DQN' else 'ppo'}"
 
     def check_layout(self, observation_size: int) -> None:
         """Refuse an environment whose observation does not match the model's."""
@@ -420,6 +429,7 @@ POLICY_ENVS: dict[str, str] = {
     "align-descend": "DeckLanding-v0",
     "quiescent": "DeckLandingTiming-v0",
     "land-now": "DeckLandingTiming-v0",
+    "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
@@ -439,6 +449,7 @@ def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> An
         return LandNowPolicy()
     if name == "quiescent":
         return QuiescentPolicy(base.layout, dt)
-    policy = TrainedTimingPolicy(model_path or SHIPPED_TIMING_MODEL)
+    default = shipped_timing_model(name.removeprefix("timing-"))
+    policy = TrainedTimingPolicy(model_path or default)
     policy.check_layout(base.layout.size)
     return policy

@@ -22,6 +22,7 @@ from __future__ import annotations
 import ast
 import shutil
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
-from agents.policies import SHIPPED_TIMING_MODEL
+from agents.policies import shipped_timing_model
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 
@@ -73,6 +74,9 @@ class TrainSettings:
     out_dir: str = "results/train/timing_ppo"
     #: "subproc" runs one process per environment; "dummy" runs them in this process
     vec_env: Literal["subproc", "dummy"] = "subproc"
+    #: threads of the learner's torch: one, so that the gradient steps do not compete with
+    #: the environment processes for the cores (the network is small)
+    torch_threads: int = 1
 
     def __post_init__(self) -> None:
         require_choice("algo", self.algo, ALGOS)
@@ -80,6 +84,7 @@ class TrainSettings:
         require_range("checkpoint_freq", self.checkpoint_freq, 1)
         require_range("target_success_rate", self.target_success_rate, 0.0)
         require_range("max_minutes", self.max_minutes, 0.0, low_inclusive=False)
+        require_range("torch_threads", self.torch_threads, 1)
 
 
 @dataclass
@@ -230,7 +235,7 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
 
     evaluation = EvalCallback(
         eval_env,
-        # SB3 counts callback steps per vectorised step: divide by the number of environments
+        # SB3 counts callback calls per vectorised step: divide by the number of environments
         eval_freq=max(settings.eval.freq // n_envs, 1),
         n_eval_episodes=settings.eval.episodes,
         best_model_save_path=str(out),
@@ -277,9 +282,11 @@ def train(
     install: bool = False,
 ) -> TrainResult:
     """Train, evaluate and save; with ``install`` copy the best model to the shipped path."""
+    import torch
     from stable_baselines3 import DQN, PPO
 
     settings = config.settings
+    torch.set_num_threads(settings.torch_threads)
     out = Path(out_dir or settings.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "train_config.yaml").write_text(
@@ -303,12 +310,15 @@ def train(
         )
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
-        model.learn(
-            total_timesteps=steps,
-            callback=callbacks,
-            progress_bar=progress_bar,
-            tb_log_name=f"timing_{settings.algo}",
-        )
+        with warnings.catch_warnings():
+            # the evaluation env runs in this process on purpose (a DummyVecEnv of one)
+            warnings.filterwarnings("ignore", message="Training and eval env are not of the same")
+            model.learn(
+                total_timesteps=steps,
+                callback=callbacks,
+                progress_bar=progress_bar,
+                tb_log_name=f"timing_{settings.algo}",
+            )
         model_path = out / f"timing_{settings.algo}_final.zip"
         model.save(model_path)
     finally:
@@ -343,8 +353,9 @@ def train(
     )
     if install:
         source = result.best_model_path or model_path
-        SHIPPED_TIMING_MODEL.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(source, SHIPPED_TIMING_MODEL)
+        target = shipped_timing_model(settings.algo)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
     return result
 
 
@@ -373,7 +384,7 @@ def _train_timing(args: Any) -> int:
         console.print(f"  evaluation at {steps:>8d} steps: success rate {rate:.3f}")
     console.print(f"final model: {result.model_path}\nbest model: {result.best_model_path}")
     if args.install:
-        console.print(f"installed as {SHIPPED_TIMING_MODEL}")
+        console.print(f"installed as {shipped_timing_model(config.settings.algo)}")
     return 0
 
 
@@ -394,6 +405,6 @@ def add_train_parser(subparsers: Any) -> None:
     timing.add_argument(
         "--install",
         action="store_true",
-        help="copy the best model to agents/models/timing_ppo.zip (the shipped policy)",
+        help="copy the best model to agents/models/timing_<algo>.zip (the shipped policy)",
     )
     timing.set_defaults(func=_train_timing)

@@ -31,12 +31,14 @@ from estimation.estimator import (
     BAD_CORNERS,
     DEGENERATE_CORNERS,
     PNP_FAILED,
+    DeckPoseEstimator,
     GuardedEstimator,
     corners_degenerate,
     finish_pose,
     target_corners,
 )
 from estimation.frames import tag_corners_in_tag_frame
+from estimation.landmarks import LandmarkLayout, shortest_side_px
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 REPROJECTION_ERROR = "reprojection_error"
@@ -53,12 +55,15 @@ class ATDAConfig:
     ``history_timeout_s``: an older previous estimate is not used.
     ``max_reprojection_error_px``: a larger RMS error of the chosen pose means the corners
     are not a square's image (invalid).
+    ``joint_landmarks``: on a deck with nested landmarks, estimate from all detected tags
+    at once (:class:`JointAtdaEstimator`) rather than from the chosen one alone.
     """
 
     ambiguity_ratio_threshold: float = 0.6
     history_timeout_s: float = 0.5
     max_reprojection_error_px: float = 10.0
     min_corner_area_px: float = 4.0
+    joint_landmarks: bool = True
 
     def __post_init__(self) -> None:
         require_range(
@@ -194,4 +199,144 @@ class AtdaEstimator(GuardedEstimator):
         estimate = finish_pose(self.name, timestamp, chosen[1], chosen[2], extras)
         if estimate.valid:
             self._previous = (timestamp, chosen[1])
+        return estimate
+
+
+class JointAtdaEstimator(GuardedEstimator):
+    """ATDA over nested landmarks: one PnP over the corners of every detected tag.
+
+    With two or more tags of the layout detected (each side >= ``min_side_px``), their
+    corners in D (:meth:`Landmark.corners_d`) and pixels go into one planar PnP (IPPE, then
+    Levenberg–Marquardt refinement), which gives ``T_CD`` directly; the points spread over
+    the whole layout, so the pose is better conditioned than from any one tag (measured in
+    render mode on the high-approach deck: 21 mm against 68 mm at 10 m, 8 against 13 mm at
+    5 m, 3.9 against 6.1 mm at 2 m).  With fewer tags, ``single`` (the per-landmark ATDA of
+    :class:`~estimation.landmarks.LandmarkEstimator`) estimates instead.
+    """
+
+    name = "atda"
+
+    def __init__(
+        self,
+        *,
+        intrinsics: CameraIntrinsics,
+        layout: LandmarkLayout,
+        single: DeckPoseEstimator,
+        min_side_px: float = 12.0,
+        config: ATDAConfig | None = None,
+    ) -> None:
+        self.intrinsics = intrinsics
+        self.layout = layout
+        self.single = single
+        self.min_side_px = float(min_side_px)
+        self.config = config or ATDAConfig()
+        self._k = intrinsics.matrix
+        self._no_dist = np.zeros(5)
+        self._undistorter = geometry.Undistorter(intrinsics)
+        self._previous: tuple[float, np.ndarray] | None = None
+
+    def reset(self) -> None:
+        self.single.reset()
+        self._previous = None
+
+    def _pick(self, timestamp: float, solutions: list) -> tuple[int, float, bool]:
+        """Index of the IPPE solution to refine, the ambiguity ratio and whether the previous
+        estimate decided (the rule of :class:`AtdaEstimator`)."""
+        order = sorted(range(len(solutions)), key=lambda i: solutions[i][0])
+        if len(order) < 2:
+            return order[0], math.nan, False
+        best, second = solutions[order[0]], solutions[order[1]]
+        ratio = 1.0 if second[0] <= 0.0 else best[0] / second[0]
+        previous = self._previous
+        if (
+            ratio >= self.config.ambiguity_ratio_threshold
+            and previous is not None
+            and 0.0 <= timestamp - previous[0] <= self.config.history_timeout_s
+        ):
+            closest = max(order[:2], key=lambda i: float(np.sum(previous[1] * solutions[i][1])))
+            return closest, ratio, closest != order[0]
+        return order[0], ratio, False
+
+    def _joint_inputs(self, frame: CameraFrame) -> tuple[list[int], np.ndarray, np.ndarray]:
+        """Ids, object points in D (N x 3) and pixels (N x 2) of the usable detections."""
+        ids: list[int] = []
+        objects, pixels = [], []
+        for detection in frame.detections:
+            landmark = self.layout.by_id(detection.tag_id)
+            if landmark is None or landmark.tag_id in ids:
+                continue
+            corners = np.asarray(detection.corners_px, dtype=float)
+            if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
+                continue
+            if corners_degenerate(corners, self.config.min_corner_area_px):
+                continue
+            if not shortest_side_px(corners) >= self.min_side_px:
+                continue
+            ids.append(landmark.tag_id)
+            objects.append(landmark.corners_d())
+            pixels.append(corners)
+        if len(ids) < 2:
+            return ids, np.empty((0, 3)), np.empty((0, 2))
+        return ids, np.vstack(objects), np.vstack(pixels)
+
+    def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        timestamp = float(frame.timestamp)
+        ids, objects, pixels = self._joint_inputs(frame)
+        if len(ids) < 2:
+            return self.single.estimate(frame, ranges)
+        if self._undistorter.active:
+            pixels = self._undistorter(pixels)
+            if not np.all(np.isfinite(pixels)):
+                return DeckPoseEstimate.invalid(self.name, timestamp, BAD_CORNERS)
+        # as in AtdaEstimator._solutions: solve with the layout turned by half a turn when
+        # D's x axis points left in the image (OpenCV's rotation vectors lose precision
+        # near 180 degrees), and turn the result back
+        first = pixels[:4]
+        half_turn = bool(first[1, 0] + first[2, 0] - first[0, 0] - first[3, 0] < 0.0)
+        flip = np.array([-1.0, -1.0, 1.0])
+        points = objects * flip if half_turn else objects
+        image = pixels.reshape(-1, 1, 2)
+        count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+            points, image, self._k, self._no_dist, flags=cv2.SOLVEPNP_IPPE
+        )
+        errors = np.asarray(errors, dtype=float).reshape(-1)
+        # (error, R_CD, rvec, tvec) of the finite solutions in front of the camera
+        solutions = []
+        for k in range(int(count)):
+            rvec, tvec = np.asarray(rvecs[k], dtype=float), np.asarray(tvecs[k], dtype=float)
+            finite = np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))
+            if finite and np.isfinite(errors[k]) and tvec.reshape(3)[2] > 0.0:
+                rotation, _ = cv2.Rodrigues(rvec)
+                solutions.append(
+                    (errors[k], rotation * flip if half_turn else rotation, rvec, tvec)
+                )
+        if not solutions:
+            return DeckPoseEstimate.invalid(self.name, timestamp, PNP_FAILED)
+        chosen, ratio, by_history = self._pick(timestamp, solutions)
+        rvec, tvec = cv2.solvePnPRefineLM(
+            points, image, self._k, self._no_dist, solutions[chosen][2], solutions[chosen][3]
+        )
+        rotation, _ = cv2.Rodrigues(rvec)
+        translation = np.asarray(tvec, dtype=float).reshape(3)
+        projected, _ = cv2.projectPoints(points, rvec, tvec, self._k, self._no_dist)
+        rms = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - pixels) ** 2, axis=1))))
+        if not rms <= self.config.max_reprojection_error_px:
+            return DeckPoseEstimate.invalid(self.name, timestamp, REPROJECTION_ERROR)
+        if half_turn:
+            rotation = rotation * flip  # R_CD = R' Rz(180°): negate the first two columns
+        # reported as the landmark: the largest in the image (the single-tag rule's pick)
+        sides = [shortest_side_px(pixels[4 * i : 4 * i + 4]) for i in range(len(ids))]
+        largest = int(np.argmax(sides))
+        extras = {
+            "ambiguity_ratio": ratio,
+            "reprojection_error_px": rms,
+            "chosen_by_history": by_history,
+            "solver": "joint_ippe",
+            "landmark_id": ids[largest],
+            "landmark_ids": tuple(ids),
+            "landmark_side_px": sides[largest],
+        }
+        estimate = finish_pose(self.name, timestamp, rotation, translation, extras)
+        if estimate.valid:
+            self._previous = (timestamp, rotation)
         return estimate

@@ -8,6 +8,7 @@ invalid or NaN range, degenerate geometry or non-finite numbers give
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
@@ -296,6 +297,38 @@ class RangeFusionEstimator(GuardedEstimator):
         extras["rigid_rms_m"] = fit.rms_residual
         extras["touch_points_extrapolated"] = inputs.extrapolated
         return finish_pose(self.name, timestamp, fit.rotation, fit.translation, extras)
+
+
+class RankedEstimator:
+    """The first valid estimate of several estimators, in rank order (``auto`` in the env).
+
+    E.g. ``(ihrcf, atda)``: IHRCF wherever all four ToF rays return (near the deck), ATDA
+    above the ToF range, where IHRCF is invalid (``range_invalid``).  Every estimator runs
+    each frame so that its state stays current; ``extras["source"]`` names the one used.
+    An invalid result has the last-ranked one's reason, and all of them in
+    ``extras["reasons"]``.
+    """
+
+    def __init__(self, name: str, estimators: tuple[DeckPoseEstimator, ...]) -> None:
+        if not estimators:
+            raise ValueError("a ranked estimator needs at least one estimator")
+        self.name = name
+        self.estimators = estimators
+
+    def reset(self) -> None:
+        for estimator in self.estimators:
+            estimator.reset()
+
+    def estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        results = [estimator.estimate(frame, ranges) for estimator in self.estimators]
+        for estimator, result in zip(self.estimators, results, strict=True):
+            if result.valid:
+                extras = {**result.extras, "source": estimator.name}
+                return dataclasses.replace(result, method=self.name, extras=extras)
+        # the last-ranked estimator needs the least, so its reason says most
+        reasons = {e.name: r.reason for e, r in zip(self.estimators, results, strict=True)}
+        last = results[-1]
+        return dataclasses.replace(last, method=self.name, extras={"reasons": reasons})
 
 
 def make_estimator(

@@ -15,6 +15,7 @@ import yaml
 
 from estimation.atda import ATDAConfig
 from estimation.crhf import CRHFConfig
+from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -23,15 +24,20 @@ from landing_env.physics.wind import WindConfig
 from landing_env.scene.deck import DeckSurfaceConfig
 from landing_env.sensors.camera import CameraConfig
 from landing_env.sensors.imu import ImuConfig
+from landing_env.sensors.rangefinder import RangefinderConfig
 from landing_env.sensors.tof import TofConfig
 from landing_env.stewart.kinematics import StewartGeometry
 from landing_env.stewart.motion import MotionConfig
+from landing_env.vision_link import VisionLinkConfig
 
 #: Scenario and training configs shipped with the project.
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 
 #: Names an estimator can have in ``estimation.observed`` / ``estimation.compare``.
-ESTIMATOR_NAMES = ("truth", "atda", "ihrcf", "crhf")
+ESTIMATOR_NAMES = ("truth", "atda", "ihrcf", "crhf", "beacon", "auto", "fused")
+
+#: ``auto``: the first valid of these (IHRCF within ToF range, ATDA above it)
+AUTO_RANKING = ("ihrcf", "atda")
 
 #: Where the estimators' calibrations come from: a calibration file or the exact model.
 CALIBRATION_SOURCES = ("file", "exact")
@@ -100,6 +106,9 @@ class StartConfig:
     height_m: tuple[float, float] = (1.8, 2.2)
     #: maximum horizontal offset from the deck centre, metres
     max_offset_m: float = 0.3
+    #: minimum horizontal offset, metres (equal to max_offset_m: a fixed distance at a
+    #: random bearing, e.g. the high approach's 5 m)
+    min_offset_m: float = 0.0
     #: maximum |yaw| at the start, degrees
     max_yaw_deg: float = 10.0
 
@@ -108,6 +117,7 @@ class StartConfig:
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
         require_range("max_offset_m", self.max_offset_m, 0.0)
+        require_range("min_offset_m", self.min_offset_m, 0.0, self.max_offset_m)
         require_range("max_yaw_deg", self.max_yaw_deg, 0.0, 180.0)
 
 
@@ -174,6 +184,11 @@ class EstimationConfig:
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
     crhf: CRHFConfig = field(default_factory=CRHFConfig)
+    #: the ``fused`` estimator: EKF of the IMU with the (delayed) poses of ``fusion.sources``
+    #: and the ToF ranges (estimation/fusion/)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
+    #: latency, irregular rate and dropouts of the camera-based estimates (off by default)
+    vision_link: VisionLinkConfig = field(default_factory=VisionLinkConfig)
 
     def __post_init__(self) -> None:
         require_choice("observed", self.observed, ESTIMATOR_NAMES)
@@ -184,7 +199,11 @@ class EstimationConfig:
         require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
         require_range("max_bridged_frames", self.max_bridged_frames, 0)
         names = {self.observed, *self.compare}
-        if self.intrinsics == "file" and names & {"atda", "ihrcf", "crhf"}:
+        if "auto" in names:
+            names |= set(AUTO_RANKING)
+        if "fused" in names:
+            names |= set(self.fusion.sources)
+        if self.intrinsics == "file" and names & {"atda", "ihrcf", "crhf", "beacon"}:
             _require_file("intrinsics_file", self.intrinsics_path)
         if self.tof_calibration == "file" and names & {"ihrcf", "crhf"}:
             _require_file("tof_calibration_file", self.tof_calibration_path)
@@ -245,6 +264,8 @@ class DeckLandingConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     tof: TofConfig = field(default_factory=TofConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
+    #: the downward long-range rangefinder (observation ``range_down``)
+    rangefinder: RangefinderConfig = field(default_factory=RangefinderConfig)
 
 
 def available_configs() -> list[str]:

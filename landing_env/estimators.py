@@ -11,18 +11,22 @@ pose falls outside the observation's bounds) gives an invalid estimate with its 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from estimation.atda import JointAtdaEstimator
 from estimation.camera_model import CameraIntrinsics
-from estimation.estimator import DeckPoseEstimator, make_estimator
+from estimation.estimator import DeckPoseEstimator, RankedEstimator, make_estimator
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
+from estimation.landmarks import LandmarkChoiceConfig, LandmarkEstimator
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, TrackedEstimator
-from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
-from landing_env.config import DeckLandingConfig
+from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
+from landing_env.config import AUTO_RANKING, DeckLandingConfig
 from landing_env.errors import ConfigError
+from landing_env.vision_link import VisionStage
 
 if TYPE_CHECKING:
     from landing_env.world import World
@@ -156,11 +160,18 @@ class EstimatorBank:
         self.config = config
         self.pose_bounds = pose_bounds
         names = list(dict.fromkeys((config.estimation.observed, *config.estimation.compare)))
+        # `fused` runs after the per-frame estimators (VisionStage), on its sources' output
+        fusion = config.estimation.fusion if "fused" in names else None
+        if fusion is not None:
+            names = [n for n in dict.fromkeys((*names, *fusion.sources)) if n != "fused"]
         self._intrinsics: CameraIntrinsics | None = None
         self._tof_calibration: TofCameraCalibration | None = None
         self.estimators: dict[str, DeckPoseEstimator | TruthEstimator] = {
             name: self._make(name, world) for name in names
         }
+        self._world = world
+        mounts = np.asarray(config.tof.mount_offsets_c, dtype=float)
+        self.vision = VisionStage(config.estimation.vision_link, fusion, mounts, world.t_bc)
 
     @property
     def intrinsics(self) -> CameraIntrinsics:
@@ -179,6 +190,34 @@ class EstimatorBank:
     def _make(self, name: str, world: World) -> DeckPoseEstimator | TruthEstimator:
         if name == "truth":
             return TruthEstimator(world)
+        if name == "beacon":
+            return _make_beacon(self.intrinsics, self.config, world)
+        if name == "auto":
+            # its own instances: the ranked ones may also be compared under their names
+            return RankedEstimator(name, tuple(self._make(n, world) for n in AUTO_RANKING))
+        layout = self.config.deck.layout
+        if layout.is_single_centred:
+            only = layout.landmarks[0]
+            return self._make_for_tag(name, only.tag_id, only.size)
+        # nested landmarks: one estimator per tag, run on the chosen one, reporting T_CD of D;
+        # the ToF estimators prefer the tag nearest the landing point (estimation.landmarks)
+        choice = LandmarkChoiceConfig(prefer="nearest" if name in ("ihrcf", "crhf") else "largest")
+        single = LandmarkEstimator(
+            name, layout, lambda lm: self._make_for_tag(name, lm.tag_id, lm.size), choice
+        )
+        atda = self.config.estimation.atda
+        if name != "atda" or not atda.joint_landmarks:
+            return single
+        # ATDA: one PnP over every detected tag, the chosen tag alone when only one is seen
+        return JointAtdaEstimator(
+            intrinsics=self.intrinsics,
+            layout=layout,
+            single=single,
+            min_side_px=choice.min_side_px,
+            config=atda,
+        )
+
+    def _make_for_tag(self, name: str, tag_id: int, tag_size: float) -> DeckPoseEstimator:
         cfg = self.config
         est = cfg.estimation
         mounts = np.asarray(cfg.tof.mount_offsets_c, dtype=float)
@@ -188,8 +227,8 @@ class EstimatorBank:
                 name,
                 # IHRCF and CRHF need no K: they only undistort with it (when it has distortion)
                 intrinsics=self.intrinsics,
-                tag_size=cfg.deck.tag_size,
-                tag_id=cfg.deck.tag_id,
+                tag_size=tag_size,
+                tag_id=tag_id,
                 tof_calibration=self.tof_calibration if needs_tof else None,
                 tof_positions_c=mounts if needs_tof else None,
                 config=getattr(est, name),
@@ -203,11 +242,16 @@ class EstimatorBank:
             estimator = TrackedEstimator(estimator, tracker, name=name)
         return estimator
 
-    def reset(self) -> None:
+    def reset(self, rng: np.random.Generator | None = None) -> None:
+        """A new episode (``rng``: the env's generator, for the vision link's stream)."""
         for estimator in self.estimators.values():
             estimator.reset()
+        self.vision.reset(rng)
 
-    def estimate(self, frame: CameraFrame, ranges: RangeReading) -> dict[str, DeckPoseEstimate]:
+    def estimate(
+        self, frame: CameraFrame, ranges: RangeReading, imu_samples: Sequence[ImuSample] = ()
+    ) -> dict[str, DeckPoseEstimate]:
+        """Every estimate of this frame, through the vision link and the fusion (if set)."""
         results = {}
         for name, estimator in self.estimators.items():
             try:
@@ -217,6 +261,15 @@ class EstimatorBank:
                     name, frame.timestamp, f"estimator error: {type(exc).__name__}: {exc}"
                 )
             results[name] = self._within_bounds(estimate)
+        r_wb = self._world.drone_state().rotation_wb
+        results = self.vision.process(frame.timestamp, results, ranges, imu_samples, r_wb)
+        if "fused" in results:
+            fused = self._within_bounds(results["fused"])
+            if fused.valid and fused.covariance is not None and self.pose_bounds is not None:
+                # a 1-sigma beyond the observation's range says nothing: refuse, never clip
+                if not np.all(_std(fused.covariance) <= self.pose_bounds[1]):
+                    fused = DeckPoseEstimate.invalid("fused", fused.timestamp, OUT_OF_BOUNDS)
+            results["fused"] = fused
         return results
 
     def _within_bounds(self, estimate: DeckPoseEstimate) -> DeckPoseEstimate:
@@ -238,6 +291,28 @@ class EstimatorBank:
         )
 
 
+def _make_beacon(
+    intrinsics: CameraIntrinsics, config: DeckLandingConfig, world: World
+) -> DeckPoseEstimator:
+    """The IR-LOCK-style ``beacon`` estimator: tag-centre bearing + the downward rangefinder
+    (position only; its orientation is reported level, ``orientation_known = False``)."""
+    from estimation.beacon import BeaconConfig, BeaconEstimator
+
+    # the rangefinder's origin below the camera along the optical axis (+z_C = -z_B)
+    offset = float(world.t_bc[2] - config.rangefinder.mount_offset_b[2])
+
+    def one(tag_id: int) -> BeaconEstimator:
+        return BeaconEstimator(
+            intrinsics, tag_id, lambda: world.last_range_down, BeaconConfig(range_offset_m=offset)
+        )
+
+    layout = config.deck.layout
+    if layout.is_single_centred:
+        return one(layout.landmarks[0].tag_id)
+    # nested landmarks: the chosen tag's centre, moved to D's origin under the level assumption
+    return LandmarkEstimator("beacon", layout, lambda lm: one(lm.tag_id))
+
+
 def describe_estimate(estimate: DeckPoseEstimate) -> dict:
     """The estimate as ``info["estimates"][name]`` carries it (numpy scalars made plain)."""
     extras = {
@@ -250,7 +325,14 @@ def describe_estimate(estimate: DeckPoseEstimate) -> dict:
         "reason": estimate.reason,
         "predicted": estimate.predicted,
         "extras": extras,
+        # 1-sigma of (x, y, z, roll, pitch, yaw) where the method gives a covariance (fused)
+        **({"std": _std(estimate.covariance)} if estimate.covariance is not None else {}),
     }
+
+
+def _std(covariance: np.ndarray) -> np.ndarray:
+    # the clip only removes round-off below zero on the diagonal of a PSD matrix
+    return np.sqrt(np.clip(np.diag(covariance), 0.0, None))
 
 
 __all__ = [

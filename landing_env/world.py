@@ -17,14 +17,16 @@ import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_BC, R_PD, deck_pose_in_camera
+from estimation.landmarks import landmark_pose_w
 from estimation.types import CameraFrame, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body
-from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.camera import CameraSensor, TagPlacement
 from landing_env.sensors.imu import ImuModel
+from landing_env.sensors.rangefinder import Rangefinder
 from landing_env.sensors.tof import TofArray
 from landing_env.stewart.motion import make_motion_source
 from landing_env.stewart.platform import StewartPlatform, StewartStatus
@@ -41,6 +43,9 @@ TOP_PLATE_MASS_KG = 15.0
 #: below this height of the drone above the deck's home surface, contacts are checked every
 #: physics step; it exceeds the deck's heave reach plus the feet's depth with a wide margin
 CONTACT_WATCH_HEIGHT_M = 0.8
+#: ... for a deck up to 1 m square; a larger deck's corners rise further as it tilts, so the
+#: height grows by its extra half-diagonal times the sine of this tilt (beyond the workspace)
+CONTACT_WATCH_TILT_DEG = 15.0
 
 
 @dataclass
@@ -125,8 +130,16 @@ class World:
         )
         home_position, _ = self.stewart.home_pose_w()
         self.deck_home_w = np.asarray(home_position, dtype=float)
+        extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
+        self.contact_watch_height_m = CONTACT_WATCH_HEIGHT_M + extra_half_diagonal * math.sin(
+            math.radians(CONTACT_WATCH_TILT_DEG)
+        )
         self.camera = CameraSensor(c, config.camera, rng)
+        self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
+        self.rangefinder = Rangefinder(c, config.rangefinder, rng)
+        #: the latest downward rangefinder reading (for estimators that use it: ``beacon``)
+        self.last_range_down = RangeReading(0.0, np.full(1, np.nan), np.zeros(1, dtype=bool))
         self.imu = ImuModel(config.imu, rng, sim.physics_hz)
         self.wind = WindModel(config.wind, rng)
         self.time = 0.0
@@ -146,6 +159,9 @@ class World:
         self.imu.rng = streams[3]
         self.imu.reset()
         self.wind = WindModel(self.config.wind, streams[4])
+        # a stream of its own: the other sensors' streams are unchanged by its addition
+        self.rangefinder.rng = rng.spawn(1)[0]
+        self.last_range_down = RangeReading(0.0, np.full(1, np.nan), np.zeros(1, dtype=bool))
         self.time = 0.0
         self.stewart.reset(0.0)
         self.drone.reset(position_w, yaw)
@@ -179,7 +195,7 @@ class World:
         cid = self.client._client
         dt = self.dt
         idle = [self.params.omega_min] * 4
-        watch_below = self.deck_home_w[2] + CONTACT_WATCH_HEIGHT_M
+        watch_below = self.deck_home_w[2] + self.contact_watch_height_m
         # the hot loop works on plain floats: small numpy arrays cost more than the physics
         times: list[float] = []
         rotations: list[tuple[float, ...]] = []
@@ -326,19 +342,25 @@ class World:
         return self._capture(t_wc, r_wc, deck)
 
     def _capture(self, t_wc: np.ndarray, r_wc: np.ndarray, deck: DeckState) -> CameraFrame:
-        return self.camera.capture(
-            self.time,
-            t_wc,
-            r_wc,
-            deck.tag_centre_w,
-            deck.rotation_wd,
-            self.config.deck.tag_size,
-            self.config.deck.tag_id,
-        )
+        # every landmark of the deck (one centred tag by default), placed from the deck frame D
+        t_wd = deck.tag_centre_w
+        tags = [
+            TagPlacement(lm.tag_id, lm.size, *landmark_pose_w(t_wd, deck.rotation_wd, lm))
+            for lm in self._landmarks
+        ]
+        return self.camera.capture_tags(self.time, t_wc, r_wc, tags)
 
     def measure_ranges(self) -> RangeReading:
         state = self.drone_state()
         return self.tof.measure(self.time, state.position_w, state.rotation_wb, self.drone.body_id)
+
+    def measure_range_down(self) -> RangeReading:
+        """The downward rangefinder's reading now (also kept as ``last_range_down``)."""
+        state = self.drone_state()
+        self.last_range_down = self.rangefinder.measure(
+            self.time, state.position_w, state.rotation_wb, self.drone.body_id
+        )
+        return self.last_range_down
 
     def close(self) -> None:
         try:

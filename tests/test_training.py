@@ -24,21 +24,25 @@ from landing_env.errors import ConfigError
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "timing_ppo.yaml"
 
 
-def test_the_yaml_is_rl_zoo_style_and_complete() -> None:
-    from stable_baselines3 import PPO
+@pytest.mark.parametrize("algo", ["ppo", "dqn"])
+def test_the_yamls_are_rl_zoo_style_and_complete(algo: str) -> None:
+    from stable_baselines3 import DQN, PPO
 
-    data = yaml.safe_load(CONFIG.read_text())
+    path = CONFIG.with_name(f"timing_{algo}.yaml")
+    data = yaml.safe_load(path.read_text())
     zoo = data[ENV_ID]
-    # every key of the zoo section is a zoo meta key or a PPO keyword argument
-    ppo_args = set(inspect.signature(PPO.__init__).parameters)
-    assert set(zoo) <= set(ZOO_META_KEYS) | ppo_args
+    # every key of the zoo section is a zoo meta key or a keyword argument of the algorithm
+    algo_args = set(inspect.signature({"ppo": PPO, "dqn": DQN}[algo].__init__).parameters)
+    assert set(zoo) <= set(ZOO_META_KEYS) | algo_args
     assert isinstance(zoo["policy_kwargs"], str) and zoo["policy_kwargs"].startswith("dict(")
-    config = load_train_config(CONFIG)
-    assert config.settings.algo == "ppo" and config.n_envs == 2
+    config = load_train_config(path)
+    assert config.settings.algo == algo and config.n_envs == 2
     assert config.settings.env_kwargs["overrides"]["estimation.observed"] in ("ihrcf", "crhf")
     kwargs = algorithm_kwargs(config.hyperparams)
     assert "n_envs" not in kwargs and "n_timesteps" not in kwargs
-    assert isinstance(kwargs["policy_kwargs"]["net_arch"], dict)
+    # PPO: separate actor and critic networks; DQN: one Q-network
+    net_arch = kwargs["policy_kwargs"]["net_arch"]
+    assert isinstance(net_arch, dict if algo == "ppo" else list)
 
 
 def test_zoo_policy_kwargs_strings_are_parsed_without_eval() -> None:
@@ -68,9 +72,14 @@ def test_a_short_training_run_saves_a_policy_that_loads_again(tmp_path: Path) ->
 
     config = load_train_config(CONFIG)
     settings = config.settings
-    # a quick variant of the task: short history, short settle, a small network
-    settings.env_kwargs["timing"] = {"history_s": 0.5, "wait_limit_s": 2.0}
-    settings.env_kwargs["overrides"]["touchdown.settle_time_s"] = 0.2
+    # a quick variant of the task: short history, low hold, short settle, a small network
+    settings.env_kwargs["timing"] = {
+        "history_s": 0.25,
+        "rate_window_s": 0.2,
+        "hold_height_m": 0.45,
+        "wait_limit_s": 2.0,
+    }
+    settings.env_kwargs["overrides"]["touchdown.settle_time_s"] = 0.1
     settings.eval.freq = 1024
     settings.eval.episodes = 3
     settings.checkpoint_freq = 1024
@@ -92,7 +101,7 @@ def test_a_short_training_run_saves_a_policy_that_loads_again(tmp_path: Path) ->
 @pytest.mark.skipif(not SHIPPED_TIMING_MODEL.is_file(), reason="no shipped timing model")
 def test_the_shipped_policy_beats_land_now_on_held_out_seeds() -> None:
     episodes, first = 24, 2_000_000
-    learned = evaluate_policy("timing-ppo", "sea-state-4", episodes, first)
+    learned = evaluate_policy("timing-dqn", "sea-state-4", episodes, first)
     now = evaluate_policy("land-now", "sea-state-4", episodes, first)
     learned_rate = np.mean([r.success for r in learned])
     now_rate = np.mean([r.success for r in now])

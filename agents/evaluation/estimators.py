@@ -33,7 +33,7 @@ AXIS_UNITS: tuple[str, ...] = ("m", "m", "m", "deg", "deg", "deg")
 #: the reference, never scored against itself
 TRUTH = "truth"
 #: display names of the estimators
-DISPLAY_NAMES: dict[str, str] = {"atda": "ATDA", "ihrcf": "IHRCF", "crhf": "CRHF"}
+DISPLAY_NAMES: dict[str, str] = {"atda": "ATDA", "ihrcf": "IHRCF", "crhf": "CRHF", "fused": "Fused"}
 
 
 @dataclass(frozen=True)
@@ -139,6 +139,11 @@ class EstimatorTrace:
     valid: np.ndarray
     predicted: np.ndarray
     reasons: list[str]
+    #: 1-sigma per axis (m, rad) where the estimator gives one (``fused``), else None
+    std: np.ndarray | None = None
+    #: capture time of the image the shown estimate came from (the vision link), s; NaN
+    #: where the estimate is not delayed
+    capture_time_s: np.ndarray | None = None
 
 
 @dataclass
@@ -174,6 +179,9 @@ class ScenarioRecord:
             arrays[f"{name}.valid"] = trace.valid
             arrays[f"{name}.predicted"] = trace.predicted
             arrays[f"{name}.reasons"] = np.asarray(trace.reasons, dtype=str)
+            for extra in ("std", "capture_time_s"):
+                if getattr(trace, extra) is not None:
+                    arrays[f"{name}.{extra}"] = getattr(trace, extra)
         arrays["meta"] = np.asarray(
             json.dumps({"scenario": self.scenario, "seed": self.seed, "wall": self.wall_time_s})
         )
@@ -196,6 +204,10 @@ class ScenarioRecord:
                         valid=data[f"{n}.valid"],
                         predicted=data[f"{n}.predicted"],
                         reasons=[str(r) for r in data[f"{n}.reasons"]],
+                        std=data[f"{n}.std"] if f"{n}.std" in data.files else None,
+                        capture_time_s=data[f"{n}.capture_time_s"]
+                        if f"{n}.capture_time_s" in data.files
+                        else None,
                     )
                     for n in names
                 },
@@ -226,6 +238,8 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
     valid: dict[str, list[bool]] = {n: [] for n in names}
     predicted: dict[str, list[bool]] = {n: [] for n in names}
     reasons: dict[str, list[str]] = {n: [] for n in names}
+    stds: dict[str, list[np.ndarray]] = {n: [] for n in names}
+    captures: dict[str, list[float]] = {n: [] for n in names}
 
     def record(info: dict[str, Any]) -> None:
         times.append(float(info["time_s"]))
@@ -241,6 +255,8 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
             valid[name].append(ok)
             predicted[name].append(bool(estimate["predicted"]))
             reasons[name].append(str(estimate["reason"]))
+            stds[name].append(np.asarray(estimate.get("std", np.full(6, np.nan)), dtype=float))
+            captures[name].append(float(estimate["extras"].get("capture_time_s", np.nan)))
 
     hover = np.zeros(4, dtype=np.float32)  # ignored: the drone is pinned
     start = time.perf_counter()
@@ -270,6 +286,8 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
                 valid=np.asarray(valid[n], dtype=bool),
                 predicted=np.asarray(predicted[n], dtype=bool),
                 reasons=reasons[n],
+                std=np.asarray(stds[n]) if np.isfinite(stds[n]).any() else None,
+                capture_time_s=np.asarray(captures[n]) if np.isfinite(captures[n]).any() else None,
             )
             for n in names
         },
@@ -518,4 +536,8 @@ def evaluate_estimators(
         from agents.evaluation.plots import plot_all
 
         files += plot_all(record, out)
+        if "fused" in record.estimates:
+            from agents.evaluation.fusion_plot import plot_fusion_dropout
+
+            files.append(plot_fusion_dropout(record, out / "fusion_dropout.png"))
     return EvaluationResult(record, metrics, rows, out, files)

@@ -108,8 +108,12 @@ def make_env_and_policy(
     camera_mode: str = "project",
     model_path: str | None = None,
     render_mode: str | None = None,
+    extra_overrides: dict[str, Any] | None = None,
 ) -> tuple[Any, Any]:
-    """The environment the policy acts in, configured for ``scenario``, and the policy."""
+    """The environment the policy acts in, configured for ``scenario``, and the policy.
+
+    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``.
+    """
     import gymnasium as gym
 
     import landing_env  # noqa: F401  (registers the environments)
@@ -117,7 +121,10 @@ def make_env_and_policy(
 
     require_choice("policy", policy_name, tuple(POLICY_ENVS))
     env_id = POLICY_ENVS[policy_name]
-    overrides = scenario_overrides(scenario, env_id, estimator, camera_mode)
+    overrides = {
+        **scenario_overrides(scenario, env_id, estimator, camera_mode),
+        **(extra_overrides or {}),
+    }
     env = gym.make(
         env_id, config=SCENARIOS[scenario].config, overrides=overrides, render_mode=render_mode
     )
@@ -158,10 +165,12 @@ def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: st
     return result
 
 
-def _run_chunk(job: tuple[str, str, list[int], str, str, str | None]) -> list[EpisodeResult]:
+def _run_chunk(job: tuple) -> list[EpisodeResult]:
     """Worker: one environment, a list of seeds (top level, so that it pickles)."""
-    policy_name, scenario, seeds, estimator, camera_mode, model_path = job
-    env, policy = make_env_and_policy(policy_name, scenario, estimator, camera_mode, model_path)
+    policy_name, scenario, seeds, estimator, camera_mode, model_path, extra = job
+    env, policy = make_env_and_policy(
+        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides=extra
+    )
     try:
         return [run_episode(env, policy, seed, policy_name, scenario) for seed in seeds]
     finally:
@@ -178,13 +187,22 @@ def evaluate_policy(
     model_path: str | None = None,
     workers: int = 1,
     progress: bool = False,
+    extra_overrides: dict[str, Any] | None = None,
 ) -> list[EpisodeResult]:
     """``episodes`` episodes of one policy on one scenario, over ``workers`` processes."""
     seeds = list(range(first_seed, first_seed + episodes))
     # small chunks keep both workers busy to the end and let the progress bar move
     size = max(1, min(25, math.ceil(episodes / max(workers, 1))))
     jobs = [
-        (policy_name, scenario, seeds[i : i + size], estimator, camera_mode, model_path)
+        (
+            policy_name,
+            scenario,
+            seeds[i : i + size],
+            estimator,
+            camera_mode,
+            model_path,
+            extra_overrides,
+        )
         for i in range(0, len(seeds), size)
     ]
     results: list[EpisodeResult] = []
@@ -393,6 +411,7 @@ def evaluate_landing(
     workers: int = 2,
     progress: bool = True,
     command: str = "",
+    extra_overrides: dict[str, Any] | None = None,
 ) -> LandingEvaluation:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure."""
     if episodes < 1:
@@ -409,6 +428,7 @@ def evaluate_landing(
             model_path,
             workers,
             progress,
+            extra_overrides,
         )
     summaries = [summarise(rs) for rs in results.values()]
     files: list[Path] = []
@@ -435,6 +455,7 @@ def evaluate_landing(
                     "estimator": estimator,
                     "camera_mode": camera_mode,
                     "first_seed": first_seed,
+                    "overrides": extra_overrides or {},
                     "command": command,
                     "summaries": [asdict(s) for s in summaries],
                 },
@@ -454,6 +475,19 @@ def evaluate_landing(
 
 
 # ------------------------------------------------------------------------------ command line
+def _parse_overrides(pairs: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` pairs (dotted keys, YAML values) as an overrides mapping."""
+    import yaml
+
+    overrides: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set", f"{pair!r} is not KEY=VALUE (e.g. tof.noise=vl53l1x)")
+        overrides[key.strip()] = yaml.safe_load(value)
+    return overrides
+
+
 def _evaluate_landing(args: argparse.Namespace) -> int:
     import shlex
     import sys
@@ -478,6 +512,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             args.workers,
             progress=not args.no_progress,
             command=command,
+            extra_overrides=_parse_overrides(args.set),
         )
         console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
         print(markdown_table(evaluation.summaries))
@@ -511,6 +546,13 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--workers", type=int, default=2, help="parallel processes")
     landing.add_argument("--out", default="results/landing", help="output directory")
     landing.add_argument("--no-progress", action="store_true")
+    landing.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="dotted config overrides applied last, e.g. tof.noise=vl53l1x",
+    )
     landing.set_defaults(func=_evaluate_landing)
 
 

@@ -33,6 +33,8 @@ class Sensing:
     frame: CameraFrame
     ranges: RangeReading
     estimates: dict[str, DeckPoseEstimate]
+    #: the downward rangefinder (shape (1,), NaN when invalid)
+    range_down: RangeReading | None = None
 
 
 class DeckLandingBaseEnv(gym.Env):
@@ -74,8 +76,18 @@ class DeckLandingBaseEnv(gym.Env):
                 "tof_range": spaces.Box(0.0, tof_max, shape=(4,), dtype=np.float32),
                 "tof_valid": spaces.MultiBinary(4),
                 "imu": spaces.Box(-IMU_HIGH, IMU_HIGH, dtype=np.float32),
+                "range_down": spaces.Box(
+                    0.0, float(self.config.rangefinder.max_range), shape=(1,), dtype=np.float32
+                ),
+                "range_down_valid": spaces.MultiBinary(1),
             }
         )
+        if self.config.estimation.observed == "fused":
+            # the fused estimate's 1-sigma (x, y, z, roll, pitch, yaw); zeros when invalid
+            std_space = spaces.Box(0.0, POSE_HIGH, dtype=np.float32)
+            self.observation_space = spaces.Dict(
+                {**self.observation_space.spaces, "deck_pose_std": std_space}
+            )
         self._steps = 0
         self._sensing: Sensing | None = None
         self._report = PhysicsReport()
@@ -91,7 +103,7 @@ class DeckLandingBaseEnv(gym.Env):
         super().reset(seed=seed if seed is not None else self._first_seed())
         position, yaw = self._start_pose(options or {})
         self.world.reset(self.np_random, position, yaw)
-        self.bank.reset()
+        self.bank.reset(self.np_random)
         self._steps = 0
         self._outcome = Outcome.IN_FLIGHT
         self._touchdown = None
@@ -155,7 +167,12 @@ class DeckLandingBaseEnv(gym.Env):
         start = self.config.start
         rng = self.np_random
         height = float(options.get("height_m", rng.uniform(*start.height_m)))
-        radius = start.max_offset_m * math.sqrt(rng.uniform())
+        if start.min_offset_m > 0.0:
+            # uniform over the annulus between the two radii
+            low, high = start.min_offset_m**2, start.max_offset_m**2
+            radius = math.sqrt(low + (high - low) * rng.uniform())
+        else:  # the original draw, so that existing seeded episodes stay the same
+            radius = start.max_offset_m * math.sqrt(rng.uniform())
         bearing = rng.uniform(-math.pi, math.pi)
         offset = np.asarray(
             options.get("offset_m", (radius * math.cos(bearing), radius * math.sin(bearing))),
@@ -235,8 +252,10 @@ class DeckLandingBaseEnv(gym.Env):
     def _sense(self) -> Sensing:
         frame = self.world.capture()
         ranges = self.world.measure_ranges()
-        estimates = self.bank.estimate(frame, ranges)
-        return Sensing(frame, ranges, estimates)
+        # before the estimators: the beacon estimator reads it from the world
+        range_down = self.world.measure_range_down()
+        estimates = self.bank.estimate(frame, ranges, self._report.imu_samples)
+        return Sensing(frame, ranges, estimates, range_down)
 
     def _observation(self) -> dict[str, np.ndarray]:
         assert self._sensing is not None
@@ -253,6 +272,8 @@ class DeckLandingBaseEnv(gym.Env):
             imu[3:] = np.mean([s.gyro for s in samples], axis=0)
         self._imu_saturated = bool(np.any(np.abs(imu) > IMU_HIGH))
         imu = np.clip(imu, -IMU_HIGH, IMU_HIGH)
+        down = self._sensing.range_down
+        assert down is not None
         return {
             "deck_pose": pose,
             "deck_pose_valid": np.array([int(estimate.valid)], dtype=np.int8),
@@ -261,7 +282,20 @@ class DeckLandingBaseEnv(gym.Env):
             "tof_range": tof.astype(np.float32),
             "tof_valid": ranges.valid.astype(np.int8),
             "imu": imu,
+            # the downward rangefinder (rangefinder.*): 0 when invalid (no return in range)
+            "range_down": np.nan_to_num(down.ranges, nan=0.0).astype(np.float32),
+            "range_down_valid": down.valid.astype(np.int8),
+            **self._pose_std(estimate),
         }
+
+    def _pose_std(self, estimate: DeckPoseEstimate) -> dict[str, np.ndarray]:
+        """``deck_pose_std`` (only with ``estimation.observed: fused``): zeros when invalid."""
+        if self.config.estimation.observed != "fused":
+            return {}
+        std = np.zeros(6, dtype=np.float32)
+        if estimate.valid and estimate.covariance is not None:
+            std[:] = np.sqrt(np.clip(np.diag(estimate.covariance), 0.0, None))
+        return {"deck_pose_std": std}
 
     def _info(self) -> dict[str, Any]:
         assert self._sensing is not None
@@ -280,6 +314,9 @@ class DeckLandingBaseEnv(gym.Env):
             "tag_miss_reason": self._sensing.frame.miss_reason,
             "tof_ranges": self._sensing.ranges.ranges.copy(),
             "tof_valid": self._sensing.ranges.valid.copy(),
+            "range_down": float(self._sensing.range_down.ranges[0])
+            if self._sensing.range_down is not None
+            else float("nan"),
             "drone": {
                 "position_w": state.position_w.copy(),
                 "velocity_w": state.velocity_w.copy(),

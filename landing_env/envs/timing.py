@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from estimation.frames import euler_zyx_from_matrix
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.errors import ConfigError, require_range
@@ -381,11 +382,14 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.guidance = DeckGuidance(self.timing.guidance)
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
-        #: with ``render_mode="rgb_array"``, set True to keep the camera image of every control
-        #: period of a step in ``frames_of_last_step`` (a commit step holds the whole descent);
-        #: off by default, because SB3's ``make_vec_env`` asks for ``rgb_array`` by default
-        self.record_frames = False
+        #: set True to keep a record of every control period of a step (a commit step holds
+        #: the whole descent): ``periods_of_last_step`` (time, drone and deck positions, true
+        #: and observed deck pose) and, with ``render_mode="rgb_array"``, the camera images in
+        #: ``frames_of_last_step``.  Off by default: SB3's ``make_vec_env`` asks for
+        #: ``rgb_array`` unless told otherwise, and rendering every period is slow
+        self.record_periods = False
         self.frames_of_last_step: list[np.ndarray] = []
+        self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
 
     def _reset_episode_state(self) -> None:
@@ -407,6 +411,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._base_observation = base_observation
         self._record()
         self.frames_of_last_step = []
+        self.periods_of_last_step = []
         # warm-up: hold until the history is full; the agent decides only from then on
         for _ in range(self.history.length - 1):
             self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
@@ -426,6 +431,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         if choice not in (0, 1):
             raise ValueError(f"action must be 0 (wait) or 1 (commit); got {action!r}")
         self.frames_of_last_step = []
+        self.periods_of_last_step = []
         r = self.config.reward
         reward = 0.0
         if choice == 0:
@@ -457,8 +463,28 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._sensing = self._sense()
         self._base_observation = self._observation()
         self._record()
-        if self.record_frames and self.render_mode == "rgb_array":
-            self.frames_of_last_step.append(self.world.camera_image(self._sensing.frame))
+        if self.record_periods:
+            self._record_period()
+
+    def _record_period(self) -> None:
+        assert self._sensing is not None and self._base_observation is not None
+        world = self.world
+        r_cd, t_cd = world.true_deck_pose_c()
+        deck = world.deck_state()
+        self.periods_of_last_step.append(
+            {
+                "time_s": world.time,
+                "drone_position_w": world.drone_state().position_w.copy(),
+                "deck_position_w": deck.position_w.copy(),
+                "deck_euler_w": euler_zyx_from_matrix(deck.rotation_wp),
+                "deck_pose_true": np.concatenate([t_cd, euler_zyx_from_matrix(r_cd)]),
+                "deck_pose_observed": self._base_observation["deck_pose"].astype(float),
+                "deck_pose_valid": bool(self._base_observation["deck_pose_valid"][0]),
+                "committed": self._committed,
+            }
+        )
+        if self.render_mode == "rgb_array":
+            self.frames_of_last_step.append(world.camera_image(self._sensing.frame))
 
     def _record(self) -> None:
         assert self._base_observation is not None

@@ -8,6 +8,9 @@ texture's columns and its y axis down its rows, so the texture *is* the tag fram
 x right and y down, and the tag is drawn in AprilTag's canonical orientation (corner 0
 bottom-left).  OpenCV's ``generateImageMarker`` draws AprilTags rotated by 180 degrees
 (its detected corner 0 is top-right), so its bit pattern is turned round before use.
+With ``landmarks`` set, several tags are drawn, each at its centre ``(x, y)`` in D with D's
+axes (nested landmarks, :mod:`estimation.landmarks`); ``tag_id`` and ``tag_size`` then
+describe no drawn tag.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
+from estimation.landmarks import Landmark, LandmarkLayout
 from landing_env.errors import ConfigError, require_choice, require_range
 
 #: AprilTag family of the deck; the only one OpenCV and pupil-apriltags both provide here.
@@ -93,6 +97,9 @@ class DeckSurfaceConfig:
     pad_radius: float = 0.04
     #: pad centres (x, y) in P in sensor order ps1..ps4; None = the ToF touch points
     pad_centres_p: tuple[tuple[float, float], ...] | None = None
+    #: nested landmarks (tag_id, size, x, y in D; see estimation.landmarks) drawn instead of
+    #: the single centred tag (tag_id, tag_size); empty = the single tag
+    landmarks: tuple[Landmark, ...] = ()
 
     def __post_init__(self) -> None:
         require_range("size", self.size, 0.0, low_inclusive=False)
@@ -110,6 +117,11 @@ class DeckSurfaceConfig:
                 f"{self.size} m deck; allowed tag_size <= "
                 f"{self.size * TAG_CELLS / (TAG_CELLS + 2 * self.quiet_zone_cells):.3f} m",
             )
+        if self.landmarks:
+            try:
+                self.layout.check_fits(self.size)
+            except ConfigError as exc:
+                raise exc.under("") from None
         require_range("texture_px", self.texture_px, 16, 8192)
         if len(self.deck_rgb) != 3 or any(not 0 <= c <= 255 for c in self.deck_rgb):
             raise ConfigError("deck_rgb", f"{self.deck_rgb!r}: need three values in [0, 255]")
@@ -134,6 +146,13 @@ class DeckSurfaceConfig:
     @property
     def metres_per_texel(self) -> float:
         return self.size / self.texture_px
+
+    @property
+    def layout(self) -> LandmarkLayout:
+        """The tags on the deck: the landmarks, or the single centred tag."""
+        if self.landmarks:
+            return LandmarkLayout(tuple(self.landmarks), self.quiet_zone_cells)
+        return LandmarkLayout.single(self.tag_id, self.tag_size, self.quiet_zone_cells)
 
 
 def opencv_tag_bits(tag_id: int) -> np.ndarray:
@@ -167,26 +186,41 @@ def make_deck_texture(config: DeckSurfaceConfig) -> np.ndarray:
     their exact metric positions to a fraction of a texel.
     """
     n = config.texture_px
-    image = np.empty((n, n, 3), dtype=float)
-    image[:] = np.asarray(config.deck_rgb, dtype=float)
+    image = np.empty((n, n, 3), dtype=np.uint8)
+    image[:] = np.asarray(config.deck_rgb, dtype=np.uint8)
     if config.tag:
-        # cells of the tag plus quiet zone, white = 1; the quiet zone may be a fraction of a cell
-        bits = np.pad(opencv_tag_bits(config.tag_id), 1, constant_values=1.0)
-        cell = config.tag_size / TAG_CELLS
-        inner = (np.arange(TAG_CELLS + 1) - TAG_CELLS / 2) * cell
-        quiet = config.quiet_zone_cells * cell
-        # boundaries along x_D (columns) and y_D (rows), measured from the texture's edge
-        edges = np.concatenate([[inner[0] - quiet], inner, [inner[-1] + quiet]]) + config.size / 2
-        cover = _coverage(n, config.size, edges)
-        inside = cover.sum(axis=1)
-        # per-texel area fractions: white and covered-by-tag-square
-        white = cover @ bits @ cover.T
-        covered = np.outer(inside, inside)
-        image = image * (1.0 - covered)[..., None] + 255.0 * white[..., None]
-    image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        for landmark in config.layout.landmarks:
+            _draw_tag(image, config, landmark)
     if config.pads:
         _draw_pads(image, config)
     return image
+
+
+def _draw_tag(image: np.ndarray, config: DeckSurfaceConfig, landmark: Landmark) -> None:
+    """Area-average one tag with its quiet zone onto the texels it covers (in place)."""
+    n = config.texture_px
+    # cells of the tag plus quiet zone, white = 1; the quiet zone may be a fraction of a cell
+    bits = np.pad(opencv_tag_bits(landmark.tag_id), 1, constant_values=1.0)
+    cell = landmark.size / TAG_CELLS
+    inner = (np.arange(TAG_CELLS + 1) - TAG_CELLS / 2) * cell
+    quiet = config.quiet_zone_cells * cell
+    local = np.concatenate([[inner[0] - quiet], inner, [inner[-1] + quiet]])
+    # boundaries along x_D (texture columns) and y_D (rows), from the texture's edge
+    cover_u = _coverage(n, config.size, local + landmark.x + config.size / 2)
+    cover_v = _coverage(n, config.size, local + landmark.y + config.size / 2)
+    inside_u, inside_v = cover_u.sum(axis=1), cover_v.sum(axis=1)
+    # only the block of texels the tag touches is blended (a large texture in float is big)
+    cols, rows = np.flatnonzero(inside_u > 0.0), np.flatnonzero(inside_v > 0.0)
+    if cols.size == 0 or rows.size == 0:
+        return
+    u0, u1, v0, v1 = cols[0], cols[-1] + 1, rows[0], rows[-1] + 1
+    cover_u, cover_v = cover_u[u0:u1], cover_v[v0:v1]
+    # per-texel area fractions: white and covered-by-tag-square
+    white = cover_v @ bits @ cover_u.T
+    covered = np.outer(inside_v[v0:v1], inside_u[u0:u1])
+    block = image[v0:v1, u0:u1].astype(float)
+    block = block * (1.0 - covered)[..., None] + 255.0 * white[..., None]
+    image[v0:v1, u0:u1] = np.clip(np.rint(block), 0, 255).astype(np.uint8)
 
 
 def plate_to_texel(config: DeckSurfaceConfig, points_p: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib.util
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -34,6 +35,9 @@ MISS_OBLIQUE = "too_oblique"
 MISS_SMALL = "too_small"
 MISS_DROPOUT = "dropout"
 MISS_NOT_DETECTED = "not_detected"
+
+#: With several tags and none seen, the frame reports the miss nearest to a detection.
+_MISS_PRIORITY = (MISS_NOT_DETECTED, MISS_SMALL, MISS_OBLIQUE, MISS_OUT_OF_VIEW, MISS_BEHIND)
 
 #: Where each renderer puts the content of a point at OpenCV pixel u (v) relative to u (v),
 #: measured with this module's projection: TinyRenderer samples pixel i at screen coordinate
@@ -258,6 +262,24 @@ def _max_monotonic_radius(dist: np.ndarray) -> float:
 
 
 @dataclass(frozen=True)
+class TagPlacement:
+    """One tag in the world: id, black-border edge (m) and its frame's pose (t_wl, r_wl)."""
+
+    tag_id: int
+    size: float
+    t_wl: np.ndarray
+    r_wl: np.ndarray
+
+
+def _first_miss(reasons: Sequence[str]) -> str:
+    """The reason to report when no tag of several is seen (see ``_MISS_PRIORITY``)."""
+    for reason in _MISS_PRIORITY:
+        if reason in reasons:
+            return reason
+    return reasons[0] if reasons else MISS_OUT_OF_VIEW
+
+
+@dataclass(frozen=True)
 class ProjectedTag:
     """The analytic view of the tag: corners and the quantities the visibility rules use."""
 
@@ -460,6 +482,28 @@ class CameraSensor:
         tag_id: int,
     ) -> CameraFrame:
         """One camera frame: the tag's detection (if seen) and, in render mode, the image."""
+        return self.capture_tags(
+            timestamp, t_wc, r_wc, (TagPlacement(tag_id, tag_size, t_wd, r_wd),)
+        )
+
+    def capture_tags(
+        self,
+        timestamp: float,
+        t_wc: np.ndarray,
+        r_wc: np.ndarray,
+        tags: Sequence[TagPlacement],
+    ) -> CameraFrame:
+        """One camera frame of several tags (nested landmarks): every tag seen is detected.
+
+        With one tag this is :meth:`capture`.  ``project``: each tag follows the visibility
+        rules on its own; a dropout drops the whole frame.  ``render`` with the ``tag``
+        region: a window is rendered round each tag (with several tags, only those fully
+        in view: a tag cut by the image border cannot be decoded) and searched for it.
+        """
+        if len(tags) > 1:
+            return self._capture_many(timestamp, t_wc, r_wc, tags)
+        only = tags[0]
+        t_wd, r_wd, tag_size, tag_id = only.t_wl, only.r_wl, only.size, only.tag_id
         if self.config.mode == "render":
             return self._capture_render(timestamp, t_wc, r_wc, t_wd, r_wd, tag_size, tag_id)
         return self._capture_project(timestamp, t_wc, r_wc, t_wd, r_wd, tag_size, tag_id)
@@ -529,6 +573,72 @@ class CameraSensor:
             hamming=best.hamming,
         )
         return CameraFrame(timestamp, (detection,), image, "")
+
+    def _capture_many(
+        self,
+        timestamp: float,
+        t_wc: np.ndarray,
+        r_wc: np.ndarray,
+        tags: Sequence[TagPlacement],
+    ) -> CameraFrame:
+        dropped = self.rng.random() < self.config.dropout_prob
+        views = [self.project_tag(t_wc, r_wc, t.t_wl, t.r_wl, t.size) for t in tags]
+        if self.config.mode == "project":
+            detections = []
+            for tag, view in zip(tags, views, strict=True):
+                noise = self.rng.normal(0.0, 1.0, size=(4, 2)) * self.config.pixel_noise_px
+                if not view.miss_reason:
+                    detections.append(TagDetection(tag.tag_id, view.corners_px + noise))
+            image = None
+        else:
+            detections, image = self._detect_rendered(t_wc, r_wc, tags, views)
+        if not detections:
+            reasons = [v.miss_reason or MISS_NOT_DETECTED for v in views]
+            return CameraFrame(timestamp, (), image, _first_miss(reasons))
+        if dropped:
+            return CameraFrame(timestamp, (), image, MISS_DROPOUT)
+        return CameraFrame(timestamp, tuple(detections), image, "")
+
+    def _detect_rendered(
+        self,
+        t_wc: np.ndarray,
+        r_wc: np.ndarray,
+        tags: Sequence[TagPlacement],
+        views: Sequence[ProjectedTag],
+    ) -> tuple[list[TagDetection], np.ndarray]:
+        """Render (windows round the tags in view, or the full image) and detect every tag."""
+        if self._detector is None:
+            raise RuntimeError("the camera has been closed")
+        k = self.intrinsics
+        wanted = {t.tag_id for t in tags}
+        found: dict[int, TagDetection] = {}
+
+        def keep(detections: Sequence[TagDetection], origin: np.ndarray) -> None:
+            for d in detections:
+                best = found.get(d.tag_id)
+                better = best is None or d.decision_margin > best.decision_margin
+                if d.tag_id in wanted and better:
+                    found[d.tag_id] = TagDetection(
+                        d.tag_id, d.corners_px + origin, d.decision_margin, d.hamming
+                    )
+
+        if self.config.render_region == "full" or self.renderer == "egl":
+            image = self.render_image(t_wc, r_wc)
+            keep(self._detector.detect(image), np.zeros(2))
+        else:
+            image = np.full((k.height, k.width, 3), 127, dtype=np.uint8)
+            for tag, view in zip(tags, views, strict=True):
+                if view.miss_reason in (MISS_BEHIND, MISS_OUT_OF_VIEW) or tag.tag_id in found:
+                    continue
+                window = self.tag_window(view.corners_px)
+                if window is None:
+                    continue
+                x0, y0, x1, y1 = window
+                patch = self.render_window(t_wc, r_wc, window)
+                image[y0:y1, x0:x1] = patch
+                keep(self._detector.detect(patch), np.array([x0, y0], dtype=float))
+        order = {t.tag_id: i for i, t in enumerate(tags)}
+        return sorted(found.values(), key=lambda d: order[d.tag_id]), image
 
 
 def draw_detections(image: np.ndarray, frame: CameraFrame) -> np.ndarray:

@@ -1,0 +1,488 @@
+"""The high-approach evaluation: ``deck-landing evaluate approach``.
+
+``deck-landing evaluate approach --policy svgs-routine beacon-range --scenario high-approach
+--episodes N`` flies each policy for N episodes (seeds ``--seed``, ``--seed + 1``, ...) from
+the scenario's start (``configs/high-approach.yaml``: 20 m up, 5 m off, sea state 3, gusty
+wind) and writes to ``--out`` (``results/approach/``): a Markdown table per policy (success
+rate with its 95% Wilson interval, offset from the deck centre at touchdown mean and 95th
+percentile, time to land, touchdown speed, outcomes), a CSV of the episodes, a JSON summary
+and a PNG of trajectories (top view and height against time, truth, for the reader only).
+
+Each policy flies with its own estimator in the observation: ``svgs-routine`` with
+``fused`` when the environment offers it (else ``atda``; ``--routine-estimator``),
+``beacon-range`` with ``beacon`` (bearing + range).  Episodes run over ``--workers``
+processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import multiprocessing as mp
+import shlex
+import sys
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.evaluation import _guarded, _parse_overrides
+from agents.evaluation.landing import HELD_OUT_SEED, wilson_interval
+from landing_env.errors import ConfigError, require_choice
+
+#: the policies of this evaluation and the estimator each reads by default
+APPROACH_POLICIES: dict[str, str] = {"svgs-routine": "fused", "beacon-range": "beacon"}
+#: the routine's estimator when ``fused`` is not (yet) available
+ROUTINE_FALLBACK_ESTIMATOR = "atda"
+#: a trajectory point every this many control periods (plots only)
+TRAJECTORY_STRIDE = 5
+#: trajectories kept per policy for the figure
+PLOTTED_EPISODES = 12
+
+
+def routine_estimator(requested: str | None = None) -> str:
+    """The estimator the SVGS routine flies with: ``requested``, else ``fused`` if the
+    environment knows it, else ``atda``."""
+    from landing_env.config import ESTIMATOR_NAMES
+
+    if requested:
+        require_choice("routine_estimator", requested, ESTIMATOR_NAMES)
+        return requested
+    return "fused" if "fused" in ESTIMATOR_NAMES else ROUTINE_FALLBACK_ESTIMATOR
+
+
+@dataclass
+class ApproachEpisode:
+    """One episode (NaN where a metric does not exist, e.g. after a crash or a time-out)."""
+
+    policy: str
+    estimator: str
+    scenario: str
+    seed: int
+    outcome: str
+    success: bool
+    #: horizontal offset of the drone's centre from the deck centre at touchdown, metres
+    offset_m: float = math.nan
+    #: simulated time from the start to the touchdown, seconds
+    time_to_land_s: float = math.nan
+    relative_normal_speed: float = math.nan
+    deck_tilt_deg: float = math.nan
+    relative_attitude_deg: float = math.nan
+    #: start: height above the deck's home surface and horizontal offset, metres
+    start_height_m: float = math.nan
+    start_offset_m: float = math.nan
+    #: the policy's last state; relocations (svgs-routine's Algorithm 4); searches
+    #: (beacon-range: PX4 searches flown; svgs-routine: scans re-entered after a relocation)
+    final_state: str = ""
+    relocations: int = 0
+    searches: int = 0
+    failed_checks: str = ""
+    wall_time_s: float = math.nan
+    #: (t, x, y, z) of the drone relative to the deck's home, every TRAJECTORY_STRIDE periods
+    trajectory: list[tuple[float, float, float, float]] = field(default_factory=list, repr=False)
+
+
+def make_env_and_policy(
+    policy_name: str,
+    scenario: str,
+    estimator: str,
+    overrides: dict[str, Any] | None = None,
+) -> tuple[Any, Any]:
+    """``DeckLanding-v0`` on ``scenario`` with ``estimator`` observed, and the policy."""
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401  (registers the environments)
+    from agents.beacon_range import make_beacon_range
+    from agents.svgs_routine import make_svgs_routine
+
+    require_choice("policy", policy_name, tuple(APPROACH_POLICIES))
+    settings = {
+        "estimation.observed": estimator,
+        "estimation.compare": [],
+        **(overrides or {}),
+    }
+    env = gym.make("DeckLanding-v0", config=scenario, overrides=settings)
+    try:
+        factory: Callable[[Any], Any] = (
+            make_svgs_routine if policy_name == "svgs-routine" else make_beacon_range
+        )
+        policy = factory(env)
+    except Exception:
+        env.close()
+        raise
+    return env, policy
+
+
+def _count(transitions: list[tuple[float, str, str]], states: tuple[str, ...]) -> int:
+    return sum(1 for _, state, _ in transitions if state in states)
+
+
+def run_episode(
+    env: Any, policy: Any, seed: int, policy_name: str, estimator: str, scenario: str
+) -> ApproachEpisode:
+    """One episode to its end; truth from ``info`` only for the record, never to the policy."""
+    import time
+
+    start_wall = time.perf_counter()
+    observation, info = env.reset(seed=seed)
+    policy.reset()
+    home = np.asarray(env.unwrapped.world.deck_home_w, dtype=float)
+    start = np.asarray(info["drone"]["position_w"], dtype=float) - home
+    trajectory = [(0.0, *(float(v) for v in start))]
+    step = 0
+    while True:
+        observation, _, terminated, truncated, info = env.step(policy(observation))
+        step += 1
+        if step % TRAJECTORY_STRIDE == 0 or terminated or truncated:
+            rel = np.asarray(info["drone"]["position_w"], dtype=float) - home
+            trajectory.append((float(info["time_s"]), *(float(v) for v in rel)))
+        if terminated or truncated:
+            break
+    transitions = getattr(policy, "transitions", [])
+    episode = ApproachEpisode(
+        policy=policy_name,
+        estimator=estimator,
+        scenario=scenario,
+        seed=seed,
+        outcome=info["outcome"],
+        success=info["outcome"] == "success",
+        start_height_m=float(start[2]),
+        start_offset_m=float(math.hypot(start[0], start[1])),
+        final_state=str(getattr(getattr(policy, "state", ""), "value", "")),
+        relocations=_count(transitions, ("relocate_xy",)),
+        # the baseline counts its PX4 searches; the routine's re-entered scans are transitions
+        searches=int(getattr(policy, "searches", _count(transitions, ("scan",)))),
+        trajectory=trajectory,
+    )
+    touchdown = info.get("touchdown")
+    if touchdown:
+        episode.offset_m = float(touchdown["lateral_offset_m"])
+        episode.time_to_land_s = float(touchdown["time_s"])
+        episode.relative_normal_speed = float(touchdown["relative_normal_speed"])
+        episode.deck_tilt_deg = float(touchdown["deck_tilt_deg"])
+        episode.relative_attitude_deg = float(touchdown["relative_attitude_deg"])
+        episode.failed_checks = ";".join(touchdown["failed_checks"])
+    elif "crash_contact" in info:
+        episode.failed_checks = str(info["crash_contact"])
+    episode.wall_time_s = time.perf_counter() - start_wall
+    return episode
+
+
+def _run_chunk(job: tuple) -> list[ApproachEpisode]:
+    """Worker: one environment, a list of seeds (top level, so that it pickles)."""
+    policy_name, scenario, estimator, seeds, overrides = job
+    env, policy = make_env_and_policy(policy_name, scenario, estimator, overrides)
+    try:
+        return [run_episode(env, policy, s, policy_name, estimator, scenario) for s in seeds]
+    finally:
+        env.close()
+
+
+def evaluate_policy(
+    policy_name: str,
+    scenario: str,
+    estimator: str,
+    episodes: int,
+    first_seed: int = HELD_OUT_SEED,
+    workers: int = 2,
+    progress: bool = True,
+    overrides: dict[str, Any] | None = None,
+) -> list[ApproachEpisode]:
+    """``episodes`` episodes of one policy, over ``workers`` processes (spawned)."""
+    seeds = list(range(first_seed, first_seed + episodes))
+    # chunks of a few episodes keep both workers busy to the end and the progress bar moving
+    size = max(1, min(5, math.ceil(episodes / max(workers, 1))))
+    jobs = [
+        (policy_name, scenario, estimator, seeds[i : i + size], overrides)
+        for i in range(0, len(seeds), size)
+    ]
+    pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
+    chunks = pool.imap(_run_chunk, jobs) if pool is not None else map(_run_chunk, jobs)
+    results: list[ApproachEpisode] = []
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=episodes, desc=f"{policy_name} ({estimator})", unit="ep")
+    try:
+        for chunk in chunks:
+            results.extend(chunk)
+            if bar is not None:
+                bar.update(len(chunk))
+    finally:
+        if bar is not None:
+            bar.close()
+        if pool is not None:
+            pool.close()
+            pool.join()
+    return results
+
+
+# ------------------------------------------------------------------------------ summaries
+def _finite(values: list[float]) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    return array[np.isfinite(array)]
+
+
+@dataclass
+class ApproachSummary:
+    """One policy's figures over its episodes (touchdown metrics over those that touched down)."""
+
+    policy: str
+    estimator: str
+    episodes: int
+    successes: int
+    success_rate: float
+    success_ci_low: float
+    success_ci_high: float
+    offset_mean_m: float
+    offset_p95_m: float
+    time_to_land_mean_s: float
+    time_to_land_p95_s: float
+    normal_speed_mean: float
+    deck_tilt_mean_deg: float
+    relocations: int
+    searches: int
+    outcomes: dict[str, int] = field(default_factory=dict)
+
+
+def summarise(episodes: list[ApproachEpisode]) -> ApproachSummary:
+    """The table's figures for one policy's episodes."""
+    if not episodes:
+        raise ValueError("no episodes to summarise")
+    n = len(episodes)
+    k = sum(e.success for e in episodes)
+    low, high = wilson_interval(k, n)
+
+    def stat(name: str, fn: Callable[[np.ndarray], float]) -> float:
+        values = _finite([getattr(e, name) for e in episodes])
+        return float(fn(values)) if values.size else math.nan
+
+    return ApproachSummary(
+        policy=episodes[0].policy,
+        estimator=episodes[0].estimator,
+        episodes=n,
+        successes=k,
+        success_rate=k / n,
+        success_ci_low=low,
+        success_ci_high=high,
+        offset_mean_m=stat("offset_m", np.mean),
+        offset_p95_m=stat("offset_m", lambda v: np.percentile(v, 95)),
+        time_to_land_mean_s=stat("time_to_land_s", np.mean),
+        time_to_land_p95_s=stat("time_to_land_s", lambda v: np.percentile(v, 95)),
+        normal_speed_mean=stat("relative_normal_speed", np.mean),
+        deck_tilt_mean_deg=stat("deck_tilt_deg", np.mean),
+        relocations=sum(e.relocations for e in episodes),
+        searches=sum(e.searches for e in episodes),
+        outcomes=dict(Counter(e.outcome for e in episodes)),
+    )
+
+
+TABLE_HEADER = (
+    "policy",
+    "estimator",
+    "episodes",
+    "success (95% CI)",
+    "offset mean / p95 (m)",
+    "time to land mean / p95 (s)",
+    "v_n mean (m/s)",
+    "deck tilt mean (deg)",
+    "relocations / searches",
+    "outcomes",
+)
+
+
+def markdown_table(summaries: list[ApproachSummary]) -> str:
+    """One row per policy."""
+    lines = [
+        "| " + " | ".join(TABLE_HEADER) + " |",
+        "|" + "|".join("---" for _ in TABLE_HEADER) + "|",
+    ]
+    for s in summaries:
+        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(s.outcomes.items()))
+        cells = (
+            s.policy,
+            s.estimator,
+            str(s.episodes),
+            f"{100 * s.success_rate:.1f}% ({100 * s.success_ci_low:.1f}–"
+            f"{100 * s.success_ci_high:.1f})",
+            f"{s.offset_mean_m:.3f} / {s.offset_p95_m:.3f}",
+            f"{s.time_to_land_mean_s:.1f} / {s.time_to_land_p95_s:.1f}",
+            f"{s.normal_speed_mean:.3f}",
+            f"{s.deck_tilt_mean_deg:.2f}",
+            f"{s.relocations} / {s.searches}",
+            outcomes,
+        )
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_trajectories(results: dict[str, list[ApproachEpisode]], path: Path, title: str) -> None:
+    """Top view (x, y from the deck's home) and height against time of the first episodes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_top, ax_h) = plt.subplots(1, 2, figsize=(13, 5.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for index, (name, episodes) in enumerate(results.items()):
+        colour = colours[index % len(colours)]
+        for k, episode in enumerate(episodes[:PLOTTED_EPISODES]):
+            track = np.asarray(episode.trajectory, dtype=float)
+            if track.size == 0:
+                continue
+            label = name if k == 0 else None
+            ax_top.plot(track[:, 1], track[:, 2], color=colour, alpha=0.6, lw=1, label=label)
+            ax_top.plot(track[0, 1], track[0, 2], "o", color=colour, ms=4)
+            marker = "x" if episode.success else "s"
+            ax_top.plot(track[-1, 1], track[-1, 2], marker, color=colour, ms=6)
+            ax_h.plot(track[:, 0], track[:, 3], color=colour, alpha=0.6, lw=1, label=label)
+    ax_top.plot(0.0, 0.0, "k+", ms=14, mew=2, label="deck centre")
+    ax_top.set(xlabel="x (m)", ylabel="y (m)", title="Top view (o start, x success, s other)")
+    ax_top.set_aspect("equal", adjustable="datalim")
+    ax_top.legend(loc="best", fontsize=8)
+    ax_h.set(xlabel="time (s)", ylabel="height above the deck's home (m)", title="Height")
+    ax_h.legend(loc="best", fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+@dataclass
+class ApproachEvaluation:
+    """Every policy on the scenario, and the files written."""
+
+    scenario: str
+    summaries: list[ApproachSummary]
+    results: dict[str, list[ApproachEpisode]]
+    files: list[Path]
+
+
+def evaluate_approach(
+    policies: list[str],
+    scenario: str = "high-approach",
+    episodes: int = 20,
+    out_dir: Path | None = Path("results/approach"),
+    first_seed: int = HELD_OUT_SEED,
+    routine_estimator_name: str | None = None,
+    workers: int = 2,
+    progress: bool = True,
+    overrides: dict[str, Any] | None = None,
+    command: str = "",
+) -> ApproachEvaluation:
+    """Evaluate ``policies`` on ``scenario``; write the table, CSV, JSON and figure."""
+    if episodes < 1:
+        raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+    for name in policies:
+        require_choice("policy", name, tuple(APPROACH_POLICIES))
+    results: dict[str, list[ApproachEpisode]] = {}
+    for name in policies:
+        estimator = (
+            routine_estimator(routine_estimator_name)
+            if name == "svgs-routine"
+            else APPROACH_POLICIES[name]
+        )
+        results[name] = evaluate_policy(
+            name, scenario, estimator, episodes, first_seed, workers, progress, overrides
+        )
+    summaries = [summarise(r) for r in results.values()]
+    files: list[Path] = []
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        stem = f"approach_{Path(scenario).stem}"
+        title = (
+            f"{scenario}: {episodes} episodes per policy (seeds {first_seed}–"
+            f"{first_seed + episodes - 1})"
+        )
+        wall = sum(e.wall_time_s for r in results.values() for e in r)
+        table = out_dir / f"{stem}.md"
+        table.write_text(
+            f"# Approach: {scenario}\n\n{title}\n\n"
+            + (f"Command: `{command}`\n\n" if command else "")
+            + markdown_table(summaries)
+            + f"\n\nSimulation wall time over all episodes: {wall:.0f} s (summed over workers)\n"
+        )
+        summary_json = out_dir / f"{stem}.json"
+        summary_json.write_text(
+            json.dumps(
+                {
+                    "scenario": scenario,
+                    "first_seed": first_seed,
+                    "overrides": overrides or {},
+                    "command": command,
+                    "summaries": [asdict(s) for s in summaries],
+                },
+                indent=2,
+            )
+        )
+        episodes_csv = out_dir / f"{stem}_episodes.csv"
+        columns = [k for k in asdict(next(iter(results.values()))[0]) if k != "trajectory"]
+        with episodes_csv.open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
+            writer.writeheader()
+            for rs in results.values():
+                writer.writerows(asdict(e) for e in rs)
+        figure = out_dir / f"{stem}.png"
+        plot_trajectories(results, figure, title)
+        files = [table, summary_json, episodes_csv, figure]
+    return ApproachEvaluation(scenario, summaries, results, files)
+
+
+# ------------------------------------------------------------------------------ command line
+def _evaluate_approach(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    console = Console()
+    command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    evaluation = evaluate_approach(
+        list(args.policy),
+        args.scenario,
+        args.episodes,
+        Path(args.out),
+        args.seed,
+        args.routine_estimator,
+        args.workers,
+        progress=not args.no_progress,
+        overrides=_parse_overrides(args.set),
+        command=command,
+    )
+    console.print(f"\n[bold]{args.scenario}[/bold]")
+    print(markdown_table(evaluation.summaries))
+    for path in evaluation.files:
+        console.print(f"  wrote {path}")
+    return 0
+
+
+def add_approach_parser(evaluate_group: Any) -> None:
+    """Add ``approach`` to the ``evaluate`` sub-command group."""
+    approach = evaluate_group.add_parser(
+        "approach",
+        help="the high approach (20 m up, 5 m off): svgs-routine against beacon-range; "
+        "success (95%% Wilson interval), touchdown offset, time to land; table, CSV, figure",
+    )
+    approach.add_argument(
+        "--policy", nargs="+", choices=list(APPROACH_POLICIES), default=list(APPROACH_POLICIES)
+    )
+    approach.add_argument(
+        "--scenario", default="high-approach", help="a config in configs/ or a path"
+    )
+    approach.add_argument("--episodes", type=int, default=20)
+    approach.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first seed")
+    approach.add_argument(
+        "--routine-estimator",
+        default=None,
+        help="the routine's estimator (default: fused if available, else atda)",
+    )
+    approach.add_argument("--workers", type=int, default=2, help="parallel processes")
+    approach.add_argument("--out", default="results/approach", help="output directory")
+    approach.add_argument("--no-progress", action="store_true")
+    approach.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
+    approach.set_defaults(func=_guarded(_evaluate_approach))

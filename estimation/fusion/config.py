@@ -1,0 +1,102 @@
+"""Settings of the drone–deck fusion EKF (:mod:`estimation.fusion`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from estimation.errors import ConfigError, require_choice, require_range
+
+#: Estimators whose deck pose (T_CD) the fusion can take as a measurement.
+POSE_SOURCES: tuple[str, ...] = ("atda", "ihrcf", "crhf")
+
+
+def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:
+    if len(sigmas) != 6:
+        raise ConfigError(key, f"{sigmas!r} needs 6 values: x, y, z (m), roll, pitch, yaw (deg)")
+    for value in sigmas:
+        # .inf is allowed and means "do not use this component of the measurement"
+        if not (value > 0.0 or math.isinf(value)):
+            raise ConfigError(key, f"{sigmas!r}: every sigma must be > 0 (or .inf: unused)")
+
+
+@dataclass
+class FusionConfig:
+    """The EKF of the relative drone–deck state (see :mod:`estimation.fusion`).
+
+    Pose-measurement sigmas are per source, 1-sigma per frame: x, y, z of ``t_CD`` in the
+    camera frame (metres) and roll, pitch, yaw of the deck (degrees); ``.inf`` drops a
+    component (e.g. IHRCF's z, roll and pitch, which come from the same ToF ranges the filter
+    already fuses).  Process noises are power spectral densities of white deck accelerations.
+    """
+
+    #: estimators whose (delayed) poses are fused; each must also be computed by the env
+    sources: tuple[str, ...] = ("atda", "crhf")
+    #: fuse the four ToF ranges (undelayed: a range to the deck plane along each ray)
+    use_tof: bool = True
+    #: how far back a delayed measurement is still fused at its own timestamp, seconds
+    horizon_s: float = 0.5
+    #: chi-square innovation gate: a measurement whose NIS exceeds this quantile is rejected
+    gate_probability: float = 0.9995
+    #: no accepted pose update for this long: the estimate is invalid and the filter
+    #: re-initialises from the next pose measurement, seconds
+    reset_timeout_s: float = 1.0
+    #: white deck linear-acceleration PSD, m^2/s^3 (a random walk in velocity)
+    deck_accel_psd: float = 0.02
+    #: white deck angular-acceleration PSD (of the Euler angles), rad^2/s^3
+    deck_angular_accel_psd: float = 0.002
+    #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
+    accel_noise_density: float = 1.0e-3
+    accel_bias_random_walk: float = 4.0e-4
+    #: prior 1-sigma of the accelerometer bias (m/s^2), the relative velocity (m/s) and the
+    #: deck's Euler rates (rad/s) when the filter (re)initialises
+    initial_accel_bias_sigma: float = 0.05
+    initial_velocity_sigma: float = 0.3
+    initial_rate_sigma: float = 0.2
+    #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range (VL53L1X-class)
+    tof_sigma_m: float = 0.002
+    tof_sigma_per_m: float = 0.0025
+    #: per-source pose sigmas: x, y, z (m, camera frame), roll, pitch, yaw (deg).  IHRCF's
+    #: and CRHF's z, roll and pitch are the plane through the same ToF ranges the filter
+    #: fuses itself (undelayed): using them again would count that noise twice
+    atda_sigma: tuple[float, ...] = (0.003, 0.003, 0.008, 3.0, 3.0, 0.3)
+    ihrcf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
+    crhf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
+
+    def __post_init__(self) -> None:
+        self.sources = tuple(self.sources)
+        for name in self.sources:
+            require_choice("sources", name, POSE_SOURCES)
+        require_range("horizon_s", self.horizon_s, 0.0, 10.0)
+        require_range(
+            "gate_probability",
+            self.gate_probability,
+            0.0,
+            1.0,
+            low_inclusive=False,
+            high_inclusive=False,
+        )
+        require_range("reset_timeout_s", self.reset_timeout_s, 0.0, low_inclusive=False)
+        for name in (
+            "deck_accel_psd",
+            "deck_angular_accel_psd",
+            "accel_noise_density",
+            "accel_bias_random_walk",
+            "tof_sigma_per_m",
+        ):
+            require_range(name, getattr(self, name), 0.0)
+        for name in (
+            "initial_accel_bias_sigma",
+            "initial_velocity_sigma",
+            "initial_rate_sigma",
+            "tof_sigma_m",
+        ):
+            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+        for name in POSE_SOURCES:
+            key = f"{name}_sigma"
+            setattr(self, key, tuple(float(v) for v in getattr(self, key)))
+            _check_sigmas(key, getattr(self, key))
+
+    def pose_sigma(self, source: str) -> tuple[float, ...]:
+        """The 1-sigma of a source's pose: metres and degrees."""
+        return getattr(self, f"{source}_sigma")

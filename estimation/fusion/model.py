@@ -1,0 +1,159 @@
+"""State, process model and measurement models of the drone–deck relative EKF.
+
+State (15), all in the world frame's axes W (gravity-aligned, z up):
+
+====  ======  ==============================================================================
+0:3   ``p``   the tag centre (deck-frame origin) relative to the drone's centre of mass, m
+3:6   ``v``   its rate of change, m/s
+6:9   ``th``  the deck's attitude R_WP as ZYX Euler angles (roll, pitch, yaw), rad
+9:12  ``w``   their rates, rad/s
+12:15 ``ba``  the accelerometer bias, body frame, m/s^2
+====  ======  ==============================================================================
+
+The drone's attitude R_WB is an *input* (the autopilot's attitude estimate), never a state:
+the filter estimates only the relative state.  The IMU's specific force gives the drone's
+acceleration ``R_WB (f - ba) + g``; the deck's acceleration is white noise (velocity random
+walk, PSD ``deck_accel_psd``), and so is the deck's Euler acceleration.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+N_STATE = 15
+P, V, TH, W, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+GRAVITY_W = np.array([0.0, 0.0, -9.81])
+_I3 = np.eye(3)
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
+    """Wrap to [-pi, pi)."""
+    return (np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def rotation_zyx(th: np.ndarray) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) in closed form (called at the filter rate, where scipy's
+    general conversion costs tens of microseconds)."""
+    cr, sr = math.cos(th[0]), math.sin(th[0])
+    cp, sp = math.cos(th[1]), math.sin(th[1])
+    cy, sy = math.cos(th[2]), math.sin(th[2])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def deck_normal(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The deck's normal R_WP e_z and its 3x3 Jacobian with respect to (roll, pitch, yaw)."""
+    cr, sr = math.cos(th[0]), math.sin(th[0])
+    cp, sp = math.cos(th[1]), math.sin(th[1])
+    cy, sy = math.cos(th[2]), math.sin(th[2])
+    normal = np.array([cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr])
+    jacobian = np.array(
+        [
+            [-cy * sp * sr + sy * cr, cy * cp * cr, -sy * sp * cr + cy * sr],
+            [-sy * sp * sr - cy * cr, sy * cp * cr, cy * sp * cr + sy * sr],
+            [-cp * sr, -sp * cr, 0.0],
+        ]
+    )
+    return normal, jacobian
+
+
+@lru_cache(maxsize=64)
+def _process_noise(
+    dt: float, q_accel: float, q_angular: float, accel_noise_density: float, bias_walk: float
+) -> np.ndarray:
+    """The discrete process noise over ``dt`` (cached: it does not depend on the state)."""
+    q = np.zeros((N_STATE, N_STATE))
+    d1, d2, d3 = dt, dt * dt / 2.0, dt * dt * dt / 3.0
+    # white-acceleration (continuous) noise integrated over dt, per axis
+    for pos, vel, psd in ((P, V, q_accel), (TH, W, q_angular)):
+        q[pos, pos] = psd * d3 * _I3
+        q[pos, vel] = q[vel, pos] = psd * d2 * _I3
+        q[vel, vel] = psd * d1 * _I3
+    q[V, V] += accel_noise_density**2 * d1 * _I3
+    q[BA, BA] = bias_walk**2 * d1 * _I3
+    q.setflags(write=False)
+    return q
+
+
+def predict(
+    x: np.ndarray,
+    cov: np.ndarray,
+    accel_b: np.ndarray,
+    r_wb: np.ndarray,
+    dt: float,
+    q_accel: float,
+    q_angular: float,
+    accel_noise_density: float,
+    bias_walk: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One IMU sample of prediction over ``dt`` (the sample's specific force, body frame)."""
+    # relative acceleration = deck (zero mean) - drone (from the IMU)
+    a_rel = -(r_wb @ (accel_b - x[BA])) - GRAVITY_W
+    x = x.copy()
+    x[P] += x[V] * dt + 0.5 * dt * dt * a_rel
+    x[V] += a_rel * dt
+    x[TH] += x[W] * dt
+    f = np.eye(N_STATE)
+    f[P, V] = dt * _I3
+    f[P, BA] = 0.5 * dt * dt * r_wb
+    f[V, BA] = dt * r_wb
+    f[TH, W] = dt * _I3
+    noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk)
+    return x, f @ cov @ f.T + noise
+
+
+def tof_model(
+    x: np.ndarray, origin_b: np.ndarray, r_wb: np.ndarray
+) -> tuple[float, np.ndarray] | None:
+    """Predicted range of a ToF sensor (origin in B, measuring along body -z) and its 1x15 H.
+
+    The range to the deck plane (through the tag centre, normal R_WP e_z) along the ray;
+    None when the ray is (nearly) parallel to the plane or points away from it.
+    """
+    normal, d_normal = deck_normal(x[TH])
+    direction = -r_wb[:, 2]
+    q = x[P] - r_wb @ origin_b  # the deck origin relative to the sensor
+    along = float(normal @ direction)  # negative: the ray points down into the deck
+    if along > -0.2:  # grazing (beyond ~78 degrees of incidence) or pointing away
+        return None
+    predicted = float(normal @ q) / along
+    if predicted <= 0.0:
+        return None
+    h = np.zeros(N_STATE)
+    h[P] = normal / along
+    h[TH] = (q - predicted * direction) @ d_normal / along
+    return predicted, h
+
+
+def ekf_update(
+    x: np.ndarray,
+    cov: np.ndarray,
+    innovation: np.ndarray,
+    h: np.ndarray,
+    noise: np.ndarray,
+    gate: float,
+) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """Gated EKF update: (state, covariance, NIS, accepted).
+
+    A measurement whose normalised innovation squared exceeds ``gate`` leaves the state as is.
+    With the optimal gain, P - K S K^T equals the Joseph form; it is symmetrised against
+    round-off.
+    """
+    ph = cov @ h.T
+    s = h @ ph + noise
+    s_inv = np.linalg.inv(s)
+    nis = float(innovation @ s_inv @ innovation)
+    if not nis <= gate:  # also refuses a NaN
+        return x, cov, nis, False
+    gain = ph @ s_inv
+    x = x + gain @ innovation
+    cov = cov - gain @ s @ gain.T
+    return x, 0.5 * (cov + cov.T), nis, True

@@ -1,0 +1,286 @@
+"""The drone–deck fusion EKF on synthetic data: consistency, delayed fusion, gating, resets."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from estimation.errors import ConfigError
+from estimation.frames import R_BC, R_PD, matrix_from_euler_zyx, tof_positions_in_camera_frame
+from estimation.fusion import DeckFusion, FusionConfig
+from estimation.fusion.model import N_STATE, TH, deck_normal, rotation_zyx, tof_model, wrap_angle
+from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
+
+RATE = 240
+DT = 1.0 / RATE
+T_BC = np.array([0.0, 0.0, -0.03])
+SIGMA = (0.003, 0.003, 0.008, 2.0, 2.0, 0.5)
+
+
+@dataclass
+class Frame:
+    """One 50 ms step of synthetic data."""
+
+    time: float
+    r_wb: np.ndarray
+    imu: list[ImuSample]
+    truth: np.ndarray  # the 15-state truth at ``time``
+    pose: DeckPoseEstimate | None
+
+
+def synthetic_run(
+    rng: np.random.Generator, config: FusionConfig, duration: float = 6.0, pose_every: int = 2
+) -> list[Frame]:
+    """Constant drone acceleration over a deck whose motion follows the filter's model.
+
+    The drone (tilted, yawed, constant attitude) accelerates at a constant rate; the deck's
+    position and Euler angles are random walks in velocity with the configured PSDs; the IMU
+    has white noise and a random-walk bias; pose measurements carry the configured noise.
+    """
+    r_wb = matrix_from_euler_zyx(0.08, -0.05, 0.6)
+    a_drone = np.array([0.3, -0.2, 0.15])
+    g = np.array([0.0, 0.0, -9.81])
+    p_rel = np.array([0.1, -0.2, -2.0]) + rng.normal(0.0, 0.01, 3)
+    v_rel = rng.normal(0.0, config.initial_velocity_sigma, 3)
+    th = np.array([0.03, -0.02, 0.4])
+    w = rng.normal(0.0, config.initial_rate_sigma, 3)
+    bias = rng.normal(0.0, config.initial_accel_bias_sigma, 3)
+    sigma = np.array(SIGMA, dtype=float)
+    sigma[3:] = np.deg2rad(sigma[3:])
+
+    def block(q: float) -> np.ndarray:
+        return q * np.array([[DT**3 / 3, DT**2 / 2], [DT**2 / 2, DT]])
+
+    chol_a = np.linalg.cholesky(block(config.deck_accel_psd))
+    chol_w = np.linalg.cholesky(block(config.deck_angular_accel_psd))
+    frames: list[Frame] = []
+    substeps = RATE // 20
+    t = 0.0
+    for k in range(round(duration * 20)):
+        samples = []
+        for _ in range(substeps):
+            # deck noise (exact discretisation), drone: constant acceleration
+            wa = chol_a @ rng.standard_normal((2, 3))
+            ww = chol_w @ rng.standard_normal((2, 3))
+            p_rel = p_rel + v_rel * DT - 0.5 * a_drone * DT**2 + wa[0]
+            v_rel = v_rel - a_drone * DT + wa[1]
+            th = th + w * DT + ww[0]
+            w = w + ww[1]
+            bias = bias + config.accel_bias_random_walk * math.sqrt(DT) * rng.standard_normal(3)
+            t = round(t + DT, 12)
+            noise = config.accel_noise_density * math.sqrt(RATE) * rng.standard_normal(3)
+            accel = r_wb.T @ (a_drone - g) + bias + noise
+            samples.append(ImuSample(t, accel, np.zeros(3)))
+        truth = np.concatenate([p_rel, v_rel, th, w, bias])
+        pose = None
+        if k % pose_every == 0:
+            r_wc = r_wb @ R_BC
+            t_cd = r_wc.T @ (p_rel - r_wb @ T_BC) + sigma[:3] * rng.standard_normal(3)
+            th_noisy = th + sigma[3:] * rng.standard_normal(3)
+            r_cd = r_wc.T @ rotation_zyx(th_noisy) @ R_PD
+            pose = DeckPoseEstimate("atda", t, True, r_cd, t_cd)
+        frames.append(Frame(t, r_wb, samples, truth, pose))
+    return frames
+
+
+def make_config(**kwargs: object) -> FusionConfig:
+    base: dict[str, object] = {
+        "sources": ("atda",),
+        "use_tof": False,
+        "atda_sigma": SIGMA,
+        "deck_accel_psd": 0.01,
+        "deck_angular_accel_psd": 0.002,
+        "initial_rate_sigma": 0.05,
+    }
+    base.update(kwargs)
+    return FusionConfig(**base)  # type: ignore[arg-type]
+
+
+def make_fusion(config: FusionConfig) -> DeckFusion:
+    return DeckFusion(config, tof_positions_in_camera_frame(), T_BC)
+
+
+def nees(fusion: DeckFusion, truth: np.ndarray) -> float:
+    error = truth - fusion.state
+    error[TH] = wrap_angle(error[TH])
+    return float(error @ np.linalg.solve(fusion.covariance, error))
+
+
+def test_nees_consistent_over_monte_carlo() -> None:
+    """Average NEES over seeded runs inside the chi-square 95% band of the 15-state."""
+    config = make_config(gate_probability=1.0 - 1e-12)
+    runs = 25
+    checkpoints = (40, 80, 119)  # 2 s, 4 s, 6 s
+    values = {k: [] for k in checkpoints}
+    rng = np.random.default_rng(7)
+    for _ in range(runs):
+        fusion = make_fusion(config)
+        for k, frame in enumerate(synthetic_run(rng, config)):
+            poses = [frame.pose] if frame.pose is not None else []
+            fusion.step(frame.time, frame.r_wb, frame.imu, None, poses)
+            if k in checkpoints:
+                values[k].append(nees(fusion, frame.truth))
+    low, high = chi2.ppf([0.025, 0.975], runs * N_STATE) / runs
+    for k in checkpoints:
+        mean = float(np.mean(values[k]))
+        assert low <= mean <= high, (k, mean, low, high)
+    # and it converged: the position error at the end is well below the measurement noise
+    assert fusion.diagnostics().get("atda_rejected", 0) == 0
+
+
+def test_converges_on_constant_acceleration() -> None:
+    config = make_config()
+    fusion = make_fusion(config)
+    frames = synthetic_run(np.random.default_rng(3), config, duration=6.0)
+    errors = []
+    for frame in frames:
+        estimate = fusion.step(
+            frame.time, frame.r_wb, frame.imu, None, [frame.pose] if frame.pose else []
+        )
+        errors.append(np.abs(frame.truth - fusion.state))
+    late = np.mean(errors[-40:], axis=0)
+    assert estimate.valid and estimate.covariance is not None
+    # below one measurement's noise (3, 3, 8 mm) and a tenth of the initial velocity sigma
+    assert np.all(late[0:3] < np.array(SIGMA[:3]))
+    assert np.all(late[3:6] < 0.2 * config.initial_velocity_sigma)
+
+
+def _run_with_delay(delay_steps: int, frames: list[Frame], config: FusionConfig) -> DeckFusion:
+    fusion = make_fusion(config)
+    pending: list[tuple[int, DeckPoseEstimate]] = []
+    for k, frame in enumerate(frames):
+        if frame.pose is not None:
+            pending.append((k + delay_steps, frame.pose))
+        due = [pose for when, pose in pending if when <= k]
+        pending = [(when, pose) for when, pose in pending if when > k]
+        fusion.step(frame.time, frame.r_wb, frame.imu, None, due)
+    return fusion
+
+
+def test_delayed_measurement_equals_undelayed() -> None:
+    """A pose delivered 200 ms late, fused at its timestamp, gives the on-time estimate."""
+    config = make_config()
+    frames = synthetic_run(np.random.default_rng(11), config, duration=3.0)
+    # the last measurement lands inside both runs: compare after the delayed one arrives
+    frames = frames[:-4] + [Frame(f.time, f.r_wb, f.imu, f.truth, None) for f in frames[-4:]]
+    on_time = _run_with_delay(0, frames, config)
+    late = _run_with_delay(4, frames, config)
+    np.testing.assert_allclose(late.state, on_time.state, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(late.covariance, on_time.covariance, rtol=0, atol=1e-15)
+    without = _run_with_delay(100, frames, config)  # never delivered: a different estimate
+    assert np.max(np.abs(without.state - on_time.state)) > 1e-5
+
+
+def test_too_old_measurement_is_rejected_and_counted() -> None:
+    config = make_config(horizon_s=0.3)
+    frames = synthetic_run(np.random.default_rng(5), config, duration=2.0)
+    late = _run_with_delay(8, frames, config)  # 0.4 s late: beyond the 0.3 s horizon
+    diag = late.diagnostics()
+    assert diag["atda_too_old"] > 0
+    assert diag.get("atda_accepted", 0) == 0
+
+
+def test_outlier_is_gated_and_counted() -> None:
+    config = make_config()
+    fusion = make_fusion(config)
+    frames = synthetic_run(np.random.default_rng(2), config, duration=3.0)
+    for frame in frames[:-1]:
+        fusion.step(frame.time, frame.r_wb, frame.imu, None, [frame.pose] if frame.pose else [])
+    before = fusion.state
+    last = frames[-1]
+    r_wc = last.r_wb @ R_BC
+    good_t = r_wc.T @ (last.truth[0:3] - last.r_wb @ T_BC)
+    bad = DeckPoseEstimate(
+        "atda",
+        last.time,
+        True,
+        r_wc.T @ rotation_zyx(last.truth[TH]) @ R_PD,
+        np.array([*good_t[:2], good_t[2] + 0.3]),
+    )
+    fusion.step(last.time, last.r_wb, last.imu, None, [bad])
+    diag = fusion.diagnostics()
+    assert diag["atda_rejected"] == 1
+    assert diag["nis_atda"] > chi2.ppf(config.gate_probability, 6)
+    # only the prediction moved the state: the outlier did not pull z
+    assert abs(fusion.state[2] - before[2]) < 0.01
+
+
+def test_reset_after_timeout_and_reinitialise() -> None:
+    config = make_config(reset_timeout_s=0.5)
+    fusion = make_fusion(config)
+    frames = synthetic_run(np.random.default_rng(4), config, duration=3.0)
+    for frame in frames[:20]:
+        fusion.step(frame.time, frame.r_wb, frame.imu, None, [frame.pose] if frame.pose else [])
+    assert fusion.initialised
+    for frame in frames[20:40]:  # 1 s without vision
+        estimate = fusion.step(frame.time, frame.r_wb, frame.imu, None, [])
+    assert not estimate.valid and estimate.reason == "fusion_reset"
+    assert fusion.diagnostics()["resets"] == 1
+    frame = frames[40]
+    assert frame.pose is not None
+    estimate = fusion.step(frame.time, frame.r_wb, frame.imu, None, [frame.pose])
+    assert estimate.valid
+    assert fusion.diagnostics()["atda_initialised"] == 2
+
+
+def test_tof_model_matches_geometry_and_jacobian() -> None:
+    """A level drone 2 m above a level deck reads 2 m minus the sensor heights; H is right."""
+    fusion = make_fusion(make_config(use_tof=True))
+    x = np.zeros(N_STATE)
+    x[2] = -2.0
+    r_wb = np.eye(3)
+    for origin in fusion.tof_origins_b:
+        predicted, _ = tof_model(x, origin, r_wb)
+        assert predicted == pytest.approx(2.0 + origin[2])
+    rng = np.random.default_rng(0)
+    x[0:3] += rng.normal(0, 0.05, 3)
+    x[TH] = [0.1, -0.07, 0.5]
+    r_wb = matrix_from_euler_zyx(0.05, 0.1, -0.3)
+    origin = fusion.tof_origins_b[1]
+    _, h = tof_model(x, origin, r_wb)
+    numeric = np.zeros(N_STATE)
+    for i in range(N_STATE):
+        d = np.zeros(N_STATE)
+        d[i] = 1e-7
+        numeric[i] = (tof_model(x + d, origin, r_wb)[0] - tof_model(x - d, origin, r_wb)[0]) / 2e-7
+    np.testing.assert_allclose(h, numeric, atol=1e-6)
+    normal, _ = deck_normal(x[TH])
+    np.testing.assert_allclose(normal, matrix_from_euler_zyx(*x[TH])[:, 2], atol=1e-12)
+
+
+def test_tof_ranges_refine_height_and_tilt() -> None:
+    """With the ToF ranges, z and the deck tilt are estimated better than from poses alone."""
+    config = make_config(use_tof=True, tof_sigma_m=0.002, tof_sigma_per_m=0.0)
+    errors = {}
+    for use_tof in (False, True):
+        cfg = make_config(use_tof=use_tof, tof_sigma_m=0.002, tof_sigma_per_m=0.0)
+        fusion = make_fusion(cfg)
+        rng = np.random.default_rng(9)
+        frames = synthetic_run(rng, config, duration=4.0)
+        err = []
+        for frame in frames:
+            x = frame.truth
+            ranges = np.array([tof_model(x, o, frame.r_wb)[0] for o in fusion.tof_origins_b])
+            ranges += 0.002 * rng.standard_normal(4)
+            reading = RangeReading(frame.time, ranges, np.ones(4, dtype=bool))
+            poses = [frame.pose] if frame.pose else []
+            fusion.step(frame.time, frame.r_wb, frame.imu, reading, poses)
+            err.append(np.abs(wrap_angle(fusion.state - x))[[2, 6, 7]])
+        errors[use_tof] = np.mean(err[20:], axis=0)
+        if use_tof:
+            assert fusion.diagnostics()["tof_accepted"] > 0
+    assert np.all(errors[True] < errors[False])
+
+
+def test_config_errors_name_the_field() -> None:
+    with pytest.raises(ConfigError, match="sources"):
+        FusionConfig(sources=("truth",))
+    with pytest.raises(ConfigError, match="gate_probability"):
+        FusionConfig(gate_probability=1.0)
+    with pytest.raises(ConfigError, match="atda_sigma"):
+        FusionConfig(atda_sigma=(0.1, 0.1))
+    assert FusionConfig(ihrcf_sigma=(0.002, 0.002, math.inf, math.inf, math.inf, 0.3)).sources

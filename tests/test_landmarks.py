@@ -1,0 +1,280 @@
+"""Nested landmarks: layout geometry, the choice rule, T_CD of D from an offset tag, the
+high-approach scenario (project and render mode)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import landing_env  # noqa: F401  (registers the environments)
+from estimation.atda import JointAtdaEstimator
+from estimation.camera_model import CameraIntrinsics
+from estimation.detection import AprilTagDetector
+from estimation.estimator import RankedEstimator, make_estimator
+from estimation.frames import R_PD, matrix_from_euler_zyx, tof_positions_in_camera_frame
+from estimation.landmarks import (
+    Landmark,
+    LandmarkChoiceConfig,
+    LandmarkEstimator,
+    LandmarkLayout,
+    choose_landmark,
+    compose_deck_pose,
+    layout_from_pairs,
+)
+from estimation.synthetic import SyntheticScene
+from estimation.tof_calibration import TofCameraCalibration
+from estimation.types import CameraFrame, RangeReading, TagDetection
+from landing_env.config import load_config
+from landing_env.errors import ConfigError
+from landing_env.scene.deck import DeckSurfaceConfig, make_deck_texture, plate_to_texel
+
+CAMERA = CameraIntrinsics(width=512, height=512, fx=458.5, fy=457.855, cx=255.5, cy=255.5)
+HIGH = load_config("high-approach")
+LAYOUT = HIGH.deck.layout
+
+
+def _square(side_px: float, centre: tuple[float, float] = (256.0, 256.0)) -> np.ndarray:
+    half = 0.5 * side_px
+    signs = np.array([[-1.0, 1.0], [1.0, 1.0], [1.0, -1.0], [-1.0, -1.0]])
+    return np.asarray(centre) + half * signs
+
+
+def _frame(*detections: tuple[int, float]) -> CameraFrame:
+    return CameraFrame(0.0, tuple(TagDetection(i, _square(s)) for i, s in detections))
+
+
+# ---------------------------------------------------------------------------------- layout
+def test_high_approach_layout_fits_the_deck_with_quiet_zones_apart() -> None:
+    q = LAYOUT.quiet_zone_cells
+    assert len(set(LAYOUT.ids)) == len(LAYOUT.landmarks) == 3
+    assert LAYOUT.extent() <= 0.5 * HIGH.deck.size
+    landmarks = LAYOUT.landmarks
+    for i, a in enumerate(landmarks):
+        for b in landmarks[i + 1 :]:
+            reach = a.outer_half_extent(q) + b.outer_half_extent(q)
+            assert max(abs(a.x - b.x), abs(a.y - b.y)) >= reach
+    # the smallest tag marks the landing point, the origin of D
+    smallest = min(landmarks, key=lambda lm: lm.size)
+    assert (smallest.x, smallest.y) == (0.0, 0.0)
+
+
+def test_layout_refuses_overlap_duplicates_and_off_deck() -> None:
+    with pytest.raises(ConfigError, match="overlap"):
+        layout_from_pairs([(0, 0.2, 0.0, 0.0), (1, 0.2, 0.2, 0.0)])
+    with pytest.raises(ConfigError, match="distinct"):
+        layout_from_pairs([(0, 0.2, 0.0, 0.0), (0, 0.2, 1.0, 0.0)])
+    with pytest.raises(ConfigError, match="landmarks"):
+        DeckSurfaceConfig(size=1.0, landmarks=(Landmark(0, 0.3, 0.4, 0.0),))
+    with pytest.raises(ConfigError):
+        load_config("high-approach", overrides={"deck.size": 2.0})
+
+
+def test_default_deck_is_one_centred_tag() -> None:
+    layout = load_config("default").deck.layout
+    assert layout.is_single_centred
+    assert layout.landmarks == (Landmark(0, 0.30),)
+
+
+def test_texture_draws_every_landmark_where_the_layout_says() -> None:
+    # a coarser texture than the scenario's, detected directly: ids and corner texels
+    config = DeckSurfaceConfig(size=HIGH.deck.size, texture_px=2048, landmarks=HIGH.deck.landmarks)
+    texture = make_deck_texture(config)
+    detector = AprilTagDetector()
+    try:
+        found = {d.tag_id: d.corners_px for d in detector.detect(texture)}
+    finally:
+        detector.close()
+    assert set(found) == set(LAYOUT.ids)
+    for landmark in LAYOUT.landmarks:
+        corners_p = (R_PD @ landmark.corners_d().T).T
+        expected = plate_to_texel(config, corners_p[:, :2])
+        # the texture is the deck seen from above (a camera with R_CD = I): same corner order
+        assert np.max(np.abs(found[landmark.tag_id] - expected)) < 1.0
+
+
+# ----------------------------------------------------------------------------- choice rule
+def test_choice_prefers_the_largest_image_within_the_band() -> None:
+    band = LandmarkChoiceConfig(min_side_px=16.0, max_side_px=300.0)
+    assert choose_landmark(_frame((2, 25.0), (1, 9.0)), LAYOUT, band).landmark.tag_id == 2
+    assert choose_landmark(_frame((0, 60.0), (1, 180.0)), LAYOUT, band).landmark.tag_id == 1
+    # a tag filling the view is out of the band: the in-band one wins although smaller
+    chosen = choose_landmark(_frame((1, 420.0), (0, 120.0)), LAYOUT, band)
+    assert chosen.landmark.tag_id == 0 and chosen.in_band
+    # nothing in the band: the largest still serves
+    chosen = choose_landmark(_frame((0, 10.0), (1, 12.0)), LAYOUT, band)
+    assert chosen.landmark.tag_id == 1 and not chosen.in_band
+    # tags not in the layout are ignored
+    assert choose_landmark(_frame((7, 100.0)), LAYOUT, band) is None
+
+
+def test_choice_for_the_tof_estimators_prefers_the_tag_at_the_landing_point() -> None:
+    nearest = LandmarkChoiceConfig(prefer="nearest")
+    frame = _frame((2, 168.0), (1, 61.0), (0, 18.0))
+    assert choose_landmark(frame, LAYOUT, nearest).landmark.tag_id == 0
+    # below the band it gives way to an in-band tag farther off
+    assert choose_landmark(_frame((0, 9.0), (1, 30.0)), LAYOUT, nearest).landmark.tag_id == 1
+    with pytest.raises(ConfigError, match="prefer"):
+        LandmarkChoiceConfig(prefer="smallest")
+
+
+# --------------------------------------------------- estimates of D from a small offset tag
+def _offset_scene(landmark: Landmark, r_cd: np.ndarray, t_cd: np.ndarray):
+    """Measurements of one landmark only (the others out of the picture)."""
+    scene = SyntheticScene(CAMERA, landmark.size, tag_id=landmark.tag_id)
+    t_cl = t_cd + r_cd @ landmark.offset_d
+    return scene.measure(r_cd, t_cl)
+
+
+def _estimator(name: str, layout: LandmarkLayout) -> LandmarkEstimator:
+    positions = tof_positions_in_camera_frame()
+    calibration = TofCameraCalibration.exact(CAMERA, positions, 0.04, 4.0)
+
+    def one(lm: Landmark):
+        needs_tof = name != "atda"
+        return make_estimator(
+            name,
+            intrinsics=CAMERA,
+            tag_size=lm.size,
+            tag_id=lm.tag_id,
+            tof_calibration=calibration if needs_tof else None,
+            tof_positions_c=positions if needs_tof else None,
+        )
+
+    return LandmarkEstimator(name, layout, one)
+
+
+@pytest.mark.parametrize("name", ["atda", "ihrcf", "crhf"])
+def test_every_estimator_reports_the_deck_frame_from_an_offset_tag(name: str) -> None:
+    # a small tag 0.3 m off the landing point; the deck tilted, the camera 0.8 m above
+    layout = layout_from_pairs([(5, 0.10, 0.30, -0.12), (6, 0.60, -0.60, 0.0)])
+    r_cd = matrix_from_euler_zyx(math.radians(4.0), math.radians(-3.0), math.radians(20.0))
+    t_cd = np.array([-0.25, 0.05, 0.8])
+    small = layout.by_id(5)
+    assert small is not None
+    measurement = _offset_scene(small, r_cd, t_cd)
+    assert [d.tag_id for d in measurement.frame.detections] == [5]
+    assert measurement.ranges.valid.all()
+    estimate = _estimator(name, layout).estimate(measurement.frame, measurement.ranges)
+    assert estimate.valid, estimate.reason
+    assert estimate.extras["landmark_id"] == 5
+    assert np.allclose(estimate.translation, t_cd, atol=2e-3)
+    assert np.allclose(estimate.rotation, r_cd, atol=2e-3)
+
+
+def _frame_of_all(layout: LandmarkLayout, r_cd: np.ndarray, t_cd: np.ndarray) -> CameraFrame:
+    """Noise-free detections of every landmark of ``layout`` at deck pose (R_CD, t_CD)."""
+    detections = []
+    for lm in layout.landmarks:
+        corners_c = lm.corners_d() @ r_cd.T + t_cd
+        detections.append(TagDetection(lm.tag_id, CAMERA.project(corners_c)))
+    return CameraFrame(0.0, tuple(detections))
+
+
+@pytest.mark.parametrize("yaw_deg", [15.0, 170.0, -100.0])
+def test_joint_atda_uses_every_detected_tag_and_reports_the_deck_frame(yaw_deg: float) -> None:
+    layout = LAYOUT
+    r_cd = matrix_from_euler_zyx(math.radians(3.0), math.radians(-2.0), math.radians(yaw_deg))
+    t_cd = np.array([0.1, -0.1, 3.0])
+    single = _estimator("atda", layout)
+    joint = JointAtdaEstimator(intrinsics=CAMERA, layout=layout, single=single)
+    no_ranges = RangeReading(0.0, np.full(4, np.nan), np.zeros(4, dtype=bool))
+    estimate = joint.estimate(_frame_of_all(layout, r_cd, t_cd), no_ranges)
+    assert estimate.valid and estimate.extras["solver"] == "joint_ippe"
+    assert set(estimate.extras["landmark_ids"]) == set(layout.ids)
+    assert estimate.extras["landmark_id"] == 2  # the largest image
+    assert np.allclose(estimate.translation, t_cd, atol=1e-6)
+    assert np.allclose(estimate.rotation, r_cd, atol=1e-6)
+    # one tag only: the single-tag ATDA on the chosen landmark answers
+    one = layout_from_pairs([(1, 0.40, 0.345, 0.0)])
+    frame = _frame_of_all(one, r_cd, t_cd)
+    estimate = joint.estimate(frame, no_ranges)
+    assert estimate.valid and estimate.extras["landmark_id"] == 1
+    assert "landmark_ids" not in estimate.extras
+    assert np.allclose(estimate.translation, t_cd, atol=1e-3)
+
+
+def test_compose_moves_the_tag_pose_to_the_deck_frame() -> None:
+    landmark = Landmark(3, 0.2, 0.5, -0.25)
+    r_cd = matrix_from_euler_zyx(0.1, -0.05, 1.0)
+    t_cd = np.array([0.1, 0.2, 3.0])
+    r, t = compose_deck_pose(r_cd, t_cd + r_cd @ landmark.offset_d, landmark)
+    assert np.allclose(r, r_cd) and np.allclose(t, t_cd)
+
+
+def test_ranked_estimator_uses_atda_above_the_tof_range_and_ihrcf_within() -> None:
+    layout = layout_from_pairs([(0, 0.12, 0.0, 0.0), (2, 1.1, -0.78, 0.0)])
+    auto = RankedEstimator("auto", (_estimator("ihrcf", layout), _estimator("atda", layout)))
+    level = np.eye(3)
+    high = _offset_scene(layout.by_id(2), level, np.array([0.3, -0.2, 12.0]))
+    # far above the ToF range: no ray returns
+    high = dataclasses.replace(
+        high, ranges=RangeReading(0.0, np.full(4, np.nan), np.zeros(4, dtype=bool))
+    )
+    estimate = auto.estimate(high.frame, high.ranges)
+    assert estimate.valid and estimate.extras["source"] == "atda"
+    assert np.allclose(estimate.translation, [0.3, -0.2, 12.0], atol=0.02)
+    low = _offset_scene(layout.by_id(0), level, np.array([0.02, 0.0, 0.6]))
+    estimate = auto.estimate(low.frame, low.ranges)
+    assert estimate.valid and estimate.extras["source"] == "ihrcf"
+    nothing = auto.estimate(CameraFrame(1.0, ()), low.ranges)
+    assert not nothing.valid and set(nothing.extras["reasons"]) == {"ihrcf", "atda"}
+
+
+# ------------------------------------------------------------------------------- scenario
+def test_high_approach_starts_20_m_up_and_5_m_off_with_only_atda_valid() -> None:
+    env = gym.make("DeckLanding-v0", config="high-approach")
+    try:
+        for seed in (0, 1):
+            _, info = env.reset(seed=seed)
+            offset = info["drone"]["position_w"] - env.unwrapped.world.deck_home_w
+            assert math.hypot(offset[0], offset[1]) == pytest.approx(5.0, abs=1e-9)
+            assert offset[2] == pytest.approx(20.0, abs=1e-9)
+            estimates = info["estimates"]
+            assert estimates["atda"]["valid"]
+            assert estimates["atda"]["extras"]["landmark_id"] == 2
+            for name in ("ihrcf", "crhf"):
+                assert estimates[name]["reason"] == "range_invalid"
+            # a 25 px tag with 0.3 px corner noise: a few percent of the 20.6 m range
+            error = estimates["atda"]["pose"][:3] - info["deck_pose_true"][:3]
+            assert np.linalg.norm(error) < 0.05 * np.linalg.norm(info["deck_pose_true"][:3])
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(("height_m", "tag_id"), [(20.0, 2), (0.5, 0)])
+def test_render_mode_decodes_the_large_tag_high_and_the_small_one_low(
+    height_m: float, tag_id: int
+) -> None:
+    env = gym.make(
+        "DeckLanding-v0",
+        config="high-approach",
+        overrides={
+            "camera.mode": "render",
+            "simulation.drone_fixed": True,
+            "wind.enabled": False,
+            "estimation.observed": "auto",
+            "estimation.compare": ["atda"],
+        },
+    )
+    try:
+        # the camera 3 cm below the drone's centre, 5 cm off the landing point
+        _, info = env.reset(seed=3, options={"height_m": height_m + 0.03, "offset_m": (0.05, 0.0)})
+        frame = env.unwrapped._sensing.frame
+        assert tag_id in {d.tag_id for d in frame.detections}
+        auto = info["estimates"]["auto"]
+        assert auto["valid"] and auto["extras"]["landmark_id"] == tag_id
+        assert auto["extras"]["source"] == ("atda" if height_m > 4.0 else "ihrcf")
+        error = np.linalg.norm(auto["pose"][:3] - info["deck_pose_true"][:3])
+        assert error < 0.03 * height_m
+    finally:
+        env.close()
+
+
+def test_start_offset_bounds_are_validated() -> None:
+    with pytest.raises(ConfigError, match="min_offset_m"):
+        load_config("default", overrides={"start.min_offset_m": 1.0})
+    assert load_config("default").start.min_offset_m == 0.0
