@@ -155,10 +155,15 @@ def run_demo(
     seed: int = 0,
     out_dir: Path = Path("results/demo"),
     timing: bool = True,
+    timing_seed: int = 4,
     **kw,
 ) -> EpisodeLog:
     """The `make demo` job: one seeded episode with the camera rendered and the tag detected,
-    then (``timing``) the trained timing policy landing on a sea-state deck."""
+    then (``timing``) the trained timing policy landing on a sea-state deck.
+
+    ``timing_seed`` 4 (held-out seed 1 000 004) is an episode on which committing at once meets
+    a 6.7° deck tilt (a hard landing): the one that shows the policy waiting.
+    """
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
@@ -180,7 +185,7 @@ def run_demo(
     plot_trajectory(log, plot)
     console.print(f"camera video: {video}\ntrajectory plot: {plot}")
     if timing:
-        run_timing_demo(seed=seed, out_dir=out_dir)
+        run_timing_demo(seed=timing_seed, out_dir=out_dir)
     return log
 
 

@@ -67,7 +67,7 @@ class TrainSettings:
     eval: EvalSettings = field(default_factory=EvalSettings)
     #: save a checkpoint every this many environment steps (summed over the environments)
     checkpoint_freq: int = 50_000
-    #: stop when the evaluation success rate reaches this (1 or more: never stop early)
+    #: stop when the evaluation success rate reaches this (above 1: never stop early)
     target_success_rate: float = 0.95
     #: stop after this much wall-clock time, minutes (the run keeps what it has learnt)
     max_minutes: float = 30.0

@@ -83,6 +83,7 @@ def test_a_short_training_run_saves_a_policy_that_loads_again(tmp_path: Path) ->
     settings.eval.freq = 1024
     settings.eval.episodes = 3
     settings.checkpoint_freq = 1024
+    settings.target_success_rate = 1.1  # run every step: no early stop on a lucky evaluation
     config.hyperparams.update(n_steps=256, batch_size=128, n_epochs=2)
     config.hyperparams["policy_kwargs"] = "dict(net_arch=[32, 32])"
     result = train(config, out_dir=tmp_path, total_timesteps=2048, progress_bar=False)

@@ -45,6 +45,10 @@ TRAJECTORY_STRIDE = 5
 PLOTTED_EPISODES = 12
 
 
+#: how svgs-routine chooses the moment of the final descent
+ROUTINE_TIMINGS = ("model", "quiescent")
+
+
 def routine_estimator(requested: str | None = None) -> str:
     """The estimator the SVGS routine flies with: ``requested``, else ``fused`` if the
     environment knows it, else ``atda``."""
@@ -92,15 +96,21 @@ def make_env_and_policy(
     scenario: str,
     estimator: str,
     overrides: dict[str, Any] | None = None,
+    routine_timing: str = "model",
 ) -> tuple[Any, Any]:
-    """``DeckLanding-v0`` on ``scenario`` with ``estimator`` observed, and the policy."""
+    """``DeckLanding-v0`` on ``scenario`` with ``estimator`` observed, and the policy.
+
+    ``routine_timing`` (svgs-routine only): ``"model"`` commits through the shipped timing
+    policy where it is installed, ``"quiescent"`` through the calm-window heuristic.
+    """
     import gymnasium as gym
 
     import landing_env  # noqa: F401  (registers the environments)
     from agents.beacon_range import make_beacon_range
-    from agents.svgs_routine import make_svgs_routine
+    from agents.svgs_routine import RoutineConfig, make_svgs_routine
 
     require_choice("policy", policy_name, tuple(APPROACH_POLICIES))
+    require_choice("routine_timing", routine_timing, ROUTINE_TIMINGS)
     settings = {
         "estimation.observed": estimator,
         "estimation.compare": [],
@@ -108,10 +118,11 @@ def make_env_and_policy(
     }
     env = gym.make("DeckLanding-v0", config=scenario, overrides=settings)
     try:
-        factory: Callable[[Any], Any] = (
-            make_svgs_routine if policy_name == "svgs-routine" else make_beacon_range
-        )
-        policy = factory(env)
+        if policy_name == "svgs-routine":
+            config = RoutineConfig(use_timing_model=routine_timing == "model")
+            policy = make_svgs_routine(env, config)
+        else:
+            policy = make_beacon_range(env)
     except Exception:
         env.close()
         raise
@@ -175,8 +186,8 @@ def run_episode(
 
 def _run_chunk(job: tuple) -> list[ApproachEpisode]:
     """Worker: one environment, a list of seeds (top level, so that it pickles)."""
-    policy_name, scenario, estimator, seeds, overrides = job
-    env, policy = make_env_and_policy(policy_name, scenario, estimator, overrides)
+    policy_name, scenario, estimator, seeds, overrides, routine_timing = job
+    env, policy = make_env_and_policy(policy_name, scenario, estimator, overrides, routine_timing)
     try:
         return [run_episode(env, policy, s, policy_name, estimator, scenario) for s in seeds]
     finally:
@@ -192,13 +203,14 @@ def evaluate_policy(
     workers: int = 2,
     progress: bool = True,
     overrides: dict[str, Any] | None = None,
+    routine_timing: str = "model",
 ) -> list[ApproachEpisode]:
     """``episodes`` episodes of one policy, over ``workers`` processes (spawned)."""
     seeds = list(range(first_seed, first_seed + episodes))
     # chunks of a few episodes keep both workers busy to the end and the progress bar moving
     size = max(1, min(5, math.ceil(episodes / max(workers, 1))))
     jobs = [
-        (policy_name, scenario, estimator, seeds[i : i + size], overrides)
+        (policy_name, scenario, estimator, seeds[i : i + size], overrides, routine_timing)
         for i in range(0, len(seeds), size)
     ]
     pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
@@ -377,6 +389,7 @@ def evaluate_approach(
     progress: bool = True,
     overrides: dict[str, Any] | None = None,
     command: str = "",
+    routine_timing: str = "model",
 ) -> ApproachEvaluation:
     """Evaluate ``policies`` on ``scenario``; write the table, CSV, JSON and figure."""
     if episodes < 1:
@@ -391,7 +404,15 @@ def evaluate_approach(
             else APPROACH_POLICIES[name]
         )
         results[name] = evaluate_policy(
-            name, scenario, estimator, episodes, first_seed, workers, progress, overrides
+            name,
+            scenario,
+            estimator,
+            episodes,
+            first_seed,
+            workers,
+            progress,
+            overrides,
+            routine_timing,
         )
     summaries = [summarise(r) for r in results.values()]
     files: list[Path] = []
@@ -402,6 +423,8 @@ def evaluate_approach(
             f"{scenario}: {episodes} episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
         )
+        if "svgs-routine" in results:
+            title += f"; svgs-routine commits through the {routine_timing} timing"
         wall = sum(e.wall_time_s for r in results.values() for e in r)
         table = out_dir / f"{stem}.md"
         table.write_text(
@@ -417,6 +440,7 @@ def evaluate_approach(
                     "scenario": scenario,
                     "first_seed": first_seed,
                     "overrides": overrides or {},
+                    "routine_timing": routine_timing,
                     "command": command,
                     "summaries": [asdict(s) for s in summaries],
                 },
@@ -453,6 +477,7 @@ def _evaluate_approach(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         overrides=_parse_overrides(args.set),
         command=command,
+        routine_timing=args.routine_timing,
     )
     console.print(f"\n[bold]{args.scenario}[/bold]")
     print(markdown_table(evaluation.summaries))
@@ -480,6 +505,13 @@ def add_approach_parser(evaluate_group: Any) -> None:
         "--routine-estimator",
         default=None,
         help="the routine's estimator (default: fused if available, else atda)",
+    )
+    approach.add_argument(
+        "--routine-timing",
+        choices=ROUTINE_TIMINGS,
+        default="model",
+        help="svgs-routine's commit: the shipped timing policy (where installed) or the "
+        "quiescent heuristic",
     )
     approach.add_argument("--workers", type=int, default=2, help="parallel processes")
     approach.add_argument("--out", default="results/approach", help="output directory")
