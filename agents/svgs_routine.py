@@ -50,7 +50,7 @@ from agents.policies import (
     normalise_setpoint,
     predict_calm,
 )
-from estimation.frames import R_BC
+from estimation.frames import R_BC, levelled_deck_pose
 from landing_env.config import ActionConfig
 from landing_env.envs.timing import (
     DeckGuidance,
@@ -408,7 +408,14 @@ class SvgsRoutinePolicy:
         self._unseen_s = 0.0 if seen else self._unseen_s + self.dt
         self._lock_count = self._lock_count + 1 if measured else 0
         locked = self._lock_count >= c.lock_frames
-        self.history.push(observation["deck_pose"].astype(float) if seen else None)
+        # the timing task's history holds the deck pose as a level camera sees it
+        self.history.push(
+            None
+            if not seen
+            else levelled_deck_pose(observation["deck_pose"], self.attitude.level_from_body())
+            if c.timing.level_history
+            else observation["deck_pose"].astype(float)
+        )
         height = self.height_m(observation)
         if measured:
             self.trusted_position = self.odometry.position.copy()

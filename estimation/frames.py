@@ -136,3 +136,25 @@ def deck_pose_in_camera(
     r_cd = r_wc.T @ r_wd
     t_cd = r_wc.T @ (t_wd - t_wc)
     return r_cd, t_cd
+
+
+def level_from_body(r_wb: np.ndarray) -> np.ndarray:
+    """R_HB: the body frame in the levelled heading frame H (the drone's roll and pitch
+    removed, its yaw kept), from the drone's attitude R_WB (an autopilot's estimate)."""
+    roll, pitch, _ = euler_zyx_from_matrix(r_wb)
+    return matrix_from_euler_zyx(roll, pitch, 0.0)
+
+
+def levelled_deck_pose(deck_pose: np.ndarray, r_hb: np.ndarray) -> np.ndarray:
+    """The deck pose (x, y, z, roll, pitch, yaw of T_CD) as a level camera would see it.
+
+    The level camera C' is the camera of the same drone with its roll and pitch removed
+    (``r_hb`` from :func:`level_from_body`): ``R_C'C = R_BC^T R_HB R_BC``.  Its roll and pitch
+    are the deck's tilt relative to gravity, which is what the touchdown criterion judges;
+    the camera-frame ones also hold the drone's own tilt (a few degrees in wind).  For a
+    level drone the two poses are the same.
+    """
+    pose = np.asarray(deck_pose, dtype=float)
+    r_lc = R_BC.T @ np.asarray(r_hb, dtype=float) @ R_BC
+    r_cd = matrix_from_euler_zyx(*pose[3:6])
+    return np.concatenate([r_lc @ pose[:3], euler_zyx_from_matrix(r_lc @ r_cd)])

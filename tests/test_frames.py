@@ -11,6 +11,8 @@ from estimation.frames import (
     R_BC,
     deck_pose_in_camera,
     euler_zyx_from_matrix,
+    level_from_body,
+    levelled_deck_pose,
     matrix_from_euler_zyx,
     tag_corners_in_tag_frame,
     tof_positions_in_camera_frame,
@@ -52,3 +54,35 @@ def test_euler_closed_form_matches_scipy(roll: float, pitch: float, yaw: float) 
     yaw_s, pitch_s, roll_s = Rotation.from_matrix(rotation).as_euler("ZYX")
     np.testing.assert_allclose(ours, [roll_s, pitch_s, yaw_s], atol=1e-9)
     np.testing.assert_allclose(matrix_from_euler_zyx(*ours), rotation, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    drone=st.tuples(*[st.floats(-0.26, 0.26)] * 2, st.floats(-3.1, 3.1)),
+    deck=st.tuples(*[st.floats(-0.17, 0.17)] * 3),
+    offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(0.3, 5.0)),
+)
+def test_levelled_deck_pose_is_what_a_level_camera_sees(
+    drone: tuple[float, float, float],
+    deck: tuple[float, float, float],
+    offset: tuple[float, float, float],
+) -> None:
+    roll, pitch, yaw = drone
+    r_wb = matrix_from_euler_zyx(roll, pitch, yaw)
+    r_wp = matrix_from_euler_zyx(*deck)
+    t_wb = np.array([offset[0], offset[1], offset[2]])
+    # the camera at the body origin, so that tilting the drone only turns the camera
+    tilted = deck_pose_in_camera(t_wb, r_wb, np.zeros(3), r_wp, np.zeros(3))
+    level = deck_pose_in_camera(
+        t_wb, matrix_from_euler_zyx(0, 0, yaw), np.zeros(3), r_wp, np.zeros(3)
+    )
+
+    def vector(pose: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        return np.concatenate([pose[1], euler_zyx_from_matrix(pose[0])])
+
+    levelled = levelled_deck_pose(vector(tilted), level_from_body(r_wb))
+    np.testing.assert_allclose(levelled, vector(level), atol=1e-9)
+    # a level drone changes nothing
+    np.testing.assert_allclose(
+        levelled_deck_pose(vector(level), np.eye(3)), vector(level), atol=1e-12
+    )

@@ -8,6 +8,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import landing_env  # noqa: F401  (registers the environments)
+from estimation.frames import level_from_body, levelled_deck_pose, matrix_from_euler_zyx
 from landing_env.envs.timing import (
     HISTORY_FEATURES,
     DeckGuidance,
@@ -64,10 +65,11 @@ def test_spaces_and_layout_of_the_default_task() -> None:
     # after the warm-up the whole history holds valid estimates, and nothing has been waited
     assert parts.history[:, HISTORY_FEATURES.index("valid")].all()
     assert parts.wait_fraction == 0.0
-    # the decoded last estimate is the observed estimator's pose, in SI units
-    np.testing.assert_allclose(
-        parts.history[-1, :6], info["estimates"]["ihrcf"]["pose"], atol=1e-5, rtol=1e-4
-    )
+    # the decoded last estimate is the observed estimator's pose, in SI units, as a level
+    # camera sees it (the drone's roll and pitch removed)
+    r_wb = matrix_from_euler_zyx(*info["drone"]["euler_w"])
+    expected = levelled_deck_pose(info["estimates"]["ihrcf"]["pose"], level_from_body(r_wb))
+    np.testing.assert_allclose(parts.history[-1, :6], expected, atol=1e-5, rtol=1e-4)
     # the drone holds at the hold height: camera range about 0.7 m
     assert abs(np.nanmean(parts.tof_range) - 0.7) < 0.05
     env.close()

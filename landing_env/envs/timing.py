@@ -8,8 +8,9 @@ the episode ends with the touchdown's outcome.  Running the descent inside the s
 decision problem a clean stopping problem: no steps with ignored actions reach the learner.
 
 Observation (a flat ``Box``, documented by :class:`TimingObservationLayout`): the last
-``history_s`` seconds of the configured estimator's deck pose and of its rates (a
-least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
+``history_s`` seconds of the configured estimator's deck pose (as a level camera would see
+it: the drone's roll and pitch removed with its attitude, ``level_history``) and of its rates
+(a least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
 with their validity and the fraction of the wait limit used.
 """
 
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from estimation.frames import euler_zyx_from_matrix
+from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.errors import ConfigError, require_range
@@ -333,6 +334,11 @@ class TimingConfig:
     wait_limit_s: float = 15.0
     #: a descent that has not touched down after this long ends the episode (timeout), seconds
     descent_timeout_s: float = 6.0
+    #: the history holds the deck pose as a level camera sees it (the drone's roll and pitch,
+    #: from its attitude, removed), so that the deck's tilt relative to gravity, which the
+    #: touchdown judges, is not confused with the drone's own tilt in wind; False keeps the
+    #: camera-frame pose
+    level_history: bool = True
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
 
     def __post_init__(self) -> None:
@@ -489,8 +495,15 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     def _record(self) -> None:
         assert self._base_observation is not None
         observation = self._base_observation
-        valid = bool(observation["deck_pose_valid"][0])
-        self.history.push(observation["deck_pose"].astype(float) if valid else None)
+        if not observation["deck_pose_valid"][0]:
+            self.history.push(None)
+            return
+        pose = observation["deck_pose"].astype(float)
+        if self.timing.level_history:
+            # the drone's attitude stands in for the autopilot's estimate (good to a fraction
+            # of a degree in PX4); the deck pose stays the estimator's
+            pose = levelled_deck_pose(pose, level_from_body(self.world.drone_state().rotation_wb))
+        self.history.push(pose)
 
     def _descend(self) -> None:
         """The final descent, run to touchdown (or crash, or the descent timeout)."""
