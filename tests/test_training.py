@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from agents.evaluation.landing import evaluate_policy
-from agents.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
+from agents.policies import TrainedTimingPolicy
 from agents.training import (
     ENV_ID,
     ZOO_META_KEYS,
@@ -99,7 +99,6 @@ def test_a_short_training_run_saves_a_policy_that_loads_again(tmp_path: Path) ->
     assert (tmp_path / "train_summary.yaml").is_file()
 
 
-@pytest.mark.skipif(not SHIPPED_TIMING_MODEL.is_file(), reason="no shipped timing model")
 def test_the_shipped_policy_beats_land_now_on_held_out_seeds() -> None:
     episodes, first = 24, 2_000_000
     learned = evaluate_policy("timing-dqn", "sea-state-4", episodes, first)

@@ -20,7 +20,6 @@ import argparse
 import csv
 import json
 import math
-import multiprocessing as mp
 import shlex
 import sys
 from collections import Counter
@@ -33,6 +32,7 @@ import numpy as np
 
 from agents.evaluation import _guarded, _parse_overrides
 from agents.evaluation.landing import HELD_OUT_SEED, wilson_interval
+from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
 
 #: the policies of this evaluation and the estimator each reads by default
@@ -206,33 +206,15 @@ def evaluate_policy(
     routine_timing: str = "model",
 ) -> list[ApproachEpisode]:
     """``episodes`` episodes of one policy, over ``workers`` processes (spawned)."""
-    seeds = list(range(first_seed, first_seed + episodes))
-    # chunks of a few episodes keep both workers busy to the end and the progress bar moving
-    size = max(1, min(5, math.ceil(episodes / max(workers, 1))))
-    jobs = [
-        (policy_name, scenario, estimator, seeds[i : i + size], overrides, routine_timing)
-        for i in range(0, len(seeds), size)
-    ]
-    pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
-    chunks = pool.imap(_run_chunk, jobs) if pool is not None else map(_run_chunk, jobs)
-    results: list[ApproachEpisode] = []
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=episodes, desc=f"{policy_name} ({estimator})", unit="ep")
-    try:
-        for chunk in chunks:
-            results.extend(chunk)
-            if bar is not None:
-                bar.update(len(chunk))
-    finally:
-        if bar is not None:
-            bar.close()
-        if pool is not None:
-            pool.close()
-            pool.join()
-    return results
+    return run_seed_chunks(
+        _run_chunk,
+        lambda chunk: (policy_name, scenario, estimator, chunk, overrides, routine_timing),
+        list(range(first_seed, first_seed + episodes)),
+        workers,
+        max_chunk=5,
+        desc=f"{policy_name} ({estimator})",
+        progress=progress,
+    )
 
 
 # ------------------------------------------------------------------------------ summaries

@@ -18,7 +18,6 @@ import argparse
 import csv
 import json
 import math
-import multiprocessing as mp
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation import _parse_overrides
+from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
@@ -190,45 +191,23 @@ def evaluate_policy(
     extra_overrides: dict[str, Any] | None = None,
 ) -> list[EpisodeResult]:
     """``episodes`` episodes of one policy on one scenario, over ``workers`` processes."""
-    seeds = list(range(first_seed, first_seed + episodes))
-    # small chunks keep both workers busy to the end and let the progress bar move
-    size = max(1, min(25, math.ceil(episodes / max(workers, 1))))
-    jobs = [
-        (
+    return run_seed_chunks(
+        _run_chunk,
+        lambda chunk: (
             policy_name,
             scenario,
-            seeds[i : i + size],
+            chunk,
             estimator,
             camera_mode,
             model_path,
             extra_overrides,
-        )
-        for i in range(0, len(seeds), size)
-    ]
-    results: list[EpisodeResult] = []
-    if workers <= 1:
-        chunks = map(_run_chunk, jobs)
-        pool = None
-    else:
-        pool = mp.get_context("spawn").Pool(workers)
-        chunks = pool.imap(_run_chunk, jobs)
-    try:
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=episodes, desc=f"{policy_name} @ {scenario}", unit="ep")
-            for chunk in chunks:
-                results.extend(chunk)
-                bar.update(len(chunk))
-            bar.close()
-        else:
-            for chunk in chunks:
-                results.extend(chunk)
-    finally:
-        if pool is not None:
-            pool.close()
-            pool.join()
-    return results
+        ),
+        list(range(first_seed, first_seed + episodes)),
+        workers,
+        max_chunk=25,
+        desc=f"{policy_name} @ {scenario}",
+        progress=progress,
+    )
 
 
 # ------------------------------------------------------------------------------ summaries
@@ -475,19 +454,6 @@ def evaluate_landing(
 
 
 # ------------------------------------------------------------------------------ command line
-def _parse_overrides(pairs: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` pairs (dotted keys, YAML values) as an overrides mapping."""
-    import yaml
-
-    overrides: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError("--set", f"{pair!r} is not KEY=VALUE (e.g. tof.noise=vl53l1x)")
-        overrides[key.strip()] = yaml.safe_load(value)
-    return overrides
-
-
 def _evaluate_landing(args: argparse.Namespace) -> int:
     import shlex
     import sys
