@@ -153,8 +153,7 @@ def test_every_estimator_reports_the_deck_frame_from_an_offset_tag(name: str) ->
     layout = layout_from_pairs([(5, 0.10, 0.30, -0.12), (6, 0.60, -0.60, 0.0)])
     r_cd = matrix_from_euler_zyx(math.radians(4.0), math.radians(-3.0), math.radians(20.0))
     t_cd = np.array([-0.25, 0.05, 0.8])
-    small = layout.by_id(5)
-    assert small is not None
+    small = next(lm for lm in layout.landmarks if lm.tag_id == 5)
     measurement = _offset_scene(small, r_cd, t_cd)
     assert [d.tag_id for d in measurement.frame.detections] == [5]
     assert measurement.ranges.valid.all()
