@@ -8,6 +8,7 @@ order is kept: it is the order of :data:`estimation.frames.TAG_CORNER_SIGNS`.
 
 from __future__ import annotations
 
+import math
 import weakref
 
 import cv2
@@ -18,6 +19,19 @@ from estimation.types import TagDetection
 
 #: pupil-apriltags' pixel-centre offset relative to OpenCV's convention.
 PUPIL_TO_OPENCV_OFFSET_PX: float = -0.5
+
+#: Smallest image side (pixels, before decimation) handed to the native detector.
+#: pupil-apriltags 1.0.4 segfaults on thin images: measured in subprocesses
+#: (``benchmarks/probe_detector_min_size.py``) it crashed for min(h, w) up to 4 at
+#: ``quad_decimate`` 1, 5 at 1.5, 6 at 3 and 8 at 4, and never from the sizes below up to
+#: +30 px.  A tag36h11 needs 10 modules across (8 black-border modules and the white quiet
+#: zone), so nothing detectable is lost: a smaller image holds no tag at one pixel a module.
+MIN_DETECT_SIDE_PX: int = 10
+
+
+def min_detect_side_px(quad_decimate: float) -> int:
+    """The smallest image side passed to pupil-apriltags at this decimation (see above)."""
+    return max(MIN_DETECT_SIDE_PX, 4 * math.ceil(quad_decimate))
 
 
 def _release_safely(detector: Detector) -> None:
@@ -79,6 +93,8 @@ class AprilTagDetector:
             raise ValueError(f"nthreads must be >= 1, got {nthreads}")
         self.families = families
         self.max_hamming = max_hamming
+        #: images with a smaller side hold no tag and are never passed to the native code
+        self.min_side_px = min_detect_side_px(quad_decimate)
         self._detector = Detector(
             families=families,
             nthreads=nthreads,
@@ -98,7 +114,13 @@ class AprilTagDetector:
         """Detect tags; corners are 4x2 OpenCV pixels in AprilTag order (see module doc)."""
         if not self._finalizer.alive:
             raise RuntimeError("the detector has been closed")
-        gray = to_gray(gray_or_rgb)
+        image = np.asarray(gray_or_rgb)
+        if image.dtype != np.uint8:
+            raise TypeError(f"expected a uint8 image, got {image.dtype}")
+        if image.ndim in (2, 3) and min(image.shape[:2]) < self.min_side_px:
+            # too small to hold a tag, and such shapes crash the C detector (see above)
+            return ()
+        gray = to_gray(image)
         results = self._detector.detect(gray)
         detections = []
         for result in results:

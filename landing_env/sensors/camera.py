@@ -416,6 +416,8 @@ class CameraSensor:
     def tag_window(self, corners_px: np.ndarray) -> tuple[int, int, int, int] | None:
         """The image window (x0, y0, x1, y1) rendered round projected corners; None if empty."""
         k, c = self.intrinsics, self.config
+        if not np.isfinite(corners_px).all():
+            return None
         low, high = corners_px.min(axis=0), corners_px.max(axis=0)
         grow = c.render_margin_frac * (high - low) + c.render_margin_px
         x0 = max(int(np.floor(low[0] - grow[0])), 0)

@@ -161,19 +161,21 @@ class TofArray:
     ) -> RangeReading:
         """The four readings at the body pose (t_wb, r_wb); invalid ones are NaN.
 
-        Validity is decided on the true distance (what the sensor's ranging status reflects);
-        the noisy value of a valid reading is reported as is.
+        Validity is decided on the reported (noisy, quantised) value, as the sensor's own
+        range limits are: a valid reading always lies in ``[min_range, max_range]``, so the
+        observation's ``tof_range`` never leaves its space.
         """
         cfg = self.config
         ranges, _ = self.true_ranges(t_wb, r_wb, exclude_body)
         # draw the random numbers every call so the stream does not depend on the scene
         gauss = self.rng.standard_normal(self.count)
         fails = self.rng.random(self.count) < cfg.invalid_prob
-        valid = np.isfinite(ranges) & (ranges >= cfg.min_range) & (ranges <= cfg.max_range)
         if cfg.noise == "vl53l1x":
-            valid &= ~fails
             ranges = ranges + cfg.sigma(ranges) * gauss
             if cfg.resolution > 0.0:
                 ranges = np.round(ranges / cfg.resolution) * cfg.resolution
+        valid = np.isfinite(ranges) & (ranges >= cfg.min_range) & (ranges <= cfg.max_range)
+        if cfg.noise == "vl53l1x":
+            valid &= ~fails
         ranges = np.where(valid, ranges, np.nan)
         return RangeReading(timestamp=timestamp, ranges=ranges, valid=valid)
