@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from typing import Any
 
@@ -31,6 +32,16 @@ def require_choice(key: str, value: Any, allowed: Iterable[Any]) -> None:
         raise ConfigError(key, f"{value!r} is not allowed; choose one of {names}")
 
 
+def require_finite(key: str, value: float) -> None:
+    """Raise ConfigError unless ``value`` is a finite number (not NaN, not +-inf)."""
+    try:
+        finite = math.isfinite(value)
+    except TypeError:
+        raise ConfigError(key, f"{value!r} is not a number") from None
+    if not finite:
+        raise ConfigError(key, f"{value!r} is not allowed; give a finite number")
+
+
 def require_range(
     key: str,
     value: float,
@@ -40,8 +51,11 @@ def require_range(
     low_inclusive: bool = True,
     high_inclusive: bool = True,
 ) -> None:
-    """Raise ConfigError unless ``low <= value <= high`` (bounds optional, inclusivity settable)."""
-    ok = True
+    """Raise ConfigError unless ``low <= value <= high`` (bounds optional, inclusivity settable).
+
+    NaN is never in range.
+    """
+    ok = value == value  # False for NaN
     if low is not None:
         ok &= value >= low if low_inclusive else value > low
     if high is not None:

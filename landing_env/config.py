@@ -17,6 +17,7 @@ from estimation.atda import ATDAConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
+from landing_env.config_limits import check_value
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
@@ -74,7 +75,7 @@ class SimulationConfig:
         if self.physics_hz % self.env_hz != 0:
             raise ConfigError(
                 "physics_hz",
-                f"{self.physics_hz} Hz is not a multiple of env_hz = {self.env_hz} Hz; "
+                f"{self.physics_hz} Hz is not a multiple of simulation.env_hz = {self.env_hz} Hz; "
                 "choose physics_hz = k * env_hz (e.g. 240 with env_hz 20, 30, 40, 48, 60, 80)",
             )
         require_range("max_episode_s", self.max_episode_s, 0.0, low_inclusive=False)
@@ -267,6 +268,14 @@ class DeckLandingConfig:
     #: the downward long-range rangefinder (observation ``range_down``)
     rangefinder: RangefinderConfig = field(default_factory=RangefinderConfig)
 
+    def __post_init__(self) -> None:
+        if self.vehicle and not Path(self.vehicle).expanduser().is_file():
+            raise ConfigError(
+                "vehicle",
+                f"{self.vehicle!r} is not a file; give a vehicle YAML like the shipped "
+                "landing_env/assets/quadrotor.yaml, or leave it empty for that one",
+            )
+
 
 def available_configs() -> list[str]:
     """Names of the YAML scenarios in ``configs/``."""
@@ -309,4 +318,4 @@ def load_config(
     data = deep_merge(data, dotted_to_nested(sections))
     if overrides:
         data = deep_merge(data, dotted_to_nested(overrides))
-    return build_dataclass(DeckLandingConfig, data, base=base)
+    return build_dataclass(DeckLandingConfig, data, base=base, check=check_value)

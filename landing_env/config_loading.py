@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
@@ -28,7 +28,13 @@ def _type_name(annotation: Any) -> str:
     return getattr(annotation, "__name__", str(annotation))
 
 
-def _coerce(value: Any, annotation: Any, key: str, base: Any = None) -> Any:
+#: Called with (dotted key, value) for every value given to the loader; raises ConfigError.
+LeafCheck = Callable[[str, Any], None]
+
+
+def _coerce(
+    value: Any, annotation: Any, key: str, base: Any = None, check: LeafCheck | None = None
+) -> Any:
     """Convert ``value`` to ``annotation`` or raise ConfigError naming ``key``."""
     origin = get_origin(annotation)
     args = get_args(annotation)
@@ -40,7 +46,7 @@ def _coerce(value: Any, annotation: Any, key: str, base: Any = None) -> Any:
             return value
         if not isinstance(value, Mapping):
             raise ConfigError(key, f"expected a mapping of {annotation.__name__} fields")
-        return build_dataclass(annotation, value, key, base=base)
+        return build_dataclass(annotation, value, key, base=base, check=check)
     if origin is Literal:
         if value not in args:
             allowed = ", ".join(repr(a) for a in args)
@@ -54,7 +60,7 @@ def _coerce(value: Any, annotation: Any, key: str, base: Any = None) -> Any:
             if arg is type(None):
                 continue
             try:
-                return _coerce(value, arg, key, base)
+                return _coerce(value, arg, key, base, check)
             except ConfigError as exc:
                 errors.append(exc.detail)
         raise ConfigError(key, "; ".join(errors))
@@ -108,11 +114,27 @@ def _coerce(value: Any, annotation: Any, key: str, base: Any = None) -> Any:
     return value
 
 
-def build_dataclass(cls: type[T], data: Mapping[str, Any], prefix: str = "", base: Any = None) -> T:
+def build_dataclass(
+    cls: type[T],
+    data: Mapping[str, Any],
+    prefix: str = "",
+    base: Any = None,
+    check: LeafCheck | None = None,
+) -> T:
     """Build ``cls`` from ``data``, starting from ``base`` (an instance) or the defaults.
 
-    Unknown keys and badly typed values raise ConfigError with the full dotted key.
+    Unknown keys and badly typed values raise ConfigError with the full dotted key.  Every
+    given value then passes ``check(dotted_key, value)``: by default
+    :func:`~landing_env.config_limits.check_value` without limits, which refuses NaN and
+    infinities in any number (``load_config`` adds the physical ranges of
+    :data:`~landing_env.config_limits.LIMITS`).
     """
+    if check is None:
+        from landing_env.config_limits import check_value
+
+        def check(key: str, value: Any) -> None:
+            check_value(key, value, {})
+
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     hints = typing.get_type_hints(cls)
     unknown = [k for k in data if k not in fields]
@@ -128,7 +150,10 @@ def build_dataclass(cls: type[T], data: Mapping[str, Any], prefix: str = "", bas
         sub_base = kwargs.get(name)
         if not dataclasses.is_dataclass(sub_base):
             sub_base = None
-        kwargs[name] = _coerce(value, hints[name], _join(prefix, name), sub_base)
+        key = _join(prefix, name)
+        kwargs[name] = _coerce(value, hints[name], key, sub_base, check)
+        if not dataclasses.is_dataclass(kwargs[name]):
+            check(key, kwargs[name])
     try:
         return cls(**kwargs)
     except ConfigError as exc:

@@ -63,8 +63,12 @@ class TruthEstimator:
         )
 
 
+#: The config keys of the distortion coefficients, in OpenCV's order.
+_DIST_KEYS = ("camera.k1", "camera.k2", "camera.p1", "camera.p2", "camera.k3")
+
+
 def _camera_differences(metadata: dict, camera: CameraIntrinsics) -> list[str]:
-    """The camera parameters in which a calibration's recorded camera differs from ``camera``."""
+    """The camera keys in which a calibration's recorded camera differs from ``camera``."""
     recorded = metadata.get("camera")
     if not isinstance(recorded, dict):
         return []
@@ -81,9 +85,27 @@ def _camera_differences(metadata: dict, camera: CameraIntrinsics) -> list[str]:
     for key, value in actual.items():
         if key not in recorded:
             continue
-        if not np.allclose(np.asarray(recorded[key], dtype=float), value, rtol=1e-9, atol=1e-12):
-            differences.append(f"{key} {recorded[key]} (configured {value})")
+        calibrated = np.asarray(recorded[key], dtype=float).reshape(-1)
+        configured = np.asarray(value, dtype=float).reshape(-1)
+        if calibrated.shape == configured.shape and np.allclose(
+            calibrated, configured, rtol=1e-9, atol=1e-12
+        ):
+            continue
+        if key != "dist" or calibrated.shape != configured.shape:
+            differences.append(f"camera.{key} = {value} (calibrated for {recorded[key]})")
+            continue
+        for name, cal, conf in zip(_DIST_KEYS, calibrated, configured, strict=False):
+            if not np.isclose(cal, conf, rtol=1e-9, atol=1e-12):
+                differences.append(f"{name} = {conf} (calibrated for {cal})")
     return differences
+
+
+def _changed_camera(path: object, differences: list[str]) -> str:
+    return (
+        f"the configured camera differs from the one {path} was calibrated for: "
+        f"{'; '.join(differences)}; a changed camera needs a matching calibration: "
+        f"{_RECALIBRATE}"
+    )
 
 
 def load_intrinsics(config: DeckLandingConfig) -> CameraIntrinsics:
@@ -105,10 +127,7 @@ def load_intrinsics(config: DeckLandingConfig) -> CameraIntrinsics:
         )
     differences = _camera_differences(result.metadata, camera)
     if differences:
-        raise ConfigError(
-            "estimation.intrinsics_file",
-            f"{path} was calibrated for another camera: {'; '.join(differences)}; {_RECALIBRATE}",
-        )
+        raise ConfigError("estimation.intrinsics_file", _changed_camera(path, differences))
     return result.to_intrinsics()
 
 
@@ -134,13 +153,11 @@ def load_tof_calibration(config: DeckLandingConfig) -> TofCameraCalibration:
     differences = _camera_differences(calibration.metadata, camera)
     recorded_mounts = calibration.metadata.get("tof_mount_offsets_c")
     if recorded_mounts is not None and not np.allclose(recorded_mounts, mounts, atol=1e-9):
-        differences.append(f"tof_mount_offsets_c {recorded_mounts} (configured {mounts.tolist()})")
-    if differences:
-        raise ConfigError(
-            "estimation.tof_calibration_file",
-            f"{path} was calibrated for another camera or ToF layout: "
-            f"{'; '.join(differences)}; {_RECALIBRATE}",
+        differences.append(
+            f"tof.mount_offsets_c = {mounts.tolist()} (calibrated for {recorded_mounts})"
         )
+    if differences:
+        raise ConfigError("estimation.tof_calibration_file", _changed_camera(path, differences))
     return calibration.with_method(est.tof_lookup)
 
 
@@ -222,14 +239,17 @@ class EstimatorBank:
         est = cfg.estimation
         mounts = np.asarray(cfg.tof.mount_offsets_c, dtype=float)
         needs_tof = name in ("ihrcf", "crhf")
+        # loaded outside the try: their errors already name their full keys
+        intrinsics = self.intrinsics
+        tof_calibration = self.tof_calibration if needs_tof else None
         try:
             estimator = make_estimator(
                 name,
                 # IHRCF and CRHF need no K: they only undistort with it (when it has distortion)
-                intrinsics=self.intrinsics,
+                intrinsics=intrinsics,
                 tag_size=tag_size,
                 tag_id=tag_id,
-                tof_calibration=self.tof_calibration if needs_tof else None,
+                tof_calibration=tof_calibration,
                 tof_positions_c=mounts if needs_tof else None,
                 config=getattr(est, name),
             )

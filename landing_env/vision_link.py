@@ -47,7 +47,12 @@ class VisionLinkConfig:
 
     def __post_init__(self) -> None:
         require_range("latency_s", self.latency_s, 0.0)
-        require_range("latency_jitter_s", self.latency_jitter_s, 0.0, self.latency_s)
+        if not 0.0 <= self.latency_jitter_s <= self.latency_s:
+            raise ConfigError(
+                "latency_jitter_s",
+                f"{self.latency_jitter_s} must lie in [0, latency_s = {self.latency_s}] "
+                "(a delay is never negative)",
+            )
         self.rate_hz = tuple(float(v) for v in self.rate_hz)  # type: ignore[assignment]
         if len(self.rate_hz) != 2 or not 0.0 < self.rate_hz[0] <= self.rate_hz[1]:
             raise ConfigError("rate_hz", f"{self.rate_hz!r} must be [min, max] with 0 < min <= max")
