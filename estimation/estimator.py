@@ -43,11 +43,18 @@ RIGID_RESIDUAL = "rigid_residual"
 PNP_FAILED = "pnp_failed"
 NON_FINITE_RESULT = "non_finite_result"
 NUMERICAL_ERROR = "numerical_error"
+BAD_TIMESTAMP = "bad_timestamp"
 
 #: No camera delivers pixel coordinates this large, nor a ToF sensor ranges this long: such
 #: numbers are corrupt input, not measurements.
 MAX_ABS_PIXEL = 1e6
 MAX_RANGE_M = 1e3
+
+#: How far outside the image (a fraction of its width / height on each side) a corner may
+#: lie.  A detector reports corners inside the image; a tracker bridging a missed frame can
+#: extrapolate one past the edge, but never by half an image at 20 Hz.  Further out the
+#: corners are corrupt input (ATDA once returned a valid pose for corners 9e5 px outside).
+MAX_OUTSIDE_IMAGE_FRAC = 0.5
 
 
 @runtime_checkable
@@ -74,16 +81,89 @@ class GuardedEstimator:
     def reset(self) -> None:
         """Stateless by default."""
 
+    @property
+    def image_size(self) -> tuple[int, int] | None:
+        """(width, height) of the camera's image when known (from ``intrinsics``, or from a
+        wrapped ``inner`` estimator): corners far outside it are refused."""
+        intrinsics = getattr(self, "intrinsics", None)
+        if intrinsics is not None:
+            return int(intrinsics.width), int(intrinsics.height)
+        return getattr(getattr(self, "inner", None), "image_size", None)
+
     def estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
-        timestamp = float(frame.timestamp)
+        timestamp = checked_timestamp(getattr(frame, "timestamp", None))
+        if timestamp is None:
+            return DeckPoseEstimate.invalid(self.name, math.nan, BAD_TIMESTAMP)
+        checked = checked_frame(frame, timestamp, self.image_size, getattr(self, "tag_id", None))
+        if checked is None:
+            return DeckPoseEstimate.invalid(self.name, timestamp, BAD_CORNERS)
         try:
             with np.errstate(all="ignore"):
-                return self._estimate(frame, ranges)
-        except (np.linalg.LinAlgError, cv2.error, FloatingPointError, OverflowError, ValueError):
+                return self._estimate(checked, ranges)
+        except (
+            np.linalg.LinAlgError,
+            cv2.error,
+            FloatingPointError,
+            OverflowError,
+            ValueError,
+            TypeError,
+        ):
             return DeckPoseEstimate.invalid(self.name, timestamp, NUMERICAL_ERROR)
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
         raise NotImplementedError
+
+
+def checked_timestamp(value: object) -> float | None:
+    """The timestamp as a finite float, or None (a string, a bool, NaN, inf...)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+        return None
+    timestamp = float(value)
+    return timestamp if math.isfinite(timestamp) else None
+
+
+def _corners_usable(corners_px: object, image_size: tuple[int, int] | None) -> bool:
+    try:
+        corners = np.asarray(corners_px, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    # NaN fails the comparisons too
+    if corners.shape != (4, 2) or not (np.abs(corners) <= MAX_ABS_PIXEL).all():
+        return False
+    if image_size is None:
+        return True
+    size = np.asarray(image_size, dtype=float)
+    margin = MAX_OUTSIDE_IMAGE_FRAC * size
+    return bool(((corners >= -margin) & (corners <= size - 1.0 + margin)).all())
+
+
+def checked_frame(
+    frame: CameraFrame,
+    timestamp: float,
+    image_size: tuple[int, int] | None,
+    tag_id: int | None = None,
+) -> CameraFrame | None:
+    """The frame with its float timestamp and without detections whose corners are not four
+    finite pixels in (or near) the image; None when that removed the estimator's tag (or
+    every detection): its corners are corrupt."""
+    detections = getattr(frame, "detections", None)
+    if not isinstance(detections, (tuple, list)):
+        return None
+    kept = tuple(
+        d for d in detections if _corners_usable(getattr(d, "corners_px", None), image_size)
+    )
+    if len(kept) < len(detections):
+        if not kept:
+            return None
+        if tag_id is not None:
+            ids = {getattr(d, "tag_id", None) for d in kept}
+            if tag_id not in ids and any(getattr(d, "tag_id", None) == tag_id for d in detections):
+                return None
+    if kept == tuple(detections) and frame.timestamp == timestamp:
+        return frame
+    if dataclasses.is_dataclass(frame) and not isinstance(frame, type):
+        return dataclasses.replace(frame, timestamp=timestamp, detections=kept)
+    return CameraFrame(timestamp, kept, getattr(frame, "image", None))
 
 
 def target_corners(frame: CameraFrame, tag_id: int) -> tuple[np.ndarray | None, str]:
@@ -127,7 +207,10 @@ def corners_degenerate(corners_px: np.ndarray, min_area_px: float) -> bool:
 def checked_ranges(reading: RangeReading, n_sensors: int) -> np.ndarray | None:
     """The ranges as a float array when all ``n_sensors`` are valid, finite, positive and sane."""
     ranges = np.asarray(reading.ranges, dtype=float).reshape(-1)
-    valid = np.asarray(reading.valid, dtype=bool).reshape(-1)
+    valid = np.asarray(reading.valid).reshape(-1)
+    if valid.dtype != bool:
+        # only 1 (or True) means valid: NaN, 0.5 or "yes" do not
+        valid = np.asarray(valid == 1, dtype=bool).reshape(-1)
     if len(ranges) != n_sensors or len(valid) != n_sensors or not valid.all():
         return None
     # NaN fails both comparisons
