@@ -125,8 +125,9 @@ def test_forward_velocity_step(params: QuadrotorParams) -> None:
     flight.fly(lambda t: VelocitySetpoint(np.array([1.0 if t >= 1.0 else 0.0, 0.0, 0.0])), 6.0)
     velocity = flight.series("velocity_w")
     overshoot, settle = step_response(flight.t, velocity[:, 0], 1.0, 1.0, band=0.05)
-    assert overshoot <= 0.15
-    assert settle <= 2.0
+    # the README's 2.1 % and 0.82 s (deterministic), with a margin
+    assert overshoot <= 0.03
+    assert settle <= 1.0
     assert np.abs(velocity[:, 1]).max() < 0.02
     assert np.abs(velocity[:, 2]).max() < 0.05
     # Accelerating forward pitches the nose down: positive pitch about FLU's left-pointing y.
@@ -148,8 +149,9 @@ def test_vertical_velocity_steps(params: QuadrotorParams) -> None:
     flight.fly(lambda t: VelocitySetpoint(np.array([0.0, 0.0, 1.0 if t >= 1.0 else 0.0])), 4.0)
     climb = flight.series("velocity_w")[:, 2]
     overshoot, settle = step_response(flight.t, climb, 1.0, 1.0, band=0.05)
-    assert overshoot <= 0.15
-    assert settle <= 1.5
+    # the README's 4.3 % (settles in 0.44 s), with a margin
+    assert overshoot <= 0.06
+    assert settle <= 0.6
     flight.fly(lambda t: VelocitySetpoint(np.array([0.0, 0.0, -0.5])), 3.0)
     descent = flight.series("velocity_w")[:, 2]
     assert descent[-1] == pytest.approx(-0.5, abs=0.025)
