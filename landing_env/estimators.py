@@ -120,11 +120,14 @@ def load_intrinsics(config: DeckLandingConfig) -> CameraIntrinsics:
     except (OSError, ValueError, KeyError) as exc:
         raise ConfigError("estimation.intrinsics_file", f"{path}: {exc}") from None
     if tuple(result.image_size) != (camera.width, camera.height):
-        raise ConfigError(
-            "estimation.intrinsics_file",
-            f"{path} is for {result.image_size[0]}x{result.image_size[1]} images, the camera "
-            f"gives {camera.width}x{camera.height}; {_RECALIBRATE}",
-        )
+        differences = [
+            f"camera.{key} = {value} (calibrated for {calibrated})"
+            for key, value, calibrated in zip(
+                ("width", "height"), (camera.width, camera.height), result.image_size, strict=True
+            )
+            if value != calibrated
+        ]
+        raise ConfigError("estimation.intrinsics_file", _changed_camera(path, differences))
     differences = _camera_differences(result.metadata, camera)
     if differences:
         raise ConfigError("estimation.intrinsics_file", _changed_camera(path, differences))

@@ -207,7 +207,7 @@ def _shaped(default: object, number: float) -> object:
     return number
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     leaf=st.sampled_from(LEAVES),
     factor=st.one_of(
@@ -254,3 +254,25 @@ def test_the_limits_keep_infinity_only_where_it_means_something() -> None:
         "estimation.crhf.max_plane_rms_m",
         "estimation.crhf.max_rigid_rms_rel",
     }
+
+
+@pytest.fixture(scope="module")
+def timing_env() -> gym.Env:
+    environment = gym.make("DeckLandingTiming-v0")
+    yield environment
+    environment.close()
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31 - 1), decisions=st.lists(st.integers(0, 1), max_size=40))
+def test_fuzzed_timing_decisions_keep_every_observation_in_its_space(
+    timing_env: gym.Env, seed: int, decisions: list[int]
+) -> None:
+    observation, _ = timing_env.reset(seed=seed)
+    assert timing_env.observation_space.contains(observation)
+    for decision in decisions:
+        observation, reward, terminated, truncated, _ = timing_env.step(decision)
+        assert timing_env.observation_space.contains(observation)
+        assert math.isfinite(reward)
+        if terminated or truncated:
+            break
