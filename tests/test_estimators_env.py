@@ -291,7 +291,7 @@ def test_hyperbola_lookup_and_bad_file_contents(tmp_path) -> None:
     doc["image_size"] = [640, 480]
     bogus.write_text(json.dumps(doc))
     config = load_config("default", overrides={"estimation.intrinsics_file": str(bogus)})
-    with pytest.raises(ConfigError, match="640x480"):
+    with pytest.raises(ConfigError, match=r"camera\.width = 512 \(calibrated for 640\)"):
         load_intrinsics(config)
     # a foreign file without provenance is accepted when its image size fits
     del doc["metadata"]
