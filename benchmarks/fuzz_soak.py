@@ -13,7 +13,8 @@ goes (re-written after every config):
    Memory: the process's RSS after the first config and at the end (flat = no leak).
 2. ``render``: the same in ``render`` mode (pupil-apriltags on rendered windows).
 3. ``config``: one key at a time, every numeric key of the config tree set to NaN, +-inf,
-   0, -1, +-1e9 and 0.1x / 10x its default: each must either build and run
+   0, -1, +-1e9 and 0.1x / 10x its default, and every key to a string, None, a mapping
+   and a mixed list: each must either build and run
    (``--config-steps`` steps, observations in space, finite rewards) or raise a
    ``ConfigError`` naming that key.
 
@@ -38,7 +39,7 @@ from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import DeckLandingConfig, available_configs
-from landing_env.config_limits import numeric_leaves
+from landing_env.config_limits import config_leaves, numeric_leaves
 from landing_env.errors import ConfigError
 
 OUT_DIR = Path("results/fuzz_soak")
@@ -178,8 +179,11 @@ def config_fuzz(steps: int, seed: int) -> dict:
     """Every numeric key, one at a time: a run, or a ConfigError naming the key."""
     leaves = numeric_leaves(DeckLandingConfig)
     cases = [(key, value) for key, default in leaves for value in _values(default)]
+    # every key, numeric or not, with values of the wrong type
+    every = config_leaves(DeckLandingConfig)
+    cases += [(key, value) for key, _ in every for value in ("fuzz", None, {"a": 1}, [1, "x"])]
     rng = np.random.default_rng(seed)
-    result: dict = {"keys": len(leaves), "cases": len(cases)}
+    result: dict = {"numeric_keys": len(leaves), "keys": len(every), "cases": len(cases)}
     counts = {"ran": 0, "refused_naming_key": 0, "refused_naming_other": 0, "crashed": 0}
     problems: list[str] = []
     for key, value in tqdm(cases, desc="config fuzz", unit="case"):
@@ -255,7 +259,10 @@ def main() -> None:
         _report(soak_configs("render", args.render_steps, args.seed + 1))
     if "config" in args.parts:
         result = config_fuzz(args.config_steps, args.seed + 2)
-        print(f"config fuzz: {result['keys']} keys, {result['cases']} cases: {result['counts']}")
+        print(
+            f"config fuzz: {result['keys']} keys ({result['numeric_keys']} numeric), "
+            f"{result['cases']} cases: {result['counts']}"
+        )
         for problem in result["problems"][:20]:
             print(f"  {problem}")
 

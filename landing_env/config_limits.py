@@ -243,9 +243,8 @@ def check_value(key: str, value: Any, limits: dict[str, Limit] | None = None) ->
             )
 
 
-def numeric_leaves(cls: type, prefix: str = "") -> list[tuple[str, Any]]:
-    """(dotted key, default value) of every numeric leaf of a config dataclass tree (numbers
-    and tuples of numbers): what the fuzzers of ``tests/`` and ``benchmarks/`` vary."""
+def config_leaves(cls: type, prefix: str = "") -> list[tuple[str, Any]]:
+    """(dotted key, default value) of every leaf (non-dataclass field) of a config tree."""
     import dataclasses
     import typing
 
@@ -254,11 +253,14 @@ def numeric_leaves(cls: type, prefix: str = "") -> list[tuple[str, Any]]:
     defaults = cls()
     for f in dataclasses.fields(cls):
         key = f"{prefix}{f.name}"
-        annotation = hints[f.name]
-        if dataclasses.is_dataclass(annotation):
-            leaves.extend(numeric_leaves(annotation, key + "."))
-            continue
-        value = getattr(defaults, f.name)
-        if _numbers(value):
-            leaves.append((key, value))
+        if dataclasses.is_dataclass(hints[f.name]):
+            leaves.extend(config_leaves(hints[f.name], key + "."))
+        else:
+            leaves.append((key, getattr(defaults, f.name)))
     return leaves
+
+
+def numeric_leaves(cls: type) -> list[tuple[str, Any]]:
+    """The leaves holding numbers (a number or tuples of them): what the fuzzers of
+    ``tests/`` and ``benchmarks/`` vary."""
+    return [(key, value) for key, value in config_leaves(cls) if _numbers(value)]

@@ -239,9 +239,8 @@ def test_csv_errors_are_clear(tmp_path: Path, text: str, match: str) -> None:
 
 
 def test_csv_missing_file(tmp_path: Path) -> None:
-    config = MotionConfig(kind="csv", csv=CsvMotionConfig(str(tmp_path / "nope.csv")))
-    with pytest.raises(FileNotFoundError, match=r"nope\.csv"):
-        make_motion_source(config, rng())
+    with pytest.raises(ConfigError, match=r"csv\.path.*nope\.csv"):
+        MotionConfig(kind="csv", csv=CsvMotionConfig(str(tmp_path / "nope.csv")))
 
 
 # ------------------------------------------------------------------ configs

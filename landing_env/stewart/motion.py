@@ -588,6 +588,8 @@ class MotionConfig:
                 object.__setattr__(self, item.name, value)
         if self.kind == "csv" and not self.csv.path:
             raise ConfigError("csv.path", "is required when kind is 'csv'")
+        if self.kind == "csv" and not Path(self.csv.path).expanduser().is_file():
+            raise ConfigError("csv.path", f"{self.csv.path!r} is not a file (motion.kind: csv)")
 
 
 def make_motion_source(config: MotionConfig, rng: np.random.Generator) -> MotionSource:
