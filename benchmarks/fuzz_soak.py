@@ -6,11 +6,12 @@
 Three parts, each printing its figures and writing ``results/fuzz_soak/<part>.json`` as it
 goes (re-written after every config):
 
-1. ``project``: fuzzed episodes over every shipped config (steps split evenly) in the
-   ``project`` camera mode: random seeds, actions drawn in the box (uniform, extreme
-   corners, or a descent with noise, so that touchdowns, settles and flips happen), every
-   observation checked against ``observation_space`` and every reward for finiteness.
-   Memory: the process's RSS after the first config and at the end (flat = no leak).
+1. ``project``: fuzzed episodes over every shipped config (steps split evenly; the
+   configs that pin the drone also run with it free) in the ``project`` camera mode:
+   random seeds, actions drawn in the box (uniform, extreme corners, or a descent with
+   noise, so that touchdowns, settles and flips happen), every observation checked against
+   ``observation_space`` and every reward for finiteness.  Memory: the RSS at 10 % and 100 %
+   of each config's steps (flat = no leak), and after the first config and at the end.
 2. ``render``: the same in ``render`` mode (pupil-apriltags on rendered windows).
 3. ``config``: one key at a time, every numeric key of the config tree set to NaN, +-inf,
    0, -1, +-1e9 and 0.1x / 10x its default, and every key to a string, None, a mapping
@@ -38,7 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
-from landing_env.config import DeckLandingConfig, available_configs
+from landing_env.config import DeckLandingConfig, available_configs, load_config
 from landing_env.config_limits import config_leaves, numeric_leaves
 from landing_env.errors import ConfigError
 
@@ -132,8 +133,20 @@ def soak(
     return tally
 
 
+def soak_variants() -> list[tuple[str, str, dict]]:
+    """(label, config, overrides): every shipped config as shipped, and those that pin the
+    drone (the estimator benches) also with the drone free, so that their decks are landed on.
+    """
+    variants = []
+    for name in available_configs():
+        variants.append((name, name, {}))
+        if load_config(name).simulation.drone_fixed:
+            variants.append((f"{name}+free", name, {"simulation.drone_fixed": False}))
+    return variants
+
+
 def soak_configs(mode: str, total_steps: int, seed: int) -> dict:
-    configs = available_configs()
+    configs = soak_variants()
     per_config = max(1, total_steps // len(configs))
     rng = np.random.default_rng(seed)
     result: dict = {"mode": mode, "steps_per_config": per_config, "configs": {}}
@@ -141,8 +154,9 @@ def soak_configs(mode: str, total_steps: int, seed: int) -> dict:
     rss_first = math.nan
     start = time.process_time()
     with tqdm(total=per_config * len(configs), desc=f"{mode} soak", unit="step") as bar:
-        for index, name in enumerate(configs):
-            env = gym.make("DeckLanding-v0", config=name, overrides={"camera.mode": mode})
+        for index, (name, config, overrides) in enumerate(configs):
+            overrides = {**overrides, "camera.mode": mode}
+            env = gym.make("DeckLanding-v0", config=config, overrides=overrides)
             try:
                 tally = soak(env, per_config, rng, bar)
             finally:
@@ -228,7 +242,7 @@ def _report(result: dict) -> None:
     total = result["total"]
     print(
         f"{result['mode']}: {total['steps']} steps, {total['episodes']} episodes over "
-        f"{len(result['configs'])} configs ({result['steps_per_config']} each); "
+        f"{len(result['configs'])} config variants ({result['steps_per_config']} each); "
         f"crashes {total['crashes']}, observations outside the space {total['out_of_space']}, "
         f"NaN rewards {total['nan_rewards']}; RSS {result['rss_mib_after_first_config']:.1f} "
         f"MiB after the first config -> {result['rss_mib_end']:.1f} MiB at the end; "
