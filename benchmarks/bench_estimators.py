@@ -29,8 +29,8 @@ from rich.table import Table
 
 from estimation.camera_model import CameraIntrinsics
 from estimation.detection import AprilTagDetector
-from estimation.estimator import make_estimator
 from estimation.frames import matrix_from_euler_zyx
+from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticMeasurement, SyntheticScene
 from estimation.tracking import CornerTracker, TrackedEstimator
 from landing_env.config import load_config

@@ -547,7 +547,7 @@ class TightEstimator(GuardedEstimator):
             ):
                 distinct.append((label, solution))
         found = distinct
-        ratio = math.nan
+        ratio = 0.0  # one distinct minimum: unambiguous
         by_history = False
         if len(found) > 1:
             second = found[1][1].cost

@@ -6,9 +6,10 @@ import math
 from dataclasses import dataclass
 
 from estimation.errors import ConfigError, require_choice, require_range
+from estimation.registry import FRAME_ESTIMATOR_NAMES
 
 #: Estimators whose deck pose (T_CD) the fusion can take as a measurement.
-POSE_SOURCES: tuple[str, ...] = ("atda", "ihrcf", "crhf")
+POSE_SOURCES: tuple[str, ...] = FRAME_ESTIMATOR_NAMES
 
 
 def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:
@@ -62,11 +63,19 @@ class FusionConfig:
     atda_sigma: tuple[float, ...] = (0.003, 0.003, 0.008, 3.0, 3.0, 0.3)
     ihrcf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
     crhf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
+    #: tight: used only when an estimate carries no covariance (see covariance_sources)
+    tight_sigma: tuple[float, ...] = (0.002, 0.002, 0.005, 1.0, 1.0, 0.3)
+    #: sources whose own 6x6 covariance (from their measurement model, e.g. tight's
+    #: Jacobian) is the measurement noise, in place of the fixed sigmas above
+    covariance_sources: tuple[str, ...] = ("tight",)
 
     def __post_init__(self) -> None:
         self.sources = tuple(self.sources)
         for name in self.sources:
             require_choice("sources", name, POSE_SOURCES)
+        self.covariance_sources = tuple(self.covariance_sources)
+        for name in self.covariance_sources:
+            require_choice("covariance_sources", name, POSE_SOURCES)
         require_range("horizon_s", self.horizon_s, 0.0, 10.0)
         require_range(
             "gate_probability",

@@ -17,6 +17,7 @@ still in the buffer as of their latest replay.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from collections import Counter
 from collections.abc import Sequence
@@ -26,7 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix
+from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix, matrix_from_euler_zyx
 from estimation.fusion.config import FusionConfig
 from estimation.fusion.model import (
     BA,
@@ -91,6 +92,26 @@ def pose_measurement(
     p = r_wc @ estimate.translation + r_wb @ t_bc
     th = euler_zyx_from_matrix(r_wc @ estimate.rotation @ R_PD.T)
     return np.concatenate([p, th]), r_wc
+
+
+def _measurement_jacobian(
+    estimate: DeckPoseEstimate, r_wb: np.ndarray, t_bc: np.ndarray, z: np.ndarray
+) -> np.ndarray:
+    """d(p, th)/d(x, y, z, roll, pitch, yaw of T_CD): the translation part is R_WC, the
+    angles' by central differences (six small matrix products)."""
+    jac = np.zeros((6, 6))
+    jac[:3, :3] = r_wb @ R_BC
+    euler = euler_zyx_from_matrix(estimate.rotation)
+    step = 1e-6
+    for k in range(3):
+        delta = np.zeros(3)
+        delta[k] = step
+        up = dataclasses.replace(estimate, rotation=matrix_from_euler_zyx(*(euler + delta)))
+        down = dataclasses.replace(estimate, rotation=matrix_from_euler_zyx(*(euler - delta)))
+        z_up, _ = pose_measurement(up, r_wb, t_bc)
+        z_down, _ = pose_measurement(down, r_wb, t_bc)
+        jac[3:, 3 + k] = wrap_angle(z_up[3:] - z_down[3:]) / (2.0 * step)
+    return jac
 
 
 class DeckFusion:
@@ -211,14 +232,27 @@ class DeckFusion:
         z, r_wc = pose_measurement(estimate, r_wb, self.t_bc)
         if not np.all(np.isfinite(z)):
             return None
-        sigma = np.asarray(self.config.pose_sigma(source), dtype=float)
-        mask = np.isfinite(sigma)
-        sigma = np.where(mask, sigma, 1.0)
-        sigma[3:] = np.deg2rad(sigma[3:])
-        noise = np.zeros((6, 6))
-        # the translation noise is given in the camera frame: rotate it into W
-        noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
-        noise[3:, 3:] = np.diag(sigma[3:] ** 2)
+        own = estimate.covariance
+        if (
+            source in self.config.covariance_sources
+            and own is not None
+            and np.shape(own) == (6, 6)
+            and np.all(np.isfinite(own))
+        ):
+            # the source's covariance of T_CD's (x, y, z, roll, pitch, yaw), carried into
+            # the state's axes through the measurement function's Jacobian
+            jac = _measurement_jacobian(estimate, r_wb, self.t_bc, z)
+            noise = jac @ own @ jac.T
+            mask = np.ones(6, dtype=bool)
+        else:
+            sigma = np.asarray(self.config.pose_sigma(source), dtype=float)
+            mask = np.isfinite(sigma)
+            sigma = np.where(mask, sigma, 1.0)
+            sigma[3:] = np.deg2rad(sigma[3:])
+            noise = np.zeros((6, 6))
+            # the translation noise is given in the camera frame: rotate it into W
+            noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
+            noise[3:, 3:] = np.diag(sigma[3:] ** 2)
         event = self._event(time, "pose", source, r_wb, z)
         event.noise, event.mask = noise, mask
         return event
