@@ -27,6 +27,7 @@ from estimation.registry import (
     NEEDS_INTRINSICS,
     NEEDS_TOF_CALIBRATION,
     REGISTRY,
+    WANTS_TOF_CALIBRATION,
     make_estimator,
 )
 from estimation.tracking import CornerTracker, TrackedEstimator
@@ -54,9 +55,10 @@ def needs_intrinsics(names: tuple[str, ...] | list[str]) -> bool:
     return bool(expanded & NEEDS_INTRINSICS)
 
 
-def needs_tof_calibration(names: tuple[str, ...] | list[str]) -> bool:
+def needs_tof_calibration(names: tuple[str, ...] | list[str], *, optional: bool = False) -> bool:
+    """Whether the names need the ToF–camera calibration (``optional``: or can use one)."""
     expanded = set(names) | (set(AUTO_RANKING) if "auto" in names else set())
-    return bool(expanded & NEEDS_TOF_CALIBRATION)
+    return bool(expanded & (WANTS_TOF_CALIBRATION if optional else NEEDS_TOF_CALIBRATION))
 
 
 @dataclass(frozen=True)
@@ -146,7 +148,9 @@ def _for_tag(
             intrinsics=options.intrinsics,
             tag_size=tag_size,
             tag_id=tag_id,
-            tof_calibration=options.tof_calibration if spec.needs_tof_calibration else None,
+            tof_calibration=options.tof_calibration
+            if spec.wants_tof_calibration or spec.needs_tof_calibration
+            else None,
             tof_positions_c=options.tof_positions_c if spec.uses_ranges else None,
             config=options.configs.get(name),
         )

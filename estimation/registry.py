@@ -44,8 +44,9 @@ class EstimatorSpec:
     """A registered single-frame estimator.
 
     ``needs_intrinsics`` / ``needs_tof_calibration``: the calibrations it cannot run
-    without; ``uses_ranges``: it takes the ToF ranges (on a deck of nested landmarks it then
-    prefers the tag nearest the landing point, under the rays).
+    without; ``wants_tof_calibration``: it uses the ToF–camera calibration when there is
+    one (tight: the principal point); ``uses_ranges``: it takes the ToF ranges (on a deck
+    of nested landmarks it then prefers the tag nearest the landing point, under the rays).
     """
 
     name: str
@@ -54,6 +55,7 @@ class EstimatorSpec:
     needs_intrinsics: bool
     needs_tof_calibration: bool
     uses_ranges: bool
+    wants_tof_calibration: bool = False
 
 
 def _atda(inputs: BuildInputs) -> DeckPoseEstimator:
@@ -110,7 +112,7 @@ REGISTRY: dict[str, EstimatorSpec] = {
         EstimatorSpec("ihrcf", IHRCFConfig, _ihrcf, False, True, True),
         EstimatorSpec("crhf", CRHFConfig, _crhf, False, True, True),
         # the ranges enter through the sensors' mounts and the noise model, not a look-up
-        EstimatorSpec("tight", TightConfig, _tight, True, False, True),
+        EstimatorSpec("tight", TightConfig, _tight, True, False, True, True),
     )
 }
 
@@ -129,6 +131,10 @@ NEEDS_INTRINSICS: frozenset[str] = frozenset(
 )
 NEEDS_TOF_CALIBRATION: frozenset[str] = frozenset(
     n for n, s in REGISTRY.items() if s.needs_tof_calibration
+)
+#: Names that use the ToF–camera calibration when it is available (a superset of the above).
+WANTS_TOF_CALIBRATION: frozenset[str] = frozenset(
+    n for n, s in REGISTRY.items() if s.needs_tof_calibration or s.wants_tof_calibration
 )
 
 

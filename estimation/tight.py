@@ -34,6 +34,7 @@ is dropped and the pose solved again.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -43,7 +44,7 @@ import numpy as np
 from estimation import geometry
 from estimation.atda import ippe_solutions
 from estimation.camera_model import CameraIntrinsics
-from estimation.errors import ConfigError, require_range
+from estimation.errors import ConfigError, require_choice, require_range
 from estimation.estimator import (
     BAD_CORNERS,
     DEGENERATE_CORNERS,
@@ -67,6 +68,8 @@ from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
     from estimation.tof_calibration import TofCameraCalibration
+
+PRINCIPAL_POINT_SOURCES = ("touch_points", "calibrated")
 
 TOO_FEW_CORNERS = "too_few_corners"
 NO_INITIAL_POSE = "no_initial_pose"
@@ -93,6 +96,11 @@ class TightConfig:
     (as ATDA does).  ``start_cost_margin``: only the starts whose whitened cost is within
     this of the lowest start's are refined (``inf``: all of them); the others start in
     another basin with a cost higher by more than sqrt(50) ≈ 7 sigma.
+    ``principal_point``: ``"touch_points"`` (with a ToF–camera calibration) moves the
+    calibrated principal point by the median offset between the pads' measured touch pixels
+    and their projection through the calibrated camera (the calibrations' disagreement,
+    which CRHF removes by estimating its own principal point, CRHF Sec. 2.7: a chessboard
+    calibration off by 0.3 px in cx shifts x by 1.3 mm at 2 m); ``"calibrated"`` keeps K.
     """
 
     pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
@@ -106,6 +114,7 @@ class TightConfig:
     ambiguity_ratio_threshold: float = 0.6
     history_timeout_s: float = 0.5
     start_cost_margin: float = 50.0
+    principal_point: str = "touch_points"
 
     def __post_init__(self) -> None:
         require_range("pixel_sigma_px", self.pixel_sigma_px, 0.0, low_inclusive=False)
@@ -124,6 +133,7 @@ class TightConfig:
         )  # fmt: skip
         require_range("history_timeout_s", self.history_timeout_s, 0.0)
         require_range("start_cost_margin", self.start_cost_margin, 0.0)
+        require_choice("principal_point", self.principal_point, PRINCIPAL_POINT_SOURCES)
 
     @property
     def tof_noise(self) -> TofNoiseModel:
@@ -368,6 +378,30 @@ def euler_jacobian(rotation: np.ndarray) -> np.ndarray:
     return np.linalg.inv(e)
 
 
+def principal_point_offset(
+    intrinsics: CameraIntrinsics,
+    tof_positions_c: np.ndarray,
+    tof_calibration: TofCameraCalibration,
+) -> np.ndarray:
+    """The median (du, dv) by which the ToF–camera calibration's touch pixels lie from the
+    projection of the touch points ``s_i + r e_z`` through ``intrinsics``, pixels.
+
+    Both calibrations see the same image, but the pads' touch pixels are measured directly
+    while the chessboard's principal point is a fitted parameter; their median disagreement
+    over every sample is the principal-point error (zero for consistent calibrations).
+    """
+    offsets = []
+    for sensor, samples in zip(tof_positions_c, tof_calibration.samples, strict=False):
+        points = np.tile(sensor, (len(samples), 1))
+        points[:, 2] += samples[:, 0]
+        offsets.append(samples[:, 1:3] - intrinsics.project(points))
+    stacked = np.vstack(offsets) if offsets else np.empty((0, 2))
+    stacked = stacked[np.all(np.isfinite(stacked), axis=1)]
+    if len(stacked) == 0:
+        return np.zeros(2)
+    return np.median(stacked, axis=0)
+
+
 class TightEstimator(GuardedEstimator):
     """The deck pose from the tag corners and the ToF ranges in one least-squares problem."""
 
@@ -396,11 +430,20 @@ class TightEstimator(GuardedEstimator):
                 "tof_calibration",
                 f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
             )
-        self.intrinsics = intrinsics
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
         self.tof_positions_c = positions
         self.config = config or TightConfig()
+        self.principal_point_offset_px = np.zeros(2)
+        if tof_calibration is not None and self.config.principal_point == "touch_points":
+            self.principal_point_offset_px = principal_point_offset(
+                intrinsics, positions, tof_calibration
+            )
+            dx, dy = self.principal_point_offset_px
+            intrinsics = dataclasses.replace(
+                intrinsics, cx=intrinsics.cx + float(dx), cy=intrinsics.cy + float(dy)
+            )
+        self.intrinsics = intrinsics
         self._noise = self.config.tof_noise
         self._model = tag_corners_in_tag_frame(self.tag_size)
         self._k = intrinsics.matrix

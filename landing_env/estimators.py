@@ -151,6 +151,20 @@ def load_tof_calibration(config: DeckLandingConfig) -> TofCameraCalibration:
     return calibration.with_method(est.tof_lookup)
 
 
+def _tof_calibration_for(
+    config: DeckLandingConfig, names: list[str]
+) -> TofCameraCalibration | None:
+    """The ToF–camera calibration when a name needs it, or can use it and it exists."""
+    if needs_tof_calibration(names):
+        return load_tof_calibration(config)
+    est = config.estimation
+    if needs_tof_calibration(names, optional=True) and (
+        est.tof_calibration == "exact" or est.tof_calibration_path.is_file()
+    ):
+        return load_tof_calibration(config)
+    return None
+
+
 def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOptions:
     """The one options object the estimators are built from: the configured names and
     settings, the calibrations they need (loaded here) and the world's sensor glue."""
@@ -162,7 +176,7 @@ def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOpt
         names=tuple(names),
         layout=config.deck.layout,
         intrinsics=load_intrinsics(config) if needs_intrinsics(names) else None,
-        tof_calibration=load_tof_calibration(config) if needs_tof_calibration(names) else None,
+        tof_calibration=_tof_calibration_for(config, names),
         tof_positions_c=np.asarray(config.tof.mount_offsets_c, dtype=float),
         configs={name: getattr(est, name) for name in REGISTRY},
         tracking=est.tracking,
