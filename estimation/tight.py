@@ -101,6 +101,9 @@ class TightConfig:
     and their projection through the calibrated camera (the calibrations' disagreement,
     which CRHF removes by estimating its own principal point, CRHF Sec. 2.7: a chessboard
     calibration off by 0.3 px in cx shifts x by 1.3 mm at 2 m); ``"calibrated"`` keeps K.
+    ``noise_from_sensors``: a host that knows its sensors (the simulator) replaces the ToF
+    noise above by the configured sensor's model, and the pixel sigma by the camera's
+    configured corner noise where it has one.
     """
 
     pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
@@ -115,6 +118,7 @@ class TightConfig:
     history_timeout_s: float = 0.5
     start_cost_margin: float = 50.0
     principal_point: str = "touch_points"
+    noise_from_sensors: bool = True
 
     def __post_init__(self) -> None:
         require_range("pixel_sigma_px", self.pixel_sigma_px, 0.0, low_inclusive=False)

@@ -13,6 +13,7 @@ pose falls outside the observation's bounds) gives an invalid estimate with its 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -20,7 +21,9 @@ import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
 from estimation.estimator import DeckPoseEstimator
+from estimation.fusion import FusionConfig
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
+from estimation.noise import TofNoiseModel
 from estimation.pipeline import (
     EstimationOptions,
     build_estimators,
@@ -29,6 +32,7 @@ from estimation.pipeline import (
     needs_tof_calibration,
 )
 from estimation.registry import REGISTRY
+from estimation.tight import TightConfig
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig
@@ -165,6 +169,44 @@ def _tof_calibration_for(
     return None
 
 
+def sensor_tof_noise(config: DeckLandingConfig) -> TofNoiseModel:
+    """The configured ToF sensors' noise model (exact ranges for ``tof.noise: none``)."""
+    tof = config.tof
+    if tof.noise == "none":
+        return TofNoiseModel.exact()
+    return TofNoiseModel(tof.sigma_0, tof.sigma_per_m, tof.resolution)
+
+
+def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
+    """An estimator's settings with the configured sensors' noise, where it asks for it."""
+    if isinstance(settings, TightConfig) and settings.noise_from_sensors:
+        noise = sensor_tof_noise(config)
+        changes: dict = {
+            "tof_sigma_0_m": noise.sigma_0_m,
+            "tof_sigma_per_m": noise.sigma_per_m,
+            "tof_resolution_m": noise.resolution_m,
+        }
+        camera = config.camera
+        if camera.mode == "project" and camera.pixel_noise_px > 0.0:
+            changes["pixel_sigma_px"] = camera.pixel_noise_px
+        return dataclasses.replace(settings, **changes)
+    return settings
+
+
+def fusion_settings(config: DeckLandingConfig) -> FusionConfig:
+    """The fusion's settings with the configured ToF sensors' noise, where it asks for it."""
+    fusion = config.estimation.fusion
+    if not fusion.noise_from_sensors:
+        return fusion
+    noise = sensor_tof_noise(config)
+    return dataclasses.replace(
+        fusion,
+        tof_sigma_m=noise.sigma_0_m,
+        tof_sigma_per_m=noise.sigma_per_m,
+        tof_resolution_m=noise.resolution_m,
+    )
+
+
 def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOptions:
     """The one options object the estimators are built from: the configured names and
     settings, the calibrations they need (loaded here) and the world's sensor glue."""
@@ -178,7 +220,7 @@ def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOpt
         intrinsics=load_intrinsics(config) if needs_intrinsics(names) else None,
         tof_calibration=_tof_calibration_for(config, names),
         tof_positions_c=np.asarray(config.tof.mount_offsets_c, dtype=float),
-        configs={name: getattr(est, name) for name in REGISTRY},
+        configs={name: _with_sensor_noise(getattr(est, name), config) for name in REGISTRY},
         tracking=est.tracking,
         tracking_dt_s=1.0 / config.simulation.env_hz,
         max_bridged_frames=est.max_bridged_frames,
@@ -207,7 +249,7 @@ class EstimatorBank:
         self.pose_bounds = pose_bounds
         est = config.estimation
         # `fused` runs after the per-frame estimators (VisionStage), on its sources' output
-        fusion = est.fusion if "fused" in (est.observed, *est.compare) else None
+        fusion = fusion_settings(config) if "fused" in (est.observed, *est.compare) else None
         options = estimation_options(config, world)
         self.estimators: dict[str, DeckPoseEstimator | TruthEstimator] = dict(
             build_estimators(options, {"truth": TruthEstimator(world)})

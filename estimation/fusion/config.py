@@ -6,6 +6,12 @@ import math
 from dataclasses import dataclass
 
 from estimation.errors import ConfigError, require_choice, require_range
+from estimation.noise import (
+    VL53L1X_RESOLUTION_M,
+    VL53L1X_SIGMA_0_M,
+    VL53L1X_SIGMA_PER_M,
+    TofNoiseModel,
+)
 from estimation.registry import FRAME_ESTIMATOR_NAMES
 
 #: Estimators whose deck pose (T_CD) the fusion can take as a measurement.
@@ -54,9 +60,15 @@ class FusionConfig:
     initial_accel_bias_sigma: float = 0.05
     initial_velocity_sigma: float = 0.3
     initial_rate_sigma: float = 0.2
-    #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range (VL53L1X-class)
-    tof_sigma_m: float = 0.002
-    tof_sigma_per_m: float = 0.0025
+    #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range, with readings in steps
+    #: of tof_resolution_m (estimation.noise.TofNoiseModel; defaults: the VL53L1X model)
+    tof_sigma_m: float = VL53L1X_SIGMA_0_M
+    tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
+    tof_resolution_m: float = VL53L1X_RESOLUTION_M
+    #: a simulator (or any host that knows its sensors) replaces the ToF noise above by the
+    #: configured sensor's model (landing_env: the `tof` section), so that the filter weights
+    #: exact ranges as exact and noisy ones as noisy
+    noise_from_sensors: bool = True
     #: per-source pose sigmas: x, y, z (m, camera frame), roll, pitch, yaw (deg).  IHRCF's
     #: and CRHF's z, roll and pitch are the plane through the same ToF ranges the filter
     #: fuses itself (undelayed): using them again would count that noise twice
@@ -92,19 +104,24 @@ class FusionConfig:
             "accel_noise_density",
             "accel_bias_random_walk",
             "tof_sigma_per_m",
+            "tof_sigma_m",
+            "tof_resolution_m",
         ):
             require_range(name, getattr(self, name), 0.0)
         for name in (
             "initial_accel_bias_sigma",
             "initial_velocity_sigma",
             "initial_rate_sigma",
-            "tof_sigma_m",
         ):
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         for name in POSE_SOURCES:
             key = f"{name}_sigma"
             setattr(self, key, tuple(float(v) for v in getattr(self, key)))
             _check_sigmas(key, getattr(self, key))
+
+    @property
+    def tof_noise(self) -> TofNoiseModel:
+        return TofNoiseModel(self.tof_sigma_m, self.tof_sigma_per_m, self.tof_resolution_m)
 
     def pose_sigma(self, source: str) -> tuple[float, ...]:
         """The 1-sigma of a source's pose: metres and degrees."""

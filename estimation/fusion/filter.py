@@ -75,6 +75,10 @@ class _Event:
     noise: np.ndarray | None = None
     mask: np.ndarray | None = None
     after: _Snapshot | None = None
+    #: pose: it already holds the ToF ranges of its frame (tight); tof: a pose that holds
+    #: these ranges has arrived, so they are not fused again
+    includes_ranges: bool = False
+    superseded: bool = False
     outcome: Counter = field(default_factory=Counter)
     nis: float = float("nan")
 
@@ -128,6 +132,7 @@ class DeckFusion:
         mounts = np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
         self.tof_origins_b = self.t_bc + mounts @ R_BC.T
         self._gates = {dof: float(chi2.ppf(config.gate_probability, dof)) for dof in range(1, 7)}
+        self._tof_noise = config.tof_noise
         self.reset()
 
     # ------------------------------------------------------------------ lifecycle
@@ -255,6 +260,7 @@ class DeckFusion:
             noise[3:, 3:] = np.diag(sigma[3:] ** 2)
         event = self._event(time, "pose", source, r_wb, z)
         event.noise, event.mask = noise, mask
+        event.includes_ranges = bool(estimate.extras.get("ranges_used", 0))
         return event
 
     # ------------------------------------------------------------------ the buffer
@@ -267,6 +273,18 @@ class DeckFusion:
             self._keys.insert(i, event.key)
             self._events.insert(i, event)
             first = min(first, i)
+        # a pose that already fused its frame's ranges (tight) supersedes that frame's ToF
+        # event: each reading is used once, and the filter replays from it
+        for event in events:
+            if event.kind != "pose" or not event.includes_ranges:
+                continue
+            i = bisect.bisect_left(self._keys, (event.time - 1e-9, -1, -1))
+            while i < len(self._events) and self._events[i].time <= event.time + 1e-9:
+                other = self._events[i]
+                if other.kind == "tof" and not other.superseded:
+                    other.superseded = True
+                    first = min(first, i)
+                i += 1
         # later events already applied were inserted after `first`: replay from there
         snap = self._events[first - 1].after if first > 0 else self._base
         assert snap is not None
@@ -313,7 +331,9 @@ class DeckFusion:
                 )
             time = max(time, event.time)
         elif event.kind == "tof":
-            if initialised:
+            if event.superseded:
+                event.outcome["tof_superseded"] += 1
+            elif initialised:
                 x, cov = self._update_tof(event, x, cov)
         elif not initialised:
             x, cov = self._initialise(event, x, cov)
@@ -370,7 +390,6 @@ class DeckFusion:
     def _update_tof(
         self, event: _Event, x: np.ndarray, cov: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        cfg = self.config
         gate = self._gates[1]
         nis_values = []
         # one scalar update per sensor: a ray off the deck edge is rejected alone
@@ -382,7 +401,7 @@ class DeckFusion:
                 event.outcome["tof_rejected"] += 1
                 continue
             predicted, h = model
-            sigma = cfg.tof_sigma_m + cfg.tof_sigma_per_m * measured
+            sigma = self._tof_noise.sigma_scalar(measured)
             x, cov, nis, accepted = ekf_update(
                 x,
                 cov,
