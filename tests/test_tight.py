@@ -73,7 +73,9 @@ def pose_error_free(rotation, translation) -> np.ndarray:
 
 
 def tight(lens: str = "pinhole", **config) -> TightEstimator:
-    return TightEstimator(intrinsics=LENSES[lens], tag_size=TAG_SIZE, config=TightConfig(**config))
+    """tight weighting the corners by the tests' pixel noise (and VL53L1X ranges)."""
+    settings = TightConfig(**{"pixel_sigma_px": PIXEL_SIGMA, **config})
+    return TightEstimator(intrinsics=LENSES[lens], tag_size=TAG_SIZE, config=settings)
 
 
 @pytest.mark.parametrize("lens", list(LENSES))
@@ -353,7 +355,9 @@ def test_the_touch_pixels_correct_a_chessboard_principal_point_error() -> None:
     scene = SyntheticScene(true_k, TAG_SIZE)
     rotation, translation = random_pose(np.random.default_rng(12), 2.0)
     m = scene.measure(rotation, translation)
-    fixed = TightEstimator(intrinsics=wrong_k, tag_size=TAG_SIZE, tof_calibration=pads)
+    fixed = TightEstimator(
+        intrinsics=wrong_k, tag_size=TAG_SIZE, tof_calibration=pads, config=TightConfig()
+    )
     np.testing.assert_allclose(fixed.principal_point_offset_px, [0.38, -0.27], atol=1e-9)
     assert np.linalg.norm(fixed.estimate(m.frame, m.ranges).translation - translation) < 1e-6
     kept = TightEstimator(
