@@ -42,6 +42,64 @@ from estimation.landmarks import LandmarkLayout, shortest_side_px
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 REPROJECTION_ERROR = "reprojection_error"
+_NO_DISTORTION = np.zeros(5)
+
+
+def _solve_pnp(
+    object_points: np.ndarray, corners: np.ndarray, k: np.ndarray, flag: int
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """The finite PnP solutions in front of the camera as (RMS error px, R, t)."""
+    count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+        object_points, corners.reshape(4, 1, 2), k, _NO_DISTORTION, flags=flag
+    )
+    errors = np.asarray(errors, dtype=float).reshape(-1)
+    solutions = []
+    for i in range(int(count)):
+        tvec = np.asarray(tvecs[i], dtype=float).reshape(3)
+        rvec = np.asarray(rvecs[i], dtype=float).reshape(3)
+        finite = np.all(np.isfinite(tvec)) and np.all(np.isfinite(rvec))
+        if finite and np.isfinite(errors[i]) and tvec[2] > 0.0:
+            rotation, _ = cv2.Rodrigues(rvec)
+            solutions.append((float(errors[i]), rotation, tvec))
+    return solutions
+
+
+def ippe_solutions(
+    object_points: np.ndarray, corners: np.ndarray, k: np.ndarray
+) -> tuple[str, list[tuple[float, np.ndarray, np.ndarray]]]:
+    """IPPE_SQUARE's two poses of a square tag from its 4 undistorted corner pixels, sorted
+    by reprojection error, as (RMS error px, R_CD, t_CD), with the solver that gave them.
+
+    OpenCV 5.0 returns rotation vectors, and its conversion loses precision for
+    rotations near 180° (measured: 0.03° error 1e-6 rad from a yaw of 180°, a wrong pose
+    at exactly 180°).  When the tag's x axis points left in the image (|yaw| > 90°) the
+    corners are therefore relabelled by half a turn, which is the same square turned
+    by 180° about its normal, and the result is turned back.
+
+    IPPE also returns NaN for some exactly symmetric views (tag centre on an image axis,
+    tilt about the other); IPPE_SQUARE and generic IPPE fail on different cases, and
+    SQPNP (one, globally optimal pose) is the last resort.
+    """
+    x_axis_u = corners[1, 0] + corners[2, 0] - corners[0, 0] - corners[3, 0]
+    half_turn = x_axis_u < 0.0
+    if half_turn:
+        corners = corners[[2, 3, 0, 1]]
+    best: tuple[str, list] = ("none", [])
+    for solver, flag in (
+        ("ippe_square", cv2.SOLVEPNP_IPPE_SQUARE),
+        ("ippe", cv2.SOLVEPNP_IPPE),
+        ("sqpnp", cv2.SOLVEPNP_SQPNP),
+    ):
+        sols = _solve_pnp(object_points, corners, k, flag)
+        if len(sols) > len(best[1]):
+            best = (solver, sols)
+        if len(best[1]) >= 2:
+            break
+    solutions = sorted(best[1], key=lambda s: s[0])
+    if half_turn:
+        # R_CD = R' Rz(180°): negate the first two columns
+        solutions = [(e, r * np.array([-1.0, -1.0, 1.0]), t) for e, r, t in solutions]
+    return best[0], solutions
 
 
 @dataclass(frozen=True)
@@ -101,62 +159,14 @@ class AtdaEstimator(GuardedEstimator):
         # IPPE_SQUARE's required point order is exactly frames.TAG_CORNER_SIGNS
         self._object_points = tag_corners_in_tag_frame(self.tag_size)
         self._k = intrinsics.matrix
-        self._no_dist = np.zeros(5)
         self._undistorter = geometry.Undistorter(intrinsics)
         self._previous: tuple[float, np.ndarray] | None = None
 
     def reset(self) -> None:
         self._previous = None
 
-    def _solve(self, corners: np.ndarray, flag: int) -> list[tuple[float, np.ndarray, np.ndarray]]:
-        """The finite PnP solutions in front of the camera as (RMS error px, R, t)."""
-        count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
-            self._object_points, corners.reshape(4, 1, 2), self._k, self._no_dist, flags=flag
-        )
-        errors = np.asarray(errors, dtype=float).reshape(-1)
-        solutions = []
-        for k in range(int(count)):
-            tvec = np.asarray(tvecs[k], dtype=float).reshape(3)
-            rvec = np.asarray(rvecs[k], dtype=float).reshape(3)
-            finite = np.all(np.isfinite(tvec)) and np.all(np.isfinite(rvec))
-            if finite and np.isfinite(errors[k]) and tvec[2] > 0.0:
-                rotation, _ = cv2.Rodrigues(rvec)
-                solutions.append((float(errors[k]), rotation, tvec))
-        return solutions
-
     def _solutions(self, corners: np.ndarray) -> tuple[str, list]:
-        """IPPE_SQUARE's two poses, sorted by reprojection error, with fallbacks.
-
-        OpenCV 5.0 returns rotation vectors, and its conversion loses precision for
-        rotations near 180° (measured: 0.03° error 1e-6 rad from a yaw of 180°, a wrong pose
-        at exactly 180°).  When the tag's x axis points left in the image (|yaw| > 90°) the
-        corners are therefore relabelled by half a turn, which is the same square turned
-        by 180° about its normal, and the result is turned back.
-
-        IPPE also returns NaN for some exactly symmetric views (tag centre on an image axis,
-        tilt about the other); IPPE_SQUARE and generic IPPE fail on different cases, and
-        SQPNP (one, globally optimal pose) is the last resort.
-        """
-        x_axis_u = corners[1, 0] + corners[2, 0] - corners[0, 0] - corners[3, 0]
-        half_turn = x_axis_u < 0.0
-        if half_turn:
-            corners = corners[[2, 3, 0, 1]]
-        best: tuple[str, list] = ("none", [])
-        for solver, flag in (
-            ("ippe_square", cv2.SOLVEPNP_IPPE_SQUARE),
-            ("ippe", cv2.SOLVEPNP_IPPE),
-            ("sqpnp", cv2.SOLVEPNP_SQPNP),
-        ):
-            sols = self._solve(corners, flag)
-            if len(sols) > len(best[1]):
-                best = (solver, sols)
-            if len(best[1]) >= 2:
-                break
-        solutions = sorted(best[1], key=lambda s: s[0])
-        if half_turn:
-            # R_CD = R' Rz(180°): negate the first two columns
-            solutions = [(e, r * np.array([-1.0, -1.0, 1.0]), t) for e, r, t in solutions]
-        return best[0], solutions
+        return ippe_solutions(self._object_points, corners, self._k)
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
         timestamp = float(frame.timestamp)

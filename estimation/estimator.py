@@ -1,4 +1,7 @@
-"""The interface every deck-pose estimator implements, shared input checks and the factory.
+"""The interface every deck-pose estimator implements and the shared input checks.
+
+The estimators are built by name in :mod:`estimation.registry` (single frame) and
+:mod:`estimation.pipeline` (everything a host asks for).
 
 An estimator turns one camera frame and one ToF reading into a :class:`DeckPoseEstimate`
 (``T_CD``, see :mod:`estimation.frames`).  It never raises for bad input: a missing tag, an
@@ -24,8 +27,6 @@ from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
     from estimation.tof_calibration import TofCameraCalibration
-
-ESTIMATOR_NAMES = ("atda", "ihrcf", "crhf")
 
 # Reasons for invalid estimates (stable tokens, so that runs can be tallied by reason).
 NO_DETECTION = "no_detection"
@@ -412,60 +413,3 @@ class RankedEstimator:
         reasons = {e.name: r.reason for e, r in zip(self.estimators, results, strict=True)}
         last = results[-1]
         return dataclasses.replace(last, method=self.name, extras={"reasons": reasons})
-
-
-def make_estimator(
-    name: str,
-    *,
-    intrinsics: CameraIntrinsics | None,
-    tag_size: float,
-    tag_id: int = 0,
-    tof_calibration: TofCameraCalibration | None = None,
-    tof_positions_c: np.ndarray | None = None,
-    config: object | None = None,
-) -> DeckPoseEstimator:
-    """Build the estimator ``name`` ("atda", "ihrcf" or "crhf").
-
-    ``intrinsics``: calibrated camera (required by ATDA; IHRCF/CRHF only use it to undistort).
-    ``tag_size``: black-border edge length of the tag, metres.  ``tof_calibration`` and
-    ``tof_positions_c`` (default :func:`tof_positions_in_camera_frame`) are required by
-    IHRCF and CRHF.  ``config``: the method's config dataclass (default settings if None).
-    """
-    # imported here: the method modules import this one
-    from estimation.atda import ATDAConfig, AtdaEstimator
-    from estimation.crhf import CRHFConfig, CrhfEstimator
-    from estimation.ihrcf import IHRCFConfig, IhrcfEstimator
-
-    if name not in ESTIMATOR_NAMES:
-        raise ValueError(f"unknown estimator {name!r}; allowed: {', '.join(ESTIMATOR_NAMES)}")
-    if name == "atda":
-        if intrinsics is None:
-            raise ValueError("atda needs the camera intrinsics")
-        if config is not None and not isinstance(config, ATDAConfig):
-            raise TypeError("atda expects an ATDAConfig")
-        return AtdaEstimator(
-            intrinsics=intrinsics, tag_size=tag_size, tag_id=tag_id, config=config or ATDAConfig()
-        )
-    if tof_calibration is None:
-        raise ValueError(f"{name} needs a tof_calibration")
-    if name == "ihrcf":
-        if config is not None and not isinstance(config, IHRCFConfig):
-            raise TypeError("ihrcf expects an IHRCFConfig")
-        return IhrcfEstimator(
-            tag_size=tag_size,
-            tag_id=tag_id,
-            tof_calibration=tof_calibration,
-            tof_positions_c=tof_positions_c,
-            intrinsics=intrinsics,
-            config=config or IHRCFConfig(),
-        )
-    if config is not None and not isinstance(config, CRHFConfig):
-        raise TypeError("crhf expects a CRHFConfig")
-    return CrhfEstimator(
-        tag_size=tag_size,
-        tag_id=tag_id,
-        tof_calibration=tof_calibration,
-        tof_positions_c=tof_positions_c,
-        intrinsics=intrinsics,
-        config=config or CRHFConfig(),
-    )

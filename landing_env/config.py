@@ -17,6 +17,9 @@ from estimation.atda import ATDAConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
+from estimation.pipeline import needs_intrinsics, needs_tof_calibration
+from estimation.registry import ESTIMATOR_NAMES
+from estimation.tight import TightConfig
 from landing_env.config_limits import check_value
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -34,11 +37,6 @@ from landing_env.vision_link import VisionLinkConfig
 #: Scenario and training configs shipped with the project.
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 
-#: Names an estimator can have in ``estimation.observed`` / ``estimation.compare``.
-ESTIMATOR_NAMES = ("truth", "atda", "ihrcf", "crhf", "beacon", "auto", "fused")
-
-#: ``auto``: the first valid of these (IHRCF within ToF range, ATDA above it)
-AUTO_RANKING = ("ihrcf", "atda")
 
 #: Where the estimators' calibrations come from: a calibration file or the exact model.
 CALIBRATION_SOURCES = ("file", "exact")
@@ -185,6 +183,8 @@ class EstimationConfig:
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
     crhf: CRHFConfig = field(default_factory=CRHFConfig)
+    #: the tightly coupled corners + ranges least squares (estimation/tight.py)
+    tight: TightConfig = field(default_factory=TightConfig)
     #: the ``fused`` estimator: EKF of the IMU with the (delayed) poses of ``fusion.sources``
     #: and the ToF ranges (estimation/fusion/)
     fusion: FusionConfig = field(default_factory=FusionConfig)
@@ -199,14 +199,12 @@ class EstimationConfig:
         require_choice("tof_calibration", self.tof_calibration, CALIBRATION_SOURCES)
         require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
         require_range("max_bridged_frames", self.max_bridged_frames, 0)
-        names = {self.observed, *self.compare}
-        if "auto" in names:
-            names |= set(AUTO_RANKING)
+        names = [self.observed, *self.compare]
         if "fused" in names:
-            names |= set(self.fusion.sources)
-        if self.intrinsics == "file" and names & {"atda", "ihrcf", "crhf", "beacon"}:
+            names += list(self.fusion.sources)
+        if self.intrinsics == "file" and needs_intrinsics(names):
             _require_file("intrinsics_file", self.intrinsics_path)
-        if self.tof_calibration == "file" and names & {"ihrcf", "crhf"}:
+        if self.tof_calibration == "file" and needs_tof_calibration(names):
             _require_file("tof_calibration_file", self.tof_calibration_path)
 
     @property

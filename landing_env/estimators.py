@@ -1,7 +1,9 @@
 """The estimators the environment runs each step: the observed one and those compared.
 
-``estimation.observed`` and ``estimation.compare`` name them (``truth``, ``atda``, ``ihrcf``,
-``crhf``); all run on the same camera frame and ToF reading.  Their calibrations come from
+``estimation.observed`` and ``estimation.compare`` name them (the names of
+:data:`estimation.registry.ESTIMATOR_NAMES`); all run on the same camera frame and ToF
+reading.  They are built by :mod:`estimation.pipeline` from one options object; this module
+adds the ground truth and loads the calibration files.  Their calibrations come from
 the files in ``configs/calibration/`` (or the configured ones, or the exact model), and are
 checked against the configured camera and ToF layout when the environment is built: a
 calibration made for another camera is refused there, not discovered as bad estimates.
@@ -11,20 +13,29 @@ pose falls outside the observation's bounds) gives an invalid estimate with its 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimation.atda import JointAtdaEstimator
 from estimation.camera_model import CameraIntrinsics
-from estimation.estimator import DeckPoseEstimator, RankedEstimator, make_estimator
+from estimation.estimator import DeckPoseEstimator
+from estimation.fusion import FusionConfig
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
-from estimation.landmarks import LandmarkChoiceConfig, LandmarkEstimator
+from estimation.noise import TofNoiseModel
+from estimation.pipeline import (
+    EstimationOptions,
+    build_estimators,
+    names_to_build,
+    needs_intrinsics,
+    needs_tof_calibration,
+)
+from estimation.registry import REGISTRY
+from estimation.tight import TightConfig
 from estimation.tof_calibration import TofCameraCalibration
-from estimation.tracking import CornerTracker, TrackedEstimator
 from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
-from landing_env.config import AUTO_RANKING, DeckLandingConfig
+from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.vision_link import VisionStage
 
@@ -164,11 +175,88 @@ def load_tof_calibration(config: DeckLandingConfig) -> TofCameraCalibration:
     return calibration.with_method(est.tof_lookup)
 
 
+def _tof_calibration_for(
+    config: DeckLandingConfig, names: list[str]
+) -> TofCameraCalibration | None:
+    """The ToF–camera calibration when a name needs it, or can use it and it exists."""
+    if needs_tof_calibration(names):
+        return load_tof_calibration(config)
+    est = config.estimation
+    if needs_tof_calibration(names, optional=True) and (
+        est.tof_calibration == "exact" or est.tof_calibration_path.is_file()
+    ):
+        return load_tof_calibration(config)
+    return None
+
+
+def sensor_tof_noise(config: DeckLandingConfig) -> TofNoiseModel:
+    """The configured ToF sensors' noise model (exact ranges for ``tof.noise: none``)."""
+    tof = config.tof
+    if tof.noise == "none":
+        return TofNoiseModel.exact()
+    return TofNoiseModel(tof.sigma_0, tof.sigma_per_m, tof.resolution)
+
+
+def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
+    """An estimator's settings with the configured sensors' noise, where it asks for it."""
+    if isinstance(settings, TightConfig) and settings.noise_from_sensors:
+        noise = sensor_tof_noise(config)
+        changes: dict = {
+            "tof_sigma_0_m": noise.sigma_0_m,
+            "tof_sigma_per_m": noise.sigma_per_m,
+            "tof_resolution_m": noise.resolution_m,
+        }
+        camera = config.camera
+        if camera.mode == "project" and camera.pixel_noise_px > 0.0:
+            changes["pixel_sigma_px"] = camera.pixel_noise_px
+        return dataclasses.replace(settings, **changes)
+    return settings
+
+
+def fusion_settings(config: DeckLandingConfig) -> FusionConfig:
+    """The fusion's settings with the configured ToF sensors' noise, where it asks for it."""
+    fusion = config.estimation.fusion
+    if not fusion.noise_from_sensors:
+        return fusion
+    noise = sensor_tof_noise(config)
+    return dataclasses.replace(
+        fusion,
+        tof_sigma_m=noise.sigma_0_m,
+        tof_sigma_per_m=noise.sigma_per_m,
+        tof_resolution_m=noise.resolution_m,
+    )
+
+
+def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOptions:
+    """The one options object the estimators are built from: the configured names and
+    settings, the calibrations they need (loaded here) and the world's sensor glue."""
+    est = config.estimation
+    names = names_to_build(est.observed, est.compare, est.fusion.sources)
+    # the rangefinder's origin below the camera along the optical axis (+z_C = -z_B)
+    range_offset = float(world.t_bc[2] - config.rangefinder.mount_offset_b[2])
+    return EstimationOptions(
+        names=tuple(names),
+        layout=config.deck.layout,
+        intrinsics=load_intrinsics(config) if needs_intrinsics(names) else None,
+        tof_calibration=_tof_calibration_for(config, names),
+        tof_positions_c=np.asarray(config.tof.mount_offsets_c, dtype=float),
+        configs={name: _with_sensor_noise(getattr(est, name), config) for name in REGISTRY},
+        tracking=est.tracking,
+        tracking_dt_s=1.0 / config.simulation.env_hz,
+        max_bridged_frames=est.max_bridged_frames,
+        range_down=lambda: world.last_range_down,
+        range_offset_m=range_offset,
+    )
+
+
 class EstimatorBank:
     """Runs the observed estimator and every compared one on the same sensor data.
 
-    ``pose_bounds``: (low, high) of (x, y, z, roll, pitch, yaw); a valid estimate outside
-    them is reported invalid (``out_of_observation_bounds``) rather than clipped.
+    The estimators come from :func:`estimation.pipeline.build_estimators` with the options
+    :func:`estimation_options` fills from the configuration; the bank adds only the ground
+    truth and the observation's bounds.  ``pose_bounds``: (low, high) of (x, y, z, roll,
+    pitch, yaw); a valid estimate outside them is reported invalid
+    (``out_of_observation_bounds``) rather than clipped.
     """
 
     def __init__(
@@ -179,91 +267,16 @@ class EstimatorBank:
     ) -> None:
         self.config = config
         self.pose_bounds = pose_bounds
-        names = list(dict.fromkeys((config.estimation.observed, *config.estimation.compare)))
+        est = config.estimation
         # `fused` runs after the per-frame estimators (VisionStage), on its sources' output
-        fusion = config.estimation.fusion if "fused" in names else None
-        if fusion is not None:
-            names = [n for n in dict.fromkeys((*names, *fusion.sources)) if n != "fused"]
-        self._intrinsics: CameraIntrinsics | None = None
-        self._tof_calibration: TofCameraCalibration | None = None
-        self.estimators: dict[str, DeckPoseEstimator | TruthEstimator] = {
-            name: self._make(name, world) for name in names
-        }
+        fusion = fusion_settings(config) if "fused" in (est.observed, *est.compare) else None
+        options = estimation_options(config, world)
+        self.estimators: dict[str, DeckPoseEstimator | TruthEstimator] = dict(
+            build_estimators(options, {"truth": TruthEstimator(world)})
+        )
         self._world = world
         mounts = np.asarray(config.tof.mount_offsets_c, dtype=float)
-        self.vision = VisionStage(config.estimation.vision_link, fusion, mounts, world.t_bc)
-
-    @property
-    def intrinsics(self) -> CameraIntrinsics:
-        """The camera model the estimators use (loaded once)."""
-        if self._intrinsics is None:
-            self._intrinsics = load_intrinsics(self.config)
-        return self._intrinsics
-
-    @property
-    def tof_calibration(self) -> TofCameraCalibration:
-        """The ToF–camera look-up IHRCF and CRHF use (loaded once)."""
-        if self._tof_calibration is None:
-            self._tof_calibration = load_tof_calibration(self.config)
-        return self._tof_calibration
-
-    def _make(self, name: str, world: World) -> DeckPoseEstimator | TruthEstimator:
-        if name == "truth":
-            return TruthEstimator(world)
-        if name == "beacon":
-            return _make_beacon(self.intrinsics, self.config, world)
-        if name == "auto":
-            # its own instances: the ranked ones may also be compared under their names
-            return RankedEstimator(name, tuple(self._make(n, world) for n in AUTO_RANKING))
-        layout = self.config.deck.layout
-        if layout.is_single_centred:
-            only = layout.landmarks[0]
-            return self._make_for_tag(name, only.tag_id, only.size)
-        # nested landmarks: one estimator per tag, run on the chosen one, reporting T_CD of D;
-        # the ToF estimators prefer the tag nearest the landing point (estimation.landmarks)
-        choice = LandmarkChoiceConfig(prefer="nearest" if name in ("ihrcf", "crhf") else "largest")
-        single = LandmarkEstimator(
-            name, layout, lambda lm: self._make_for_tag(name, lm.tag_id, lm.size), choice
-        )
-        atda = self.config.estimation.atda
-        if name != "atda" or not atda.joint_landmarks:
-            return single
-        # ATDA: one PnP over every detected tag, the chosen tag alone when only one is seen
-        return JointAtdaEstimator(
-            intrinsics=self.intrinsics,
-            layout=layout,
-            single=single,
-            min_side_px=choice.min_side_px,
-            config=atda,
-        )
-
-    def _make_for_tag(self, name: str, tag_id: int, tag_size: float) -> DeckPoseEstimator:
-        cfg = self.config
-        est = cfg.estimation
-        mounts = np.asarray(cfg.tof.mount_offsets_c, dtype=float)
-        needs_tof = name in ("ihrcf", "crhf")
-        # loaded outside the try: their errors already name their full keys
-        intrinsics = self.intrinsics
-        tof_calibration = self.tof_calibration if needs_tof else None
-        try:
-            estimator = make_estimator(
-                name,
-                # IHRCF and CRHF need no K: they only undistort with it (when it has distortion)
-                intrinsics=intrinsics,
-                tag_size=tag_size,
-                tag_id=tag_id,
-                tof_calibration=tof_calibration,
-                tof_positions_c=mounts if needs_tof else None,
-                config=getattr(est, name),
-            )
-        except ConfigError as exc:
-            raise exc.under(f"estimation.{name}") from None
-        if est.tracking:
-            tracker = CornerTracker(
-                dt=1.0 / cfg.simulation.env_hz, max_bridged_frames=est.max_bridged_frames
-            )
-            estimator = TrackedEstimator(estimator, tracker, name=name)
-        return estimator
+        self.vision = VisionStage(est.vision_link, fusion, mounts, world.t_bc)
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """A new episode (``rng``: the env's generator, for the vision link's stream)."""
@@ -314,28 +327,6 @@ class EstimatorBank:
         )
 
 
-def _make_beacon(
-    intrinsics: CameraIntrinsics, config: DeckLandingConfig, world: World
-) -> DeckPoseEstimator:
-    """The IR-LOCK-style ``beacon`` estimator: tag-centre bearing + the downward rangefinder
-    (position only; its orientation is reported level, ``orientation_known = False``)."""
-    from estimation.beacon import BeaconConfig, BeaconEstimator
-
-    # the rangefinder's origin below the camera along the optical axis (+z_C = -z_B)
-    offset = float(world.t_bc[2] - config.rangefinder.mount_offset_b[2])
-
-    def one(tag_id: int) -> BeaconEstimator:
-        return BeaconEstimator(
-            intrinsics, tag_id, lambda: world.last_range_down, BeaconConfig(range_offset_m=offset)
-        )
-
-    layout = config.deck.layout
-    if layout.is_single_centred:
-        return one(layout.landmarks[0].tag_id)
-    # nested landmarks: the chosen tag's centre, moved to D's origin under the level assumption
-    return LandmarkEstimator("beacon", layout, lambda lm: one(lm.tag_id))
-
-
 def describe_estimate(estimate: DeckPoseEstimate) -> dict:
     """The estimate as ``info["estimates"][name]`` carries it (numpy scalars made plain)."""
     extras = {
@@ -363,6 +354,7 @@ __all__ = [
     "EstimatorBank",
     "TruthEstimator",
     "describe_estimate",
+    "estimation_options",
     "load_intrinsics",
     "load_tof_calibration",
 ]

@@ -124,8 +124,9 @@ def test_every_scenario_scores_every_estimator_on_every_axis(
     record = short_runs[scenario]
     assert record.n_frames == round(SHORT_S * 20) + 1
     metrics = score_record(record)
-    assert list(metrics) == list(ESTIMATORS)
-    for name in ESTIMATORS:
+    # the papers' three in every scenario (the bench's also score tight)
+    assert list(metrics)[:3] == list(ESTIMATORS)
+    for name in metrics:
         m = metrics[name]
         assert m.n_valid > 0.9 * m.n_frames, (name, m.invalid_reasons)
         assert np.isfinite(m.mae).all() and np.isfinite(m.max_error).all(), name

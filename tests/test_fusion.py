@@ -10,7 +10,13 @@ import pytest
 from scipy.stats import chi2
 
 from estimation.errors import ConfigError
-from estimation.frames import R_BC, R_PD, matrix_from_euler_zyx, tof_positions_in_camera_frame
+from estimation.frames import (
+    R_BC,
+    R_PD,
+    euler_zyx_from_matrix,
+    matrix_from_euler_zyx,
+    tof_positions_in_camera_frame,
+)
 from estimation.fusion import DeckFusion, FusionConfig
 from estimation.fusion.model import N_STATE, TH, deck_normal, rotation_zyx, tof_model, wrap_angle
 from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
@@ -284,3 +290,69 @@ def test_config_errors_name_the_field() -> None:
     with pytest.raises(ConfigError, match="atda_sigma"):
         FusionConfig(atda_sigma=(0.1, 0.1))
     assert FusionConfig(ihrcf_sigma=(0.002, 0.002, math.inf, math.inf, math.inf, 0.3)).sources
+
+
+def _as_tight(frame: Frame, rng: np.random.Generator, sigma_cd: np.ndarray) -> DeckPoseEstimate:
+    """The frame's true T_CD with noise of covariance diag(sigma_cd²) on its (x, y, z, roll,
+    pitch, yaw), carried as the estimate's own covariance (as tight gives it)."""
+    r_wb = frame.r_wb
+    r_wc = r_wb @ R_BC
+    truth = frame.truth
+    t_cd = r_wc.T @ (truth[0:3] - r_wb @ T_BC)
+    euler = euler_zyx_from_matrix(r_wc.T @ rotation_zyx(truth[TH]) @ R_PD)
+    noisy = np.concatenate([t_cd, euler]) + sigma_cd * rng.standard_normal(6)
+    return DeckPoseEstimate(
+        "tight",
+        frame.time,
+        True,
+        matrix_from_euler_zyx(*noisy[3:]),
+        noisy[:3],
+        covariance=np.diag(sigma_cd**2),
+        extras={"ranges_used": 4},
+    )
+
+
+def test_a_source_with_its_own_covariance_is_fused_consistently_nees_and_nis() -> None:
+    """Poses whose noise is given in T_CD's axes (tight's covariance) are carried into the
+    state's axes through the measurement Jacobian: NEES and NIS stay in their chi² bands."""
+    config = make_config(sources=("tight",), gate_probability=1.0 - 1e-12)
+    sigma_cd = np.array([0.002, 0.002, 0.004, *np.radians([1.5, 1.5, 0.3])])
+    runs = 25
+    nees_end, nis_values = [], []
+    rng = np.random.default_rng(11)
+    for _ in range(runs):
+        fusion = make_fusion(config)
+        for frame in synthetic_run(rng, config):
+            poses = [_as_tight(frame, rng, sigma_cd)] if frame.pose is not None else []
+            fusion.step(frame.time, frame.r_wb, frame.imu, None, poses)
+            if poses and fusion.diagnostics().get("tight_accepted", 0) > 0:
+                nis_values.append(fusion.diagnostics()["nis_tight"])
+        nees_end.append(nees(fusion, frame.truth))
+    low, high = chi2.ppf([0.025, 0.975], runs * N_STATE) / runs
+    assert low <= float(np.mean(nees_end)) <= high
+    n = len(nis_values)
+    low, high = chi2.ppf([0.025, 0.975], 6 * n) / n
+    assert low <= float(np.mean(nis_values)) <= high, np.mean(nis_values)
+
+
+def test_a_pose_that_holds_its_frames_ranges_supersedes_their_tof_update() -> None:
+    """Each ToF reading is used once: through tight's pose when it arrives (even late),
+    directly otherwise."""
+    config = make_config(sources=("tight",), use_tof=True)
+    sigma_cd = np.array([0.002, 0.002, 0.004, *np.radians([1.5, 1.5, 0.3])])
+    rng = np.random.default_rng(3)
+    frames = synthetic_run(rng, config, duration=2.0, pose_every=1)
+    fusion = make_fusion(config)
+    reading = RangeReading(0.0, np.full(4, 2.0), np.ones(4, bool))
+    for k, frame in enumerate(frames):
+        ranges = RangeReading(frame.time, reading.ranges, reading.valid)
+        pose = _as_tight(frame, rng, sigma_cd)
+        # every other pose arrives one step late: its frame's ranges were fused by then
+        if k % 2 == 0:
+            fusion.step(frame.time, frame.r_wb, frame.imu, ranges, [])
+            late = pose
+        else:
+            fusion.step(frame.time, frame.r_wb, frame.imu, ranges, [late, pose])
+    counts = fusion.diagnostics()
+    assert counts.get("tof_superseded", 0) >= len(frames) - 4
+    assert counts.get("tof_accepted", 0) + counts.get("tof_rejected", 0) <= 4 * 2

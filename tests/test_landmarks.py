@@ -14,7 +14,7 @@ import landing_env  # noqa: F401  (registers the environments)
 from estimation.atda import JointAtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.detection import AprilTagDetector
-from estimation.estimator import RankedEstimator, make_estimator
+from estimation.estimator import RankedEstimator
 from estimation.frames import R_PD, matrix_from_euler_zyx, tof_positions_in_camera_frame
 from estimation.landmarks import (
     Landmark,
@@ -25,6 +25,7 @@ from estimation.landmarks import (
     compose_deck_pose,
     layout_from_pairs,
 )
+from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticScene
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, RangeReading, TagDetection

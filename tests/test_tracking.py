@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from estimation.camera_model import CameraIntrinsics
-from estimation.estimator import make_estimator
 from estimation.frames import tof_positions_in_camera_frame
+from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticScene
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, CornerTrackerConfig, TrackedEstimator

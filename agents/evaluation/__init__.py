@@ -17,7 +17,7 @@ from typing import Any
 from estimation.errors import ConfigError
 
 #: the conditions ``evaluate sweep`` can vary (see :mod:`agents.evaluation.sweep`)
-SWEEP_PARAMETERS: tuple[str, ...] = ("height", "tof_noise", "tilt", "k1")
+SWEEP_PARAMETERS: tuple[str, ...] = ("height", "tof_noise", "pixel_noise", "tilt", "k1")
 
 SET_HELP = "dotted config overrides, e.g. tof.noise=vl53l1x camera.k1=-0.05"
 
@@ -66,7 +66,7 @@ def _evaluate_sweep(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         seed=args.seed,
         camera_mode=args.mode,
-        parameters=tuple(args.parameters),
+        parameters=tuple(args.parameters) if args.parameters else None,
         overrides=_parse_overrides(args.set),
         calibration_dir=str(Path(args.out) / "calibration"),
     )
@@ -127,7 +127,11 @@ def add_evaluate_parser(subparsers: argparse._SubParsersAction) -> None:
         "--mode", choices=("render", "project"), default="render", help="camera mode"
     )
     sweep.add_argument(
-        "--parameters", nargs="+", choices=SWEEP_PARAMETERS, default=list(SWEEP_PARAMETERS)
+        "--parameters",
+        nargs="+",
+        choices=SWEEP_PARAMETERS,
+        default=None,
+        help="default: all (pixel_noise only in project mode)",
     )
     sweep.add_argument("--out", default="results/sweep", help="output directory")
     sweep.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help=SET_HELP)

@@ -27,6 +27,7 @@ COLOURS: dict[str, str] = {
     "atda": "tab:red",
     "ihrcf": "tab:blue",
     "crhf": "tab:purple",
+    "tight": "tab:orange",
 }
 _AXIS_COLOURS = ("tab:blue", "tab:red", "goldenrod")
 DPI = 110

@@ -1,4 +1,5 @@
-"""Each estimator's error against one condition at a time: height, ToF noise, tilt, distortion.
+"""Each estimator's error against one condition at a time: height, ToF noise, pixel noise,
+tilt, distortion.
 
 Every point is a short run of a base scenario (``paper-stewart`` by default) with one setting
 changed, the drone pinned, rendered and detected like the full evaluation (``project`` mode is
@@ -9,6 +10,8 @@ The conditions:
   maximum range is raised to ``tof_max_range_m`` so that the 4 m point still has ranges (a
   VL53L1X is rated to 4 m: beyond it the fusion methods would simply have no input);
 * ``tof_noise``: the VL53L1X noise model scaled by a factor (0 = noise-free ranges);
+* ``pixel_noise``: Gaussian corner noise, pixels (``project`` mode only: in ``render`` mode
+  the noise is what rendering and detection give);
 * ``tilt``: the peak roll and pitch of the platform, degrees (the scenario's sinusoids scaled);
 * ``k1``: the radial distortion of the lens (the CRHF paper leaves its effect as future work),
   in two variants per value.  ``modelled``: the estimators use the simulated chessboard
@@ -46,6 +49,7 @@ from agents.evaluation.estimators import (
     score_record,
 )
 from agents.evaluation.plots import COLOURS, DPI
+from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -55,14 +59,12 @@ from landing_env.physics.quadrotor import QuadrotorParams
 PARAMETER_LABELS: dict[str, str] = {
     "height": "camera height above the deck (m)",
     "tof_noise": "ToF noise (x VL53L1X model: 2 mm + 2.5 mm/m)",
+    "pixel_noise": "corner pixel noise, 1-sigma (px)",
     "tilt": "peak deck roll and pitch (deg)",
     "k1": "radial distortion k1",
 }
 #: how the estimators treat the lens in the k1 sweep, and the chessboard model of each
 K1_VARIANTS: dict[str, str] = {"modelled": "k1k2p1p2", "ignored": "none"}
-#: the VL53L1X model's sigma at zero range and its growth per metre (landing_env/sensors/tof.py)
-VL53L1X_SIGMA_0 = 0.002
-VL53L1X_SIGMA_PER_M = 0.0025
 
 
 @dataclass
@@ -74,9 +76,11 @@ class SweepSettings:
     duration_s: float = 10.0
     seed: int = 0
     camera_mode: Literal["render", "project"] = "render"
-    parameters: tuple[str, ...] = SWEEP_PARAMETERS
+    #: None: every condition (pixel_noise only in project mode)
+    parameters: tuple[str, ...] | None = None
     heights_m: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
     tof_noise_scales: tuple[float, ...] = (0.0, 1.0, 2.0, 4.0, 8.0)
+    pixel_noise_px: tuple[float, ...] = (0.0, 0.25, 0.5, 1.0, 2.0)
     tilt_peaks_deg: tuple[float, ...] = (0.0, 3.0, 6.5, 10.0)
     k1_values: tuple[float, ...] = (-0.15, -0.1, -0.05, 0.0, 0.05, 0.1)
     k1_variants: tuple[str, ...] = ("modelled", "ignored")
@@ -92,6 +96,10 @@ class SweepSettings:
         require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
         require_range("seed", self.seed, 0)
         require_choice("camera_mode", self.camera_mode, ("render", "project"))
+        if self.parameters is None:
+            self.parameters = tuple(
+                p for p in SWEEP_PARAMETERS if p != "pixel_noise" or self.camera_mode == "project"
+            )
         self.parameters = tuple(self.parameters)
         if not self.parameters:
             raise ConfigError("parameters", f"is empty; choose from {', '.join(SWEEP_PARAMETERS)}")
@@ -101,6 +109,13 @@ class SweepSettings:
             require_range("heights_m", h, 0.25, 10.0)
         for s in self.tof_noise_scales:
             require_range("tof_noise_scales", s, 0.0)
+        for s in self.pixel_noise_px:
+            require_range("pixel_noise_px", s, 0.0, 20.0)
+        if "pixel_noise" in self.parameters and self.camera_mode != "project":
+            raise ConfigError(
+                "parameters",
+                "pixel_noise needs camera_mode 'project' (render mode's noise is the renderer's)",
+            )
         for a in self.tilt_peaks_deg:
             require_range("tilt_peaks_deg", a, 0.0, 30.0)
         for k in self.k1_values:
@@ -116,7 +131,7 @@ class SweepSettings:
         """Every point as (condition, value, variant); the variant is empty but for k1."""
         return [
             (parameter, value, variant)
-            for parameter in self.parameters
+            for parameter in self.parameters or ()
             for value in self.values(parameter)
             for variant in (self.k1_variants if parameter == "k1" else ("",))
         ]
@@ -125,6 +140,7 @@ class SweepSettings:
         return {
             "height": self.heights_m,
             "tof_noise": self.tof_noise_scales,
+            "pixel_noise": self.pixel_noise_px,
             "tilt": self.tilt_peaks_deg,
             "k1": self.k1_values,
         }[parameter]
@@ -143,7 +159,7 @@ def _tof_overrides(value: float) -> dict:
         return {"tof.noise": "none"}
     return {
         "tof.noise": "vl53l1x",
-        "tof.sigma_0": VL53L1X_SIGMA_0 * value,
+        "tof.sigma_0": VL53L1X_SIGMA_0_M * value,
         "tof.sigma_per_m": VL53L1X_SIGMA_PER_M * value,
     }
 
@@ -196,6 +212,8 @@ def point_overrides(
         return _height_overrides(value, base, settings)
     if parameter == "tof_noise":
         return _tof_overrides(value)
+    if parameter == "pixel_noise":
+        return {"camera.pixel_noise_px": float(value)}
     if parameter == "tilt":
         return _tilt_overrides(value, base)
     return _k1_overrides(value, variant, base, settings, workdir)
@@ -394,6 +412,50 @@ def plot_overview(points: list[SweepPoint], path: Path) -> Path:
     return path
 
 
+#: the estimators tight is held against in :func:`plot_tight_ratio` (the issue's target:
+#: at most 5 % above the better of them on every axis)
+RATIO_REFERENCES = ("atda", "crhf")
+
+
+def tight_ratios(points: list[SweepPoint]) -> list[tuple[str, float, np.ndarray]]:
+    """Per point (condition, value): tight's MAE over min(ATDA, CRHF) per axis."""
+    rows = []
+    for p in points:
+        if "tight" not in p.metrics or not all(r in p.metrics for r in RATIO_REFERENCES):
+            continue
+        best = np.minimum.reduce([np.asarray(p.metrics[r].mae) for r in RATIO_REFERENCES])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rows.append((p.parameter, p.value, np.asarray(p.metrics["tight"].mae) / best))
+    return rows
+
+
+def plot_tight_ratio(points: list[SweepPoint], path: Path) -> Path | None:
+    """tight's MAE / min(ATDA, CRHF) per axis against each condition, with the 1.05 line."""
+    rows = tight_ratios(points)
+    parameters = list(dict.fromkeys(r[0] for r in rows))
+    if not parameters:
+        return None
+    fig, axes = plt.subplots(1, len(parameters), figsize=(5 * len(parameters), 4), squeeze=False)
+    for ax, parameter in zip(axes[0], parameters, strict=True):
+        chosen = [r for r in rows if r[0] == parameter]
+        x = np.array([r[1] for r in chosen])
+        ratio = np.array([r[2] for r in chosen])
+        for k, axis in enumerate(AXES):
+            ax.plot(x, ratio[:, k], marker="o", label=axis)
+        ax.axhline(1.05, color="k", ls="--", lw=1, label="1.05")
+        ax.set(
+            xlabel=PARAMETER_LABELS[parameter],
+            ylabel="tight MAE / min(ATDA, CRHF) MAE",
+            ylim=(0.0, max(1.2, float(np.nanmax(ratio)) * 1.05)),
+        )
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
 def write_sweep(points: list[SweepPoint], settings: SweepSettings, out_dir: Path) -> list[Path]:
     """The CSV, the Markdown summary and the figures of a sweep."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -411,4 +473,7 @@ def write_sweep(points: list[SweepPoint], settings: SweepSettings, out_dir: Path
     for parameter in dict.fromkeys(p.parameter for p in points):
         files.append(plot_parameter(points, parameter, out_dir / f"sweep_{parameter}.png"))
     files.append(plot_overview(points, out_dir / "sweep.png"))
+    ratio = plot_tight_ratio(points, out_dir / "sweep_tight_ratio.png")
+    if ratio is not None:
+        files.append(ratio)
     return files

@@ -6,9 +6,16 @@ import math
 from dataclasses import dataclass
 
 from estimation.errors import ConfigError, require_choice, require_range
+from estimation.noise import (
+    VL53L1X_RESOLUTION_M,
+    VL53L1X_SIGMA_0_M,
+    VL53L1X_SIGMA_PER_M,
+    TofNoiseModel,
+)
+from estimation.registry import FRAME_ESTIMATOR_NAMES
 
 #: Estimators whose deck pose (T_CD) the fusion can take as a measurement.
-POSE_SOURCES: tuple[str, ...] = ("atda", "ihrcf", "crhf")
+POSE_SOURCES: tuple[str, ...] = FRAME_ESTIMATOR_NAMES
 
 
 def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:
@@ -53,20 +60,34 @@ class FusionConfig:
     initial_accel_bias_sigma: float = 0.05
     initial_velocity_sigma: float = 0.3
     initial_rate_sigma: float = 0.2
-    #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range (VL53L1X-class)
-    tof_sigma_m: float = 0.002
-    tof_sigma_per_m: float = 0.0025
+    #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range, with readings in steps
+    #: of tof_resolution_m (estimation.noise.TofNoiseModel; defaults: the VL53L1X model)
+    tof_sigma_m: float = VL53L1X_SIGMA_0_M
+    tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
+    tof_resolution_m: float = VL53L1X_RESOLUTION_M
+    #: a simulator (or any host that knows its sensors) replaces the ToF noise above by the
+    #: configured sensor's model (landing_env: the `tof` section), so that the filter weights
+    #: exact ranges as exact and noisy ones as noisy
+    noise_from_sensors: bool = True
     #: per-source pose sigmas: x, y, z (m, camera frame), roll, pitch, yaw (deg).  IHRCF's
     #: and CRHF's z, roll and pitch are the plane through the same ToF ranges the filter
     #: fuses itself (undelayed): using them again would count that noise twice
     atda_sigma: tuple[float, ...] = (0.003, 0.003, 0.008, 3.0, 3.0, 0.3)
     ihrcf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
     crhf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
+    #: tight: used only when an estimate carries no covariance (see covariance_sources)
+    tight_sigma: tuple[float, ...] = (0.002, 0.002, 0.005, 1.0, 1.0, 0.3)
+    #: sources whose own 6x6 covariance (from their measurement model, e.g. tight's
+    #: Jacobian) is the measurement noise, in place of the fixed sigmas above
+    covariance_sources: tuple[str, ...] = ("tight",)
 
     def __post_init__(self) -> None:
         self.sources = tuple(self.sources)
         for name in self.sources:
             require_choice("sources", name, POSE_SOURCES)
+        self.covariance_sources = tuple(self.covariance_sources)
+        for name in self.covariance_sources:
+            require_choice("covariance_sources", name, POSE_SOURCES)
         require_range("horizon_s", self.horizon_s, 0.0, 10.0)
         require_range(
             "gate_probability",
@@ -83,19 +104,24 @@ class FusionConfig:
             "accel_noise_density",
             "accel_bias_random_walk",
             "tof_sigma_per_m",
+            "tof_sigma_m",
+            "tof_resolution_m",
         ):
             require_range(name, getattr(self, name), 0.0)
         for name in (
             "initial_accel_bias_sigma",
             "initial_velocity_sigma",
             "initial_rate_sigma",
-            "tof_sigma_m",
         ):
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         for name in POSE_SOURCES:
             key = f"{name}_sigma"
             setattr(self, key, tuple(float(v) for v in getattr(self, key)))
             _check_sigmas(key, getattr(self, key))
+
+    @property
+    def tof_noise(self) -> TofNoiseModel:
+        return TofNoiseModel(self.tof_sigma_m, self.tof_sigma_per_m, self.tof_resolution_m)
 
     def pose_sigma(self, source: str) -> tuple[float, ...]:
         """The 1-sigma of a source's pose: metres and degrees."""

@@ -17,6 +17,7 @@ still in the buffer as of their latest replay.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from collections import Counter
 from collections.abc import Sequence
@@ -26,7 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix
+from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix, matrix_from_euler_zyx
 from estimation.fusion.config import FusionConfig
 from estimation.fusion.model import (
     BA,
@@ -74,6 +75,10 @@ class _Event:
     noise: np.ndarray | None = None
     mask: np.ndarray | None = None
     after: _Snapshot | None = None
+    #: pose: it already holds the ToF ranges of its frame (tight); tof: a pose that holds
+    #: these ranges has arrived, so they are not fused again
+    includes_ranges: bool = False
+    superseded: bool = False
     outcome: Counter = field(default_factory=Counter)
     nis: float = float("nan")
 
@@ -93,6 +98,26 @@ def pose_measurement(
     return np.concatenate([p, th]), r_wc
 
 
+def _measurement_jacobian(
+    estimate: DeckPoseEstimate, r_wb: np.ndarray, t_bc: np.ndarray, z: np.ndarray
+) -> np.ndarray:
+    """d(p, th)/d(x, y, z, roll, pitch, yaw of T_CD): the translation part is R_WC, the
+    angles' by central differences (six small matrix products)."""
+    jac = np.zeros((6, 6))
+    jac[:3, :3] = r_wb @ R_BC
+    euler = euler_zyx_from_matrix(estimate.rotation)
+    step = 1e-6
+    for k in range(3):
+        delta = np.zeros(3)
+        delta[k] = step
+        up = dataclasses.replace(estimate, rotation=matrix_from_euler_zyx(*(euler + delta)))
+        down = dataclasses.replace(estimate, rotation=matrix_from_euler_zyx(*(euler - delta)))
+        z_up, _ = pose_measurement(up, r_wb, t_bc)
+        z_down, _ = pose_measurement(down, r_wb, t_bc)
+        jac[3:, 3 + k] = wrap_angle(z_up[3:] - z_down[3:]) / (2.0 * step)
+    return jac
+
+
 class DeckFusion:
     """EKF of the relative drone–deck state with delayed, gated measurements.
 
@@ -107,6 +132,7 @@ class DeckFusion:
         mounts = np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
         self.tof_origins_b = self.t_bc + mounts @ R_BC.T
         self._gates = {dof: float(chi2.ppf(config.gate_probability, dof)) for dof in range(1, 7)}
+        self._tof_noise = config.tof_noise
         self.reset()
 
     # ------------------------------------------------------------------ lifecycle
@@ -211,16 +237,30 @@ class DeckFusion:
         z, r_wc = pose_measurement(estimate, r_wb, self.t_bc)
         if not np.all(np.isfinite(z)):
             return None
-        sigma = np.asarray(self.config.pose_sigma(source), dtype=float)
-        mask = np.isfinite(sigma)
-        sigma = np.where(mask, sigma, 1.0)
-        sigma[3:] = np.deg2rad(sigma[3:])
-        noise = np.zeros((6, 6))
-        # the translation noise is given in the camera frame: rotate it into W
-        noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
-        noise[3:, 3:] = np.diag(sigma[3:] ** 2)
+        own = estimate.covariance
+        if (
+            source in self.config.covariance_sources
+            and own is not None
+            and np.shape(own) == (6, 6)
+            and np.all(np.isfinite(own))
+        ):
+            # the source's covariance of T_CD's (x, y, z, roll, pitch, yaw), carried into
+            # the state's axes through the measurement function's Jacobian
+            jac = _measurement_jacobian(estimate, r_wb, self.t_bc, z)
+            noise = jac @ own @ jac.T
+            mask = np.ones(6, dtype=bool)
+        else:
+            sigma = np.asarray(self.config.pose_sigma(source), dtype=float)
+            mask = np.isfinite(sigma)
+            sigma = np.where(mask, sigma, 1.0)
+            sigma[3:] = np.deg2rad(sigma[3:])
+            noise = np.zeros((6, 6))
+            # the translation noise is given in the camera frame: rotate it into W
+            noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
+            noise[3:, 3:] = np.diag(sigma[3:] ** 2)
         event = self._event(time, "pose", source, r_wb, z)
         event.noise, event.mask = noise, mask
+        event.includes_ranges = bool(estimate.extras.get("ranges_used", 0))
         return event
 
     # ------------------------------------------------------------------ the buffer
@@ -233,6 +273,18 @@ class DeckFusion:
             self._keys.insert(i, event.key)
             self._events.insert(i, event)
             first = min(first, i)
+        # a pose that already fused its frame's ranges (tight) supersedes that frame's ToF
+        # event: each reading is used once, and the filter replays from it
+        for event in events:
+            if event.kind != "pose" or not event.includes_ranges:
+                continue
+            i = bisect.bisect_left(self._keys, (event.time - 1e-9, -1, -1))
+            while i < len(self._events) and self._events[i].time <= event.time + 1e-9:
+                other = self._events[i]
+                if other.kind == "tof" and not other.superseded:
+                    other.superseded = True
+                    first = min(first, i)
+                i += 1
         # later events already applied were inserted after `first`: replay from there
         snap = self._events[first - 1].after if first > 0 else self._base
         assert snap is not None
@@ -279,7 +331,9 @@ class DeckFusion:
                 )
             time = max(time, event.time)
         elif event.kind == "tof":
-            if initialised:
+            if event.superseded:
+                event.outcome["tof_superseded"] += 1
+            elif initialised:
                 x, cov = self._update_tof(event, x, cov)
         elif not initialised:
             x, cov = self._initialise(event, x, cov)
@@ -336,7 +390,6 @@ class DeckFusion:
     def _update_tof(
         self, event: _Event, x: np.ndarray, cov: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        cfg = self.config
         gate = self._gates[1]
         nis_values = []
         # one scalar update per sensor: a ray off the deck edge is rejected alone
@@ -348,7 +401,7 @@ class DeckFusion:
                 event.outcome["tof_rejected"] += 1
                 continue
             predicted, h = model
-            sigma = cfg.tof_sigma_m + cfg.tof_sigma_per_m * measured
+            sigma = self._tof_noise.sigma_scalar(measured)
             x, cov, nis, accepted = ekf_update(
                 x,
                 cov,

@@ -25,6 +25,7 @@ import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_BC, tof_positions_in_camera_frame
+from estimation.noise import VL53L1X_RESOLUTION_M, VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from estimation.types import RangeReading
 from landing_env.errors import ConfigError, require_choice, require_range
 
@@ -52,9 +53,8 @@ class TofConfig:
     """The ToF sensors: geometry, range limits and the noise model.
 
     ``noise = "vl53l1x"`` models a VL53L1X-class sensor in long-distance mode: Gaussian noise
-    with ``sigma = sigma_0 + sigma_per_m * range`` (defaults 2 mm + 2.5 mm/m: a few mm up
-    close, 12 mm at 4 m; chosen to be of the order of the +-20 mm ranging accuracy quoted
-    for the VL53L1X, with the spread growing as the return signal weakens with distance),
+    with ``sigma = sigma_0 + sigma_per_m * range`` (defaults 2 mm + 2.5 mm/m, the model of
+    :mod:`estimation.noise`, with its source, which the estimators weight ranges by),
     readings quantised to the sensor's 1 mm output, and an optional per-reading failure
     probability (ranging status not valid).
     """
@@ -64,10 +64,10 @@ class TofConfig:
     #: nearer than this the reading is invalid, metres
     min_range: float = 0.04
     noise: Literal["none", "vl53l1x"] = "none"
-    sigma_0: float = 0.002
-    sigma_per_m: float = 0.0025
+    sigma_0: float = VL53L1X_SIGMA_0_M
+    sigma_per_m: float = VL53L1X_SIGMA_PER_M
     #: output resolution in vl53l1x mode, metres (0 = no quantisation)
-    resolution: float = 0.001
+    resolution: float = VL53L1X_RESOLUTION_M
     #: probability of an invalid ranging status on an in-range target (vl53l1x mode)
     invalid_prob: float = 0.0
     #: sensor origins in the camera frame C, metres (sensor order ps1..ps4)

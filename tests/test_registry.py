@@ -1,0 +1,126 @@
+"""One home for building estimators: the registry, the pipeline builder, one name list."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from estimation.camera_model import CameraIntrinsics
+from estimation.estimator import DeckPoseEstimator, RankedEstimator
+from estimation.frames import tof_positions_in_camera_frame
+from estimation.fusion.config import POSE_SOURCES, FusionConfig
+from estimation.landmarks import Landmark, LandmarkLayout
+from estimation.pipeline import EstimationOptions, build_estimators, names_to_build
+from estimation.registry import (
+    ESTIMATOR_NAMES,
+    FRAME_ESTIMATOR_NAMES,
+    REGISTRY,
+    make_estimator,
+)
+from estimation.tight import TightConfig, TightEstimator
+from estimation.tof_calibration import TofCameraCalibration
+from estimation.tracking import TrackedEstimator
+from landing_env import config as env_config
+from landing_env.errors import ConfigError
+
+K = CameraIntrinsics()
+CAL = TofCameraCalibration.exact(K, tof_positions_in_camera_frame(), 0.04, 4.0)
+
+
+def test_there_is_one_list_of_names() -> None:
+    assert env_config.ESTIMATOR_NAMES is ESTIMATOR_NAMES
+    assert POSE_SOURCES == FRAME_ESTIMATOR_NAMES == tuple(REGISTRY)
+    assert "tight" in FRAME_ESTIMATOR_NAMES
+    assert set(FRAME_ESTIMATOR_NAMES) < set(ESTIMATOR_NAMES)
+
+
+def test_estimation_imports_without_a_cycle_in_any_order() -> None:
+    for first in ("estimation.estimator", "estimation.tight", "estimation.registry",
+                  "estimation.pipeline", "estimation.fusion"):  # fmt: skip
+        code = f"import {first}; import estimation.registry, estimation.pipeline"
+        subprocess.run([sys.executable, "-c", code], check=True)
+    # the interface module does not reach back into the estimators that import it
+    code = "import sys, estimation.estimator; assert 'estimation.atda' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("name", FRAME_ESTIMATOR_NAMES)
+def test_every_registered_name_builds_with_its_default_config(name: str) -> None:
+    estimator = make_estimator(name, intrinsics=K, tag_size=0.15, tof_calibration=CAL)
+    assert isinstance(estimator, DeckPoseEstimator) and estimator.name == name
+    with pytest.raises(TypeError, match=REGISTRY[name].config_type.__name__):
+        make_estimator(name, intrinsics=K, tag_size=0.15, tof_calibration=CAL, config=object())
+
+
+def test_tight_needs_the_camera_but_not_the_tof_lookup() -> None:
+    with pytest.raises(ValueError, match="intrinsics"):
+        make_estimator("tight", intrinsics=None, tag_size=0.15)
+    estimator = make_estimator(
+        "tight", intrinsics=K, tag_size=0.15, config=TightConfig(pixel_sigma_px=1.0)
+    )
+    assert isinstance(estimator, TightEstimator) and estimator.config.pixel_sigma_px == 1.0
+
+
+def test_the_pipeline_builds_names_from_one_options_object() -> None:
+    layout = LandmarkLayout((Landmark(tag_id=0, size=0.15),))
+    names = names_to_build("fused", ("auto", "crhf"), fusion_sources=("tight", "atda"))
+    assert names == ["auto", "crhf", "tight", "atda"]
+    options = EstimationOptions(
+        names=tuple(names),
+        layout=layout,
+        intrinsics=K,
+        tof_calibration=CAL,
+        tof_positions_c=tof_positions_in_camera_frame(),
+        tracking=True,
+        configs={"tight": TightConfig(pixel_sigma_px=0.8)},
+    )
+    built = build_estimators(options)
+    assert list(built) == names
+    assert isinstance(built["auto"], RankedEstimator)
+    assert isinstance(built["tight"], TrackedEstimator)
+    assert built["tight"].inner.config.pixel_sigma_px == 0.8
+    with pytest.raises(ConfigError, match="truth"):
+        build_estimators(EstimationOptions(names=("truth",), layout=layout))
+    supplied = build_estimators(
+        EstimationOptions(names=("truth",), layout=layout), {"truth": built["crhf"]}
+    )
+    assert supplied["truth"] is built["crhf"]
+
+
+def test_tight_is_a_fusion_source_whose_own_covariance_is_the_noise() -> None:
+    config = FusionConfig(sources=("tight",))
+    assert "tight" in config.covariance_sources
+    with pytest.raises(ConfigError, match="sources"):
+        FusionConfig(sources=("apriltag",))
+
+
+def test_the_env_observes_tight_and_fuses_it(tmp_path) -> None:
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+
+    env = gym.make(
+        "DeckLanding-v0",
+        overrides={
+            "estimation.observed": "tight",
+            "estimation.compare": ["fused", "truth"],
+            "estimation.fusion.sources": ["tight"],
+            "motion.kind": "static",
+        },
+    )
+    try:
+        _, info = env.reset(seed=1)
+        for _ in range(10):
+            _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        tight = info["estimates"]["tight"]
+        assert tight["valid"], tight["reason"]
+        assert np.all(np.abs(np.asarray(tight["pose"]) - info["deck_pose_true"]) < 0.02)
+        assert "std" in tight  # the covariance travels with it
+        fused = info["estimates"]["fused"]
+        assert fused["valid"], fused["reason"]
+        assert fused["extras"].get("tight_accepted", 0) > 0
+    finally:
+        env.close()
