@@ -24,11 +24,12 @@ from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body
+from landing_env.sea.deck_mount import ShipDeck
 from landing_env.sensors.camera import CameraSensor, TagPlacement
 from landing_env.sensors.imu import ImuModel
 from landing_env.sensors.rangefinder import Rangefinder
 from landing_env.sensors.tof import TofArray
-from landing_env.stewart.motion import make_motion_source
+from landing_env.stewart.motion import CsvMotion, make_motion_source
 from landing_env.stewart.platform import StewartPlatform, StewartStatus
 from landing_env.touchdown import (
     ContactSummary,
@@ -117,23 +118,31 @@ class World:
         self.t_bc = np.asarray(self.params.camera_offset_b, dtype=float)
 
         rng = np.random.default_rng(0)
-        base_position = np.asarray(config.stewart_base_position, dtype=float)
-        self.deck_id = create_deck_body(
-            c, config.deck, TOP_PLATE_MASS_KG, base_position, [0.0, 0.0, 0.0, 1.0]
-        )
-        self.stewart = StewartPlatform(
-            c,
-            config.stewart,
-            base_position,
-            self.deck_id,
-            make_motion_source(config.motion, rng),
-        )
+        if config.deck_mount == "ship":
+            # a full-scale helideck: no legs, no workspace, home high above the sea plane
+            home = np.array([0.0, 0.0, config.ship_deck_height_m])
+            self.deck_id = create_deck_body(
+                c, config.deck, TOP_PLATE_MASS_KG, home, [0.0, 0.0, 0.0, 1.0]
+            )
+            self.stewart: StewartPlatform = ShipDeck(
+                c, home, self.deck_id, make_motion_source(config.motion, rng)
+            )
+        else:
+            base_position = np.asarray(config.stewart_base_position, dtype=float)
+            self.deck_id = create_deck_body(
+                c, config.deck, TOP_PLATE_MASS_KG, base_position, [0.0, 0.0, 0.0, 1.0]
+            )
+            self.stewart = StewartPlatform(
+                c,
+                config.stewart,
+                base_position,
+                self.deck_id,
+                make_motion_source(config.motion, rng),
+            )
         home_position, _ = self.stewart.home_pose_w()
         self.deck_home_w = np.asarray(home_position, dtype=float)
-        extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
-        self.contact_watch_height_m = CONTACT_WATCH_HEIGHT_M + extra_half_diagonal * math.sin(
-            math.radians(CONTACT_WATCH_TILT_DEG)
-        )
+        self._extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
+        self.contact_watch_height_m = self._watch_height()
         self.camera = CameraSensor(c, config.camera, rng)
         self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
@@ -164,6 +173,11 @@ class World:
         self.last_range_down = RangeReading(0.0, np.full(1, np.nan), np.zeros(1, dtype=bool))
         self.time = 0.0
         self.stewart.reset(0.0)
+        self.contact_watch_height_m = self._watch_height()
+        if self.config.start.relative_to == "deck":
+            # the start is given from the deck's home: carry it to where the deck is now
+            deck_now, _ = self.stewart.top_plate_pose_w()
+            position_w = np.asarray(position_w, dtype=float) + (deck_now - self.deck_home_w)
         self.drone.reset(position_w, yaw)
         self._pinned_pose = (
             [float(v) for v in position_w],
@@ -173,6 +187,25 @@ class World:
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
+
+    def _watch_height(self) -> float:
+        """Height above the deck's home below which contacts are checked every physics step.
+
+        The bench's deck moves centimetres; a ship deck carries its own reach (its motion's
+        bound on vertical displacement and tilt, ``vertical_reach_m`` / ``tilt_reach_rad``).
+        """
+        motion = self.stewart.motion
+        reach = float(getattr(motion, "vertical_reach_m", 0.0))
+        tilt = max(
+            math.radians(CONTACT_WATCH_TILT_DEG), float(getattr(motion, "tilt_reach_rad", 0.0))
+        )
+        if isinstance(motion, CsvMotion) and self.config.deck_mount == "ship":
+            reach = float(np.max(np.abs(motion.samples[:, 2])))
+            tilt = max(tilt, float(np.max(np.abs(motion.samples[:, 3:5]))))
+        half_diagonal = self._extra_half_diagonal
+        if self.config.deck_mount == "ship":
+            half_diagonal = 0.5 * self.config.deck.size * math.sqrt(2.0)
+        return CONTACT_WATCH_HEIGHT_M + reach + half_diagonal * math.sin(min(tilt, 1.5))
 
     def place_drone(self, position_w: np.ndarray, yaw: float) -> None:
         """Put the drone level at a pose without stepping time (a calibration rig's move)."""

@@ -7,7 +7,8 @@ interval, touchdown relative normal speed mean and 95th percentile, deck tilt an
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).
 
-Scenarios are the shipped bench configs with the drone flying instead of pinned, the tag
+Scenarios are the shipped bench (``bench-ss*``, ``paper-stewart``) and full-scale ship-deck
+(``ship-ss*``) configs with the drone flying instead of pinned, the tag
 projected analytically (``camera.mode: project``; ``--mode render`` renders and detects it)
 and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
 """
@@ -43,10 +44,20 @@ class Scenario:
 
 
 SCENARIOS: dict[str, Scenario] = {
-    "sea-state-3": Scenario("sea-state-3", "JONSWAP sea state 3 (Hs 0.88 m, Tp 7.5 s)"),
-    "sea-state-4": Scenario("sea-state-4", "JONSWAP sea state 4 (Hs 1.88 m, Tp 8.8 s)"),
-    "sea-state-5": Scenario("sea-state-5", "JONSWAP sea state 5 (Hs 3.25 m, Tp 9.7 s)"),
+    "bench-ss3": Scenario(
+        "bench-ss3", "Stewart bench, sea state 3 scaled into the workspace (Hs 0.88 m, Tp 7.5 s)"
+    ),
+    "bench-ss4": Scenario(
+        "bench-ss4", "Stewart bench, sea state 4 scaled into the workspace (Hs 1.88 m, Tp 8.8 s)"
+    ),
+    "bench-ss5": Scenario(
+        "bench-ss5", "Stewart bench, sea state 5 scaled into the workspace (Hs 3.25 m, Tp 9.7 s)"
+    ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
+    "ship-ss3": Scenario("ship-ss3", "30 m vessel's helideck, sea state 3 (Hs 0.88 m, Tp 7.5 s)"),
+    "ship-ss4": Scenario("ship-ss4", "30 m vessel's helideck, sea state 4 (Hs 1.88 m, Tp 8.8 s)"),
+    "ship-ss5": Scenario("ship-ss5", "30 m vessel's helideck, sea state 5 (Hs 3.25 m, Tp 9.7 s)"),
+    "ship-ss6": Scenario("ship-ss6", "30 m vessel's helideck, sea state 6 (Hs 5.0 m, Tp 12.4 s)"),
 }
 
 #: what turns a bench config into a landing scenario
