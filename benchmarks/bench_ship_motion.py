@@ -56,7 +56,12 @@ def statistics(scenario: str, seeds: int, minutes: float) -> dict[str, float]:
     motion = config.motion
     sea = motion.ship if motion.kind == "ship" else motion.sea_state
     keys = ("heave", "roll", "pitch", "vvel", "vacc_g", "roll_pk", "pitch_pk", "incl_pk", "vvel_pk")
-    return {"hs": sea.hs, "tp": sea.tp, "gamma": sea.gamma_in_use, **dict(zip(keys, mean))}
+    return {
+        "hs": sea.hs,
+        "tp": sea.tp,
+        "gamma": sea.gamma_in_use,
+        **dict(zip(keys, mean, strict=True)),
+    }
 
 
 def main() -> None:

@@ -135,8 +135,14 @@ class TouchdownConfig:
     max_relative_attitude_deg: float = 10.0
     #: the drone must still be on the deck this long after the first contact, seconds
     settle_time_s: float = 1.0
+    #: a bounce higher than this (lowest foot above the deck, metres) fails the touchdown
+    max_bounce_m: float = 0.01
+    #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
+    tip_over_deg: float = 45.0
 
     def __post_init__(self) -> None:
+        require_range("max_bounce_m", self.max_bounce_m, 0.0, 1.0)
+        require_range("tip_over_deg", self.tip_over_deg, 1.0, 180.0)
         require_range("max_normal_speed", self.max_normal_speed, 0.0, low_inclusive=False)
         require_range("max_deck_tilt_deg", self.max_deck_tilt_deg, 0.0, 90.0)
         require_range("max_relative_attitude_deg", self.max_relative_attitude_deg, 0.0, 180.0)

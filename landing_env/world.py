@@ -34,6 +34,7 @@ from landing_env.stewart.platform import StewartPlatform, StewartStatus
 from landing_env.touchdown import (
     ContactSummary,
     TouchdownMetrics,
+    TouchdownProbe,
     contact_metrics,
     summarise_contacts,
 )
@@ -139,10 +140,16 @@ class World:
                 self.deck_id,
                 make_motion_source(config.motion, rng),
             )
+        # Bullet multiplies the two bodies' friction coefficients: the deck's 1 leaves the pair
+        # the feet's (landing_gear.friction in the vehicle YAML)
+        c.changeDynamics(self.deck_id, -1, lateralFriction=1.0, restitution=0.0)
         home_position, _ = self.stewart.home_pose_w()
         self.deck_home_w = np.asarray(home_position, dtype=float)
         self._extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
         self.contact_watch_height_m = self._watch_height()
+        hx, hy, hz = self.deck_home_w.tolist()
+        self._deck_home_floats = (hx, hy, hz)
+        self._airwake = config.wind.enabled and config.wind.airwake_radius_m > 0.0
         self.camera = CameraSensor(c, config.camera, rng)
         self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
@@ -157,6 +164,12 @@ class World:
         self.pinned = config.simulation.drone_fixed
         self._pinned_pose: tuple[list[float], list[float]] = ([0.0] * 3, [0.0, 0.0, 0.0, 1.0])
         self._state: DroneState | None = None
+        #: the touchdown being settled, and its per-physics-step probe (None in flight)
+        self._touchdown: TouchdownMetrics | None = None
+        self._probe: TouchdownProbe | None = None
+        self._foot_radius = float(
+            c.getCollisionShapeData(self.drone.body_id, min(self.foot_links))[0][3][0]
+        )
 
     # ------------------------------------------------------------------ episode control
     def reset(self, rng: np.random.Generator, position_w: np.ndarray, yaw: float) -> None:
@@ -184,6 +197,8 @@ class World:
             [0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)],
         )
         self.controller.reset()
+        self._touchdown = None
+        self._probe = None
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
@@ -234,11 +249,17 @@ class World:
         rotations: list[tuple[float, ...]] = []
         accels: list[tuple[float, float, float]] = []
         rates: list[tuple[float, float, float]] = []
+        probe = self._probe
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
             if not self.pinned:
                 command = self.controller.update(state, setpoint, dt) if self.armed else idle
-                self.drone.wind_velocity_w = self.wind.velocity_tuple(self.time, dt)
+                wind = self.wind.velocity_tuple(self.time, dt)
+                if self._airwake:
+                    px, py, pz = state.floats.position_w
+                    hx, hy, hz = self._deck_home_floats
+                    wind = self.wind.airwake(wind, (px - hx, py - hy, pz - hz))
+                self.drone.wind_velocity_w = wind
                 self.drone.apply_rotor_commands(command, dt, state)
                 report.motor_saturated |= self.drone.last_saturated
             report.stewart_clamped |= self.stewart.advance(self.time + dt)
@@ -253,6 +274,8 @@ class World:
                 )
                 p.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3, physicsClientId=cid)
             self.time += dt
+            if probe is not None:
+                probe.update()
             new_state = self.drone.read_state()
             v0, new = state.floats.velocity_w, new_state.floats
             v1 = new.velocity_w
@@ -267,7 +290,7 @@ class World:
                     report.forbidden_contact = contacts.forbidden_what
                 if contacts.feet_on_deck and report.first_contact is None:
                     assert deck_before is not None
-                    report.first_contact = contact_metrics(
+                    report.first_contact = metrics = contact_metrics(
                         self.time,
                         state.position_w,
                         state.velocity_w,
@@ -278,6 +301,8 @@ class World:
                         deck_before.angular_velocity_w,
                         deck_before.tag_centre_w,
                     )
+                    metrics.deck_vertical_accel_g = self._deck_vertical_accel(self.time) / GRAVITY
+                    self._touchdown = metrics
                 if report.first_contact is not None or report.forbidden_contact:
                     break
         report.imu_samples = self.imu.sample_many(times, rotations, accels, rates)
@@ -292,6 +317,14 @@ class World:
         end_feet: set[int] = set()
         zero = VelocitySetpoint(np.zeros(3), 0.0)
         steps = max(1, round(duration_s * self.config.simulation.env_hz))
+        self._probe = TouchdownProbe(
+            self.client._client,
+            self.drone.body_id,
+            self.deck_id,
+            self.foot_links,
+            self._foot_radius,
+            self.config.touchdown.tip_over_deg,
+        )
         for _ in range(steps):
             report = self.step(zero, monitor_contacts=False)
             del report
@@ -301,7 +334,15 @@ class World:
             if contacts.forbidden and not forbidden:
                 forbidden = contacts.forbidden_what
         self.stewart.update_leg_visuals()
+        if self._touchdown is not None:
+            self._probe.fill(self._touchdown, self.params.weight)
+        self._probe = None
         return feet_seen, len(end_feet) >= 3 and not forbidden, forbidden, end_feet
+
+    def _deck_vertical_accel(self, t: float, h: float = 0.01) -> float:
+        """Vertical acceleration of the deck's commanded motion at ``t`` (m/s^2)."""
+        motion = self.stewart.motion
+        return float(motion.velocity(t + h)[2] - motion.velocity(max(0.0, t - h))[2]) / (2 * h)
 
     def contacts(self) -> ContactSummary:
         points = self.client.getContactPoints(bodyA=self.drone.body_id)
