@@ -7,6 +7,8 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 from scipy.signal import welch
 
@@ -129,3 +131,48 @@ def test_ship_deck_moves_metres_without_legs_and_the_drone_starts_above_it() -> 
         )
     finally:
         env.close()
+
+
+@pytest.mark.parametrize(
+    "name", ["bench-ss3", "bench-ss4", "bench-ss5", "ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"]
+)
+def test_landing_scenarios_fly_the_drone_and_use_the_dnv_gamma(name: str) -> None:
+    config = load_config(name)
+    assert config.simulation.drone_fixed is False  # paper-stewart pins it; these must not
+    sea = config.motion.ship if config.motion.kind == "ship" else config.motion.sea_state
+    assert sea.gamma is None and sea.gamma_in_use == 1.0
+    assert (config.deck_mount == "ship") == name.startswith("ship")
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    length=st.floats(10.0, 40.0),
+    beam_ratio=st.floats(0.12, 0.45),
+    draught_ratio=st.floats(0.1, 0.55),
+    cb=st.floats(0.3, 1.0),
+    gm=st.floats(0.2, 5.0),
+    direction=st.floats(-360.0, 360.0),
+    state=st.sampled_from([0, 1, 2, 3, 4, 5, 6]),
+    arm=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(-20.0, 20.0)),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_any_valid_vessel_moves_finitely(
+    length, beam_ratio, draught_ratio, cb, gm, direction, state, arm, seed
+) -> None:
+    beam = beam_ratio * length
+    config = ShipMotionConfig(
+        sea_state=state,
+        length_m=length,
+        beam_m=beam,
+        draught_m=max(0.2, draught_ratio * beam),
+        block_coefficient=cb,
+        metacentric_height_m=gm,
+        wave_direction_deg=direction,
+        helideck_position_m=(arm[0] * 0.5 * length, arm[1] * 0.5 * beam, arm[2]),
+        n_components=40,
+    )
+    source = ShipMotion(config, np.random.default_rng(seed))
+    times = np.linspace(0.0, 120.0, 61)
+    poses, rates = source.poses(times), source.velocities(times)
+    assert np.all(np.isfinite(poses)) and np.all(np.isfinite(rates))
+    assert np.all(np.abs(poses[:, 2]) <= source.vertical_reach_m + 1e-9)
