@@ -29,6 +29,7 @@ import numpy as np
 from agents.evaluation import _parse_overrides
 from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
+from landing_env.stewart.motion import SeaStateConfig
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -45,19 +46,33 @@ class Scenario:
     timing: dict[str, Any] = field(default_factory=dict)
 
 
+#: the bench's per-axis scale factors (SeaStateConfig.scale), printed with its scenarios
+BENCH_SCALE = ", ".join(
+    f"{axis} {factor:g}"
+    for axis, factor in zip(
+        ("surge", "sway", "heave", "roll", "pitch", "yaw"), SeaStateConfig().scale, strict=True
+    )
+)
+
 #: the timing task over a ship deck holds higher: the deck heaves metres at up to ~2-4 m/s
 #: (bench-ss: centimetres), and 0.7 m over it ends in a touchdown during the warm-up
 SHIP_TIMING: dict[str, Any] = {"hold_height_m": 2.0}
 
 SCENARIOS: dict[str, Scenario] = {
     "bench-ss3": Scenario(
-        "bench-ss3", "Stewart bench, sea state 3 scaled into the workspace (Hs 0.88 m, Tp 7.5 s)"
+        "bench-ss3",
+        "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
+        + BENCH_SCALE,
     ),
     "bench-ss4": Scenario(
-        "bench-ss4", "Stewart bench, sea state 4 scaled into the workspace (Hs 1.88 m, Tp 8.8 s)"
+        "bench-ss4",
+        "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
+        + BENCH_SCALE,
     ),
     "bench-ss5": Scenario(
-        "bench-ss5", "Stewart bench, sea state 5 scaled into the workspace (Hs 3.25 m, Tp 9.7 s)"
+        "bench-ss5",
+        "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
+        + BENCH_SCALE,
     ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
     "ship-ss3": Scenario(
