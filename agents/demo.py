@@ -232,7 +232,7 @@ def plot_timing(log: TimingDemoLog, path: Path, limit_deg: float) -> None:
 def run_timing_demo(
     seed: int = 0,
     out_dir: Path = Path("results/demo"),
-    scenario: str = "sea-state-4",
+    scenario: str = "bench-ss4",
     policy_name: str = "timing-dqn",
 ) -> TimingDemoLog | None:
     """`make demo`, part 2: the shipped timing policy waits over a sea-state deck and lands.

@@ -26,6 +26,7 @@ from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
 from landing_env.physics.wind import WindConfig
 from landing_env.scene.deck import DeckSurfaceConfig
+from landing_env.sea.deck_mount import DECK_MOUNTS
 from landing_env.sensors.camera import CameraConfig
 from landing_env.sensors.imu import ImuConfig
 from landing_env.sensors.rangefinder import RangefinderConfig
@@ -110,8 +111,12 @@ class StartConfig:
     min_offset_m: float = 0.0
     #: maximum |yaw| at the start, degrees
     max_yaw_deg: float = 10.0
+    #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
+    #: is at t = 0 (a ship deck can be metres away from home), so the drone starts above it
+    relative_to: str = "home"
 
     def __post_init__(self) -> None:
+        require_choice("relative_to", self.relative_to, ("home", "deck"))
         low, high = self.height_m
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
@@ -129,8 +134,14 @@ class TouchdownConfig:
     max_relative_attitude_deg: float = 10.0
     #: the drone must still be on the deck this long after the first contact, seconds
     settle_time_s: float = 1.0
+    #: a bounce higher than this (lowest foot above the deck, metres) fails the touchdown
+    max_bounce_m: float = 0.01
+    #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
+    tip_over_deg: float = 45.0
 
     def __post_init__(self) -> None:
+        require_range("max_bounce_m", self.max_bounce_m, 0.0, 1.0)
+        require_range("tip_over_deg", self.tip_over_deg, 1.0, 180.0)
         require_range("max_normal_speed", self.max_normal_speed, 0.0, low_inclusive=False)
         require_range("max_deck_tilt_deg", self.max_deck_tilt_deg, 0.0, 90.0)
         require_range("max_relative_attitude_deg", self.max_relative_attitude_deg, 0.0, 180.0)
@@ -260,6 +271,11 @@ class DeckLandingConfig:
     #: world position of the Stewart platform's base centre (the ship stand-in), metres
     stewart_base_position: tuple[float, float, float] = (0.0, 0.0, 0.04)
     motion: MotionConfig = field(default_factory=MotionConfig)
+    #: what carries the deck: "stewart" (the papers' bench, motion clamped to its workspace)
+    #: or "ship" (a full-scale helideck moved by the motion as it is, no legs; landing_env/sea/)
+    deck_mount: str = "stewart"
+    #: deck_mount ship: height of the deck's home surface above the sea plane, metres
+    ship_deck_height_m: float = 10.0
     camera: CameraConfig = field(default_factory=CameraConfig)
     tof: TofConfig = field(default_factory=TofConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
@@ -272,6 +288,14 @@ class DeckLandingConfig:
                 "vehicle",
                 f"{self.vehicle!r} is not a file; give a vehicle YAML like the shipped "
                 "landing_env/assets/quadrotor.yaml, or leave it empty for that one",
+            )
+        require_choice("deck_mount", self.deck_mount, DECK_MOUNTS)
+        require_range("ship_deck_height_m", self.ship_deck_height_m, 2.0, 50.0)
+        if self.deck_mount == "stewart" and self.motion.kind == "ship":
+            raise ConfigError(
+                "motion.kind",
+                "'ship' moves a full-scale helideck (metres of heave) and needs deck_mount: "
+                "ship; the Stewart bench takes static, sinusoids, sea_state or csv",
             )
 
 

@@ -40,6 +40,21 @@ class TouchdownMetrics:
     all_feet_touched: bool = False
     #: at the end of the settle the drone still stood on the deck (>= 3 feet in contact)
     on_deck_after_settle: bool = False
+    #: highest clearance of the lowest foot above the deck plane during the settle, metres
+    #: (> 0: the drone left the deck again, all feet in the air)
+    bounce_height_m: float = math.nan
+    #: largest total normal force foot-deck in one physics step after the contact, newtons,
+    #: and that as a multiple of the drone's weight
+    peak_load_n: float = math.nan
+    peak_load_g: float = math.nan
+    #: deck vertical acceleration at the contact (g; the quantity CAP 437's Motion Severity
+    #: Index is built from), from the deck's commanded motion
+    deck_vertical_accel_g: float = math.nan
+    #: largest angle between the drone's z axis and the deck normal during the settle, deg
+    max_settle_attitude_deg: float = math.nan
+    #: the drone tipped over: that angle passed the tip-over limit, or a part other than a
+    #: foot touched the deck during the settle
+    tipped_over: bool = False
     #: what failed, empty on success
     failed_checks: tuple[str, ...] = ()
 
@@ -92,8 +107,73 @@ def evaluate_touchdown(
         failed.append("all_feet_on_deck")
     if not metrics.on_deck_after_settle:
         failed.append("on_deck_after_settle")
+    if metrics.bounce_height_m > thresholds.max_bounce_m:
+        failed.append("bounce")
+    if metrics.tipped_over:
+        failed.append("tip_over")
     metrics.failed_checks = tuple(failed)
     return (Outcome.SUCCESS if not failed else Outcome.HARD_LANDING), metrics
+
+
+class TouchdownProbe:
+    """Watches the settle after the first contact at every physics step.
+
+    Records the peak foot-deck normal load, the bounce (the lowest foot's largest clearance
+    above the deck plane) and the largest drone-to-deck-normal angle, and whether a non-foot
+    part touched the deck.
+    """
+
+    def __init__(
+        self,
+        client_id: int,
+        drone_id: int,
+        deck_id: int,
+        foot_links: frozenset[int],
+        foot_radius_m: float,
+        tip_over_deg: float,
+    ) -> None:
+        self._cid = client_id
+        self._drone = drone_id
+        self._deck = deck_id
+        self._feet = tuple(sorted(foot_links))
+        self._foot_set = frozenset(foot_links)
+        self._radius = foot_radius_m
+        self._tip_over_deg = tip_over_deg
+        self.peak_load_n = 0.0
+        self.bounce_height_m = -math.inf
+        self.max_attitude_deg = 0.0
+        self.body_contact = False
+
+    def update(self) -> None:
+        import pybullet as p
+
+        cid = self._cid
+        load = 0.0
+        for contact in p.getContactPoints(bodyA=self._drone, bodyB=self._deck, physicsClientId=cid):
+            if contact[3] in self._foot_set:
+                load += contact[9]
+            else:
+                self.body_contact = True
+        self.peak_load_n = max(self.peak_load_n, load)
+        position, orientation = p.getBasePositionAndOrientation(self._deck, physicsClientId=cid)
+        normal = np.asarray(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)[:, 2]
+        feet = p.getLinkStates(self._drone, self._feet, physicsClientId=cid)
+        clearance = min(
+            float(normal @ (np.asarray(foot[0]) - position)) - self._radius for foot in feet
+        )
+        self.bounce_height_m = max(self.bounce_height_m, clearance)
+        _, drone_q = p.getBasePositionAndOrientation(self._drone, physicsClientId=cid)
+        drone_z = np.asarray(p.getMatrixFromQuaternion(drone_q)).reshape(3, 3)[:, 2]
+        angle = math.degrees(math.acos(float(np.clip(drone_z @ normal, -1.0, 1.0))))
+        self.max_attitude_deg = max(self.max_attitude_deg, angle)
+
+    def fill(self, metrics: TouchdownMetrics, weight_n: float) -> None:
+        """Write what was watched into ``metrics``."""
+        metrics.bounce_height_m = max(0.0, self.bounce_height_m)
+        metrics.peak_load_n = self.peak_load_n
+        metrics.peak_load_g = self.peak_load_n / weight_n
+        metrics.max_settle_attitude_deg = self.max_attitude_deg
+        metrics.tipped_over = self.body_contact or self.max_attitude_deg > self._tip_over_deg
 
 
 def contact_metrics(

@@ -24,15 +24,17 @@ from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body
+from landing_env.sea.deck_mount import ShipDeck
 from landing_env.sensors.camera import CameraSensor, TagPlacement
 from landing_env.sensors.imu import ImuModel
 from landing_env.sensors.rangefinder import Rangefinder
 from landing_env.sensors.tof import TofArray
-from landing_env.stewart.motion import make_motion_source
+from landing_env.stewart.motion import CsvMotion, make_motion_source
 from landing_env.stewart.platform import StewartPlatform, StewartStatus
 from landing_env.touchdown import (
     ContactSummary,
     TouchdownMetrics,
+    TouchdownProbe,
     contact_metrics,
     summarise_contacts,
 )
@@ -117,23 +119,37 @@ class World:
         self.t_bc = np.asarray(self.params.camera_offset_b, dtype=float)
 
         rng = np.random.default_rng(0)
-        base_position = np.asarray(config.stewart_base_position, dtype=float)
-        self.deck_id = create_deck_body(
-            c, config.deck, TOP_PLATE_MASS_KG, base_position, [0.0, 0.0, 0.0, 1.0]
-        )
-        self.stewart = StewartPlatform(
-            c,
-            config.stewart,
-            base_position,
-            self.deck_id,
-            make_motion_source(config.motion, rng),
-        )
+        if config.deck_mount == "ship":
+            # a full-scale helideck: no legs, no workspace, home high above the sea plane
+            home = np.array([0.0, 0.0, config.ship_deck_height_m])
+            self.deck_id = create_deck_body(
+                c, config.deck, TOP_PLATE_MASS_KG, home, [0.0, 0.0, 0.0, 1.0]
+            )
+            self.stewart: StewartPlatform = ShipDeck(
+                c, home, self.deck_id, make_motion_source(config.motion, rng)
+            )
+        else:
+            base_position = np.asarray(config.stewart_base_position, dtype=float)
+            self.deck_id = create_deck_body(
+                c, config.deck, TOP_PLATE_MASS_KG, base_position, [0.0, 0.0, 0.0, 1.0]
+            )
+            self.stewart = StewartPlatform(
+                c,
+                config.stewart,
+                base_position,
+                self.deck_id,
+                make_motion_source(config.motion, rng),
+            )
+        # Bullet multiplies the two bodies' friction coefficients: the deck's 1 leaves the pair
+        # the feet's (landing_gear.friction in the vehicle YAML)
+        c.changeDynamics(self.deck_id, -1, lateralFriction=1.0, restitution=0.0)
         home_position, _ = self.stewart.home_pose_w()
         self.deck_home_w = np.asarray(home_position, dtype=float)
-        extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
-        self.contact_watch_height_m = CONTACT_WATCH_HEIGHT_M + extra_half_diagonal * math.sin(
-            math.radians(CONTACT_WATCH_TILT_DEG)
-        )
+        self._extra_half_diagonal = max(0.0, (config.deck.size - 1.0) * math.sqrt(0.5))
+        self.contact_watch_height_m = self._watch_height()
+        hx, hy, hz = self.deck_home_w.tolist()
+        self._deck_home_floats = (hx, hy, hz)
+        self._airwake = config.wind.enabled and config.wind.airwake_radius_m > 0.0
         self.camera = CameraSensor(c, config.camera, rng)
         self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
@@ -148,6 +164,12 @@ class World:
         self.pinned = config.simulation.drone_fixed
         self._pinned_pose: tuple[list[float], list[float]] = ([0.0] * 3, [0.0, 0.0, 0.0, 1.0])
         self._state: DroneState | None = None
+        #: the touchdown being settled, and its per-physics-step probe (None in flight)
+        self._touchdown: TouchdownMetrics | None = None
+        self._probe: TouchdownProbe | None = None
+        self._foot_radius = float(
+            c.getCollisionShapeData(self.drone.body_id, min(self.foot_links))[0][3][0]
+        )
 
     # ------------------------------------------------------------------ episode control
     def reset(self, rng: np.random.Generator, position_w: np.ndarray, yaw: float) -> None:
@@ -164,15 +186,41 @@ class World:
         self.last_range_down = RangeReading(0.0, np.full(1, np.nan), np.zeros(1, dtype=bool))
         self.time = 0.0
         self.stewart.reset(0.0)
+        self.contact_watch_height_m = self._watch_height()
+        if self.config.start.relative_to == "deck":
+            # the start is given from the deck's home: carry it to where the deck is now
+            deck_now, _ = self.stewart.top_plate_pose_w()
+            position_w = np.asarray(position_w, dtype=float) + (deck_now - self.deck_home_w)
         self.drone.reset(position_w, yaw)
         self._pinned_pose = (
             [float(v) for v in position_w],
             [0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)],
         )
         self.controller.reset()
+        self._touchdown = None
+        self._probe = None
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
+
+    def _watch_height(self) -> float:
+        """Height above the deck's home below which contacts are checked every physics step.
+
+        The bench's deck moves centimetres; a ship deck carries its own reach (its motion's
+        bound on vertical displacement and tilt, ``vertical_reach_m`` / ``tilt_reach_rad``).
+        """
+        motion = self.stewart.motion
+        reach = float(getattr(motion, "vertical_reach_m", 0.0))
+        tilt = max(
+            math.radians(CONTACT_WATCH_TILT_DEG), float(getattr(motion, "tilt_reach_rad", 0.0))
+        )
+        if isinstance(motion, CsvMotion) and self.config.deck_mount == "ship":
+            reach = float(np.max(np.abs(motion.samples[:, 2])))
+            tilt = max(tilt, float(np.max(np.abs(motion.samples[:, 3:5]))))
+        half_diagonal = self._extra_half_diagonal
+        if self.config.deck_mount == "ship":
+            half_diagonal = 0.5 * self.config.deck.size * math.sqrt(2.0)
+        return CONTACT_WATCH_HEIGHT_M + reach + half_diagonal * math.sin(min(tilt, 1.5))
 
     def place_drone(self, position_w: np.ndarray, yaw: float) -> None:
         """Put the drone level at a pose without stepping time (a calibration rig's move)."""
@@ -201,11 +249,17 @@ class World:
         rotations: list[tuple[float, ...]] = []
         accels: list[tuple[float, float, float]] = []
         rates: list[tuple[float, float, float]] = []
+        probe = self._probe
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
             if not self.pinned:
                 command = self.controller.update(state, setpoint, dt) if self.armed else idle
-                self.drone.wind_velocity_w = self.wind.velocity_tuple(self.time, dt)
+                wind = self.wind.velocity_tuple(self.time, dt)
+                if self._airwake:
+                    px, py, pz = state.floats.position_w
+                    hx, hy, hz = self._deck_home_floats
+                    wind = self.wind.airwake(wind, (px - hx, py - hy, pz - hz))
+                self.drone.wind_velocity_w = wind
                 self.drone.apply_rotor_commands(command, dt, state)
                 report.motor_saturated |= self.drone.last_saturated
             report.stewart_clamped |= self.stewart.advance(self.time + dt)
@@ -220,6 +274,8 @@ class World:
                 )
                 p.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3, physicsClientId=cid)
             self.time += dt
+            if probe is not None:
+                probe.update()
             new_state = self.drone.read_state()
             v0, new = state.floats.velocity_w, new_state.floats
             v1 = new.velocity_w
@@ -234,7 +290,7 @@ class World:
                     report.forbidden_contact = contacts.forbidden_what
                 if contacts.feet_on_deck and report.first_contact is None:
                     assert deck_before is not None
-                    report.first_contact = contact_metrics(
+                    report.first_contact = metrics = contact_metrics(
                         self.time,
                         state.position_w,
                         state.velocity_w,
@@ -245,6 +301,8 @@ class World:
                         deck_before.angular_velocity_w,
                         deck_before.tag_centre_w,
                     )
+                    metrics.deck_vertical_accel_g = self._deck_vertical_accel(self.time) / GRAVITY
+                    self._touchdown = metrics
                 if report.first_contact is not None or report.forbidden_contact:
                     break
         report.imu_samples = self.imu.sample_many(times, rotations, accels, rates)
@@ -259,6 +317,14 @@ class World:
         end_feet: set[int] = set()
         zero = VelocitySetpoint(np.zeros(3), 0.0)
         steps = max(1, round(duration_s * self.config.simulation.env_hz))
+        self._probe = TouchdownProbe(
+            self.client._client,
+            self.drone.body_id,
+            self.deck_id,
+            self.foot_links,
+            self._foot_radius,
+            self.config.touchdown.tip_over_deg,
+        )
         for _ in range(steps):
             report = self.step(zero, monitor_contacts=False)
             del report
@@ -268,7 +334,15 @@ class World:
             if contacts.forbidden and not forbidden:
                 forbidden = contacts.forbidden_what
         self.stewart.update_leg_visuals()
+        if self._touchdown is not None:
+            self._probe.fill(self._touchdown, self.params.weight)
+        self._probe = None
         return feet_seen, len(end_feet) >= 3 and not forbidden, forbidden, end_feet
+
+    def _deck_vertical_accel(self, t: float, h: float = 0.01) -> float:
+        """Vertical acceleration of the deck's commanded motion at ``t`` (m/s^2)."""
+        motion = self.stewart.motion
+        return float(motion.velocity(t + h)[2] - motion.velocity(max(0.0, t - h))[2]) / (2 * h)
 
     def contacts(self) -> ContactSummary:
         points = self.client.getContactPoints(bodyA=self.drone.body_id)

@@ -28,7 +28,7 @@ from agents.evaluation.estimators import (
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
 from landing_env.errors import ConfigError
 
-SCENARIOS = ("paper-static", "paper-stewart", "realistic", "sea-state-4")
+SCENARIOS = ("paper-static", "paper-stewart", "realistic", "bench-ss4")
 ESTIMATORS = ("atda", "ihrcf", "crhf")
 #: simulated seconds of each short scenario run
 SHORT_S = 3.0
@@ -160,7 +160,7 @@ def test_paper_static_is_within_the_crhf_papers_static_error(
 def test_sea_state_moves_the_deck_differently_from_the_sinusoids(
     short_runs: dict[str, ScenarioRecord],
 ) -> None:
-    sea = short_runs["sea-state-4"].truth
+    sea = short_runs["bench-ss4"].truth
     bench = short_runs["paper-stewart"].truth
     assert np.ptp(sea[:, 2]) > 1e-3
     assert not np.allclose(sea, bench, atol=1e-3)

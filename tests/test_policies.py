@@ -125,12 +125,12 @@ def test_align_descend_lands_from_far_off_the_deck_on_the_papers_bench() -> None
 
 
 def test_timing_heuristics_on_a_sea_state_deck() -> None:
-    env, quiescent = make_env_and_policy("quiescent", "sea-state-4")
+    env, quiescent = make_env_and_policy("quiescent", "bench-ss4")
     try:
         land_now = make_policy("land-now", env)
         assert isinstance(land_now, LandNowPolicy)
-        now = run_episode(env, land_now, 7, "land-now", "sea-state-4")
-        waited = run_episode(env, quiescent, 7, "quiescent", "sea-state-4")
+        now = run_episode(env, land_now, 7, "land-now", "bench-ss4")
+        waited = run_episode(env, quiescent, 7, "quiescent", "bench-ss4")
     finally:
         env.close()
     assert now.wait_s == 0.0
@@ -144,8 +144,8 @@ def test_timing_heuristics_on_a_sea_state_deck() -> None:
 
 def test_unknown_policy_and_scenario_name_the_choices() -> None:
     with pytest.raises(ConfigError, match=r"policy.*align-descend"):
-        make_env_and_policy("hover", "sea-state-4")
-    with pytest.raises(ConfigError, match=r"scenario.*sea-state-3"):
+        make_env_and_policy("hover", "bench-ss4")
+    with pytest.raises(ConfigError, match=r"scenario.*bench-ss3"):
         scenario_overrides("sea-state-9", "DeckLanding-v0")
 
 

@@ -351,6 +351,42 @@ def _cheeseman_bennett(params: QuadrotorParams, h: float) -> float:
     return 1.0 / (1.0 - (params.rotor_radius / (4.0 * h)) ** 2)
 
 
+def _four_rotor_model(params: QuadrotorParams, h: float) -> float:
+    """Sanchez-Cuevas, Heredia & Ollero (2017), Eq. 8, written out from the paper."""
+    r = params.rotor_radius
+    d = math.dist(params.rotor_positions_b[0, :2], params.rotor_positions_b[1, :2])  # adjacent
+    b = params.arm_length
+    k_b = params.ground_effect_body_coefficient
+    return 1.0 / (
+        1.0
+        - (r / (4.0 * h)) ** 2
+        - r**2 * h / math.sqrt((d**2 + 4 * h**2) ** 3)
+        - (r**2 / 2) * h / math.sqrt((2 * d**2 + 4 * h**2) ** 3)
+        - 2 * r**2 * h * k_b / math.sqrt((b**2 + 4 * h**2) ** 3)
+    )
+
+
+def test_ground_effect_thrust_at_a_tenth_of_a_metre_matches_the_four_rotor_model(
+    params: QuadrotorParams,
+) -> None:
+    client = make_world()
+    drone = Quadrotor(client, params)
+    hub_z = params.rotor_positions_b[0, 2]
+    far = _hover_thrust_at(drone, client, (0.0, 0.0, 2.0))
+    near = _hover_thrust_at(drone, client, (0.0, 0.0, 0.1 - hub_z))  # hubs 0.10 m up
+    np.testing.assert_allclose(drone.last_ground_heights, 0.1, atol=1e-4)
+    assert near / far == pytest.approx(_four_rotor_model(params, 0.1), rel=1e-4)
+    # +21 % for this frame at 0.10 m, +11 % at 0.15 m (Cheeseman-Bennett alone: +2.6 %)
+    assert near / far == pytest.approx(1.213, abs=0.005)
+    high = _hover_thrust_at(drone, client, (0.0, 0.0, 0.15 - hub_z))
+    assert high / far == pytest.approx(1.112, abs=0.005)
+    single = dataclasses.replace(params, ground_effect_model="cheeseman_bennett")
+    drone.params = single
+    assert _hover_thrust_at(drone, client, (0.0, 0.0, 0.1 - hub_z)) / far == pytest.approx(
+        _cheeseman_bennett(params, 0.1), rel=1e-4
+    )
+
+
 def test_ground_effect_raises_thrust_over_a_raised_box(params: QuadrotorParams) -> None:
     client = make_world()
     add_box(client, (0.0, 0.0, 0.5), (0.5, 0.5, 0.5))  # top at z = 1 m
@@ -363,7 +399,7 @@ def test_ground_effect_raises_thrust_over_a_raised_box(params: QuadrotorParams) 
     assert far == pytest.approx(out_of_ground_effect, rel=1e-12)
     assert np.all(np.isnan(drone.last_ground_heights))
     np.testing.assert_allclose(heights_near, 0.13 + hub_z, atol=1e-4)
-    assert near == pytest.approx(far * _cheeseman_bennett(params, 0.13 + hub_z), rel=1e-4)
+    assert near == pytest.approx(far * _four_rotor_model(params, 0.13 + hub_z), rel=1e-4)
     assert near > 1.01 * far
 
 
@@ -376,7 +412,7 @@ def test_ground_effect_uses_the_surface_under_each_rotor(params: QuadrotorParams
     _hover_thrust_at(drone, client, (0.0, 0.0, 1.1))
     np.testing.assert_allclose(drone.last_ground_heights, 0.1 + hub_z, atol=1e-4)
     gains = np.array(drone.last_ground_effect_gains)
-    np.testing.assert_allclose(gains, _cheeseman_bennett(params, 0.1 + hub_z), rtol=1e-4)
+    np.testing.assert_allclose(gains, _four_rotor_model(params, 0.1 + hub_z), rtol=1e-4)
     # Straddling the box's edge at x = 0.5: the front rotors see the floor 1.1 m down (beyond
     # the ray), the back rotors the box.
     _hover_thrust_at(drone, client, (0.5, 0.0, 1.1))

@@ -251,8 +251,10 @@ def test_advance_on_the_world_clock_matches_step_to(client: BulletClient) -> Non
     try:
         platforms = []
         for c in (client, other):
-            # sea state 4, seed 5 leaves the workspace from t = 3.6 s: clamping is exercised
-            motion = make_motion_source(MotionConfig(kind="sea_state"), np.random.default_rng(5))
+            # sea state 4 with gamma 3.3, seed 5 leaves the workspace from t = 3.6 s: clamping
+            # is exercised
+            config = MotionConfig(kind="sea_state", sea_state={"gamma": 3.3})  # type: ignore[arg-type]
+            motion = make_motion_source(config, np.random.default_rng(5))
             platform = make_platform(c, motion)
             platform.reset(3.0)
             platforms.append(platform)

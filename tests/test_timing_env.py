@@ -17,7 +17,7 @@ from landing_env.envs.timing import (
 )
 from landing_env.errors import ConfigError
 
-#: the bench of the papers with a sea-state-4 deck, the drone flying, IHRCF observed
+#: the bench of the papers with a bench-ss4 deck, the drone flying, IHRCF observed
 FLYING = {
     "simulation.drone_fixed": False,
     "camera.mode": "project",
@@ -29,7 +29,7 @@ FLYING = {
 QUICK = {"history_s": 0.5, "wait_limit_s": 3.0}
 
 
-def make(timing: dict | None = None, config: str = "sea-state-4", **overrides) -> gym.Env:
+def make(timing: dict | None = None, config: str = "bench-ss4", **overrides) -> gym.Env:
     return gym.make(
         "DeckLandingTiming-v0",
         config=config,

@@ -7,7 +7,8 @@ interval, touchdown relative normal speed mean and 95th percentile, deck tilt an
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).
 
-Scenarios are the shipped bench configs with the drone flying instead of pinned, the tag
+Scenarios are the shipped bench (``bench-ss*``, ``paper-stewart``) and full-scale ship-deck
+(``ship-ss*``) configs with the drone flying instead of pinned, the tag
 projected analytically (``camera.mode: project``; ``--mode render`` renders and detects it)
 and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
 """
@@ -28,6 +29,7 @@ import numpy as np
 from agents.evaluation import _parse_overrides
 from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
+from landing_env.stewart.motion import SeaStateConfig
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -40,13 +42,59 @@ class Scenario:
 
     config: str
     description: str
+    #: settings of the timing task (DeckLandingTiming-v0's ``timing``) for this scenario
+    timing: dict[str, Any] = field(default_factory=dict)
 
+
+#: the bench's per-axis scale factors (SeaStateConfig.scale), printed with its scenarios
+BENCH_SCALE = ", ".join(
+    f"{axis} {factor:g}"
+    for axis, factor in zip(
+        ("surge", "sway", "heave", "roll", "pitch", "yaw"), SeaStateConfig().scale, strict=True
+    )
+)
+
+#: the timing task over a ship deck holds higher: the deck heaves metres at up to ~2-4 m/s
+#: (bench-ss: centimetres), and 0.7 m over it ends in a touchdown during the warm-up
+SHIP_TIMING: dict[str, Any] = {"hold_height_m": 2.0}
 
 SCENARIOS: dict[str, Scenario] = {
-    "sea-state-3": Scenario("sea-state-3", "JONSWAP sea state 3 (Hs 0.88 m, Tp 7.5 s)"),
-    "sea-state-4": Scenario("sea-state-4", "JONSWAP sea state 4 (Hs 1.88 m, Tp 8.8 s)"),
-    "sea-state-5": Scenario("sea-state-5", "JONSWAP sea state 5 (Hs 3.25 m, Tp 9.7 s)"),
+    "bench-ss3": Scenario(
+        "bench-ss3",
+        "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
+        + BENCH_SCALE,
+    ),
+    "bench-ss4": Scenario(
+        "bench-ss4",
+        "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
+        + BENCH_SCALE,
+    ),
+    "bench-ss5": Scenario(
+        "bench-ss5",
+        "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
+        + BENCH_SCALE,
+    ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
+    "ship-ss3": Scenario(
+        "ship-ss3",
+        "30 m vessel's helideck, sea state 3 (Hs 0.88 m, Tp 7.5 s)",
+        SHIP_TIMING,
+    ),
+    "ship-ss4": Scenario(
+        "ship-ss4",
+        "30 m vessel's helideck, sea state 4 (Hs 1.88 m, Tp 8.8 s)",
+        SHIP_TIMING,
+    ),
+    "ship-ss5": Scenario(
+        "ship-ss5",
+        "30 m vessel's helideck, sea state 5 (Hs 3.25 m, Tp 9.7 s)",
+        SHIP_TIMING,
+    ),
+    "ship-ss6": Scenario(
+        "ship-ss6",
+        "30 m vessel's helideck, sea state 6 (Hs 5.0 m, Tp 12.4 s)",
+        SHIP_TIMING,
+    ),
 }
 
 #: what turns a bench config into a landing scenario
@@ -99,6 +147,11 @@ class EpisodeResult:
     time_to_land_s: float = math.nan
     #: the timing task's wait before the commit, seconds (NaN for align-descend)
     wait_s: float = math.nan
+    #: compliant-touchdown metrics (landing_env/touchdown.py)
+    bounce_height_m: float = math.nan
+    peak_load_g: float = math.nan
+    deck_vertical_accel_g: float = math.nan
+    tipped_over: bool = False
     failed_checks: str = ""
 
 
@@ -126,8 +179,14 @@ def make_env_and_policy(
         **scenario_overrides(scenario, env_id, estimator, camera_mode),
         **(extra_overrides or {}),
     }
+    timing = SCENARIOS[scenario].timing
+    kwargs = {"timing": dict(timing)} if timing and env_id == "DeckLandingTiming-v0" else {}
     env = gym.make(
-        env_id, config=SCENARIOS[scenario].config, overrides=overrides, render_mode=render_mode
+        env_id,
+        config=SCENARIOS[scenario].config,
+        overrides=overrides,
+        render_mode=render_mode,
+        **kwargs,
     )
     try:
         policy = make_policy(policy_name, env, model_path)
@@ -139,7 +198,16 @@ def make_env_and_policy(
 
 def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: str) -> EpisodeResult:
     """Run one episode to its end and record the touchdown metrics."""
-    observation, info = env.reset(seed=seed)
+    try:
+        observation, info = env.reset(seed=seed)
+    except RuntimeError as exc:
+        # the timing task's warm-up hold ended on the deck or in a crash (a ship deck in wind):
+        # a failed episode, not a failed evaluation
+        if "warm-up" not in str(exc):
+            raise
+        return EpisodeResult(
+            policy_name, scenario, seed, "hold_failed", False, failed_checks="hold_failed"
+        )
     policy.reset()
     while True:
         observation, _, terminated, truncated, info = env.step(policy(observation))
@@ -160,6 +228,10 @@ def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: st
         result.lateral_offset_m = float(touchdown["lateral_offset_m"])
         result.relative_attitude_deg = float(touchdown["relative_attitude_deg"])
         result.time_to_land_s = float(touchdown["time_s"])
+        result.bounce_height_m = float(touchdown.get("bounce_height_m", math.nan))
+        result.peak_load_g = float(touchdown.get("peak_load_g", math.nan))
+        result.deck_vertical_accel_g = float(touchdown.get("deck_vertical_accel_g", math.nan))
+        result.tipped_over = bool(touchdown.get("tipped_over", False))
         result.failed_checks = ";".join(touchdown["failed_checks"])
     elif "crash_contact" in info:
         result.failed_checks = str(info["crash_contact"])
@@ -249,6 +321,10 @@ class LandingSummary:
     lateral_offset_mean_m: float
     time_to_land_mean_s: float
     outcomes: dict[str, int] = field(default_factory=dict)
+    #: how often each touchdown check failed (an episode can fail several), and crashes
+    failures: dict[str, int] = field(default_factory=dict)
+    bounce_p95_m: float = math.nan
+    peak_load_p95_g: float = math.nan
 
 
 def summarise(results: list[EpisodeResult]) -> LandingSummary:
@@ -277,6 +353,19 @@ def summarise(results: list[EpisodeResult]) -> LandingSummary:
         lateral_offset_mean_m=_mean(column("lateral_offset_m")),
         time_to_land_mean_s=_mean(column("time_to_land_s")),
         outcomes=dict(Counter(r.outcome for r in results)),
+        failures=dict(
+            Counter(
+                check
+                for r in results
+                if not r.success
+                for check in (
+                    r.failed_checks.split(";") if r.outcome == "hard_landing" else [r.outcome]
+                )
+                if check
+            )
+        ),
+        bounce_p95_m=_p95(column("bounce_height_m")),
+        peak_load_p95_g=_p95(column("peak_load_g")),
     )
 
 
@@ -289,7 +378,10 @@ TABLE_HEADER = (
     "tilt mean / p95 (deg)",
     "offset mean (m)",
     "time to land (s)",
+    "bounce p95 (mm)",
+    "peak load p95 (g)",
     "outcomes",
+    "failed checks",
 )
 
 
@@ -311,7 +403,10 @@ def markdown_table(summaries: list[LandingSummary]) -> str:
             f"{s.deck_tilt_mean_deg:.2f} / {s.deck_tilt_p95_deg:.2f}",
             f"{s.lateral_offset_mean_m:.3f}",
             f"{s.time_to_land_mean_s:.2f}",
+            f"{1000 * s.bounce_p95_m:.1f}",
+            f"{s.peak_load_p95_g:.1f}",
             outcomes,
+            ", ".join(f"{k} {v}" for k, v in sorted(s.failures.items())) or "-",
         )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

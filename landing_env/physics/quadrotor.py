@@ -27,7 +27,15 @@ DEFAULT_PARAMS_PATH: Path = Path(__file__).resolve().parent.parent / "assets" / 
 
 GRAVITY: float = 9.81
 
-_GROUND_EFFECT_MODELS = ("cheeseman_bennett",)
+#: ``sanchez_cuevas``: the four-rotor model of Sanchez-Cuevas, Heredia & Ollero (2017),
+#: *Characterization of the aerodynamic ground effect and its influence in multirotor
+#: control*, Int. J. Aerospace Eng. 2017:1823056, Eq. (8):
+#: T_IGE/T_OGE = 1 / (1 - (R/4z)^2 - R^2 z / (d^2 + 4z^2)^1.5 - (R^2/2) z / (2d^2 + 4z^2)^1.5
+#:                    - 2 R^2 z K_b / (b^2 + 4z^2)^1.5)
+#: with z the rotor's height, d the distance between adjacent rotors, b the arm length (rotor
+#: to body centre) and K_b the body-lift coefficient fitted in the paper (2).  The first term
+#: is the single-rotor Cheeseman-Bennett (1955) model, kept as ``cheeseman_bennett``.
+_GROUND_EFFECT_MODELS = ("cheeseman_bennett", "sanchez_cuevas")
 
 
 @dataclass(frozen=True)
@@ -59,6 +67,13 @@ class QuadrotorParams:
     ground_effect_coefficient: float
     ground_effect_max_gain: float
     ground_effect_ray_length: float
+    #: body-lift coefficient K_b of the sanchez_cuevas model
+    ground_effect_body_coefficient: float
+    #: landing gear: contact stiffness (N/m) and damping (N s/m) of each foot, friction
+    #: coefficient foot-deck (see quadrotor.yaml for the sources)
+    gear_stiffness: float
+    gear_damping: float
+    gear_friction: float
     #: camera origin in B (m); the camera looks down body -z
     camera_offset_b: np.ndarray
     #: body z of the ToF sensors (m) and their distance from the camera axis (m)
@@ -125,6 +140,17 @@ class QuadrotorParams:
             100.0,
             low_inclusive=False,
         )
+        require_range(
+            "ground_effect_body_coefficient", self.ground_effect_body_coefficient, 0.0, 10.0
+        )
+        # 0 = PyBullet's rigid contact; otherwise a few mm under a touchdown load
+        require_range("gear_stiffness", self.gear_stiffness, 0.0, 1e7)
+        require_range("gear_damping", self.gear_damping, 0.0, 1e5)
+        if (self.gear_stiffness > 0.0) != (self.gear_damping > 0.0):
+            raise ConfigError(
+                "gear_damping", "stiffness and damping are both 0 (rigid) or both > 0"
+            )
+        require_range("gear_friction", self.gear_friction, 0.0, 5.0)
         _require_shape("camera_offset_b", self.camera_offset_b, (3,))
         require_range("tof_arm_distance", self.tof_arm_distance, 0.0, low_inclusive=False)
 
@@ -177,6 +203,7 @@ class QuadrotorParams:
         motors = reader.section("motors")
         drag = reader.section("drag")
         ground = reader.section("ground_effect")
+        gear = reader.section("landing_gear")
         sensors = reader.section("sensors")
         try:
             params = cls(
@@ -199,6 +226,10 @@ class QuadrotorParams:
                 ground_effect_coefficient=ground.number("coefficient"),
                 ground_effect_max_gain=ground.number("max_gain"),
                 ground_effect_ray_length=ground.number("ray_length"),
+                ground_effect_body_coefficient=ground.number("body_coefficient"),
+                gear_stiffness=gear.number("contact_stiffness"),
+                gear_damping=gear.number("contact_damping"),
+                gear_friction=gear.number("friction"),
                 camera_offset_b=sensors.get("camera_offset_b"),
                 tof_mount_z=sensors.number("tof_mount_z"),
                 tof_arm_distance=sensors.number("tof_arm_distance"),
@@ -208,7 +239,7 @@ class QuadrotorParams:
             raise ConfigError(_YAML_KEYS.get(error.key, error.key), error.detail) from error
         except (TypeError, ValueError) as error:
             raise ConfigError(str(path), f"malformed value: {error}") from error
-        for section in (reader, body, rotors, motors, drag, ground, sensors):
+        for section in (reader, body, rotors, motors, drag, ground, gear, sensors):
             section.reject_unused()
         return params
 
@@ -232,6 +263,10 @@ _YAML_KEYS: dict[str, str] = {
     "ground_effect_coefficient": "ground_effect.coefficient",
     "ground_effect_max_gain": "ground_effect.max_gain",
     "ground_effect_ray_length": "ground_effect.ray_length",
+    "ground_effect_body_coefficient": "ground_effect.body_coefficient",
+    "gear_stiffness": "landing_gear.contact_stiffness",
+    "gear_damping": "landing_gear.contact_damping",
+    "gear_friction": "landing_gear.friction",
     "camera_offset_b": "sensors.camera_offset_b",
     "tof_arm_distance": "sensors.tof_arm_distance",
 }
@@ -441,6 +476,7 @@ class Quadrotor:
         # PyBullet's default linear/angular damping would be a second, unmodelled drag.
         for link in (-1, *feet):
             client.changeDynamics(self.body_id, link, linearDamping=0.0, angularDamping=0.0)
+        self._apply_landing_gear()
 
         #: the whole body's centre of mass in the base frame (m): the feet lower it slightly
         self.com_offset_b: tuple[float, float, float] = self._combined_com_offset()
@@ -482,6 +518,28 @@ class Quadrotor:
         self.wind_velocity_w: np.ndarray | tuple[float, float, float] = self._zero3
         #: wind velocity (m/s, W) used for the drag in the last step
         self.last_wind_w: tuple[float, float, float] = self._zero3
+
+    def _apply_landing_gear(self) -> None:
+        """Give each foot its contact stiffness, damping and friction (quadrotor.yaml).
+
+        Bullet turns stiffness k and damping c into a soft constraint (ERP = dt k / (dt k + c),
+        CFM = 1 / (dt k + c)); restitution stays 0, the energy loss is the damping's.
+        """
+        prm = self.params
+        for link in self.foot_link_indices:
+            if prm.gear_stiffness > 0.0:
+                self.client.changeDynamics(
+                    self.body_id,
+                    link,
+                    contactStiffness=prm.gear_stiffness,
+                    contactDamping=prm.gear_damping,
+                    lateralFriction=prm.gear_friction,
+                    restitution=0.0,
+                )
+            else:
+                self.client.changeDynamics(
+                    self.body_id, link, lateralFriction=prm.gear_friction, restitution=0.0
+                )
 
     def _combined_com_offset(self) -> tuple[float, float, float]:
         """Centre of mass of base and feet together, in the base frame."""
@@ -567,6 +625,20 @@ class Quadrotor:
         self._drag = (float(d0), float(d1), float(d2))
         self._ground_effect_on = bool(prm.ground_effect_enabled)
         self._ge_const = prm.ground_effect_coefficient * (prm.rotor_radius / 4.0) ** 2
+        self._ge_multirotor = prm.ground_effect_model == "sanchez_cuevas"
+        hubs = prm.rotor_positions_b[:, :2]
+        gaps = np.linalg.norm(hubs[:, None, :] - hubs[None, :, :], axis=-1)
+        adjacent = float(np.min(gaps[gaps > 1e-9]))
+        r2 = float(prm.rotor_radius) ** 2
+        # (d^2, 2 d^2, b^2, R^2, R^2 / 2, 2 K_b R^2) of the four-rotor model
+        self._ge_terms = (
+            adjacent**2,
+            2.0 * adjacent**2,
+            float(prm.arm_length) ** 2,
+            r2,
+            0.5 * r2,
+            2.0 * float(prm.ground_effect_body_coefficient) * r2,
+        )
         self._ge_min_denominator = 1.0 / prm.ground_effect_max_gain
         self._ge_max_gain = float(prm.ground_effect_max_gain)
         self._ge_ray_length = float(prm.ground_effect_ray_length)
@@ -711,6 +783,15 @@ class Quadrotor:
             # Cheeseman–Bennett: T_IGE/T_OGE = 1/(1 - c (R/4h)^2), which diverges at h = R/4
             # (c = 1); the gain is capped at max_gain and the cap is flagged.
             denominator = 1.0 - const / (h * h) if h > 0.0 else -1.0
+            if self._ge_multirotor and h > 0.0:
+                # Sanchez-Cuevas et al. (2017): the neighbours' and the body's images too
+                d2, d2x2, b2, r2, r2_half, body = self._ge_terms
+                four_h2 = 4.0 * h * h
+                denominator -= (
+                    r2 * h / (d2 + four_h2) ** 1.5
+                    + r2_half * h / (d2x2 + four_h2) ** 1.5
+                    + body * h / (b2 + four_h2) ** 1.5
+                )
             if denominator <= min_den:
                 gains.append(self._ge_max_gain)
                 capped = True

@@ -23,25 +23,13 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sea.ship import ShipMotion, ShipMotionConfig
+from landing_env.sea.spectrum import SEA_STATE_TABLE, WaveComponents, dnv_gamma
 
-MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "csv")
+MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
 CSV_HEADER: tuple[str, ...] = ("t", "x", "y", "z", "roll", "pitch", "yaw")
 AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 GRAVITY = 9.80665
-
-#: Typical (significant height m, peak period s) per WMO sea-state code.  Heights are the
-#: means of the open-ocean North Atlantic table of Bales, Lee & Voelker (DTNSRDC 1981), which
-#: fall inside the WMO/Douglas code bands; periods are that table's most probable modal
-#: periods.  Codes 0 and 1 (calm) have no tabulated period: 3 s is this project's choice.
-SEA_STATE_TABLE: dict[int, tuple[float, float]] = {
-    0: (0.0, 3.0),
-    1: (0.05, 3.0),
-    2: (0.3, 7.5),
-    3: (0.88, 7.5),
-    4: (1.88, 8.8),
-    5: (3.25, 9.7),
-    6: (5.0, 12.4),
-}
 
 
 @runtime_checkable
@@ -245,8 +233,10 @@ class SeaStateConfig:
     sea_state: int | None = 4
     significant_height_m: float | None = None
     peak_period_s: float | None = None
-    #: JONSWAP peak enhancement factor (1 gives Pierson-Moskowitz)
-    gamma: float = 3.3
+    #: JONSWAP peak enhancement factor (1 gives Pierson-Moskowitz); None: by the DNV-RP-C205
+    #: rule from Hs and Tp (:func:`~landing_env.sea.spectrum.dnv_gamma`: 1 for the tabled
+    #: sea states 3-6, whose Tp/sqrt(Hs) >= 5)
+    gamma: float | None = None
     #: number of wave components (one per frequency bin)
     n_components: int = 150
     #: spectrum band as multiples of the peak frequency
@@ -285,7 +275,8 @@ class SeaStateConfig:
             require_range("significant_height_m", self.significant_height_m, 0.0, 20.0)
         if self.peak_period_s is not None:
             require_range("peak_period_s", self.peak_period_s, 0.5, 30.0)
-        require_range("gamma", self.gamma, 1.0, 10.0)
+        if self.gamma is not None:
+            require_range("gamma", self.gamma, 1.0, 10.0)
         require_range("n_components", self.n_components, 1, 10_000)
         require_range("band_low", self.band_low, 0.0, 1.0, low_inclusive=False)
         require_range("band_high", self.band_high, 1.0, 20.0, low_inclusive=False)
@@ -315,18 +306,10 @@ class SeaStateConfig:
             return self.peak_period_s
         return SEA_STATE_TABLE[int(self.sea_state)][1]  # type: ignore[arg-type]
 
-
-def jonswap_shape(frequency_hz: np.ndarray, peak_period_s: float, gamma: float) -> np.ndarray:
-    """Unnormalised JONSWAP spectral shape S(f) (arbitrary scale; normalised by Hs later).
-
-    Pierson-Moskowitz f^-5 exp(-5/4 (fp/f)^4) times the peak enhancement
-    gamma^exp(-(f - fp)^2 / (2 sigma^2 fp^2)), sigma 0.07 below and 0.09 above the peak.
-    """
-    f = np.asarray(frequency_hz, dtype=float)
-    fp = 1.0 / peak_period_s
-    sigma = np.where(f <= fp, 0.07, 0.09)
-    peak = gamma ** np.exp(-((f - fp) ** 2) / (2.0 * sigma**2 * fp**2))
-    return f**-5 * np.exp(-1.25 * (fp / f) ** 4) * peak
+    @property
+    def gamma_in_use(self) -> float:
+        """JONSWAP peak factor in use: ``gamma`` or, when None, the DNV-RP-C205 rule's."""
+        return dnv_gamma(self.hs, self.tp) if self.gamma is None else float(self.gamma)
 
 
 def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:
@@ -357,28 +340,25 @@ class SeaStateMotion:
 
     def __init__(self, config: SeaStateConfig, rng: np.random.Generator) -> None:
         self.config = config
-        n = config.n_components
-        fp = 1.0 / config.tp
-        edges = np.linspace(config.band_low * fp, config.band_high * fp, n + 1)
-        width = np.diff(edges)
-        frequency = edges[:-1] + width * rng.uniform(0.0, 1.0, n)
-        phase = rng.uniform(0.0, 2.0 * math.pi, n)
-        spread = math.radians(config.direction_spread_deg)
-        direction = math.radians(config.wave_direction_deg) + rng.uniform(-spread, spread, n)
-        density = jonswap_shape(frequency, config.tp, config.gamma) * width
-        m0_target = config.hs**2 / 16.0
-        # Normalise the discrete spectrum so sum(a^2 / 2) = m0 = Hs^2 / 16 exactly.
-        total = float(np.sum(density))
-        amplitude = np.sqrt(2.0 * density * (m0_target / total))
-        self.frequencies_hz = frequency
-        self.amplitudes_m = amplitude
-        self.directions = direction
-        self.m0 = float(np.sum(amplitude**2) / 2.0)
-        omega = 2.0 * math.pi * frequency
+        waves = WaveComponents(
+            config.hs,
+            config.tp,
+            config.gamma_in_use,
+            config.n_components,
+            (config.band_low, config.band_high),
+            math.radians(config.wave_direction_deg),
+            math.radians(config.direction_spread_deg),
+            rng,
+        )
+        self.waves = waves
+        self.frequencies_hz = waves.frequencies_hz
+        self.amplitudes_m = waves.amplitudes_m
+        self.directions = direction = waves.directions
+        self.m0 = waves.m0
+        omega = waves.omega
         self._omega = omega
         wavenumber = omega**2 / GRAVITY  # deep-water dispersion
-        # Complex amplitudes at t = 0 (elevation = Re(a e^{i(w t + phi)})).
-        elevation = amplitude * np.exp(1j * phase)
+        elevation = waves.elevation_phasors
         self._elevation = elevation
         slope = -1j * wavenumber * elevation  # d/dx of the travelling wave at the origin
         orbital = -1j * elevation  # horizontal surface displacement along the direction
@@ -557,6 +537,7 @@ _NESTED: dict[str, type] = {
     "static": StaticMotionConfig,
     "sinusoids": SinusoidConfig,
     "sea_state": SeaStateConfig,
+    "ship": ShipMotionConfig,
     "csv": CsvMotionConfig,
 }
 
@@ -565,10 +546,12 @@ _NESTED: dict[str, type] = {
 class MotionConfig:
     """Which motion source drives the platform, with one nested config per kind."""
 
-    kind: Literal["static", "sinusoids", "sea_state", "csv"] = "sinusoids"
+    kind: Literal["static", "sinusoids", "sea_state", "ship", "csv"] = "sinusoids"
     static: StaticMotionConfig = field(default_factory=StaticMotionConfig)
     sinusoids: SinusoidConfig = field(default_factory=SinusoidConfig)
     sea_state: SeaStateConfig = field(default_factory=SeaStateConfig)
+    #: a full-scale vessel's helideck motion (landing_env/sea/ship.py; needs deck_mount: ship)
+    ship: ShipMotionConfig = field(default_factory=ShipMotionConfig)
     csv: CsvMotionConfig = field(default_factory=CsvMotionConfig)
 
     def __post_init__(self) -> None:
@@ -601,4 +584,6 @@ def make_motion_source(config: MotionConfig, rng: np.random.Generator) -> Motion
         return SinusoidMotion.from_config(config.sinusoids, rng)
     if config.kind == "sea_state":
         return SeaStateMotion(config.sea_state, rng)
+    if config.kind == "ship":
+        return ShipMotion(config.ship, rng)
     return CsvMotion.from_file(config.csv.path, config.csv.end)

@@ -1,0 +1,86 @@
+"""Wind at sea: Dryden gusts by MIL-F-8785C, the deck's airwake, wind scaled with sea state."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from landing_env.config import load_config
+from landing_env.errors import ConfigError
+from landing_env.physics.wind import WindConfig, WindModel
+
+
+def test_dryden_scales_follow_mil_f_8785c_low_altitude() -> None:
+    config = WindConfig(enabled=True, mean_velocity_w=(6.0, 8.0, 0.0), turbulence="dryden")
+    (su, sv, sw), (lu, lv, lw) = config.dryden()
+    h_ft = 10.0 / 0.3048
+    assert sw == pytest.approx(0.1 * 10.0)
+    assert su == sv == pytest.approx(sw / (0.177 + 0.000823 * h_ft) ** 0.4)
+    assert lw == pytest.approx(10.0)
+    assert lu == lv == pytest.approx(h_ft / (0.177 + 0.000823 * h_ft) ** 1.2 * 0.3048)
+    assert 1.8 < su / sw < 2.0 and 60.0 < lu < 75.0
+
+
+def test_dryden_gusts_have_the_model_variance_and_correlation_time() -> None:
+    config = WindConfig(enabled=True, mean_velocity_w=(8.0, 0.0, 0.0), turbulence="dryden")
+    model = WindModel(config, np.random.default_rng(0))
+    dt = 0.05
+    samples = np.array([model.velocity((k + 1) * dt, dt) for k in range(200_000)])
+    gust = samples - np.array(config.mean_velocity_w)
+    sigma, taus = config.gust_process()
+    np.testing.assert_allclose(np.std(gust, axis=0), sigma, rtol=0.06)
+    # the vertical gust's autocorrelation at one correlation time is 1/e
+    w = gust[:, 2] - gust[:, 2].mean()
+    lag = round(taus[2] / dt)
+    rho = float(np.mean(w[:-lag] * w[lag:]) / np.var(w))
+    assert rho == pytest.approx(math.exp(-1.0), abs=0.05)
+
+
+def test_dryden_u_axis_follows_the_mean_wind() -> None:
+    config = WindConfig(enabled=True, mean_velocity_w=(0.0, 10.0, 0.0), turbulence="dryden")
+    model = WindModel(config, np.random.default_rng(1))
+    dt = 0.05
+    gust = np.array([model.velocity((k + 1) * dt, dt) for k in range(100_000)]) - [0, 10, 0]
+    sigma_u, sigma_v, _ = config.gust_process()[0]
+    # the wind blows along y: the longitudinal gust (sigma_u) is along y, the lateral along x
+    assert np.std(gust[:, 1]) == pytest.approx(sigma_u, rel=0.1)
+    assert np.std(gust[:, 0]) == pytest.approx(sigma_v, rel=0.1)
+
+
+def test_the_airwake_adds_a_downdraft_and_turbulence_over_the_deck_only() -> None:
+    config = WindConfig(
+        enabled=True,
+        mean_velocity_w=(10.0, 0.0, 0.0),
+        turbulence="dryden",
+        airwake_radius_m=3.0,
+        airwake_height_m=5.0,
+        airwake_downdraft_fraction=0.05,
+        airwake_turbulence_factor=1.5,
+    )
+    model = WindModel(config, np.random.default_rng(2))
+    wind = (11.0, 1.0, 0.2)
+    over = model.airwake(wind, (0.5, 0.0, 2.0))
+    assert over == pytest.approx((10.0 + 1.5, 1.5, 0.3 - 0.5))
+    assert model.airwake(wind, (4.0, 0.0, 2.0)) == wind  # beside the deck
+    assert model.airwake(wind, (0.0, 0.0, 6.0)) == wind  # above the wake
+
+
+def test_ship_scenarios_blow_harder_with_the_sea_state() -> None:
+    speeds = []
+    for state in (3, 4, 5, 6):
+        wind = load_config(f"ship-ss{state}").wind
+        assert wind.enabled and wind.turbulence == "dryden"
+        speeds.append(wind.mean_speed)
+        # Pierson-Moskowitz: Hs = 0.21 U19.5^2 / g with U10 = U19.5 / 1.08
+        hs = load_config(f"ship-ss{state}").motion.ship.hs
+        assert wind.mean_speed == pytest.approx(math.sqrt(hs * 9.81 / 0.21) / 1.08, rel=0.01)
+    assert np.all(np.diff(speeds) > 0)
+
+
+def test_bad_wind_keys_are_named() -> None:
+    with pytest.raises(ConfigError, match=r"wind\.turbulence"):
+        load_config("ship-ss4", overrides={"wind.turbulence": "karman"})
+    with pytest.raises(ConfigError, match=r"wind\.airwake_turbulence_factor"):
+        load_config("ship-ss4", overrides={"wind.airwake_turbulence_factor": 0.5})
