@@ -23,9 +23,10 @@ from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
-from landing_env.scene.deck import create_deck_body
+from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sensors.camera import CameraSensor, TagPlacement
 from landing_env.sensors.imu import ImuModel
+from landing_env.sensors.planar_renderer import planar_scene_or_none
 from landing_env.sensors.rangefinder import Rangefinder
 from landing_env.sensors.tof import TofArray
 from landing_env.stewart.motion import make_motion_source
@@ -135,6 +136,17 @@ class World:
             math.radians(CONTACT_WATCH_TILT_DEG)
         )
         self.camera = CameraSensor(c, config.camera, rng)
+        if config.camera.renderer == "planar":
+            scene = planar_scene_or_none(
+                c._client,
+                config.camera,
+                self.deck_id,
+                config.deck,
+                make_deck_texture(config.deck),
+                hidden_bodies=(self.drone.body_id,),
+            )
+            if scene is not None:
+                self.camera.attach_scene(scene)
         self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
         self.rangefinder = Rangefinder(c, config.rangefinder, rng)

@@ -27,6 +27,7 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.types import CameraFrame, TagDetection
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sensors.planar_renderer import PlanarScene, UnsupportedScene
 
 #: Miss reasons a CameraFrame can carry.
 MISS_BEHIND = "behind_camera"
@@ -104,6 +105,12 @@ class CameraConfig:
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
     #: and it only draws bodies created after it is loaded: create the camera first
     use_egl: bool = False
+    #: "planar" draws the scene a downward camera sees with OpenCV homographies and polygons
+    #: (:mod:`landing_env.sensors.planar_renderer`: about 1-3 ms a frame at any height) when
+    #: the world has attached its scene (:meth:`CameraSensor.attach_scene`); "bullet" is the
+    #: reference, PyBullet's TinyRenderer (or EGL with ``use_egl``).  Without an attached
+    #: scene (calibration rigs, bare clients) the camera renders with "bullet".
+    renderer: Literal["planar", "bullet"] = "planar"
     #: renderer lighting; specular off so the white quiet zone does not saturate in patches
     light_ambient: float = 0.6
     light_diffuse: float = 0.4
@@ -134,6 +141,7 @@ class CameraConfig:
         require_range("decode_sharpening", self.decode_sharpening, 0.0)
         require_range("detector_threads", self.detector_threads, 1, 64)
         require_choice("render_region", self.render_region, ("tag", "full"))
+        require_choice("renderer", self.renderer, ("planar", "bullet"))
         require_range("render_margin_frac", self.render_margin_frac, 0.0)
         require_range("render_margin_px", self.render_margin_px, 0)
         for name in ("light_ambient", "light_diffuse", "light_specular"):
@@ -303,6 +311,7 @@ class CameraSensor:
         self._max_radius = _max_monotonic_radius(self.intrinsics.dist_coeffs)
         self._warp = _DistortionWarp(self.intrinsics) if self.intrinsics.has_distortion else None
         self._egl_plugin: int | None = None
+        self._planar: PlanarScene | None = None
         self.renderer = "tiny"
         if config.use_egl:
             self._load_egl()
@@ -339,6 +348,16 @@ class CameraSensor:
         self._egl_plugin = plugin
         self.renderer = "egl"
 
+    def attach_scene(self, scene: PlanarScene) -> None:
+        """Let the planar renderer draw this client's scene (when ``renderer`` is "planar")."""
+        if self.config.renderer == "planar":
+            self._planar = scene
+
+    @property
+    def active_renderer(self) -> str:
+        """What draws the images: "planar", "tiny" (TinyRenderer) or "egl"."""
+        return "planar" if self._planar is not None else self.renderer
+
     def close(self) -> None:
         """Free the detector and unload the EGL plugin if this sensor loaded it."""
         if self._detector is not None:
@@ -364,6 +383,16 @@ class CameraSensor:
         k = self.intrinsics
         x0, y0, x1, y1 = window
         width, height = x1 - x0, y1 - y0
+        if self._planar is not None:
+            try:
+                self._planar.refresh_if_changed()
+                k_window = k.matrix - np.array([[0, 0, x0], [0, 0, y0], [0, 0, 0]], dtype=float)
+                return self._planar.render(
+                    t_wc, r_wc, k_window, width, height, self.config.near, self.config.far
+                )
+            except UnsupportedScene as exc:
+                warnings.warn(f"planar renderer: {exc}; using the bullet renderer", stacklevel=2)
+                self._planar = None
         # compensate the renderer's sampling offset so content lands where the model says
         shift_u, shift_v = RENDERER_SHIFT_PX[self.renderer]
         projection = opengl_projection(
@@ -543,7 +572,7 @@ class CameraSensor:
         view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
         k = self.intrinsics
         # EGL re-creates its framebuffer whenever the size changes, so windows cost more there
-        if self.config.render_region == "full" or self.renderer == "egl":
+        if self.config.render_region == "full" or self.active_renderer == "egl":
             image = self.render_image(t_wc, r_wc)
             patch, origin = image, np.zeros(2)
         else:
@@ -622,7 +651,7 @@ class CameraSensor:
                         d.tag_id, d.corners_px + origin, d.decision_margin, d.hamming
                     )
 
-        if self.config.render_region == "full" or self.renderer == "egl":
+        if self.config.render_region == "full" or self.active_renderer == "egl":
             image = self.render_image(t_wc, r_wc)
             keep(self._detector.detect(image), np.zeros(2))
         else:
