@@ -265,10 +265,25 @@ class PlanarScene:
                 )
         self._solids = solids
         self._body_count = count
+        self._colours = self._colour_key()
+
+    def _colour_key(self) -> tuple:
+        """Every drawn body's visual colours (changeVisualShape may recolour them)."""
+        c = self.client
+        bodies = {solid.body_id for solid in self._solids} - {
+            plate.body_id for plate in self.plates
+        }
+        return tuple(
+            tuple(shape[7] for shape in p.getVisualShapeData(body, physicsClientId=c))
+            for body in sorted(bodies)
+        )
 
     def refresh_if_changed(self) -> None:
-        """Read the scene again if bodies were added or removed."""
-        if p.getNumBodies(physicsClientId=self.client) != self._body_count:
+        """Read the scene again if bodies were added or removed or recoloured."""
+        if (
+            p.getNumBodies(physicsClientId=self.client) != self._body_count
+            or self._colour_key() != self._colours
+        ):
             self._read()
 
     def shade(self, normal_w: np.ndarray) -> float:
