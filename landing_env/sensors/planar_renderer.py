@@ -321,6 +321,9 @@ class PlanarScene:
         image = np.empty((height, width, 3), dtype=np.uint8)
         image[:] = BACKGROUND_RGB
         planes = self._frustum_planes(k, width, height, near, far)
+        # a plate that fills the whole window hides everything behind its plane (a tag window
+        # near the deck): those faces are culled (n.x + d < 0 in camera coordinates)
+        hiders = self._covering_plates(t_wc, r_wc, k, width, height)
         # (distance, kind, payload): polygons and textured plates, drawn far to near
         items: list[tuple[float, int, object]] = []
         for solid in self._solids:
@@ -328,6 +331,8 @@ class PlanarScene:
             centre_w = position + rotation @ solid.offset
             centre_c = r_cw @ (centre_w - t_wc)
             if not _sphere_in_frustum(centre_c, solid.radius, planes):
+                continue
+            if any(h[:3] @ centre_c + h[3] < -solid.radius for h in hiders):
                 continue
             r_cs = r_cw @ rotation @ solid.rotation
             normals_c = solid.normals @ r_cs.T
@@ -340,6 +345,8 @@ class PlanarScene:
             dist = faces_c @ planes[:, :3].T + planes[:, 3]  # F x V x planes
             inside = np.all(dist >= 0.0, axis=(1, 2))
             outside = np.any(np.all(dist < 0.0, axis=1), axis=1)
+            for h in hiders:
+                outside |= np.all(faces_c @ h[:3] + h[3] <= 1e-9, axis=1)
             shades = self.ambient + self.diffuse * np.maximum(
                 normals_c @ (r_cw @ TINY_LIGHT_DIR_W), 0.0
             )
@@ -373,6 +380,38 @@ class PlanarScene:
             else:
                 self._draw_plate(image, k, t_wc, r_wc, *payload)  # type: ignore[misc]
         return image
+
+    def _covering_plates(
+        self, t_wc: np.ndarray, r_wc: np.ndarray, k: np.ndarray, width: int, height: int
+    ) -> list[np.ndarray]:
+        """Planes (n, d) in camera coordinates, towards the camera positive, of the plates
+        that cover every pixel of the window (seen from above, one pixel of margin)."""
+        hiders = []
+        corners = np.array(
+            [
+                [-1.5, -1.5, 1],
+                [width + 0.5, -1.5, 1],
+                [width + 0.5, height + 0.5, 1],
+                [-1.5, height + 0.5, 1],
+            ]
+        )
+        rays_c = corners @ np.linalg.inv(k).T
+        for plate in self.plates:
+            position, rotation = self._pose(plate.body_id, -1)
+            normal_c = r_wc.T @ rotation[:, 2]
+            point_c = r_wc.T @ (position - t_wc)
+            towards = float(normal_c @ point_c)  # < 0: the camera is on the top side
+            if towards >= 0.0:
+                continue
+            denominators = rays_c @ normal_c
+            if np.any(denominators >= 0.0):
+                continue  # a corner ray runs parallel or away from the plane
+            hits_c = rays_c * (towards / denominators)[:, None]
+            local = (hits_c - point_c) @ (r_wc.T @ rotation)
+            half = 0.5 * plate.size
+            if np.all(np.abs(local[:, :2]) < half):
+                hiders.append(np.append(normal_c, -towards))
+        return hiders
 
     def _draw_plate(
         self,
