@@ -25,6 +25,7 @@ from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sensors.camera import CameraSensor, TagPlacement
+from landing_env.sensors.camera_realism import RelativeMotion
 from landing_env.sensors.imu import ImuModel
 from landing_env.sensors.planar_renderer import planar_scene_or_none
 from landing_env.sensors.rangefinder import Rangefinder
@@ -323,8 +324,25 @@ class World:
                 self.drone.body_id, link, rgbaColor=[*colour[:3], alpha * colour[3]]
             )
 
+    def camera_motion(self) -> RelativeMotion:
+        """The camera's and the deck's motion now, for the exposure (motion blur)."""
+        state = self.drone_state()
+        deck = self.deck_state()
+        omega_w = state.rotation_wb @ state.angular_velocity_b
+        v_camera = state.velocity_w + np.cross(omega_w, state.rotation_wb @ self.t_bc)
+        return RelativeMotion(
+            v_camera,
+            omega_w,
+            deck.position_w,
+            deck.rotation_wp,
+            deck.velocity_w,
+            deck.angular_velocity_w,
+        )
+
     def camera_image(self, frame: CameraFrame) -> np.ndarray:
         """A full camera render with ``frame``'s detections drawn (both camera modes)."""
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         self._drone_visible(False)
         try:
             return self.camera.annotated_image(frame, *self.camera_pose_w())
@@ -336,6 +354,8 @@ class World:
 
         For calibration rigs, which segment the raw image themselves (both camera modes).
         """
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         self._drone_visible(False)
         try:
             return self.camera.render_image(*self.camera_pose_w())
@@ -345,6 +365,8 @@ class World:
     def capture(self) -> CameraFrame:
         t_wc, r_wc = self.camera_pose_w()
         deck = self.deck_state()
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         if self.config.camera.mode == "render":
             self._drone_visible(False)
             try:

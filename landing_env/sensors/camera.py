@@ -27,6 +27,8 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.types import CameraFrame, TagDetection
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sensors.camera_profiles import PROFILES, camera_profile
+from landing_env.sensors.camera_realism import Glare, ImageFormation, RelativeMotion
 from landing_env.sensors.planar_renderer import PlanarScene, UnsupportedScene
 
 #: Miss reasons a CameraFrame can carry.
@@ -111,6 +113,19 @@ class CameraConfig:
     #: reference, PyBullet's TinyRenderer (or EGL with ``use_egl``).  Without an attached
     #: scene (calibration rigs, bare clients) the camera renders with "bullet".
     renderer: Literal["planar", "bullet"] = "planar"
+    #: the camera class (:mod:`landing_env.sensors.camera_profiles`): "ideal" (the papers'
+    #: simulator: the rendered image as it is), "ov9281" (global shutter) or "imx219"
+    #: (rolling shutter); the others add exposure blur, noise, vignetting and response
+    profile: str = "ideal"
+    #: exposure time, seconds; None = the profile's
+    exposure_s: float | None = None
+    #: analog gain (1 = the sensor's 0 dB, where full well meets the ADC's top)
+    gain: float = 1.0
+    #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
+    #: None = no glare.  ``glare_strength``: the lobe's peak in white-surface units
+    sun_direction_w: tuple[float, float, float] | None = None
+    glare_strength: float = 4.0
+    glare_shininess: float = 300.0
     #: renderer lighting; specular off so the white quiet zone does not saturate in patches
     light_ambient: float = 0.6
     light_diffuse: float = 0.4
@@ -142,6 +157,18 @@ class CameraConfig:
         require_range("detector_threads", self.detector_threads, 1, 64)
         require_choice("render_region", self.render_region, ("tag", "full"))
         require_choice("renderer", self.renderer, ("planar", "bullet"))
+        require_choice("profile", self.profile, tuple(PROFILES))
+        if self.exposure_s is not None:
+            require_range("exposure_s", self.exposure_s, 0.0, 0.1)
+        require_range("gain", self.gain, 0.0, 64.0, low_inclusive=False)
+        if self.sun_direction_w is not None:
+            sun = np.asarray(self.sun_direction_w, dtype=float)
+            if sun.shape != (3,) or not np.all(np.isfinite(sun)) or np.linalg.norm(sun) == 0:
+                raise ConfigError(
+                    "sun_direction_w", f"{self.sun_direction_w!r}: need a nonzero (x, y, z)"
+                )
+        require_range("glare_strength", self.glare_strength, 0.0)
+        require_range("glare_shininess", self.glare_shininess, 1.0)
         require_range("render_margin_frac", self.render_margin_frac, 0.0)
         require_range("render_margin_px", self.render_margin_px, 0)
         for name in ("light_ambient", "light_diffuse", "light_specular"):
@@ -318,6 +345,24 @@ class CameraSensor:
         self._detector: AprilTagDetector | None = None
         if config.mode == "render":
             self._detector = self._make_detector()
+        #: exposure and sensor model (None for the ideal profile)
+        self.formation = self._make_formation(config)
+        #: the camera's and deck's motion for the next exposure (set by the world)
+        self.motion: RelativeMotion | None = None
+        #: noise for images made only to be looked at (rgb_array), so that rendering them
+        #: leaves the sensing streams as they are
+        self._display_rng = np.random.default_rng(0)
+
+    def _make_formation(self, c: CameraConfig) -> ImageFormation | None:
+        profile = camera_profile(c.profile)
+        if profile.ideal:
+            return None
+        glare = None
+        if c.sun_direction_w is not None:
+            glare = Glare(
+                np.asarray(c.sun_direction_w, dtype=float), c.glare_strength, c.glare_shininess
+            )
+        return ImageFormation(profile, self.intrinsics, c.exposure_s, c.gain, glare)
 
     def _make_detector(self) -> AprilTagDetector:
         c = self.config
@@ -422,21 +467,42 @@ class CameraSensor:
         return np.ascontiguousarray(np.reshape(rgba, (height, width, 4))[..., :3], dtype=np.uint8)
 
     def render_window(
-        self, t_wc: np.ndarray, r_wc: np.ndarray, window: tuple[int, int, int, int]
+        self,
+        t_wc: np.ndarray,
+        r_wc: np.ndarray,
+        window: tuple[int, int, int, int],
+        rng: np.random.Generator | None = None,
     ) -> np.ndarray:
-        """Render the image window (x0, y0, x1, y1) (exclusive ends) with lens distortion."""
-        if self._warp is None:
-            return self._render_canvas(t_wc, r_wc, window)
-        sx0, sy0, sx1, sy1 = self._warp.source_window(*window)
-        source = self._render_canvas(t_wc, r_wc, (sx0, sy0, sx1, sy1))
-        return self._warp.warp(source, (sx0, sy0), window)
+        """Render the image window (x0, y0, x1, y1) (exclusive ends) with lens distortion.
 
-    def render_image(self, t_wc: np.ndarray, r_wc: np.ndarray) -> np.ndarray:
+        With a profile other than ``ideal`` the window is exposed (blur, rolling shutter,
+        glare) and goes through the sensor model, drawing its noise from ``rng`` (None: a
+        stream kept for display images).
+        """
+        if self.formation is None:
+            if self._warp is None:
+                return self._render_canvas(t_wc, r_wc, window)
+            sx0, sy0, sx1, sy1 = self._warp.source_window(*window)
+            source = self._render_canvas(t_wc, r_wc, (sx0, sy0, sx1, sy1))
+            return self._warp.warp(source, (sx0, sy0), window)
+        source_window = window if self._warp is None else self._warp.source_window(*window)
+        exposed = self.formation.expose(
+            lambda w: self._render_canvas(t_wc, r_wc, w), t_wc, r_wc, source_window, self.motion
+        )
+        if self._warp is not None:
+            exposed = self._warp.warp(exposed, source_window[:2], window)
+        noise = self._display_rng if rng is None else rng
+        return self.formation.sensor(exposed, window[:2], noise)
+
+    def render_image(
+        self, t_wc: np.ndarray, r_wc: np.ndarray, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
         """Render the scene as this camera sees it: HxWx3 uint8 RGB, lens distortion applied.
 
         Works in both modes (e.g. for ``render_mode="rgb_array"``).
         """
-        return self.render_window(t_wc, r_wc, (0, 0, self.intrinsics.width, self.intrinsics.height))
+        k = self.intrinsics
+        return self.render_window(t_wc, r_wc, (0, 0, k.width, k.height), rng)
 
     def annotated_image(self, frame: CameraFrame, t_wc: np.ndarray, r_wc: np.ndarray) -> np.ndarray:
         """A full render from the camera pose with ``frame``'s detections drawn (both modes)."""
@@ -573,7 +639,7 @@ class CameraSensor:
         k = self.intrinsics
         # EGL re-creates its framebuffer whenever the size changes, so windows cost more there
         if self.config.render_region == "full" or self.active_renderer == "egl":
-            image = self.render_image(t_wc, r_wc)
+            image = self.render_image(t_wc, r_wc, self.rng)
             patch, origin = image, np.zeros(2)
         else:
             # only the pixels round the tag can make its detection; a render of that window
@@ -583,7 +649,7 @@ class CameraSensor:
             if window is None:
                 return CameraFrame(timestamp, (), image, view.miss_reason or MISS_OUT_OF_VIEW)
             x0, y0, x1, y1 = window
-            patch = self.render_window(t_wc, r_wc, window)
+            patch = self.render_window(t_wc, r_wc, window, self.rng)
             image[y0:y1, x0:x1] = patch
             origin = np.array([x0, y0], dtype=float)
         if self._detector is None:
@@ -652,7 +718,7 @@ class CameraSensor:
                     )
 
         if self.config.render_region == "full" or self.active_renderer == "egl":
-            image = self.render_image(t_wc, r_wc)
+            image = self.render_image(t_wc, r_wc, self.rng)
             keep(self._detector.detect(image), np.zeros(2))
         else:
             image = np.full((k.height, k.width, 3), 127, dtype=np.uint8)
@@ -663,7 +729,7 @@ class CameraSensor:
                 if window is None:
                     continue
                 x0, y0, x1, y1 = window
-                patch = self.render_window(t_wc, r_wc, window)
+                patch = self.render_window(t_wc, r_wc, window, self.rng)
                 image[y0:y1, x0:x1] = patch
                 keep(self._detector.detect(patch), np.array([x0, y0], dtype=float))
         order = {t.tag_id: i for i, t in enumerate(tags)}
