@@ -9,7 +9,9 @@ with a measurement (EMVA 1288) of the camera flown.
 - ``ideal``: the papers' simulator (no blur, noise, vignetting or response curve); the
   rendered image is the camera image.
 - ``ov9281``: OmniVision OV9281/OV9282-class global-shutter machine-vision camera (1280 x 800,
-  3 um pixels, RAW10; OmniVision product brief; Linux ``ovti,ov9282`` binding).  Exposure
+  3 um pixels, RAW10; OmniVision product brief; Linux ``ovti,ov9282`` binding), in colour
+  as its Bayer twin OV9782 (same array and shutter), since IHRCF's pad calibration needs
+  colour.  Exposure
   2 ms (a typical fixed machine-vision exposure outdoors; the sensor accepts 10 us to a frame
   time, Luxonis OV9282 docs); full well 8 500 e- and read noise 4 e- *assumed* (typical of
   3 um global-shutter pixels); a linear RAW10 output read as 8 bits (no ISP gamma); corner
@@ -77,7 +79,7 @@ PROFILES: dict[str, CameraProfile] = {
         white_fraction_of_full_well=0.6,
         corner_illumination=0.80,
         gamma=1.0,
-        mono=True,
+        mono=False,
     ),
     "imx219": CameraProfile(
         "imx219",
