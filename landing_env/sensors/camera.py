@@ -29,6 +29,7 @@ from estimation.types import CameraFrame, TagDetection
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera_profiles import PROFILES, camera_profile
 from landing_env.sensors.camera_realism import Glare, ImageFormation, RelativeMotion
+from landing_env.sensors.corner_noise import sigma_px
 from landing_env.sensors.planar_renderer import PlanarScene, UnsupportedScene
 
 #: Miss reasons a CameraFrame can carry.
@@ -81,6 +82,12 @@ class CameraConfig:
     far: float = 30.0
     #: Gaussian corner noise, pixels (project mode)
     pixel_noise_px: float = 0.0
+    #: project mode's corner noise: "constant" (``pixel_noise_px``) or "fitted": sigma from
+    #: the tag's side and blur in pixels with ``pixel_noise_fit`` = (base px, size px^3,
+    #: blur fraction, side^2 coefficient), fitted to render-and-detect under a camera profile
+    #: (:mod:`landing_env.sensors.corner_noise`; ``sensors: realistic`` sets both)
+    pixel_noise_model: Literal["constant", "fitted"] = "constant"
+    pixel_noise_fit: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     #: probability that a visible tag is dropped from a frame (both modes)
     dropout_prob: float = 0.0
     #: angle between the tag normal and the ray from the tag centre to the camera, degrees
@@ -145,6 +152,13 @@ class CameraConfig:
         if self.far <= self.near:
             raise ConfigError("far", f"{self.far} must be greater than near = {self.near}")
         require_range("pixel_noise_px", self.pixel_noise_px, 0.0)
+        require_choice("pixel_noise_model", self.pixel_noise_model, ("constant", "fitted"))
+        if len(self.pixel_noise_fit) != 4 or any(
+            not np.isfinite(v) or v < 0.0 for v in self.pixel_noise_fit
+        ):
+            raise ConfigError(
+                "pixel_noise_fit", f"{self.pixel_noise_fit!r}: need four finite values >= 0"
+            )
         require_range("dropout_prob", self.dropout_prob, 0.0, 1.0)
         require_range("max_view_angle_deg", self.max_view_angle_deg, 0.0, 90.0)
         require_range("min_tag_side_px", self.min_tag_side_px, 0.0)
@@ -565,6 +579,17 @@ class CameraSensor:
             reason = ""
         return ProjectedTag(corners_px, corners_c, view_angle, min_side, reason)
 
+    def corner_sigma_px(self, t_wc: np.ndarray, r_wc: np.ndarray, view: ProjectedTag) -> float:
+        """Project mode's corner noise (pixels per axis) for a visible tag."""
+        c = self.config
+        if c.pixel_noise_model == "constant":
+            return c.pixel_noise_px
+        blur = 0.0
+        if self.formation is not None and self.motion is not None:
+            centre = self.intrinsics.project(view.corners_c.mean(axis=0)[None], distort=False)[0]
+            blur = self.formation.blur_length_px(t_wc, r_wc, self.motion, tuple(centre))
+        return float(sigma_px(c.pixel_noise_fit, view.min_side_px, blur))
+
     # ------------------------------------------------------------------------------- capture
     def capture(
         self,
@@ -615,12 +640,13 @@ class CameraSensor:
     ) -> CameraFrame:
         # draw the random numbers every frame so the stream does not depend on visibility
         dropped = self.rng.random() < self.config.dropout_prob
-        noise = self.rng.normal(0.0, 1.0, size=(4, 2)) * self.config.pixel_noise_px
+        unit = self.rng.normal(0.0, 1.0, size=(4, 2))
         view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
         if view.miss_reason:
             return CameraFrame(timestamp, (), None, view.miss_reason)
         if dropped:
             return CameraFrame(timestamp, (), None, MISS_DROPOUT)
+        noise = unit * self.corner_sigma_px(t_wc, r_wc, view)
         detection = TagDetection(tag_id=tag_id, corners_px=view.corners_px + noise)
         return CameraFrame(timestamp, (detection,), None, "")
 
@@ -681,8 +707,9 @@ class CameraSensor:
         if self.config.mode == "project":
             detections = []
             for tag, view in zip(tags, views, strict=True):
-                noise = self.rng.normal(0.0, 1.0, size=(4, 2)) * self.config.pixel_noise_px
+                unit = self.rng.normal(0.0, 1.0, size=(4, 2))
                 if not view.miss_reason:
+                    noise = unit * self.corner_sigma_px(t_wc, r_wc, view)
                     detections.append(TagDetection(tag.tag_id, view.corners_px + noise))
             image = None
         else:
