@@ -10,7 +10,8 @@ hovers at the default start height (about 2 m), where `render` mode renders the 
 
 The second table is `render` mode by height: the drone pinned (``simulation.drone_fixed``)
 over the moving deck at 4, 2, 1, 0.6 and 0.3 m, one environment, for each renderer
-(``camera.renderer``: ``planar``, the default, and ``bullet``, PyBullet's TinyRenderer), with
+(``camera.renderer``: ``planar``, the default, and ``bullet``, PyBullet's TinyRenderer; and
+``planar+realistic``: ``sensors: realistic``, the OV9281-class camera's blur and noise), with
 the time of a step and of a full-frame ``render()`` (``rgb_array``), each as CPU time of this
 process (``time.process_time``, what the run costs when the machine is shared) and wall time.
 Only ``--heights`` runs that table alone.
@@ -78,8 +79,12 @@ def _parallel(mode: str, estimator: str, sim_seconds: float, n: int) -> tuple[in
 HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
 
 
-def _by_height(renderer: str, height: float, steps: int, renders: int) -> dict[str, float]:
-    """Per-step and per-render CPU and wall times (ms) with the drone pinned at a height."""
+def _by_height(case: str, height: float, steps: int, renders: int) -> dict[str, float]:
+    """Per-step and per-render CPU and wall times (ms) with the drone pinned at a height.
+
+    ``case`` is a renderer, optionally with ``+realistic`` (``sensors: realistic``).
+    """
+    renderer, _, extra = case.partition("+")
     overrides = {
         "camera.mode": "render",
         "camera.renderer": renderer,
@@ -90,6 +95,8 @@ def _by_height(renderer: str, height: float, steps: int, renders: int) -> dict[s
         "start.max_offset_m": 0.0,
         "start.max_yaw_deg": 0.0,
     }
+    if extra:
+        overrides["sensors"] = extra
     env = gym.make("DeckLanding-v0", render_mode="rgb_array", overrides=overrides)
     env.reset(seed=0)
     env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
@@ -145,7 +152,11 @@ def main() -> None:
     parser.add_argument("--render-seconds", type=float, default=20.0)
     parser.add_argument("--heights", action="store_true", help="only the table by height")
     parser.add_argument("--height-steps", type=int, default=100, help="steps per height")
-    parser.add_argument("--renderers", default="planar,bullet", help="comma-separated")
+    parser.add_argument(
+        "--renderers",
+        default="planar,planar+realistic,bullet",
+        help="comma-separated renderers (planar, bullet), +realistic for sensors: realistic",
+    )
     args = parser.parse_args()
     console = Console(width=140)
     height_table(console, args.height_steps, 10, args.renderers.split(","))
