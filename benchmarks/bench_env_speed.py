@@ -7,6 +7,14 @@ environments in parallel (one process each, as SubprocVecEnv runs them).  The de
 (sum of sinusoids), the four ToF rays are cast and the IMU is sampled at 240 Hz in every case;
 `truth` rows measure the simulation alone, `ihrcf` rows add the default estimator.  The drone
 hovers at the default start height (about 2 m), where `render` mode renders the tag's window.
+
+The second table is `render` mode by height: the drone pinned (``simulation.drone_fixed``)
+over the moving deck at 4, 2, 1, 0.6 and 0.3 m, one environment, for each renderer
+(``camera.renderer``: ``planar``, the default, and ``bullet``, PyBullet's TinyRenderer; and
+``planar+realistic``: ``sensors: realistic``, the OV9281-class camera's blur and noise), with
+the time of a step and of a full-frame ``render()`` (``rgb_array``), each as CPU time of this
+process (``time.process_time``, what the run costs when the machine is shared) and wall time.
+Only ``--heights`` runs that table alone.
 """
 
 from __future__ import annotations
@@ -68,12 +76,92 @@ def _parallel(mode: str, estimator: str, sim_seconds: float, n: int) -> tuple[in
     return steps, wall, sim
 
 
+HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
+
+
+def _by_height(case: str, height: float, steps: int, renders: int) -> dict[str, float]:
+    """Per-step and per-render CPU and wall times (ms) with the drone pinned at a height.
+
+    ``case`` is a renderer, optionally with ``+realistic`` (``sensors: realistic``).
+    """
+    renderer, _, extra = case.partition("+")
+    overrides = {
+        "camera.mode": "render",
+        "camera.renderer": renderer,
+        "estimation.observed": "ihrcf",
+        "simulation.drone_fixed": True,
+        "simulation.max_episode_s": 1e4,
+        "start.height_m": (height, height),
+        "start.max_offset_m": 0.0,
+        "start.max_yaw_deg": 0.0,
+    }
+    if extra:
+        overrides["sensors"] = extra
+    env = gym.make("DeckLanding-v0", render_mode="rgb_array", overrides=overrides)
+    env.reset(seed=0)
+    env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
+    action = np.zeros(4, dtype=np.float32)
+    env.step(action)
+    cpu, wall = time.process_time(), time.perf_counter()
+    for _ in range(steps):
+        env.step(action)
+    step_cpu, step_wall = (time.process_time() - cpu) / steps, (time.perf_counter() - wall) / steps
+    cpu, wall = time.process_time(), time.perf_counter()
+    for _ in range(renders):
+        env.render()
+    render_cpu = (time.process_time() - cpu) / renders
+    render_wall = (time.perf_counter() - wall) / renders
+    env.close()
+    return {
+        "step_cpu_ms": 1e3 * step_cpu,
+        "step_wall_ms": 1e3 * step_wall,
+        "rtf_cpu": env_dt / step_cpu,
+        "rtf_wall": env_dt / step_wall,
+        "render_cpu_ms": 1e3 * render_cpu,
+        "render_wall_ms": 1e3 * render_wall,
+    }
+
+
+def height_table(console: Console, steps: int, renders: int, renderers: list[str]) -> None:
+    table = Table(title="render mode by height (drone pinned, one env, 20 Hz steps)")
+    for column in (
+        "renderer",
+        "height m",
+        "step ms cpu / wall",
+        "real-time factor cpu / wall",
+        "rgb_array render ms cpu / wall",
+    ):
+        table.add_column(column, justify="right")
+    for renderer in renderers:
+        for height in HEIGHTS_M:
+            r = _by_height(renderer, height, steps, renders)
+            table.add_row(
+                renderer,
+                f"{height:g}",
+                f"{r['step_cpu_ms']:.1f} / {r['step_wall_ms']:.1f}",
+                f"{r['rtf_cpu']:.1f}x / {r['rtf_wall']:.1f}x",
+                f"{r['render_cpu_ms']:.1f} / {r['render_wall_ms']:.1f}",
+            )
+            console.print(f"{renderer} {height} m: {r}")
+    console.print(table)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per env")
     parser.add_argument("--render-seconds", type=float, default=20.0)
+    parser.add_argument("--heights", action="store_true", help="only the table by height")
+    parser.add_argument("--height-steps", type=int, default=100, help="steps per height")
+    parser.add_argument(
+        "--renderers",
+        default="planar,planar+realistic,bullet",
+        help="comma-separated renderers (planar, bullet), +realistic for sensors: realistic",
+    )
     args = parser.parse_args()
-    console = Console()
+    console = Console(width=140)
+    height_table(console, args.height_steps, 10, args.renderers.split(","))
+    if args.heights:
+        return
     table = Table(title="DeckLanding-v0 speed (240 Hz physics, 20 Hz steps)")
     for column in ("camera mode", "observed estimator", "envs", "steps/s", "real-time factor"):
         table.add_column(column, justify="right")

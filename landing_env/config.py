@@ -7,6 +7,7 @@ keys and bad values raise :class:`~landing_env.errors.ConfigError` naming the do
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,11 @@ from landing_env.vision_link import VisionLinkConfig
 #: Scenario and training configs shipped with the project.
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 
+#: ``sensors``: each name is a preset in ``configs/sensors/`` laid over the scenario
+SENSOR_SETS = ("ideal", "realistic")
+#: the environment variable ``deck-landing --sensors`` sets (worker processes inherit it);
+#: it is the default of the ``sensors`` key
+SENSORS_ENV = "DECK_LANDING_SENSORS"
 
 #: Where the estimators' calibrations come from: a calibration file or the exact model.
 CALIBRATION_SOURCES = ("file", "exact")
@@ -256,6 +262,10 @@ class DeckLandingConfig:
     """Everything DeckLanding-v0 needs; each section is documented by its dataclass."""
 
     seed: int | None = None
+    #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
+    #: noise, lens distortion, VL53L1X ToF noise and the calibrations made for them): the
+    #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
+    sensors: str = "ideal"
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     action: ActionConfig = field(default_factory=ActionConfig)
     start: StartConfig = field(default_factory=StartConfig)
@@ -297,6 +307,7 @@ class DeckLandingConfig:
                 "'ship' moves a full-scale helideck (metres of heave) and needs deck_mount: "
                 "ship; the Stewart bench takes static, sinusoids, sea_state or csv",
             )
+        require_choice("sensors", self.sensors, SENSOR_SETS)
 
 
 def available_configs() -> list[str]:
@@ -337,7 +348,20 @@ def load_config(
     else:
         base = None
         data = _read_yaml(config) if config is not None else {}
-    data = deep_merge(data, dotted_to_nested(sections))
+    user = dotted_to_nested(sections)
     if overrides:
-        data = deep_merge(data, dotted_to_nested(overrides))
-    return build_dataclass(DeckLandingConfig, data, base=base, check=check_value)
+        user = deep_merge(user, dotted_to_nested(overrides))
+    sensors = user.get("sensors", data.get("sensors"))
+    if sensors is None and os.environ.get(SENSORS_ENV):
+        sensors = os.environ[SENSORS_ENV]
+        user = deep_merge(user, {"sensors": sensors})
+    if sensors is not None:
+        data = deep_merge(data, sensor_preset(sensors))
+    return build_dataclass(DeckLandingConfig, deep_merge(data, user), base=base, check=check_value)
+
+
+def sensor_preset(name: str) -> dict[str, Any]:
+    """The settings ``sensors: name`` stands for (``configs/sensors/<name>.yaml``)."""
+    require_choice("sensors", name, SENSOR_SETS)
+    with (CONFIG_DIR / "sensors" / f"{name}.yaml").open() as handle:
+        return {"sensors": name, **(yaml.safe_load(handle) or {})}

@@ -23,10 +23,12 @@ from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
 from landing_env.physics.wind import WindModel
-from landing_env.scene.deck import create_deck_body
+from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sea.deck_mount import ShipDeck
 from landing_env.sensors.camera import CameraSensor, TagPlacement
+from landing_env.sensors.camera_realism import RelativeMotion
 from landing_env.sensors.imu import ImuModel
+from landing_env.sensors.planar_renderer import planar_scene_or_none
 from landing_env.sensors.rangefinder import Rangefinder
 from landing_env.sensors.tof import TofArray
 from landing_env.stewart.motion import CsvMotion, make_motion_source
@@ -151,6 +153,17 @@ class World:
         self._deck_home_floats = (hx, hy, hz)
         self._airwake = config.wind.enabled and config.wind.airwake_radius_m > 0.0
         self.camera = CameraSensor(c, config.camera, rng)
+        if config.camera.renderer == "planar":
+            scene = planar_scene_or_none(
+                c._client,
+                config.camera,
+                self.deck_id,
+                config.deck,
+                make_deck_texture(config.deck),
+                hidden_bodies=(self.drone.body_id,),
+            )
+            if scene is not None:
+                self.camera.attach_scene(scene)
         self._landmarks = config.deck.layout.landmarks
         self.tof = TofArray(c, config.tof, rng, self.t_bc)
         self.rangefinder = Rangefinder(c, config.rangefinder, rng)
@@ -385,8 +398,25 @@ class World:
                 self.drone.body_id, link, rgbaColor=[*colour[:3], alpha * colour[3]]
             )
 
+    def camera_motion(self) -> RelativeMotion:
+        """The camera's and the deck's motion now, for the exposure (motion blur)."""
+        state = self.drone_state()
+        deck = self.deck_state()
+        omega_w = state.rotation_wb @ state.angular_velocity_b
+        v_camera = state.velocity_w + np.cross(omega_w, state.rotation_wb @ self.t_bc)
+        return RelativeMotion(
+            v_camera,
+            omega_w,
+            deck.position_w,
+            deck.rotation_wp,
+            deck.velocity_w,
+            deck.angular_velocity_w,
+        )
+
     def camera_image(self, frame: CameraFrame) -> np.ndarray:
         """A full camera render with ``frame``'s detections drawn (both camera modes)."""
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         self._drone_visible(False)
         try:
             return self.camera.annotated_image(frame, *self.camera_pose_w())
@@ -398,6 +428,8 @@ class World:
 
         For calibration rigs, which segment the raw image themselves (both camera modes).
         """
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         self._drone_visible(False)
         try:
             return self.camera.render_image(*self.camera_pose_w())
@@ -407,6 +439,8 @@ class World:
     def capture(self) -> CameraFrame:
         t_wc, r_wc = self.camera_pose_w()
         deck = self.deck_state()
+        if self.camera.formation is not None:
+            self.camera.motion = self.camera_motion()
         if self.config.camera.mode == "render":
             self._drone_visible(False)
             try:

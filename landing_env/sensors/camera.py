@@ -27,6 +27,10 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.types import CameraFrame, TagDetection
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sensors.camera_profiles import PROFILES, camera_profile
+from landing_env.sensors.camera_realism import Glare, ImageFormation, RelativeMotion
+from landing_env.sensors.corner_noise import sigma_px
+from landing_env.sensors.planar_renderer import PlanarScene, UnsupportedScene
 
 #: Miss reasons a CameraFrame can carry.
 MISS_BEHIND = "behind_camera"
@@ -78,6 +82,12 @@ class CameraConfig:
     far: float = 30.0
     #: Gaussian corner noise, pixels (project mode)
     pixel_noise_px: float = 0.0
+    #: project mode's corner noise: "constant" (``pixel_noise_px``) or "fitted": sigma from
+    #: the tag's side and blur in pixels with ``pixel_noise_fit`` = (base px, size px^3,
+    #: blur fraction, side^2 coefficient), fitted to render-and-detect under a camera profile
+    #: (:mod:`landing_env.sensors.corner_noise`; ``sensors: realistic`` sets both)
+    pixel_noise_model: Literal["constant", "fitted"] = "constant"
+    pixel_noise_fit: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     #: probability that a visible tag is dropped from a frame (both modes)
     dropout_prob: float = 0.0
     #: angle between the tag normal and the ray from the tag centre to the camera, degrees
@@ -104,6 +114,25 @@ class CameraConfig:
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
     #: and it only draws bodies created after it is loaded: create the camera first
     use_egl: bool = False
+    #: "planar" draws the scene a downward camera sees with OpenCV homographies and polygons
+    #: (:mod:`landing_env.sensors.planar_renderer`: about 1-3 ms a frame at any height) when
+    #: the world has attached its scene (:meth:`CameraSensor.attach_scene`); "bullet" is the
+    #: reference, PyBullet's TinyRenderer (or EGL with ``use_egl``).  Without an attached
+    #: scene (calibration rigs, bare clients) the camera renders with "bullet".
+    renderer: Literal["planar", "bullet"] = "planar"
+    #: the camera class (:mod:`landing_env.sensors.camera_profiles`): "ideal" (the papers'
+    #: simulator: the rendered image as it is), "ov9281" (global shutter) or "imx219"
+    #: (rolling shutter); the others add exposure blur, noise, vignetting and response
+    profile: str = "ideal"
+    #: exposure time, seconds; None = the profile's
+    exposure_s: float | None = None
+    #: analog gain (1 = the sensor's 0 dB, where full well meets the ADC's top)
+    gain: float = 1.0
+    #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
+    #: None = no glare.  ``glare_strength``: the lobe's peak in white-surface units
+    sun_direction_w: tuple[float, float, float] | None = None
+    glare_strength: float = 4.0
+    glare_shininess: float = 300.0
     #: renderer lighting; specular off so the white quiet zone does not saturate in patches
     light_ambient: float = 0.6
     light_diffuse: float = 0.4
@@ -123,6 +152,13 @@ class CameraConfig:
         if self.far <= self.near:
             raise ConfigError("far", f"{self.far} must be greater than near = {self.near}")
         require_range("pixel_noise_px", self.pixel_noise_px, 0.0)
+        require_choice("pixel_noise_model", self.pixel_noise_model, ("constant", "fitted"))
+        if len(self.pixel_noise_fit) != 4 or any(
+            not np.isfinite(v) or v < 0.0 for v in self.pixel_noise_fit
+        ):
+            raise ConfigError(
+                "pixel_noise_fit", f"{self.pixel_noise_fit!r}: need four finite values >= 0"
+            )
         require_range("dropout_prob", self.dropout_prob, 0.0, 1.0)
         require_range("max_view_angle_deg", self.max_view_angle_deg, 0.0, 90.0)
         require_range("min_tag_side_px", self.min_tag_side_px, 0.0)
@@ -134,6 +170,19 @@ class CameraConfig:
         require_range("decode_sharpening", self.decode_sharpening, 0.0)
         require_range("detector_threads", self.detector_threads, 1, 64)
         require_choice("render_region", self.render_region, ("tag", "full"))
+        require_choice("renderer", self.renderer, ("planar", "bullet"))
+        require_choice("profile", self.profile, tuple(PROFILES))
+        if self.exposure_s is not None:
+            require_range("exposure_s", self.exposure_s, 0.0, 0.1)
+        require_range("gain", self.gain, 0.0, 64.0, low_inclusive=False)
+        if self.sun_direction_w is not None:
+            sun = np.asarray(self.sun_direction_w, dtype=float)
+            if sun.shape != (3,) or not np.all(np.isfinite(sun)) or np.linalg.norm(sun) == 0:
+                raise ConfigError(
+                    "sun_direction_w", f"{self.sun_direction_w!r}: need a nonzero (x, y, z)"
+                )
+        require_range("glare_strength", self.glare_strength, 0.0)
+        require_range("glare_shininess", self.glare_shininess, 1.0)
         require_range("render_margin_frac", self.render_margin_frac, 0.0)
         require_range("render_margin_px", self.render_margin_px, 0)
         for name in ("light_ambient", "light_diffuse", "light_specular"):
@@ -303,12 +352,31 @@ class CameraSensor:
         self._max_radius = _max_monotonic_radius(self.intrinsics.dist_coeffs)
         self._warp = _DistortionWarp(self.intrinsics) if self.intrinsics.has_distortion else None
         self._egl_plugin: int | None = None
+        self._planar: PlanarScene | None = None
         self.renderer = "tiny"
         if config.use_egl:
             self._load_egl()
         self._detector: AprilTagDetector | None = None
         if config.mode == "render":
             self._detector = self._make_detector()
+        #: exposure and sensor model (None for the ideal profile)
+        self.formation = self._make_formation(config)
+        #: the camera's and deck's motion for the next exposure (set by the world)
+        self.motion: RelativeMotion | None = None
+        #: noise for images made only to be looked at (rgb_array), so that rendering them
+        #: leaves the sensing streams as they are
+        self._display_rng = np.random.default_rng(0)
+
+    def _make_formation(self, c: CameraConfig) -> ImageFormation | None:
+        profile = camera_profile(c.profile)
+        if profile.ideal:
+            return None
+        glare = None
+        if c.sun_direction_w is not None:
+            glare = Glare(
+                np.asarray(c.sun_direction_w, dtype=float), c.glare_strength, c.glare_shininess
+            )
+        return ImageFormation(profile, self.intrinsics, c.exposure_s, c.gain, glare)
 
     def _make_detector(self) -> AprilTagDetector:
         c = self.config
@@ -339,6 +407,16 @@ class CameraSensor:
         self._egl_plugin = plugin
         self.renderer = "egl"
 
+    def attach_scene(self, scene: PlanarScene) -> None:
+        """Let the planar renderer draw this client's scene (when ``renderer`` is "planar")."""
+        if self.config.renderer == "planar":
+            self._planar = scene
+
+    @property
+    def active_renderer(self) -> str:
+        """What draws the images: "planar", "tiny" (TinyRenderer) or "egl"."""
+        return "planar" if self._planar is not None else self.renderer
+
     def close(self) -> None:
         """Free the detector and unload the EGL plugin if this sensor loaded it."""
         if self._detector is not None:
@@ -364,6 +442,16 @@ class CameraSensor:
         k = self.intrinsics
         x0, y0, x1, y1 = window
         width, height = x1 - x0, y1 - y0
+        if self._planar is not None:
+            try:
+                self._planar.refresh_if_changed()
+                k_window = k.matrix - np.array([[0, 0, x0], [0, 0, y0], [0, 0, 0]], dtype=float)
+                return self._planar.render(
+                    t_wc, r_wc, k_window, width, height, self.config.near, self.config.far
+                )
+            except UnsupportedScene as exc:
+                warnings.warn(f"planar renderer: {exc}; using the bullet renderer", stacklevel=2)
+                self._planar = None
         # compensate the renderer's sampling offset so content lands where the model says
         shift_u, shift_v = RENDERER_SHIFT_PX[self.renderer]
         projection = opengl_projection(
@@ -393,21 +481,42 @@ class CameraSensor:
         return np.ascontiguousarray(np.reshape(rgba, (height, width, 4))[..., :3], dtype=np.uint8)
 
     def render_window(
-        self, t_wc: np.ndarray, r_wc: np.ndarray, window: tuple[int, int, int, int]
+        self,
+        t_wc: np.ndarray,
+        r_wc: np.ndarray,
+        window: tuple[int, int, int, int],
+        rng: np.random.Generator | None = None,
     ) -> np.ndarray:
-        """Render the image window (x0, y0, x1, y1) (exclusive ends) with lens distortion."""
-        if self._warp is None:
-            return self._render_canvas(t_wc, r_wc, window)
-        sx0, sy0, sx1, sy1 = self._warp.source_window(*window)
-        source = self._render_canvas(t_wc, r_wc, (sx0, sy0, sx1, sy1))
-        return self._warp.warp(source, (sx0, sy0), window)
+        """Render the image window (x0, y0, x1, y1) (exclusive ends) with lens distortion.
 
-    def render_image(self, t_wc: np.ndarray, r_wc: np.ndarray) -> np.ndarray:
+        With a profile other than ``ideal`` the window is exposed (blur, rolling shutter,
+        glare) and goes through the sensor model, drawing its noise from ``rng`` (None: a
+        stream kept for display images).
+        """
+        if self.formation is None:
+            if self._warp is None:
+                return self._render_canvas(t_wc, r_wc, window)
+            sx0, sy0, sx1, sy1 = self._warp.source_window(*window)
+            source = self._render_canvas(t_wc, r_wc, (sx0, sy0, sx1, sy1))
+            return self._warp.warp(source, (sx0, sy0), window)
+        source_window = window if self._warp is None else self._warp.source_window(*window)
+        exposed = self.formation.expose(
+            lambda w: self._render_canvas(t_wc, r_wc, w), t_wc, r_wc, source_window, self.motion
+        )
+        if self._warp is not None:
+            exposed = self._warp.warp(exposed, source_window[:2], window)
+        noise = self._display_rng if rng is None else rng
+        return self.formation.sensor(exposed, window[:2], noise)
+
+    def render_image(
+        self, t_wc: np.ndarray, r_wc: np.ndarray, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
         """Render the scene as this camera sees it: HxWx3 uint8 RGB, lens distortion applied.
 
         Works in both modes (e.g. for ``render_mode="rgb_array"``).
         """
-        return self.render_window(t_wc, r_wc, (0, 0, self.intrinsics.width, self.intrinsics.height))
+        k = self.intrinsics
+        return self.render_window(t_wc, r_wc, (0, 0, k.width, k.height), rng)
 
     def annotated_image(self, frame: CameraFrame, t_wc: np.ndarray, r_wc: np.ndarray) -> np.ndarray:
         """A full render from the camera pose with ``frame``'s detections drawn (both modes)."""
@@ -472,6 +581,17 @@ class CameraSensor:
             reason = ""
         return ProjectedTag(corners_px, corners_c, view_angle, min_side, reason)
 
+    def corner_sigma_px(self, t_wc: np.ndarray, r_wc: np.ndarray, view: ProjectedTag) -> float:
+        """Project mode's corner noise (pixels per axis) for a visible tag."""
+        c = self.config
+        if c.pixel_noise_model == "constant":
+            return c.pixel_noise_px
+        blur = 0.0
+        if self.formation is not None and self.motion is not None:
+            centre = self.intrinsics.project(view.corners_c.mean(axis=0)[None], distort=False)[0]
+            blur = self.formation.blur_length_px(t_wc, r_wc, self.motion, tuple(centre))
+        return float(sigma_px(c.pixel_noise_fit, view.min_side_px, blur))
+
     # ------------------------------------------------------------------------------- capture
     def capture(
         self,
@@ -522,12 +642,13 @@ class CameraSensor:
     ) -> CameraFrame:
         # draw the random numbers every frame so the stream does not depend on visibility
         dropped = self.rng.random() < self.config.dropout_prob
-        noise = self.rng.normal(0.0, 1.0, size=(4, 2)) * self.config.pixel_noise_px
+        unit = self.rng.normal(0.0, 1.0, size=(4, 2))
         view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
         if view.miss_reason:
             return CameraFrame(timestamp, (), None, view.miss_reason)
         if dropped:
             return CameraFrame(timestamp, (), None, MISS_DROPOUT)
+        noise = unit * self.corner_sigma_px(t_wc, r_wc, view)
         detection = TagDetection(tag_id=tag_id, corners_px=view.corners_px + noise)
         return CameraFrame(timestamp, (detection,), None, "")
 
@@ -545,8 +666,8 @@ class CameraSensor:
         view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
         k = self.intrinsics
         # EGL re-creates its framebuffer whenever the size changes, so windows cost more there
-        if self.config.render_region == "full" or self.renderer == "egl":
-            image = self.render_image(t_wc, r_wc)
+        if self.config.render_region == "full" or self.active_renderer == "egl":
+            image = self.render_image(t_wc, r_wc, self.rng)
             patch, origin = image, np.zeros(2)
         else:
             # only the pixels round the tag can make its detection; a render of that window
@@ -556,7 +677,7 @@ class CameraSensor:
             if window is None:
                 return CameraFrame(timestamp, (), image, view.miss_reason or MISS_OUT_OF_VIEW)
             x0, y0, x1, y1 = window
-            patch = self.render_window(t_wc, r_wc, window)
+            patch = self.render_window(t_wc, r_wc, window, self.rng)
             image[y0:y1, x0:x1] = patch
             origin = np.array([x0, y0], dtype=float)
         if self._detector is None:
@@ -588,8 +709,9 @@ class CameraSensor:
         if self.config.mode == "project":
             detections = []
             for tag, view in zip(tags, views, strict=True):
-                noise = self.rng.normal(0.0, 1.0, size=(4, 2)) * self.config.pixel_noise_px
+                unit = self.rng.normal(0.0, 1.0, size=(4, 2))
                 if not view.miss_reason:
+                    noise = unit * self.corner_sigma_px(t_wc, r_wc, view)
                     detections.append(TagDetection(tag.tag_id, view.corners_px + noise))
             image = None
         else:
@@ -624,8 +746,8 @@ class CameraSensor:
                         d.tag_id, d.corners_px + origin, d.decision_margin, d.hamming
                     )
 
-        if self.config.render_region == "full" or self.renderer == "egl":
-            image = self.render_image(t_wc, r_wc)
+        if self.config.render_region == "full" or self.active_renderer == "egl":
+            image = self.render_image(t_wc, r_wc, self.rng)
             keep(self._detector.detect(image), np.zeros(2))
         else:
             image = np.full((k.height, k.width, 3), 127, dtype=np.uint8)
@@ -636,7 +758,7 @@ class CameraSensor:
                 if window is None:
                     continue
                 x0, y0, x1, y1 = window
-                patch = self.render_window(t_wc, r_wc, window)
+                patch = self.render_window(t_wc, r_wc, window, self.rng)
                 image[y0:y1, x0:x1] = patch
                 keep(self._detector.detect(patch), np.array([x0, y0], dtype=float))
         order = {t.tag_id: i for i, t in enumerate(tags)}
