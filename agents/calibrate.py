@@ -28,6 +28,7 @@ from rich.console import Console
 from rich.table import Table
 from tqdm import tqdm
 
+from agents.cli_args import positive_int
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
@@ -280,9 +281,14 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--config", default="default", help="a config name in configs/ or a path")
     parser.add_argument("--out", default="results/calibration", help="output directory")
-    parser.add_argument("--views", type=int, default=20, help="chessboard poses (CRHF: 20)")
     parser.add_argument(
-        "--stages", type=int, default=120, help="climb stages of the pad rig (papers: ~120)"
+        "--views", type=positive_int, default=20, help="chessboard poses (CRHF: 20)"
+    )
+    parser.add_argument(
+        "--stages",
+        type=positive_int,
+        default=120,
+        help="climb stages of the pad rig (papers: ~120)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seeds the board poses and noise")
     parser.add_argument(

@@ -31,6 +31,7 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
+from agents.cli_args import positive_int
 from agents.policies import shipped_timing_model
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -397,9 +398,11 @@ def add_train_parser(subparsers: Any) -> None:
     )
     timing.add_argument("--config", default="configs/train/timing_ppo.yaml", help="training YAML")
     timing.add_argument("--algo", choices=ALGOS, default=None, help="default: the YAML's")
-    timing.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps")
+    timing.add_argument("--timesteps", type=positive_int, default=None, help="default: n_timesteps")
     timing.add_argument("--seed", type=int, default=None, help="default: the YAML's")
-    timing.add_argument("--n-envs", type=int, default=None, help="default: the YAML's n_envs")
+    timing.add_argument(
+        "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"
+    )
     timing.add_argument("--out", default=None, help="output directory (default: the YAML's)")
     timing.add_argument("--no-progress", action="store_true", help="no progress bar")
     timing.add_argument(

@@ -5,6 +5,11 @@ Importing the package registers ``DeckLanding-v0`` with Gymnasium.
 
 from gymnasium.envs.registration import register, registry
 
+from landing_env._quiet import quiet_stdout
+
+with quiet_stdout():  # PyBullet prints its build time from C on import
+    import pybullet  # noqa: F401
+
 if "DeckLanding-v0" not in registry:
     register(
         id="DeckLanding-v0",

@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluation import _guarded, _parse_overrides
+from agents.cli_args import parse_overrides as _parse_overrides
+from agents.cli_args import positive_int
 from agents.evaluation.landing import HELD_OUT_SEED, wilson_interval
 from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
@@ -481,7 +482,7 @@ def add_approach_parser(evaluate_group: Any) -> None:
     approach.add_argument(
         "--scenario", default="high-approach", help="a config in configs/ or a path"
     )
-    approach.add_argument("--episodes", type=int, default=20)
+    approach.add_argument("--episodes", type=positive_int, default=20)
     approach.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first seed")
     approach.add_argument(
         "--routine-estimator",
@@ -495,8 +496,8 @@ def add_approach_parser(evaluate_group: Any) -> None:
         help="svgs-routine's commit: the shipped timing policy (where installed) or the "
         "quiescent heuristic",
     )
-    approach.add_argument("--workers", type=int, default=2, help="parallel processes")
+    approach.add_argument("--workers", type=positive_int, default=2, help="parallel processes")
     approach.add_argument("--out", default="results/approach", help="output directory")
     approach.add_argument("--no-progress", action="store_true")
     approach.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
-    approach.set_defaults(func=_guarded(_evaluate_approach))
+    approach.set_defaults(func=_evaluate_approach)

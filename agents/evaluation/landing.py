@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluation import _parse_overrides
+from agents.cli_args import parse_overrides as _parse_overrides
+from agents.cli_args import positive_int
 from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
 
@@ -504,12 +505,12 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="one or more policies, or all",
     )
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
-    landing.add_argument("--episodes", type=int, default=100)
+    landing.add_argument("--episodes", type=positive_int, default=100)
     landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
     landing.add_argument("--estimator", choices=ESTIMATORS, default="ihrcf")
     landing.add_argument("--mode", choices=("project", "render"), default="project")
     landing.add_argument("--model", default=None, help="a trained timing model (timing-ppo)")
-    landing.add_argument("--workers", type=int, default=2, help="parallel processes")
+    landing.add_argument("--workers", type=positive_int, default=2, help="parallel processes")
     landing.add_argument("--out", default="results/landing", help="output directory")
     landing.add_argument("--no-progress", action="store_true")
     landing.add_argument(
@@ -520,22 +521,3 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="dotted config overrides applied last, e.g. tof.noise=vl53l1x",
     )
     landing.set_defaults(func=_evaluate_landing)
-
-
-def _subparser_group(parser: argparse.ArgumentParser) -> Any:
-    for action in parser._actions:  # argparse keeps sub-command groups only here
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    return None
-
-
-def add_landing_commands(subparsers: Any) -> None:
-    """``train timing`` and ``evaluate landing`` (added to an existing ``evaluate`` group)."""
-    from agents.training import add_train_parser
-
-    add_train_parser(subparsers)
-    evaluate = subparsers.choices.get("evaluate")
-    if evaluate is None:
-        evaluate = subparsers.add_parser("evaluate", help="evaluations")
-        evaluate.add_subparsers(dest="evaluation", required=True)
-    add_landing_parser(_subparser_group(evaluate))

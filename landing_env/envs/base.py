@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -13,6 +14,7 @@ from gymnasium import spaces
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 from landing_env.config import DeckLandingConfig, load_config
+from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
@@ -57,6 +59,14 @@ class DeckLandingBaseEnv(gym.Env):
             allowed = ", ".join(self.metadata["render_modes"])
             raise ValueError(f"render_mode: {render_mode!r} is not allowed; choose {allowed}")
         self.config = load_config(config, overrides, **sections)
+        if self.config.simulation.drone_fixed:
+            warnings.warn(
+                "simulation.drone_fixed is true: the drone is pinned at its start pose (the "
+                "estimators' bench), the action is ignored and this environment cannot land; "
+                "set simulation.drone_fixed: false to fly (the registered scenario ids do)",
+                PinnedDroneWarning,
+                stacklevel=2,
+            )
         self._config_seed = self.config.seed
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.config.simulation.env_hz}
