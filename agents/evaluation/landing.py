@@ -29,6 +29,11 @@ from agents.cli_args import parse_overrides as _parse_overrides
 from agents.cli_args import positive_int
 from agents.evaluation.parallel import run_seed_chunks
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
+    FLYING_OVERRIDES,
+    START_OVERRIDES,
+    landing_overrides,
+)
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -50,22 +55,6 @@ SCENARIOS: dict[str, Scenario] = {
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
 }
 
-#: what turns a bench config into a landing scenario
-FLYING_OVERRIDES: dict[str, Any] = {
-    "simulation.drone_fixed": False,
-    "simulation.max_episode_s": 40.0,
-    "estimation.compare": [],
-}
-#: starts: the timing task starts at its hold height; align-descend far and off the deck
-START_OVERRIDES: dict[str, dict[str, Any]] = {
-    "DeckLandingTiming-v0": {"start.max_offset_m": 0.1, "start.max_yaw_deg": 10.0},
-    "DeckLanding-v0": {
-        "start.height_m": [1.5, 4.0],
-        "start.max_offset_m": 1.0,
-        "start.max_yaw_deg": 30.0,
-    },
-}
-
 
 def scenario_overrides(
     scenario: str, env_id: str, estimator: str = "ihrcf", camera_mode: str = "project"
@@ -74,12 +63,7 @@ def scenario_overrides(
     require_choice("scenario", scenario, tuple(SCENARIOS))
     require_choice("estimator", estimator, ESTIMATORS)
     require_choice("mode", camera_mode, ("project", "render"))
-    return {
-        **FLYING_OVERRIDES,
-        **START_OVERRIDES[env_id],
-        "estimation.observed": estimator,
-        "camera.mode": camera_mode,
-    }
+    return landing_overrides(env_id, estimator, camera_mode)
 
 
 # ------------------------------------------------------------------------------ episodes
