@@ -290,6 +290,11 @@ def _read_yaml(name_or_path: str | Path) -> dict[str, Any]:
     return data
 
 
+def read_config_data(name_or_path: str | Path) -> dict[str, Any]:
+    """A config's YAML data with its ``extends`` chain merged (no validation)."""
+    return _read_yaml(name_or_path)
+
+
 def load_config(
     config: str | Path | DeckLandingConfig | None = "default",
     overrides: dict[str, Any] | None = None,

@@ -57,9 +57,14 @@ class ScenarioId:
     description: str
     overrides: dict[str, Any] = field(default_factory=dict)
 
-    def kwargs(self) -> dict[str, Any]:
-        """The keyword arguments of the task's constructor."""
-        return {"config": self.config, "overrides": dict(self.overrides)}
+    def make(self, overrides: dict[str, Any] | None = None, **kwargs: Any) -> Any:
+        """The task's environment on this scenario; ``overrides`` apply on top of the
+        scenario's (``gym.make(id, overrides={...})``), other keywords go to the task."""
+        from gymnasium.envs.registration import load_env_creator
+
+        task = load_env_creator(TASKS[self.task])
+        config = kwargs.pop("config", self.config)
+        return task(config=config, overrides={**self.overrides, **(overrides or {})}, **kwargs)
 
 
 def _landing(task: str, config: str, description: str) -> ScenarioId:
@@ -111,6 +116,14 @@ def episode_step_limit(config: Any, timing: Any = None) -> int:
     return math.ceil(timing.wait_limit_s / decision_s - 1e-9) + 1
 
 
+def make_scenario_env(scenario: str, **kwargs: Any) -> Any:
+    """Gymnasium's entry point of every scenario id (``kwargs``: see :meth:`ScenarioId.make`)."""
+    return SCENARIO_IDS[scenario].make(**kwargs)
+
+
+make_scenario_env.metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}  # type: ignore[attr-defined]
+
+
 def register_all() -> None:
     """Register the tasks and every scenario id with Gymnasium (idempotent)."""
     from gymnasium.envs.registration import register, registry
@@ -123,23 +136,29 @@ def register_all() -> None:
             continue
         register(
             id=env_id,
-            entry_point=TASKS[scenario.task],
-            kwargs=scenario.kwargs(),
+            entry_point="landing_env.scenarios:make_scenario_env",
+            kwargs={"scenario": env_id},
             max_episode_steps=_step_limit(scenario),
             disable_env_checker=False,
         )
 
 
 def _step_limit(scenario: ScenarioId) -> int:
-    from landing_env.config import load_config
+    """``episode_step_limit`` from the scenario's simulation section alone: registration reads
+    no calibration file and builds no sensor (importing the package stays cheap and safe)."""
+    from types import SimpleNamespace
 
-    config = load_config(scenario.config, scenario.overrides)
+    from landing_env.config import SimulationConfig, read_config_data
+    from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+
+    data = deep_merge(read_config_data(scenario.config), dotted_to_nested(scenario.overrides))
+    sim = build_dataclass(SimulationConfig, data.get("simulation") or {}, "simulation")
     timing = None
     if scenario.task == "DeckLandingTiming-v0":
         from landing_env.envs.timing import TimingConfig
 
         timing = TimingConfig()
-    return episode_step_limit(config, timing)
+    return episode_step_limit(SimpleNamespace(simulation=sim), timing)
 
 
 __all__ = [
