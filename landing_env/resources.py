@@ -27,7 +27,8 @@ CONFIG_PACKAGE = "deck_landing_configs"
 def config_dir() -> Path:
     """The directory of the shipped YAML scenarios (with ``calibration/`` and ``train/``)."""
     source = Path(__file__).resolve().parent.parent / "configs"
-    if (source / "default.yaml").is_file():  # a checkout (or an editable install of one): the files being edited
+    # a checkout (or an editable install of one): the files being edited
+    if (source / "default.yaml").is_file():
         return source
     spec = importlib.util.find_spec(CONFIG_PACKAGE)
     if spec is not None and spec.submodule_search_locations:
