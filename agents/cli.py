@@ -16,6 +16,7 @@ from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.approach import add_approach_parser
 from agents.evaluation.landing import add_landing_parser
 from agents.training import add_train_parser
+from agents.tune import add_tune_parser
 
 
 class _Parser(argparse.ArgumentParser):
@@ -157,6 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_landing_parser(which)
     add_approach_parser(which)
     add_train_parser(sub)
+    add_tune_parser(sub)
     add_calibrate_parser(sub)
     return parser
 

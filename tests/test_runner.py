@@ -67,3 +67,22 @@ def test_results_are_written_as_they_arrive_and_resume_skips_finished_seeds(
     assert again.resumed == 4 and not again.failures
     assert [r.seed for r in again.records] == [0, 1, 2, 3, 4]
     assert len(path.read_text().splitlines()) == 5
+
+
+def test_the_shared_record_types_live_in_a_leaf_module() -> None:
+    import ast
+
+    root = Path(__file__).resolve().parent.parent / "agents" / "evaluation"
+
+    def imported(name: str) -> set[str]:
+        tree = ast.parse((root / name).read_text())
+        return {
+            node.module
+            for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) and node.module
+        }
+
+    assert not {m for m in imported("records.py") if m.startswith("agents")}
+    # the figures read the records, not the estimator run: no estimators <-> plots cycle
+    for figures in ("plots.py", "fusion_plot.py"):
+        assert "agents.evaluation.estimators" not in imported(figures)

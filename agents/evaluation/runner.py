@@ -152,8 +152,12 @@ def run_episodes(
     resume: bool = False,
     progress: bool = False,
     desc: str = "",
+    backend: str = "auto",
 ) -> RunResult:
-    """Run ``task`` for every seed (see the module docstring); records come back in seed order."""
+    """Run ``task`` for every seed (see the module docstring); records come back in seed order.
+
+    ``backend``: ``"auto"`` (serial for one local worker or one seed, else Ray), or force
+    ``"serial"`` or ``"ray"`` (the benchmark compares them)."""
     if workers < 1:
         from estimation.errors import ConfigError
 
@@ -171,11 +175,12 @@ def run_episodes(
     sink = _Sink(results_path, len(wanted), len(done), desc or task.policy, progress)
     started = time.perf_counter()
     try:
-        if address is None and (workers == 1 or len(todo) <= 1):
-            backend = "serial"
+        if backend == "auto":
+            short = address is None and (workers == 1 or len(todo) <= 1)
+            backend = "serial" if short else "ray"
+        if backend == "serial":
             records, failures = _run_serial(evaluation, task, todo, sink)
         else:
-            backend = "ray"
             records, failures = _run_ray(task, todo, workers, address, sink)
     finally:
         sink.close()
