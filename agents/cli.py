@@ -94,6 +94,8 @@ def _evaluate_sweep(args: argparse.Namespace) -> int:
         parameters=tuple(args.parameters),
         overrides=parse_overrides(args.set),
         calibration_dir=str(Path(args.out) / "calibration"),
+        workers=args.workers,
+        address=args.address,
     )
     points = run_sweep(settings)
     files = write_sweep(points, settings, Path(args.out))
@@ -140,6 +142,10 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
         "--parameters", nargs="+", choices=SWEEP_PARAMETERS, default=list(SWEEP_PARAMETERS)
     )
     sweep.add_argument("--out", default="results/sweep", help="output directory")
+    sweep.add_argument(
+        "--workers", type=positive_int, default=1, help="parallel workers (Ray beyond one)"
+    )
+    sweep.add_argument("--address", default=None, help="an existing Ray cluster")
     add_set_argument(sweep)
     sweep.set_defaults(func=_evaluate_sweep)
     return which

@@ -1,16 +1,17 @@
 """Episodes per second of ``evaluate landing`` on Ray against the old multiprocessing pool,
 and Ray's fixed start-up and shut-down cost (prints figures; not a test).
 
-    python benchmarks/bench_ray_vs_pool.py [--episodes 24] [--policy land-now] [--repeats 2]
+    python benchmarks/bench_ray_vs_pool.py [--episodes 6 24] [--policy land-now]
 
 For 1 and 2 workers: the previous ``agents/evaluation/parallel.py`` (a spawned
 ``multiprocessing.Pool`` over chunks of seeds, reproduced below for the comparison; its
 process start-up is inside its time, as it was in every evaluation), and the Ray runner
 (``agents/evaluation/runner.py``, one actor per worker, seeds one at a time) timed from the
 first submission to the last record, with ``ray.init`` and ``ray.shutdown`` timed apart.
-The serial in-process run is the reference.  Both parallel paths must return the serial
-records; the script checks it.  Best of ``--repeats`` wall-clock times; the machine may be
-shared, so compare rows of one run only.
+Each runs N1 and N2 episodes; the per-episode throughput is (N2 - N1) / (t2 - t1), so that
+fixed costs (worker start-up, environment construction) cancel, and the fixed cost is what
+remains of t1.  Both paths must return the serial records seed by seed; the script checks
+it.  Wall-clock times: on a shared machine compare rows of one run only.
 """
 
 from __future__ import annotations
@@ -56,68 +57,72 @@ def run_pool(policy: str, scenario: str, seeds: list[int], workers: int) -> list
         return [r for chunk in pool.imap(_pool_chunk, jobs) for r in chunk]
 
 
-def _best(fn, repeats: int) -> tuple[float, object]:
-    best, out = math.inf, None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - start)
-    return best, out
+def _time(fn) -> tuple[float, object]:
+    start = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - start, out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=24)
+    parser.add_argument("--episodes", type=int, nargs=2, default=[6, 24], metavar=("N1", "N2"))
     parser.add_argument("--policy", default="land-now")
     parser.add_argument("--scenario", default="sea-state-4")
-    parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args()
-    seeds = list(range(HELD_OUT_SEED, HELD_OUT_SEED + args.episodes))
+    n1, n2 = args.episodes
     task = landing_task(args.policy, args.scenario)
-    rows: list[tuple[str, int, float]] = []
+    seeds = {n: list(range(HELD_OUT_SEED, HELD_OUT_SEED + n)) for n in (n1, n2)}
+    serial = {
+        n: run_episodes(task, seeds[n], workers=1, backend="serial").records for n in (n1, n2)
+    }
 
-    serial_s, serial = _best(
-        lambda: run_episodes(task, seeds, workers=1, backend="serial").records, args.repeats
-    )
-    rows.append(("serial, in process", 1, serial_s))
-    for workers in (1, 2):
-        pool_s, pooled = _best(
-            lambda w=workers: run_pool(args.policy, args.scenario, seeds, w), args.repeats
-        )
-        assert pooled == serial, "the pool's records differ from the serial ones"
-        rows.append(("multiprocessing pool (old)", workers, pool_s))
-
+    runners = {
+        "multiprocessing pool (old)": lambda n, w: run_pool(
+            args.policy, args.scenario, seeds[n], w
+        ),
+        "Ray runner": lambda n, w: run_episodes(task, seeds[n], workers=w, backend="ray").records,
+    }
     import ray
 
-    startup, shutdown = [], []
+    rows: list[tuple[str, int, float, float]] = []
+    startup: list[float] = []
+    shutdown: list[float] = []
     for workers in (1, 2):
-        start = time.perf_counter()
-        ensure_ray(None, workers)
-        startup.append(time.perf_counter() - start)
-        ray_s, result = _best(
-            lambda w=workers: run_episodes(task, seeds, workers=w, backend="ray"), args.repeats
-        )
-        assert result.records == serial, "Ray's records differ from the serial ones"
-        rows.append(("Ray runner (start-up apart)", workers, ray_s))
-        start = time.perf_counter()
-        ray.shutdown()
-        shutdown.append(time.perf_counter() - start)
+        for name, run in runners.items():
+            if name.startswith("Ray"):
+                start = time.perf_counter()
+                ensure_ray(None, workers)
+                startup.append(time.perf_counter() - start)
+            times = {}
+            for n in (n1, n2):
+                times[n], records = _time(lambda n=n, run=run, w=workers: run(n, w))
+                assert records == serial[n], f"{name}: records differ from the serial ones"
+            rate = (n2 - n1) / (times[n2] - times[n1])  # per episode, fixed costs cancel
+            fixed = times[n1] - n1 / rate
+            rows.append((name, workers, rate, fixed))
+            if name.startswith("Ray"):
+                start = time.perf_counter()
+                ray.shutdown()
+                shutdown.append(time.perf_counter() - start)
 
     table = Table(
-        title=f"{args.policy} on {args.scenario}: {args.episodes} episodes, best of {args.repeats}"
+        title=f"{args.policy} on {args.scenario}: per-episode throughput from {n1} and {n2} "
+        "episodes (fixed costs cancel)"
     )
-    for column in ("runner", "workers", "wall (s)", "episodes/s", "vs the pool"):
+    for column in ("runner", "workers", "episodes/s", "vs the pool", "fixed cost (s)"):
         table.add_column(column, justify="right")
-    pool_rate = {w: args.episodes / t for name, w, t in rows if name.startswith("multi")}
-    for name, workers, seconds in rows:
-        rate = args.episodes / seconds
-        ratio = f"{100 * rate / pool_rate[workers]:.0f} %" if workers in pool_rate else "-"
-        table.add_row(name, str(workers), f"{seconds:.2f}", f"{rate:.2f}", ratio)
+    pool = {w: r for name, w, r, _ in rows if name.startswith("multi")}
+    for name, workers, rate, fixed in rows:
+        table.add_row(
+            name, str(workers), f"{rate:.2f}", f"{100 * rate / pool[workers]:.0f} %", f"{fixed:.1f}"
+        )
     console = Console()
     console.print(table)
     console.print(
-        f"Ray start-up (ray.init, local): {', '.join(f'{s:.2f}' for s in startup)} s; "
-        f"shut-down: {', '.join(f'{s:.2f}' for s in shutdown)} s (for 1 and 2 workers)"
+        "fixed cost: worker start-up and environment construction (the pool's 1-worker row "
+        "runs in this process).  Ray start-up (ray.init, local, 1 and 2 CPUs): "
+        f"{', '.join(f'{s:.2f}' for s in startup)} s; shut-down: "
+        f"{', '.join(f'{s:.2f}' for s in shutdown)} s"
     )
 
 

@@ -86,3 +86,39 @@ def test_the_shared_record_types_live_in_a_leaf_module() -> None:
     # the figures read the records, not the estimator run: no estimators <-> plots cycle
     for figures in ("plots.py", "fusion_plot.py"):
         assert "agents.evaluation.estimators" not in imported(figures)
+
+
+@pytest.mark.slow
+def test_a_sweep_on_ray_gives_the_serial_points(ray_session: None, tmp_path: Path) -> None:
+    import numpy as np
+
+    from agents.evaluation.sweep import SweepSettings, run_sweep
+
+    def sweep(workers: int) -> list:
+        return run_sweep(
+            SweepSettings(
+                duration_s=0.3, parameters=("height",), heights_m=(1.0, 2.0),
+                camera_mode="project", progress=False, workers=workers,
+                calibration_dir=str(tmp_path / f"cal{workers}"),
+            )
+        )  # fmt: skip
+
+    serial, parallel = sweep(1), sweep(2)
+    assert [(p.parameter, p.value) for p in parallel] == [(p.parameter, p.value) for p in serial]
+    for a, b in zip(serial, parallel, strict=True):
+        for name in a.metrics:
+            np.testing.assert_array_equal(a.metrics[name].mae, b.metrics[name].mae)
+
+
+@pytest.mark.slow
+def test_the_two_calibrations_on_ray_give_the_serial_files(
+    ray_session: None, tmp_path: Path
+) -> None:
+    from agents.calibrate import run_calibration
+
+    runs = {
+        w: run_calibration(out_dir=tmp_path / str(w), views=4, stages=4, progress=False, workers=w)
+        for w in (1, 2)
+    }
+    for name in ("intrinsics", "tof_camera"):
+        assert runs[1].files[name].read_text() == runs[2].files[name].read_text()

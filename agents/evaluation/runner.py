@@ -23,13 +23,18 @@ import importlib
 import json
 import math
 import time
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 from agents.cli_args import USER_ERRORS
 from agents.evaluation.records import EpisodeRecord
+
+#: calls queued per actor: the next seed waits in the actor while the current one runs, so a
+#: worker never idles for the round trip to the driver
+PIPELINE_DEPTH = 2
 
 #: evaluation name -> "module:attribute" of its :class:`Evaluation` (imported on use, also in
 #: the workers); a test may name its own evaluation by its "module:attribute" directly
@@ -300,50 +305,110 @@ def _run_ray(
     actor_class = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(_EpisodeWorker)
     records: list[EpisodeRecord] = []
     failures: list[SeedFailure] = []
-    queue: Iterator[int] = iter(seeds)
-    running: dict[Any, tuple[Any, int]] = {}
-    actors: list[Any] = []
+    queue: deque[int] = deque(seeds)
+    #: per actor, its calls in the order it runs them (an actor runs one call at a time)
+    inflight: dict[Any, deque[tuple[Any, int]]] = {}
+    running: dict[Any, Any] = {}  # ref -> actor
 
-    def submit(actor: Any) -> bool:
-        seed = next(queue, None)
-        if seed is None:
-            return False
-        running[actor.run.remote(seed)] = (actor, seed)
-        return True
+    def fill(actor: Any) -> None:
+        while queue and len(inflight[actor]) < PIPELINE_DEPTH:
+            seed = queue.popleft()
+            ref = actor.run.remote(seed)
+            inflight[actor].append((ref, seed))
+            running[ref] = actor
 
-    def new_actor() -> Any:
+    def new_actor() -> None:
         actor = actor_class.remote(task)
-        actors.append(actor)
-        return actor
+        inflight[actor] = deque()
+        fill(actor)
 
     try:
         for _ in range(min(workers, len(seeds))):
-            submit(new_actor())
+            new_actor()
         while running:
             ready, _ = ray.wait(list(running), num_returns=1)
             ref = ready[0]
-            actor, seed = running.pop(ref)
+            actor = running.pop(ref)
             try:
                 data = ray.get(ref)
             except (RayTaskError, RayActorError) as exc:
                 cause = _user_error(exc)
                 if cause is not None:
                     raise cause from None
-                failures.append(SeedFailure(seed, _describe(exc)))
+                # the actor's earliest unfinished call is the one that failed; its other
+                # seeds go back to the queue for a fresh actor
+                calls = inflight.pop(actor)
+                crashed = calls[0][1]
+                failures.append(SeedFailure(crashed, _describe(exc)))
                 sink.fail()
+                for other_ref, other_seed in reversed(calls):
+                    running.pop(other_ref, None)
+                    if other_seed != crashed:
+                        queue.appendleft(other_seed)
                 ray.kill(actor)
-                submit(new_actor())  # a fresh worker for the rest
+                if queue:
+                    new_actor()
                 continue
+            inflight[actor].popleft()
             record = record_type.from_json(data)
             records.append(record)
             sink.add(record)
-            submit(actor)
+            fill(actor)
     finally:
-        for actor in actors:
+        for actor in inflight:
             ray.kill(actor)
         if started:
             ray.shutdown()
     return records, failures
+
+
+def map_tasks(
+    fn: Callable[[Any], Any],
+    items: list[Any],
+    *,
+    workers: int = 1,
+    address: str | None = None,
+    progress: bool = False,
+    desc: str = "",
+) -> list[Any]:
+    """``[fn(item) for item in items]``: in this process for one local worker, else as Ray
+    tasks (``fn`` top level, items picklable), results in the items' order, the progress bar
+    moving as each arrives.  A user error (ConfigError...) raised in a task is raised here
+    with its message; the other tasks are cancelled."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(items), desc=desc, unit="run", disable=not progress)
+    try:
+        if address is None and (workers == 1 or len(items) <= 1):
+            out = []
+            for item in items:
+                out.append(fn(item))
+                bar.update(1)
+            return out
+        import ray
+        from ray.exceptions import RayTaskError
+
+        with batch_session(workers, address):
+            remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+            refs = [remote.remote(item) for item in items]
+            index = {ref: i for i, ref in enumerate(refs)}
+            results: list[Any] = [None] * len(items)
+            pending = list(refs)
+            try:
+                while pending:
+                    ready, pending = ray.wait(pending, num_returns=1)
+                    try:
+                        results[index[ready[0]]] = ray.get(ready[0])
+                    except RayTaskError as exc:
+                        cause = _user_error(exc)
+                        raise (cause or exc) from None
+                    bar.update(1)
+            finally:
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+            return results
+    finally:
+        bar.close()
 
 
 def _user_error(exc: BaseException) -> BaseException | None:
@@ -387,5 +452,6 @@ __all__ = [
     "ensure_ray",
     "for_each_seed",
     "get_evaluation",
+    "map_tasks",
     "run_episodes",
 ]
