@@ -23,10 +23,12 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(PY) -m mypy estimation/
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_env_speed.py
 	$(PY) benchmarks/bench_estimators.py
+	$(PY) benchmarks/bench_ray_vs_pool.py
 
 # both calibrations in the simulator; rewrites the shipped files in configs/calibration/
 calibrate: $(STAMP)

@@ -22,12 +22,14 @@ import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 from tqdm import tqdm
 
+from agents.cli_args import positive_int
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
@@ -207,6 +209,14 @@ def plot_curves(tof: TofSimReport, path: Path) -> None:
     plt.close(fig)
 
 
+def _calibration_part(job: tuple) -> Any:
+    """One of the two calibrations (top level: it runs in a Ray worker too)."""
+    kind, cfg, rig, rng = job
+    if kind == "intrinsics":
+        return calibrate_intrinsics_in_sim(cfg.camera, rig, rng)
+    return calibrate_tof_camera_in_sim(cfg, rig, rng)
+
+
 def run_calibration(
     config: str | Path | DeckLandingConfig = "default",
     out_dir: Path = Path("results/calibration"),
@@ -216,6 +226,8 @@ def run_calibration(
     install: bool = False,
     progress: bool = True,
     console: Console | None = None,
+    workers: int = 1,
+    address: str | None = None,
 ) -> CalibrationRun:
     """Run both calibrations, print the figures and write the files (see the module doc)."""
     console = console or Console()
@@ -231,10 +243,28 @@ def run_calibration(
             )
     intrinsics_rng, tof_rng = np.random.default_rng(seed).spawn(2)
     rig = ChessboardRigConfig(views=views)
-    with tqdm(total=views, desc="chessboard views", unit="view", disable=not progress) as bar:
-        intrinsics = calibrate_intrinsics_in_sim(cfg.camera, rig, intrinsics_rng, bar.update)
-    with tqdm(total=stages, desc="ToF–camera stages", unit="stage", disable=not progress) as bar:
-        tof = calibrate_tof_camera_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
+    if workers > 1 or address is not None:
+        # the two calibrations side by side on Ray (the same generators: the same results)
+        from agents.evaluation.runner import map_tasks
+
+        intrinsics, tof = map_tasks(
+            _calibration_part,
+            [
+                ("intrinsics", cfg, rig, intrinsics_rng),
+                ("tof", cfg, TofRigConfig(stages=stages), tof_rng),
+            ],
+            workers=min(workers, 2),
+            address=address,
+            progress=progress,
+            desc="calibrations",
+        )
+    else:
+        with tqdm(total=views, desc="chessboard views", unit="view", disable=not progress) as bar:
+            intrinsics = calibrate_intrinsics_in_sim(cfg.camera, rig, intrinsics_rng, bar.update)
+        with tqdm(
+            total=stages, desc="ToF–camera stages", unit="stage", disable=not progress
+        ) as bar:
+            tof = calibrate_tof_camera_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {
@@ -267,6 +297,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         stages=args.stages,
         seed=args.seed,
         install=args.install,
+        workers=args.workers,
+        address=args.address,
     )
     return 0
 
@@ -280,9 +312,21 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--config", default="default", help="a config name in configs/ or a path")
     parser.add_argument("--out", default="results/calibration", help="output directory")
-    parser.add_argument("--views", type=int, default=20, help="chessboard poses (CRHF: 20)")
     parser.add_argument(
-        "--stages", type=int, default=120, help="climb stages of the pad rig (papers: ~120)"
+        "--workers",
+        type=positive_int,
+        default=1,
+        help="2 runs the two calibrations side by side on Ray (the same results)",
+    )
+    parser.add_argument("--address", default=None, help="an existing Ray cluster")
+    parser.add_argument(
+        "--views", type=positive_int, default=20, help="chessboard poses (CRHF: 20)"
+    )
+    parser.add_argument(
+        "--stages",
+        type=positive_int,
+        default=120,
+        help="climb stages of the pad rig (papers: ~120)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seeds the board poses and noise")
     parser.add_argument(

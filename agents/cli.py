@@ -1,4 +1,8 @@
-"""The ``deck-landing`` command line."""
+"""The ``deck-landing`` command line: every sub-command's arguments, and one error path.
+
+A user error (a bad flag or config key, a missing file or model) prints one line naming the
+problem and exits with status 2; ``--debug`` shows the traceback instead.
+"""
 
 from __future__ import annotations
 
@@ -8,32 +12,160 @@ import sys
 from pathlib import Path
 
 from agents.calibrate import add_calibrate_parser
-from agents.evaluation import add_evaluate_parser
+from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, positive_int
+from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.approach import add_approach_parser
-from agents.evaluation.landing import _subparser_group, add_landing_commands
+from agents.evaluation.landing import add_landing_parser
+from agents.training import add_train_parser
+from agents.tune import add_tune_parser
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (no usage block), exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+# ---------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
     from agents.demo import run_demo
 
-    log = run_demo(config=args.config, seed=args.seed, out_dir=Path(args.out))
+    log = run_demo(
+        config=args.config,
+        seed=args.seed,
+        out_dir=Path(args.out),
+        timing=not args.no_timing,
+        episodes=args.episodes,
+        camera_mode=args.mode,
+    )
     return 0 if log.final_info.get("outcome") else 1
 
 
+def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
+    demo = sub.add_parser("demo", help="seeded episodes: summary, camera video, trajectory plot")
+    demo.add_argument("--config", default="default", help="a config name in configs/ or a path")
+    demo.add_argument("--seed", type=int, default=0, help="the first episode's seed")
+    demo.add_argument("--episodes", type=positive_int, default=1, help="episodes (seeds on)")
+    demo.add_argument(
+        "--mode",
+        choices=("render", "project"),
+        default="render",
+        help="camera: render and detect the tag, or project it (faster)",
+    )
+    demo.add_argument(
+        "--no-timing", action="store_true", help="skip the trained timing policy's episode"
+    )
+    demo.add_argument("--out", default="results/demo", help="output directory")
+    demo.set_defaults(func=_demo)
+
+
+# ------------------------------------------------------------------ evaluate estimators/sweep
+def _evaluate_estimators(args: argparse.Namespace) -> int:
+    from agents.evaluation.estimators import RunSettings, evaluate_estimators
+
+    settings = RunSettings(
+        scenario=args.scenario,
+        duration_s=args.duration,
+        seed=args.seed,
+        camera_mode=args.mode,
+        estimators=tuple(args.estimators) if args.estimators else None,
+        overrides=parse_overrides(args.set),
+    )
+    out = Path(args.out) if args.out else None
+    result = evaluate_estimators(settings, out, plots=not args.no_plots)
+    print((result.out_dir / "errors.md").read_text())
+    steps = max(result.record.n_frames - 1, 1)
+    print(
+        f"{result.record.n_frames} frames in {result.record.wall_time_s:.1f} s "
+        f"({1000 * result.record.wall_time_s / steps:.1f} ms per step); "
+        f"written to {result.out_dir}/"
+    )
+    return 0
+
+
+def _evaluate_sweep(args: argparse.Namespace) -> int:
+    from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
+
+    settings = SweepSettings(
+        scenario=args.scenario,
+        duration_s=args.duration,
+        seed=args.seed,
+        camera_mode=args.mode,
+        parameters=tuple(args.parameters),
+        overrides=parse_overrides(args.set),
+        calibration_dir=str(Path(args.out) / "calibration"),
+        workers=args.workers,
+        address=args.address,
+    )
+    points = run_sweep(settings)
+    files = write_sweep(points, settings, Path(args.out))
+    print((Path(args.out) / "sweep.md").read_text())
+    print("written: " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParsersAction:
+    """``evaluate`` with ``estimators`` and ``sweep``; returns its sub-command group."""
+    evaluate = sub.add_parser("evaluate", help="evaluations of the estimators and the policies")
+    which = evaluate.add_subparsers(dest="evaluation", required=True)
+    est = which.add_parser(
+        "estimators",
+        help="run a scenario with the drone pinned over the moving deck; tables and figures "
+        "beside the papers' Tables 2 and 5",
+    )
+    est.add_argument(
+        "--scenario", required=True, help="a config in configs/ (e.g. paper-stewart) or a path"
+    )
+    est.add_argument(
+        "--duration", type=float, default=None, help="simulated seconds (default: the scenario's)"
+    )
+    est.add_argument("--out", default=None, help="output directory (default: results/SCENARIO)")
+    est.add_argument("--seed", type=int, default=None, help="default: the scenario's seed")
+    est.add_argument("--mode", choices=("render", "project"), default="render", help="camera mode")
+    est.add_argument(
+        "--estimators", nargs="+", default=None, help="default: the scenario's (truth excluded)"
+    )
+    est.add_argument("--no-plots", action="store_true", help="tables only")
+    add_set_argument(est)
+    est.set_defaults(func=_evaluate_estimators)
+
+    sweep = which.add_parser(
+        "sweep", help="each estimator's error against height, ToF noise, deck tilt and k1"
+    )
+    sweep.add_argument("--scenario", default="paper-stewart", help="the base scenario")
+    sweep.add_argument("--duration", type=float, default=10.0, help="simulated s per point")
+    sweep.add_argument("--seed", type=int, default=0)
+    sweep.add_argument(
+        "--mode", choices=("render", "project"), default="render", help="camera mode"
+    )
+    sweep.add_argument(
+        "--parameters", nargs="+", choices=SWEEP_PARAMETERS, default=list(SWEEP_PARAMETERS)
+    )
+    sweep.add_argument("--out", default="results/sweep", help="output directory")
+    sweep.add_argument(
+        "--workers", type=positive_int, default=1, help="parallel workers (Ray beyond one)"
+    )
+    sweep.add_argument("--address", default=None, help="an existing Ray cluster")
+    add_set_argument(sweep)
+    sweep.set_defaults(func=_evaluate_sweep)
+    return which
+
+
+# ---------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="deck-landing",
         description="Quadrotor landing on a moving Stewart-platform deck.",
     )
+    parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="one seeded episode: summary, camera video, trajectory plot")
-    demo.add_argument("--config", default="default", help="a config name in configs/ or a path")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--out", default="results/demo", help="output directory")
-    demo.set_defaults(func=_demo)
-    add_evaluate_parser(sub)
-    add_landing_commands(sub)
-    add_approach_parser(_subparser_group(sub.choices["evaluate"]))
+    _add_demo_parser(sub)
+    which = _add_evaluate_parser(sub)
+    add_landing_parser(which)
+    add_approach_parser(which)
+    add_train_parser(sub)
+    add_tune_parser(sub)
     add_calibrate_parser(sub)
     _add_sensors_option(parser)
     return parser
@@ -58,23 +190,39 @@ def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
         _add_sensors_option(child)
 
 
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    if isinstance(exc, FileNotFoundError) and exc.filename and str(exc.filename) not in text:
+        text = f"{text}: {exc.filename}"
+    return " ".join(text.split())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if not getattr(args, "sensors", None):
-        return args.func(args)
-    # the default of the config key ``sensors`` here and in worker processes, for this run
-    from landing_env.config import SENSORS_ENV
-
-    before = os.environ.get(SENSORS_ENV)
-    os.environ[SENSORS_ENV] = args.sensors
     try:
-        return args.func(args)
-    finally:
-        if before is None:
-            os.environ.pop(SENSORS_ENV, None)
-        else:
-            os.environ[SENSORS_ENV] = before
+        if not getattr(args, "sensors", None):
+            return int(args.func(args))
+        # the default of the config key ``sensors`` here and in worker processes, for this run
+        from landing_env.config import SENSORS_ENV
+
+        before = os.environ.get(SENSORS_ENV)
+        os.environ[SENSORS_ENV] = args.sensors
+        try:
+            return int(args.func(args))
+        finally:
+            if before is None:
+                os.environ.pop(SENSORS_ENV, None)
+            else:
+                os.environ[SENSORS_ENV] = before
+    except USER_ERRORS as exc:
+        if args.debug:
+            raise
+        print(f"deck-landing {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("deck-landing: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

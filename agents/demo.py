@@ -19,6 +19,7 @@ from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
 from agents.scripted import DescendPolicy
+from landing_env.errors import ConfigError, require_choice
 
 
 @dataclass
@@ -156,37 +157,50 @@ def run_demo(
     out_dir: Path = Path("results/demo"),
     timing: bool = True,
     timing_seed: int = 4,
+    episodes: int = 1,
+    camera_mode: str = "render",
     **kw,
 ) -> EpisodeLog:
-    """The `make demo` job: one seeded episode with the camera rendered and the tag detected,
-    then (``timing``) the trained timing policy landing on a sea-state deck.
+    """The `make demo` job: ``episodes`` seeded episodes (seeds ``seed``, ``seed + 1``, ...)
+    with the camera rendered and the tag detected (``camera_mode="project"`` projects it,
+    faster), then (``timing``) the trained timing policy landing on a sea-state deck.  The
+    video and plot show the first episode; returns its log.
 
     ``timing_seed`` 4 (held-out seed 1 000 004) is an episode on which committing at once meets
     a 6.7° deck tilt (a hard landing): the one that shows the policy waiting.
     """
+    if episodes < 1:
+        raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+    require_choice("mode", camera_mode, ("render", "project"))
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
     overrides = kw.setdefault("overrides", {})
-    overrides.setdefault("camera.mode", "render")
+    overrides.setdefault("camera.mode", camera_mode)
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
     env = gym.make("DeckLanding-v0", config=config, render_mode="rgb_array", **kw)
     policy = DescendPolicy(env.unwrapped.config.action)
     frames: list[np.ndarray] = []
     try:
-        log = run_episode(env, policy, seed, frames)
+        logs = [run_episode(env, policy, seed, frames)]
+        for offset in range(1, episodes):
+            logs.append(run_episode(env, policy, seed + offset))
     finally:
         env.close()
-    summarise(log, console)
+    for offset, log in enumerate(logs):
+        if episodes > 1:
+            console.print(f"[bold]seed {seed + offset}[/bold]")
+        summarise(log, console)
+    first = logs[0]
     video = out_dir / "camera.mp4"
     imageio.mimsave(video, frames, fps=env.unwrapped.config.simulation.env_hz, macro_block_size=1)
     plot = out_dir / "trajectory.png"
-    plot_trajectory(log, plot)
-    console.print(f"camera video: {video}\ntrajectory plot: {plot}")
+    plot_trajectory(first, plot)
+    console.print(f"camera video (seed {seed}): {video}\ntrajectory plot: {plot}")
     if timing:
         run_timing_demo(seed=timing_seed, out_dir=out_dir)
-    return log
+    return first
 
 
 # ---------------------------------------------------------------------------------------------

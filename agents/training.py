@@ -3,12 +3,14 @@
 ``deck-landing train timing --config configs/train/timing_ppo.yaml`` reads a YAML with two
 top-level keys:
 
-* the environment id (``DeckLandingTiming-v0``) holding the hyper-parameters in rl-zoo3's
+* a registered id (``DeckLandingTiming-SeaState4-v0``: the scenario is built in, see
+  :mod:`landing_env.scenarios`) holding the hyper-parameters in rl-zoo3's
   format (``n_envs``, ``n_timesteps``, ``policy``, ``policy_kwargs`` as a ``"dict(...)"``
   string, ``learning_rate`` as a number or ``"lin_<x>"``, and the algorithm's own keyword
-  arguments), so that ``python -m rl_zoo3.train --conf-file`` can read the same file;
-* ``deck_landing``, which rl-zoo3 ignores: the algorithm, the seed, the environment's keyword
-  arguments (scenario, overrides, timing settings), the evaluation and checkpoint schedule, the
+  arguments), so that ``python -m rl_zoo3.train --env <id> --gym-packages landing_env
+  --conf-file <yaml>`` trains the same task from the same file, unmodified;
+* ``deck_landing``, which rl-zoo3 ignores: the algorithm, the seed, optional extra keyword
+  arguments of the environment, the evaluation and checkpoint schedule, the
   target success rate and the wall-clock budget.
 
 Training runs the environments in a ``SubprocVecEnv`` (one process per core), shows SB3's
@@ -31,11 +33,14 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
+from agents.cli_args import positive_int
 from agents.policies import shipped_timing_model
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 
 ENV_ID = "DeckLandingTiming-v0"
+#: the shipped training scenario: the timing task over a sea-state-4 deck, built into the id
+SCENARIO_ENV_ID = "DeckLandingTiming-SeaState4-v0"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
 ALGOS = ("ppo", "dqn")
@@ -62,7 +67,9 @@ class TrainSettings:
 
     algo: Literal["ppo", "dqn"] = "ppo"
     seed: int = 0
-    #: keyword arguments of ``gym.make(ENV_ID, ...)``: config, overrides, timing
+    #: extra keyword arguments of ``gym.make(id, ...)`` (config, overrides, timing); empty
+    #: in the shipped YAMLs, whose id has the scenario built in, so that rl-zoo3 trains the
+    #: same task without ``--env-kwargs``
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval: EvalSettings = field(default_factory=EvalSettings)
     #: save a checkpoint every this many environment steps (summed over the environments)
@@ -94,6 +101,8 @@ class TrainConfig:
     hyperparams: dict[str, Any]
     settings: TrainSettings
     source: str = ""
+    #: the registered id the YAML's rl-zoo3 section is keyed by (the scenario built in)
+    env_id: str = ENV_ID
 
     @property
     def n_envs(self) -> int:
@@ -122,15 +131,36 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
     path = Path(path)
     if not path.is_file():
         raise ConfigError("config", f"{str(path)!r} does not exist")
-    data = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(data, dict) or ENV_ID not in data:
-        raise ConfigError("config", f"{path} needs a top-level {ENV_ID!r} section (rl-zoo3 style)")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError("config", f"{path} is not YAML: {exc}") from None
+    ids = _timing_ids()
+    keys = [key for key in data if key in ids] if isinstance(data, dict) else []
+    if len(keys) != 1:
+        raise ConfigError(
+            "config",
+            f"{path} needs one top-level section named by a registered timing id (rl-zoo3 "
+            f"style), e.g. {SCENARIO_ENV_ID!r} or {ENV_ID!r}",
+        )
     section = dict(data.get("deck_landing") or {})
     if algo is not None:
         section["algo"] = algo
     settings = build_dataclass(TrainSettings, section, "deck_landing")
-    hyperparams = dict(data[ENV_ID] or {})
-    return TrainConfig(hyperparams, settings, str(path))
+    hyperparams = dict(data[keys[0]] or {})
+    zoo_kwargs = hyperparams.pop("env_kwargs", None) or {}
+    if not isinstance(zoo_kwargs, dict):
+        raise ConfigError(f"{keys[0]}.env_kwargs", f"{zoo_kwargs!r} is not a mapping")
+    # rl-zoo3 reads env_kwargs from the hyper-parameters: the same keywords here
+    settings.env_kwargs = {**zoo_kwargs, **settings.env_kwargs}
+    return TrainConfig(hyperparams, settings, str(path), keys[0])
+
+
+def _timing_ids() -> tuple[str, ...]:
+    """The ids a training YAML can name: the timing task and its registered scenarios."""
+    from landing_env.scenarios import SCENARIO_IDS
+
+    return (ENV_ID, *(k for k, v in SCENARIO_IDS.items() if v.task == ENV_ID))
 
 
 # ------------------------------------------------------------------------------ zoo syntax
@@ -260,7 +290,7 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     s = config.settings
     vec_cls = SubprocVecEnv if s.vec_env == "subproc" and config.n_envs > 1 else DummyVecEnv
     # the "module:id" form makes the worker processes import and register the package
-    env_id = f"landing_env:{ENV_ID}"
+    env_id = f"landing_env:{config.env_id}"
     # make_vec_env asks for render_mode="rgb_array" unless told otherwise: nothing is rendered
     env_kwargs = {"render_mode": None, **s.env_kwargs}
     train_env = make_vec_env(
@@ -397,9 +427,11 @@ def add_train_parser(subparsers: Any) -> None:
     )
     timing.add_argument("--config", default="configs/train/timing_ppo.yaml", help="training YAML")
     timing.add_argument("--algo", choices=ALGOS, default=None, help="default: the YAML's")
-    timing.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps")
+    timing.add_argument("--timesteps", type=positive_int, default=None, help="default: n_timesteps")
     timing.add_argument("--seed", type=int, default=None, help="default: the YAML's")
-    timing.add_argument("--n-envs", type=int, default=None, help="default: the YAML's n_envs")
+    timing.add_argument(
+        "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"
+    )
     timing.add_argument("--out", default=None, help="output directory (default: the YAML's)")
     timing.add_argument("--no-progress", action="store_true", help="no progress bar")
     timing.add_argument(

@@ -19,6 +19,11 @@ class ConfigError(ValueError):
         self.detail = message
         super().__init__(f"{key}: {message}")
 
+    def __reduce__(self) -> tuple[type[ConfigError], tuple[str, str]]:
+        # the default pickles ``args`` (the joined message) and calls __init__ with it alone,
+        # which fails; a worker process's error must reach the caller with key and message
+        return (type(self), (self.key, self.detail))
+
     def under(self, prefix: str) -> ConfigError:
         """The same error with ``prefix.`` in front of the key."""
         return ConfigError(f"{prefix}.{self.key}" if prefix else self.key, self.detail)

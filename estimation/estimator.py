@@ -319,7 +319,9 @@ class RangeFusionEstimator(GuardedEstimator):
         self._undistort = bool(
             config.undistort and intrinsics is not None and intrinsics.has_distortion
         )
-        self._undistorter = geometry.Undistorter(intrinsics) if self._undistort else None
+        self._undistorter = (
+            geometry.Undistorter(intrinsics) if self._undistort and intrinsics is not None else None
+        )
         # the sensors' (x, y) never change: the least-squares plane's pseudo-inverse is fixed
         try:
             self._plane_fitter = geometry.ZPlaneFitter(positions[:, :2])

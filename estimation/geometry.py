@@ -177,8 +177,8 @@ def _homography_four(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
     xd, yd, cdx, cdy, sd = _normalised_floats(dst)
     if ss == 0.0 or sd == 0.0 or _three_collinear(xs, ys) or _three_collinear(xd, yd):
         return None
-    rows = []
-    rhs = []
+    rows: list[list[float]] = []
+    rhs: list[float] = []
     for x, y, u, v in zip(xs, ys, xd, yd, strict=True):
         rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y])
         rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y])

@@ -135,7 +135,7 @@ def calibrate(
     for i, v in enumerate(views):
         if len(v) != n:
             raise ValueError(f"view {i} has {len(v)} corners; pattern {pattern} has {n}")
-    rms, k, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+    rms, k, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(  # type: ignore[call-overload]
         [object_points] * len(views), views, tuple(image_size), None, None, flags=flags
     )
     return IntrinsicsCalibrationResult(

@@ -26,6 +26,7 @@ from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_ne
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
 from landing_env.physics.wind import WindConfig
+from landing_env.resources import config_dir
 from landing_env.scene.deck import DeckSurfaceConfig
 from landing_env.sea.deck_mount import DECK_MOUNTS
 from landing_env.sensors.camera import CameraConfig
@@ -36,8 +37,9 @@ from landing_env.stewart.kinematics import StewartGeometry
 from landing_env.stewart.motion import MotionConfig
 from landing_env.vision_link import VisionLinkConfig
 
-#: Scenario and training configs shipped with the project.
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+#: Scenario and training configs shipped with the project (found as package data in a
+#: wheel; see :mod:`landing_env.resources`).
+CONFIG_DIR = config_dir()
 
 #: ``sensors``: each name is a preset in ``configs/sensors/`` laid over the scenario
 SENSOR_SETS = ("ideal", "realistic")
@@ -244,7 +246,13 @@ def _calibration_path(name: str, shipped: Path) -> Path:
     if path.is_absolute() or path.exists():
         return path
     from_root = CONFIG_DIR.parent / path
-    return from_root if from_root.exists() else path
+    if from_root.exists():
+        return from_root
+    if path.parts[:1] == ("configs",):  # "configs/..." in an installed wheel
+        shipped_file = CONFIG_DIR.joinpath(*path.parts[1:])
+        if shipped_file.exists():
+            return shipped_file
+    return path
 
 
 def _require_file(key: str, path: Path) -> None:
@@ -330,6 +338,11 @@ def _read_yaml(name_or_path: str | Path) -> dict[str, Any]:
     if parent is not None:
         data = deep_merge(_read_yaml(parent), data)
     return data
+
+
+def read_config_data(name_or_path: str | Path) -> dict[str, Any]:
+    """A config's YAML data with its ``extends`` chain merged (no validation)."""
+    return _read_yaml(name_or_path)
 
 
 def load_config(

@@ -19,6 +19,7 @@ from pybullet_utils.bullet_client import BulletClient
 from estimation.frames import R_BC, R_PD, deck_pose_in_camera
 from estimation.landmarks import landmark_pose_w
 from estimation.types import CameraFrame, ImuSample, RangeReading
+from landing_env._quiet import quiet_stdout
 from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
@@ -96,7 +97,8 @@ class World:
                 "render_mode='human' (simulation.gui) needs a display; none is set (DISPLAY). "
                 "Use render_mode='rgb_array' on a headless machine, or run under Xvfb."
             )
-        self.client = BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        with quiet_stdout():  # PyBullet prints ``argv[0]=`` from C on connect
+            self.client = BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
         c = self.client
         c.setGravity(0.0, 0.0, -GRAVITY)
         c.setTimeStep(self.dt)

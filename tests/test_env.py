@@ -179,11 +179,13 @@ def test_fixed_drone_stays_put_over_the_moving_deck() -> None:
     assert abs(info["imu_samples"][:, 3].mean() - 9.81) < 0.5
 
 
-def test_human_render_without_a_display_fails_clearly(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_gui_config_without_a_display_fails_clearly(monkeypatch: pytest.MonkeyPatch) -> None:
+    # render_mode="human" falls back to headless (tests/test_ecosystem.py); simulation.gui
+    # asks for the window explicitly and is refused
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.raises(RuntimeError, match="needs a display"):
-        make(render_mode="human")
+        make(overrides={"simulation.gui": True})
 
 
 def test_rgb_array_shows_the_camera_view_with_the_detection() -> None:

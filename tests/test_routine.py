@@ -291,7 +291,7 @@ def test_seeded_high_approach_episodes_land(tmp_path: Path) -> None:
     assert routine.start_height_m == pytest.approx(20.0, abs=0.1)
     assert routine.start_offset_m == pytest.approx(5.0, abs=0.1)
     assert routine.outcome == "success", routine
-    assert routine.offset_m < 0.3 and routine.final_state == RoutineState.LAND.value
+    assert routine.lateral_offset_m < 0.3 and routine.final_state == RoutineState.LAND.value
     beacon = evaluation.results["beacon-range"][0]
     assert beacon.estimator == "beacon" and beacon.outcome in ("success", "hard_landing")
     assert all(path.is_file() for path in evaluation.files)

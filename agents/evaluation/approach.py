@@ -30,9 +30,18 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluation import _guarded, _parse_overrides
-from agents.evaluation.landing import HELD_OUT_SEED, wilson_interval
-from agents.evaluation.parallel import run_seed_chunks
+from agents.cli_args import add_batch_arguments, positive_int
+from agents.cli_args import parse_overrides as _parse_overrides
+from agents.evaluation.landing import HELD_OUT_SEED, failures_note, wilson_interval
+from agents.evaluation.records import EpisodeRecord
+from agents.evaluation.runner import (
+    EpisodeTask,
+    RunResult,
+    SeedFailure,
+    batch_session,
+    for_each_seed,
+    run_episodes,
+)
 from landing_env.errors import ConfigError, require_choice
 
 #: the policies of this evaluation and the estimator each reads by default
@@ -61,22 +70,11 @@ def routine_estimator(requested: str | None = None) -> str:
 
 
 @dataclass
-class ApproachEpisode:
-    """One episode (NaN where a metric does not exist, e.g. after a crash or a time-out)."""
+class ApproachEpisode(EpisodeRecord):
+    """One approach episode: the shared record (:mod:`agents.evaluation.records`; the
+    touchdown offset is ``lateral_offset_m``) and the approach's own columns."""
 
-    policy: str
-    estimator: str
-    scenario: str
-    seed: int
-    outcome: str
-    success: bool
-    #: horizontal offset of the drone's centre from the deck centre at touchdown, metres
-    offset_m: float = math.nan
-    #: simulated time from the start to the touchdown, seconds
-    time_to_land_s: float = math.nan
-    relative_normal_speed: float = math.nan
-    deck_tilt_deg: float = math.nan
-    relative_attitude_deg: float = math.nan
+    estimator: str = ""
     #: start: height above the deck's home surface and horizontal offset, metres
     start_height_m: float = math.nan
     start_offset_m: float = math.nan
@@ -85,7 +83,6 @@ class ApproachEpisode:
     final_state: str = ""
     relocations: int = 0
     searches: int = 0
-    failed_checks: str = ""
     wall_time_s: float = math.nan
     #: (t, x, y, z) of the drone relative to the deck's home, every TRAJECTORY_STRIDE periods
     trajectory: list[tuple[float, float, float, float]] = field(default_factory=list, repr=False)
@@ -170,28 +167,47 @@ def run_episode(
         searches=int(getattr(policy, "searches", _count(transitions, ("scan",)))),
         trajectory=trajectory,
     )
-    touchdown = info.get("touchdown")
-    if touchdown:
-        episode.offset_m = float(touchdown["lateral_offset_m"])
-        episode.time_to_land_s = float(touchdown["time_s"])
-        episode.relative_normal_speed = float(touchdown["relative_normal_speed"])
-        episode.deck_tilt_deg = float(touchdown["deck_tilt_deg"])
-        episode.relative_attitude_deg = float(touchdown["relative_attitude_deg"])
-        episode.failed_checks = ";".join(touchdown["failed_checks"])
-    elif "crash_contact" in info:
-        episode.failed_checks = str(info["crash_contact"])
+    episode.record_end(info)
     episode.wall_time_s = time.perf_counter() - start_wall
     return episode
 
 
-def _run_chunk(job: tuple) -> list[ApproachEpisode]:
-    """Worker: one environment, a list of seeds (top level, so that it pickles)."""
-    policy_name, scenario, estimator, seeds, overrides, routine_timing = job
-    env, policy = make_env_and_policy(policy_name, scenario, estimator, overrides, routine_timing)
-    try:
-        return [run_episode(env, policy, s, policy_name, estimator, scenario) for s in seeds]
-    finally:
-        env.close()
+class _ApproachEvaluation:
+    """``evaluate approach`` for the runner (:mod:`agents.evaluation.runner`)."""
+
+    record_type = ApproachEpisode
+
+    def validate(self, task: EpisodeTask) -> None:
+        from landing_env.config import load_config
+
+        o = task.options
+        require_choice("policy", task.policy, tuple(APPROACH_POLICIES))
+        require_choice("routine_timing", o.get("routine_timing", "model"), ROUTINE_TIMINGS)
+        load_config(
+            task.scenario,
+            {
+                "estimation.observed": o["estimator"],
+                "estimation.compare": [],
+                **(o.get("overrides") or {}),
+            },
+        )
+
+    def make(self, task: EpisodeTask) -> tuple[Any, Any]:
+        o = task.options
+        return make_env_and_policy(
+            task.policy,
+            task.scenario,
+            o["estimator"],
+            o.get("overrides"),
+            o.get("routine_timing", "model"),
+        )
+
+    def run_episode(self, env: Any, policy: Any, seed: int, task: EpisodeTask) -> ApproachEpisode:
+        return run_episode(env, policy, seed, task.policy, task.options["estimator"], task.scenario)
+
+
+#: the runner's handle on this evaluation (``EVALUATIONS["approach"]``)
+APPROACH_EVALUATION = _ApproachEvaluation()
 
 
 def evaluate_policy(
@@ -204,16 +220,26 @@ def evaluate_policy(
     progress: bool = True,
     overrides: dict[str, Any] | None = None,
     routine_timing: str = "model",
-) -> list[ApproachEpisode]:
-    """``episodes`` episodes of one policy, over ``workers`` processes (spawned)."""
-    return run_seed_chunks(
-        _run_chunk,
-        lambda chunk: (policy_name, scenario, estimator, chunk, overrides, routine_timing),
-        list(range(first_seed, first_seed + episodes)),
-        workers,
-        max_chunk=5,
-        desc=f"{policy_name} ({estimator})",
+    address: str | None = None,
+    results_path: Path | None = None,
+    resume: bool = False,
+) -> RunResult:
+    """``episodes`` episodes of one policy over ``workers`` workers (Ray beyond one)."""
+    task = EpisodeTask(
+        "approach",
+        policy_name,
+        scenario,
+        {"estimator": estimator, "overrides": overrides, "routine_timing": routine_timing},
+    )
+    return run_episodes(
+        task,
+        for_each_seed(first_seed, episodes),
+        workers=workers,
+        address=address,
+        results_path=results_path,
+        resume=resume,
         progress=progress,
+        desc=f"{policy_name} ({estimator})",
     )
 
 
@@ -265,8 +291,8 @@ def summarise(episodes: list[ApproachEpisode]) -> ApproachSummary:
         success_rate=k / n,
         success_ci_low=low,
         success_ci_high=high,
-        offset_mean_m=stat("offset_m", np.mean),
-        offset_p95_m=stat("offset_m", lambda v: np.percentile(v, 95)),
+        offset_mean_m=stat("lateral_offset_m", np.mean),
+        offset_p95_m=stat("lateral_offset_m", lambda v: np.percentile(v, 95)),
         time_to_land_mean_s=stat("time_to_land_s", np.mean),
         time_to_land_p95_s=stat("time_to_land_s", lambda v: np.percentile(v, 95)),
         normal_speed_mean=stat("relative_normal_speed", np.mean),
@@ -358,6 +384,8 @@ class ApproachEvaluation:
     summaries: list[ApproachSummary]
     results: dict[str, list[ApproachEpisode]]
     files: list[Path]
+    #: seeds whose worker crashed, per policy (the other seeds' results are kept)
+    failures: dict[str, list[SeedFailure]] = field(default_factory=dict)
 
 
 def evaluate_approach(
@@ -372,6 +400,8 @@ def evaluate_approach(
     overrides: dict[str, Any] | None = None,
     command: str = "",
     routine_timing: str = "model",
+    address: str | None = None,
+    resume: bool = False,
 ) -> ApproachEvaluation:
     """Evaluate ``policies`` on ``scenario``; write the table, CSV, JSON and figure."""
     if episodes < 1:
@@ -379,28 +409,40 @@ def evaluate_approach(
     for name in policies:
         require_choice("policy", name, tuple(APPROACH_POLICIES))
     results: dict[str, list[ApproachEpisode]] = {}
-    for name in policies:
-        estimator = (
-            routine_estimator(routine_estimator_name)
-            if name == "svgs-routine"
-            else APPROACH_POLICIES[name]
-        )
-        results[name] = evaluate_policy(
-            name,
-            scenario,
-            estimator,
-            episodes,
-            first_seed,
-            workers,
-            progress,
-            overrides,
-            routine_timing,
-        )
+    failures: dict[str, list[SeedFailure]] = {}
+    stem = f"approach_{Path(scenario).stem}"
+    with batch_session(workers, address):
+        for name in policies:
+            estimator = (
+                routine_estimator(routine_estimator_name)
+                if name == "svgs-routine"
+                else APPROACH_POLICIES[name]
+            )
+            run = evaluate_policy(
+                name,
+                scenario,
+                estimator,
+                episodes,
+                first_seed,
+                workers,
+                progress,
+                overrides,
+                routine_timing,
+                address,
+                out_dir / f"{stem}_{name}.jsonl" if out_dir is not None else None,
+                resume,
+            )
+            results[name] = run.records  # type: ignore[assignment]
+            if run.failures:
+                failures[name] = run.failures
+    results = {name: rs for name, rs in results.items() if rs}
+    if not results:
+        seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
+        raise RuntimeError(f"every episode failed (seeds {seeds})")
     summaries = [summarise(r) for r in results.values()]
     files: list[Path] = []
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        stem = f"approach_{Path(scenario).stem}"
         title = (
             f"{scenario}: {episodes} episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
@@ -414,6 +456,7 @@ def evaluate_approach(
             + (f"Command: `{command}`\n\n" if command else "")
             + markdown_table(summaries)
             + f"\n\nSimulation wall time over all episodes: {wall:.0f} s (summed over workers)\n"
+            + failures_note(failures)
         )
         summary_json = out_dir / f"{stem}.json"
         summary_json.write_text(
@@ -439,7 +482,7 @@ def evaluate_approach(
         figure = out_dir / f"{stem}.png"
         plot_trajectories(results, figure, title)
         files = [table, summary_json, episodes_csv, figure]
-    return ApproachEvaluation(scenario, summaries, results, files)
+    return ApproachEvaluation(scenario, summaries, results, files, failures)
 
 
 # ------------------------------------------------------------------------------ command line
@@ -460,9 +503,14 @@ def _evaluate_approach(args: argparse.Namespace) -> int:
         overrides=_parse_overrides(args.set),
         command=command,
         routine_timing=args.routine_timing,
+        address=args.address,
+        resume=args.resume,
     )
     console.print(f"\n[bold]{args.scenario}[/bold]")
     print(markdown_table(evaluation.summaries))
+    note = failures_note(evaluation.failures)
+    if note:
+        console.print(note, style="yellow")
     for path in evaluation.files:
         console.print(f"  wrote {path}")
     return 0
@@ -481,7 +529,7 @@ def add_approach_parser(evaluate_group: Any) -> None:
     approach.add_argument(
         "--scenario", default="high-approach", help="a config in configs/ or a path"
     )
-    approach.add_argument("--episodes", type=int, default=20)
+    approach.add_argument("--episodes", type=positive_int, default=20)
     approach.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first seed")
     approach.add_argument(
         "--routine-estimator",
@@ -495,8 +543,7 @@ def add_approach_parser(evaluate_group: Any) -> None:
         help="svgs-routine's commit: the shipped timing policy (where installed) or the "
         "quiescent heuristic",
     )
-    approach.add_argument("--workers", type=int, default=2, help="parallel processes")
     approach.add_argument("--out", default="results/approach", help="output directory")
-    approach.add_argument("--no-progress", action="store_true")
+    add_batch_arguments(approach)
     approach.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
-    approach.set_defaults(func=_guarded(_evaluate_approach))
+    approach.set_defaults(func=_evaluate_approach)

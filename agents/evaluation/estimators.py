@@ -14,6 +14,7 @@ import csv
 import json
 import math
 import time
+import warnings
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,16 +25,28 @@ import numpy as np
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
+from agents.evaluation.records import (  # noqa: F401  (re-exported: their home is records.py)
+    AXES,
+    AXIS_UNITS,
+    DISPLAY_NAMES,
+    TRUTH,
+    EstimatorTrace,
+    ScenarioRecord,
+    display_name,
+    pose_errors,
+    to_table_units,
+    wrap_degrees,
+)
 from landing_env.config import DeckLandingConfig, load_config
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError, PinnedDroneWarning, require_choice, require_range
 
-AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
-#: units of the tables and figures per axis (the env reports radians; tables use degrees)
-AXIS_UNITS: tuple[str, ...] = ("m", "m", "m", "deg", "deg", "deg")
-#: the reference, never scored against itself
-TRUTH = "truth"
-#: display names of the estimators
-DISPLAY_NAMES: dict[str, str] = {"atda": "ATDA", "ihrcf": "IHRCF", "crhf": "CRHF", "fused": "Fused"}
+#: the command-line option that sets each key the evaluation forces
+_FORCED_BY = {
+    "camera.mode": "--mode",
+    "simulation.drone_fixed": "the pinned-drone bench",
+    "simulation.max_episode_s": "--duration",
+    "estimation.compare": "--estimators",
+}
 
 
 @dataclass(frozen=True)
@@ -56,11 +69,6 @@ PAPER_RESULTS: tuple[PaperResult, ...] = (
     PaperResult("atda", "CRHF paper, Table 5", (0.0157, 0.0129, 0.0687, 3.9043, 1.7684, 1.7859)),
     PaperResult("crhf", "CRHF paper, Table 5", (0.0047, 0.0042, 0.0051, 1.4239, 1.5231, 1.3290)),
 )
-
-
-def display_name(name: str) -> str:
-    """ATDA, IHRCF, CRHF, or the name itself for any other estimator."""
-    return DISPLAY_NAMES.get(name, name)
 
 
 # ------------------------------------------------------------------------------- running
@@ -117,6 +125,14 @@ class RunSettings:
             forced["simulation.max_episode_s"] = float(self.duration_s)
         if self.estimators is not None:
             forced["estimation.compare"] = list(self.estimators)
+        for key, value in self.overrides.items():
+            if key in forced and value != forced[key]:
+                flag = _FORCED_BY.get(key, "the evaluation")
+                raise ConfigError(
+                    key,
+                    f"{value!r} conflicts with the evaluation's {forced[key]!r}, which {flag} "
+                    "sets; drop it from --set",
+                )
         return {**self.overrides, **forced}
 
     def scored(self, config: DeckLandingConfig) -> list[str]:
@@ -131,92 +147,6 @@ class RunSettings:
         return load_config(self.scenario, self.all_overrides())
 
 
-@dataclass
-class EstimatorTrace:
-    """One estimator's output at every frame: pose (m, rad; NaN when invalid) and flags."""
-
-    pose: np.ndarray
-    valid: np.ndarray
-    predicted: np.ndarray
-    reasons: list[str]
-    #: 1-sigma per axis (m, rad) where the estimator gives one (``fused``), else None
-    std: np.ndarray | None = None
-    #: capture time of the image the shown estimate came from (the vision link), s; NaN
-    #: where the estimate is not delayed
-    capture_time_s: np.ndarray | None = None
-
-
-@dataclass
-class ScenarioRecord:
-    """Everything a run recorded, frame by frame (the reset frame and every step)."""
-
-    scenario: str
-    seed: int
-    time_s: np.ndarray
-    #: the true T_CD as x, y, z (m), roll, pitch, yaw (rad)
-    truth: np.ndarray
-    estimates: dict[str, EstimatorTrace]
-    #: a deck command was outside the legs' stroke and was clamped (the truth is still true)
-    stewart_clamped: np.ndarray
-    tag_miss_reason: list[str]
-    wall_time_s: float
-    config: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def n_frames(self) -> int:
-        return len(self.time_s)
-
-    def save(self, path: Path) -> None:
-        """Write the time series as a compressed ``.npz`` (reasons as string arrays)."""
-        arrays: dict[str, np.ndarray] = {
-            "time_s": self.time_s,
-            "truth": self.truth,
-            "stewart_clamped": self.stewart_clamped,
-            "tag_miss_reason": np.asarray(self.tag_miss_reason, dtype=str),
-        }
-        for name, trace in self.estimates.items():
-            arrays[f"{name}.pose"] = trace.pose
-            arrays[f"{name}.valid"] = trace.valid
-            arrays[f"{name}.predicted"] = trace.predicted
-            arrays[f"{name}.reasons"] = np.asarray(trace.reasons, dtype=str)
-            for extra in ("std", "capture_time_s"):
-                if getattr(trace, extra) is not None:
-                    arrays[f"{name}.{extra}"] = getattr(trace, extra)
-        arrays["meta"] = np.asarray(
-            json.dumps({"scenario": self.scenario, "seed": self.seed, "wall": self.wall_time_s})
-        )
-        np.savez_compressed(path, **arrays)
-
-    @classmethod
-    def load(cls, path: Path) -> ScenarioRecord:
-        """Read a record written by :meth:`save` (to re-plot or re-score without re-running)."""
-        with np.load(path) as data:
-            meta = json.loads(str(data["meta"]))
-            names = [key.removesuffix(".pose") for key in data.files if key.endswith(".pose")]
-            return cls(
-                scenario=meta["scenario"],
-                seed=int(meta["seed"]),
-                time_s=data["time_s"],
-                truth=data["truth"],
-                estimates={
-                    n: EstimatorTrace(
-                        pose=data[f"{n}.pose"],
-                        valid=data[f"{n}.valid"],
-                        predicted=data[f"{n}.predicted"],
-                        reasons=[str(r) for r in data[f"{n}.reasons"]],
-                        std=data[f"{n}.std"] if f"{n}.std" in data.files else None,
-                        capture_time_s=data[f"{n}.capture_time_s"]
-                        if f"{n}.capture_time_s" in data.files
-                        else None,
-                    )
-                    for n in names
-                },
-                stewart_clamped=data["stewart_clamped"],
-                tag_miss_reason=[str(r) for r in data["tag_miss_reason"]],
-                wall_time_s=float(meta["wall"]),
-            )
-
-
 def run_scenario(settings: RunSettings) -> ScenarioRecord:
     """Run the scenario with the drone pinned and record the truth and every estimate."""
     config = settings.config()
@@ -227,7 +157,9 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
             "estimation.compare",
             "names no estimator to score; add some of 'atda', 'ihrcf', 'crhf'",
         )
-    env = gym.make("DeckLanding-v0", config=config)
+    with warnings.catch_warnings():  # the pinned drone is this bench's point
+        warnings.simplefilter("ignore", PinnedDroneWarning)
+        env = gym.make("DeckLanding-v0", config=config)
     base = env.unwrapped
     steps = base.max_steps
     times: list[float] = []
@@ -299,25 +231,6 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
 
 
 # ------------------------------------------------------------------------------- metrics
-def wrap_degrees(angle_deg: np.ndarray) -> np.ndarray:
-    """Wrap angles to (-180, 180] degrees."""
-    return 180.0 - np.mod(180.0 - np.asarray(angle_deg, dtype=float), 360.0)
-
-
-def to_table_units(pose: np.ndarray) -> np.ndarray:
-    """Poses (..., 6) in m and rad -> m and degrees."""
-    out = np.array(pose, dtype=float, copy=True)
-    out[..., 3:] = np.rad2deg(out[..., 3:])
-    return out
-
-
-def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Signed errors (N, 6) estimate - truth in m and degrees, angles wrapped; NaN stays NaN."""
-    error = to_table_units(estimate) - to_table_units(truth)
-    error[..., 3:] = wrap_degrees(error[..., 3:])
-    return error
-
-
 @dataclass(frozen=True)
 class EstimatorMetrics:
     """One estimator's scores over a run (metres and degrees per axis)."""

@@ -16,8 +16,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.evaluation.estimators import ScenarioRecord, display_name, to_table_units
 from agents.evaluation.plots import DPI, _colour
+from agents.evaluation.records import ScenarioRecord, display_name, to_table_units
 
 #: (axis index, label, scale from m / degrees to the plotted unit)
 _PANELS: tuple[tuple[int, str, float], ...] = ((2, "z (mm)", 1000.0), (3, "roll (°)", 1.0))

@@ -26,9 +26,23 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluation import _parse_overrides
-from agents.evaluation.parallel import run_seed_chunks
+from agents.cli_args import add_batch_arguments, positive_int
+from agents.cli_args import parse_overrides as _parse_overrides
+from agents.evaluation.records import EpisodeRecord
+from agents.evaluation.runner import (
+    EpisodeTask,
+    RunResult,
+    SeedFailure,
+    batch_session,
+    for_each_seed,
+    run_episodes,
+)
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
+    FLYING_OVERRIDES,
+    START_OVERRIDES,
+    landing_overrides,
+)
 from landing_env.stewart.motion import SeaStateConfig
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
@@ -97,22 +111,6 @@ SCENARIOS: dict[str, Scenario] = {
     ),
 }
 
-#: what turns a bench config into a landing scenario
-FLYING_OVERRIDES: dict[str, Any] = {
-    "simulation.drone_fixed": False,
-    "simulation.max_episode_s": 40.0,
-    "estimation.compare": [],
-}
-#: starts: the timing task starts at its hold height; align-descend far and off the deck
-START_OVERRIDES: dict[str, dict[str, Any]] = {
-    "DeckLandingTiming-v0": {"start.max_offset_m": 0.1, "start.max_yaw_deg": 10.0},
-    "DeckLanding-v0": {
-        "start.height_m": [1.5, 4.0],
-        "start.max_offset_m": 1.0,
-        "start.max_yaw_deg": 30.0,
-    },
-}
-
 
 def scenario_overrides(
     scenario: str, env_id: str, estimator: str = "ihrcf", camera_mode: str = "project"
@@ -121,38 +119,17 @@ def scenario_overrides(
     require_choice("scenario", scenario, tuple(SCENARIOS))
     require_choice("estimator", estimator, ESTIMATORS)
     require_choice("mode", camera_mode, ("project", "render"))
-    return {
-        **FLYING_OVERRIDES,
-        **START_OVERRIDES[env_id],
-        "estimation.observed": estimator,
-        "camera.mode": camera_mode,
-    }
+    return landing_overrides(env_id, estimator, camera_mode)
 
 
 # ------------------------------------------------------------------------------ episodes
 @dataclass
-class EpisodeResult:
-    """One evaluated episode (NaN where a metric does not exist, e.g. after a crash)."""
+class EpisodeResult(EpisodeRecord):
+    """One evaluated landing episode: the shared record (:mod:`agents.evaluation.records`)
+    and the timing task's wait."""
 
-    policy: str
-    scenario: str
-    seed: int
-    outcome: str
-    success: bool
-    relative_normal_speed: float = math.nan
-    deck_tilt_deg: float = math.nan
-    lateral_offset_m: float = math.nan
-    relative_attitude_deg: float = math.nan
-    #: simulated time from the episode start to the touchdown, seconds
-    time_to_land_s: float = math.nan
     #: the timing task's wait before the commit, seconds (NaN for align-descend)
     wait_s: float = math.nan
-    #: compliant-touchdown metrics (landing_env/touchdown.py)
-    bounce_height_m: float = math.nan
-    peak_load_g: float = math.nan
-    deck_vertical_accel_g: float = math.nan
-    tipped_over: bool = False
-    failed_checks: str = ""
 
 
 def make_env_and_policy(
@@ -221,33 +198,63 @@ def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: st
         success=info["outcome"] == "success",
         wait_s=float(info.get("wait_s", math.nan)),
     )
-    touchdown = info.get("touchdown")
-    if touchdown:
-        result.relative_normal_speed = float(touchdown["relative_normal_speed"])
-        result.deck_tilt_deg = float(touchdown["deck_tilt_deg"])
-        result.lateral_offset_m = float(touchdown["lateral_offset_m"])
-        result.relative_attitude_deg = float(touchdown["relative_attitude_deg"])
-        result.time_to_land_s = float(touchdown["time_s"])
-        result.bounce_height_m = float(touchdown.get("bounce_height_m", math.nan))
-        result.peak_load_g = float(touchdown.get("peak_load_g", math.nan))
-        result.deck_vertical_accel_g = float(touchdown.get("deck_vertical_accel_g", math.nan))
-        result.tipped_over = bool(touchdown.get("tipped_over", False))
-        result.failed_checks = ";".join(touchdown["failed_checks"])
-    elif "crash_contact" in info:
-        result.failed_checks = str(info["crash_contact"])
+    result.record_end(info)
     return result
 
 
-def _run_chunk(job: tuple) -> list[EpisodeResult]:
-    """Worker: one environment, a list of seeds (top level, so that it pickles)."""
-    policy_name, scenario, seeds, estimator, camera_mode, model_path, extra = job
-    env, policy = make_env_and_policy(
-        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides=extra
+class _LandingEvaluation:
+    """``evaluate landing`` for the runner (:mod:`agents.evaluation.runner`)."""
+
+    record_type = EpisodeResult
+
+    def validate(self, task: EpisodeTask) -> None:
+        from agents.policies import POLICY_ENVS
+        from landing_env.config import load_config
+
+        require_choice("policy", task.policy, tuple(POLICY_ENVS))
+        o = task.options
+        overrides = {
+            **scenario_overrides(
+                task.scenario,
+                POLICY_ENVS[task.policy],
+                o.get("estimator", "ihrcf"),
+                o.get("camera_mode", "project"),
+            ),
+            **(o.get("extra_overrides") or {}),
+        }
+        load_config(SCENARIOS[task.scenario].config, overrides)
+
+    def make(self, task: EpisodeTask) -> tuple[Any, Any]:
+        return make_env_and_policy(task.policy, task.scenario, **task.options)
+
+    def run_episode(self, env: Any, policy: Any, seed: int, task: EpisodeTask) -> EpisodeResult:
+        return run_episode(env, policy, seed, task.policy, task.scenario)
+
+
+#: the runner's handle on this evaluation (``EVALUATIONS["landing"]``)
+LANDING_EVALUATION = _LandingEvaluation()
+
+
+def landing_task(
+    policy_name: str,
+    scenario: str,
+    estimator: str = "ihrcf",
+    camera_mode: str = "project",
+    model_path: str | None = None,
+    extra_overrides: dict[str, Any] | None = None,
+) -> EpisodeTask:
+    """The runner's task for one policy on one scenario."""
+    return EpisodeTask(
+        "landing",
+        policy_name,
+        scenario,
+        {
+            "estimator": estimator,
+            "camera_mode": camera_mode,
+            "model_path": model_path,
+            "extra_overrides": extra_overrides,
+        },
     )
-    try:
-        return [run_episode(env, policy, seed, policy_name, scenario) for seed in seeds]
-    finally:
-        env.close()
 
 
 def evaluate_policy(
@@ -261,24 +268,43 @@ def evaluate_policy(
     workers: int = 1,
     progress: bool = False,
     extra_overrides: dict[str, Any] | None = None,
+    address: str | None = None,
+    results_path: Path | None = None,
+    resume: bool = False,
 ) -> list[EpisodeResult]:
-    """``episodes`` episodes of one policy on one scenario, over ``workers`` processes."""
-    return run_seed_chunks(
-        _run_chunk,
-        lambda chunk: (
-            policy_name,
-            scenario,
-            chunk,
-            estimator,
-            camera_mode,
-            model_path,
-            extra_overrides,
-        ),
-        list(range(first_seed, first_seed + episodes)),
-        workers,
-        max_chunk=25,
-        desc=f"{policy_name} @ {scenario}",
+    """``episodes`` episodes of one policy on one scenario, over ``workers`` workers."""
+    return run_policy(
+        policy_name, scenario, episodes, first_seed, estimator, camera_mode, model_path,
+        workers, progress, extra_overrides, address, results_path, resume,
+    ).records  # type: ignore[return-value]  # fmt: skip
+
+
+def run_policy(
+    policy_name: str,
+    scenario: str,
+    episodes: int,
+    first_seed: int = HELD_OUT_SEED,
+    estimator: str = "ihrcf",
+    camera_mode: str = "project",
+    model_path: str | None = None,
+    workers: int = 1,
+    progress: bool = False,
+    extra_overrides: dict[str, Any] | None = None,
+    address: str | None = None,
+    results_path: Path | None = None,
+    resume: bool = False,
+) -> RunResult:
+    """As :func:`evaluate_policy`, with the failed seeds and how the run went."""
+    task = landing_task(policy_name, scenario, estimator, camera_mode, model_path, extra_overrides)
+    return run_episodes(
+        task,
+        for_each_seed(first_seed, episodes),
+        workers=workers,
+        address=address,
+        results_path=results_path,
+        resume=resume,
         progress=progress,
+        desc=f"{policy_name} @ {scenario}",
     )
 
 
@@ -471,6 +497,8 @@ class LandingEvaluation:
     summaries: list[LandingSummary]
     results: dict[str, list[EpisodeResult]]
     files: list[Path]
+    #: seeds whose worker crashed, per policy (the other seeds' results are kept)
+    failures: dict[str, list[SeedFailure]] = field(default_factory=dict)
 
 
 def evaluate_landing(
@@ -486,24 +514,38 @@ def evaluate_landing(
     progress: bool = True,
     command: str = "",
     extra_overrides: dict[str, Any] | None = None,
+    address: str | None = None,
+    resume: bool = False,
 ) -> LandingEvaluation:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure."""
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     results: dict[str, list[EpisodeResult]] = {}
-    for name in policies:
-        results[name] = evaluate_policy(
-            name,
-            scenario,
-            episodes,
-            first_seed,
-            estimator,
-            camera_mode,
-            model_path,
-            workers,
-            progress,
-            extra_overrides,
-        )
+    failures: dict[str, list[SeedFailure]] = {}
+    with batch_session(workers, address):
+        for name in policies:
+            run = run_policy(
+                name,
+                scenario,
+                episodes,
+                first_seed,
+                estimator,
+                camera_mode,
+                model_path,
+                workers,
+                progress,
+                extra_overrides,
+                address,
+                out_dir / f"landing_{scenario}_{name}.jsonl" if out_dir is not None else None,
+                resume,
+            )
+            results[name] = run.records  # type: ignore[assignment]
+            if run.failures:
+                failures[name] = run.failures
+    results = {name: rs for name, rs in results.items() if rs}
+    if not results:
+        seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
+        raise RuntimeError(f"every episode failed (seeds {seeds})")
     summaries = [summarise(rs) for rs in results.values()]
     files: list[Path] = []
     if out_dir is not None:
@@ -520,6 +562,7 @@ def evaluate_landing(
             + (f"Command: `{command}`\n\n" if command else "")
             + markdown_table(summaries)
             + "\n"
+            + failures_note(failures)
         )
         summary_json = out_dir / f"{stem}.json"
         summary_json.write_text(
@@ -538,14 +581,25 @@ def evaluate_landing(
         )
         episodes_csv = out_dir / f"{stem}_episodes.csv"
         with episodes_csv.open("w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(asdict(results[policies[0]][0])))
+            first = next(iter(results.values()))[0]
+            writer = csv.DictWriter(handle, fieldnames=list(asdict(first)))
             writer.writeheader()
             for rs in results.values():
                 writer.writerows(asdict(r) for r in rs)
         figure = out_dir / f"{stem}.png"
         plot_results(results, summaries, figure, title)
         files = [table, summary_json, episodes_csv, figure]
-    return LandingEvaluation(scenario, summaries, results, files)
+    return LandingEvaluation(scenario, summaries, results, files, failures)
+
+
+def failures_note(failures: dict[str, list[SeedFailure]]) -> str:
+    """A line per crashed seed, for the table's file (empty when none crashed)."""
+    if not failures:
+        return ""
+    lines = ["", "Seeds whose worker crashed (not in the table):", ""]
+    for name, fs in failures.items():
+        lines += [f"- {name}, seed {f.seed}: {f.error}" for f in fs]
+    return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------------------ command line
@@ -574,9 +628,14 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             command=command,
             extra_overrides=_parse_overrides(args.set),
+            address=args.address,
+            resume=args.resume,
         )
         console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
         print(markdown_table(evaluation.summaries))
+        note = failures_note(evaluation.failures)
+        if note:
+            console.print(note, style="yellow")
         for path in evaluation.files:
             console.print(f"  wrote {path}")
     return 0
@@ -599,14 +658,13 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="one or more policies, or all",
     )
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
-    landing.add_argument("--episodes", type=int, default=100)
+    landing.add_argument("--episodes", type=positive_int, default=100)
     landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
     landing.add_argument("--estimator", choices=ESTIMATORS, default="ihrcf")
     landing.add_argument("--mode", choices=("project", "render"), default="project")
     landing.add_argument("--model", default=None, help="a trained timing model (timing-ppo)")
-    landing.add_argument("--workers", type=int, default=2, help="parallel processes")
     landing.add_argument("--out", default="results/landing", help="output directory")
-    landing.add_argument("--no-progress", action="store_true")
+    add_batch_arguments(landing)
     landing.add_argument(
         "--set",
         nargs="*",
@@ -615,22 +673,3 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="dotted config overrides applied last, e.g. tof.noise=vl53l1x",
     )
     landing.set_defaults(func=_evaluate_landing)
-
-
-def _subparser_group(parser: argparse.ArgumentParser) -> Any:
-    for action in parser._actions:  # argparse keeps sub-command groups only here
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    return None
-
-
-def add_landing_commands(subparsers: Any) -> None:
-    """``train timing`` and ``evaluate landing`` (added to an existing ``evaluate`` group)."""
-    from agents.training import add_train_parser
-
-    add_train_parser(subparsers)
-    evaluate = subparsers.choices.get("evaluate")
-    if evaluate is None:
-        evaluate = subparsers.add_parser("evaluate", help="evaluations")
-        evaluate.add_subparsers(dest="evaluation", required=True)
-    add_landing_parser(_subparser_group(evaluate))

@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.evaluation.estimators import (
+from agents.evaluation.records import (
     AXES,
     ScenarioRecord,
     display_name,

@@ -36,7 +36,6 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from tqdm import tqdm
 
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import (
@@ -49,6 +48,7 @@ from agents.evaluation.estimators import (
     score_record,
 )
 from agents.evaluation.plots import COLOURS, DPI
+from agents.evaluation.runner import map_tasks
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
 from landing_env.config import DeckLandingConfig, load_config
@@ -91,6 +91,9 @@ class SweepSettings:
     #: extra dotted-key overrides for every point
     overrides: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
+    #: parallel workers (Ray beyond one) and an existing Ray cluster's address
+    workers: int = 1
+    address: str | None = None
 
     def __post_init__(self) -> None:
         require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
@@ -234,15 +237,15 @@ class SweepPoint:
 
 
 def run_sweep(settings: SweepSettings) -> list[SweepPoint]:
-    """Run every point of the sweep (one short scenario run each)."""
+    """Run every point of the sweep (one short scenario run each), over ``settings.workers``
+    (Ray beyond one, or on the cluster at ``settings.address``; the same points either way)."""
     base = load_config(settings.scenario, settings.overrides)
-    points: list[SweepPoint] = []
     with tempfile.TemporaryDirectory(prefix="deck-landing-sweep-") as scratch:
         workdir = Path(settings.calibration_dir or scratch)
         workdir.mkdir(parents=True, exist_ok=True)
-        for parameter, value, variant in tqdm(
-            settings.plan(), desc="sweep", unit="run", disable=not settings.progress
-        ):
+        jobs = []
+        for parameter, value, variant in settings.plan():
+            # in this process: the k1 points' chessboard calibrations are written to workdir
             changes = point_overrides(parameter, value, variant, base, settings, workdir)
             run = RunSettings(
                 scenario=settings.scenario,
@@ -252,18 +255,29 @@ def run_sweep(settings: SweepSettings) -> list[SweepPoint]:
                 overrides={**settings.overrides, **changes},
                 progress=False,
             )
-            record = run_scenario(run)
-            points.append(
-                SweepPoint(
-                    parameter,
-                    float(value),
-                    variant,
-                    score_record(record),
-                    int(record.stewart_clamped.sum()),
-                    record.wall_time_s,
-                )
-            )
-    return points
+            jobs.append((parameter, float(value), variant, run))
+        return map_tasks(
+            _run_point,
+            jobs,
+            workers=settings.workers,
+            address=settings.address,
+            progress=settings.progress,
+            desc="sweep",
+        )
+
+
+def _run_point(job: tuple[str, float, str, RunSettings]) -> SweepPoint:
+    """One point of the sweep (top level: it runs in a Ray worker too)."""
+    parameter, value, variant, run = job
+    record = run_scenario(run)
+    return SweepPoint(
+        parameter,
+        value,
+        variant,
+        score_record(record),
+        int(record.stewart_clamped.sum()),
+        record.wall_time_s,
+    )
 
 
 # ------------------------------------------------------------------------------- outputs

@@ -36,6 +36,7 @@ from estimation.intrinsics_calibration import (
     chessboard_object_points,
     find_chessboard,
 )
+from landing_env._quiet import quiet_stdout
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera import CameraConfig, CameraSensor
 
@@ -193,7 +194,8 @@ class ChessboardScene:
         self.rig = rig
         # the rig only renders: no detector, no EGL (its bodies must be created after it)
         self.camera_config = replace(camera, mode="project", use_egl=False)
-        self.client = BulletClient(connection_mode=p.DIRECT)
+        with quiet_stdout():
+            self.client = BulletClient(connection_mode=p.DIRECT)
         self._files = tempfile.TemporaryDirectory(prefix="chessboard_")
         directory = Path(self._files.name)
         obj_path = directory / "board.obj"

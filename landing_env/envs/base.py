@@ -2,19 +2,26 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import warnings
+import weakref
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 from landing_env.config import DeckLandingConfig, load_config
+from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
 from landing_env.world import PhysicsReport, World
 
@@ -24,6 +31,35 @@ POSE_HIGH = -POSE_LOW
 #: full-scale range of the IMU (an ICM-20602-class part: ±16 g, ±2000 °/s); a mean reading
 #: beyond it is clipped to the range, as the part itself would, and flagged in info
 IMU_HIGH = np.array([16 * 9.81] * 3 + [math.radians(2000.0)] * 3, dtype=np.float32)
+
+
+def _has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+#: slot -> live environment of this process (for distinct config seeds of vector members)
+_SLOTS: dict[int, weakref.ref] = {}
+
+
+def _claim_slot(env: object) -> int:
+    slot = 0
+    while slot in _SLOTS and _SLOTS[slot]() is not None:
+        slot += 1
+    _SLOTS[slot] = weakref.ref(env)
+    return slot
+
+
+def _release_slot(env: DeckLandingBaseEnv) -> None:
+    slot = getattr(env, "_slot", None)
+    if slot is not None and slot in _SLOTS and _SLOTS[slot]() is env:
+        del _SLOTS[slot]
+
+
+def _process_key() -> tuple[int, ...]:
+    """A child process's creation index (multiprocessing's ``_identity``); () in the main one."""
+    import multiprocessing
+
+    return tuple(getattr(multiprocessing.current_process(), "_identity", ()) or ())
 
 
 @dataclass
@@ -57,11 +93,28 @@ class DeckLandingBaseEnv(gym.Env):
             allowed = ", ".join(self.metadata["render_modes"])
             raise ValueError(f"render_mode: {render_mode!r} is not allowed; choose {allowed}")
         self.config = load_config(config, overrides, **sections)
+        if self.config.simulation.drone_fixed:
+            warnings.warn(
+                "simulation.drone_fixed is true: the drone is pinned at its start pose (the "
+                "estimators' bench), the action is ignored and this environment cannot land; "
+                "set simulation.drone_fixed: false to fly (the registered scenario ids do)",
+                PinnedDroneWarning,
+                stacklevel=2,
+            )
         self._config_seed = self.config.seed
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.config.simulation.env_hz}
         sim = self.config.simulation
-        self.world = World(self.config, gui=render_mode == "human" or sim.gui)
+        gui = render_mode == "human" or sim.gui
+        if render_mode == "human" and not sim.gui and not _has_display():
+            # as Gymnasium's own envs on a headless machine: run, show nothing, say so once
+            gym.logger.warn(
+                "render_mode='human' without a display (DISPLAY/WAYLAND_DISPLAY unset): the "
+                "simulation runs headless and nothing is shown; use 'rgb_array' or Xvfb"
+            )
+            gui = False
+        self._slot = _claim_slot(self)
+        self.world = World(self.config, gui=gui)
         self.bank = EstimatorBank(self.config, self.world, (POSE_LOW, POSE_HIGH))
         self.max_steps = round(sim.max_episode_s * sim.env_hz)
         self.env_dt = 1.0 / sim.env_hz
@@ -149,7 +202,26 @@ class DeckLandingBaseEnv(gym.Env):
         return self.world.camera_image(self._sensing.frame)
 
     def close(self) -> None:
+        _release_slot(self)
         self.world.close()
+
+    # ------------------------------------------------------------------ spec
+    @property
+    def spec(self) -> EnvSpec | None:  # type: ignore[override]
+        """The registration spec, with ``max_episode_steps`` of this env's config where the id
+        leaves it open (``DeckLanding-v0``, ``DeckLandingTiming-v0``)."""
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self.episode_step_limit)
+        self.__dict__["_spec"] = value
+
+    @property
+    def episode_step_limit(self) -> int:
+        """The most steps an episode can take: it truncates at ``simulation.max_episode_s``."""
+        return episode_step_limit(self.config)
 
     # ------------------------------------------------------------------ task hooks
     def _action_to_setpoint(self, action: np.ndarray) -> VelocitySetpoint:
@@ -245,9 +317,19 @@ class DeckLandingBaseEnv(gym.Env):
 
     # ------------------------------------------------------------------ observation and info
     def _first_seed(self) -> int | None:
-        """The config's seed applies to the first reset without a seed only."""
+        """The config's seed applies to the first reset without a seed only, as Gymnasium
+        seeds on the first reset.  Each vector worker gets its own seed from it: the first
+        live environment of the main process uses the seed as given; another environment
+        alive beside it (a ``SyncVectorEnv`` or ``DummyVecEnv`` member) or one in a child
+        process (``AsyncVectorEnv``, ``SubprocVecEnv``) uses a seed spawned from it with
+        ``SeedSequence`` and its (process, slot) key, so workers never replay one episode."""
         seed, self._config_seed = self._config_seed, None
-        return seed
+        if seed is None:
+            return None
+        key = (*_process_key(), self._slot)
+        if not any(key):
+            return seed
+        return int(np.random.SeedSequence([seed, *key]).generate_state(1, np.uint64)[0] >> 1)
 
     def _sense(self) -> Sensing:
         frame = self.world.capture()

@@ -29,6 +29,7 @@ from landing_env.config_loading import build_dataclass
 from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome
 
 #: the camera sits this far below the drone's centre of mass (body z), metres; the start
@@ -397,6 +398,11 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.frames_of_last_step: list[np.ndarray] = []
         self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
+
+    @property
+    def episode_step_limit(self) -> int:
+        """The most decisions an episode can take: ``wait_limit_s`` forces the commit."""
+        return episode_step_limit(self.config, self.timing)
 
     def _reset_episode_state(self) -> None:
         self._wait_s = 0.0

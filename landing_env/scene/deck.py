@@ -29,6 +29,7 @@ from pybullet_utils.bullet_client import BulletClient
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.landmarks import Landmark, LandmarkLayout
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.resources import cache_dir
 
 #: AprilTag family of the deck; the only one OpenCV and pupil-apriltags both provide here.
 TAG_FAMILY = "tag36h11"
@@ -49,8 +50,9 @@ PAD_NAMES: tuple[str, ...] = ("blue", "green", "yellow", "red")
 #: Bump when the generated files change so old cache entries are not reused.
 _ASSET_VERSION = 1
 
-#: Where generated meshes and textures are cached (git-ignored).
-GENERATED_DIR = Path(__file__).resolve().parent.parent / "assets" / "generated"
+#: Where generated meshes and textures are cached: the user cache directory, never the
+#: installed package (``DECK_LANDING_CACHE_DIR`` overrides it; see landing_env/resources.py).
+GENERATED_DIR = cache_dir() / f"assets-v{_ASSET_VERSION}"
 
 
 def _client_id(client: int | BulletClient) -> int:

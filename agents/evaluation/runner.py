@@ -1,0 +1,457 @@
+"""One runner for every batch of episodes over seeds: serial for short jobs, Ray otherwise.
+
+``evaluate landing`` and ``evaluate approach`` describe what to run as an :class:`EpisodeTask`
+(the evaluation's name from :data:`EVALUATIONS`, the policy, the scenario, options) and
+:func:`run_episodes` runs it over seeds:
+
+* one worker on this machine: in this process (no start-up cost), the same results;
+* more workers, or ``address``: on Ray (``ray.init()`` on this machine by default, an existing
+  cluster with ``address``), one actor per worker holding its environment, seeds handed out
+  one at a time, so the results are those of the serial run seed by seed;
+* a bad config fails fast, before any worker starts, with its message
+  (:class:`~estimation.errors.ConfigError` naming the key);
+* a worker that crashes (its process dies, or its episode raises) is reported with its seed
+  in :attr:`RunResult.failures`; a fresh worker takes over and the other seeds still run;
+* each record is appended to ``results_path`` (JSON lines) as it arrives, and ``resume``
+  keeps the seeds already there and runs only the missing ones.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from agents.cli_args import USER_ERRORS
+from agents.evaluation.records import EpisodeRecord
+
+#: calls queued per actor: the next seed waits in the actor while the current one runs, so a
+#: worker never idles for the round trip to the driver
+PIPELINE_DEPTH = 2
+
+#: evaluation name -> "module:attribute" of its :class:`Evaluation` (imported on use, also in
+#: the workers); a test may name its own evaluation by its "module:attribute" directly
+EVALUATIONS: dict[str, str] = {
+    "landing": "agents.evaluation.landing:LANDING_EVALUATION",
+    "approach": "agents.evaluation.approach:APPROACH_EVALUATION",
+}
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """What a worker needs to run episodes of one policy (picklable)."""
+
+    evaluation: str
+    policy: str
+    scenario: str
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+class Evaluation(Protocol):
+    """How one kind of evaluation makes its environment and policy and runs an episode."""
+
+    record_type: type[EpisodeRecord]
+
+    def validate(self, task: EpisodeTask) -> None:
+        """Raise ConfigError for a bad task (builds the config; runs before any worker)."""
+
+    def make(self, task: EpisodeTask) -> tuple[Any, Any]:
+        """The environment and the policy."""
+
+    def run_episode(self, env: Any, policy: Any, seed: int, task: EpisodeTask) -> EpisodeRecord:
+        """One episode to its end."""
+
+
+def get_evaluation(name: str) -> Evaluation:
+    """The evaluation registered as ``name`` (or given as "module:attribute")."""
+    target = EVALUATIONS.get(name, name)
+    module, sep, attribute = target.partition(":")
+    if not sep:
+        from estimation.errors import ConfigError
+
+        raise ConfigError("evaluation", f"{name!r} is not one of {sorted(EVALUATIONS)}")
+    return getattr(importlib.import_module(module), attribute)
+
+
+@dataclass
+class SeedFailure:
+    """A seed whose worker crashed or whose episode raised."""
+
+    seed: int
+    error: str
+
+
+@dataclass
+class RunResult:
+    """The records in seed order, the failed seeds, and how the run went."""
+
+    records: list[EpisodeRecord]
+    failures: list[SeedFailure]
+    resumed: int = 0
+    backend: str = "serial"
+    wall_time_s: float = math.nan
+
+
+# ------------------------------------------------------------------------------ results file
+def _read_done(path: Path, record_type: type[EpisodeRecord], seeds: set[int]) -> dict[int, Any]:
+    done: dict[int, Any] = {}
+    if not path.is_file():
+        return done
+    for line in path.read_text().splitlines():
+        try:
+            data = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut by an interruption: the seed runs again
+        if isinstance(data, dict) and data.get("seed") in seeds:
+            done[int(data["seed"])] = record_type.from_json(data)
+    return done
+
+
+class _Sink:
+    """Appends records to the JSON-lines file and moves the progress bar."""
+
+    def __init__(self, path: Path | None, total: int, done: int, desc: str, progress: bool):
+        self.handle = None
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.handle = path.open("a")
+        self.bar = None
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, initial=done, desc=desc, unit="ep")
+
+    def add(self, record: EpisodeRecord) -> None:
+        if self.handle is not None:
+            self.handle.write(json.dumps(record.to_json()) + "\n")
+            self.handle.flush()
+        if self.bar is not None:
+            self.bar.update(1)
+
+    def fail(self) -> None:
+        if self.bar is not None:
+            self.bar.update(1)
+
+    def close(self) -> None:
+        if self.handle is not None:
+            self.handle.close()
+        if self.bar is not None:
+            self.bar.close()
+
+
+# ------------------------------------------------------------------------------ the runner
+def run_episodes(
+    task: EpisodeTask,
+    seeds: list[int],
+    *,
+    workers: int = 1,
+    address: str | None = None,
+    results_path: Path | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    desc: str = "",
+    backend: str = "auto",
+) -> RunResult:
+    """Run ``task`` for every seed (see the module docstring); records come back in seed order.
+
+    ``backend``: ``"auto"`` (serial for one local worker or one seed, else Ray), or force
+    ``"serial"`` or ``"ray"`` (the benchmark compares them)."""
+    if workers < 1:
+        from estimation.errors import ConfigError
+
+        raise ConfigError("workers", f"{workers} is out of range; allowed [1, inf]")
+    evaluation = get_evaluation(task.evaluation)
+    evaluation.validate(task)  # fail fast, before a worker starts
+    wanted = list(dict.fromkeys(seeds))
+    done: dict[int, Any] = {}
+    if results_path is not None:
+        if resume:
+            done = _read_done(results_path, evaluation.record_type, set(wanted))
+        elif results_path.exists():
+            results_path.unlink()
+    todo = [s for s in wanted if s not in done]
+    sink = _Sink(results_path, len(wanted), len(done), desc or task.policy, progress)
+    started = time.perf_counter()
+    try:
+        if backend == "auto":
+            short = address is None and (workers == 1 or len(todo) <= 1)
+            backend = "serial" if short else "ray"
+        if backend == "serial":
+            records, failures = _run_serial(evaluation, task, todo, sink)
+        else:
+            records, failures = _run_ray(task, todo, workers, address, sink)
+    finally:
+        sink.close()
+    every = {**done, **{r.seed: r for r in records}}
+    return RunResult(
+        records=[every[s] for s in wanted if s in every],
+        failures=sorted(failures, key=lambda f: f.seed),
+        resumed=len(done),
+        backend=backend,
+        wall_time_s=time.perf_counter() - started,
+    )
+
+
+def _run_serial(
+    evaluation: Evaluation, task: EpisodeTask, seeds: list[int], sink: _Sink
+) -> tuple[list[EpisodeRecord], list[SeedFailure]]:
+    records: list[EpisodeRecord] = []
+    failures: list[SeedFailure] = []
+    env = policy = None
+    try:
+        for seed in seeds:
+            if env is None:
+                env, policy = evaluation.make(task)
+            try:
+                record = evaluation.run_episode(env, policy, seed, task)
+            except USER_ERRORS:
+                raise
+            except Exception as exc:  # a crashed episode: report its seed, keep the others
+                failures.append(SeedFailure(seed, f"{type(exc).__name__}: {exc}"))
+                sink.fail()
+                env.close()
+                env = policy = None
+                continue
+            records.append(record)
+            sink.add(record)
+    finally:
+        if env is not None:
+            env.close()
+    return records, failures
+
+
+# ------------------------------------------------------------------------------ Ray
+class _EpisodeWorker:
+    """A Ray actor: one environment and policy, episodes one seed at a time."""
+
+    def __init__(self, task: EpisodeTask) -> None:
+        from landing_env._quiet import quiet_stdout
+
+        self.task = task
+        self.evaluation = get_evaluation(task.evaluation)
+        with quiet_stdout():
+            import landing_env  # noqa: F401  (registers the ids, PyBullet silenced)
+        # a user error is raised again by run(): Ray keeps the error of a task (with its
+        # type), but only the text of an actor's failed construction
+        self.error: BaseException | None = None
+        try:
+            self.env, self.policy = self.evaluation.make(task)
+        except USER_ERRORS as exc:
+            self.error = exc
+
+    def run(self, seed: int) -> dict[str, Any]:
+        if self.error is not None:
+            raise self.error
+        record = self.evaluation.run_episode(self.env, self.policy, seed, self.task)
+        return record.to_json()
+
+
+def ensure_ray(address: str | None, workers: int) -> bool:
+    """Start Ray (this machine, ``workers`` CPUs) or connect to ``address``; True if this
+    call started it (the caller shuts it down)."""
+    import os
+
+    import ray
+
+    if ray.is_initialized():
+        return False
+    os.environ.setdefault("RAY_ACCEPT_CLUSTER_RESOURCES", "1")
+    kwargs: dict[str, Any] = {
+        "include_dashboard": False,
+        "log_to_driver": True,
+        "configure_logging": False,
+    }
+    if address is None:
+        # workers import this checkout's packages (its root on their path)
+        root = str(Path(__file__).resolve().parents[2])
+        pythonpath = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
+        kwargs["num_cpus"] = workers
+        kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": pythonpath}}
+    ray.init(address=address, **kwargs)
+    return True
+
+
+@contextlib.contextmanager
+def batch_session(workers: int, address: str | None) -> Iterator[None]:
+    """Keep one Ray session over several :func:`run_episodes` calls (several policies) when
+    the job uses Ray; shut it down at the end if this started it."""
+    started = False
+    if address is not None or workers > 1:
+        started = ensure_ray(address, workers)
+    try:
+        yield
+    finally:
+        if started:
+            import ray
+
+            ray.shutdown()
+
+
+def _run_ray(
+    task: EpisodeTask, seeds: list[int], workers: int, address: str | None, sink: _Sink
+) -> tuple[list[EpisodeRecord], list[SeedFailure]]:
+    import ray
+    from ray.exceptions import RayActorError, RayTaskError
+
+    record_type = get_evaluation(task.evaluation).record_type
+    started = ensure_ray(address, workers)
+    actor_class = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(_EpisodeWorker)
+    records: list[EpisodeRecord] = []
+    failures: list[SeedFailure] = []
+    queue: deque[int] = deque(seeds)
+    #: per actor, its calls in the order it runs them (an actor runs one call at a time)
+    inflight: dict[Any, deque[tuple[Any, int]]] = {}
+    running: dict[Any, Any] = {}  # ref -> actor
+
+    def fill(actor: Any) -> None:
+        while queue and len(inflight[actor]) < PIPELINE_DEPTH:
+            seed = queue.popleft()
+            ref = actor.run.remote(seed)
+            inflight[actor].append((ref, seed))
+            running[ref] = actor
+
+    def new_actor() -> None:
+        actor = actor_class.remote(task)
+        inflight[actor] = deque()
+        fill(actor)
+
+    try:
+        for _ in range(min(workers, len(seeds))):
+            new_actor()
+        while running:
+            ready, _ = ray.wait(list(running), num_returns=1)
+            ref = ready[0]
+            actor = running.pop(ref)
+            try:
+                data = ray.get(ref)
+            except (RayTaskError, RayActorError) as exc:
+                cause = _user_error(exc)
+                if cause is not None:
+                    raise cause from None
+                # the actor's earliest unfinished call is the one that failed; its other
+                # seeds go back to the queue for a fresh actor
+                calls = inflight.pop(actor)
+                crashed = calls[0][1]
+                failures.append(SeedFailure(crashed, _describe(exc)))
+                sink.fail()
+                for other_ref, other_seed in reversed(calls):
+                    running.pop(other_ref, None)
+                    if other_seed != crashed:
+                        queue.appendleft(other_seed)
+                ray.kill(actor)
+                if queue:
+                    new_actor()
+                continue
+            inflight[actor].popleft()
+            record = record_type.from_json(data)
+            records.append(record)
+            sink.add(record)
+            fill(actor)
+    finally:
+        for actor in inflight:
+            ray.kill(actor)
+        if started:
+            ray.shutdown()
+    return records, failures
+
+
+def map_tasks(
+    fn: Callable[[Any], Any],
+    items: list[Any],
+    *,
+    workers: int = 1,
+    address: str | None = None,
+    progress: bool = False,
+    desc: str = "",
+) -> list[Any]:
+    """``[fn(item) for item in items]``: in this process for one local worker, else as Ray
+    tasks (``fn`` top level, items picklable), results in the items' order, the progress bar
+    moving as each arrives.  A user error (ConfigError...) raised in a task is raised here
+    with its message; the other tasks are cancelled."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(items), desc=desc, unit="run", disable=not progress)
+    try:
+        if address is None and (workers == 1 or len(items) <= 1):
+            out = []
+            for item in items:
+                out.append(fn(item))
+                bar.update(1)
+            return out
+        import ray
+        from ray.exceptions import RayTaskError
+
+        with batch_session(workers, address):
+            remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+            refs = [remote.remote(item) for item in items]
+            index = {ref: i for i, ref in enumerate(refs)}
+            results: list[Any] = [None] * len(items)
+            pending = list(refs)
+            try:
+                while pending:
+                    ready, pending = ray.wait(pending, num_returns=1)
+                    try:
+                        results[index[ready[0]]] = ray.get(ready[0])
+                    except RayTaskError as exc:
+                        cause = _user_error(exc)
+                        raise (cause or exc) from None
+                    bar.update(1)
+            finally:
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+            return results
+    finally:
+        bar.close()
+
+
+def _user_error(exc: BaseException) -> BaseException | None:
+    """The user error (a ConfigError, a missing file) behind a Ray error, if any."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, USER_ERRORS):
+            return current
+        cause = getattr(current, "cause", None)
+        if isinstance(cause, BaseException):
+            current = cause
+            continue
+        current = current.__cause__
+    return None
+
+
+def _describe(exc: BaseException) -> str:
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, BaseException):
+        return f"{type(cause).__name__}: {cause}"
+    first = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {first[0] if first else ''}"
+
+
+def for_each_seed(
+    first_seed: int, episodes: int
+) -> list[int]:  # the held-out seeds of an evaluation
+    """Seeds ``first_seed``, ``first_seed + 1``, ... (``episodes`` of them)."""
+    return list(range(first_seed, first_seed + episodes))
+
+
+__all__ = [
+    "EVALUATIONS",
+    "EpisodeTask",
+    "Evaluation",
+    "RunResult",
+    "SeedFailure",
+    "batch_session",
+    "ensure_ray",
+    "for_each_seed",
+    "get_evaluation",
+    "map_tasks",
+    "run_episodes",
+]

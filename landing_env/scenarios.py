@@ -1,0 +1,173 @@
+"""Registered environment ids with their scenario built in: ONE table, ``SCENARIO_IDS``.
+
+``gym.make("DeckLandingTiming-SeaState4-v0")`` is ``DeckLandingTiming-v0`` on the
+``sea-state-4`` config made a landing run (the drone flying, the tag projected, IHRCF in the
+observation): what the README trains and evaluates on, reproducible by id alone (rl-zoo3
+included).  To add or rename a scenario, edit the table; the ids follow
+``<task>-<Scenario>-v<version>`` and the version goes up when what the id builds changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+#: the task environments: id -> entry point
+TASKS: dict[str, str] = {
+    "DeckLanding-v0": "landing_env.envs.deck_landing:DeckLandingEnv",
+    "DeckLandingTiming-v0": "landing_env.envs.timing:DeckLandingTimingEnv",
+}
+
+#: what turns a bench config (a pinned drone over the moving deck) into a landing run
+FLYING_OVERRIDES: dict[str, Any] = {
+    "simulation.drone_fixed": False,
+    "simulation.max_episode_s": 40.0,
+    "estimation.compare": [],
+}
+#: starts per task: the timing task starts at its hold height; align-descend far and off
+START_OVERRIDES: dict[str, dict[str, Any]] = {
+    "DeckLandingTiming-v0": {"start.max_offset_m": 0.1, "start.max_yaw_deg": 10.0},
+    "DeckLanding-v0": {
+        "start.height_m": [1.5, 4.0],
+        "start.max_offset_m": 1.0,
+        "start.max_yaw_deg": 30.0,
+    },
+}
+
+
+def landing_overrides(
+    task: str, estimator: str = "ihrcf", camera_mode: str = "project"
+) -> dict[str, Any]:
+    """The dotted overrides that make a bench config a landing run of ``task``."""
+    return {
+        **FLYING_OVERRIDES,
+        **START_OVERRIDES[task],
+        "estimation.observed": estimator,
+        "camera.mode": camera_mode,
+    }
+
+
+@dataclass(frozen=True)
+class ScenarioId:
+    """A registered id: a task on a config, with overrides (dotted keys)."""
+
+    task: str
+    config: str
+    description: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def make(self, overrides: dict[str, Any] | None = None, **kwargs: Any) -> Any:
+        """The task's environment on this scenario; ``overrides`` apply on top of the
+        scenario's (``gym.make(id, overrides={...})``), other keywords go to the task."""
+        from gymnasium.envs.registration import load_env_creator
+
+        task = load_env_creator(TASKS[self.task])
+        config = kwargs.pop("config", self.config)
+        return task(config=config, overrides={**self.overrides, **(overrides or {})}, **kwargs)
+
+
+def _landing(task: str, config: str, description: str) -> ScenarioId:
+    return ScenarioId(task, config, description, landing_overrides(task))
+
+
+#: THE id -> scenario table (landing runs of the shipped benches, and the high approach)
+SCENARIO_IDS: dict[str, ScenarioId] = {
+    "DeckLandingTiming-SeaState3-v0": _landing(
+        "DeckLandingTiming-v0", "sea-state-3", "timing task over a sea-state-3 deck"
+    ),
+    "DeckLandingTiming-SeaState4-v0": _landing(
+        "DeckLandingTiming-v0", "sea-state-4", "timing task over a sea-state-4 deck (trained)"
+    ),
+    "DeckLandingTiming-SeaState5-v0": _landing(
+        "DeckLandingTiming-v0", "sea-state-5", "timing task over a sea-state-5 deck"
+    ),
+    "DeckLandingTiming-PaperStewart-v0": _landing(
+        "DeckLandingTiming-v0", "paper-stewart", "timing task over the papers' Stewart bench"
+    ),
+    "DeckLanding-SeaState3-v0": _landing(
+        "DeckLanding-v0", "sea-state-3", "align and descend onto a sea-state-3 deck"
+    ),
+    "DeckLanding-SeaState4-v0": _landing(
+        "DeckLanding-v0", "sea-state-4", "align and descend onto a sea-state-4 deck"
+    ),
+    "DeckLanding-SeaState5-v0": _landing(
+        "DeckLanding-v0", "sea-state-5", "align and descend onto a sea-state-5 deck"
+    ),
+    "DeckLanding-PaperStewart-v0": _landing(
+        "DeckLanding-v0", "paper-stewart", "align and descend onto the papers' Stewart bench"
+    ),
+    "DeckLanding-HighApproach-v0": ScenarioId(
+        "DeckLanding-v0", "high-approach", "from 20 m up and 5 m off, gusty wind, sea state 3"
+    ),
+}
+
+
+def episode_step_limit(config: Any, timing: Any = None) -> int:
+    """The most steps an episode of this config can take (``max_episode_steps``).
+
+    ``DeckLanding-v0`` truncates at ``simulation.max_episode_s``; the timing task decides every
+    ``steps_per_decision`` control periods until ``wait_limit_s`` forces the commit (one step).
+    """
+    sim = config.simulation
+    if timing is None:
+        return round(sim.max_episode_s * sim.env_hz)
+    decision_s = timing.steps_per_decision / sim.env_hz
+    return math.ceil(timing.wait_limit_s / decision_s - 1e-9) + 1
+
+
+def make_scenario_env(scenario: str, **kwargs: Any) -> Any:
+    """Gymnasium's entry point of every scenario id (``kwargs``: see :meth:`ScenarioId.make`)."""
+    return SCENARIO_IDS[scenario].make(**kwargs)
+
+
+make_scenario_env.metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}  # type: ignore[attr-defined]
+
+
+def register_all() -> None:
+    """Register the tasks and every scenario id with Gymnasium (idempotent)."""
+    from gymnasium.envs.registration import register, registry
+
+    for env_id, entry_point in TASKS.items():
+        if env_id not in registry:
+            register(id=env_id, entry_point=entry_point, disable_env_checker=False)
+    for env_id, scenario in SCENARIO_IDS.items():
+        if env_id in registry:
+            continue
+        register(
+            id=env_id,
+            entry_point="landing_env.scenarios:make_scenario_env",
+            kwargs={"scenario": env_id},
+            max_episode_steps=_step_limit(scenario),
+            disable_env_checker=False,
+        )
+
+
+def _step_limit(scenario: ScenarioId) -> int:
+    """``episode_step_limit`` from the scenario's simulation section alone: registration reads
+    no calibration file and builds no sensor (importing the package stays cheap and safe)."""
+    from types import SimpleNamespace
+
+    from landing_env.config import SimulationConfig, read_config_data
+    from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+
+    data = deep_merge(read_config_data(scenario.config), dotted_to_nested(scenario.overrides))
+    sim = build_dataclass(SimulationConfig, data.get("simulation") or {}, "simulation")
+    timing = None
+    if scenario.task == "DeckLandingTiming-v0":
+        from landing_env.envs.timing import TimingConfig
+
+        timing = TimingConfig()
+    return episode_step_limit(SimpleNamespace(simulation=sim), timing)
+
+
+__all__ = [
+    "FLYING_OVERRIDES",
+    "SCENARIO_IDS",
+    "START_OVERRIDES",
+    "TASKS",
+    "ScenarioId",
+    "episode_step_limit",
+    "landing_overrides",
+    "register_all",
+]

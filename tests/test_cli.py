@@ -1,0 +1,113 @@
+"""The command line's one error path, and the failures that used to hang or pass silently."""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+
+import landing_env  # noqa: F401
+from agents.cli import main
+from estimation.errors import ConfigError
+from landing_env.errors import PinnedDroneWarning
+
+LANDING = ["evaluate", "landing", "--policy", "land-now", "--scenario", "sea-state-4"]
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_config_error_survives_pickling_with_key_and_message() -> None:
+    error = pickle.loads(pickle.dumps(ConfigError("tof.nosie", "unknown key")))
+    assert isinstance(error, ConfigError)
+    assert (error.key, error.detail, str(error)) == (
+        "tof.nosie",
+        "unknown key",
+        "tof.nosie: unknown key",
+    )
+    assert pickle.loads(pickle.dumps(error.under("x"))).key == "x.tof.nosie"
+
+
+def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = int(exc.code or 0)
+    err = capsys.readouterr().err.strip()
+    return code, err
+
+
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        ([*LANDING, "--episodes", "0"], "--episodes"),
+        ([*LANDING, "--workers", "-3"], "--workers"),
+        (["evaluate", "approach", "--workers", "0"], "--workers"),
+        (["demo", "--config", "nope", "--no-timing"], "'nope' not found"),
+        (["demo", "--episodes", "0"], "--episodes"),
+        (["train", "timing", "--config", "configs/sea-state-4.yaml"], "DeckLandingTiming-v0"),
+        (["train", "timing", "--config", "no/such/file.yaml"], "does not exist"),
+        (
+            ["evaluate", "landing", "--policy", "timing-ppo", "--model", "no-such.zip",
+             "--scenario", "sea-state-4", "--episodes", "1", "--workers", "1", "--no-progress"],
+            "no-such.zip",
+        ),
+        (
+            ["evaluate", "estimators", "--scenario", "paper-stewart", "--mode", "project",
+             "--duration", "0.2", "--no-plots", "--set", "camera.mode=raytrace"],
+            "camera.mode",
+        ),
+    ],
+)  # fmt: skip
+def test_every_user_error_exits_2_with_one_line_naming_it(
+    argv: list[str], names: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, err = _run(argv, capsys)
+    assert code == 2
+    assert len(err.splitlines()) == 1, err
+    assert names in err
+    assert "Traceback" not in err
+
+
+def test_a_typo_in_set_fails_fast_with_two_workers(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    # a ConfigError raised in a worker process used to hang the pool forever
+    argv = ["evaluate", "landing", "--policy", "land-now", "--scenario", "sea-state-4",
+            "--episodes", "2", "--workers", "2", "--no-progress", "--out", str(tmp_path),
+            "--set", "tof.nosie=vl53l1x"]  # fmt: skip
+    code, err = _run(argv, capsys)
+    assert code == 2
+    assert "tof.nosie" in err and "unknown key" in err
+
+
+def test_debug_shows_the_traceback_instead() -> None:
+    with pytest.raises(ConfigError, match="nope"):
+        main(["--debug", "demo", "--config", "nope", "--no-timing"])
+
+
+def test_demo_runs_a_short_projected_episode_without_the_timing_part(tmp_path: Path) -> None:
+    code = main(["demo", "--mode", "project", "--no-timing", "--out", str(tmp_path)])
+    assert code == 0
+    assert (tmp_path / "camera.mp4").stat().st_size > 0
+    assert not (tmp_path / "timing_camera.mp4").exists()
+
+
+def test_pybullet_prints_nothing_when_an_env_is_made() -> None:
+    code = (
+        "import gymnasium as gym, landing_env; "
+        "env = gym.make('DeckLanding-v0'); env.reset(seed=0); env.close()"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert "pybullet build time" not in done.stdout + done.stderr
+    assert "argv[0]" not in done.stdout + done.stderr
+
+
+def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
+    with pytest.warns(PinnedDroneWarning, match="cannot land"):
+        env = gym.make("DeckLanding-v0", config="sea-state-5")
+    env.close()
