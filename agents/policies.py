@@ -6,6 +6,9 @@
 * ``quiescent`` (``DeckLandingTiming-v0``): commit when a calm window at least as long as the
   descent is predicted from the recent deck motion (the classic landing-period heuristic).
 * ``land-now`` (``DeckLandingTiming-v0``): commit at once; the lower bar.
+* ``oracle`` (``DeckLandingTiming-v0``): the best timing of all, found by trying every commit
+  in a saved copy of the episode (privileged: it knows the future, :mod:`agents.oracle`);
+  the upper bar.
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -23,14 +26,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from estimation.frames import camera_to_heading_xy
 from landing_env.config import ActionConfig
-from landing_env.envs.timing import (
-    HISTORY_FEATURES,
-    DeckGuidance,
-    DeckMotionHistory,
-    GuidanceGains,
-    TimingObservationLayout,
-)
+from landing_env.envs.actions import action_from_setpoint
+from landing_env.envs.guidance import DeckGuidance, GuidanceGains
+from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.envs.timing import TimingObservationLayout
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
@@ -106,7 +107,7 @@ def tilt_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
 def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPrediction:
     """Is a calm window at least ``config.descent_s`` long ahead?
 
-    ``history`` holds rows of :data:`~landing_env.envs.timing.HISTORY_FEATURES` (SI units),
+    ``history`` holds rows of :data:`~landing_env.envs.history.HISTORY_FEATURES` (SI units),
     oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all show
     a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
     rates, and the tilt extrapolated ``descent_s`` ahead (``trend_weight`` of the trend) and
@@ -307,7 +308,7 @@ class AlignDescendPolicy:
     no ToF sees anything: every surface is then beyond its range).  Flare: hold
     there, aligned, until :func:`predict_calm` predicts a calm window as long as the descent
     (or ``max_flare_s`` has passed).  Descent: the final descent of
-    :class:`~landing_env.envs.timing.DeckGuidance` down to touchdown.  Output: the Box(4)
+    :class:`~landing_env.envs.guidance.DeckGuidance` down to touchdown.  Output: the Box(4)
     action, normalised by :class:`ActionConfig`.
     """
 
@@ -326,9 +327,9 @@ class AlignDescendPolicy:
         mounts = np.asarray(
             tof_mounts_c if tof_mounts_c is not None else TofConfig().mount_offsets_c, dtype=float
         )
-        # each sensor's direction from the camera in the heading frame (forward = -y_C,
-        # left = -x_C), for seeking the deck with the ranges
-        directions = np.column_stack([-mounts[:, 1], -mounts[:, 0]])
+        # each sensor's direction from the camera in the heading frame, for seeking the deck
+        # with the ranges
+        directions = camera_to_heading_xy(mounts[:, :2])
         norms = np.linalg.norm(directions, axis=1, keepdims=True)
         self._tof_directions = directions / np.where(norms > 0.0, norms, 1.0)
         self.guidance = DeckGuidance(self.config.guidance)
@@ -408,19 +409,8 @@ class AlignDescendPolicy:
         return vector / norm if norm > 0.0 else None
 
 
-def normalise_setpoint(setpoint: VelocitySetpoint, action: ActionConfig) -> np.ndarray:
-    """A heading-frame set-point as the Box(4) action in [-1, 1] of ``DeckLanding-v0``."""
-    v = setpoint.velocity_h
-    command = np.array(
-        [
-            v[0] / action.max_horizontal_speed,
-            v[1] / action.max_horizontal_speed,
-            v[2] / action.max_vertical_speed,
-            setpoint.yaw_rate / math.radians(action.max_yaw_rate_deg),
-        ]
-    )
-    # the guidance's limits lie inside the action's; this clip only guards hand-set gains
-    return np.clip(command, -1.0, 1.0).astype(np.float32)
+#: the Box(4) encoding of a set-point lives with the actions (kept here under its old name)
+normalise_setpoint = action_from_setpoint
 
 
 # ------------------------------------------------------------------------------ registry
@@ -429,6 +419,7 @@ POLICY_ENVS: dict[str, str] = {
     "align-descend": "DeckLanding-v0",
     "quiescent": "DeckLandingTiming-v0",
     "land-now": "DeckLandingTiming-v0",
+    "oracle": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
 }
@@ -449,6 +440,10 @@ def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> An
         return LandNowPolicy()
     if name == "quiescent":
         return QuiescentPolicy(base.layout, dt)
+    if name == "oracle":
+        from agents.oracle import OracleTimingPolicy
+
+        return OracleTimingPolicy(env)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_layout(base.layout.size)

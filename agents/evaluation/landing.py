@@ -5,7 +5,10 @@ each policy for N episodes (seeds ``--seed``, ``--seed + 1``, ...; the training 
 them) and writes, per scenario, a Markdown and CSV table (success rate with its 95% Wilson
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
-touchdown speeds per policy, success rates with their intervals).
+touchdown speeds per policy, success rates with their intervals).  With a timing policy among
+them the ``oracle`` (:mod:`agents.oracle`, the best any timing could do on the same seeds) runs
+too, unless ``--no-oracle``: each timing policy's row gives the oracle's success, the gap in
+points and how many of its failures the oracle failed as well (no timing could avoid them).
 
 Scenarios are the shipped bench configs with the drone flying instead of pinned, the tag
 projected analytically (``camera.mode: project``; ``--mode render`` renders and detects it)
@@ -249,6 +252,35 @@ class LandingSummary:
     lateral_offset_mean_m: float
     time_to_land_mean_s: float
     outcomes: dict[str, int] = field(default_factory=dict)
+    #: the oracle's success on the same seeds (NaN without it or outside the timing task)
+    oracle_success_rate: float = math.nan
+    #: oracle minus this policy, percentage points
+    gap_points: float = math.nan
+    #: this policy's failures on seeds where the oracle failed too: no timing avoids them
+    unavoidable_failures: int = 0
+
+
+def compare_with_oracle(
+    summaries: list[LandingSummary], results: dict[str, list[EpisodeResult]]
+) -> None:
+    """Fill in the oracle's columns of the timing policies' summaries (seed by seed)."""
+    from agents.policies import POLICY_ENVS
+
+    oracle = results.get("oracle")
+    if not oracle:
+        return
+    oracle_success = {r.seed: r.success for r in oracle}
+    rate = sum(oracle_success.values()) / len(oracle_success)
+    for summary in summaries:
+        if POLICY_ENVS.get(summary.policy) != POLICY_ENVS["oracle"]:
+            continue
+        summary.oracle_success_rate = rate
+        summary.gap_points = 100.0 * (rate - summary.success_rate)
+        summary.unavoidable_failures = sum(
+            1
+            for r in results[summary.policy]
+            if not r.success and oracle_success.get(r.seed) is False
+        )
 
 
 def summarise(results: list[EpisodeResult]) -> LandingSummary:
@@ -290,6 +322,9 @@ TABLE_HEADER = (
     "offset mean (m)",
     "time to land (s)",
     "outcomes",
+    "oracle",
+    "gap (points)",
+    "failures no timing avoids",
 )
 
 
@@ -312,6 +347,15 @@ def markdown_table(summaries: list[LandingSummary]) -> str:
             f"{s.lateral_offset_mean_m:.3f}",
             f"{s.time_to_land_mean_s:.2f}",
             outcomes,
+            *(
+                (
+                    f"{100 * s.oracle_success_rate:.1f}%",
+                    f"{s.gap_points:+.1f}",
+                    f"{s.unavoidable_failures} of {s.episodes - s.successes}",
+                )
+                if math.isfinite(s.oracle_success_rate)
+                else ("", "", "")
+            ),
         )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -391,10 +435,18 @@ def evaluate_landing(
     progress: bool = True,
     command: str = "",
     extra_overrides: dict[str, Any] | None = None,
+    oracle: bool = True,
 ) -> LandingEvaluation:
-    """Evaluate every policy on ``scenario``; write the table, the episodes and the figure."""
+    """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
+
+    With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last)."""
+    from agents.policies import POLICY_ENVS
+
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+    timing_env = POLICY_ENVS["oracle"]
+    if oracle and "oracle" not in policies and timing_env in {POLICY_ENVS[p] for p in policies}:
+        policies = [*policies, "oracle"]
     results: dict[str, list[EpisodeResult]] = {}
     for name in policies:
         results[name] = evaluate_policy(
@@ -410,6 +462,7 @@ def evaluate_landing(
             extra_overrides,
         )
     summaries = [summarise(rs) for rs in results.values()]
+    compare_with_oracle(summaries, results)
     files: list[Path] = []
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -479,6 +532,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             command=command,
             extra_overrides=_parse_overrides(args.set),
+            oracle=not args.no_oracle,
         )
         console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
         print(markdown_table(evaluation.summaries))
@@ -512,6 +566,11 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--workers", type=int, default=2, help="parallel processes")
     landing.add_argument("--out", default="results/landing", help="output directory")
     landing.add_argument("--no-progress", action="store_true")
+    landing.add_argument(
+        "--no-oracle",
+        action="store_true",
+        help="do not run the oracle timing (the best any timing could do) beside timing policies",
+    )
     landing.add_argument(
         "--set",
         nargs="*",
