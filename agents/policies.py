@@ -204,9 +204,16 @@ def _model_class(path: Path) -> Any:
 
 
 class TrainedTimingPolicy:
-    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically."""
+    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
+
+    The model's card (:mod:`agents.model_metadata`: env id and version, observation layout,
+    estimator, sensing profiles, training config) is read on load; a model without one is
+    refused.  :meth:`check_env` refuses an environment that differs from the card.
+    """
 
     def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
+        from agents.model_metadata import METADATA_NAME, read_metadata
+
         self.path = Path(path)
         if not self.path.is_file():
             algo = "ppo" if "ppo" in self.path.name else "dqn"
@@ -214,8 +221,32 @@ class TrainedTimingPolicy:
                 f"no trained timing model at {self.path}; train one with `deck-landing train "
                 f"timing --config configs/train/timing_{algo}.yaml --install`"
             )
+        metadata = read_metadata(self.path)
+        if metadata is None:
+            raise ConfigError(
+                "model",
+                f"{self.path.name} has no card ({METADATA_NAME}: what it was trained on); add "
+                "it with `python -m agents.model_metadata stamp MODEL --config TRAINING_YAML`",
+            )
+        self.metadata = metadata
         self.model = _model_class(self.path).load(self.path, device=device)
         self.name = f"timing-{'dqn' if type(self.model).__name__ == 'DQN' else 'ppo'}"
+
+    def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
+        """Refuse ``env`` unless it is what the model was trained on (see the card); the
+        fields in ``allow_mismatch`` (``sensing``, ``estimator``, ...) may differ."""
+        from agents.model_metadata import check_compatible, env_signature
+
+        base = env.unwrapped
+        self.check_layout(base.layout.size)
+        check_compatible(self.metadata, env_signature(base), self.path.name, allow_mismatch)
+
+    def check_observation(self, signature: dict[str, Any]) -> None:
+        """Refuse an observation whose meaning (``observation_signature``) differs."""
+        from agents.model_metadata import check_compatible
+
+        self.check_layout(int(signature["size"]))
+        check_compatible(self.metadata, {"observation": signature}, self.path.name)
 
     def check_layout(self, observation_size: int) -> None:
         """Refuse an environment whose observation does not match the model's."""
@@ -426,8 +457,16 @@ POLICY_ENVS: dict[str, str] = {
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 
 
-def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> Any:
-    """Build the policy ``name`` for ``env`` (an environment of ``POLICY_ENVS[name]``)."""
+def make_policy(
+    name: str,
+    env: Any,
+    model_path: str | Path | None = None,
+    allow_mismatch: tuple[str, ...] = (),
+) -> Any:
+    """Build the policy ``name`` for ``env`` (an environment of ``POLICY_ENVS[name]``).
+
+    A trained model is checked against ``env`` (:meth:`TrainedTimingPolicy.check_env`);
+    ``allow_mismatch`` names the card's fields that may differ on purpose."""
     if name not in POLICY_ENVS:
         raise ConfigError("policy", f"{name!r} is not allowed; choose one of {POLICY_NAMES}")
     base = env.unwrapped
@@ -446,5 +485,5 @@ def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> An
         return OracleTimingPolicy(env)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
-    policy.check_layout(base.layout.size)
+    policy.check_env(env, allow_mismatch)
     return policy

@@ -31,6 +31,7 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
+from agents.model_metadata import card_for_training, write_metadata
 from agents.policies import shipped_timing_model
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -321,11 +322,16 @@ def train(
             )
         model_path = out / f"timing_{settings.algo}_final.zip"
         model.save(model_path)
+        # the model's card: what it was trained on (checked when it is loaded)
+        card = card_for_training(eval_env.envs[0], config)
     finally:
         train_env.close()
         eval_env.close()
     wall = time.perf_counter() - started
     best = out / "best_model.zip"
+    for saved in (model_path, best):
+        if saved.is_file():
+            write_metadata(saved, card)
     evaluations = [
         (int(t), float(np.mean(s)))
         for t, s in zip(

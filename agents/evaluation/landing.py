@@ -113,10 +113,12 @@ def make_env_and_policy(
     model_path: str | None = None,
     render_mode: str | None = None,
     extra_overrides: dict[str, Any] | None = None,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> tuple[Any, Any]:
     """The environment the policy acts in, configured for ``scenario``, and the policy.
 
-    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``.
+    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``;
+    ``allow_mismatch``: fields of a trained model's card that may differ from the environment.
     """
     import gymnasium as gym
 
@@ -133,7 +135,7 @@ def make_env_and_policy(
         env_id, config=SCENARIOS[scenario].config, overrides=overrides, render_mode=render_mode
     )
     try:
-        policy = make_policy(policy_name, env, model_path)
+        policy = make_policy(policy_name, env, model_path, tuple(allow_mismatch))
     except Exception:
         env.close()
         raise
@@ -171,9 +173,15 @@ def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: st
 
 def _run_chunk(job: tuple) -> list[EpisodeResult]:
     """Worker: one environment, a list of seeds (top level, so that it pickles)."""
-    policy_name, scenario, seeds, estimator, camera_mode, model_path, extra = job
+    policy_name, scenario, seeds, estimator, camera_mode, model_path, extra, allow = job
     env, policy = make_env_and_policy(
-        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides=extra
+        policy_name,
+        scenario,
+        estimator,
+        camera_mode,
+        model_path,
+        extra_overrides=extra,
+        allow_mismatch=allow,
     )
     try:
         return [run_episode(env, policy, seed, policy_name, scenario) for seed in seeds]
@@ -192,6 +200,7 @@ def evaluate_policy(
     workers: int = 1,
     progress: bool = False,
     extra_overrides: dict[str, Any] | None = None,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> list[EpisodeResult]:
     """``episodes`` episodes of one policy on one scenario, over ``workers`` processes."""
     return run_seed_chunks(
@@ -204,6 +213,7 @@ def evaluate_policy(
             camera_mode,
             model_path,
             extra_overrides,
+            tuple(allow_mismatch),
         ),
         list(range(first_seed, first_seed + episodes)),
         workers,
@@ -436,6 +446,7 @@ def evaluate_landing(
     command: str = "",
     extra_overrides: dict[str, Any] | None = None,
     oracle: bool = True,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> LandingEvaluation:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
 
@@ -460,6 +471,7 @@ def evaluate_landing(
             workers,
             progress,
             extra_overrides,
+            allow_mismatch,
         )
     summaries = [summarise(rs) for rs in results.values()]
     compare_with_oracle(summaries, results)
@@ -533,6 +545,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             command=command,
             extra_overrides=_parse_overrides(args.set),
             oracle=not args.no_oracle,
+            allow_mismatch=tuple(args.allow_mismatch),
         )
         console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
         print(markdown_table(evaluation.summaries))
@@ -566,6 +579,14 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--workers", type=int, default=2, help="parallel processes")
     landing.add_argument("--out", default="results/landing", help="output directory")
     landing.add_argument("--no-progress", action="store_true")
+    landing.add_argument(
+        "--allow-mismatch",
+        nargs="*",
+        default=[],
+        choices=["env_id", "observation", "estimator", "sensing"],
+        help="evaluate a trained model although its card differs in these fields (e.g. sensing: "
+        "an ideal-trained model under realistic noise)",
+    )
     landing.add_argument(
         "--no-oracle",
         action="store_true",
