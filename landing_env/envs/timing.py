@@ -12,6 +12,13 @@ Observation (a flat ``Box``, documented by :class:`TimingObservationLayout`): th
 it: the drone's roll and pitch removed with its attitude, ``level_history``) and of its rates
 (a least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
 with their validity and the fraction of the wait limit used.
+
+Versions: the id's version changes whenever what an observation value means changes (a trained
+model's card, :mod:`agents.model_metadata`, records the id it was trained on and refuses
+another):
+
+* ``v0``: the layout above, the deck pose levelled (``level_history``, the default), z and the
+  ranges relative to the hold height, scaled by ``HISTORY_SCALES`` and ``TOF_SCALE``.
 """
 
 from __future__ import annotations
