@@ -194,12 +194,16 @@ class QuiescentPolicy:
 
 
 def _model_class(path: Path) -> Any:
-    """PPO or DQN, read from the saved model's metadata (no trial loading)."""
+    """PPO, DQN or RecurrentPPO, read from the saved model's data (no trial loading)."""
     from stable_baselines3 import DQN, PPO
 
     with zipfile.ZipFile(path) as archive:
         data = json.loads(archive.read("data"))
     module = str(data.get("policy_class", {}).get("__module__", ""))
+    if "recurrent" in module:
+        from sb3_contrib import RecurrentPPO
+
+        return RecurrentPPO
     return DQN if ".dqn." in module else PPO
 
 
@@ -230,7 +234,11 @@ class TrainedTimingPolicy:
             )
         self.metadata = metadata
         self.model = _model_class(self.path).load(self.path, device=device)
-        self.name = f"timing-{'dqn' if type(self.model).__name__ == 'DQN' else 'ppo'}"
+        self.name = f"timing-{type(self.model).__name__.lower()}"
+        #: a recurrent policy's memory (RecurrentPPO), cleared by :meth:`reset`
+        self.recurrent = self.name == "timing-recurrentppo"
+        self._state: Any = None
+        self._episode_start = True
 
     def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
         """Refuse ``env`` unless it is what the model was trained on (see the card); the
@@ -260,10 +268,21 @@ class TrainedTimingPolicy:
             )
 
     def reset(self) -> None:
-        """The policy is a feed-forward network: nothing to forget."""
+        """Forget a recurrent policy's memory (a feed-forward one has none)."""
+        self._state = None
+        self._episode_start = True
 
     def act(self, observation: np.ndarray) -> int:
-        action, _ = self.model.predict(observation, deterministic=True)
+        if self.recurrent:
+            action, self._state = self.model.predict(
+                observation,
+                state=self._state,
+                episode_start=np.array([self._episode_start]),
+                deterministic=True,
+            )
+            self._episode_start = False
+        else:
+            action, _ = self.model.predict(observation, deterministic=True)
         return int(np.asarray(action).reshape(-1)[0])
 
     def __call__(self, observation: np.ndarray) -> int:
