@@ -93,7 +93,7 @@ class Rangefinder:
         ranges, _ = self._ray.true_ranges(t_wb, r_wb, exclude_body)
         true = float(ranges[0])
         value = true + (cfg.sigma_0 + cfg.sigma_per_m * true) * gauss
-        if cfg.resolution > 0.0:
+        if cfg.resolution > 0.0 and math.isfinite(value):
             value = round(value / cfg.resolution) * cfg.resolution
         # the limits apply to what the sensor reports, so a valid reading is always within them
         valid = math.isfinite(value) and cfg.min_range <= value <= cfg.max_range and not fails
