@@ -8,6 +8,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import ActionConfig, RewardConfig
@@ -154,3 +156,39 @@ def test_the_reward_is_the_sum_of_its_terms_in_info_in_both_tasks() -> None:
     finally:
         timing.close()
         landing.close()
+
+
+_ANYTHING = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.complex_numbers(),
+    st.text(max_size=5),
+    st.lists(st.floats(-2.0, 2.0), max_size=6),
+    st.lists(st.lists(st.integers(-2, 2), max_size=3), max_size=3),
+    st.builds(np.array, st.lists(st.floats(-3.0, 3.0, width=32), min_size=4, max_size=4)),
+    st.builds(np.int64, st.integers(-3, 3)),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_ANYTHING)
+def test_fuzzed_actions_are_accepted_as_the_space_says_or_refused_with_a_value_error(
+    action: object,
+) -> None:
+    discrete = spaces.Discrete(2)
+    try:
+        value = validate_action(action, discrete)
+    except ValueError:
+        pass
+    else:
+        assert type(value) is int and value in (0, 1)
+    box = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
+    try:
+        array = validate_action(action, box)
+    except ValueError:
+        pass
+    else:
+        assert array.shape == (4,) and array.dtype == np.float64
+        assert np.all(np.isfinite(array))
