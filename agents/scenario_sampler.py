@@ -144,7 +144,9 @@ class RandomisedTimingEnv(gym.Env):
         self._worlds: dict[tuple[str, str], gym.Env] = {}
         #: each world's configured wind, which the draws replace per episode
         self._wind: dict[tuple[str, str], Any] = {}
+        self._space: gym.Space | None = None
         first = self._world(self.settings.scenarios[0], self.settings.sensing[0])
+        self._space = first.observation_space
         self.observation_space = first.observation_space
         self.action_space = first.action_space
         self._current = first
@@ -164,10 +166,7 @@ class RandomisedTimingEnv(gym.Env):
             env = gym.make(
                 ENV_ID, config=SCENARIOS[scenario].config, overrides=overrides, timing=self.timing
             )
-            if (
-                hasattr(self, "observation_space")
-                and env.observation_space != self.observation_space
-            ):
+            if self._space is not None and env.observation_space != self._space:
                 env.close()
                 raise ConfigError(
                     "randomise", f"{key} gives another observation space; keep the timing settings"
