@@ -1,4 +1,4 @@
-"""One seeded episode of DeckLanding-v0 under the scripted descend policy: summary, video, plot."""
+"""One seeded episode of DeckLanding-v0 under the align-descend policy: summary, video, plot."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from rich.table import Table
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.scripted import DescendPolicy
+from agents.policies import AlignDescendPolicy
 from landing_env.errors import ConfigError, require_choice
 
 
@@ -49,7 +49,7 @@ class EpisodeLog:
 
 
 def run_episode(
-    env: gym.Env, policy: DescendPolicy, seed: int, frames: list | None = None
+    env: gym.Env, policy: AlignDescendPolicy, seed: int, frames: list | None = None
 ) -> EpisodeLog:
     """Run one episode; append rendered frames to ``frames`` when given."""
     log = EpisodeLog()
@@ -180,7 +180,10 @@ def run_demo(
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
     env = gym.make("DeckLanding-v0", config=config, render_mode="rgb_array", **kw)
-    policy = DescendPolicy(env.unwrapped.config.action)
+    base = env.unwrapped
+    policy = AlignDescendPolicy(
+        base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c
+    )
     frames: list[np.ndarray] = []
     try:
         logs = [run_episode(env, policy, seed, frames)]

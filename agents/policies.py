@@ -6,6 +6,9 @@
 * ``quiescent`` (``DeckLandingTiming-v0``): commit when a calm window at least as long as the
   descent is predicted from the recent deck motion (the classic landing-period heuristic).
 * ``land-now`` (``DeckLandingTiming-v0``): commit at once; the lower bar.
+* ``oracle`` (``DeckLandingTiming-v0``): the best timing of all, found by trying every commit
+  in a saved copy of the episode (privileged: it knows the future, :mod:`agents.oracle`);
+  the upper bar.
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -23,14 +26,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from estimation.frames import camera_to_heading_xy
 from landing_env.config import ActionConfig
-from landing_env.envs.timing import (
-    HISTORY_FEATURES,
-    DeckGuidance,
-    DeckMotionHistory,
-    GuidanceGains,
-    TimingObservationLayout,
-)
+from landing_env.envs.actions import action_from_setpoint
+from landing_env.envs.guidance import DeckGuidance, GuidanceGains
+from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.envs.timing import TimingObservationLayout
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
@@ -106,7 +107,7 @@ def tilt_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
 def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPrediction:
     """Is a calm window at least ``config.descent_s`` long ahead?
 
-    ``history`` holds rows of :data:`~landing_env.envs.timing.HISTORY_FEATURES` (SI units),
+    ``history`` holds rows of :data:`~landing_env.envs.history.HISTORY_FEATURES` (SI units),
     oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all show
     a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
     rates, and the tilt extrapolated ``descent_s`` ahead (``trend_weight`` of the trend) and
@@ -193,19 +194,30 @@ class QuiescentPolicy:
 
 
 def _model_class(path: Path) -> Any:
-    """PPO or DQN, read from the saved model's metadata (no trial loading)."""
+    """PPO, DQN or RecurrentPPO, read from the saved model's data (no trial loading)."""
     from stable_baselines3 import DQN, PPO
 
     with zipfile.ZipFile(path) as archive:
         data = json.loads(archive.read("data"))
     module = str(data.get("policy_class", {}).get("__module__", ""))
+    if "recurrent" in module:
+        from sb3_contrib import RecurrentPPO
+
+        return RecurrentPPO
     return DQN if ".dqn." in module else PPO
 
 
 class TrainedTimingPolicy:
-    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically."""
+    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
+
+    The model's card (:mod:`agents.model_metadata`: env id and version, observation layout,
+    estimator, sensing profiles, training config) is read on load; a model without one is
+    refused.  :meth:`check_env` refuses an environment that differs from the card.
+    """
 
     def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
+        from agents.model_metadata import METADATA_NAME, read_metadata
+
         self.path = Path(path)
         if not self.path.is_file():
             algo = "ppo" if "ppo" in self.path.name else "dqn"
@@ -213,8 +225,36 @@ class TrainedTimingPolicy:
                 f"no trained timing model at {self.path}; train one with `deck-landing train "
                 f"timing --config configs/train/timing_{algo}.yaml --install`"
             )
+        metadata = read_metadata(self.path)
+        if metadata is None:
+            raise ConfigError(
+                "model",
+                f"{self.path.name} has no card ({METADATA_NAME}: what it was trained on); add "
+                "it with `python -m agents.model_metadata stamp MODEL --config TRAINING_YAML`",
+            )
+        self.metadata = metadata
         self.model = _model_class(self.path).load(self.path, device=device)
-        self.name = f"timing-{'dqn' if type(self.model).__name__ == 'DQN' else 'ppo'}"
+        self.name = f"timing-{type(self.model).__name__.lower()}"
+        #: a recurrent policy's memory (RecurrentPPO), cleared by :meth:`reset`
+        self.recurrent = self.name == "timing-recurrentppo"
+        self._state: Any = None
+        self._episode_start = True
+
+    def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
+        """Refuse ``env`` unless it is what the model was trained on (see the card); the
+        fields in ``allow_mismatch`` (``sensing``, ``estimator``, ...) may differ."""
+        from agents.model_metadata import check_compatible, env_signature
+
+        base = env.unwrapped
+        self.check_layout(base.layout.size)
+        check_compatible(self.metadata, env_signature(base), self.path.name, allow_mismatch)
+
+    def check_observation(self, signature: dict[str, Any]) -> None:
+        """Refuse an observation whose meaning (``observation_signature``) differs."""
+        from agents.model_metadata import check_compatible
+
+        self.check_layout(int(signature["size"]))
+        check_compatible(self.metadata, {"observation": signature}, self.path.name)
 
     def check_layout(self, observation_size: int) -> None:
         """Refuse an environment whose observation does not match the model's."""
@@ -228,10 +268,21 @@ class TrainedTimingPolicy:
             )
 
     def reset(self) -> None:
-        """The policy is a feed-forward network: nothing to forget."""
+        """Forget a recurrent policy's memory (a feed-forward one has none)."""
+        self._state = None
+        self._episode_start = True
 
     def act(self, observation: np.ndarray) -> int:
-        action, _ = self.model.predict(observation, deterministic=True)
+        if self.recurrent:
+            action, self._state = self.model.predict(
+                observation,
+                state=self._state,
+                episode_start=np.array([self._episode_start]),
+                deterministic=True,
+            )
+            self._episode_start = False
+        else:
+            action, _ = self.model.predict(observation, deterministic=True)
         return int(np.asarray(action).reshape(-1)[0])
 
     def __call__(self, observation: np.ndarray) -> int:
@@ -307,7 +358,7 @@ class AlignDescendPolicy:
     no ToF sees anything: every surface is then beyond its range).  Flare: hold
     there, aligned, until :func:`predict_calm` predicts a calm window as long as the descent
     (or ``max_flare_s`` has passed).  Descent: the final descent of
-    :class:`~landing_env.envs.timing.DeckGuidance` down to touchdown.  Output: the Box(4)
+    :class:`~landing_env.envs.guidance.DeckGuidance` down to touchdown.  Output: the Box(4)
     action, normalised by :class:`ActionConfig`.
     """
 
@@ -326,9 +377,9 @@ class AlignDescendPolicy:
         mounts = np.asarray(
             tof_mounts_c if tof_mounts_c is not None else TofConfig().mount_offsets_c, dtype=float
         )
-        # each sensor's direction from the camera in the heading frame (forward = -y_C,
-        # left = -x_C), for seeking the deck with the ranges
-        directions = np.column_stack([-mounts[:, 1], -mounts[:, 0]])
+        # each sensor's direction from the camera in the heading frame, for seeking the deck
+        # with the ranges
+        directions = camera_to_heading_xy(mounts[:, :2])
         norms = np.linalg.norm(directions, axis=1, keepdims=True)
         self._tof_directions = directions / np.where(norms > 0.0, norms, 1.0)
         self.guidance = DeckGuidance(self.config.guidance)
@@ -408,19 +459,8 @@ class AlignDescendPolicy:
         return vector / norm if norm > 0.0 else None
 
 
-def normalise_setpoint(setpoint: VelocitySetpoint, action: ActionConfig) -> np.ndarray:
-    """A heading-frame set-point as the Box(4) action in [-1, 1] of ``DeckLanding-v0``."""
-    v = setpoint.velocity_h
-    command = np.array(
-        [
-            v[0] / action.max_horizontal_speed,
-            v[1] / action.max_horizontal_speed,
-            v[2] / action.max_vertical_speed,
-            setpoint.yaw_rate / math.radians(action.max_yaw_rate_deg),
-        ]
-    )
-    # the guidance's limits lie inside the action's; this clip only guards hand-set gains
-    return np.clip(command, -1.0, 1.0).astype(np.float32)
+#: the Box(4) encoding of a set-point lives with the actions (kept here under its old name)
+normalise_setpoint = action_from_setpoint
 
 
 # ------------------------------------------------------------------------------ registry
@@ -429,14 +469,23 @@ POLICY_ENVS: dict[str, str] = {
     "align-descend": "DeckLanding-v0",
     "quiescent": "DeckLandingTiming-v0",
     "land-now": "DeckLandingTiming-v0",
+    "oracle": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 
 
-def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> Any:
-    """Build the policy ``name`` for ``env`` (an environment of ``POLICY_ENVS[name]``)."""
+def make_policy(
+    name: str,
+    env: Any,
+    model_path: str | Path | None = None,
+    allow_mismatch: tuple[str, ...] = (),
+) -> Any:
+    """Build the policy ``name`` for ``env`` (an environment of ``POLICY_ENVS[name]``).
+
+    A trained model is checked against ``env`` (:meth:`TrainedTimingPolicy.check_env`);
+    ``allow_mismatch`` names the card's fields that may differ on purpose."""
     if name not in POLICY_ENVS:
         raise ConfigError("policy", f"{name!r} is not allowed; choose one of {POLICY_NAMES}")
     base = env.unwrapped
@@ -449,7 +498,11 @@ def make_policy(name: str, env: Any, model_path: str | Path | None = None) -> An
         return LandNowPolicy()
     if name == "quiescent":
         return QuiescentPolicy(base.layout, dt)
+    if name == "oracle":
+        from agents.oracle import OracleTimingPolicy
+
+        return OracleTimingPolicy(env)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
-    policy.check_layout(base.layout.size)
+    policy.check_env(env, allow_mismatch)
     return policy

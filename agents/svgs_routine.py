@@ -322,7 +322,9 @@ class SvgsRoutinePolicy:
         self.layout = TimingObservationLayout(n_history, t.hold_height_m)
         self.timing_model = _load_timing_model(c) if timing_model == "auto" else timing_model
         if isinstance(self.timing_model, TrainedTimingPolicy):
-            self.timing_model.check_layout(self.layout.size)
+            from agents.model_metadata import observation_signature
+
+            self.timing_model.check_observation(observation_signature(t, 1.0 / dt))
         #: what chooses the moment of the final descent
         self.timing_source = self.timing_model.name if self.timing_model else "quiescent"
         self.odometry = DeadReckoning(dt, c.dead_reckoning_lag_s)

@@ -34,6 +34,7 @@ import numpy as np
 import yaml
 
 from agents.cli_args import positive_int
+from agents.model_metadata import card_for_training, write_metadata
 from agents.policies import shipped_timing_model
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -43,7 +44,7 @@ ENV_ID = "DeckLandingTiming-v0"
 SCENARIO_ENV_ID = "DeckLandingTiming-SeaState4-v0"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
-ALGOS = ("ppo", "dqn")
+ALGOS = ("ppo", "dqn", "recurrentppo")
 
 
 @dataclass
@@ -65,12 +66,16 @@ class EvalSettings:
 class TrainSettings:
     """The ``deck_landing`` section of a training YAML."""
 
-    algo: Literal["ppo", "dqn"] = "ppo"
+    algo: Literal["ppo", "dqn", "recurrentppo"] = "ppo"
     seed: int = 0
     #: extra keyword arguments of ``gym.make(id, ...)`` (config, overrides, timing); empty
     #: in the shipped YAMLs, whose id has the scenario built in, so that rl-zoo3 trains the
     #: same task without ``--env-kwargs``
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+    #: domain randomisation per episode (:class:`agents.scenario_sampler.RandomiseSettings`:
+    #: scenarios, sensing profiles, estimator, wind, start heights); when set, the episodes
+    #: come from it and ``env_kwargs`` keeps only ``timing``
+    randomise: dict[str, Any] | None = None
     eval: EvalSettings = field(default_factory=EvalSettings)
     #: save a checkpoint every this many environment steps (summed over the environments)
     checkpoint_freq: int = 50_000
@@ -92,6 +97,10 @@ class TrainSettings:
         require_range("target_success_rate", self.target_success_rate, 0.0)
         require_range("max_minutes", self.max_minutes, 0.0, low_inclusive=False)
         require_range("torch_threads", self.torch_threads, 1)
+        if self.randomise is not None:
+            from agents.scenario_sampler import RandomiseSettings
+
+            build_dataclass(RandomiseSettings, self.randomise, "deck_landing.randomise")
 
 
 @dataclass
@@ -290,9 +299,18 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     s = config.settings
     vec_cls = SubprocVecEnv if s.vec_env == "subproc" and config.n_envs > 1 else DummyVecEnv
     # the "module:id" form makes the worker processes import and register the package
-    env_id = f"landing_env:{config.env_id}"
+    env_id: Any = f"landing_env:{config.env_id}"
     # make_vec_env asks for render_mode="rgb_array" unless told otherwise: nothing is rendered
     env_kwargs = {"render_mode": None, **s.env_kwargs}
+    if s.randomise is not None:
+        from agents.scenario_sampler import make_randomised_env
+
+        env_id = make_randomised_env
+        env_kwargs = {
+            "render_mode": None,
+            "randomise": s.randomise,
+            "timing": s.env_kwargs.get("timing", {}),
+        }
     train_env = make_vec_env(
         env_id,
         n_envs=config.n_envs,
@@ -313,6 +331,7 @@ def train(
 ) -> TrainResult:
     """Train, evaluate and save; with ``install`` copy the best model to the shipped path."""
     import torch
+    from sb3_contrib import RecurrentPPO
     from stable_baselines3 import DQN, PPO
 
     settings = config.settings
@@ -324,13 +343,14 @@ def train(
             {"hyperparams": config.hyperparams, "source": config.source}, sort_keys=False
         )
     )
-    algo_cls = {"ppo": PPO, "dqn": DQN}[settings.algo]
+    algo_cls = {"ppo": PPO, "dqn": DQN, "recurrentppo": RecurrentPPO}[settings.algo]
+    default_policy = "MlpLstmPolicy" if settings.algo == "recurrentppo" else "MlpPolicy"
     steps = int(total_timesteps if total_timesteps is not None else config.n_timesteps)
     started = time.perf_counter()
     train_env, eval_env = make_envs(config)
     try:
         model = algo_cls(
-            config.hyperparams.get("policy", "MlpPolicy"),
+            config.hyperparams.get("policy", default_policy),
             train_env,
             seed=settings.seed,
             tensorboard_log=str(out / "tb"),
@@ -351,11 +371,23 @@ def train(
             )
         model_path = out / f"timing_{settings.algo}_final.zip"
         model.save(model_path)
+        # the model's card: what it was trained on (checked when it is loaded)
+        sensing = None
+        if settings.randomise is not None:
+            from agents.scenario_sampler import RandomiseSettings, sensing_signatures
+
+            sensing = sensing_signatures(
+                build_dataclass(RandomiseSettings, settings.randomise, "deck_landing.randomise")
+            )
+        card = card_for_training(eval_env.envs[0], config, sensing=sensing)
     finally:
         train_env.close()
         eval_env.close()
     wall = time.perf_counter() - started
     best = out / "best_model.zip"
+    for saved in (model_path, best):
+        if saved.is_file():
+            write_metadata(saved, card)
     evaluations = [
         (int(t), float(np.mean(s)))
         for t, s in zip(

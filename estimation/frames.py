@@ -72,6 +72,17 @@ def tof_positions_in_camera_frame(
     return np.array([[-dx, -dy, 0.0], [dx, -dy, 0.0], [dx, dy, 0.0], [-dx, dy, 0.0]])
 
 
+def camera_to_heading_xy(xy_c: np.ndarray) -> np.ndarray:
+    """Horizontal camera-frame offsets ``(x_C, y_C)`` as ``(forward, left)`` of a level drone.
+
+    The heading frame of a level drone is its body frame, so this is ``R_BC`` applied to the
+    offset (``forward = -y_C``, ``left = -x_C``: the image top is the nose, x_C points right).
+    Works on one offset ``(2,)`` or a stack ``(n, 2)``.
+    """
+    xy = np.asarray(xy_c, dtype=float)
+    return xy @ R_BC[:2, :2].T
+
+
 def euler_zyx_from_matrix(rotation: np.ndarray) -> np.ndarray:
     """Return (roll, pitch, yaw) in radians of a rotation matrix, ZYX (yaw-pitch-roll) order.
 

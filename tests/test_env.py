@@ -8,7 +8,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import landing_env  # noqa: F401
-from agents.scripted import DescendPolicy
+from agents.policies import AlignDescendPolicy
 from landing_env.errors import ConfigError
 
 
@@ -109,7 +109,10 @@ def test_info_carries_truth_state_and_imu_samples() -> None:
 
 def test_scripted_descent_lands_on_the_moving_deck() -> None:
     env = make()
-    policy = DescendPolicy(env.unwrapped.config.action)
+    base = env.unwrapped
+    policy = AlignDescendPolicy(
+        base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c
+    )
     observation, _ = env.reset(seed=0)
     for _ in range(env.unwrapped.max_steps):
         observation, _reward, terminated, truncated, info = env.step(policy(observation))

@@ -86,3 +86,16 @@ def test_levelled_deck_pose_is_what_a_level_camera_sees(
     np.testing.assert_allclose(
         levelled_deck_pose(vector(level), np.eye(3)), vector(level), atol=1e-12
     )
+
+
+def test_camera_offsets_map_to_forward_and_left_of_a_level_drone() -> None:
+    from estimation.frames import camera_to_heading_xy
+
+    # the tag above the image centre (y_C < 0) lies ahead; to the image's right, to starboard
+    np.testing.assert_allclose(camera_to_heading_xy(np.array([0.0, -0.2])), [0.2, 0.0])
+    np.testing.assert_allclose(camera_to_heading_xy(np.array([0.3, 0.0])), [0.0, -0.3])
+    stack = camera_to_heading_xy(np.array([[1.0, 2.0], [-1.0, 0.5]]))
+    np.testing.assert_allclose(stack, [[-2.0, -1.0], [-0.5, 1.0]])
+    # the same as rotating the full vector into the body frame
+    v_c = np.array([0.4, -0.7, 2.0])
+    np.testing.assert_allclose(camera_to_heading_xy(v_c[:2]), (R_BC @ v_c)[:2])

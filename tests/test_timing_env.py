@@ -197,6 +197,6 @@ def test_bad_settings_fail_with_the_key() -> None:
         gym.make("DeckLandingTiming-v0", config="paper-stewart")
     env = make()
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="0 \\(wait\\) or 1"):
+    with pytest.raises(ValueError, match=r"\[0, 1\] \(0 = wait, 1 = commit\)"):
         env.step(2)
     env.close()

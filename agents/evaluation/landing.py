@@ -5,7 +5,10 @@ each policy for N episodes (seeds ``--seed``, ``--seed + 1``, ...; the training 
 them) and writes, per scenario, a Markdown and CSV table (success rate with its 95% Wilson
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
-touchdown speeds per policy, success rates with their intervals).
+touchdown speeds per policy, success rates with their intervals).  With a timing policy among
+them the ``oracle`` (:mod:`agents.oracle`, the best any timing could do on the same seeds) runs
+too, unless ``--no-oracle``: each timing policy's row gives the oracle's success, the gap in
+points and how many of its failures the oracle failed as well (no timing could avoid them).
 
 Scenarios are the shipped bench (``bench-ss*``, ``paper-stewart``) and full-scale ship-deck
 (``ship-ss*``) configs with the drone flying instead of pinned, the tag
@@ -140,10 +143,12 @@ def make_env_and_policy(
     model_path: str | None = None,
     render_mode: str | None = None,
     extra_overrides: dict[str, Any] | None = None,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> tuple[Any, Any]:
     """The environment the policy acts in, configured for ``scenario``, and the policy.
 
-    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``.
+    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``;
+    ``allow_mismatch``: fields of a trained model's card that may differ from the environment.
     """
     import gymnasium as gym
 
@@ -166,7 +171,7 @@ def make_env_and_policy(
         **kwargs,
     )
     try:
-        policy = make_policy(policy_name, env, model_path)
+        policy = make_policy(policy_name, env, model_path, tuple(allow_mismatch))
     except Exception:
         env.close()
         raise
@@ -242,6 +247,7 @@ def landing_task(
     camera_mode: str = "project",
     model_path: str | None = None,
     extra_overrides: dict[str, Any] | None = None,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> EpisodeTask:
     """The runner's task for one policy on one scenario."""
     return EpisodeTask(
@@ -253,6 +259,7 @@ def landing_task(
             "camera_mode": camera_mode,
             "model_path": model_path,
             "extra_overrides": extra_overrides,
+            "allow_mismatch": tuple(allow_mismatch),
         },
     )
 
@@ -271,11 +278,12 @@ def evaluate_policy(
     address: str | None = None,
     results_path: Path | None = None,
     resume: bool = False,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> list[EpisodeResult]:
     """``episodes`` episodes of one policy on one scenario, over ``workers`` workers."""
     return run_policy(
         policy_name, scenario, episodes, first_seed, estimator, camera_mode, model_path,
-        workers, progress, extra_overrides, address, results_path, resume,
+        workers, progress, extra_overrides, address, results_path, resume, allow_mismatch,
     ).records  # type: ignore[return-value]  # fmt: skip
 
 
@@ -293,9 +301,12 @@ def run_policy(
     address: str | None = None,
     results_path: Path | None = None,
     resume: bool = False,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> RunResult:
     """As :func:`evaluate_policy`, with the failed seeds and how the run went."""
-    task = landing_task(policy_name, scenario, estimator, camera_mode, model_path, extra_overrides)
+    task = landing_task(
+        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides, allow_mismatch
+    )
     return run_episodes(
         task,
         for_each_seed(first_seed, episodes),
@@ -351,6 +362,35 @@ class LandingSummary:
     failures: dict[str, int] = field(default_factory=dict)
     bounce_p95_m: float = math.nan
     peak_load_p95_g: float = math.nan
+    #: the oracle's success on the same seeds (NaN without it or outside the timing task)
+    oracle_success_rate: float = math.nan
+    #: oracle minus this policy, percentage points
+    gap_points: float = math.nan
+    #: this policy's failures on seeds where the oracle failed too: no timing avoids them
+    unavoidable_failures: int = 0
+
+
+def compare_with_oracle(
+    summaries: list[LandingSummary], results: dict[str, list[EpisodeResult]]
+) -> None:
+    """Fill in the oracle's columns of the timing policies' summaries (seed by seed)."""
+    from agents.policies import POLICY_ENVS
+
+    oracle = results.get("oracle")
+    if not oracle:
+        return
+    oracle_success = {r.seed: r.success for r in oracle}
+    rate = sum(oracle_success.values()) / len(oracle_success)
+    for summary in summaries:
+        if POLICY_ENVS.get(summary.policy) != POLICY_ENVS["oracle"]:
+            continue
+        summary.oracle_success_rate = rate
+        summary.gap_points = 100.0 * (rate - summary.success_rate)
+        summary.unavoidable_failures = sum(
+            1
+            for r in results[summary.policy]
+            if not r.success and oracle_success.get(r.seed) is False
+        )
 
 
 def summarise(results: list[EpisodeResult]) -> LandingSummary:
@@ -408,6 +448,9 @@ TABLE_HEADER = (
     "peak load p95 (g)",
     "outcomes",
     "failed checks",
+    "oracle",
+    "gap (points)",
+    "failures no timing avoids",
 )
 
 
@@ -433,6 +476,15 @@ def markdown_table(summaries: list[LandingSummary]) -> str:
             f"{s.peak_load_p95_g:.1f}",
             outcomes,
             ", ".join(f"{k} {v}" for k, v in sorted(s.failures.items())) or "-",
+            *(
+                (
+                    f"{100 * s.oracle_success_rate:.1f}%",
+                    f"{s.gap_points:+.1f}",
+                    f"{s.unavoidable_failures} of {s.episodes - s.successes}",
+                )
+                if math.isfinite(s.oracle_success_rate)
+                else ("", "", "")
+            ),
         )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -516,10 +568,19 @@ def evaluate_landing(
     extra_overrides: dict[str, Any] | None = None,
     address: str | None = None,
     resume: bool = False,
+    oracle: bool = True,
+    allow_mismatch: tuple[str, ...] = (),
 ) -> LandingEvaluation:
-    """Evaluate every policy on ``scenario``; write the table, the episodes and the figure."""
+    """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
+
+    With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last)."""
+    from agents.policies import POLICY_ENVS
+
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+    timing_env = POLICY_ENVS["oracle"]
+    if oracle and "oracle" not in policies and timing_env in {POLICY_ENVS[p] for p in policies}:
+        policies = [*policies, "oracle"]
     results: dict[str, list[EpisodeResult]] = {}
     failures: dict[str, list[SeedFailure]] = {}
     with batch_session(workers, address):
@@ -538,6 +599,7 @@ def evaluate_landing(
                 address,
                 out_dir / f"landing_{scenario}_{name}.jsonl" if out_dir is not None else None,
                 resume,
+                allow_mismatch,
             )
             results[name] = run.records  # type: ignore[assignment]
             if run.failures:
@@ -547,6 +609,7 @@ def evaluate_landing(
         seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
         raise RuntimeError(f"every episode failed (seeds {seeds})")
     summaries = [summarise(rs) for rs in results.values()]
+    compare_with_oracle(summaries, results)
     files: list[Path] = []
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -630,6 +693,8 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             extra_overrides=_parse_overrides(args.set),
             address=args.address,
             resume=args.resume,
+            oracle=not args.no_oracle,
+            allow_mismatch=tuple(args.allow_mismatch),
         )
         console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
         print(markdown_table(evaluation.summaries))
@@ -665,6 +730,19 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--model", default=None, help="a trained timing model (timing-ppo)")
     landing.add_argument("--out", default="results/landing", help="output directory")
     add_batch_arguments(landing)
+    landing.add_argument(
+        "--allow-mismatch",
+        nargs="*",
+        default=[],
+        choices=["env_id", "observation", "estimator", "sensing"],
+        help="evaluate a trained model although its card differs in these fields (e.g. sensing: "
+        "an ideal-trained model under realistic noise)",
+    )
+    landing.add_argument(
+        "--no-oracle",
+        action="store_true",
+        help="do not run the oracle timing (the best any timing could do) beside timing policies",
+    )
     landing.add_argument(
         "--set",
         nargs="*",

@@ -18,6 +18,8 @@ from gymnasium.envs.registration import EnvSpec
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 from landing_env.config import DeckLandingConfig, load_config
+from landing_env.envs.actions import BOX_ACTION_FIELDS, setpoint_from_action, validate_action
+from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
 from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
@@ -147,6 +149,7 @@ class DeckLandingBaseEnv(gym.Env):
         self._outcome = Outcome.IN_FLIGHT
         self._touchdown: TouchdownMetrics | None = None
         self._potential = 0.0
+        self._reward_terms = zero_terms()
         self._last_image: np.ndarray | None = None
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -163,6 +166,7 @@ class DeckLandingBaseEnv(gym.Env):
         self._report = PhysicsReport()
         self._sensing = self._sense()
         self._potential = self._shaping_potential()
+        self._reward_terms = zero_terms()
         return self._observation(), self._info()
 
     def step(
@@ -172,13 +176,7 @@ class DeckLandingBaseEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self._outcome is not Outcome.IN_FLIGHT:
             raise RuntimeError("the episode has ended; call reset()")
-        action = np.asarray(action, dtype=np.float64).reshape(-1)
-        if action.shape != (4,):
-            raise ValueError(
-                f"action must have 4 values (vx, vy, vz, yaw rate); got {action.shape}"
-            )
-        if not np.all(np.isfinite(action)):
-            raise ValueError(f"action must be finite; got {action}")
+        action = validate_action(action, self.action_space, ", ".join(BOX_ACTION_FIELDS))
         self._action_clipped = bool(np.any(np.abs(action) > 1.0))
         setpoint = self._action_to_setpoint(np.clip(action, -1.0, 1.0))
         self._report = self.world.step(setpoint)
@@ -225,15 +223,7 @@ class DeckLandingBaseEnv(gym.Env):
 
     # ------------------------------------------------------------------ task hooks
     def _action_to_setpoint(self, action: np.ndarray) -> VelocitySetpoint:
-        a = self.config.action
-        velocity = np.array(
-            [
-                action[0] * a.max_horizontal_speed,
-                action[1] * a.max_horizontal_speed,
-                action[2] * a.max_vertical_speed,
-            ]
-        )
-        return VelocitySetpoint(velocity, float(action[3] * math.radians(a.max_yaw_rate_deg)))
+        return setpoint_from_action(action, self.config.action)
 
     def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
         start = self.config.start
@@ -300,20 +290,14 @@ class DeckLandingBaseEnv(gym.Env):
     def _reward(self) -> float:
         r = self.config.reward
         potential = self._shaping_potential()
-        reward = potential - self._potential - r.time_cost * self.env_dt
+        terms = {
+            "shaping": potential - self._potential,
+            "time": -r.time_cost * self.env_dt,
+            **touchdown_terms(self._outcome, self._touchdown, r),
+        }
         self._potential = potential
-        if self._outcome is Outcome.CRASH:
-            reward -= r.crash_penalty
-        elif self._touchdown is not None:
-            m = self._touchdown
-            reward -= (
-                r.normal_speed_penalty * max(m.relative_normal_speed, 0.0)
-                + r.tilt_penalty * m.deck_tilt_deg
-                + r.offset_penalty * m.lateral_offset_m
-            )
-            if self._outcome is Outcome.SUCCESS:
-                reward += r.success_bonus
-        return float(reward)
+        self._reward_terms = terms
+        return float(sum(terms.values()))
 
     # ------------------------------------------------------------------ observation and info
     def _first_seed(self) -> int | None:
@@ -418,6 +402,8 @@ class DeckLandingBaseEnv(gym.Env):
             "motor_saturated": report.motor_saturated,
             "action_clipped": getattr(self, "_action_clipped", False),
             "imu_saturated": getattr(self, "_imu_saturated", False),
+            # the step's reward, term by term (they sum to it)
+            **reward_info(self._reward_terms),
         }
         if report.forbidden_contact:
             info["crash_contact"] = report.forbidden_contact

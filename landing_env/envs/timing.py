@@ -12,12 +12,17 @@ Observation (a flat ``Box``, documented by :class:`TimingObservationLayout`): th
 it: the drone's roll and pitch removed with its attitude, ``level_history``) and of its rates
 (a least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
 with their validity and the fraction of the wait limit used.
+
+Versions: the id's version changes whenever what an observation value means changes (a trained
+model's card, :mod:`agents.model_metadata`, records the id it was trained on and refuses
+another):
+
+* ``v0``: the layout above, the deck pose levelled (``level_history``, the default), z and the
+  ranges relative to the hold height, scaled by ``HISTORY_SCALES`` and ``TOF_SCALE``.
 """
 
 from __future__ import annotations
 
-import math
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,231 +31,40 @@ from gymnasium import spaces
 
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config_loading import build_dataclass
+from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
+from landing_env.envs.guidance import DeckGuidance, GuidanceGains
+from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome
+
+#: the guidance and the history live in their own modules; importing them from here still works
+__all__ = [
+    "HISTORY_FEATURES",
+    "DeckGuidance",
+    "DeckLandingTimingEnv",
+    "DeckMotionHistory",
+    "GuidanceGains",
+    "TimingConfig",
+    "TimingObservationLayout",
+    "TimingObservationParts",
+]
 
 #: the camera sits this far below the drone's centre of mass (body z), metres; the start
 #: height puts the *camera* at the hold height
 CAMERA_BELOW_COM_M = 0.03
 
 
-# ------------------------------------------------------------------------------ guidance
-@dataclass
-class GuidanceGains:
-    """Gains and limits of the deck-relative guidance (hold, approach and final descent)."""
-
-    #: horizontal velocity per metre of horizontal error, 1/s
-    k_xy: float = 0.8
-    max_horizontal_speed: float = 1.0
-    #: yaw rate per radian of tag yaw, 1/s
-    k_yaw: float = 0.8
-    #: vertical velocity per metre of height error while holding, 1/s
-    k_z: float = 1.2
-    max_vertical_speed: float = 0.8
-    #: final descent: speed = descent_gain * range, between touchdown_speed and descent_speed
-    descent_gain: float = 1.5
-    descent_speed: float = 0.8
-    touchdown_speed: float = 0.25
-    #: below this range the tag no longer fits the image: descend on the ToF alone, metres
-    blind_range_m: float = 0.3
-    #: aligned when the horizontal error is below this plus ``align_tolerance_per_m`` * range
-    align_tolerance_m: float = 0.08
-    align_tolerance_per_m: float = 0.08
-
-    def __post_init__(self) -> None:
-        for name in (
-            "k_xy",
-            "max_horizontal_speed",
-            "k_z",
-            "max_vertical_speed",
-            "descent_gain",
-            "descent_speed",
-            "touchdown_speed",
-        ):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
-        for name in ("k_yaw", "blind_range_m", "align_tolerance_m", "align_tolerance_per_m"):
-            require_range(name, getattr(self, name), 0.0)
-        if self.touchdown_speed > self.descent_speed:
-            raise ConfigError(
-                "touchdown_speed",
-                f"{self.touchdown_speed} must not exceed descent_speed = {self.descent_speed}",
-            )
-
-
-class DeckGuidance:
-    """Velocity set-points from the *observation* (estimated deck pose and ToF), never the truth.
-
-    The deck pose is the tag in the camera frame (x right, y down the image, z along the
-    optical axis, image top = nose), so the tag lies ``-y_C`` ahead and ``-x_C`` to the left
-    of the camera.  Set-points are in the heading frame (x forward, y left, z up), m/s, rad/s.
-    """
-
-    def __init__(self, gains: GuidanceGains | None = None) -> None:
-        self.gains = gains or GuidanceGains()
-        self._last_range = math.inf
-
-    def reset(self) -> None:
-        self._last_range = math.inf
-
-    def range_m(self, observation: dict[str, np.ndarray]) -> float:
-        """Camera height above the deck: the mean of the valid ToF ranges, else the tag's z.
-
-        The four sensors sit symmetrically about the camera, so on a tilted plane their mean
-        is the range at the centre.  NaN when neither is available.
-        """
-        valid = observation["tof_valid"].astype(bool)
-        if valid.all():
-            return float(np.mean(observation["tof_range"]))
-        if observation["deck_pose_valid"][0]:
-            return float(observation["deck_pose"][2])
-        if valid.any():
-            return float(np.mean(observation["tof_range"][valid]))
-        return math.nan
-
-    def horizontal_error(self, observation: dict[str, np.ndarray]) -> tuple[float, float] | None:
-        """(forward, left) offset of the tag centre from the camera, metres; None if unseen."""
-        if not observation["deck_pose_valid"][0]:
-            return None
-        x_c, y_c = (float(v) for v in observation["deck_pose"][:2])
-        return -y_c, -x_c
-
-    def aligned(self, observation: dict[str, np.ndarray]) -> bool:
-        """The tag is seen and the drone is centred over it within the tolerance."""
-        error = self.horizontal_error(observation)
-        if error is None:
-            return False
-        height = self.range_m(observation)
-        g = self.gains
-        tolerance = g.align_tolerance_m + g.align_tolerance_per_m * max(height, 0.0)
-        return math.hypot(*error) < tolerance
-
-    def _centre(self, observation: dict[str, np.ndarray]) -> tuple[float, float, float]:
-        """Horizontal velocity and yaw rate that centre the drone over the tag."""
-        error = self.horizontal_error(observation)
-        if error is None:
-            return 0.0, 0.0, 0.0
-        g = self.gains
-        vx, vy = g.k_xy * error[0], g.k_xy * error[1]
-        speed = math.hypot(vx, vy)
-        if speed > g.max_horizontal_speed:
-            vx, vy = vx * g.max_horizontal_speed / speed, vy * g.max_horizontal_speed / speed
-        yaw_rate = -g.k_yaw * float(observation["deck_pose"][5])
-        return vx, vy, yaw_rate
-
-    def hold(self, observation: dict[str, np.ndarray], target_range_m: float) -> VelocitySetpoint:
-        """Centre over the tag and hold the camera ``target_range_m`` above the deck.
-
-        With nothing seen the drone holds its height (zero vertical set-point).
-        """
-        g = self.gains
-        vx, vy, yaw_rate = self._centre(observation)
-        height = self.range_m(observation)
-        vz = 0.0
-        if math.isfinite(height):
-            self._last_range = height
-            vz = float(
-                np.clip(
-                    g.k_z * (target_range_m - height), -g.max_vertical_speed, g.max_vertical_speed
-                )
-            )
-        return VelocitySetpoint(np.array([vx, vy, vz]), yaw_rate)
-
-    def descend(self, observation: dict[str, np.ndarray]) -> VelocitySetpoint:
-        """The final descent: centre while the tag is seen, slow to ``touchdown_speed`` near the
-        deck, and keep going down on the last range when everything is lost close to it."""
-        g = self.gains
-        height = self.range_m(observation)
-        if math.isfinite(height):
-            self._last_range = height
-        else:
-            height = self._last_range
-        vx = vy = yaw_rate = 0.0
-        if height > g.blind_range_m:
-            vx, vy, yaw_rate = self._centre(observation)
-        if math.isfinite(height):
-            speed = float(np.clip(g.descent_gain * height, g.touchdown_speed, g.descent_speed))
-        else:
-            speed = g.touchdown_speed
-        return VelocitySetpoint(np.array([vx, vy, -speed]), yaw_rate)
-
-
-# ------------------------------------------------------------------------------ history
-#: per-sample features of the history, in this order
-HISTORY_FEATURES: tuple[str, ...] = (
-    "x",
-    "y",
-    "z",
-    "roll",
-    "pitch",
-    "yaw",
-    "z_rate",
-    "roll_rate",
-    "pitch_rate",
-    "valid",
-)
+# ------------------------------------------------------------------------------ observation
 #: scale from SI units (m, rad, m/s, rad/s) to the observation: decimetres, tenths of a
 #: radian, so that typical values are of order one
 HISTORY_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 10.0, 10.0, 10.0, 1.0])
 TOF_SCALE = 10.0
 #: bound of every scaled observation value; beyond it a value is clipped and flagged
 OBSERVATION_LIMIT = 50.0
-
-
-class DeckMotionHistory:
-    """A sliding window of estimated deck poses with least-squares rates (SI units).
-
-    Each row holds :data:`HISTORY_FEATURES`; an invalid sample is a row of zeros with
-    ``valid = 0``.  The rates of z, roll and pitch are the slope of a straight line fitted to
-    the valid samples of the last ``rate_window`` samples (a finite difference of one step
-    would amplify the estimator's noise twentyfold at 20 Hz).
-    """
-
-    def __init__(self, length: int, rate_window: int, dt: float) -> None:
-        if length < 1 or rate_window < 2:
-            raise ValueError("need length >= 1 and rate_window >= 2")
-        self.length = length
-        self.dt = dt
-        self._rows: deque[np.ndarray] = deque(maxlen=length)
-        self._recent: deque[tuple[float, np.ndarray | None]] = deque(maxlen=rate_window)
-        self._t = 0.0
-
-    def reset(self) -> None:
-        self._rows.clear()
-        self._recent.clear()
-        self._t = 0.0
-
-    def push(self, pose: np.ndarray | None) -> None:
-        """Add the next sample: ``(x, y, z, roll, pitch, yaw)`` or None when invalid."""
-        self._t += self.dt
-        row = np.zeros(len(HISTORY_FEATURES))
-        if pose is not None and np.all(np.isfinite(pose)):
-            pose = np.asarray(pose, dtype=float)
-            self._recent.append((self._t, pose))
-            row[:6] = pose
-            row[6:9] = self._rates()
-            row[9] = 1.0
-        else:
-            self._recent.append((self._t, None))
-        self._rows.append(row)
-
-    def _rates(self) -> np.ndarray:
-        samples = [(t, p) for t, p in self._recent if p is not None]
-        if len(samples) < 2:
-            return np.zeros(3)
-        t = np.array([s[0] for s in samples])
-        values = np.array([s[1][2:5] for s in samples])
-        t = t - t.mean()
-        return (t @ (values - values.mean(axis=0))) / float(t @ t)
-
-    def rows(self) -> np.ndarray:
-        """(length, features), oldest first; missing leading samples are invalid rows."""
-        out = np.zeros((self.length, len(HISTORY_FEATURES)))
-        if self._rows:
-            out[self.length - len(self._rows) :] = np.array(self._rows)
-        return out
 
 
 @dataclass
@@ -439,14 +253,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise RuntimeError("call reset() before step()")
         if self._outcome is not Outcome.IN_FLIGHT:
             raise RuntimeError("the episode has ended; call reset()")
-        choice = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
-        if choice not in (0, 1):
-            raise ValueError(f"action must be 0 (wait) or 1 (commit); got {action!r}")
+        choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
         self.frames_of_last_step = []
         self.periods_of_last_step = []
         r = self.config.reward
-        reward = 0.0
-        if choice == 0:
+        terms = zero_terms()
+        if choice == WAIT:
             waited = 0.0
             for _ in range(self.timing.steps_per_decision):
                 self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
@@ -454,15 +266,17 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 if self._outcome is not Outcome.IN_FLIGHT:
                     break
             self._wait_s += waited
-            reward -= r.time_cost * waited
+            terms["time"] = -r.time_cost * waited
             if self._outcome is Outcome.IN_FLIGHT and self._wait_s >= self.timing.wait_limit_s:
                 self._forced = True
                 self._descend()
         else:
             self._descend()
-        reward += self._end_reward()
+        terms.update(touchdown_terms(self._outcome, self._touchdown, r))
+        self._reward_terms = terms
         terminated = self._outcome is not Outcome.IN_FLIGHT
-        return self._flat_observation(), float(reward), terminated, False, self._info()
+        reward = float(sum(terms.values()))
+        return self._flat_observation(), reward, terminated, False, self._info()
 
     # ------------------------------------------------------------------ internals
     def _advance(self, setpoint: VelocitySetpoint) -> None:
@@ -524,22 +338,6 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             self._advance(self.guidance.descend(self._base_observation))
         end = self._touchdown.time_s if self._touchdown is not None else self.world.time
         self._descent_s = end - start
-
-    def _end_reward(self) -> float:
-        r = self.config.reward
-        if self._outcome in (Outcome.CRASH, Outcome.TIMEOUT):
-            return -r.crash_penalty
-        if self._touchdown is None or self._outcome is Outcome.IN_FLIGHT:
-            return 0.0
-        m = self._touchdown
-        reward = -(
-            r.normal_speed_penalty * max(m.relative_normal_speed, 0.0)
-            + r.tilt_penalty * m.deck_tilt_deg
-            + r.offset_penalty * m.lateral_offset_m
-        )
-        if self._outcome is Outcome.SUCCESS:
-            reward += r.success_bonus
-        return float(reward)
 
     def _flat_observation(self) -> np.ndarray:
         assert self._base_observation is not None

@@ -1,0 +1,279 @@
+"""What a trained timing model was trained on, shipped inside its SB3 zip and checked on load.
+
+SB3's zip holds the network; :data:`METADATA_NAME` beside it in the same archive (SB3 ignores
+it) holds the model's card: the environment id with its version, the observation layout
+(every setting that changes what an observation value means), the estimator whose deck pose
+it observed, the sensing profiles it was trained under, the camera mode and the training
+config.  :func:`check_compatible` compares a card with an environment and refuses a mismatch
+with a :class:`~landing_env.errors.ConfigError` that names the field; a caller may accept
+named mismatches on purpose (``allow``), e.g. ``sensing`` to test an ideal-trained model
+under realistic noise.
+
+``python -m agents.model_metadata show MODEL.zip`` prints a card; ``stamp`` writes one into a
+model trained before cards existed (see ``--help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import zipfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from landing_env.errors import ConfigError
+
+#: the card's name inside the SB3 zip
+METADATA_NAME = "deck_landing_metadata.json"
+#: version of the card's own format
+CARD_FORMAT = 1
+#: the fields of a card that an environment must match, in the order they are checked
+CHECKED_FIELDS: tuple[str, ...] = ("env_id", "observation", "estimator", "sensing")
+
+
+@dataclass
+class ModelMetadata:
+    """A trained timing model's card (see the module docstring)."""
+
+    #: e.g. ``DeckLandingTiming-v0``: the name and the version of the observation's meaning
+    env_id: str
+    #: :func:`observation_signature` of the environment it was trained in
+    observation: dict[str, Any]
+    #: ``estimation.observed`` during training
+    estimator: str
+    #: the sensing profiles (:func:`sensing_profile`) it was trained under
+    sensing: list[str]
+    #: ``camera.mode`` during training (recorded; ``render`` at evaluation is allowed)
+    camera_mode: str = "project"
+    algo: str = ""
+    #: the training YAML's contents and where it came from
+    training_config: dict[str, Any] = field(default_factory=dict)
+    training_config_source: str = ""
+    note: str = ""
+    format: int = CARD_FORMAT
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, sort_keys=False)
+
+    @classmethod
+    def from_json(cls, text: str, where: str = "metadata") -> ModelMetadata:
+        data = json.loads(text)
+        if not isinstance(data, dict):
+            raise ConfigError(where, "is not a JSON object")
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(where, f"unknown fields {unknown}; allowed {sorted(known)}")
+        missing = [
+            name for name in ("env_id", "observation", "estimator", "sensing") if name not in data
+        ]
+        if missing:
+            raise ConfigError(where, f"missing fields {missing}")
+        return cls(**data)
+
+
+# ------------------------------------------------------------------------------ signatures
+def sensing_profile(config: Any) -> str:
+    """The sensing profile of a ``DeckLandingConfig``.
+
+    A config with a ``sensors`` switch (``ideal`` / ``realistic``, with an optional noise
+    scale) names its profile; without it, ``ideal`` when no sensor noise is configured, else
+    the settings that depart from ideal (``tof.noise=vl53l1x``, ...).
+    """
+    declared = getattr(config, "sensors", None)
+    if declared is not None:
+        profile = getattr(declared, "profile", declared)
+        scale = getattr(declared, "noise_scale", 1.0)
+        return str(profile) if scale == 1.0 else f"{profile}x{scale:g}"
+    departures = []
+    if config.tof.noise != "none":
+        departures.append(f"tof.noise={config.tof.noise}")
+    if config.camera.pixel_noise_px > 0.0:
+        departures.append(f"camera.pixel_noise_px={config.camera.pixel_noise_px:g}")
+    if config.camera.dropout_prob > 0.0:
+        departures.append(f"camera.dropout_prob={config.camera.dropout_prob:g}")
+    return ",".join(departures) if departures else "ideal"
+
+
+def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
+    """Every setting that changes what a timing observation's values mean.
+
+    ``timing`` is a :class:`~landing_env.envs.timing.TimingConfig`; the layout's own constants
+    (features, scales, bounds) are included so that a change to them is caught too.
+    """
+    from landing_env.envs.history import HISTORY_FEATURES
+    from landing_env.envs.timing import (
+        HISTORY_SCALES,
+        OBSERVATION_LIMIT,
+        TOF_SCALE,
+        TimingObservationLayout,
+    )
+
+    n_history = max(1, round(timing.history_s * env_hz))
+    layout = TimingObservationLayout(n_history, timing.hold_height_m)
+    return {
+        "size": layout.size,
+        "n_history": n_history,
+        "history_features": list(HISTORY_FEATURES),
+        "history_scales": [float(v) for v in HISTORY_SCALES],
+        "tof_scale": float(TOF_SCALE),
+        "observation_limit": float(OBSERVATION_LIMIT),
+        "env_hz": float(env_hz),
+        "hold_height_m": float(timing.hold_height_m),
+        "history_s": float(timing.history_s),
+        "rate_window_s": float(timing.rate_window_s),
+        "level_history": bool(timing.level_history),
+        "steps_per_decision": int(timing.steps_per_decision),
+        "wait_limit_s": float(timing.wait_limit_s),
+    }
+
+
+def env_signature(env: Any) -> dict[str, Any]:
+    """The checked fields of a ``DeckLandingTiming`` environment (wrapped or not)."""
+    base = env.unwrapped
+    spec = getattr(base, "spec", None)
+    from agents.training import ENV_ID
+
+    return {
+        "env_id": spec.id if spec is not None else ENV_ID,
+        "observation": observation_signature(base.timing, base.config.simulation.env_hz),
+        "estimator": base.config.estimation.observed,
+        "sensing": sensing_profile(base.config),
+        "camera_mode": base.config.camera.mode,
+    }
+
+
+def check_compatible(
+    card: ModelMetadata,
+    signature: dict[str, Any],
+    model: str = "the model",
+    allow: tuple[str, ...] | list[str] = (),
+) -> None:
+    """Refuse an environment (its ``signature``) that differs from what the model was trained
+    on; a field named in ``allow`` may differ.  Fields missing from ``signature`` are not
+    checked (e.g. a routine that knows only the observation)."""
+    unknown = sorted(set(allow) - set(CHECKED_FIELDS))
+    if unknown:
+        raise ConfigError("allow_mismatch", f"unknown fields {unknown}; allowed {CHECKED_FIELDS}")
+    hint = " (to use it anyway, allow the mismatch: --allow-mismatch {field})"
+    for name in CHECKED_FIELDS:
+        if name not in signature or name in allow:
+            continue
+        have = signature[name]
+        if name == "observation":
+            for key, trained in card.observation.items():
+                if have.get(key) != trained:
+                    raise ConfigError(
+                        f"observation.{key}",
+                        f"{model} was trained with {trained!r}, the environment has "
+                        f"{have.get(key)!r}: use the timing settings it was trained with",
+                    )
+            extra = sorted(set(have) - set(card.observation))
+            if extra:
+                raise ConfigError(
+                    "observation", f"{model}'s card does not describe {extra}; retrain or re-stamp"
+                )
+            continue
+        if name == "sensing":
+            if have not in card.sensing:
+                raise ConfigError(
+                    "sensing",
+                    f"{model} was trained under sensing {card.sensing}, the environment's is "
+                    f"{have!r}" + hint.format(field="sensing"),
+                )
+            continue
+        trained = getattr(card, name)
+        if have != trained:
+            raise ConfigError(
+                name,
+                f"{model} was trained on {trained!r}, the environment has {have!r}"
+                + hint.format(field=name),
+            )
+
+
+# ------------------------------------------------------------------------------ the zip
+def read_metadata(path: str | Path) -> ModelMetadata | None:
+    """The card inside a model zip; None when it has none."""
+    path = Path(path)
+    with zipfile.ZipFile(path) as archive:
+        if METADATA_NAME not in archive.namelist():
+            return None
+        text = archive.read(METADATA_NAME).decode()
+    return ModelMetadata.from_json(text, f"{path.name}:{METADATA_NAME}")
+
+
+def write_metadata(path: str | Path, card: ModelMetadata) -> None:
+    """Put ``card`` into the model zip (replacing an older card; the rest is copied as is)."""
+    path = Path(path)
+    with zipfile.ZipFile(path) as archive:
+        entries = [
+            (info, archive.read(info.filename))
+            for info in archive.infolist()
+            if info.filename != METADATA_NAME
+        ]
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for info, data in entries:
+            archive.writestr(info, data)
+        archive.writestr(METADATA_NAME, card.to_json())
+    tmp.replace(path)
+
+
+def card_for_training(env: Any, config: Any, sensing: list[str] | None = None) -> ModelMetadata:
+    """The card of a model trained by :func:`agents.training.train` with ``config`` in
+    environments like ``env`` (``sensing``: every profile the training sampled)."""
+    signature = env_signature(env)
+    return ModelMetadata(
+        env_id=signature["env_id"],
+        observation=signature["observation"],
+        estimator=signature["estimator"],
+        sensing=sorted(set(sensing or [signature["sensing"]])),
+        camera_mode=signature["camera_mode"],
+        algo=config.settings.algo,
+        training_config={
+            "hyperparams": config.hyperparams,
+            "deck_landing": asdict(config.settings),
+        },
+        training_config_source=str(config.source),
+    )
+
+
+# ------------------------------------------------------------------------------ command line
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.model_metadata", description="Show or write a timing model's card."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    show = sub.add_parser("show", help="print the card of a model zip")
+    show.add_argument("model")
+    stamp = sub.add_parser(
+        "stamp", help="write a card into a model zip, from the training YAML and the env it used"
+    )
+    stamp.add_argument("model")
+    stamp.add_argument("--config", required=True, help="the training YAML it was trained with")
+    stamp.add_argument("--note", default="")
+    args = parser.parse_args(argv)
+    if args.command == "show":
+        card = read_metadata(args.model)
+        print(card.to_json() if card else f"{args.model} has no card ({METADATA_NAME})")
+        return 0 if card else 1
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401  (registers the environments)
+    from agents.training import ENV_ID, load_train_config
+
+    config = load_train_config(args.config)
+    env = gym.make(ENV_ID, **{"render_mode": None, **config.settings.env_kwargs})
+    try:
+        card = card_for_training(env, config)
+    finally:
+        env.close()
+    card.note = args.note
+    write_metadata(args.model, card)
+    print(card.to_json())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,75 @@
+"""The deck-motion history the timing task observes and the calm-window heuristics judge."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+#: per-sample features of the history, in this order
+HISTORY_FEATURES: tuple[str, ...] = (
+    "x",
+    "y",
+    "z",
+    "roll",
+    "pitch",
+    "yaw",
+    "z_rate",
+    "roll_rate",
+    "pitch_rate",
+    "valid",
+)
+
+
+class DeckMotionHistory:
+    """A sliding window of estimated deck poses with least-squares rates (SI units).
+
+    Each row holds :data:`HISTORY_FEATURES`; an invalid sample is a row of zeros with
+    ``valid = 0``.  The rates of z, roll and pitch are the slope of a straight line fitted to
+    the valid samples of the last ``rate_window`` samples (a finite difference of one step
+    would amplify the estimator's noise twentyfold at 20 Hz).
+    """
+
+    def __init__(self, length: int, rate_window: int, dt: float) -> None:
+        if length < 1 or rate_window < 2:
+            raise ValueError("need length >= 1 and rate_window >= 2")
+        self.length = length
+        self.dt = dt
+        self._rows: deque[np.ndarray] = deque(maxlen=length)
+        self._recent: deque[tuple[float, np.ndarray | None]] = deque(maxlen=rate_window)
+        self._t = 0.0
+
+    def reset(self) -> None:
+        self._rows.clear()
+        self._recent.clear()
+        self._t = 0.0
+
+    def push(self, pose: np.ndarray | None) -> None:
+        """Add the next sample: ``(x, y, z, roll, pitch, yaw)`` or None when invalid."""
+        self._t += self.dt
+        row = np.zeros(len(HISTORY_FEATURES))
+        if pose is not None and np.all(np.isfinite(pose)):
+            pose = np.asarray(pose, dtype=float)
+            self._recent.append((self._t, pose))
+            row[:6] = pose
+            row[6:9] = self._rates()
+            row[9] = 1.0
+        else:
+            self._recent.append((self._t, None))
+        self._rows.append(row)
+
+    def _rates(self) -> np.ndarray:
+        samples = [(t, p) for t, p in self._recent if p is not None]
+        if len(samples) < 2:
+            return np.zeros(3)
+        t = np.array([s[0] for s in samples])
+        values = np.array([s[1][2:5] for s in samples])
+        t = t - t.mean()
+        return (t @ (values - values.mean(axis=0))) / float(t @ t)
+
+    def rows(self) -> np.ndarray:
+        """(length, features), oldest first; missing leading samples are invalid rows."""
+        out = np.zeros((self.length, len(HISTORY_FEATURES)))
+        if self._rows:
+            out[self.length - len(self._rows) :] = np.array(self._rows)
+        return out

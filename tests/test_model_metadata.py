@@ -1,0 +1,143 @@
+"""A trained timing model carries its card (what it was trained on) and refuses a mismatch."""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from agents.evaluation.landing import make_env_and_policy
+from agents.model_metadata import (
+    METADATA_NAME,
+    ModelMetadata,
+    check_compatible,
+    env_signature,
+    observation_signature,
+    read_metadata,
+    sensing_profile,
+    write_metadata,
+)
+from agents.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, make_policy
+from landing_env.config import load_config
+from landing_env.envs.timing import TimingConfig
+from landing_env.errors import ConfigError
+
+
+def test_the_shipped_model_says_what_it_was_trained_on() -> None:
+    card = read_metadata(SHIPPED_TIMING_MODEL)
+    assert card is not None
+    assert card.env_id == "DeckLandingTiming-v0"
+    assert card.estimator == "ihrcf" and card.sensing == ["ideal"]
+    assert card.camera_mode == "project" and card.algo == "dqn"
+    assert card.training_config_source.endswith("configs/train/timing_dqn.yaml")
+    assert card.training_config["hyperparams"]["gamma"] == 0.998
+    assert card.observation == observation_signature(TimingConfig(), 20.0)
+    assert card.observation["size"] == 409
+
+
+def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> None:
+    env, policy = make_env_and_policy("timing-dqn", "sea-state-4")
+    env.close()
+    assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.estimator == "ihrcf"
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"estimator": "crhf"}, r"^estimator: .*ihrcf.*crhf"),
+        ({"extra_overrides": {"tof.noise": "vl53l1x"}}, r"^sensing: .*tof\.noise=vl53l1x"),
+    ],
+)
+def test_a_different_estimator_or_sensing_is_refused_by_name(kwargs: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        make_env_and_policy("timing-dqn", "sea-state-4", **kwargs)
+
+
+def test_a_mismatch_can_be_allowed_on_purpose() -> None:
+    env, policy = make_env_and_policy(
+        "timing-dqn",
+        "sea-state-4",
+        extra_overrides={"tof.noise": "vl53l1x"},
+        allow_mismatch=("sensing",),
+    )
+    env.close()
+    assert isinstance(policy, TrainedTimingPolicy)
+
+
+def test_a_same_shape_observation_of_another_meaning_is_refused() -> None:
+    import gymnasium as gym
+
+    from agents.evaluation.landing import scenario_overrides
+
+    overrides = scenario_overrides("sea-state-4", "DeckLandingTiming-v0")
+    # the same size (409) but z and the ranges relative to another hold height
+    env = gym.make(
+        "DeckLandingTiming-v0",
+        config="sea-state-4",
+        overrides=overrides,
+        timing={"hold_height_m": 0.5},
+    )
+    try:
+        assert env.unwrapped.layout.size == 409
+        with pytest.raises(ConfigError, match=r"observation\.hold_height_m: .*0\.7.*0\.5"):
+            make_policy("timing-dqn", env)
+    finally:
+        env.close()
+
+
+def test_another_env_version_is_refused() -> None:
+    card = read_metadata(SHIPPED_TIMING_MODEL)
+    assert card is not None
+    signature = {"env_id": "DeckLandingTiming-v1", "observation": card.observation}
+    with pytest.raises(ConfigError, match=r"^env_id: .*DeckLandingTiming-v0.*-v1"):
+        check_compatible(card, signature)
+    with pytest.raises(ConfigError, match="allow_mismatch"):
+        check_compatible(card, signature, allow=("colour",))
+
+
+def test_a_model_without_a_card_is_refused(tmp_path: Path) -> None:
+    bare = tmp_path / "bare.zip"
+    with zipfile.ZipFile(SHIPPED_TIMING_MODEL) as source, zipfile.ZipFile(bare, "w") as out:
+        for info in source.infolist():
+            if info.filename != METADATA_NAME:
+                out.writestr(info, source.read(info.filename))
+    assert read_metadata(bare) is None
+    with pytest.raises(ConfigError, match=r"no card.*stamp"):
+        TrainedTimingPolicy(bare)
+
+
+def test_a_card_round_trips_and_a_bad_card_names_the_field(tmp_path: Path) -> None:
+    model = tmp_path / "model.zip"
+    shutil.copyfile(SHIPPED_TIMING_MODEL, model)
+    card = read_metadata(model)
+    assert card is not None
+    card.sensing = ["ideal", "realistic"]
+    write_metadata(model, card)
+    again = read_metadata(model)
+    assert again == card
+    with zipfile.ZipFile(model) as archive:
+        assert archive.namelist().count(METADATA_NAME) == 1
+        assert "policy.pth" in archive.namelist()
+    assert TrainedTimingPolicy(model).act(__import__("numpy").zeros(409, "float32")) in (0, 1)
+    with pytest.raises(ConfigError, match="unknown fields"):
+        ModelMetadata.from_json('{"env_id": "x", "colour": 1}')
+    with pytest.raises(ConfigError, match="missing fields"):
+        ModelMetadata.from_json('{"env_id": "x"}')
+
+
+def test_sensing_profile_names_what_departs_from_ideal() -> None:
+    assert sensing_profile(load_config("default")) == "ideal"
+    noisy = load_config("default", {"tof.noise": "vl53l1x", "camera.dropout_prob": 0.1})
+    assert sensing_profile(noisy) == "tof.noise=vl53l1x,camera.dropout_prob=0.1"
+
+
+def test_env_signature_reads_the_environment() -> None:
+    env, _ = make_env_and_policy("land-now", "sea-state-5", estimator="crhf")
+    try:
+        signature = env_signature(env)
+    finally:
+        env.close()
+    assert signature["env_id"] == "DeckLandingTiming-v0"
+    assert signature["estimator"] == "crhf" and signature["sensing"] == "ideal"

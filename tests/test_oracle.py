@@ -1,0 +1,147 @@
+"""The oracle timing: exact look-ahead by snapshot, its choice, and its place in the evaluation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.evaluation.landing import (
+    EpisodeResult,
+    compare_with_oracle,
+    evaluate_landing,
+    make_env_and_policy,
+    markdown_table,
+    run_episode,
+    summarise,
+)
+from agents.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
+from agents.policies import POLICY_ENVS, make_policy
+from landing_env.config import TouchdownConfig
+from landing_env.envs.snapshot import release_snapshot, restore_snapshot, save_snapshot
+
+
+def test_a_restored_snapshot_replays_the_episode_bit_for_bit() -> None:
+    env, _ = make_env_and_policy("land-now", "sea-state-4")
+    base = env.unwrapped
+    try:
+        env.reset(seed=3)
+        reference = [env.step(0)[0] for _ in range(4)]
+        final_reference = env.step(1)[4]["touchdown"]
+
+        env.reset(seed=3)
+        start = save_snapshot(base)
+        replay = []
+        for _ in range(4):
+            here = save_snapshot(base)
+            looked_ahead = base.step(1)[4]  # a whole descent, then undone
+            assert looked_ahead["outcome"] != "in_flight"
+            restore_snapshot(base, here, keep=False)
+            replay.append(env.step(0)[0])
+        final = env.step(1)[4]["touchdown"]
+        # and once more from the start, after the look-aheads
+        restore_snapshot(base, start, keep=True)
+        again = [env.step(0)[0] for _ in range(4)]
+        release_snapshot(base, start)
+        release_snapshot(base, start)  # idempotent
+        with pytest.raises(ValueError, match="released"):
+            restore_snapshot(base, start)
+    finally:
+        env.close()
+    for ref, got, got_again in zip(reference, replay, again, strict=True):
+        np.testing.assert_array_equal(ref, got)
+        np.testing.assert_array_equal(ref, got_again)
+    assert final == final_reference
+
+
+def test_margin_is_the_smallest_relative_slack_of_the_graded_criteria() -> None:
+    limits = TouchdownConfig(max_normal_speed=0.5, max_deck_tilt_deg=5.0)
+    touchdown = {"relative_normal_speed": 0.25, "deck_tilt_deg": 4.0, "relative_attitude_deg": 2.0}
+    assert touchdown_margin(touchdown, limits) == pytest.approx(0.2)  # the tilt: 1 - 4/5
+    touchdown["relative_normal_speed"] = 0.75
+    assert touchdown_margin(touchdown, limits) == pytest.approx(-0.5)
+    assert touchdown_margin(None, limits) == -math.inf
+
+
+def test_choice_is_the_best_margin_of_the_first_successful_run() -> None:
+    candidates = [
+        Candidate(0, "hard_landing", -0.1),
+        Candidate(1, "success", 0.1),
+        Candidate(2, "success", 0.3),
+        Candidate(3, "success", 0.2),
+        Candidate(4, "hard_landing", -0.2),
+        Candidate(5, "success", 0.9),  # later and better, but not the first window
+    ]
+    assert choose(candidates).waits == 2
+    # nothing lands: the least bad
+    failing = [Candidate(0, "hard_landing", -0.4), Candidate(1, "crash", -math.inf)]
+    assert choose(failing).waits == 0
+    with pytest.raises(ValueError):
+        choose([])
+
+
+def test_the_oracle_lands_where_landing_now_fails_and_predicts_its_own_outcome() -> None:
+    # held-out seed 1000005 of sea-state-5: committing at once touches down beyond a limit
+    seed, scenario = 1000005, "sea-state-5"
+    env, oracle = make_env_and_policy("oracle", scenario)
+    try:
+        assert isinstance(oracle, OracleTimingPolicy) and POLICY_ENVS["oracle"] == env.spec.id
+        land_now = make_policy("land-now", env)
+        now = run_episode(env, land_now, seed, "land-now", scenario)
+        best = run_episode(env, oracle, seed, "oracle", scenario)
+    finally:
+        env.close()
+    plan = oracle.last_plan
+    assert plan is not None and plan.chosen is not None
+    assert not now.success
+    # the first candidate is landing now: the same touchdown as the land-now episode
+    assert plan.candidates[0].outcome == now.outcome
+    assert best.success and plan.feasible
+    assert best.outcome == plan.chosen.outcome
+    assert best.wait_s == pytest.approx(plan.chosen.waits * 0.1)
+    assert plan.chosen.margin > 0.0
+
+
+def test_the_oracle_refuses_the_align_descend_task() -> None:
+    env, _ = make_env_and_policy("align-descend", "sea-state-4")
+    try:
+        with pytest.raises(TypeError, match="DeckLandingTiming"):
+            OracleTimingPolicy(env)
+    finally:
+        env.close()
+
+
+def test_the_summary_gives_the_oracle_the_gap_and_the_unavoidable_failures() -> None:
+    def episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
+        return [
+            EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
+            for seed, ok in enumerate(successes)
+        ]
+
+    results = {
+        "land-now": episodes("land-now", [True, False, False, True]),
+        "oracle": episodes("oracle", [True, True, False, True]),
+    }
+    summaries = [summarise(rs) for rs in results.values()]
+    compare_with_oracle(summaries, results)
+    land_now = summaries[0]
+    assert land_now.oracle_success_rate == pytest.approx(0.75)
+    assert land_now.gap_points == pytest.approx(25.0)
+    assert land_now.unavoidable_failures == 1  # seed 2: the oracle failed it too
+    table = markdown_table(summaries)
+    assert "+25.0" in table and "1 of 2" in table
+
+
+def test_evaluating_a_timing_policy_runs_the_oracle_beside_it() -> None:
+    evaluation = evaluate_landing(
+        ["land-now"], "sea-state-4", 2, out_dir=None, workers=1, progress=False
+    )
+    assert set(evaluation.results) == {"land-now", "oracle"}
+    land_now, oracle = evaluation.summaries
+    assert oracle.successes >= land_now.successes
+    assert land_now.gap_points == pytest.approx(100 * (oracle.success_rate - land_now.success_rate))
+    without = evaluate_landing(
+        ["land-now"], "sea-state-4", 1, out_dir=None, workers=1, progress=False, oracle=False
+    )
+    assert set(without.results) == {"land-now"}
