@@ -63,7 +63,7 @@ class RandomiseSettings:
     """What :class:`RandomisedTimingEnv` draws from (the ``randomise`` section of a training
     YAML's ``deck_landing``)."""
 
-    scenarios: list[str] = field(default_factory=lambda: ["sea-state-4"])
+    scenarios: list[str] = field(default_factory=lambda: ["bench-ss4"])
     sensing: list[str] = field(default_factory=lambda: ["ideal"])
     #: the estimator in the observation of every variant
     estimator: str = "ihrcf"

@@ -3,7 +3,7 @@
 ``deck-landing train timing --config configs/train/timing_ppo.yaml`` reads a YAML with two
 top-level keys:
 
-* a registered id (``DeckLandingTiming-SeaState4-v0``: the scenario is built in, see
+* a registered id (``DeckLandingTiming-BenchSS4-v0``: the scenario is built in, see
   :mod:`landing_env.scenarios`) holding the hyper-parameters in rl-zoo3's
   format (``n_envs``, ``n_timesteps``, ``policy``, ``policy_kwargs`` as a ``"dict(...)"``
   string, ``learning_rate`` as a number or ``"lin_<x>"``, and the algorithm's own keyword
@@ -40,8 +40,8 @@ from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 
 ENV_ID = "DeckLandingTiming-v0"
-#: the shipped training scenario: the timing task over a sea-state-4 deck, built into the id
-SCENARIO_ENV_ID = "DeckLandingTiming-SeaState4-v0"
+#: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
+SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v0"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
 ALGOS = ("ppo", "dqn", "recurrentppo")

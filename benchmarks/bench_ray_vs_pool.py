@@ -67,7 +67,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, nargs=2, default=[6, 24], metavar=("N1", "N2"))
     parser.add_argument("--policy", default="land-now")
-    parser.add_argument("--scenario", default="sea-state-4")
+    parser.add_argument("--scenario", default="bench-ss4")
     args = parser.parse_args()
     n1, n2 = args.episodes
     task = landing_task(args.policy, args.scenario)

@@ -1,7 +1,7 @@
 """deck-landing simulation: a quadrotor over a moving Stewart-platform deck (PyBullet).
 
 Importing the package registers ``DeckLanding-v0``, ``DeckLandingTiming-v0`` and the scenario
-ids of :data:`landing_env.scenarios.SCENARIO_IDS` (e.g. ``DeckLandingTiming-SeaState4-v0``)
+ids of :data:`landing_env.scenarios.SCENARIO_IDS` (e.g. ``DeckLandingTiming-BenchSS4-v0``)
 with Gymnasium.
 """
 

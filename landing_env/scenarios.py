@@ -1,7 +1,7 @@
 """Registered environment ids with their scenario built in: ONE table, ``SCENARIO_IDS``.
 
-``gym.make("DeckLandingTiming-SeaState4-v0")`` is ``DeckLandingTiming-v0`` on the
-``sea-state-4`` config made a landing run (the drone flying, the tag projected, IHRCF in the
+``gym.make("DeckLandingTiming-BenchSS4-v0")`` is ``DeckLandingTiming-v0`` on the
+``bench-ss4`` config made a landing run (the drone flying, the tag projected, IHRCF in the
 observation): what the README trains and evaluates on, reproducible by id alone (rl-zoo3
 included).  To add or rename a scenario, edit the table; the ids follow
 ``<task>-<Scenario>-v<version>`` and the version goes up when what the id builds changes.
@@ -56,6 +56,8 @@ class ScenarioId:
     config: str
     description: str
     overrides: dict[str, Any] = field(default_factory=dict)
+    #: keyword arguments of the task itself (e.g. the timing task's ``timing`` settings)
+    task_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def make(self, overrides: dict[str, Any] | None = None, **kwargs: Any) -> Any:
         """The task's environment on this scenario; ``overrides`` apply on top of the
@@ -64,35 +66,60 @@ class ScenarioId:
 
         task = load_env_creator(TASKS[self.task])
         config = kwargs.pop("config", self.config)
+        kwargs = {**self.task_kwargs, **kwargs}
         return task(config=config, overrides={**self.overrides, **(overrides or {})}, **kwargs)
 
 
-def _landing(task: str, config: str, description: str) -> ScenarioId:
-    return ScenarioId(task, config, description, landing_overrides(task))
+def _landing(
+    task: str, config: str, description: str, task_kwargs: dict[str, Any] | None = None
+) -> ScenarioId:
+    return ScenarioId(task, config, description, landing_overrides(task), task_kwargs or {})
+
+
+#: the timing task over a ship deck holds higher: the helideck heaves metres at up to
+#: 2-4 m/s (the bench: centimetres), and 0.7 m over it ends in a touchdown during the warm-up
+SHIP_TIMING: dict[str, Any] = {"hold_height_m": 2.0}
+
+
+def _ship_ids() -> dict[str, ScenarioId]:
+    ids: dict[str, ScenarioId] = {}
+    for n in (3, 4, 5, 6):
+        ids[f"DeckLandingTiming-ShipSS{n}-v0"] = _landing(
+            "DeckLandingTiming-v0",
+            f"ship-ss{n}",
+            f"timing task over a 30 m vessel's helideck at sea state {n}",
+            {"timing": SHIP_TIMING},
+        )
+        ids[f"DeckLanding-ShipSS{n}-v0"] = _landing(
+            "DeckLanding-v0",
+            f"ship-ss{n}",
+            f"align and descend onto a 30 m vessel's helideck at sea state {n}",
+        )
+    return ids
 
 
 #: THE id -> scenario table (landing runs of the shipped benches, and the high approach)
 SCENARIO_IDS: dict[str, ScenarioId] = {
-    "DeckLandingTiming-SeaState3-v0": _landing(
-        "DeckLandingTiming-v0", "sea-state-3", "timing task over a sea-state-3 deck"
+    "DeckLandingTiming-BenchSS3-v0": _landing(
+        "DeckLandingTiming-v0", "bench-ss3", "timing task over a bench-ss3 deck"
     ),
-    "DeckLandingTiming-SeaState4-v0": _landing(
-        "DeckLandingTiming-v0", "sea-state-4", "timing task over a sea-state-4 deck (trained)"
+    "DeckLandingTiming-BenchSS4-v0": _landing(
+        "DeckLandingTiming-v0", "bench-ss4", "timing task over a bench-ss4 deck (trained)"
     ),
-    "DeckLandingTiming-SeaState5-v0": _landing(
-        "DeckLandingTiming-v0", "sea-state-5", "timing task over a sea-state-5 deck"
+    "DeckLandingTiming-BenchSS5-v0": _landing(
+        "DeckLandingTiming-v0", "bench-ss5", "timing task over a bench-ss5 deck"
     ),
     "DeckLandingTiming-PaperStewart-v0": _landing(
         "DeckLandingTiming-v0", "paper-stewart", "timing task over the papers' Stewart bench"
     ),
-    "DeckLanding-SeaState3-v0": _landing(
-        "DeckLanding-v0", "sea-state-3", "align and descend onto a sea-state-3 deck"
+    "DeckLanding-BenchSS3-v0": _landing(
+        "DeckLanding-v0", "bench-ss3", "align and descend onto a bench-ss3 deck"
     ),
-    "DeckLanding-SeaState4-v0": _landing(
-        "DeckLanding-v0", "sea-state-4", "align and descend onto a sea-state-4 deck"
+    "DeckLanding-BenchSS4-v0": _landing(
+        "DeckLanding-v0", "bench-ss4", "align and descend onto a bench-ss4 deck"
     ),
-    "DeckLanding-SeaState5-v0": _landing(
-        "DeckLanding-v0", "sea-state-5", "align and descend onto a sea-state-5 deck"
+    "DeckLanding-BenchSS5-v0": _landing(
+        "DeckLanding-v0", "bench-ss5", "align and descend onto a bench-ss5 deck"
     ),
     "DeckLanding-PaperStewart-v0": _landing(
         "DeckLanding-v0", "paper-stewart", "align and descend onto the papers' Stewart bench"
@@ -100,6 +127,7 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
     "DeckLanding-HighApproach-v0": ScenarioId(
         "DeckLanding-v0", "high-approach", "from 20 m up and 5 m off, gusty wind, sea state 3"
     ),
+    **_ship_ids(),
 }
 
 
@@ -157,13 +185,14 @@ def _step_limit(scenario: ScenarioId) -> int:
     if scenario.task == "DeckLandingTiming-v0":
         from landing_env.envs.timing import TimingConfig
 
-        timing = TimingConfig()
+        timing = TimingConfig(**scenario.task_kwargs.get("timing", {}))
     return episode_step_limit(SimpleNamespace(simulation=sim), timing)
 
 
 __all__ = [
     "FLYING_OVERRIDES",
     "SCENARIO_IDS",
+    "SHIP_TIMING",
     "START_OVERRIDES",
     "TASKS",
     "ScenarioId",

@@ -73,7 +73,7 @@ def test_box_actions_keep_every_value_and_out_of_bounds_values_pass_to_the_env()
 def test_both_environments_refuse_bad_actions_before_moving() -> None:
     timing = gym.make(
         "DeckLandingTiming-v0",
-        config="sea-state-4",
+        config="bench-ss4",
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )
@@ -133,7 +133,7 @@ def _terms(info: dict) -> dict[str, float]:
 def test_the_reward_is_the_sum_of_its_terms_in_info_in_both_tasks() -> None:
     timing = gym.make(
         "DeckLandingTiming-v0",
-        config="sea-state-4",
+        config="bench-ss4",
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )

@@ -15,7 +15,7 @@ from agents.cli import main
 from estimation.errors import ConfigError
 from landing_env.errors import PinnedDroneWarning
 
-LANDING = ["evaluate", "landing", "--policy", "land-now", "--scenario", "sea-state-4"]
+LANDING = ["evaluate", "landing", "--policy", "land-now", "--scenario", "bench-ss4"]
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -47,11 +47,11 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]
         (["evaluate", "approach", "--workers", "0"], "--workers"),
         (["demo", "--config", "nope", "--no-timing"], "'nope' not found"),
         (["demo", "--episodes", "0"], "--episodes"),
-        (["train", "timing", "--config", "configs/sea-state-4.yaml"], "DeckLandingTiming-v0"),
+        (["train", "timing", "--config", "configs/bench-ss4.yaml"], "DeckLandingTiming-v0"),
         (["train", "timing", "--config", "no/such/file.yaml"], "does not exist"),
         (
             ["evaluate", "landing", "--policy", "timing-ppo", "--model", "no-such.zip",
-             "--scenario", "sea-state-4", "--episodes", "1", "--workers", "1", "--no-progress"],
+             "--scenario", "bench-ss4", "--episodes", "1", "--workers", "1", "--no-progress"],
             "no-such.zip",
         ),
         (
@@ -75,7 +75,7 @@ def test_a_typo_in_set_fails_fast_with_two_workers(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     # a ConfigError raised in a worker process used to hang the pool forever
-    argv = ["evaluate", "landing", "--policy", "land-now", "--scenario", "sea-state-4",
+    argv = ["evaluate", "landing", "--policy", "land-now", "--scenario", "bench-ss4",
             "--episodes", "2", "--workers", "2", "--no-progress", "--out", str(tmp_path),
             "--set", "tof.nosie=vl53l1x"]  # fmt: skip
     code, err = _run(argv, capsys)
@@ -109,5 +109,5 @@ def test_pybullet_prints_nothing_when_an_env_is_made() -> None:
 
 def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
     with pytest.warns(PinnedDroneWarning, match="cannot land"):
-        env = gym.make("DeckLanding-v0", config="sea-state-5")
+        env = gym.make("DeckLanding-v0", config="bench-ss5")
     env.close()

@@ -17,7 +17,7 @@ from landing_env.scenarios import SCENARIO_IDS, TASKS
 
 #: a short, cheap scenario with a seed in its YAML (seed: 0, inherited from paper-stewart)
 SEEDED = {
-    "config": "sea-state-4",
+    "config": "bench-ss4",
     "overrides": {"camera.mode": "project", "simulation.drone_fixed": False},
 }
 
@@ -47,7 +47,7 @@ def test_each_registered_scenario_id_builds_its_scenario_with_a_step_limit(env_i
 def test_the_task_ids_spec_has_the_configs_step_limit(task: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make(task, config="sea-state-4", overrides={"simulation.drone_fixed": False})
+        env = gym.make(task, config="bench-ss4", overrides={"simulation.drone_fixed": False})
     assert env.spec.max_episode_steps == env.unwrapped.episode_step_limit > 0
     env.close()
 

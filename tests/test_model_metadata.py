@@ -38,7 +38,7 @@ def test_the_shipped_model_says_what_it_was_trained_on() -> None:
 
 
 def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> None:
-    env, policy = make_env_and_policy("timing-dqn", "sea-state-4")
+    env, policy = make_env_and_policy("timing-dqn", "bench-ss4")
     env.close()
     assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.estimator == "ihrcf"
 
@@ -52,13 +52,13 @@ def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> No
 )
 def test_a_different_estimator_or_sensing_is_refused_by_name(kwargs: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
-        make_env_and_policy("timing-dqn", "sea-state-4", **kwargs)
+        make_env_and_policy("timing-dqn", "bench-ss4", **kwargs)
 
 
 def test_a_mismatch_can_be_allowed_on_purpose() -> None:
     env, policy = make_env_and_policy(
         "timing-dqn",
-        "sea-state-4",
+        "bench-ss4",
         extra_overrides={"tof.noise": "vl53l1x"},
         allow_mismatch=("sensing",),
     )
@@ -71,11 +71,11 @@ def test_a_same_shape_observation_of_another_meaning_is_refused() -> None:
 
     from agents.evaluation.landing import scenario_overrides
 
-    overrides = scenario_overrides("sea-state-4", "DeckLandingTiming-v0")
+    overrides = scenario_overrides("bench-ss4", "DeckLandingTiming-v0")
     # the same size (409) but z and the ranges relative to another hold height
     env = gym.make(
         "DeckLandingTiming-v0",
-        config="sea-state-4",
+        config="bench-ss4",
         overrides=overrides,
         timing={"hold_height_m": 0.5},
     )
@@ -134,7 +134,7 @@ def test_sensing_profile_names_what_departs_from_ideal() -> None:
 
 
 def test_env_signature_reads_the_environment() -> None:
-    env, _ = make_env_and_policy("land-now", "sea-state-5", estimator="crhf")
+    env, _ = make_env_and_policy("land-now", "bench-ss5", estimator="crhf")
     try:
         signature = env_signature(env)
     finally:

@@ -23,7 +23,7 @@ from landing_env.envs.snapshot import release_snapshot, restore_snapshot, save_s
 
 
 def test_a_restored_snapshot_replays_the_episode_bit_for_bit() -> None:
-    env, _ = make_env_and_policy("land-now", "sea-state-4")
+    env, _ = make_env_and_policy("land-now", "bench-ss4")
     base = env.unwrapped
     try:
         env.reset(seed=3)
@@ -82,8 +82,8 @@ def test_choice_is_the_best_margin_of_the_first_successful_run() -> None:
 
 
 def test_the_oracle_lands_where_landing_now_fails_and_predicts_its_own_outcome() -> None:
-    # held-out seed 1000005 of sea-state-5: committing at once touches down beyond a limit
-    seed, scenario = 1000005, "sea-state-5"
+    # held-out seed 1000005 of bench-ss5: committing at once touches down beyond a limit
+    seed, scenario = 1000005, "bench-ss5"
     env, oracle = make_env_and_policy("oracle", scenario)
     try:
         assert isinstance(oracle, OracleTimingPolicy) and POLICY_ENVS["oracle"] == env.spec.id
@@ -104,7 +104,7 @@ def test_the_oracle_lands_where_landing_now_fails_and_predicts_its_own_outcome()
 
 
 def test_the_oracle_refuses_the_align_descend_task() -> None:
-    env, _ = make_env_and_policy("align-descend", "sea-state-4")
+    env, _ = make_env_and_policy("align-descend", "bench-ss4")
     try:
         with pytest.raises(TypeError, match="DeckLandingTiming"):
             OracleTimingPolicy(env)
@@ -135,13 +135,13 @@ def test_the_summary_gives_the_oracle_the_gap_and_the_unavoidable_failures() -> 
 
 def test_evaluating_a_timing_policy_runs_the_oracle_beside_it() -> None:
     evaluation = evaluate_landing(
-        ["land-now"], "sea-state-4", 2, out_dir=None, workers=1, progress=False
+        ["land-now"], "bench-ss4", 2, out_dir=None, workers=1, progress=False
     )
     assert set(evaluation.results) == {"land-now", "oracle"}
     land_now, oracle = evaluation.summaries
     assert oracle.successes >= land_now.successes
     assert land_now.gap_points == pytest.approx(100 * (oracle.success_rate - land_now.success_rate))
     without = evaluate_landing(
-        ["land-now"], "sea-state-4", 1, out_dir=None, workers=1, progress=False, oracle=False
+        ["land-now"], "bench-ss4", 1, out_dir=None, workers=1, progress=False, oracle=False
     )
     assert set(without.results) == {"land-now"}

@@ -30,7 +30,7 @@ def test_the_config_directory_is_found_relative_to_the_package() -> None:
     from landing_env.resources import config_dir
 
     assert (config_dir() / "default.yaml").is_file()
-    assert {"default", "sea-state-4", "paper-stewart"} <= set(available_configs())
+    assert {"default", "bench-ss4", "paper-stewart"} <= set(available_configs())
 
 
 def test_generated_deck_assets_go_to_the_user_cache(tmp_path: Path) -> None:
@@ -56,7 +56,7 @@ import landing_env
 from landing_env.scenarios import SCENARIO_IDS
 assert "site-packages" in landing_env.__file__, landing_env.__file__
 for env_id in [*SCENARIO_IDS, "DeckLanding-v0", "DeckLandingTiming-v0"]:
-    kwargs = {} if env_id in SCENARIO_IDS else {"config": "sea-state-4",
+    kwargs = {} if env_id in SCENARIO_IDS else {"config": "bench-ss4",
               "overrides": {"simulation.drone_fixed": False, "camera.mode": "project"}}
     env = gym.make(env_id, **kwargs)
     observation, _ = env.reset(seed=0)
@@ -102,9 +102,9 @@ def test_the_wheel_installs_and_runs_from_another_directory(tmp_path: Path) -> N
     assert list((tmp_path / "cache").glob("*/deck_*.obj"))
     cli = subprocess.run(
         [str(venv / "bin" / "deck-landing"), "evaluate", "landing", "--policy", "land-now",
-         "--scenario", "sea-state-4", "--episodes", "2", "--workers", "1", "--no-progress",
+         "--scenario", "bench-ss4", "--episodes", "2", "--workers", "1", "--no-progress",
          "--out", str(tmp_path / "out")],
         cwd=elsewhere, env=env, capture_output=True, text=True,
     )  # fmt: skip
     assert cli.returncode == 0, cli.stderr[-3000:]
-    assert (tmp_path / "out" / "landing_sea-state-4.md").is_file()
+    assert (tmp_path / "out" / "landing_bench-ss4.md").is_file()

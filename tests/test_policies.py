@@ -146,7 +146,7 @@ def test_unknown_policy_and_scenario_name_the_choices() -> None:
     with pytest.raises(ConfigError, match=r"policy.*align-descend"):
         make_env_and_policy("hover", "bench-ss4")
     with pytest.raises(ConfigError, match=r"scenario.*bench-ss3"):
-        scenario_overrides("sea-state-9", "DeckLanding-v0")
+        scenario_overrides("bench-ss9", "DeckLanding-v0")
 
 
 def test_wilson_interval_and_summary() -> None:

@@ -24,8 +24,8 @@ def ray_session():
 
 
 def test_ray_gives_the_serial_results_seed_by_seed(ray_session: None) -> None:
-    serial = run_policy("land-now", "sea-state-4", 3, workers=1)
-    parallel = run_policy("land-now", "sea-state-4", 3, workers=2)
+    serial = run_policy("land-now", "bench-ss4", 3, workers=1)
+    parallel = run_policy("land-now", "bench-ss4", 3, workers=2)
     assert (serial.backend, parallel.backend) == ("serial", "ray")
     assert parallel.records == serial.records
     assert [r.seed for r in parallel.records] == [1_000_000, 1_000_001, 1_000_002]
@@ -33,7 +33,7 @@ def test_ray_gives_the_serial_results_seed_by_seed(ray_session: None) -> None:
 
 def test_a_bad_config_fails_fast_with_its_message(ray_session: None) -> None:
     with pytest.raises(ConfigError, match=r"tof\.nosie"):
-        run_policy("land-now", "sea-state-4", 4, workers=2, extra_overrides={"tof.nosie": 1})
+        run_policy("land-now", "bench-ss4", 4, workers=2, extra_overrides={"tof.nosie": 1})
     task = EpisodeTask(TOY, "p", "s", {"bad_in_worker": True})
     with pytest.raises(ConfigError, match=r"camera\.mode"):  # raised inside a Ray worker
         run_episodes(task, list(range(4)), workers=2)

@@ -23,7 +23,7 @@ from landing_env.errors import ConfigError
 RANDOMISED = Path(__file__).resolve().parent.parent / "configs/train/timing_randomised.yaml"
 QUICK_TIMING = {"history_s": 0.25, "rate_window_s": 0.2, "hold_height_m": 0.45, "wait_limit_s": 2.0}
 TWO_BY_TWO = {
-    "scenarios": ["sea-state-4", "sea-state-5"],
+    "scenarios": ["bench-ss4", "bench-ss5"],
     "sensing": ["ideal", "tof-vl53l1x"],
     "wind_speed_mps": [1.0, 3.0],
     "start_height_m": [0.45, 0.7],
@@ -34,7 +34,7 @@ TWO_BY_TWO = {
 @pytest.mark.parametrize(
     ("section", "key"),
     [
-        ({"scenarios": ["sea-state-9"]}, r"randomise\.scenarios: 'sea-state-9'.*sea-state-4"),
+        ({"scenarios": ["bench-ss9"]}, r"randomise\.scenarios: 'bench-ss9'.*bench-ss4"),
         ({"sensing": ["perfect"]}, r"randomise\.sensing: 'perfect'.*tof-vl53l1x"),
         ({"estimator": "psychic"}, r"randomise\.estimator"),
         ({"wind_speed_mps": [3.0, 1.0]}, r"randomise\.wind_speed_mps"),

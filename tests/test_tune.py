@@ -28,7 +28,7 @@ def test_a_bad_search_space_names_the_key() -> None:
 @pytest.mark.slow
 def test_a_tiny_search_runs_its_trials_and_keeps_the_best(tmp_path: Path) -> None:
     base = yaml.safe_load((ROOT / "configs" / "train" / "timing_dqn.yaml").read_text())
-    zoo = base["DeckLandingTiming-SeaState4-v0"]
+    zoo = base["DeckLandingTiming-BenchSS4-v0"]
     zoo.update(learning_starts=8, batch_size=8, buffer_size=1000, train_freq=4, gradient_steps=1)
     zoo["policy_kwargs"] = "dict(net_arch=[16])"
     base_path = tmp_path / "base.yaml"

@@ -43,6 +43,7 @@ from agents.evaluation.runner import (
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     FLYING_OVERRIDES,
+    SHIP_TIMING,
     START_OVERRIDES,
     landing_overrides,
 )
@@ -71,9 +72,6 @@ BENCH_SCALE = ", ".join(
     )
 )
 
-#: the timing task over a ship deck holds higher: the deck heaves metres at up to ~2-4 m/s
-#: (bench-ss: centimetres), and 0.7 m over it ends in a touchdown during the warm-up
-SHIP_TIMING: dict[str, Any] = {"hold_height_m": 2.0}
 
 SCENARIOS: dict[str, Scenario] = {
     "bench-ss3": Scenario(
