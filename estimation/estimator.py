@@ -128,14 +128,18 @@ def _corners_usable(corners_px: object, image_size: tuple[int, int] | None) -> b
         corners = np.asarray(corners_px, dtype=float)
     except (TypeError, ValueError):
         return False
-    # NaN fails the comparisons too
-    if corners.shape != (4, 2) or not (np.abs(corners) <= MAX_ABS_PIXEL).all():
+    # a NaN corner is one the detector did not see (``tight`` solves with three); infinities
+    # and numbers no camera delivers are corrupt
+    if corners.shape != (4, 2) or np.isinf(corners).any():
+        return False
+    seen = corners[np.isfinite(corners).all(axis=1)]
+    if not (np.abs(seen) <= MAX_ABS_PIXEL).all():
         return False
     if image_size is None:
         return True
     size = np.asarray(image_size, dtype=float)
     margin = MAX_OUTSIDE_IMAGE_FRAC * size
-    return bool(((corners >= -margin) & (corners <= size - 1.0 + margin)).all())
+    return bool(((seen >= -margin) & (seen <= size - 1.0 + margin)).all())
 
 
 def checked_frame(

@@ -125,10 +125,10 @@ ESTIMATOR_NAMES: tuple[str, ...] = ("truth", *FRAME_ESTIMATOR_NAMES, "beacon", "
 #: ``auto``: the first valid of these (IHRCF within ToF range, ATDA above it)
 AUTO_RANKING: tuple[str, ...] = ("ihrcf", "atda")
 
-#: Names that need the camera intrinsics / the ToF–camera calibration.
-NEEDS_INTRINSICS: frozenset[str] = frozenset(
-    {n for n, s in REGISTRY.items() if s.needs_intrinsics} | {"beacon"}
-)
+#: Names that need the camera intrinsics / the ToF–camera calibration.  Every camera
+#: estimator gets the intrinsics: those that do not solve with K (IHRCF, CRHF) still undistort
+#: the corners with its lens model, so a changed lens must come with its calibration.
+NEEDS_INTRINSICS: frozenset[str] = frozenset(set(REGISTRY) | {"beacon"})
 NEEDS_TOF_CALIBRATION: frozenset[str] = frozenset(
     n for n, s in REGISTRY.items() if s.needs_tof_calibration
 )

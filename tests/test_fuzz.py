@@ -19,13 +19,12 @@ from estimation.camera_model import CameraIntrinsics
 from estimation.estimator import (
     BAD_CORNERS,
     BAD_TIMESTAMP,
-    ESTIMATOR_NAMES,
     MAX_OUTSIDE_IMAGE_FRAC,
     RANGE_INVALID,
     RankedEstimator,
-    make_estimator,
 )
 from estimation.frames import tof_positions_in_camera_frame
+from estimation.registry import FRAME_ESTIMATOR_NAMES, make_estimator
 from estimation.synthetic import SyntheticScene
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, TrackedEstimator
@@ -44,7 +43,7 @@ def _estimators() -> dict:
         name: make_estimator(
             name, intrinsics=INTRINSICS, tag_size=TAG_SIZE, tof_calibration=CALIBRATION
         )
-        for name in ESTIMATOR_NAMES
+        for name in FRAME_ESTIMATOR_NAMES
     }
     built["crhf+kf"] = TrackedEstimator(
         make_estimator(
@@ -249,6 +248,7 @@ def test_the_limits_keep_infinity_only_where_it_means_something() -> None:
         "estimation.fusion.atda_sigma",
         "estimation.fusion.ihrcf_sigma",
         "estimation.fusion.crhf_sigma",
+        "estimation.fusion.tight_sigma",
         "estimation.ihrcf.max_plane_rms_m",
         "estimation.ihrcf.max_rigid_rms_rel",
         "estimation.crhf.max_plane_rms_m",
