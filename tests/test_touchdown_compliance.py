@@ -49,7 +49,8 @@ def drop(
     **touchdown: float,
 ) -> tuple[Outcome, TouchdownMetrics, World]:
     overrides = {f"touchdown.{k}": v for k, v in touchdown.items()}
-    config = load_config("ship-ss4", overrides={"motion.kind": "static", **overrides})
+    no_wind = {"motion.kind": "static", "wind.enabled": False}
+    config = load_config("ship-ss4", overrides={**no_wind, **overrides})
     world = World(config)
     if friction is not None:
         for foot in world.foot_links:
