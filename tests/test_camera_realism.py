@@ -200,3 +200,21 @@ def test_unknown_profile_and_bad_settings_are_refused_by_name() -> None:
         CameraConfig(exposure_s=-1.0)
     with pytest.raises(ConfigError, match="sun_direction_w"):
         CameraConfig(sun_direction_w=(0.0, 0.0, 0.0))
+
+
+def test_an_overhead_sun_glints_on_the_deck_below_the_camera_and_saturates() -> None:
+    overrides = {"camera.mode": "render", "camera.profile": "ov9281"}
+    images = []
+    for sun in (None, (0.0, 0.0, 1.0)):
+        w = World(load_config("default", overrides={**overrides, "camera.sun_direction_w": sun}))
+        try:
+            place(w, Pose(1.5))
+            w.camera.motion = _still_deck_motion(w, ZERO)
+            images.append(w.camera.render_image(*w.camera_pose_w(), np.random.default_rng(0)))
+        finally:
+            w.close()
+    plain, glare = (img.astype(float).mean(axis=2) for img in images)
+    centre = (slice(246, 266), slice(246, 266))
+    assert glare[centre].min() >= 250 and plain[centre].mean() < 200
+    # the lobe is narrow: the image corners are as without the sun
+    assert abs(glare[:40, :40].mean() - plain[:40, :40].mean()) < 3.0

@@ -4,7 +4,9 @@ Each profile is one real camera class with its parameters and where each comes f
 image is 512 x 512 px over the default field of view (fx = 458.5 px, about 58 degrees across),
 i.e. a binned or scaled mode of the sensor; per-row timing is scaled to 512 rows accordingly.
 Parameters marked *assumed* are typical of the class and not from a datasheet: replace them
-with a measurement (EMVA 1288) of the camera flown.
+with a measurement (EMVA 1288) of the camera flown.  Both real profiles expose a white
+surface to 80 % of the full well (the auto-exposure set point, *assumed*), i.e. 8-bit 230
+after the 2.2 gamma.
 
 - ``ideal``: the papers' simulator (no blur, noise, vignetting or response curve); the
   rendered image is the camera image.
@@ -14,7 +16,8 @@ with a measurement (EMVA 1288) of the camera flown.
   colour.  Exposure
   2 ms (a typical fixed machine-vision exposure outdoors; the sensor accepts 10 us to a frame
   time, Luxonis OV9282 docs); full well 8 500 e- and read noise 4 e- *assumed* (typical of
-  3 um global-shutter pixels); a linear RAW10 output read as 8 bits (no ISP gamma); corner
+  3 um global-shutter pixels); the sensor has no ISP, so the host encodes its RAW10 with a
+  2.2 gamma for 8-bit output (as V4L2/libcamera display pipelines do; *assumed*); corner
   relative illumination 0.80 (*assumed*, an M12 lens of about 60 degrees).
 - ``imx219``: Sony IMX219 rolling-shutter camera (Raspberry Pi Camera Module v2): RAW10 with
   a black level of 64 LSB (IMX219PQH5-C datasheet, Sec. 5-6); a line length of 3448 pixel
@@ -52,7 +55,7 @@ class CameraProfile:
     black_level_dn: float = 0.0
     #: electrons a white surface (rendered 255) gives at ``exposure_s``, as a fraction of the
     #: full well: the auto-exposure set point the scene is lit for
-    white_fraction_of_full_well: float = 0.6
+    white_fraction_of_full_well: float = 0.8
     #: relative illumination at the image corner (1 = no vignetting; cos^4-like falloff)
     corner_illumination: float = 1.0
     #: output response curve: 8-bit value = 255 * x^(1 / gamma) of the linear signal x
@@ -76,9 +79,9 @@ PROFILES: dict[str, CameraProfile] = {
         read_noise_e=4.0,
         adc_bits=10,
         black_level_dn=16.0,
-        white_fraction_of_full_well=0.6,
+        white_fraction_of_full_well=0.8,
         corner_illumination=0.80,
-        gamma=1.0,
+        gamma=2.2,
         mono=False,
     ),
     "imx219": CameraProfile(
@@ -90,7 +93,7 @@ PROFILES: dict[str, CameraProfile] = {
         read_noise_e=2.5,
         adc_bits=10,
         black_level_dn=64.0,
-        white_fraction_of_full_well=0.6,
+        white_fraction_of_full_well=0.8,
         corner_illumination=0.70,
         gamma=2.2,
         mono=False,

@@ -3,6 +3,9 @@
 Two stages, applied by :class:`~landing_env.sensors.camera.CameraSensor` when its profile is
 not ``ideal`` (:mod:`landing_env.sensors.camera_profiles`):
 
+The rendered image is taken as display-referred (gamma 2.2): it is linearised first, and
+blur, glare and noise act on linear radiance.
+
 1. :meth:`ImageFormation.expose` (on the ideal pinhole image, before lens distortion): the
    exposure integrates the scene over ``exposure_s`` centred on the frame's timestamp, and a
    rolling shutter starts row ``v`` ``(v - (H - 1) / 2) * line_time_s`` later than the middle
@@ -45,6 +48,16 @@ _SAMPLES_PER_PX = 2.0
 _MAX_SAMPLES = 32
 #: mean electrons above which shot noise is drawn in its Gaussian form
 _GAUSSIAN_FROM_E = 25.0
+
+#: the renderers' images are display-referred (sRGB-like, gamma 2.2): linear radiance is
+#: (value / 255)^2.2, 1.0 = a white surface
+RENDER_GAMMA = 2.2
+_TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** RENDER_GAMMA).astype(np.float32)
+
+
+def to_linear(image: np.ndarray) -> np.ndarray:
+    """Linear radiance (float32, 1.0 = white) of a rendered uint8 image."""
+    return _TO_LINEAR[image]
 
 
 @dataclass(frozen=True)
@@ -153,10 +166,10 @@ class ImageFormation:
         window: tuple[int, int, int, int],
         motion: RelativeMotion | None,
     ) -> np.ndarray:
-        """The exposed ideal window (float32, 1.0 = a white surface's signal)."""
+        """The exposed ideal window (float32 linear radiance, 1.0 = a white surface)."""
         x0, y0, x1, y1 = window
         if motion is None or not self.has_exposure_effects:
-            canvas = render_canvas(window).astype(np.float32) * np.float32(1.0 / 255.0)
+            canvas = to_linear(render_canvas(window))
             return self._add_glare(canvas, window, t_wc, r_wc, motion)
         half = 0.5 * self.exposure_s
         t_first = float(self.row_time_s(y0)) - half
@@ -174,11 +187,11 @@ class ImageFormation:
         blur = float(np.max(np.linalg.norm(ends[1] - ends[0], axis=1)))
         if not np.isfinite(reach) or reach > 0.5 * max(self.k.width, self.k.height):
             # a degenerate view (the deck plane through the camera): no blur
-            canvas = render_canvas(window).astype(np.float32) * np.float32(1.0 / 255.0)
+            canvas = to_linear(render_canvas(window))
             return self._add_glare(canvas, window, t_wc, r_wc, motion)
         margin = math.ceil(reach) + 2
         grown = (x0 - margin, y0 - margin, x1 + margin, y1 + margin)
-        canvas = render_canvas(grown).astype(np.float32) * np.float32(1.0 / 255.0)
+        canvas = to_linear(render_canvas(grown))
         canvas = self._add_glare(canvas, grown, t_wc, r_wc, motion)
         samples = 1
         if self.exposure_s > 0.0:
@@ -309,9 +322,7 @@ class ImageFormation:
     ) -> np.ndarray:
         """The 8-bit camera image (HxWx3 uint8) of an exposed window at ``origin``."""
         p = self.profile
-        signal = image.astype(np.float32)
-        if image.dtype == np.uint8:
-            signal *= np.float32(1.0 / 255.0)
+        signal = to_linear(image) if image.dtype == np.uint8 else image.astype(np.float32)
         if p.mono:
             signal = (signal @ np.array([0.299, 0.587, 0.114], dtype=np.float32))[..., None]
         h, w = signal.shape[:2]

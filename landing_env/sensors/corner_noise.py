@@ -14,11 +14,9 @@ the detector's straight-line fit does not follow: an error growing with the side
 ``side_px`` is the tag's shortest side and ``blur_px`` how far the tag centre moves during
 the exposure (:meth:`ImageFormation.blur_length_px`).  The coefficients are least squares
 (non-negative) on the squared errors; ``python -m benchmarks.bench_corner_noise`` prints
-them and the comparison of the two error distributions.  Measured under the OV9281 profile
-with k1 = -0.05 (1500 states, seed 0): the blur term comes out zero (blur up to ~5 px does
-not move AprilTag corners beyond what the tag size explains) and the fit is
-``(0, 0.150, 0, 6.19e-6)``: 0.04-0.07 px for 30-120 px tags, 0.13 px at 150 px, 0.26 px
-at 200 px.
+them and the comparison of the two error distributions.  Measured under the realistic
+camera (OV9281 profile, k1 = -0.05; 1500 states, seed 0): ``(0, 1.005, 0.102, 0)``: the
+image noise dominates (0.14 px for a 50 px tag) and each pixel of blur adds about 0.1 px.
 """
 
 from __future__ import annotations
