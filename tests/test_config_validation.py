@@ -97,6 +97,21 @@ def test_cross_field_errors_name_both_keys() -> None:
     assert "latency_jitter_s" in str(info.value) and "latency_s =" in str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("deck.quiet_zone_cells", 10.0),
+        ("stewart.base_radius", 5.0),
+        ("stewart.top_anchor_depth", 0.4),
+        ("stewart.min_leg_length", 4.7),
+    ],
+)
+def test_a_value_refused_by_a_cross_field_check_is_named(key: str, value: float) -> None:
+    with pytest.raises(ConfigError) as info:
+        load_config("default", overrides={key: value})
+    assert key.rsplit(".", 1)[-1] in str(info.value)
+
+
 def test_a_missing_vehicle_file_is_a_config_error() -> None:
     with pytest.raises(ConfigError) as info:
         load_config("default", vehicle="/nonexistent.yaml")
@@ -126,3 +141,13 @@ def test_a_changed_camera_without_its_calibration_is_refused(key: str, value: fl
         },
     )
     env.close()
+
+
+def test_every_config_tree_built_by_the_loader_refuses_non_finite_numbers() -> None:
+    from landing_env.config_loading import build_dataclass
+    from landing_env.envs.timing import TimingConfig
+
+    with pytest.raises(ConfigError) as info:
+        build_dataclass(TimingConfig, {"wait_limit_s": math.inf}, "timing")
+    assert info.value.key == "timing.wait_limit_s"
+    assert build_dataclass(TimingConfig, {"wait_limit_s": 20.0}, "timing").wait_limit_s == 20.0

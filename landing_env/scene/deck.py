@@ -115,8 +115,9 @@ class DeckSurfaceConfig:
         if outer > self.size:
             raise ConfigError(
                 "tag_size",
-                f"{self.tag_size} m with its quiet zone ({outer:.3f} m) does not fit on the "
-                f"{self.size} m deck; allowed tag_size <= "
+                f"{self.tag_size} m with its quiet zone (quiet_zone_cells = "
+                f"{self.quiet_zone_cells}: {outer:.3f} m) does not fit on the deck (size = "
+                f"{self.size} m); allowed tag_size <= "
                 f"{self.size * TAG_CELLS / (TAG_CELLS + 2 * self.quiet_zone_cells):.3f} m",
             )
         if self.landmarks:

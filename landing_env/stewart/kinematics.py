@@ -64,9 +64,11 @@ class StewartGeometry:
         require_range("home_height", self.home_height, 0.0, low_inclusive=False)
         require_range("top_anchor_depth", self.top_anchor_depth, 0.0, self.home_height)
         require_range("min_leg_length", self.min_leg_length, 0.0, low_inclusive=False)
-        require_range(
-            "max_leg_length", self.max_leg_length, self.min_leg_length, low_inclusive=False
-        )
+        if not self.max_leg_length > self.min_leg_length:
+            raise ConfigError(
+                "max_leg_length",
+                f"{self.max_leg_length} must be above min_leg_length = {self.min_leg_length}",
+            )
         for name in ("max_base_joint_angle_deg", "max_top_joint_angle_deg"):
             value = getattr(self, name)
             if value is not None:
@@ -76,9 +78,10 @@ class StewartGeometry:
         if np.any(home < self.min_leg_length) or np.any(home > self.max_leg_length):
             raise ConfigError(
                 "home_height",
-                f"home leg length {home[0]:.4f} m is outside the stroke "
-                f"[{self.min_leg_length}, {self.max_leg_length}] m; the home pose must be "
-                "reachable",
+                f"home leg length {home[0]:.4f} m (from home_height, base_radius, top_radius, "
+                "the half angles and top_anchor_depth) is outside the stroke "
+                f"[min_leg_length, max_leg_length] = [{self.min_leg_length}, "
+                f"{self.max_leg_length}] m; the home pose must be reachable",
             )
         base_angles, top_angles = kinematics.joint_angles(np.zeros(POSE_SIZE))
         for name, angles in (
