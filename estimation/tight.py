@@ -321,8 +321,9 @@ class TightProblem:
 
         It stops when a step is below ``step_tol`` (metres and radians), which on noise-free
         data leaves errors far below 1e-6 m (Gauss–Newton converges quadratically there), or
-        when a step lowered the whitened cost by less than ``cost_tol``: the pose then moved
-        by about sqrt(cost_tol) = 1 % of its standard deviation.
+        when a step lowered the whitened cost by less than ``cost_tol`` (times the cost per
+        residual where that exceeds 1, i.e. where the sigmas are set too small): the pose
+        then moved by about sqrt(cost_tol) = 1 % of its standard deviation.
         """
         rotation = np.asarray(rotation, dtype=float)
         translation = np.asarray(translation, dtype=float)
@@ -342,7 +343,9 @@ class TightProblem:
             cost_new = float(r_new @ r_new)
             small = float(np.max(np.abs(step))) < step_tol
             if cost_new <= cost:  # NaN is never accepted
-                small = small or cost - cost_new <= cost_tol
+                # in units of the cost per residual, so that a mis-set sigma does not
+                # change when it stops
+                small = small or cost - cost_new <= cost_tol * max(1.0, cost / self.m)
                 rotation, translation, r, j, cost = new_r, new_t, r_new, j_new, cost_new
                 lam = max(lam * 0.1, 1e-9)
             else:
