@@ -16,14 +16,14 @@ deck pose ``T_CD`` minimises one cost
 The problem has six unknowns and at most 8 + 4 residuals, so a Levenberg–Marquardt loop over
 a left-multiplicative rotation update ``R <- Exp(dtheta) R`` and ``t <- t + dt`` with analytic
 Jacobians (:class:`TightProblem`) is written out here: SciPy's ``least_squares(method="lm")``
-with the same residuals and analytic Jacobian took 291 µs (median thread CPU time, 200
-synthetic frames, shared machine) for the refinement this loop does in 106 µs, most of the
-frame's 400 µs budget (the tests check the two reach the same minimum).  It starts from both
-IPPE poses of the corners and from the pose on the ToF plane (corners back-projected on the
-plane fitted to the touch points, then a rigid fit), and keeps the lowest final cost: the
-ranges thus decide the planar flip ambiguity that costs camera-only estimates their 10°
-spikes.  The 6x6 covariance of ``(x, y, z, roll, pitch, yaw)`` is ``(JᵀJ)⁻¹`` of the whitened
-Jacobian at the solution, mapped to the Euler angles.
+with the same residuals and analytic Jacobian takes 207 µs (median thread CPU time,
+``benchmarks/bench_estimators.py``, shared machine) for the refinement this loop does in
+82 µs, half of the frame's 400 µs budget (the tests check the two reach the same minimum).
+It starts from both IPPE poses of the corners and from the pose on the ToF plane (corners
+back-projected on the plane fitted to the touch points, then a rigid fit), and keeps the
+lowest final cost: the ranges thus decide the planar flip ambiguity that costs camera-only
+estimates their 10° spikes.  The 6x6 covariance of ``(x, y, z, roll, pitch, yaw)`` is
+``(JᵀJ)⁻¹`` of the whitened Jacobian at the solution, mapped to the Euler angles.
 
 Degradation: with no valid range it is the maximum-likelihood camera-only pose (IPPE
 refined through the distortion model); 1 to 3 valid ranges still enter the cost; 3 corners
