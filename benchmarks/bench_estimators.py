@@ -112,6 +112,52 @@ def estimator_rows(frames_n: int, rng: np.random.Generator) -> list[tuple[str, n
     return rows
 
 
+def refinement_rows(frames_n: int, rng: np.random.Generator) -> list[tuple[str, np.ndarray, str]]:
+    """tight's refinement alone, by its hand-written LM and by SciPy's ``least_squares``
+    (method "lm") on the same residuals and analytic Jacobian, from the same perturbed start."""
+    from scipy.optimize import least_squares
+
+    from estimation.tight import TightEstimator, TightProblem, rotation_exp
+
+    config = load_config("default")
+    intrinsics = load_intrinsics(config)
+    tag_size = config.deck.tag_size
+    estimator = TightEstimator(intrinsics=intrinsics, tag_size=tag_size)
+    cases = []
+    for m in synthetic_frames(frames_n, config.camera.intrinsics, tag_size, rng):
+        solved = estimator.estimate(m.frame, m.ranges)
+        problem = TightProblem(
+            estimator._model,
+            m.frame.detections[0].corners_px,
+            estimator.intrinsics,
+            estimator.config.pixel_sigma_px,
+            estimator.tof_positions_c,
+            m.ranges.ranges,
+            estimator.config.tof_noise.sigma(m.ranges.ranges),
+        )
+        start_r = rotation_exp(rng.normal(0.0, 0.01, 3)) @ solved.rotation
+        start_t = solved.translation + rng.normal(0.0, 0.002, 3)
+        cases.append((problem, start_r, start_t))
+
+    def hand(i: int) -> None:
+        problem, r0, t0 = cases[i % len(cases)]
+        problem.solve(r0, t0, estimator.config.max_iterations)
+
+    def scipy(i: int) -> None:
+        problem, r0, t0 = cases[i % len(cases)]
+        least_squares(
+            lambda x: problem.residuals(rotation_exp(x[3:]) @ r0, t0 + x[:3]),
+            np.zeros(6),
+            jac=lambda x: problem.linearise(rotation_exp(x[3:]) @ r0, t0 + x[:3])[1],
+            method="lm",
+        )
+
+    return [
+        ("tight refinement, hand LM", time_calls(hand, frames_n), "from a perturbed start"),
+        ("tight refinement, SciPy lm", time_calls(scipy, frames_n), "same residuals, jac"),
+    ]
+
+
 def detection_rows(frames_n: int) -> list[tuple[str, np.ndarray, str]]:
     # imported here: the estimator timings above need no simulator
     from landing_env.world import World
@@ -159,7 +205,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
-    rows = estimator_rows(args.frames, rng) + detection_rows(args.detect_frames)
+    rows = (
+        estimator_rows(args.frames, rng)
+        + refinement_rows(min(args.frames, 500), rng)
+        + detection_rows(args.detect_frames)
+    )
     table = Table(title="per-frame cost (µs)")
     for column in ("what", "median", "p90", "calls", "note"):
         table.add_column(column, justify="left" if column in ("what", "note") else "right")

@@ -85,16 +85,28 @@ def ippe_solutions(
     if half_turn:
         corners = corners[[2, 3, 0, 1]]
     best: tuple[str, list] = ("none", [])
+    tried: list[tuple[float, str, tuple[float, np.ndarray, np.ndarray]]] = []
     for solver, flag in (
         ("ippe_square", cv2.SOLVEPNP_IPPE_SQUARE),
         ("ippe", cv2.SOLVEPNP_IPPE),
         ("sqpnp", cv2.SOLVEPNP_SQPNP),
     ):
         sols = _solve_pnp(object_points, corners, k, flag)
+        tried += [(s[0], solver, s) for s in sols]
         if len(sols) > len(best[1]):
             best = (solver, sols)
         if len(best[1]) >= 2:
             break
+    if len(best[1]) < 2 and tried:
+        # no solver gave both poses: keep the best-fitting of everything found (IPPE_SQUARE
+        # can return a single pose 13° off with a 3 px error on an exactly face-on view at
+        # 0.3 m, where SQPNP finds the exact one; found by hypothesis)
+        tried.sort(key=lambda entry: entry[0])
+        kept: list[tuple[float, np.ndarray, np.ndarray]] = []
+        for _, _, solution in tried:
+            if not any(np.allclose(solution[1], other[1], atol=1e-6) for other in kept):
+                kept.append(solution)
+        best = (tried[0][1], kept[:2])
     solutions = sorted(best[1], key=lambda s: s[0])
     if half_turn:
         # R_CD = R' Rz(180°): negate the first two columns

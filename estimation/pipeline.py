@@ -31,6 +31,7 @@ from estimation.registry import (
     make_estimator,
 )
 from estimation.tracking import CornerTracker, TrackedEstimator
+from estimation.types import RangeReading
 
 if TYPE_CHECKING:
     from estimation.tof_calibration import TofCameraCalibration
@@ -84,7 +85,7 @@ class EstimationOptions:
     tracking: bool = False
     tracking_dt_s: float = 0.05
     max_bridged_frames: int = 3
-    range_down: Callable[[], np.ndarray] | None = None
+    range_down: Callable[[], RangeReading] | None = None
     range_offset_m: float = 0.0
 
 

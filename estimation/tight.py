@@ -15,13 +15,15 @@ deck pose ``T_CD`` minimises one cost
 
 The problem has six unknowns and at most 8 + 4 residuals, so a Levenberg–Marquardt loop over
 a left-multiplicative rotation update ``R <- Exp(dtheta) R`` and ``t <- t + dt`` with analytic
-Jacobians (:class:`TightProblem`) is written out here: SciPy's ``least_squares`` costs about
-a millisecond per call on this problem size, more than the whole frame's budget (the tests
-check the two agree).  It starts from both IPPE poses of the corners and from the pose on the
-ToF plane (corners back-projected on the plane fitted to the touch points, then a rigid fit),
-and keeps the lowest final cost: the ranges thus decide the planar flip ambiguity that costs
-camera-only estimates their 10° spikes.  The 6x6 covariance of ``(x, y, z, roll, pitch,
-yaw)`` is ``(JᵀJ)⁻¹`` of the whitened Jacobian at the solution, mapped to the Euler angles.
+Jacobians (:class:`TightProblem`) is written out here: SciPy's ``least_squares(method="lm")``
+with the same residuals and analytic Jacobian takes 207 µs (median thread CPU time,
+``benchmarks/bench_estimators.py``, shared machine) for the refinement this loop does in
+82 µs, half of the frame's 400 µs budget (the tests check the two reach the same minimum).
+It starts from both IPPE poses of the corners and from the pose on the ToF plane (corners
+back-projected on the plane fitted to the touch points, then a rigid fit), and keeps the
+lowest final cost: the ranges thus decide the planar flip ambiguity that costs camera-only
+estimates their 10° spikes.  The 6x6 covariance of ``(x, y, z, roll, pitch, yaw)`` is
+``(JᵀJ)⁻¹`` of the whitened Jacobian at the solution, mapped to the Euler angles.
 
 Degradation: with no valid range it is the maximum-likelihood camera-only pose (IPPE
 refined through the distortion model); 1 to 3 valid ranges still enter the cost; 3 corners
@@ -321,8 +323,9 @@ class TightProblem:
 
         It stops when a step is below ``step_tol`` (metres and radians), which on noise-free
         data leaves errors far below 1e-6 m (Gauss–Newton converges quadratically there), or
-        when a step lowered the whitened cost by less than ``cost_tol``: the pose then moved
-        by about sqrt(cost_tol) = 1 % of its standard deviation.
+        when a step lowered the whitened cost by less than ``cost_tol`` (times the cost per
+        residual where that exceeds 1, i.e. where the sigmas are set too small): the pose
+        then moved by about sqrt(cost_tol) = 1 % of its standard deviation.
         """
         rotation = np.asarray(rotation, dtype=float)
         translation = np.asarray(translation, dtype=float)
@@ -342,7 +345,9 @@ class TightProblem:
             cost_new = float(r_new @ r_new)
             small = float(np.max(np.abs(step))) < step_tol
             if cost_new <= cost:  # NaN is never accepted
-                small = small or cost - cost_new <= cost_tol
+                # in units of the cost per residual, so that a mis-set sigma does not
+                # change when it stops
+                small = small or cost - cost_new <= cost_tol * max(1.0, cost / self.m)
                 rotation, translation, r, j, cost = new_r, new_t, r_new, j_new, cost_new
                 lam = max(lam * 0.1, 1e-9)
             else:

@@ -42,6 +42,9 @@ from landing_env.vision_link import VisionStage
 if TYPE_CHECKING:
     from landing_env.world import World
 
+#: tight's pixel sigma for the exact corners of ``camera.mode: project`` without pixel noise.
+PROJECT_PIXEL_SIGMA_FLOOR_PX = 0.01
+
 #: Reason of a valid estimate refused because it lies outside the observation's bounds.
 OUT_OF_BOUNDS = "out_of_observation_bounds"
 
@@ -207,8 +210,10 @@ def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
             "tof_resolution_m": noise.resolution_m,
         }
         camera = config.camera
-        if camera.mode == "project" and camera.pixel_noise_px > 0.0:
-            changes["pixel_sigma_px"] = camera.pixel_noise_px
+        if camera.mode == "project":
+            # the analytic camera's corner noise is exactly the configured one (0: exact
+            # corners, weighted as 0.01 px so that the weights stay finite)
+            changes["pixel_sigma_px"] = max(camera.pixel_noise_px, PROJECT_PIXEL_SIGMA_FLOOR_PX)
         return dataclasses.replace(settings, **changes)
     return settings
 

@@ -124,3 +124,19 @@ def test_the_env_observes_tight_and_fuses_it(tmp_path) -> None:
         assert fused["extras"].get("tight_accepted", 0) > 0
     finally:
         env.close()
+
+
+def test_the_simulator_hands_tight_and_fused_its_configured_sensor_noise() -> None:
+    from landing_env.config import load_config
+    from landing_env.estimators import _with_sensor_noise, fusion_settings
+
+    exact = load_config("paper-stewart")
+    noisy = load_config("realistic", overrides={"tof.sigma_per_m": 0.005})
+    for config, sigma_per_m in ((exact, 0.0), (noisy, 0.005)):
+        tight = _with_sensor_noise(config.estimation.tight, config)
+        assert tight.tof_sigma_per_m == sigma_per_m
+        assert fusion_settings(config).tof_sigma_per_m == sigma_per_m
+    project = load_config("realistic", overrides={"camera.mode": "project"})
+    assert _with_sensor_noise(project.estimation.tight, project).pixel_sigma_px == 0.01
+    kept = load_config("realistic", overrides={"estimation.tight.noise_from_sensors": False})
+    assert _with_sensor_noise(kept.estimation.tight, kept) == kept.estimation.tight
