@@ -436,6 +436,9 @@ def evaluate_landing(
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     results: dict[str, list[EpisodeResult]] = {}
     failures: dict[str, list[SeedFailure]] = {}
+    for name in policies:  # a bad config fails before Ray starts
+        task = landing_task(name, scenario, estimator, camera_mode, model_path, extra_overrides)
+        LANDING_EVALUATION.validate(task)
     with batch_session(workers, address):
         for name in policies:
             run = run_policy(
