@@ -30,7 +30,8 @@ def _flush_all() -> None:
 @contextlib.contextmanager
 def quiet_stdout() -> Iterator[None]:
     """Point file descriptors 1 and 2 at the null device for the duration (a no-op where
-    they cannot be duplicated, e.g. under some notebook kernels)."""
+    they cannot be duplicated, e.g. under some notebook kernels).  The descriptors belong to
+    the process: what another thread writes meanwhile (a few milliseconds) is lost too."""
     try:
         saved = [(fd, os.dup(fd)) for fd in (1, 2)]
     except OSError:

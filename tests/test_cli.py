@@ -81,6 +81,12 @@ def test_a_typo_in_set_fails_fast_with_two_workers(
     code, err = _run(argv, capsys)
     assert code == 2
     assert "tof.nosie" in err and "unknown key" in err
+    approach = ["evaluate", "approach", "--policy", "beacon-range", "--episodes", "2",
+                "--workers", "2", "--no-progress", "--out", str(tmp_path),
+                "--set", "tof.nosie=vl53l1x"]  # fmt: skip
+    code, err = _run(approach, capsys)
+    assert code == 2
+    assert "tof.nosie" in err and "unknown key" in err
 
 
 def test_debug_shows_the_traceback_instead() -> None:

@@ -107,7 +107,8 @@ def test_a_sweep_on_ray_gives_the_serial_points(ray_session: None, tmp_path: Pat
     assert [(p.parameter, p.value) for p in parallel] == [(p.parameter, p.value) for p in serial]
     for a, b in zip(serial, parallel, strict=True):
         for name in a.metrics:
-            np.testing.assert_array_equal(a.metrics[name].mae, b.metrics[name].mae)
+            # Ray's workers run BLAS on one thread: equal to round-off
+            np.testing.assert_allclose(a.metrics[name].mae, b.metrics[name].mae, rtol=1e-9)
 
 
 @pytest.mark.slow
@@ -120,5 +121,26 @@ def test_the_two_calibrations_on_ray_give_the_serial_files(
         w: run_calibration(out_dir=tmp_path / str(w), views=4, stages=4, progress=False, workers=w)
         for w in (1, 2)
     }
+    # the same draws; Ray's workers run BLAS/OpenCV on one thread, which may change the last
+    # bits of a least-squares sum, hence a tolerance far below any calibration error
     for name in ("intrinsics", "tof_camera"):
-        assert runs[1].files[name].read_text() == runs[2].files[name].read_text()
+        serial = json.loads(runs[1].files[name].read_text())
+        on_ray = json.loads(runs[2].files[name].read_text())
+        _assert_close(serial, on_ray, name)
+
+
+def _assert_close(a: object, b: object, where: str) -> None:
+    import numpy as np
+
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), where
+        for key in a:
+            _assert_close(a[key], b[key], f"{where}.{key}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_close(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert np.isclose(a, b, rtol=1e-9, atol=1e-12, equal_nan=True), (where, a, b)
+    else:
+        assert a == b, (where, a, b)

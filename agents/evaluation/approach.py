@@ -411,13 +411,24 @@ def evaluate_approach(
     results: dict[str, list[ApproachEpisode]] = {}
     failures: dict[str, list[SeedFailure]] = {}
     stem = f"approach_{Path(scenario).stem}"
+    estimators = {
+        name: routine_estimator(routine_estimator_name)
+        if name == "svgs-routine"
+        else APPROACH_POLICIES[name]
+        for name in policies
+    }
+    for name, estimator in estimators.items():  # a bad config fails before Ray starts
+        APPROACH_EVALUATION.validate(
+            EpisodeTask(
+                "approach",
+                name,
+                scenario,
+                {"estimator": estimator, "overrides": overrides, "routine_timing": routine_timing},
+            )
+        )
     with batch_session(workers, address):
         for name in policies:
-            estimator = (
-                routine_estimator(routine_estimator_name)
-                if name == "svgs-routine"
-                else APPROACH_POLICIES[name]
-            )
+            estimator = estimators[name]
             run = evaluate_policy(
                 name,
                 scenario,

@@ -581,6 +581,9 @@ def evaluate_landing(
         policies = [*policies, "oracle"]
     results: dict[str, list[EpisodeResult]] = {}
     failures: dict[str, list[SeedFailure]] = {}
+    for name in policies:  # a bad config fails before Ray starts
+        task = landing_task(name, scenario, estimator, camera_mode, model_path, extra_overrides)
+        LANDING_EVALUATION.validate(task)
     with batch_session(workers, address):
         for name in policies:
             run = run_policy(

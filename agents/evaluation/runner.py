@@ -262,7 +262,6 @@ def ensure_ray(address: str | None, workers: int) -> bool:
 
     if ray.is_initialized():
         return False
-    os.environ.setdefault("RAY_ACCEPT_CLUSTER_RESOURCES", "1")
     kwargs: dict[str, Any] = {
         "include_dashboard": False,
         "log_to_driver": True,
@@ -298,7 +297,7 @@ def _run_ray(
     task: EpisodeTask, seeds: list[int], workers: int, address: str | None, sink: _Sink
 ) -> tuple[list[EpisodeRecord], list[SeedFailure]]:
     import ray
-    from ray.exceptions import RayActorError, RayTaskError
+    from ray.exceptions import GetTimeoutError, RayActorError, RayTaskError
 
     record_type = get_evaluation(task.evaluation).record_type
     started = ensure_ray(address, workers)
@@ -310,17 +309,64 @@ def _run_ray(
     inflight: dict[Any, deque[tuple[Any, int]]] = {}
     running: dict[Any, Any] = {}  # ref -> actor
 
+    #: seeds whose actor died while they were queued with another: they run again, alone,
+    #: so that a crash is put on the seed that caused it
+    suspects: set[int] = set()
+
     def fill(actor: Any) -> None:
-        while queue and len(inflight[actor]) < PIPELINE_DEPTH:
+        calls = inflight[actor]
+        while queue and len(calls) < PIPELINE_DEPTH:
+            if queue[0] in suspects and calls:
+                break  # a suspect runs alone
             seed = queue.popleft()
             ref = actor.run.remote(seed)
-            inflight[actor].append((ref, seed))
+            calls.append((ref, seed))
             running[ref] = actor
+            if seed in suspects:
+                break
 
     def new_actor() -> None:
         actor = actor_class.remote(task)
         inflight[actor] = deque()
         fill(actor)
+
+    def accept(data: dict[str, Any]) -> None:
+        record = record_type.from_json(data)
+        records.append(record)
+        sink.add(record)
+
+    def report(seed: int, error: BaseException) -> None:
+        cause = _user_error(error)
+        if cause is not None:
+            raise cause from None
+        failures.append(SeedFailure(seed, _describe(error)))
+        sink.fail()
+
+    def settle(actor: Any, failed: Any, exc: BaseException) -> None:
+        """After an error on ``actor``: keep what its other calls returned, report the seed
+        that failed, queue the others again (see ``suspects``)."""
+        calls = inflight.pop(actor)
+        unfinished: list[int] = []
+        for ref, seed in calls:
+            running.pop(ref, None)
+            if ref == failed:
+                unfinished.append(seed)
+                continue
+            try:
+                accept(ray.get(ref, timeout=30.0))
+            except (RayTaskError, RayActorError, GetTimeoutError):
+                unfinished.append(seed)
+        if not isinstance(exc, RayActorError):
+            # the episode raised and the actor lives: that call is the one
+            seed = next(seed for ref, seed in calls if ref == failed)
+            report(seed, exc)
+            queue.extendleft(reversed([s for s in unfinished if s != seed]))
+            return
+        if len(calls) == 1 or (len(unfinished) == 1 and unfinished[0] in suspects):
+            report(unfinished[0], exc)  # it ran alone: it took the worker down
+            return
+        suspects.update(unfinished)
+        queue.extendleft(reversed(unfinished))
 
     try:
         for _ in range(min(workers, len(seeds))):
@@ -332,27 +378,14 @@ def _run_ray(
             try:
                 data = ray.get(ref)
             except (RayTaskError, RayActorError) as exc:
-                cause = _user_error(exc)
-                if cause is not None:
-                    raise cause from None
-                # the actor's earliest unfinished call is the one that failed; its other
-                # seeds go back to the queue for a fresh actor
-                calls = inflight.pop(actor)
-                crashed = calls[0][1]
-                failures.append(SeedFailure(crashed, _describe(exc)))
-                sink.fail()
-                for other_ref, other_seed in reversed(calls):
-                    running.pop(other_ref, None)
-                    if other_seed != crashed:
-                        queue.appendleft(other_seed)
+                settle(actor, ref, exc)
                 ray.kill(actor)
                 if queue:
                     new_actor()
                 continue
-            inflight[actor].popleft()
-            record = record_type.from_json(data)
-            records.append(record)
-            sink.add(record)
+            calls = inflight[actor]
+            calls.remove(next(call for call in calls if call[0] == ref))
+            accept(data)
             fill(actor)
     finally:
         for actor in inflight:
