@@ -77,15 +77,14 @@ class ModelMetadata:
 def sensing_profile(config: Any) -> str:
     """The sensing profile of a ``DeckLandingConfig``.
 
-    A config with a ``sensors`` switch (``ideal`` / ``realistic``, with an optional noise
-    scale) names its profile; without it, ``ideal`` when no sensor noise is configured, else
-    the settings that depart from ideal (``tof.noise=vl53l1x``, ...).
+    A config under ``sensors: realistic`` (or another named bundle) has that name; under
+    ``sensors: ideal``, ``ideal`` when no sensor noise is configured, else the settings that
+    depart from ideal (``tof.noise=vl53l1x``, ...).
     """
-    declared = getattr(config, "sensors", None)
-    if declared is not None:
-        profile = getattr(declared, "profile", declared)
-        scale = getattr(declared, "noise_scale", 1.0)
-        return str(profile) if scale == 1.0 else f"{profile}x{scale:g}"
+    declared = getattr(config, "sensors", None) or "ideal"
+    if declared != "ideal":
+        # a named bundle (``sensors: realistic``: camera profile, ToF noise, lens, calibrations)
+        return str(declared)
     departures = []
     if config.tof.noise != "none":
         departures.append(f"tof.noise={config.tof.noise}")

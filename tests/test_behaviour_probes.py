@@ -169,14 +169,34 @@ def _land(overrides: dict) -> dict:
     return info
 
 
-def test_a_drone_that_slides_off_during_the_settle_is_not_a_success() -> None:
-    """The settle rule, in the environment: on a deck tilted 20 degrees (thresholds relaxed so
-    that only the settle can fail) the drone touches down, then slides off within the second
-    after contact; on the level deck it stays."""
-    relaxed = {"touchdown.max_deck_tilt_deg": 60.0, "touchdown.max_relative_attitude_deg": 90.0}
+def test_a_drone_that_slides_off_during_the_settle_is_not_a_success(tmp_path) -> None:
+    """The settle rule, in the environment: on a slippery deck (feet friction 0.2: a wet,
+    oily deck below CAP 437's 0.65, which holds the drone at 20 degrees) tilted 20 degrees,
+    thresholds relaxed so that only the settle can fail, the drone touches down, then slides
+    off within the second after contact; on the level deck it stays."""
+    import yaml
+
+    from landing_env.physics.quadrotor import DEFAULT_PARAMS_PATH
+
+    vehicle = yaml.safe_load(DEFAULT_PARAMS_PATH.read_text())
+    vehicle["landing_gear"]["friction"] = 0.2
+    vehicle["urdf"] = str(DEFAULT_PARAMS_PATH.parent / vehicle["urdf"])
+    slippery = tmp_path / "slippery.yaml"
+    slippery.write_text(yaml.safe_dump(vehicle))
+    relaxed = {
+        "touchdown.max_deck_tilt_deg": 60.0,
+        "touchdown.max_relative_attitude_deg": 90.0,
+        "vehicle": str(slippery),
+    }
     tilted = _land({**relaxed, "motion.static.attitude_deg": [20.0, 0.0, 0.0]})
     assert tilted["outcome"] == "hard_landing"
-    assert tilted["touchdown"]["failed_checks"] == ["on_deck_after_settle"]
+    failed = tilted["touchdown"]["failed_checks"]
+    # it left the deck during the settle (falling off the edge, its body may touch: tip-over);
+    # every check of the touchdown itself passed
+    assert "on_deck_after_settle" in failed
+    assert not {"deck_tilt", "relative_normal_speed", "relative_attitude", "all_feet_on_deck"} & {
+        c.split(" ")[0] for c in failed
+    }
     assert tilted["touchdown"]["all_feet_touched"]
     level = _land(relaxed)
     assert level["outcome"] == "success"

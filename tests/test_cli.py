@@ -115,5 +115,5 @@ def test_pybullet_prints_nothing_when_an_env_is_made() -> None:
 
 def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
     with pytest.warns(PinnedDroneWarning, match="cannot land"):
-        env = gym.make("DeckLanding-v0", config="bench-ss5")
+        env = gym.make("DeckLanding-v0", config="paper-stewart")
     env.close()

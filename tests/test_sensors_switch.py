@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import landing_env  # noqa: F401
@@ -56,7 +57,9 @@ def test_every_env_honours_the_switch(env_id: str) -> None:
         assert world.camera.formation is not None
         assert world.camera.formation.profile.name == "ov9281"
         assert world.config.tof.noise == "vl53l1x"
-        env.step(env.action_space.sample() * 0.0)
+        # hover (DeckLanding-v0) or wait (the timing task's 0)
+        hold = np.zeros(env.action_space.shape, np.float32) if env.action_space.shape else 0
+        env.step(hold)
     finally:
         env.close()
 
