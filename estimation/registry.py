@@ -68,28 +68,21 @@ def _atda(inputs: BuildInputs) -> DeckPoseEstimator:
     )
 
 
-def _ihrcf(inputs: BuildInputs) -> DeckPoseEstimator:
-    assert inputs.tof_calibration is not None
-    return IhrcfEstimator(
-        tag_size=inputs.tag_size,
-        tag_id=inputs.tag_id,
-        tof_calibration=inputs.tof_calibration,
-        tof_positions_c=inputs.tof_positions_c,
-        intrinsics=inputs.intrinsics,
-        config=inputs.config,  # type: ignore[arg-type]
-    )
+def _homography_fusion(cls: type) -> Callable[[BuildInputs], DeckPoseEstimator]:
+    """The builder of IHRCF or CRHF: the papers' camera+ToF fusions take the same inputs."""
 
+    def build(inputs: BuildInputs) -> DeckPoseEstimator:
+        assert inputs.tof_calibration is not None
+        return cls(
+            tag_size=inputs.tag_size,
+            tag_id=inputs.tag_id,
+            tof_calibration=inputs.tof_calibration,
+            tof_positions_c=inputs.tof_positions_c,
+            intrinsics=inputs.intrinsics,
+            config=inputs.config,
+        )
 
-def _crhf(inputs: BuildInputs) -> DeckPoseEstimator:
-    assert inputs.tof_calibration is not None
-    return CrhfEstimator(
-        tag_size=inputs.tag_size,
-        tag_id=inputs.tag_id,
-        tof_calibration=inputs.tof_calibration,
-        tof_positions_c=inputs.tof_positions_c,
-        intrinsics=inputs.intrinsics,
-        config=inputs.config,  # type: ignore[arg-type]
-    )
+    return build
 
 
 def _tight(inputs: BuildInputs) -> DeckPoseEstimator:
@@ -109,8 +102,8 @@ REGISTRY: dict[str, EstimatorSpec] = {
     spec.name: spec
     for spec in (
         EstimatorSpec("atda", ATDAConfig, _atda, True, False, False),
-        EstimatorSpec("ihrcf", IHRCFConfig, _ihrcf, False, True, True),
-        EstimatorSpec("crhf", CRHFConfig, _crhf, False, True, True),
+        EstimatorSpec("ihrcf", IHRCFConfig, _homography_fusion(IhrcfEstimator), False, True, True),
+        EstimatorSpec("crhf", CRHFConfig, _homography_fusion(CrhfEstimator), False, True, True),
         # the ranges enter through the sensors' mounts and the noise model, not a look-up
         EstimatorSpec("tight", TightConfig, _tight, True, False, True, True),
     )

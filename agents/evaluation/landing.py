@@ -262,27 +262,10 @@ def landing_task(
     )
 
 
-def evaluate_policy(
-    policy_name: str,
-    scenario: str,
-    episodes: int,
-    first_seed: int = HELD_OUT_SEED,
-    estimator: str = "ihrcf",
-    camera_mode: str = "project",
-    model_path: str | None = None,
-    workers: int = 1,
-    progress: bool = False,
-    extra_overrides: dict[str, Any] | None = None,
-    address: str | None = None,
-    results_path: Path | None = None,
-    resume: bool = False,
-    allow_mismatch: tuple[str, ...] = (),
-) -> list[EpisodeResult]:
-    """``episodes`` episodes of one policy on one scenario, over ``workers`` workers."""
-    return run_policy(
-        policy_name, scenario, episodes, first_seed, estimator, camera_mode, model_path,
-        workers, progress, extra_overrides, address, results_path, resume, allow_mismatch,
-    ).records  # type: ignore[return-value]  # fmt: skip
+def evaluate_policy(*args: Any, **kwargs: Any) -> list[EpisodeResult]:
+    """``episodes`` episodes of one policy on one scenario, over ``workers`` workers: the
+    records of :func:`run_policy` (same arguments)."""
+    return run_policy(*args, **kwargs).records  # type: ignore[return-value]
 
 
 def run_policy(

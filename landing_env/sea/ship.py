@@ -50,13 +50,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.spectrum import SEA_STATE_TABLE, WaveComponents, dnv_gamma
+from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
 
 GRAVITY = 9.80665
 
 
 @dataclass(frozen=True)
-class ShipMotionConfig:
+class ShipMotionConfig(JonswapSeaFields):
     """A JONSWAP sea, a 10-40 m vessel in it, and where its helideck is (see the module)."""
 
     #: WMO sea-state code (typical Hs and Tp from SEA_STATE_TABLE), or None with both below
@@ -121,22 +121,6 @@ class ShipMotionConfig:
         for axis, value, limit in zip("xyz", position, half, strict=True):
             require_range(f"helideck_position_m[{axis}]", value, -limit, limit)
         object.__setattr__(self, "helideck_position_m", position)
-
-    @property
-    def hs(self) -> float:
-        if self.significant_height_m is not None:
-            return self.significant_height_m
-        return SEA_STATE_TABLE[int(self.sea_state)][0]  # type: ignore[arg-type]
-
-    @property
-    def tp(self) -> float:
-        if self.peak_period_s is not None:
-            return self.peak_period_s
-        return SEA_STATE_TABLE[int(self.sea_state)][1]  # type: ignore[arg-type]
-
-    @property
-    def gamma_in_use(self) -> float:
-        return dnv_gamma(self.hs, self.tp) if self.gamma is None else float(self.gamma)
 
     @property
     def roll_period_in_use_s(self) -> float:

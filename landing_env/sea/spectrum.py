@@ -49,6 +49,36 @@ def dnv_gamma(significant_height_m: float, peak_period_s: float) -> float:
     return 1.0
 
 
+class JonswapSeaFields:
+    """Mixin of a config with ``sea_state``, ``significant_height_m``, ``peak_period_s`` and
+    ``gamma`` fields: the Hs, Tp and gamma in use (the WMO table's when not given, gamma by
+    :func:`dnv_gamma` when None)."""
+
+    sea_state: int | None
+    significant_height_m: float | None
+    peak_period_s: float | None
+    gamma: float | None
+
+    @property
+    def hs(self) -> float:
+        """Significant wave height in use (m)."""
+        if self.significant_height_m is not None:
+            return self.significant_height_m
+        return SEA_STATE_TABLE[int(self.sea_state)][0]  # type: ignore[arg-type]
+
+    @property
+    def tp(self) -> float:
+        """Peak period in use (s)."""
+        if self.peak_period_s is not None:
+            return self.peak_period_s
+        return SEA_STATE_TABLE[int(self.sea_state)][1]  # type: ignore[arg-type]
+
+    @property
+    def gamma_in_use(self) -> float:
+        """JONSWAP peak factor in use: ``gamma`` or, when None, the DNV-RP-C205 rule's."""
+        return dnv_gamma(self.hs, self.tp) if self.gamma is None else float(self.gamma)
+
+
 def jonswap_shape(frequency_hz: np.ndarray, peak_period_s: float, gamma: float) -> np.ndarray:
     """Unnormalised JONSWAP spectral shape S(f) (arbitrary scale; normalised by Hs later).
 

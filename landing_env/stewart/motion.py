@@ -24,7 +24,7 @@ from scipy.interpolate import PchipInterpolator
 
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sea.ship import ShipMotion, ShipMotionConfig
-from landing_env.sea.spectrum import SEA_STATE_TABLE, WaveComponents, dnv_gamma
+from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
 
 MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
 CSV_HEADER: tuple[str, ...] = ("t", "x", "y", "z", "roll", "pitch", "yaw")
@@ -223,7 +223,7 @@ class SinusoidMotion:
 
 # ------------------------------------------------------------------------------- sea state
 @dataclass(frozen=True)
-class SeaStateConfig:
+class SeaStateConfig(JonswapSeaFields):
     """A JONSWAP sea, a small vessel's response to it and its scaling onto the platform.
 
     Give ``sea_state`` (WMO code 0-6, typical Hs and Tp from :data:`SEA_STATE_TABLE`) and/or
@@ -291,25 +291,6 @@ class SeaStateConfig:
         for axis, value in zip(AXES, scale, strict=True):
             require_range(f"scale[{axis}]", value, 0.0)
         object.__setattr__(self, "scale", scale)
-
-    @property
-    def hs(self) -> float:
-        """Significant wave height in use (m)."""
-        if self.significant_height_m is not None:
-            return self.significant_height_m
-        return SEA_STATE_TABLE[int(self.sea_state)][0]  # type: ignore[arg-type]
-
-    @property
-    def tp(self) -> float:
-        """Peak period in use (s)."""
-        if self.peak_period_s is not None:
-            return self.peak_period_s
-        return SEA_STATE_TABLE[int(self.sea_state)][1]  # type: ignore[arg-type]
-
-    @property
-    def gamma_in_use(self) -> float:
-        """JONSWAP peak factor in use: ``gamma`` or, when None, the DNV-RP-C205 rule's."""
-        return dnv_gamma(self.hs, self.tp) if self.gamma is None else float(self.gamma)
 
 
 def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:
