@@ -119,6 +119,10 @@ class ImageFormation:
             if profile.full_well_e > 0
             else 0.0
         )
+        # the full frame's relative illumination, sliced for windows inside the image
+        self._vignette_full = self._vignetting_of((0, 0, intrinsics.width, intrinsics.height))
+        # the ADC's output is an integer 0 .. 2^bits - 1: its 8-bit value is a table look-up
+        self._to_8bit = self._response(np.arange(2**profile.adc_bits, dtype=np.float32))
 
     # ------------------------------------------------------------------ exposure
     @property
@@ -273,6 +277,13 @@ class ImageFormation:
     def vignetting(self, window: tuple[int, int, int, int]) -> np.ndarray:
         """Relative illumination of each pixel of a window (HxW float32)."""
         x0, y0, x1, y1 = window
+        full_h, full_w = self._vignette_full.shape
+        if 0 <= x0 <= x1 <= full_w and 0 <= y0 <= y1 <= full_h:
+            return self._vignette_full[y0:y1, x0:x1]
+        return self._vignetting_of(window)
+
+    def _vignetting_of(self, window: tuple[int, int, int, int]) -> np.ndarray:
+        x0, y0, x1, y1 = window
         us, vs = np.meshgrid(
             np.arange(x0, x1, dtype=np.float32), np.arange(y0, y1, dtype=np.float32)
         )
@@ -329,13 +340,18 @@ class ImageFormation:
         x0, y0 = origin
         signal = signal * self.vignetting((x0, y0, x0 + w, y0 + h))[..., None]
         dn = self.raw_dn(signal, rng)
-        linear = np.clip((dn - p.black_level_dn) / (self._max_dn - p.black_level_dn), 0.0, 1.0)
-        if p.gamma != 1.0:
-            linear = linear ** (1.0 / p.gamma)
-        out = np.rint(255.0 * linear).astype(np.uint8)
+        out = self._to_8bit[dn.astype(np.intp)]
         if p.mono:
             out = np.repeat(out, 3, axis=2)
         return np.ascontiguousarray(out)
+
+    def _response(self, dn: np.ndarray) -> np.ndarray:
+        """8-bit output of ADC values: ``255 * x^(1/gamma)`` of the linear signal above black."""
+        p = self.profile
+        linear = np.clip((dn - p.black_level_dn) / (self._max_dn - p.black_level_dn), 0.0, 1.0)
+        if p.gamma != 1.0:
+            linear = linear ** (1.0 / p.gamma)
+        return np.rint(255.0 * linear).astype(np.uint8)
 
 
 def _apply(matrix: np.ndarray, grid: np.ndarray) -> np.ndarray:
