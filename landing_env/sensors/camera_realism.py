@@ -61,7 +61,25 @@ _TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** RENDER_GAMMA).astype
 
 def to_linear(image: np.ndarray) -> np.ndarray:
     """Linear radiance (float32, 1.0 = white) of a rendered uint8 image."""
+    image = np.asarray(image)
+    if image.size and (image.ndim == 2 or (image.ndim == 3 and 1 <= image.shape[2] <= 4)):
+        # OpenCV's table look-up: the same values, five times faster than numpy's gather
+        return cv2.LUT(np.ascontiguousarray(image), _TO_LINEAR).reshape(image.shape)
     return _TO_LINEAR[image]
+
+
+def standard_normal(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Standard normal float32 draws of ``shape``, seeded from ``rng``.
+
+    Drawn by OpenCV's normal generator (``cv2.randn``, four times numpy's
+    ``Generator.standard_normal`` on this machine: this runs on every pixel of every frame)
+    seeded from one draw of ``rng``, so the result is as deterministic as ``rng``.  OpenCV's
+    generator state is per thread.
+    """
+    out = np.empty((1, max(int(np.prod(shape)), 1)), dtype=np.float32)
+    cv2.setRNGSeed(int(rng.integers(1, 2**31 - 1)))
+    out = cv2.randn(out, 0.0, 1.0)
+    return out.reshape(-1)[: int(np.prod(shape))].reshape(shape)
 
 
 @dataclass(frozen=True)
@@ -226,7 +244,8 @@ class ImageFormation:
                     borderMode=cv2.BORDER_REPLICATE,
                 )
                 total += warped.reshape(total.shape)
-            return total * np.float32(1.0 / samples)
+            total *= np.float32(1.0 / samples)
+            return total
         # rolling shutter: each row at its own time, linear in time between the extremes
         points = np.stack(
             np.meshgrid(np.arange(x0, x1, dtype=np.float32), np.arange(y0, y1, dtype=np.float32)),
@@ -250,7 +269,8 @@ class ImageFormation:
                 borderMode=cv2.BORDER_REPLICATE,
             )
             total += warped.reshape(total.shape)
-        return total * np.float32(1.0 / samples)
+        total *= np.float32(1.0 / samples)
+        return total
 
     def _add_glare(
         self,
@@ -322,7 +342,7 @@ class ImageFormation:
         # in place, float32: this runs on every pixel of every frame
         mean_e = np.maximum(np.asarray(signal, dtype=np.float32), np.float32(0.0))
         mean_e *= np.float32(self.electrons_at_white())
-        electrons = rng.standard_normal(size=mean_e.shape, dtype=np.float32)
+        electrons = standard_normal(rng, mean_e.shape)
         low = None
         if self._exact_shot:
             low = (mean_e < _GAUSSIAN_FROM_E) & (mean_e > 0.0)
@@ -349,6 +369,9 @@ class ImageFormation:
     ) -> np.ndarray:
         """The 8-bit camera image (HxWx3 uint8) of an exposed window at ``origin``.
 
+        ``image`` is rendered (uint8) or exposed (float32 linear), RGB in its first three
+        channels (any further channel is ignored).
+
         A colour sensor has one photosite per pixel behind a Bayer filter (RGGB from the
         image's top-left pixel): each pixel collects, and is noised in, the one channel its
         filter passes, and the colour image is demosaiced from that mosaic on the linear ADC
@@ -357,6 +380,7 @@ class ImageFormation:
         """
         p = self.profile
         signal = to_linear(image) if image.dtype == np.uint8 else image.astype(np.float32)
+        signal = signal[..., :3]
         h, w = signal.shape[:2]
         x0, y0 = origin
         if p.mono:
@@ -366,9 +390,9 @@ class ImageFormation:
         raw *= self.vignetting((x0, y0, x0 + w, y0 + h))
         dn = self.raw_dn(raw, rng).astype(np.uint16)
         if p.mono or min(h, w) < 2:
-            return np.ascontiguousarray(np.repeat(self._to_8bit[dn][..., None], 3, axis=2))
+            return np.ascontiguousarray(np.repeat(np.take(self._to_8bit, dn)[..., None], 3, 2))
         rgb = cv2.cvtColor(dn, _DEMOSAIC[(y0 % 2, x0 % 2)])
-        return self._to_8bit[rgb]
+        return np.take(self._to_8bit, rgb)
 
     def _response(self, dn: np.ndarray) -> np.ndarray:
         """8-bit output of ADC values: ``255 * x^(1/gamma)`` of the linear signal above black."""
