@@ -59,11 +59,14 @@ RENDER_GAMMA = 2.2
 _TO_LINEAR = ((np.arange(256, dtype=np.float64) / 255.0) ** RENDER_GAMMA).astype(np.float32)
 
 
-def to_linear(image: np.ndarray) -> np.ndarray:
-    """Linear radiance (float32, 1.0 = white) of a rendered uint8 image."""
+def to_linear(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Linear radiance (float32, 1.0 = white) of a rendered uint8 image (into ``out``)."""
     image = np.asarray(image)
     if image.size and (image.ndim == 2 or (image.ndim == 3 and 1 <= image.shape[2] <= 4)):
         # OpenCV's table look-up: the same values, five times faster than numpy's gather
+        if out is not None and out.shape == image.shape:
+            cv2.LUT(np.ascontiguousarray(image), _TO_LINEAR, dst=out)
+            return out
         return cv2.LUT(np.ascontiguousarray(image), _TO_LINEAR).reshape(image.shape)
     return _TO_LINEAR[image]
 
@@ -141,6 +144,9 @@ class ImageFormation:
         read = profile.read_noise_e
         self._exact_shot = read <= 0.0 or 2.0 / (3.0**1.5 * read) > _MAX_SKEW
         self._max_dn = float(2**profile.adc_bits - 1)
+        #: the exposure's working images, kept from frame to frame: allocating megabytes
+        #: afresh each frame costs as much again in page faults as the arithmetic
+        self._buffers: dict[str, np.ndarray] = {}
         self._dn_per_e = (
             (self._max_dn - profile.black_level_dn) / profile.full_well_e
             if profile.full_well_e > 0
@@ -150,6 +156,15 @@ class ImageFormation:
         self._vignette_full = self._vignetting_of((0, 0, intrinsics.width, intrinsics.height))
         # the ADC's output is an integer 0 .. 2^bits - 1: its 8-bit value is a table look-up
         self._to_8bit = self._response(np.arange(2**profile.adc_bits, dtype=np.float32))
+
+    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A float32 working image of ``shape``, reused by the next call for ``name``."""
+        size = int(np.prod(shape))
+        flat = self._buffers.get(name)
+        if flat is None or flat.size < size:
+            flat = np.empty(size, dtype=np.float32)
+            self._buffers[name] = flat
+        return flat[:size].reshape(shape)
 
     # ------------------------------------------------------------------ exposure
     @property
@@ -197,7 +212,11 @@ class ImageFormation:
         window: tuple[int, int, int, int],
         motion: RelativeMotion | None,
     ) -> np.ndarray:
-        """The exposed ideal window (float32 linear radiance, 1.0 = a white surface)."""
+        """The exposed ideal window (float32 linear radiance, 1.0 = a white surface).
+
+        With motion the result is a working image of this object, valid until its next
+        ``expose``: copy it to keep it.
+        """
         x0, y0, x1, y1 = window
         if motion is None or not self.has_exposure_effects:
             canvas = to_linear(render_canvas(window))
@@ -222,7 +241,8 @@ class ImageFormation:
             return self._add_glare(canvas, window, t_wc, r_wc, motion)
         margin = math.ceil(reach) + 2
         grown = (x0 - margin, y0 - margin, x1 + margin, y1 + margin)
-        canvas = to_linear(render_canvas(grown))
+        rendered = render_canvas(grown)
+        canvas = to_linear(rendered, out=self._buffer("canvas", rendered.shape))
         canvas = self._add_glare(canvas, grown, t_wc, r_wc, motion)
         samples = 1
         if self.exposure_s > 0.0:
@@ -231,7 +251,9 @@ class ImageFormation:
         to_full = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
         to_canvas = np.array([[1.0, 0.0, -grown[0]], [0.0, 1.0, -grown[1]], [0.0, 0.0, 1.0]])
         offsets = [(j + 0.5) / samples * self.exposure_s - half for j in range(samples)]
-        total = np.zeros((size[1], size[0], canvas.shape[2]), dtype=np.float32)
+        total = self._buffer("total", (size[1], size[0], canvas.shape[2]))
+        total[...] = 0.0
+        scratch = self._buffer("sample", total.shape)
         if self.line_time_s == 0.0:
             # global shutter: each sub-exposure is one homography
             for offset in offsets:
@@ -240,6 +262,7 @@ class ImageFormation:
                     canvas,
                     m,
                     size,
+                    dst=scratch,
                     flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                     borderMode=cv2.BORDER_REPLICATE,
                 )
@@ -265,6 +288,7 @@ class ImageFormation:
                 canvas,
                 np.ascontiguousarray(coords[..., 0]),
                 np.ascontiguousarray(coords[..., 1]),
+                dst=scratch,
                 interpolation=cv2.INTER_LINEAR,
                 borderMode=cv2.BORDER_REPLICATE,
             )
@@ -379,7 +403,7 @@ class ImageFormation:
         A ``mono`` sensor collects the luma.  Either way one value per pixel is noised.
         """
         p = self.profile
-        signal = to_linear(image) if image.dtype == np.uint8 else image.astype(np.float32)
+        signal = to_linear(image) if image.dtype == np.uint8 else np.asarray(image, np.float32)
         signal = signal[..., :3]
         h, w = signal.shape[:2]
         x0, y0 = origin
