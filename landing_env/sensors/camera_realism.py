@@ -157,8 +157,12 @@ class ImageFormation:
         # the ADC's output is an integer 0 .. 2^bits - 1: its 8-bit value is a table look-up
         self._to_8bit = self._response(np.arange(2**profile.adc_bits, dtype=np.float32))
 
-    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
-        """A float32 working image of ``shape``, reused by the next call for ``name``."""
+    def working_image(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A float32 working image of ``shape``, reused by the next call for ``name``.
+
+        Allocating megabytes afresh each frame costs as much again in page faults as the
+        arithmetic on them; the frame's intermediate images live here instead.
+        """
         size = int(np.prod(shape))
         flat = self._buffers.get(name)
         if flat is None or flat.size < size:
@@ -242,7 +246,7 @@ class ImageFormation:
         margin = math.ceil(reach) + 2
         grown = (x0 - margin, y0 - margin, x1 + margin, y1 + margin)
         rendered = render_canvas(grown)
-        canvas = to_linear(rendered, out=self._buffer("canvas", rendered.shape))
+        canvas = to_linear(rendered, out=self.working_image("canvas", rendered.shape))
         canvas = self._add_glare(canvas, grown, t_wc, r_wc, motion)
         samples = 1
         if self.exposure_s > 0.0:
@@ -251,9 +255,9 @@ class ImageFormation:
         to_full = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
         to_canvas = np.array([[1.0, 0.0, -grown[0]], [0.0, 1.0, -grown[1]], [0.0, 0.0, 1.0]])
         offsets = [(j + 0.5) / samples * self.exposure_s - half for j in range(samples)]
-        total = self._buffer("total", (size[1], size[0], canvas.shape[2]))
+        total = self.working_image("total", (size[1], size[0], canvas.shape[2]))
         total[...] = 0.0
-        scratch = self._buffer("sample", total.shape)
+        scratch = self.working_image("sample", total.shape)
         if self.line_time_s == 0.0:
             # global shutter: each sub-exposure is one homography
             for offset in offsets:
@@ -410,7 +414,7 @@ class ImageFormation:
         if p.mono:
             raw = signal @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
         else:
-            raw = bayer_mosaic(signal, origin)
+            raw = bayer_mosaic(signal, origin, out=self.working_image("mosaic", (h, w)))
         raw *= self.vignetting((x0, y0, x0 + w, y0 + h))
         dn = self.raw_dn(raw, rng).astype(np.uint16)
         if p.mono or min(h, w) < 2:
@@ -438,7 +442,9 @@ _DEMOSAIC = {
 }
 
 
-def bayer_mosaic(signal: np.ndarray, origin: tuple[int, int]) -> np.ndarray:
+def bayer_mosaic(
+    signal: np.ndarray, origin: tuple[int, int], out: np.ndarray | None = None
+) -> np.ndarray:
     """What an RGGB Bayer sensor collects of an HxWx3 window at ``origin`` (HxW float32).
 
     The pattern is anchored at the full image's pixel (0, 0), so a window's mosaic is the
@@ -447,7 +453,7 @@ def bayer_mosaic(signal: np.ndarray, origin: tuple[int, int]) -> np.ndarray:
     x0, y0 = origin
     even_r, odd_r = slice(y0 % 2, None, 2), slice(1 - y0 % 2, None, 2)
     even_c, odd_c = slice(x0 % 2, None, 2), slice(1 - x0 % 2, None, 2)
-    mosaic = np.empty(signal.shape[:2], dtype=np.float32)
+    mosaic = np.empty(signal.shape[:2], dtype=np.float32) if out is None else out
     mosaic[even_r, even_c] = signal[even_r, even_c, 0]
     mosaic[even_r, odd_c] = signal[even_r, odd_c, 1]
     mosaic[odd_r, even_c] = signal[odd_r, even_c, 1]
