@@ -368,14 +368,18 @@ class ImageFormation:
         """
         p = self.profile
         # in place, float32: this runs on every pixel of every frame
-        mean_e = np.maximum(np.asarray(signal, dtype=np.float32), np.float32(0.0))
+        signal = np.asarray(signal, dtype=np.float32)
+        mean_e = self.working_image("mean_e", signal.shape)
+        np.maximum(signal, np.float32(0.0), out=mean_e)
         mean_e *= np.float32(self.electrons_at_white())
         electrons = standard_normal(rng, mean_e.shape)
         low = None
         if self._exact_shot:
             low = (mean_e < _GAUSSIAN_FROM_E) & (mean_e > 0.0)
             z_low = electrons[low]
-        electrons *= np.sqrt(mean_e + np.float32(p.read_noise_e**2))
+        sigma = self.working_image("sigma_e", signal.shape)
+        np.add(mean_e, np.float32(p.read_noise_e**2), out=sigma)
+        electrons *= np.sqrt(sigma, out=sigma)
         electrons += mean_e
         if low is not None and z_low.size:
             shot = rng.poisson(mean_e[low]).astype(np.float32)
