@@ -13,7 +13,7 @@ from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.sensors.camera import CameraConfig
 from landing_env.sensors.camera_profiles import PROFILES, camera_profile
-from landing_env.sensors.camera_realism import ImageFormation, RelativeMotion
+from landing_env.sensors.camera_realism import ImageFormation, RelativeMotion, bayer_mosaic
 from landing_env.sensors.renderer_agreement import Pose, place
 from landing_env.world import World
 
@@ -128,6 +128,29 @@ def test_noise_variance_follows_the_poisson_gaussian_model(name: str, level: flo
     assert dn.var() == pytest.approx(formation.dn_variance(mean_e), rel=0.06)
 
 
+@pytest.mark.parametrize("name", ["ov9281", "imx219"])
+@pytest.mark.parametrize("mean_e", [1.0, 5.0, 12.0, 30.0])
+def test_dim_pixels_follow_the_exact_poisson_gaussian_law_after_the_adc(
+    name: str, mean_e: float
+) -> None:
+    from scipy.stats import norm, poisson
+
+    formation = ImageFormation(camera_profile(name), CameraIntrinsics())
+    level = mean_e / formation.electrons_at_white()
+    dn = formation.raw_dn(np.full((300, 300), level, dtype=np.float32), np.random.default_rng(2))
+    # the exact law: Poisson electrons plus normal read noise, rounded by the ADC
+    p = formation.profile
+    g = formation._dn_per_e
+    values = np.arange(int(dn.min()), int(dn.max()) + 1)
+    electrons = np.arange(0, 200)
+    upper = (values + 0.5 - p.black_level_dn) / g
+    cdf = poisson.pmf(electrons, mean_e) @ norm.cdf(
+        (upper[None, :] - electrons[:, None]) / p.read_noise_e
+    )
+    measured = np.searchsorted(np.sort(dn.reshape(-1)), values, side="right") / dn.size
+    assert np.abs(measured - cdf).max() < 0.02
+
+
 def test_gain_scales_signal_and_noise_together() -> None:
     base = ImageFormation(camera_profile("ov9281"), CameraIntrinsics())
     doubled = ImageFormation(camera_profile("ov9281"), CameraIntrinsics(), gain=2.0)
@@ -145,6 +168,31 @@ def test_vignetting_reaches_the_profiles_corner_illumination() -> None:
         v = formation.vignetting((0, 0, 512, 512))
         assert v[0, 0] == pytest.approx(PROFILES[name].corner_illumination, rel=0.01)
         assert v.max() == pytest.approx(1.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("origin", [(224, 224), (225, 224), (224, 225), (231, 228)])
+def test_a_colour_sensor_collects_one_bayer_sample_a_pixel_and_demosaics_its_colour(
+    origin: tuple[int, int],
+) -> None:
+    formation = ImageFormation(camera_profile("imx219"), CameraIntrinsics())
+    scene = np.empty((64, 64, 3), dtype=np.float32)
+    scene[...] = (0.6, 0.3, 0.05)
+    mosaic = bayer_mosaic(scene, origin)
+    # RGGB anchored at the full image's (0, 0): red where row and column are even
+    x0, y0 = origin
+    assert mosaic[(-y0) % 2, (-x0) % 2] == pytest.approx(0.6)
+    assert mosaic[(1 - y0) % 2, (1 - x0) % 2] == pytest.approx(0.05)
+    assert mosaic[(-y0) % 2, (1 - x0) % 2] == pytest.approx(0.3)
+    # a window at the image centre (no vignetting to speak of), at each phase of the pattern
+    image = formation.sensor(scene, origin, np.random.default_rng(0)).astype(float)
+    expected = formation._to_8bit[
+        np.rint(
+            formation.profile.black_level_dn
+            + formation._dn_per_e * formation.electrons_at_white() * np.array([0.6, 0.3, 0.05])
+        ).astype(int)
+    ]
+    centre = image[8:-8, 8:-8].reshape(-1, 3).mean(axis=0)
+    np.testing.assert_allclose(centre, expected, atol=2.0)
 
 
 @pytest.mark.parametrize("name", ["ov9281", "imx219"])

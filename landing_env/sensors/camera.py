@@ -282,15 +282,21 @@ class _DistortionWarp:
         )
 
     def warp(
-        self, source: np.ndarray, source_origin: tuple[int, int], window: tuple[int, int, int, int]
+        self,
+        source: np.ndarray,
+        source_origin: tuple[int, int],
+        window: tuple[int, int, int, int],
+        out: np.ndarray | None = None,
     ) -> np.ndarray:
-        """The distorted ``window`` (x0, y0, x1, y1) from an ideal render starting at origin."""
+        """The distorted ``window`` (x0, y0, x1, y1) from an ideal render starting at origin
+        (into ``out`` when given, of the window's shape and the source's type)."""
         x0, y0, x1, y1 = window
         sx, sy = source_origin
         return cv2.remap(
             source,
             self.map_x[y0:y1, x0:x1] - np.float32(sx),
             self.map_y[y0:y1, x0:x1] - np.float32(sy),
+            dst=out,
             interpolation=cv2.INTER_LINEAR,
             borderMode=cv2.BORDER_CONSTANT,
             borderValue=0,
@@ -504,7 +510,10 @@ class CameraSensor:
             lambda w: self._render_canvas(t_wc, r_wc, w), t_wc, r_wc, source_window, self.motion
         )
         if self._warp is not None:
-            exposed = self._warp.warp(exposed, source_window[:2], window)
+            x0, y0, x1, y1 = window
+            shape = (y1 - y0, x1 - x0, *exposed.shape[2:])
+            out = self.formation.working_image("distorted", shape)
+            exposed = self._warp.warp(exposed, source_window[:2], window, out=out)
         noise = self._display_rng if rng is None else rng
         return self.formation.sensor(exposed, window[:2], noise)
 

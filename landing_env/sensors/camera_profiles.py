@@ -13,7 +13,8 @@ after the 2.2 gamma.
 - ``ov9281``: OmniVision OV9281/OV9282-class global-shutter machine-vision camera (1280 x 800,
   3 um pixels, RAW10; OmniVision product brief; Linux ``ovti,ov9282`` binding), in colour
   as its Bayer twin OV9782 (same array and shutter), since IHRCF's pad calibration needs
-  colour.  Exposure
+  colour: an RGGB mosaic, one colour sample a pixel, demosaiced by the host (the order
+  *assumed*; :func:`landing_env.sensors.camera_realism.bayer_mosaic`).  Exposure
   2 ms (a typical fixed machine-vision exposure outdoors; the sensor accepts 10 us to a frame
   time, Luxonis OV9282 docs); full well 8 500 e- and read noise 4 e- *assumed* (typical of
   3 um global-shutter pixels); the sensor has no ISP, so the host encodes its RAW10 with a
@@ -25,7 +26,9 @@ after the 2.2 gamma.
   rate), 1232 lines in the 2x2-binned full-field mode, so 23.3 ms to read the frame and
   45.5 us per row of a 512-row image; video signal shading 70 % (datasheet Table 46: the
   corner relative illumination); full well 4 500 e- and read noise 2.5 e- *assumed* (typical of
-  1.12 um pixels); the Pi ISP's sRGB-like gamma (2.2); exposure 8 ms (a daylight
+  1.12 um pixels); an RGGB Bayer mosaic (the Linux imx219 driver's native
+  MEDIA_BUS_FMT_SRGGB10 without flips) demosaiced by the Pi ISP; the ISP's sRGB-like gamma
+  (2.2); exposure 8 ms (a daylight
   auto-exposure setting of the Pi camera stack, *assumed*).
 """
 
@@ -60,7 +63,8 @@ class CameraProfile:
     corner_illumination: float = 1.0
     #: output response curve: 8-bit value = 255 * x^(1 / gamma) of the linear signal x
     gamma: float = 1.0
-    #: a single-channel sensor (the image is grey in all three channels)
+    #: a single-channel sensor (the image is grey in all three channels); else an RGGB Bayer
+    #: sensor, one colour sample a pixel
     mono: bool = False
 
     @property

@@ -15,8 +15,9 @@ the detector's straight-line fit does not follow: an error growing with the side
 the exposure (:meth:`ImageFormation.blur_length_px`).  The coefficients are least squares
 (non-negative) on the squared errors; ``python -m benchmarks.bench_corner_noise`` prints
 them and the comparison of the two error distributions.  Measured under the realistic
-camera (OV9281 profile, k1 = -0.05; 1500 states, seed 0): ``(0, 1.005, 0.102, 0)``: the
-image noise dominates (0.14 px for a 50 px tag) and each pixel of blur adds about 0.1 px.
+camera (OV9281 profile with its Bayer mosaic, k1 = -0.05; 1500 states, seed 0):
+``(0.137, 2.147, 0.114, 0)``: the image noise dominates (0.25 px for a 50 px tag) and each
+pixel of blur adds about 0.1 px.
 """
 
 from __future__ import annotations
