@@ -133,9 +133,14 @@ def env_signature(env: Any) -> dict[str, Any]:
     base = env.unwrapped
     spec = getattr(base, "spec", None)
     from agents.training import ENV_ID
+    from landing_env.scenarios import SCENARIO_IDS
 
+    env_id = spec.id if spec is not None else ENV_ID
+    # a scenario id (DeckLandingTiming-BenchSS4-v0) is its task on a config: the task's id and
+    # version say what the observation means
+    scenario = SCENARIO_IDS.get(env_id)
     return {
-        "env_id": spec.id if spec is not None else ENV_ID,
+        "env_id": scenario.task if scenario is not None else env_id,
         "observation": observation_signature(base.timing, base.config.simulation.env_hz),
         "estimator": base.config.estimation.observed,
         "sensing": sensing_profile(base.config),

@@ -12,6 +12,9 @@
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
+* ``timing-dqn-realistic`` (``DeckLandingTiming-v0``): the DQN trained for realistic sensing
+  with the ``tight`` estimate observed, ``agents/models/timing_dqn_realistic.zip`` (its card
+  says so; ``configs/train/timing_dqn_realistic.yaml``).
 """
 
 from __future__ import annotations
@@ -40,8 +43,9 @@ MODEL_DIR = Path(__file__).resolve().parent / "models"
 
 
 def shipped_timing_model(algo: str) -> Path:
-    """Where the trained timing policy of ``algo`` (``dqn`` or ``ppo``) is installed."""
-    return MODEL_DIR / f"timing_{algo}.zip"
+    """Where the trained timing policy of ``algo`` (``dqn``, ``ppo``, or a variant such as
+    ``dqn-realistic``) is installed: ``agents/models/timing_<algo, - as _>.zip``."""
+    return MODEL_DIR / f"timing_{algo.replace('-', '_')}.zip"
 
 
 #: the trained timing policy shipped with the package
@@ -472,6 +476,7 @@ POLICY_ENVS: dict[str, str] = {
     "oracle": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
+    "timing-dqn-realistic": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 

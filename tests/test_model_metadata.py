@@ -19,7 +19,12 @@ from agents.model_metadata import (
     sensing_profile,
     write_metadata,
 )
-from agents.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, make_policy
+from agents.policies import (
+    SHIPPED_TIMING_MODEL,
+    TrainedTimingPolicy,
+    make_policy,
+    shipped_timing_model,
+)
 from landing_env.config import load_config
 from landing_env.envs.timing import TimingConfig
 from landing_env.errors import ConfigError
@@ -41,6 +46,32 @@ def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> No
     env, policy = make_env_and_policy("timing-dqn", "bench-ss4")
     env.close()
     assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.estimator == "ihrcf"
+
+
+def test_the_realistic_model_was_trained_on_realistic_sensing_with_tight_observed() -> None:
+    card = read_metadata(shipped_timing_model("dqn-realistic"))
+    assert card is not None and card.algo == "dqn"
+    # trained on DeckLandingTiming-BenchSS4-v0: the card records its task's id
+    assert card.env_id == "DeckLandingTiming-v0"
+    assert card.estimator == "tight" and card.sensing == ["realistic"]
+    assert card.training_config_source.endswith("configs/train/timing_dqn_realistic.yaml")
+    env, policy = make_env_and_policy(
+        "timing-dqn-realistic", "bench-ss4", "tight", extra_overrides={"sensors": "realistic"}
+    )
+    env.close()
+    assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.sensing == ["realistic"]
+    with pytest.raises(ConfigError, match=r"^sensing: .*realistic"):
+        make_env_and_policy("timing-dqn-realistic", "bench-ss4", "tight")
+
+
+def test_a_scenario_id_is_signed_as_its_task() -> None:
+    import gymnasium as gym
+
+    env = gym.make("DeckLandingTiming-BenchSS4-v0")
+    try:
+        assert env_signature(env)["env_id"] == "DeckLandingTiming-v0"
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize(

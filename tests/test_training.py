@@ -25,11 +25,12 @@ from landing_env.errors import ConfigError
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "timing_ppo.yaml"
 
 
-@pytest.mark.parametrize("algo", ["ppo", "dqn"])
-def test_the_yamls_are_rl_zoo_style_and_complete(algo: str) -> None:
+@pytest.mark.parametrize("name", ["ppo", "dqn", "dqn_realistic"])
+def test_the_yamls_are_rl_zoo_style_and_complete(name: str) -> None:
     from stable_baselines3 import DQN, PPO
 
-    path = CONFIG.with_name(f"timing_{algo}.yaml")
+    algo = name.split("_")[0]
+    path = CONFIG.with_name(f"timing_{name}.yaml")
     data = yaml.safe_load(path.read_text())
     zoo = dict(data[SCENARIO_ENV_ID])
     zoo.pop("env_kwargs", None)  # rl-zoo3's (and our) keywords of gym.make
@@ -46,6 +47,14 @@ def test_the_yamls_are_rl_zoo_style_and_complete(algo: str) -> None:
     # PPO: separate actor and critic networks; DQN: one Q-network
     net_arch = kwargs["policy_kwargs"]["net_arch"]
     assert isinstance(net_arch, dict if algo == "ppo" else list)
+    if name == "dqn_realistic":
+        # the same DQN as the shipped one, under realistic sensing with the tight estimate
+        shipped = load_train_config(CONFIG.with_name("timing_dqn.yaml"))
+        for key in set(shipped.hyperparams) - {"env_kwargs"}:
+            assert config.hyperparams[key] == shipped.hyperparams[key], key
+        overrides = config.settings.env_kwargs["overrides"]
+        assert overrides["sensors"] == "realistic"
+        assert overrides["estimation.observed"] == "tight"
 
 
 def test_zoo_policy_kwargs_strings_are_parsed_without_eval() -> None:

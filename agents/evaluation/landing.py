@@ -40,6 +40,7 @@ from agents.evaluation.runner import (
     for_each_seed,
     run_episodes,
 )
+from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     FLYING_OVERRIDES,
@@ -51,7 +52,9 @@ from landing_env.stewart.motion import SeaStateConfig
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
-ESTIMATORS = ("ihrcf", "crhf", "atda", "truth")
+#: the estimators the observation can carry (the registry's names, ``tight`` and ``fused``
+#: included)
+ESTIMATORS = ESTIMATOR_NAMES
 
 
 @dataclass(frozen=True)
