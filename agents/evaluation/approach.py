@@ -41,6 +41,7 @@ from agents.evaluation.runner import (
     batch_session,
     for_each_seed,
     run_episodes,
+    split_runs,
 )
 from landing_env.errors import ConfigError, require_choice
 
@@ -408,8 +409,7 @@ def evaluate_approach(
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     for name in policies:
         require_choice("policy", name, tuple(APPROACH_POLICIES))
-    results: dict[str, list[ApproachEpisode]] = {}
-    failures: dict[str, list[SeedFailure]] = {}
+    runs: dict[str, RunResult] = {}
     stem = f"approach_{Path(scenario).stem}"
     estimators = {
         name: routine_estimator(routine_estimator_name)
@@ -443,13 +443,8 @@ def evaluate_approach(
                 out_dir / f"{stem}_{name}.jsonl" if out_dir is not None else None,
                 resume,
             )
-            results[name] = run.records  # type: ignore[assignment]
-            if run.failures:
-                failures[name] = run.failures
-    results = {name: rs for name, rs in results.items() if rs}
-    if not results:
-        seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
-        raise RuntimeError(f"every episode failed (seeds {seeds})")
+            runs[name] = run
+    results, failures = split_runs(runs)
     summaries = [summarise(r) for r in results.values()]
     files: list[Path] = []
     if out_dir is not None:

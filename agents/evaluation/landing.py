@@ -39,6 +39,7 @@ from agents.evaluation.runner import (
     batch_session,
     for_each_seed,
     run_episodes,
+    split_runs,
 )
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import ConfigError, require_choice
@@ -565,8 +566,7 @@ def evaluate_landing(
     timing_env = POLICY_ENVS["oracle"]
     if oracle and "oracle" not in policies and timing_env in {POLICY_ENVS[p] for p in policies}:
         policies = [*policies, "oracle"]
-    results: dict[str, list[EpisodeResult]] = {}
-    failures: dict[str, list[SeedFailure]] = {}
+    runs: dict[str, RunResult] = {}
     for name in policies:  # a bad config fails before Ray starts
         task = landing_task(name, scenario, estimator, camera_mode, model_path, extra_overrides)
         LANDING_EVALUATION.validate(task)
@@ -588,13 +588,8 @@ def evaluate_landing(
                 resume,
                 allow_mismatch,
             )
-            results[name] = run.records  # type: ignore[assignment]
-            if run.failures:
-                failures[name] = run.failures
-    results = {name: rs for name, rs in results.items() if rs}
-    if not results:
-        seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
-        raise RuntimeError(f"every episode failed (seeds {seeds})")
+            runs[name] = run
+    results, failures = split_runs(runs)
     summaries = [summarise(rs) for rs in results.values()]
     compare_with_oracle(summaries, results)
     files: list[Path] = []

@@ -99,6 +99,19 @@ class RunResult:
     wall_time_s: float = math.nan
 
 
+def split_runs(
+    runs: dict[str, RunResult],
+) -> tuple[dict[str, list[Any]], dict[str, list[SeedFailure]]]:
+    """The records of every policy that finished an episode, and the failed seeds by policy;
+    a RuntimeError naming the seeds when no episode finished at all."""
+    failures = {name: run.failures for name, run in runs.items() if run.failures}
+    results = {name: list(run.records) for name, run in runs.items() if run.records}
+    if not results:
+        seeds = ", ".join(str(f.seed) for fs in failures.values() for f in fs)
+        raise RuntimeError(f"every episode failed (seeds {seeds})")
+    return results, failures
+
+
 # ------------------------------------------------------------------------------ results file
 def _read_done(path: Path, record_type: type[EpisodeRecord], seeds: set[int]) -> dict[int, Any]:
     done: dict[int, Any] = {}
