@@ -349,8 +349,20 @@ class AlignDescendConfig:
         require_range("edge_seek_speed", self.edge_seek_speed, 0.0)
         require_range("edge_step_m", self.edge_step_m, 0.0, low_inclusive=False)
         require_range("lost_tag_s", self.lost_tag_s, 0.0)
-        require_range("history_s", self.history_s, self.calm.window_s, 10.0)
-        require_range("rate_window_s", self.rate_window_s, 0.1, self.history_s)
+        require_range(
+            "history_s",
+            self.history_s,
+            self.calm.window_s,
+            10.0,
+            bounds_from=f"calm.window_s = {self.calm.window_s}",
+        )
+        require_range(
+            "rate_window_s",
+            self.rate_window_s,
+            0.1,
+            self.history_s,
+            bounds_from=f"history_s = {self.history_s}",
+        )
 
 
 class AlignDescendPolicy:

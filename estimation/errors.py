@@ -55,10 +55,12 @@ def require_range(
     *,
     low_inclusive: bool = True,
     high_inclusive: bool = True,
+    bounds_from: str | None = None,
 ) -> None:
     """Raise ConfigError unless ``low <= value <= high`` (bounds optional, inclusivity settable).
 
-    NaN is never in range.
+    NaN is never in range. ``bounds_from`` names the other keys a bound is computed from, so that
+    a cross-field error names both keys (e.g. ``"length_m = 15.0"``).
     """
     ok = value == value  # False for NaN
     if low is not None:
@@ -70,4 +72,5 @@ def require_range(
         hi = "inf" if high is None else f"{high}"
         lb = "[" if low_inclusive else "("
         hb = "]" if high_inclusive else ")"
-        raise ConfigError(key, f"{value!r} is out of range; allowed {lb}{lo}, {hi}{hb}")
+        why = f" (set by {bounds_from})" if bounds_from else ""
+        raise ConfigError(key, f"{value!r} is out of range; allowed {lb}{lo}, {hi}{hb}{why}")

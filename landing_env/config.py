@@ -129,7 +129,13 @@ class StartConfig:
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
         require_range("max_offset_m", self.max_offset_m, 0.0)
-        require_range("min_offset_m", self.min_offset_m, 0.0, self.max_offset_m)
+        require_range(
+            "min_offset_m",
+            self.min_offset_m,
+            0.0,
+            self.max_offset_m,
+            bounds_from=f"max_offset_m = {self.max_offset_m}",
+        )
         require_range("max_yaw_deg", self.max_yaw_deg, 0.0, 180.0)
 
 

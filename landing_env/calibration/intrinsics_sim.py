@@ -93,7 +93,13 @@ class ChessboardRigConfig:
         if not 0.0 < low <= high:
             raise ConfigError("distance_m", f"{self.distance_m!r} must satisfy 0 < min <= max")
         require_range("min_tilt_deg", self.min_tilt_deg, 0.0, 80.0)
-        require_range("max_tilt_deg", self.max_tilt_deg, self.min_tilt_deg, 80.0)
+        require_range(
+            "max_tilt_deg",
+            self.max_tilt_deg,
+            self.min_tilt_deg,
+            80.0,
+            bounds_from=f"min_tilt_deg = {self.min_tilt_deg}",
+        )
         require_range("max_spin_deg", self.max_spin_deg, 0.0, 180.0)
         require_range("edge_margin_px", self.edge_margin_px, 0.0)
         require_choice("distortion_model", self.distortion_model, tuple(DISTORTION_FLAGS))

@@ -159,7 +159,13 @@ class TimingConfig:
     def __post_init__(self) -> None:
         require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
         require_range("history_s", self.history_s, 0.1, 10.0)
-        require_range("rate_window_s", self.rate_window_s, 0.1, self.history_s)
+        require_range(
+            "rate_window_s",
+            self.rate_window_s,
+            0.1,
+            self.history_s,
+            bounds_from=f"history_s = {self.history_s}",
+        )
         require_range("steps_per_decision", self.steps_per_decision, 1, 20)
         require_range("wait_limit_s", self.wait_limit_s, 0.0, low_inclusive=False)
         require_range("descent_timeout_s", self.descent_timeout_s, 0.5)

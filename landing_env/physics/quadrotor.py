@@ -114,14 +114,27 @@ class QuadrotorParams:
         _require_shape("spin_directions", self.spin_directions, (4,))
         if not np.all(np.isin(self.spin_directions, (-1.0, 1.0))) or self.spin_directions.sum():
             raise ConfigError("spin_directions", "need two rotors of +1 and two of -1")
-        require_range("rotor_radius", self.rotor_radius, 0.0, self.arm_length, low_inclusive=False)
+        require_range(
+            "rotor_radius",
+            self.rotor_radius,
+            0.0,
+            self.arm_length,
+            low_inclusive=False,
+            bounds_from=f"arm_length = {self.arm_length}",
+        )
         require_range("k_f", self.k_f, 0.0, low_inclusive=False)
         require_range("k_m", self.k_m, 0.0, low_inclusive=False)
         require_range(
             "motor_time_constant", self.motor_time_constant, 0.0, 1.0, low_inclusive=False
         )
         require_range("omega_min", self.omega_min, 0.0)
-        require_range("omega_max", self.omega_max, self.omega_min, low_inclusive=False)
+        require_range(
+            "omega_max",
+            self.omega_max,
+            self.omega_min,
+            low_inclusive=False,
+            bounds_from=f"omega_min = {self.omega_min}",
+        )
         if self.thrust_to_weight <= 1.0:
             raise ConfigError(
                 "omega_max",

@@ -128,7 +128,14 @@ class DeckSurfaceConfig:
         require_range("texture_px", self.texture_px, 16, 8192)
         if len(self.deck_rgb) != 3 or any(not 0 <= c <= 255 for c in self.deck_rgb):
             raise ConfigError("deck_rgb", f"{self.deck_rgb!r}: need three values in [0, 255]")
-        require_range("pad_radius", self.pad_radius, 0.0, 0.5 * self.size, low_inclusive=False)
+        require_range(
+            "pad_radius",
+            self.pad_radius,
+            0.0,
+            0.5 * self.size,
+            low_inclusive=False,
+            bounds_from=f"size = {self.size}",
+        )
         if self.pad_centres_p is not None:
             if len(self.pad_centres_p) != len(PAD_COLOURS_RGB):
                 raise ConfigError(

@@ -106,8 +106,20 @@ class ShipMotionConfig(JonswapSeaFields):
         require_range("direction_spread_deg", self.direction_spread_deg, 0.0, 180.0)
         # a 10-40 m class, with proportions a monohull can have
         require_range("length_m", self.length_m, 10.0, 40.0)
-        require_range("beam_m", self.beam_m, 0.1 * self.length_m, 0.5 * self.length_m)
-        require_range("draught_m", self.draught_m, 0.2, 0.6 * self.beam_m)
+        require_range(
+            "beam_m",
+            self.beam_m,
+            0.1 * self.length_m,
+            0.5 * self.length_m,
+            bounds_from=f"length_m = {self.length_m}",
+        )
+        require_range(
+            "draught_m",
+            self.draught_m,
+            0.2,
+            0.6 * self.beam_m,
+            bounds_from=f"beam_m = {self.beam_m}",
+        )
         require_range("block_coefficient", self.block_coefficient, 0.3, 1.0)
         require_range("metacentric_height_m", self.metacentric_height_m, 0.2, 5.0)
         if self.roll_period_s is not None:
@@ -119,7 +131,13 @@ class ShipMotionConfig(JonswapSeaFields):
             raise ConfigError("helideck_position_m", f"needs 3 values, got {len(position)}")
         half = (0.5 * self.length_m, 0.5 * self.beam_m, 20.0)
         for axis, value, limit in zip("xyz", position, half, strict=True):
-            require_range(f"helideck_position_m[{axis}]", value, -limit, limit)
+            require_range(
+                f"helideck_position_m[{axis}]",
+                value,
+                -limit,
+                limit,
+                bounds_from=f"half of length_m = {self.length_m} and of beam_m = {self.beam_m}",
+            )
         object.__setattr__(self, "helideck_position_m", position)
 
     @property

@@ -145,9 +145,13 @@ class CameraConfig:
         require_range("fx", self.fx, 0.0, low_inclusive=False)
         require_range("fy", self.fy, 0.0, low_inclusive=False)
         if self.cx is not None:
-            require_range("cx", self.cx, -0.5, self.width - 0.5)
+            require_range(
+                "cx", self.cx, -0.5, self.width - 0.5, bounds_from=f"width = {self.width}"
+            )
         if self.cy is not None:
-            require_range("cy", self.cy, -0.5, self.height - 0.5)
+            require_range(
+                "cy", self.cy, -0.5, self.height - 0.5, bounds_from=f"height = {self.height}"
+            )
         require_range("near", self.near, 0.0, low_inclusive=False)
         if self.far <= self.near:
             raise ConfigError("far", f"{self.far} must be greater than near = {self.near}")

@@ -62,7 +62,13 @@ class StewartGeometry:
         require_range("base_half_angle_deg", self.base_half_angle_deg, 0.0, 60.0)
         require_range("top_half_angle_deg", self.top_half_angle_deg, 0.0, 60.0)
         require_range("home_height", self.home_height, 0.0, low_inclusive=False)
-        require_range("top_anchor_depth", self.top_anchor_depth, 0.0, self.home_height)
+        require_range(
+            "top_anchor_depth",
+            self.top_anchor_depth,
+            0.0,
+            self.home_height,
+            bounds_from=f"home_height = {self.home_height}",
+        )
         require_range("min_leg_length", self.min_leg_length, 0.0, low_inclusive=False)
         if not self.max_leg_length > self.min_leg_length:
             raise ConfigError(

@@ -74,7 +74,14 @@ class PlatformConfig:
         require_range("base_plate_thickness", self.base_plate_thickness, 0.0, low_inclusive=False)
         require_range("base_plate_margin", self.base_plate_margin, 0.0)
         require_range("cylinder_radius", self.cylinder_radius, 0.0, low_inclusive=False)
-        require_range("rod_radius", self.rod_radius, 0.0, self.cylinder_radius, low_inclusive=False)
+        require_range(
+            "rod_radius",
+            self.rod_radius,
+            0.0,
+            self.cylinder_radius,
+            low_inclusive=False,
+            bounds_from=f"cylinder_radius = {self.cylinder_radius}",
+        )
 
 
 @dataclass(frozen=True)
