@@ -95,6 +95,10 @@ def test_cross_field_errors_name_both_keys() -> None:
     with pytest.raises(ConfigError) as info:
         load_config("default", overrides={"estimation.vision_link.latency_s": 0.0})
     assert "latency_jitter_s" in str(info.value) and "latency_s =" in str(info.value)
+    # a bound computed from another key names that key (here half the ship's length)
+    with pytest.raises(ConfigError) as info:
+        load_config("default", overrides={"motion.ship.length_m": 15.0})
+    assert "helideck_position_m" in str(info.value) and "length_m = 15.0" in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -104,6 +108,9 @@ def test_cross_field_errors_name_both_keys() -> None:
         ("stewart.base_radius", 5.0),
         ("stewart.top_anchor_depth", 0.4),
         ("stewart.min_leg_length", 4.7),
+        ("motion.ship.length_m", 15.0),
+        ("motion.ship.beam_m", 1.0),
+        ("deck.pad_radius", 10.0),
     ],
 )
 def test_a_value_refused_by_a_cross_field_check_is_named(key: str, value: float) -> None:
