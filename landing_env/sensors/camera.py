@@ -49,6 +49,11 @@ _MISS_PRIORITY = (MISS_NOT_DETECTED, MISS_SMALL, MISS_OBLIQUE, MISS_OUT_OF_VIEW,
 #: (EGL) samples pixel centres and shows no shift.
 RENDERER_SHIFT_PX: dict[str, tuple[float, float]] = {"tiny": (0.5, -0.5), "egl": (0.0, 0.0)}
 
+#: Clients of this process with the EGL plugin loaded.  The plugin keeps one scene for the
+#: whole process: a second client's renders would show the first one's bodies too (measured:
+#: two worlds' decks in one image), so only one client at a time may render with EGL.
+_EGL_CLIENTS: set[int] = set()
+
 #: OpenGL camera axes in the OpenCV camera frame: x right, y up, looking along -z.
 _CV_FROM_GL = np.diag([1.0, -1.0, -1.0])
 
@@ -400,6 +405,15 @@ class CameraSensor:
 
     def _load_egl(self) -> None:
         """Load PyBullet's EGL renderer plugin; keep TinyRenderer (and warn) if it fails."""
+        live = {c for c in _EGL_CLIENTS if p.isConnected(physicsClientId=c)}
+        _EGL_CLIENTS.intersection_update(live)
+        if live - {self.client}:
+            warnings.warn(
+                "EGL renderer already in use by another PyBullet client of this process (its "
+                "plugin draws one scene per process); using TinyRenderer",
+                stacklevel=3,
+            )
+            return
         try:
             spec = importlib.util.find_spec("eglRenderer")
             if spec is not None and spec.origin:
@@ -416,6 +430,7 @@ class CameraSensor:
             return
         self._egl_plugin = plugin
         self.renderer = "egl"
+        _EGL_CLIENTS.add(self.client)
 
     def attach_scene(self, scene: PlanarScene) -> None:
         """Let the planar renderer draw this client's scene (when ``renderer`` is "planar")."""
@@ -437,6 +452,7 @@ class CameraSensor:
                 p.unloadPlugin(self._egl_plugin, physicsClientId=self.client)
             except p.error:
                 pass  # the client is already gone, and the plugin with it
+            _EGL_CLIENTS.discard(self.client)
             self._egl_plugin = None
             self.renderer = "tiny"
 
