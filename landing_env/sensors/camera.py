@@ -46,7 +46,9 @@ _MISS_PRIORITY = (MISS_NOT_DETECTED, MISS_SMALL, MISS_OBLIQUE, MISS_OUT_OF_VIEW,
 #: Where each renderer puts the content of a point at OpenCV pixel u (v) relative to u (v),
 #: measured with this module's projection: TinyRenderer samples pixel i at screen coordinate
 #: i instead of i + 0.5 and flips rows, so it shifts content by (+0.5, -0.5) px; OpenGL
-#: (EGL) samples pixel centres and shows no shift.
+#: (EGL) samples pixel centres and shows no shift (measured with Mesa's llvmpipe: the planar
+#: renderer's corners are off OpenGL's by a mean vector under 0.01 px; see
+#: :mod:`landing_env.sensors.renderer_agreement`).
 RENDERER_SHIFT_PX: dict[str, tuple[float, float]] = {"tiny": (0.5, -0.5), "egl": (0.0, 0.0)}
 
 #: Clients of this process with the EGL plugin loaded.  The plugin keeps one scene for the
@@ -117,7 +119,8 @@ class CameraConfig:
     render_margin_px: int = 8
     #: render with the EGL plugin (OpenGL, falls back to TinyRenderer when it cannot load);
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
-    #: and it only draws bodies created after it is loaded: create the camera first
+    #: and it only draws bodies created after it is loaded (the world creates its camera
+    #: first); it draws one scene per process, so only one client at a time may use it
     use_egl: bool = False
     #: "planar" draws the scene a downward camera sees with OpenCV homographies and polygons
     #: (:mod:`landing_env.sensors.planar_renderer`: about 1-3 ms a frame at any height) when
