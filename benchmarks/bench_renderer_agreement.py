@@ -8,9 +8,10 @@ rendered by the planar renderer and by the reference (TinyRenderer, or OpenGL th
 EGL plugin), plain and supersampled ``--supersample`` times and box-filtered (see
 :mod:`landing_env.sensors.renderer_agreement`); the tag is detected in each.  Printed per
 pose: the mean corner differences; per height and over all poses: the mean difference, the
-mean difference *vector* (a systematic offset: pixel centres, row flip, projection) and the
-spread (standard deviation per axis), for planar - plain, planar - supersampled, plain -
-supersampled and each against the analytic corners.
+mean difference *vector* (a systematic offset: pixel centres, row flip, projection), the
+spread (standard deviation per axis) and the radial scale (a focal length or image-size
+error; shown as the difference it makes 200 px from the principal point), for planar -
+plain, planar - supersampled, plain - supersampled and each against the analytic corners.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ def main() -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             world = World(load_config("default", overrides=overrides))
+        k = world.camera.intrinsics
         try:
             if args.reference == "egl" and world.camera.renderer != "egl":
                 raise SystemExit("the EGL renderer plugin did not load on this machine")
@@ -85,25 +87,29 @@ def main() -> None:
     console.print(per_pose)
 
     pooled = Table(title="pooled over poses: offset = mean difference vector, spread = std")
-    for column in ("difference", "height m", "mean |d| px", "offset x, y px", "spread x, y px"):
+    columns = ("difference", "height m", "mean |d| px", "offset x, y px", "spread x, y px")
+    for column in (*columns, "scale: px at 200 px"):
         pooled.add_column(column, justify="right")
+    centre = (k.cx, k.cy)
     for a, b in pairs:
         for heights, label in [({h}, f"{h}") for h in HEIGHTS_M] + [(set(HEIGHTS_M), "all")]:
-            diffs = [
-                found[a] - found[b]
+            both = [
+                found
                 for pose, found in results
                 if pose.height_m in heights and found[a] is not None and found[b] is not None
             ]
-            if not diffs:
-                pooled.add_row(f"{a} - {b}", label, "-", "-", "-")
+            if not both:
+                pooled.add_row(f"{a} - {b}", label, "-", "-", "-", "-")
                 continue
-            s = corner_statistics(diffs)
+            diffs = [found[a] - found[b] for found in both]
+            s = corner_statistics(diffs, [found["truth"] for found in both], centre)
             pooled.add_row(
                 f"{a} - {b}",
                 label,
                 f"{s.mean_px:.3f}",
                 f"{s.offset_px[0]:+.3f}, {s.offset_px[1]:+.3f}",
                 f"{s.spread_px[0]:.3f}, {s.spread_px[1]:.3f}",
+                f"{200.0 * s.scale:+.3f}",
                 end_section=label == "all",
             )
     console.print(pooled)

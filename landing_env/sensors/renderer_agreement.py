@@ -232,13 +232,34 @@ class CornerStatistics:
     #: standard deviation per axis (x, y)
     spread_px: np.ndarray
     corners: int
+    #: the difference's growth with the distance from the principal point (a focal length,
+    #: aspect or image-size error scales the image): d = scale * (p - c) + offset, least
+    #: squares over both axes; NaN without the corners' positions
+    scale: float = float("nan")
 
 
-def corner_statistics(diffs: list[np.ndarray]) -> CornerStatistics:
-    """Pool Nx2 corner differences (e.g. planar minus reference over several poses)."""
+def corner_statistics(
+    diffs: list[np.ndarray], positions_px: list[np.ndarray] | None = None, centre_px=None
+) -> CornerStatistics:
+    """Pool Nx2 corner differences (e.g. planar minus reference over several poses).
+
+    ``positions_px`` (the corners' pixels, e.g. the analytic ones, one array per diff) and
+    ``centre_px`` (the principal point) give the radial ``scale`` too.
+    """
     d = np.concatenate([np.asarray(x, dtype=float).reshape(-1, 2) for x in diffs])
+    scale = float("nan")
+    if positions_px is not None:
+        r = np.concatenate([np.asarray(x, dtype=float).reshape(-1, 2) for x in positions_px])
+        r = r - np.asarray(centre_px, dtype=float)
+        # one scale for both axes, one offset per axis
+        design = np.zeros((2 * len(r), 3))
+        design[: len(r), 0], design[len(r) :, 0] = r[:, 0], r[:, 1]
+        design[: len(r), 1] = 1.0
+        design[len(r) :, 2] = 1.0
+        solution, *_ = np.linalg.lstsq(design, np.concatenate([d[:, 0], d[:, 1]]), rcond=None)
+        scale = float(solution[0])
     return CornerStatistics(
-        float(corner_norms(d).mean()), d.mean(axis=0), d.std(axis=0), int(d.shape[0])
+        float(corner_norms(d).mean()), d.mean(axis=0), d.std(axis=0), int(d.shape[0]), scale
     )
 
 
