@@ -250,26 +250,35 @@ def run_timing_demo(
     seed: int = 0,
     out_dir: Path = Path("results/demo"),
     scenario: str = "bench-ss4",
-    policy_name: str = "timing-dqn",
+    policy_name: str | None = None,
 ) -> TimingDemoLog | None:
     """`make demo`, part 2: the shipped timing policy waits over a sea-state deck and lands.
 
     The camera is rendered and the tag detected for real (the policy was trained with the
-    projected camera); IHRCF's estimate is in the observation.  Writes
-    ``timing_camera.mp4`` and ``timing_trajectory.png``.  The seed is offset into the held-out
-    range, so that the episode is not one the policy was trained on.
+    projected camera).  ``policy_name`` None picks the shipped policy trained for the run's
+    sensing: ``timing-dqn`` with IHRCF's estimate observed under ideal sensing,
+    ``timing-dqn-realistic`` with ``tight``'s under ``sensors: realistic`` (``deck-landing demo
+    --sensors realistic``).  Writes ``timing_camera.mp4`` and ``timing_trajectory.png``.  The
+    seed is offset into the held-out range, so that the episode is not one the policy was
+    trained on.
     """
-    from agents.evaluation.landing import HELD_OUT_SEED, make_env_and_policy
+    from agents.evaluation.landing import HELD_OUT_SEED, SCENARIOS, make_env_and_policy
     from agents.policies import shipped_timing_model
+    from landing_env.config import load_config
 
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
+    estimator = "ihrcf"
+    if policy_name is None:
+        realistic = load_config(SCENARIOS[scenario].config).sensors == "realistic"
+        policy_name = "timing-dqn-realistic" if realistic else "timing-dqn"
+        estimator = "tight" if realistic else "ihrcf"
     model = shipped_timing_model(policy_name.removeprefix("timing-"))
     if not model.is_file():
         console.print(f"[yellow]no trained timing policy at {model}: part 2 skipped[/yellow]")
         return None
     env, policy = make_env_and_policy(
-        policy_name, scenario, camera_mode="render", render_mode="rgb_array"
+        policy_name, scenario, estimator, camera_mode="render", render_mode="rgb_array"
     )
     base = env.unwrapped
     base.record_periods = True

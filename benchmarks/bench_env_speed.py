@@ -6,8 +6,10 @@ Measures the `project` and `render` camera modes, one environment in this proces
 environments in parallel (one process each, as SubprocVecEnv runs them).  The deck moves
 (sum of sinusoids), the four ToF rays are cast and the IMU is sampled at 240 Hz in every case;
 `truth` rows measure the simulation alone, `ihrcf` rows add the default estimator, `tight`
-the tightly coupled one.  The CPU-time columns (this process's, or the sum over the
-processes) are what a shared machine inflates least.  The drone
+the tightly coupled one; `realistic` rows run with ``sensors: realistic`` (the OV9281-class
+camera's blur and noise, lens distortion, ToF noise; ``--sensors`` picks the rows).  The
+CPU-time columns (this process's, or the sum over the processes) are what a shared machine
+inflates least.  The drone
 hovers at the default start height (about 2 m), where `render` mode renders the tag's window.
 
 The second table is `render` mode by height: the drone pinned (``simulation.drone_fixed``)
@@ -34,12 +36,13 @@ import landing_env  # noqa: F401
 
 
 def _run(
-    mode: str, estimator: str, sim_seconds: float, seed: int, queue=None
+    mode: str, estimator: str, sim_seconds: float, seed: int, queue=None, sensors: str = "ideal"
 ) -> tuple[int, float, float, float]:
     overrides = {
         "camera.mode": mode,
         "estimation.observed": estimator,
         "simulation.max_episode_s": 1e4,
+        "sensors": sensors,
     }
     env = gym.make("DeckLanding-v0", overrides=overrides)
     env.reset(seed=seed)
@@ -64,12 +67,13 @@ def _run(
 
 
 def _parallel(
-    mode: str, estimator: str, sim_seconds: float, n: int
+    mode: str, estimator: str, sim_seconds: float, n: int, sensors: str = "ideal"
 ) -> tuple[int, float, float, float]:
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     procs = [
-        ctx.Process(target=_run, args=(mode, estimator, sim_seconds, i, queue)) for i in range(n)
+        ctx.Process(target=_run, args=(mode, estimator, sim_seconds, i, queue, sensors))
+        for i in range(n)
     ]
     for proc in procs:
         proc.start()
@@ -164,29 +168,45 @@ def main() -> None:
         default="planar,planar+realistic,bullet",
         help="comma-separated renderers (planar, bullet), +realistic for sensors: realistic",
     )
+    parser.add_argument("--no-heights", action="store_true", help="skip the table by height")
+    parser.add_argument(
+        "--sensors",
+        default="ideal,realistic",
+        help="comma-separated sensor sets of the first table's rows (ideal, realistic)",
+    )
     args = parser.parse_args()
     console = Console(width=140)
-    height_table(console, args.height_steps, 10, args.renderers.split(","))
+    if not args.no_heights:
+        height_table(console, args.height_steps, 10, args.renderers.split(","))
     if args.heights:
         return
     table = Table(title="DeckLanding-v0 speed (240 Hz physics, 20 Hz steps)")
-    columns = ("camera mode", "observed estimator", "envs", "steps/s", "real-time factor")
+    columns = ("sensors", "camera mode", "observed estimator", "envs", "steps/s")
+    columns = (*columns, "real-time factor")
     # CPU time per step: what a shared machine inflates least (wall-clock figures need it idle)
     for column in (*columns, "CPU ms/step", "real-time factor by CPU"):
         table.add_column(column, justify="right")
     cases = (
-        ("project", "truth", args.seconds),
-        ("project", "ihrcf", args.seconds),
-        ("project", "tight", args.seconds),
-        ("render", "ihrcf", args.render_seconds),
+        ("ideal", "project", "truth", args.seconds),
+        ("ideal", "project", "ihrcf", args.seconds),
+        ("ideal", "project", "tight", args.seconds),
+        ("ideal", "render", "ihrcf", args.render_seconds),
+        # the realistic camera (blur, noise, lens), ToF noise and their calibrations
+        ("realistic", "project", "tight", args.seconds),
+        ("realistic", "render", "ihrcf", args.render_seconds),
+        ("realistic", "render", "tight", args.render_seconds),
     )
-    for mode, estimator, seconds in cases:
+    chosen = set(args.sensors.split(","))
+    for sensors, mode, estimator, seconds in cases:
+        if sensors not in chosen:
+            continue
         for n in (1, 2):
             if n == 1:
-                steps, wall, sim, cpu = _run(mode, estimator, seconds, 0)
+                steps, wall, sim, cpu = _run(mode, estimator, seconds, 0, None, sensors)
             else:
-                steps, wall, sim, cpu = _parallel(mode, estimator, seconds, n)
+                steps, wall, sim, cpu = _parallel(mode, estimator, seconds, n, sensors)
             table.add_row(
+                sensors,
                 mode,
                 estimator,
                 str(n),
@@ -195,7 +215,7 @@ def main() -> None:
                 f"{1e3 * cpu / steps:.2f}",
                 f"{sim / cpu:.1f}x",
             )
-            console.print(f"{mode}/{estimator} x{n}: {steps} steps in {wall:.1f} s")
+            console.print(f"{sensors} {mode}/{estimator} x{n}: {steps} steps in {wall:.1f} s")
     console.print(table)
 
 

@@ -105,6 +105,10 @@ class World:
         c.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
         if gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
+        rng = np.random.default_rng(0)
+        # before any body: the EGL renderer (camera.use_egl) draws only bodies created after
+        # its plugin is loaded (the camera draws nothing from rng until the first step)
+        self.camera = CameraSensor(c, config.camera, rng)
 
         # the sea / hangar floor; nothing assumes it is the landing surface
         plane_shape = c.createCollisionShape(p.GEOM_PLANE)
@@ -122,7 +126,6 @@ class World:
         }
         self.t_bc = np.asarray(self.params.camera_offset_b, dtype=float)
 
-        rng = np.random.default_rng(0)
         if config.deck_mount == "ship":
             # a full-scale helideck: no legs, no workspace, home high above the sea plane
             home = np.array([0.0, 0.0, config.ship_deck_height_m])
@@ -154,7 +157,6 @@ class World:
         hx, hy, hz = self.deck_home_w.tolist()
         self._deck_home_floats = (hx, hy, hz)
         self._airwake = config.wind.enabled and config.wind.airwake_radius_m > 0.0
-        self.camera = CameraSensor(c, config.camera, rng)
         if config.camera.renderer == "planar":
             scene = planar_scene_or_none(
                 c._client,

@@ -196,7 +196,7 @@ def test_a_colour_sensor_collects_one_bayer_sample_a_pixel_and_demosaics_its_col
 
 
 @pytest.mark.parametrize("name", ["ov9281", "imx219"])
-@pytest.mark.parametrize("height", [4.0, 2.0, 1.0])
+@pytest.mark.parametrize("height", [4.0, 2.0, 1.0, 0.6, 0.3])
 def test_tags_still_decode_at_the_default_heights(name: str, height: float) -> None:
     overrides = {
         "camera.mode": "render",

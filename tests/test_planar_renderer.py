@@ -12,11 +12,15 @@ import pytest
 from estimation.detection import AprilTagDetector
 from landing_env.config import load_config
 from landing_env.sensors.renderer_agreement import (
+    HEIGHTS_M,
     Pose,
     compare,
     corner_norms,
+    corner_sets,
+    corner_statistics,
     place,
     planar_image,
+    standard_poses,
 )
 from landing_env.world import World
 
@@ -45,29 +49,119 @@ def test_worlds_render_with_the_planar_renderer_by_default(world: World) -> None
         bullet.close()
 
 
-@pytest.mark.parametrize(
-    "pose",
-    [
-        Pose(4.0, (2.4, -4.0, 20.0), (4.0, -3.0)),
-        Pose(2.0, (-4.0, 1.6, -35.0), (-5.0, 2.0), (0.04, 0.0)),
-        Pose(1.0, (2.4, -4.0, 20.0), (4.0, -3.0)),
-        Pose(0.6, (-4.0, 1.6, -35.0), (-5.0, 2.0)),
-        Pose(0.6),
-        Pose(0.3, (2.0, -3.0, 20.0), (4.0, -3.0)),
-    ],
-    ids=lambda pose: f"{pose.height_m}m",
-)
+@pytest.fixture(scope="module")
+def tinyrenderer_corners(world: World, small_tag_world: World) -> list[tuple[Pose, dict]]:
+    """Corners of the standard poses (every height) by the planar renderer, plain
+    TinyRenderer and TinyRenderer x6, with the analytic truth."""
+    detector = AprilTagDetector()
+    out = []
+    for pose in standard_poses():
+        chosen = small_tag_world if pose.height_m < 0.5 else world
+        found = corner_sets(chosen, detector, pose, (("tiny", 1), ("tiny", 6)))
+        assert all(c is not None for c in found.values()), f"tag not detected at {pose}"
+        out.append((pose, found))
+    return out
+
+
+def _diffs(results, a: str, b: str, heights=None) -> list[np.ndarray]:
+    return [
+        found[a] - found[b]
+        for pose, found in results
+        if heights is None or pose.height_m in heights
+    ]
+
+
+def _magnified(pose: Pose) -> bool:
+    """The level pose at 0.3 m: TinyRenderer's point-sampled texels span 1.7 px there."""
+    return pose.height_m < 0.5 and pose.drone_rpy_deg == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.slow
 def test_planar_tag_corners_agree_with_supersampled_tinyrenderer_to_a_tenth_of_a_pixel(
-    world: World, small_tag_world: World, pose: Pose
+    tinyrenderer_corners,
 ) -> None:
-    chosen = small_tag_world if pose.height_m < 0.5 else world
-    result = compare(chosen, AprilTagDetector(), pose, supersample=6)
-    assert result.corner_diff_px is not None, "the tag was not detected in both images"
-    assert corner_norms(result.corner_diff_px).mean() < 0.1
-    # and the planar corners are no further from the analytic ones than the reference's
-    planar = corner_norms(result.corner_error_planar_px).mean()
-    reference = corner_norms(result.corner_error_reference_px).mean()
-    assert planar < reference + 0.05
+    everything = corner_statistics(_diffs(tinyrenderer_corners, "planar", "tiny x6"))
+    assert everything.corners == 4 * len(standard_poses())
+    assert everything.mean_px < 0.1  # the issue's target: mean over states at all heights
+    assert {pose.height_m for pose, _ in tinyrenderer_corners} == set(HEIGHTS_M)
+    for pose, found in tinyrenderer_corners:
+        planar = corner_norms(found["planar"] - found["truth"]).mean()
+        reference = corner_norms(found["tiny x6"] - found["truth"]).mean()
+        if _magnified(pose):
+            # the reference's own error dominates: the planar corners are nearer the truth
+            assert planar < reference, pose
+        else:
+            assert corner_norms(found["planar"] - found["tiny x6"]).mean() < 0.1, pose
+            assert planar < reference + 0.05, pose
+
+
+@pytest.mark.slow
+def test_planar_renderer_has_no_systematic_offset_from_plain_tinyrenderer(
+    world: World, tinyrenderer_corners
+) -> None:
+    """A half-pixel shift, a row flip or a wrong projection would move every corner alike;
+    a focal length, aspect or image-size error would scale the image about its centre."""
+    everything = corner_statistics(_diffs(tinyrenderer_corners, "planar", "tiny x1"))
+    assert np.all(np.abs(everything.offset_px) < 0.05)
+    assert np.all(everything.spread_px > 2.0 * np.abs(everything.offset_px))
+    # the scale, where TinyRenderer's texels are not magnified (0.6 m and above): under
+    # 0.1 px at 200 px from the centre (measured 0.03; a 1 px error in 512 px gives 0.39)
+    above = {h for h in HEIGHTS_M if h >= 0.6}
+    diffs = _diffs(tinyrenderer_corners, "planar", "tiny x1", above)
+    truths = [f["truth"] for pose, f in tinyrenderer_corners if pose.height_m in above]
+    k = world.camera.intrinsics
+    scaled = corner_statistics(diffs, truths, (k.cx, k.cy))
+    assert abs(scaled.scale) * 200.0 < 0.1, scaled
+    for height in HEIGHTS_M:
+        at = corner_statistics(_diffs(tinyrenderer_corners, "planar", "tiny x1", {height}))
+        assert np.all(np.abs(at.offset_px) < 0.08), (height, at)
+
+
+@pytest.mark.slow
+def test_plain_tinyrenderer_is_off_its_own_supersampled_image_as_much_as_the_planar_one(
+    tinyrenderer_corners,
+) -> None:
+    """Why plain TinyRenderer is not the yardstick: its corners are quantised."""
+    planar_vs_plain = corner_statistics(_diffs(tinyrenderer_corners, "planar", "tiny x1"))
+    plain_vs_x6 = corner_statistics(_diffs(tinyrenderer_corners, "tiny x1", "tiny x6"))
+    assert plain_vs_x6.mean_px > 0.8 * planar_vs_plain.mean_px
+    planar_err = corner_statistics(_diffs(tinyrenderer_corners, "planar", "truth"))
+    plain_err = corner_statistics(_diffs(tinyrenderer_corners, "tiny x1", "truth"))
+    assert plain_err.mean_px > 1.5 * planar_err.mean_px
+
+
+@pytest.mark.slow
+def test_planar_tag_corners_agree_with_egl_opengl_where_it_loads() -> None:
+    """OpenGL filters its textures: the planar renderer agrees with its plain output."""
+    detector = AprilTagDetector()
+    found_all = []
+    for tag_size, heights in ((0.30, (4.0, 2.0, 1.0, 0.6)), (0.12, (0.3,))):
+        overrides = {"camera.mode": "render", "camera.use_egl": True, "deck.tag_size": tag_size}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            # the EGL plugin draws one scene per process: one EGL world at a time
+            w = World(load_config("default", overrides=overrides))
+        try:
+            if w.camera.renderer != "egl":
+                pytest.skip(
+                    "PyBullet's EGL renderer plugin did not load here (no EGL driver or GPU, "
+                    "or another client of this process holds it); the planar renderer is "
+                    "checked against TinyRenderer only"
+                )
+            for pose in standard_poses():
+                if pose.height_m in heights:
+                    found = corner_sets(w, detector, pose, (("egl", 1), ("egl", 6)))
+                    assert all(c is not None for c in found.values()), pose
+                    found_all.append((pose, found))
+        finally:
+            w.close()
+    for reference in ("egl x1", "egl x6"):
+        everything = corner_statistics(_diffs(found_all, "planar", reference))
+        assert everything.mean_px < 0.1, reference
+        assert np.all(np.abs(everything.offset_px) < 0.03), reference
+        for height in HEIGHTS_M:
+            at = corner_statistics(_diffs(found_all, "planar", reference, {height}))
+            assert at.mean_px < 0.1, (reference, height, at)
 
 
 @pytest.mark.parametrize("height", [4.0, 1.0, 0.3])

@@ -46,8 +46,15 @@ _MISS_PRIORITY = (MISS_NOT_DETECTED, MISS_SMALL, MISS_OBLIQUE, MISS_OUT_OF_VIEW,
 #: Where each renderer puts the content of a point at OpenCV pixel u (v) relative to u (v),
 #: measured with this module's projection: TinyRenderer samples pixel i at screen coordinate
 #: i instead of i + 0.5 and flips rows, so it shifts content by (+0.5, -0.5) px; OpenGL
-#: (EGL) samples pixel centres and shows no shift.
+#: (EGL) samples pixel centres and shows no shift (measured with Mesa's llvmpipe: the planar
+#: renderer's corners are off OpenGL's by a mean vector under 0.01 px; see
+#: :mod:`landing_env.sensors.renderer_agreement`).
 RENDERER_SHIFT_PX: dict[str, tuple[float, float]] = {"tiny": (0.5, -0.5), "egl": (0.0, 0.0)}
+
+#: Clients of this process with the EGL plugin loaded.  The plugin keeps one scene for the
+#: whole process: a second client's renders would show the first one's bodies too (measured:
+#: two worlds' decks in one image), so only one client at a time may render with EGL.
+_EGL_CLIENTS: set[int] = set()
 
 #: OpenGL camera axes in the OpenCV camera frame: x right, y up, looking along -z.
 _CV_FROM_GL = np.diag([1.0, -1.0, -1.0])
@@ -112,7 +119,8 @@ class CameraConfig:
     render_margin_px: int = 8
     #: render with the EGL plugin (OpenGL, falls back to TinyRenderer when it cannot load);
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
-    #: and it only draws bodies created after it is loaded: create the camera first
+    #: and it only draws bodies created after it is loaded (the world creates its camera
+    #: first); it draws one scene per process, so only one client at a time may use it
     use_egl: bool = False
     #: "planar" draws the scene a downward camera sees with OpenCV homographies and polygons
     #: (:mod:`landing_env.sensors.planar_renderer`: about 1-3 ms a frame at any height) when
@@ -400,6 +408,15 @@ class CameraSensor:
 
     def _load_egl(self) -> None:
         """Load PyBullet's EGL renderer plugin; keep TinyRenderer (and warn) if it fails."""
+        live = {c for c in _EGL_CLIENTS if p.isConnected(physicsClientId=c)}
+        _EGL_CLIENTS.intersection_update(live)
+        if live - {self.client}:
+            warnings.warn(
+                "EGL renderer already in use by another PyBullet client of this process (its "
+                "plugin draws one scene per process); using TinyRenderer",
+                stacklevel=3,
+            )
+            return
         try:
             spec = importlib.util.find_spec("eglRenderer")
             if spec is not None and spec.origin:
@@ -416,6 +433,7 @@ class CameraSensor:
             return
         self._egl_plugin = plugin
         self.renderer = "egl"
+        _EGL_CLIENTS.add(self.client)
 
     def attach_scene(self, scene: PlanarScene) -> None:
         """Let the planar renderer draw this client's scene (when ``renderer`` is "planar")."""
@@ -437,6 +455,7 @@ class CameraSensor:
                 p.unloadPlugin(self._egl_plugin, physicsClientId=self.client)
             except p.error:
                 pass  # the client is already gone, and the plugin with it
+            _EGL_CLIENTS.discard(self.client)
             self._egl_plugin = None
             self.renderer = "tiny"
 
