@@ -46,6 +46,7 @@ import numpy as np
 from estimation import geometry
 from estimation.atda import ippe_solutions
 from estimation.camera_model import CameraIntrinsics
+from estimation.corner_bias import CornerBias
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.estimator import (
     BAD_CORNERS,
@@ -103,9 +104,14 @@ class TightConfig:
     and their projection through the calibrated camera (the calibrations' disagreement,
     which CRHF removes by estimating its own principal point, CRHF Sec. 2.7: a chessboard
     calibration off by 0.3 px in cx shifts x by 1.3 mm at 2 m); ``"calibrated"`` keeps K.
+    ``corner_bias_px``: the detector's edge offset ``(a, b, c)`` on this camera
+    (:class:`estimation.corner_bias.CornerBias`: ``a + b sin²(2φ) + c / L`` pixels outward
+    per tag edge), removed from the detected corners before they enter the cost; measured
+    with the intrinsics (``deck-landing calibrate`` stores it in the intrinsics file).
     ``noise_from_sensors``: a host that knows its sensors (the simulator) replaces the ToF
-    noise above by the configured sensor's model, and the pixel sigma by the camera's
-    configured corner noise where it has one.
+    noise above by the configured sensor's model, and the pixel sigma and corner offset by
+    the camera's: the configured corner noise in ``project`` mode (no offset), the
+    calibrated ones of the intrinsics file when rendering.
     """
 
     pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
@@ -120,6 +126,7 @@ class TightConfig:
     history_timeout_s: float = 0.5
     start_cost_margin: float = 50.0
     principal_point: str = "touch_points"
+    corner_bias_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
     noise_from_sensors: bool = True
 
     def __post_init__(self) -> None:
@@ -140,6 +147,12 @@ class TightConfig:
         require_range("history_timeout_s", self.history_timeout_s, 0.0)
         require_range("start_cost_margin", self.start_cost_margin, 0.0)
         require_choice("principal_point", self.principal_point, PRINCIPAL_POINT_SOURCES)
+        if len(self.corner_bias_px) != 3 or not all(
+            math.isfinite(float(v)) for v in self.corner_bias_px
+        ):
+            raise ConfigError(
+                "corner_bias_px", f"{self.corner_bias_px!r}: need three finite numbers (a, b, c)"
+            )
 
     @property
     def tof_noise(self) -> TofNoiseModel:
@@ -454,6 +467,7 @@ class TightEstimator(GuardedEstimator):
             )
         self.intrinsics = intrinsics
         self._noise = self.config.tof_noise
+        self._corner_bias = CornerBias(*(float(v) for v in self.config.corner_bias_px))
         self._model = tag_corners_in_tag_frame(self.tag_size)
         self._k = intrinsics.matrix
         self._undistorter = geometry.Undistorter(intrinsics)
@@ -621,6 +635,8 @@ class TightEstimator(GuardedEstimator):
         corners, usable, reason = self._corners(frame)
         if corners is None:
             return DeckPoseEstimate.invalid(self.name, timestamp, reason)
+        if usable.all():
+            corners = self._corner_bias.correct(corners)
         undistorted = corners.copy()
         if self._undistorter.active:
             undistorted[usable] = self._undistorter(corners[usable])

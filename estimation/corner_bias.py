@@ -1,0 +1,168 @@
+"""The tag detector's systematic corner offset on a given camera, and its correction.
+
+A real camera blurs the image in linear light (optics, demosaicing, resampling) and then
+applies a gamma curve; at the edge of the tag's dark border the 50 % level the detector's
+edge fit finds then lies inside the true edge, so the detected tag is *smaller* than the
+tag: on the realistic camera by 0.04 px per edge for edges along the pixel grid and 0.2 px
+for diagonal ones (blurring and demosaicing act over a wider footprint across a diagonal
+edge), and by more on a smaller tag (the corners' rounding weighs more in a shorter edge
+fit).  A chessboard calibration cannot see this (its saddle corners are symmetric), but it
+matters: a 0.1 px shrink of a 70 px tag reads as a 3 mm longer distance at 2 m, which the
+ToF ranges then contradict.
+
+Model: each edge of the detected quadrilateral lies ``offset(edge)`` pixels outside the true
+edge along its outward normal,
+
+    offset = a + b * sin²(2 φ) + c / L
+
+with φ the edge's angle to the image axes and ``L`` its length in pixels (``a, b, c`` in px,
+px, px²).  A corner moves where its two shifted edges meet.  :func:`fit_corner_bias`
+measures ``a, b, c`` from detections of a tag at known poses (the calibration rig,
+``landing_env.calibration.tag_corner_sim``) and the residual noise of the corners after
+the correction; :meth:`CornerBias.correct` removes the offset from detected corners.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _edge_terms(quad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per edge i (corner i to corner i+1): outward unit normal (4x2), sin²(2φ) and 1/L."""
+    nxt = np.roll(quad, -1, axis=0)
+    edge = nxt - quad
+    length = np.linalg.norm(edge, axis=1)
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]]) / length[:, None]
+    # outward: away from the quadrilateral's centre
+    midpoint = 0.5 * (quad + nxt) - quad.mean(axis=0)
+    normal *= np.where(np.sum(normal * midpoint, axis=1) < 0.0, -1.0, 1.0)[:, None]
+    phi = np.arctan2(edge[:, 1], edge[:, 0])
+    return normal, np.sin(2.0 * phi) ** 2, 1.0 / length
+
+
+def corner_design(quad: np.ndarray) -> np.ndarray | None:
+    """The (4, 2, 3) map from ``(a, b, c)`` to each corner's displacement, or None.
+
+    Corner i is shared by edge i-1 (from corner i-1) and edge i; its displacement ``d``
+    satisfies ``n_e · d = offset_e`` for both.  None for a degenerate quadrilateral.
+    """
+    quad = np.asarray(quad, dtype=float)
+    if quad.shape != (4, 2) or not np.isfinite(quad).all():
+        return None
+    normal, s2, inv_len = _edge_terms(quad)
+    if not np.all(np.isfinite(inv_len)):
+        return None
+    terms = np.column_stack([np.ones(4), s2, inv_len])  # offset_e = terms_e · (a, b, c)
+    design = np.empty((4, 2, 3))
+    for i in range(4):
+        before = (i - 1) % 4
+        normals = np.array([normal[before], normal[i]])
+        det = normals[0, 0] * normals[1, 1] - normals[0, 1] * normals[1, 0]
+        if abs(det) < 1e-6:
+            return None
+        design[i] = np.linalg.solve(normals, np.array([terms[before], terms[i]]))
+    return design
+
+
+@dataclass(frozen=True)
+class CornerBias:
+    """Edge offset ``a + b sin²(2φ) + c / L`` of the detector on a camera (pixels)."""
+
+    a_px: float = 0.0
+    b_px: float = 0.0
+    c_px2: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        return any(v != 0.0 for v in (self.a_px, self.b_px, self.c_px2))
+
+    def displacement(self, quad: np.ndarray) -> np.ndarray:
+        """Each corner's systematic offset (detected minus true, 4x2 px; zeros if degenerate)."""
+        design = corner_design(quad)
+        if design is None:
+            return np.zeros((4, 2))
+        return design @ np.array([self.a_px, self.b_px, self.c_px2])
+
+    def correct(self, corners: np.ndarray) -> np.ndarray:
+        """The detected corners with the offset removed (unchanged where any is unusable)."""
+        corners = np.asarray(corners, dtype=float)
+        if not self.active:
+            return corners
+        return corners - self.displacement(corners)
+
+
+@dataclass(frozen=True)
+class CornerBiasFit:
+    """The fitted offset, the corners' residual noise after it and what it was fitted on."""
+
+    bias: CornerBias
+    sigma_px: float
+    sigma_uncorrected_px: float
+    views: int
+
+    def as_dict(self) -> dict:
+        return {
+            "edge_offset_a_px": self.bias.a_px,
+            "edge_offset_b_px": self.bias.b_px,
+            "edge_offset_c_px2": self.bias.c_px2,
+            "sigma_px": self.sigma_px,
+            "sigma_uncorrected_px": self.sigma_uncorrected_px,
+            "views": self.views,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> CornerBiasFit:
+        return cls(
+            CornerBias(
+                float(doc["edge_offset_a_px"]),
+                float(doc["edge_offset_b_px"]),
+                float(doc["edge_offset_c_px2"]),
+            ),
+            float(doc["sigma_px"]),
+            float(doc["sigma_uncorrected_px"]),
+            int(doc["views"]),
+        )
+
+
+def fit_corner_bias(detected: Sequence[np.ndarray], true: Sequence[np.ndarray]) -> CornerBiasFit:
+    """Least-squares ``(a, b, c)`` from detected and true corner pixels (one 4x2 pair a view).
+
+    The true corners are the tag's projection through the calibrated camera at the rig's
+    known pose; each view's mean residual is removed first (a principal-point error of the
+    calibration shifts all four corners alike, which is not an edge offset).  ``sigma_px``:
+    the RMS per coordinate of what the model leaves (3 parameters and 2 per view taken off).
+    """
+    rows, rhs, raw = [], [], []
+    for q, p in zip(detected, true, strict=True):
+        q = np.asarray(q, dtype=float)
+        p = np.asarray(p, dtype=float)
+        design = corner_design(p)
+        if design is None or not np.isfinite(q).all():
+            continue
+        residual = q - p
+        residual = residual - residual.mean(axis=0)
+        design = design - design.mean(axis=0)
+        rows.append(design.reshape(8, 3))
+        rhs.append(residual.reshape(8))
+        raw.append(residual.reshape(8))
+    if len(rows) < 3:
+        raise ValueError(f"need at least 3 usable views, got {len(rows)}")
+    a = np.vstack(rows)
+    b = np.concatenate(rhs)
+    theta, *_ = np.linalg.lstsq(a, b, rcond=None)
+    left = b - a @ theta
+    dof = max(len(b) - 3 - 2 * len(rows), 1)
+    raw_all = np.concatenate(raw)
+    return CornerBiasFit(
+        CornerBias(*(float(v) for v in theta)),
+        math.sqrt(float(left @ left) / dof),
+        math.sqrt(float(raw_all @ raw_all) / max(len(raw_all) - 2 * len(rows), 1)),
+        len(rows),
+    )
+
+
+__all__ = ["CornerBias", "CornerBiasFit", "corner_design", "fit_corner_bias"]
