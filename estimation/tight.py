@@ -88,7 +88,8 @@ class TightConfig:
 
     ``pixel_sigma_px``: 1-sigma of a detected corner coordinate (default
     :data:`estimation.noise.DEFAULT_PIXEL_SIGMA_PX`).  ``tof_sigma_0_m``,
-    ``tof_sigma_per_m``, ``tof_resolution_m``: the ToF noise model
+    ``tof_sigma_per_m``, ``tof_resolution_m``, ``tof_sigma_min_m`` (a floor, 0 by default):
+    the ToF noise model
     (:class:`estimation.noise.TofNoiseModel`; defaults: the VL53L1X model the simulator's
     ``tof.noise: vl53l1x`` draws from).  ``max_iterations``: LM iterations per start.
     ``range_gate_sigma``: a range further than this many sigma from the solution is dropped
@@ -118,6 +119,7 @@ class TightConfig:
     tof_sigma_0_m: float = VL53L1X_SIGMA_0_M
     tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
     tof_resolution_m: float = VL53L1X_RESOLUTION_M
+    tof_sigma_min_m: float = 0.0
     max_iterations: int = 12
     range_gate_sigma: float = 6.0
     max_reprojection_error_px: float = 10.0
@@ -134,6 +136,7 @@ class TightConfig:
         require_range("tof_sigma_0_m", self.tof_sigma_0_m, 0.0)
         require_range("tof_sigma_per_m", self.tof_sigma_per_m, 0.0)
         require_range("tof_resolution_m", self.tof_resolution_m, 0.0)
+        require_range("tof_sigma_min_m", self.tof_sigma_min_m, 0.0)
         require_range("max_iterations", self.max_iterations, 1)
         require_range("range_gate_sigma", self.range_gate_sigma, 0.0, low_inclusive=False)
         require_range(
@@ -156,7 +159,9 @@ class TightConfig:
 
     @property
     def tof_noise(self) -> TofNoiseModel:
-        return TofNoiseModel(self.tof_sigma_0_m, self.tof_sigma_per_m, self.tof_resolution_m)
+        return TofNoiseModel(
+            self.tof_sigma_0_m, self.tof_sigma_per_m, self.tof_resolution_m, self.tof_sigma_min_m
+        )
 
 
 def rotation_exp(dtheta: np.ndarray) -> np.ndarray:
