@@ -81,11 +81,41 @@ class CornerBias:
         return any(v != 0.0 for v in (self.a_px, self.b_px, self.c_px2))
 
     def displacement(self, quad: np.ndarray) -> np.ndarray:
-        """Each corner's systematic offset (detected minus true, 4x2 px; zeros if degenerate)."""
-        design = corner_design(quad)
-        if design is None:
+        """Each corner's systematic offset (detected minus true, 4x2 px; zeros if degenerate).
+
+        Written out in plain floats (it runs on every frame of ``tight``): numpy's per-call
+        overhead on 2-vectors costs more than the arithmetic; equal to ``corner_design(quad)
+        @ (a, b, c)`` (tested).
+        """
+        quad = np.asarray(quad, dtype=float)
+        if quad.shape != (4, 2) or not np.isfinite(quad).all():
             return np.zeros((4, 2))
-        return design @ np.array([self.a_px, self.b_px, self.c_px2])
+        pts = quad.tolist()
+        cx = 0.25 * (pts[0][0] + pts[1][0] + pts[2][0] + pts[3][0])
+        cy = 0.25 * (pts[0][1] + pts[1][1] + pts[2][1] + pts[3][1])
+        normals, offsets = [], []
+        for i in range(4):
+            (x0, y0), (x1, y1) = pts[i], pts[(i + 1) % 4]
+            ex, ey = x1 - x0, y1 - y0
+            length = math.hypot(ex, ey)
+            if not length > 0.0:
+                return np.zeros((4, 2))
+            nx, ny = ey / length, -ex / length
+            if nx * (0.5 * (x0 + x1) - cx) + ny * (0.5 * (y0 + y1) - cy) < 0.0:
+                nx, ny = -nx, -ny
+            s2 = (2.0 * ex * ey / (length * length)) ** 2  # sin²(2φ)
+            normals.append((nx, ny))
+            offsets.append(self.a_px + self.b_px * s2 + self.c_px2 / length)
+        out = np.empty((4, 2))
+        for i in range(4):
+            (ax, ay), (bx, by) = normals[i - 1], normals[i]
+            det = ax * by - ay * bx
+            if abs(det) < 1e-6:
+                return np.zeros((4, 2))
+            oa, ob = offsets[i - 1], offsets[i]
+            out[i, 0] = (oa * by - ob * ay) / det
+            out[i, 1] = (ax * ob - bx * oa) / det
+        return out
 
     def correct(self, corners: np.ndarray) -> np.ndarray:
         """The detected corners with the offset removed (unchanged where any is unusable)."""

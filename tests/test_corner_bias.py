@@ -61,6 +61,16 @@ def test_the_fit_recovers_a_known_offset_and_the_noise_left_over() -> None:
     assert CornerBiasFit.from_dict(fit.as_dict()) == fit
 
 
+def test_the_per_frame_displacement_equals_the_fits_design() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        pixels = tag_pixels(rng, rng.uniform(0.8, 3.5))
+        design = corner_design(pixels)
+        assert design is not None
+        theta = np.array([REALISTIC.a_px, REALISTIC.b_px, REALISTIC.c_px2])
+        np.testing.assert_allclose(REALISTIC.displacement(pixels), design @ theta, atol=1e-12)
+
+
 def test_correcting_detected_corners_gives_the_true_ones_back() -> None:
     rng = np.random.default_rng(4)
     for _ in range(20):
