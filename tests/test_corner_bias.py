@@ -6,6 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from estimation.camera_model import CameraIntrinsics
@@ -134,3 +136,15 @@ def test_the_intrinsics_file_keeps_the_tag_corner_fit(tmp_path) -> None:
     del doc["tag_corners"]
     path.write_text(json.dumps(doc))
     assert IntrinsicsCalibrationResult.load(path).tag_corners is None
+
+
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=8, max_size=8))
+def test_fuzzed_corners_never_raise_and_stay_finite_where_they_were(values) -> None:
+    corners = np.array(values).reshape(4, 2)
+    corrected = REALISTIC.correct(corners)
+    assert corrected.shape == (4, 2)
+    finite = np.isfinite(corners)
+    # a correction is applied only to a finite quadrilateral, and is finite (or it is skipped)
+    assert np.array_equal(np.isfinite(corrected), finite) or not finite.all()
+    if not finite.all():
+        np.testing.assert_array_equal(corrected, corners)
