@@ -103,7 +103,8 @@ class CornerBias:
             nx, ny = ey / length, -ex / length
             if nx * (0.5 * (x0 + x1) - cx) + ny * (0.5 * (y0 + y1) - cy) < 0.0:
                 nx, ny = -nx, -ny
-            s2 = (2.0 * ex * ey / (length * length)) ** 2  # sin²(2φ)
+            sin2 = 2.0 * (ex / length) * (ey / length)  # sin(2φ)
+            s2 = sin2 * sin2
             normals.append((nx, ny))
             offsets.append(self.a_px + self.b_px * s2 + self.c_px2 / length)
         out = np.empty((4, 2))
@@ -115,6 +116,8 @@ class CornerBias:
             oa, ob = offsets[i - 1], offsets[i]
             out[i, 0] = (oa * by - ob * ay) / det
             out[i, 1] = (ax * ob - bx * oa) / det
+        if not np.isfinite(out).all():  # corners so far apart that the arithmetic overflows
+            return np.zeros((4, 2))
         return out
 
     def correct(self, corners: np.ndarray) -> np.ndarray:
@@ -122,7 +125,8 @@ class CornerBias:
         corners = np.asarray(corners, dtype=float)
         if not self.active:
             return corners
-        return corners - self.displacement(corners)
+        corrected = corners - self.displacement(corners)
+        return corrected if np.isfinite(corrected).all() else corners
 
 
 @dataclass(frozen=True)
