@@ -3,10 +3,10 @@
 A real camera blurs the image in linear light (optics, demosaicing, resampling) and then
 applies a gamma curve; at the edge of the tag's dark border the 50 % level the detector's
 edge fit finds then lies inside the true edge, so the detected tag is *smaller* than the
-tag: on the realistic camera by 0.04 px per edge for edges along the pixel grid and 0.2 px
-for diagonal ones (blurring and demosaicing act over a wider footprint across a diagonal
-edge), and by more on a smaller tag (the corners' rounding weighs more in a shorter edge
-fit).  A chessboard calibration cannot see this (its saddle corners are symmetric), but it
+tag: on the realistic camera, for a 70 px tag, by 0.09 px per edge for edges along the
+pixel grid and 0.19 px for diagonal ones (blurring and demosaicing act over a wider footprint
+across a diagonal edge), and by more on a smaller tag (the corners' rounding weighs more in
+a shorter edge fit).  A chessboard calibration cannot see this (its saddle corners are symmetric), but it
 matters: a 0.1 px shrink of a 70 px tag reads as a 3 mm longer distance at 2 m, which the
 ToF ranges then contradict.
 
