@@ -3,12 +3,12 @@
 A real camera blurs the image in linear light (optics, demosaicing, resampling) and then
 applies a gamma curve; at the edge of the tag's dark border the 50 % level the detector's
 edge fit finds then lies inside the true edge, so the detected tag is *smaller* than the
-tag: on the realistic camera, for a 70 px tag, by 0.09 px per edge for edges along the
-pixel grid and 0.19 px for diagonal ones (blurring and demosaicing act over a wider footprint
+tag: on the realistic camera, for a 70 px tag, by 0.09 px per edge for edges along the pixel
+grid and 0.19 px for diagonal ones (blurring and demosaicing act over a wider footprint
 across a diagonal edge), and by more on a smaller tag (the corners' rounding weighs more in
-a shorter edge fit).  A chessboard calibration cannot see this (its saddle corners are symmetric), but it
-matters: a 0.1 px shrink of a 70 px tag reads as a 3 mm longer distance at 2 m, which the
-ToF ranges then contradict.
+a shorter edge fit).  A chessboard calibration cannot see this (its saddle corners are
+symmetric), but it matters: a 0.1 px shrink of a 70 px tag reads as a 3 mm longer distance
+at 2 m, which the ToF ranges then contradict.
 
 Model: each edge of the detected quadrilateral lies ``offset(edge)`` pixels outside the true
 edge along its outward normal,
@@ -129,14 +129,38 @@ class CornerBias:
         return corrected if np.isfinite(corrected).all() else corners
 
 
+def edge_axis_alignment(quad: np.ndarray) -> float:
+    """The mean of cos²(2φ) over the quadrilateral's edges: 1 when they lie along the pixel
+    axes, 0 on the diagonals (NaN for unusable corners)."""
+    pts = np.asarray(quad, dtype=float).reshape(4, 2).tolist()  # plain floats: per frame
+    total = 0.0
+    for i in range(4):
+        ex = pts[(i + 1) % 4][0] - pts[i][0]
+        ey = pts[(i + 1) % 4][1] - pts[i][1]
+        xx, yy = ex * ex, ey * ey
+        if not (xx + yy > 0.0 and math.isfinite(xx + yy)):
+            return math.nan
+        c2 = (xx - yy) / (xx + yy)  # cos(2φ)
+        total += c2 * c2
+    return 0.25 * total
+
+
 @dataclass(frozen=True)
 class CornerBiasFit:
-    """The fitted offset, the corners' residual noise after it and what it was fitted on."""
+    """The fitted offset, the corners' residual noise after it and what it was fitted on.
+
+    ``sigma_px``: the residual noise over all views; ``sigma_diagonal_px`` /
+    ``sigma_axes_px``: its model against the edges' angle, ``sigma² = d² + (a² - d²)
+    cos²(2φ)`` (edges along the pixel axes are noisier: their sub-pixel phase is the same
+    along the whole edge, so its error does not average out).
+    """
 
     bias: CornerBias
     sigma_px: float
     sigma_uncorrected_px: float
     views: int
+    sigma_diagonal_px: float = 0.0  # 0: not measured (sigma_px at every angle)
+    sigma_axes_px: float = 0.0
 
     def as_dict(self) -> dict:
         return {
@@ -146,6 +170,8 @@ class CornerBiasFit:
             "sigma_px": self.sigma_px,
             "sigma_uncorrected_px": self.sigma_uncorrected_px,
             "views": self.views,
+            "sigma_diagonal_px": self.sigma_diagonal_px,
+            "sigma_axes_px": self.sigma_axes_px,
         }
 
     @classmethod
@@ -159,6 +185,8 @@ class CornerBiasFit:
             float(doc["sigma_px"]),
             float(doc["sigma_uncorrected_px"]),
             int(doc["views"]),
+            float(doc.get("sigma_diagonal_px", 0.0)),
+            float(doc.get("sigma_axes_px", 0.0)),
         )
 
 
@@ -170,7 +198,7 @@ def fit_corner_bias(detected: Sequence[np.ndarray], true: Sequence[np.ndarray]) 
     calibration shifts all four corners alike, which is not an edge offset).  ``sigma_px``:
     the RMS per coordinate of what the model leaves (3 parameters and 2 per view taken off).
     """
-    rows, rhs, raw = [], [], []
+    rows, rhs, raw, alignment = [], [], [], []
     for q, p in zip(detected, true, strict=True):
         q = np.asarray(q, dtype=float)
         p = np.asarray(p, dtype=float)
@@ -183,6 +211,7 @@ def fit_corner_bias(detected: Sequence[np.ndarray], true: Sequence[np.ndarray]) 
         rows.append(design.reshape(8, 3))
         rhs.append(residual.reshape(8))
         raw.append(residual.reshape(8))
+        alignment.append(edge_axis_alignment(p))
     if len(rows) < 3:
         raise ValueError(f"need at least 3 usable views, got {len(rows)}")
     a = np.vstack(rows)
@@ -191,12 +220,25 @@ def fit_corner_bias(detected: Sequence[np.ndarray], true: Sequence[np.ndarray]) 
     left = b - a @ theta
     dof = max(len(b) - 3 - 2 * len(rows), 1)
     raw_all = np.concatenate(raw)
+    # each view's mean square (6 degrees of freedom of 8 after its mean) against cos²(2φ)
+    view_ms = np.sum(left.reshape(-1, 8) ** 2, axis=1) / 6.0
+    design = np.column_stack([np.ones(len(view_ms)), alignment])
+    (d2, slope), *_ = np.linalg.lstsq(design, view_ms, rcond=None)
+    floor = 1e-8
     return CornerBiasFit(
         CornerBias(*(float(v) for v in theta)),
         math.sqrt(float(left @ left) / dof),
         math.sqrt(float(raw_all @ raw_all) / max(len(raw_all) - 2 * len(rows), 1)),
         len(rows),
+        math.sqrt(max(float(d2), floor)),
+        math.sqrt(max(float(d2 + slope), floor)),
     )
 
 
-__all__ = ["CornerBias", "CornerBiasFit", "corner_design", "fit_corner_bias"]
+__all__ = [
+    "CornerBias",
+    "CornerBiasFit",
+    "corner_design",
+    "edge_axis_alignment",
+    "fit_corner_bias",
+]

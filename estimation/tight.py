@@ -46,7 +46,7 @@ import numpy as np
 from estimation import geometry
 from estimation.atda import ippe_solutions
 from estimation.camera_model import CameraIntrinsics
-from estimation.corner_bias import CornerBias
+from estimation.corner_bias import CornerBias, edge_axis_alignment
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.estimator import (
     BAD_CORNERS,
@@ -87,7 +87,12 @@ class TightConfig:
     """Settings of :class:`TightEstimator`.
 
     ``pixel_sigma_px``: 1-sigma of a detected corner coordinate (default
-    :data:`estimation.noise.DEFAULT_PIXEL_SIGMA_PX`).  ``tof_sigma_0_m``,
+    :data:`estimation.noise.DEFAULT_PIXEL_SIGMA_PX`); with ``pixel_sigma_axes_px`` set (> 0)
+    it is the sigma when the tag's edges lie on the image diagonals, ``pixel_sigma_axes_px``
+    the sigma when they lie along the pixel axes, and each frame's is
+    ``sqrt(d² + (a² - d²) cos²(2φ))`` for its edges' angle φ
+    (:func:`estimation.corner_bias.edge_axis_alignment`; the tag rig measures both).
+    ``tof_sigma_0_m``,
     ``tof_sigma_per_m``, ``tof_resolution_m``, ``tof_sigma_min_m`` (a floor, 0 by default):
     the ToF noise model
     (:class:`estimation.noise.TofNoiseModel`; defaults: the VL53L1X model the simulator's
@@ -116,6 +121,7 @@ class TightConfig:
     """
 
     pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
+    pixel_sigma_axes_px: float = 0.0
     tof_sigma_0_m: float = VL53L1X_SIGMA_0_M
     tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
     tof_resolution_m: float = VL53L1X_RESOLUTION_M
@@ -133,6 +139,7 @@ class TightConfig:
 
     def __post_init__(self) -> None:
         require_range("pixel_sigma_px", self.pixel_sigma_px, 0.0, low_inclusive=False)
+        require_range("pixel_sigma_axes_px", self.pixel_sigma_axes_px, 0.0)
         require_range("tof_sigma_0_m", self.tof_sigma_0_m, 0.0)
         require_range("tof_sigma_per_m", self.tof_sigma_per_m, 0.0)
         require_range("tof_resolution_m", self.tof_resolution_m, 0.0)
@@ -523,6 +530,18 @@ class TightEstimator(GuardedEstimator):
         use = valid & (ranges > 0.0) & (ranges <= MAX_RANGE_M)
         return ranges[use], self.tof_positions_c[use]
 
+    def _pixel_sigma(self, corners: np.ndarray, usable: np.ndarray) -> float:
+        """This frame's corner sigma: the configured one, or its model against the edges'
+        angle to the pixel axes (the larger of the two ends when the angle is unknown)."""
+        cfg = self.config
+        diagonal, axes = cfg.pixel_sigma_px, cfg.pixel_sigma_axes_px
+        if not axes > 0.0:
+            return diagonal
+        alignment = edge_axis_alignment(corners) if usable.all() else math.nan
+        if not math.isfinite(alignment):
+            return max(diagonal, axes)
+        return math.sqrt(diagonal * diagonal + (axes * axes - diagonal * diagonal) * alignment)
+
     # -- starts ------------------------------------------------------------------------
     def _plane_start(
         self, undistorted: np.ndarray, model: np.ndarray, ranges: np.ndarray, sensors: np.ndarray
@@ -652,12 +671,13 @@ class TightEstimator(GuardedEstimator):
         if not starts:
             return DeckPoseEstimate.invalid(self.name, timestamp, NO_INITIAL_POSE)
         dropped = 0
+        pixel_sigma = self._pixel_sigma(corners, usable)
         while True:
             problem = TightProblem(
                 self._model[usable],
                 corners[usable],
                 self.intrinsics,
-                self.config.pixel_sigma_px,
+                pixel_sigma,
                 sensors,
                 ranges,
                 self._noise.sigma(ranges),
@@ -678,7 +698,7 @@ class TightEstimator(GuardedEstimator):
                 s for s in starts if s[0].startswith("ippe")
             ]
         n_px = 2 * problem.n_corners
-        pixel_res = solution.residuals[:n_px] * self.config.pixel_sigma_px
+        pixel_res = solution.residuals[:n_px] * problem.pixel_sigma_px
         rms_px = math.sqrt(float(pixel_res @ pixel_res) / problem.n_corners)
         if not rms_px <= self.config.max_reprojection_error_px:
             return DeckPoseEstimate.invalid(self.name, timestamp, REPROJECTION_ERROR)
@@ -695,6 +715,7 @@ class TightEstimator(GuardedEstimator):
         extras = {
             "cost": solution.cost,
             "reprojection_error_px": rms_px,
+            "pixel_sigma_px": problem.pixel_sigma_px,
             "ranges_used": problem.n_ranges,
             "ranges_dropped": dropped,
             "corners_used": problem.n_corners,

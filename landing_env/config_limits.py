@@ -109,6 +109,7 @@ LIMITS: dict[str, Limit] = {
     "estimation.tight.tof_sigma_per_m": _nonneg(1.0),
     "estimation.tight.tof_resolution_m": _nonneg(0.1, "VL53L1X reports whole millimetres"),
     "estimation.tight.tof_sigma_min_m": _nonneg(1.0),
+    "estimation.tight.pixel_sigma_axes_px": _nonneg(100.0, "0: pixel_sigma_px at every angle"),
     "estimation.tight.corner_bias_px": _sym(100.0, "detector edge offset a, b (px), c (px^2)"),
     "estimation.tight.max_iterations": Limit(1, 1000),
     "estimation.tight.range_gate_sigma": _positive(1e3, "gate in sigmas"),

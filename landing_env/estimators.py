@@ -234,7 +234,9 @@ def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
                 # the detector's corner offset and noise measured on this camera
                 bias = fit.bias
                 changes["corner_bias_px"] = (bias.a_px, bias.b_px, bias.c_px2)
-                changes["pixel_sigma_px"] = fit.sigma_px
+                measured = fit.sigma_diagonal_px > 0.0 and fit.sigma_axes_px > 0.0
+                changes["pixel_sigma_px"] = fit.sigma_diagonal_px if measured else fit.sigma_px
+                changes["pixel_sigma_axes_px"] = fit.sigma_axes_px if measured else 0.0
         return dataclasses.replace(settings, **changes)
     return settings
 

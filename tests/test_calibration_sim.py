@@ -157,7 +157,8 @@ def test_the_realistic_intrinsics_file_gives_tight_its_corner_offset_and_noise()
     assert fit is not None
     settings = _with_sensor_noise(TightConfig(), config)
     assert settings.corner_bias_px == (fit.bias.a_px, fit.bias.b_px, fit.bias.c_px2)
-    assert settings.pixel_sigma_px == fit.sigma_px
+    assert settings.pixel_sigma_px == fit.sigma_diagonal_px
+    assert settings.pixel_sigma_axes_px == fit.sigma_axes_px
     project = load_config("realistic", overrides={"camera.mode": "project"})
     assert _with_sensor_noise(TightConfig(), project).corner_bias_px == (0.0, 0.0, 0.0)
     exact = load_config("realistic", overrides={"estimation.intrinsics": "exact"})

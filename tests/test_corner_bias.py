@@ -11,7 +11,13 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from estimation.camera_model import CameraIntrinsics
-from estimation.corner_bias import CornerBias, CornerBiasFit, corner_design, fit_corner_bias
+from estimation.corner_bias import (
+    CornerBias,
+    CornerBiasFit,
+    corner_design,
+    edge_axis_alignment,
+    fit_corner_bias,
+)
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
 from estimation.synthetic import SyntheticScene
@@ -60,7 +66,41 @@ def test_the_fit_recovers_a_known_offset_and_the_noise_left_over() -> None:
     assert fit.bias.c_px2 == pytest.approx(REALISTIC.c_px2, abs=0.6)
     assert fit.sigma_px == pytest.approx(0.05, rel=0.1)
     assert fit.sigma_uncorrected_px > fit.sigma_px
+    assert fit.sigma_diagonal_px == pytest.approx(0.05, rel=0.15)
+    assert fit.sigma_axes_px == pytest.approx(0.05, rel=0.15)
     assert CornerBiasFit.from_dict(fit.as_dict()) == fit
+
+
+def test_the_fit_finds_noisier_corners_where_the_edges_lie_along_the_pixel_axes() -> None:
+    rng = np.random.default_rng(6)
+    true, detected = [], []
+    for _ in range(400):
+        pixels = tag_pixels(rng, rng.uniform(0.8, 3.5))
+        sigma = np.sqrt(0.04**2 + (0.12**2 - 0.04**2) * edge_axis_alignment(pixels))
+        true.append(pixels)
+        detected.append(pixels + REALISTIC.displacement(pixels) + rng.normal(0, sigma, (4, 2)))
+    fit = fit_corner_bias(detected, true)
+    assert fit.sigma_diagonal_px == pytest.approx(0.04, abs=0.01)
+    assert fit.sigma_axes_px == pytest.approx(0.12, rel=0.1)
+    square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    assert edge_axis_alignment(square) == pytest.approx(1.0)
+    assert edge_axis_alignment(square @ np.array([[1, 1], [-1, 1]]) / np.sqrt(2)) < 1e-12
+    assert np.isnan(edge_axis_alignment(np.zeros((4, 2))))
+
+
+def test_tight_weights_each_frame_by_its_edges_angle() -> None:
+    """With both ends of the noise model set, an axis-aligned tag's corners are weighted
+    by the axes' sigma and a diagonal one's by the diagonals'."""
+    scene = SyntheticScene(CAMERA, TAG_SIZE)
+    no_ranges = RangeReading(0.0, np.full(4, np.nan), np.zeros(4, bool))
+    settings = TightConfig(pixel_sigma_px=0.05, pixel_sigma_axes_px=0.1)
+    sigmas = []
+    for yaw in (0.0, np.pi / 4.0):
+        rotation = Rotation.from_euler("z", yaw).as_matrix()
+        m = scene.measure(rotation, np.array([0.0, 0.0, 2.0]))
+        estimator = TightEstimator(intrinsics=CAMERA, tag_size=TAG_SIZE, config=settings)
+        sigmas.append(estimator.estimate(m.frame, no_ranges).extras["pixel_sigma_px"])
+    np.testing.assert_allclose(sigmas, [0.1, 0.05], atol=1e-5)  # perspective: nearly diagonal
 
 
 def test_the_per_frame_displacement_equals_the_fits_design() -> None:
@@ -122,7 +162,7 @@ def test_tight_config_rejects_a_bad_offset_naming_the_key() -> None:
 
 
 def test_the_intrinsics_file_keeps_the_tag_corner_fit(tmp_path) -> None:
-    fit = CornerBiasFit(REALISTIC, 0.068, 0.19, 240)
+    fit = CornerBiasFit(REALISTIC, 0.068, 0.19, 240, 0.062, 0.073)
     result = IntrinsicsCalibrationResult(
         K=np.eye(3), dist=np.zeros(5), rms_reprojection_error=0.1,
         per_view_errors=np.zeros(2), image_size=(512, 512), tag_corners=fit.as_dict(),
