@@ -4,7 +4,9 @@ Runs the chessboard intrinsics calibration (CRHF Sec. 2.1–2.2) and the ToF–c
 calibration (IHRCF Sec. 2.2, CRHF Sec. 2.3) for a config's camera and ToF layout, prints
 their figures, and writes to ``--out`` (default ``results/calibration/``):
 
-* ``intrinsics.json``: K, distortion, reprojection errors, the camera it was made for;
+* ``intrinsics.json``: K, distortion, reprojection errors, the camera it was made for, and
+  the tag detector's corner offset and noise on that camera (a third rig, after K:
+  ``landing_env/calibration/tag_corner_sim.py``, :mod:`estimation.corner_bias`);
 * ``tof_camera.json``: the range → pixel samples of each sensor (the PCHIP look-up's data);
 * ``tof_camera_curves.png``: pixel against range per sensor with the PCHIP and hyperbola
   fits, and their error against the analytic touch-point pixel;
@@ -18,6 +20,7 @@ differs from the default config's, since the shipped files are for those.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 from dataclasses import dataclass
@@ -35,6 +38,11 @@ from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
     IntrinsicsSimReport,
     calibrate_intrinsics_in_sim,
+)
+from landing_env.calibration.tag_corner_sim import (
+    TagCornerReport,
+    TagRigConfig,
+    calibrate_tag_corners_in_sim,
 )
 from landing_env.calibration.tof_camera_sim import (
     TofRigConfig,
@@ -61,6 +69,7 @@ class CalibrationRun:
     intrinsics: IntrinsicsSimReport
     tof: TofSimReport
     files: dict[str, Path]
+    tag_corners: TagCornerReport | None = None
 
 
 def _layout_differences(config: DeckLandingConfig) -> list[str]:
@@ -76,10 +85,16 @@ def _layout_differences(config: DeckLandingConfig) -> list[str]:
     return differences
 
 
-def summary(intrinsics: IntrinsicsSimReport, tof: TofSimReport) -> dict:
-    """The figures of both calibrations as plain data."""
+def summary(
+    intrinsics: IntrinsicsSimReport, tof: TofSimReport, tags: TagCornerReport | None = None
+) -> dict:
+    """The figures of the calibrations as plain data."""
     result = intrinsics.result
+    tag_part = (
+        {} if tags is None else {"tag_corners": {**tags.fit.as_dict(), "missed": tags.missed_views}}
+    )
     return {
+        **tag_part,
         "intrinsics": {
             "views_used": intrinsics.views_used,
             "views_rejected": intrinsics.views_rejected,
@@ -241,7 +256,8 @@ def run_calibration(
                 f"this config differs in {', '.join(differences)}: write them with --out and "
                 "point estimation.intrinsics_file / estimation.tof_calibration_file at them",
             )
-    intrinsics_rng, tof_rng = np.random.default_rng(seed).spawn(2)
+    # spawn(3) gives the same first two streams as spawn(2) did before the tag rig
+    intrinsics_rng, tof_rng, tag_rng = np.random.default_rng(seed).spawn(3)
     rig = ChessboardRigConfig(views=views)
     if workers > 1 or address is not None:
         # the two calibrations side by side on Ray (the same generators: the same results)
@@ -265,6 +281,16 @@ def run_calibration(
             total=stages, desc="ToF–camera stages", unit="stage", disable=not progress
         ) as bar:
             tof = calibrate_tof_camera_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
+    # the tag detector's corner offset, against the corners projected through the new K
+    with tqdm(
+        total=TagRigConfig().stages, desc="tag-corner stages", unit="stage", disable=not progress
+    ) as bar:
+        tags = calibrate_tag_corners_in_sim(
+            cfg, intrinsics.result.to_intrinsics(), TagRigConfig(), tag_rng, bar.update
+        )
+    intrinsics = dataclasses.replace(
+        intrinsics, result=dataclasses.replace(intrinsics.result, tag_corners=tags.fit.as_dict())
+    )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {
@@ -276,8 +302,14 @@ def run_calibration(
     intrinsics.result.save(files["intrinsics"])
     tof.calibration.save(files["tof_camera"])
     plot_curves(tof, files["plot"])
-    files["summary"].write_text(json.dumps(summary(intrinsics, tof), indent=1))
+    files["summary"].write_text(json.dumps(summary(intrinsics, tof, tags), indent=1))
     print_summary(console, intrinsics, tof)
+    fit = tags.fit
+    console.print(
+        f"[bold]Tag corners[/bold] ({fit.views} views, {tags.missed_views} missed): edge offset "
+        f"{fit.bias.a_px:+.3f} {fit.bias.b_px:+.3f}·sin²2φ {fit.bias.c_px2:+.2f}/L px; corner "
+        f"noise {fit.sigma_px:.3f} px after it ({fit.sigma_uncorrected_px:.3f} px before)"
+    )
     if install:
         CALIBRATION_DIR.mkdir(parents=True, exist_ok=True)
         for key, name in (("intrinsics", INTRINSICS_NAME), ("tof_camera", TOF_NAME)):
@@ -286,7 +318,7 @@ def run_calibration(
             files[f"installed_{key}"] = target
     for key, path in files.items():
         console.print(f"{key}: {path}")
-    return CalibrationRun(intrinsics=intrinsics, tof=tof, files=files)
+    return CalibrationRun(intrinsics=intrinsics, tof=tof, files=files, tag_corners=tags)
 
 
 def _calibrate(args: argparse.Namespace) -> int:

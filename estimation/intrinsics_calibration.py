@@ -58,6 +58,8 @@ class IntrinsicsCalibrationResult:
 
     ``metadata``: free-form provenance saved with the result (e.g. which simulated camera
     was calibrated, so that a user of the file can tell whether it fits their camera).
+    ``tag_corners``: optional, the tag detector's corner offset and noise on this camera
+    (:class:`estimation.corner_bias.CornerBiasFit` as a dict), measured after K.
     """
 
     K: np.ndarray
@@ -66,6 +68,7 @@ class IntrinsicsCalibrationResult:
     per_view_errors: np.ndarray
     image_size: tuple[int, int]
     metadata: dict = field(default_factory=dict)
+    tag_corners: dict | None = None
 
     def to_intrinsics(self) -> CameraIntrinsics:
         """The result as the project's :class:`CameraIntrinsics`."""
@@ -94,6 +97,8 @@ class IntrinsicsCalibrationResult:
             "per_view_errors_px": self.per_view_errors.tolist(),
             "metadata": self.metadata,
         }
+        if self.tag_corners is not None:
+            doc["tag_corners"] = self.tag_corners
         Path(path).write_text(json.dumps(doc, indent=1))
 
     @classmethod
@@ -111,6 +116,7 @@ class IntrinsicsCalibrationResult:
             per_view_errors=np.asarray(doc["per_view_errors_px"], dtype=float),
             image_size=(int(doc["image_size"][0]), int(doc["image_size"][1])),
             metadata=dict(doc.get("metadata", {})),
+            tag_corners=dict(doc["tag_corners"]) if "tag_corners" in doc else None,
         )
 
 

@@ -39,8 +39,10 @@ DEFAULT_PIXEL_SIGMA_PX = 0.2
 
 @dataclass(frozen=True)
 class TofNoiseModel:
-    """Gaussian range noise ``sigma(r) = sigma_0_m + sigma_per_m * r``, plus the uniform
-    quantisation of a sensor that reports in steps of ``resolution_m`` (variance step²/12).
+    """Gaussian range noise ``sigma(r) = max(sigma_min_m, sigma_0_m + sigma_per_m * r)``,
+    plus the uniform quantisation of a sensor that reports in steps of ``resolution_m``
+    (variance step²/12).  ``sigma_min_m`` (default 0) gives a floor, as in the issue's
+    synthetic model ``max(5 mm, 0.5 % of range)``.
 
     Exact ranges (all zero) keep the floor :data:`EXACT_RANGE_SIGMA_M`, so that weights
     stay finite and a range is still compared with the plane at a scale it can meet.
@@ -49,11 +51,13 @@ class TofNoiseModel:
     sigma_0_m: float = VL53L1X_SIGMA_0_M
     sigma_per_m: float = VL53L1X_SIGMA_PER_M
     resolution_m: float = VL53L1X_RESOLUTION_M
+    sigma_min_m: float = 0.0
 
     def __post_init__(self) -> None:
         require_range("sigma_0_m", self.sigma_0_m, 0.0)
         require_range("sigma_per_m", self.sigma_per_m, 0.0)
         require_range("resolution_m", self.resolution_m, 0.0)
+        require_range("sigma_min_m", self.sigma_min_m, 0.0)
 
     @classmethod
     def exact(cls) -> TofNoiseModel:
@@ -62,13 +66,24 @@ class TofNoiseModel:
 
     def scaled(self, factor: float) -> TofNoiseModel:
         """The model with its Gaussian part multiplied by ``factor`` (sweeps)."""
-        return TofNoiseModel(self.sigma_0_m * factor, self.sigma_per_m * factor, self.resolution_m)
+        return TofNoiseModel(
+            self.sigma_0_m * factor,
+            self.sigma_per_m * factor,
+            self.resolution_m,
+            self.sigma_min_m * factor,
+        )
+
+    def gaussian_sigma(self, ranges: np.ndarray | float) -> np.ndarray:
+        """1-sigma of the Gaussian part at ``ranges`` metres (no quantisation, no floor for
+        exact ranges): what a simulator draws before rounding to ``resolution_m``."""
+        linear = self.sigma_0_m + self.sigma_per_m * np.asarray(ranges, dtype=float)
+        return np.maximum(linear, self.sigma_min_m)
 
     def sigma(self, ranges: np.ndarray | float) -> np.ndarray:
         """1-sigma of a reading at ``ranges`` metres, quantisation included (floored)."""
-        gauss = self.sigma_0_m + self.sigma_per_m * np.asarray(ranges, dtype=float)
+        gauss = self.gaussian_sigma(ranges)
         return np.maximum(np.sqrt(gauss * gauss + self.resolution_m**2 / 12.0), EXACT_RANGE_SIGMA_M)
 
     def sigma_scalar(self, range_m: float) -> float:
-        gauss = self.sigma_0_m + self.sigma_per_m * range_m
+        gauss = max(self.sigma_0_m + self.sigma_per_m * range_m, self.sigma_min_m)
         return max(math.sqrt(gauss * gauss + self.resolution_m**2 / 12.0), EXACT_RANGE_SIGMA_M)

@@ -46,6 +46,7 @@ import numpy as np
 from estimation import geometry
 from estimation.atda import ippe_solutions
 from estimation.camera_model import CameraIntrinsics
+from estimation.corner_bias import CornerBias, edge_axis_alignment
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.estimator import (
     BAD_CORNERS,
@@ -86,8 +87,14 @@ class TightConfig:
     """Settings of :class:`TightEstimator`.
 
     ``pixel_sigma_px``: 1-sigma of a detected corner coordinate (default
-    :data:`estimation.noise.DEFAULT_PIXEL_SIGMA_PX`).  ``tof_sigma_0_m``,
-    ``tof_sigma_per_m``, ``tof_resolution_m``: the ToF noise model
+    :data:`estimation.noise.DEFAULT_PIXEL_SIGMA_PX`); with ``pixel_sigma_axes_px`` set (> 0)
+    it is the sigma when the tag's edges lie on the image diagonals, ``pixel_sigma_axes_px``
+    the sigma when they lie along the pixel axes, and each frame's is
+    ``sqrt(d² + (a² - d²) cos²(2φ))`` for its edges' angle φ
+    (:func:`estimation.corner_bias.edge_axis_alignment`; the tag rig measures both).
+    ``tof_sigma_0_m``,
+    ``tof_sigma_per_m``, ``tof_resolution_m``, ``tof_sigma_min_m`` (a floor, 0 by default):
+    the ToF noise model
     (:class:`estimation.noise.TofNoiseModel`; defaults: the VL53L1X model the simulator's
     ``tof.noise: vl53l1x`` draws from).  ``max_iterations``: LM iterations per start.
     ``range_gate_sigma``: a range further than this many sigma from the solution is dropped
@@ -103,15 +110,22 @@ class TightConfig:
     and their projection through the calibrated camera (the calibrations' disagreement,
     which CRHF removes by estimating its own principal point, CRHF Sec. 2.7: a chessboard
     calibration off by 0.3 px in cx shifts x by 1.3 mm at 2 m); ``"calibrated"`` keeps K.
+    ``corner_bias_px``: the detector's edge offset ``(a, b, c)`` on this camera
+    (:class:`estimation.corner_bias.CornerBias`: ``a + b sin²(2φ) + c / L`` pixels outward
+    per tag edge), removed from the detected corners before they enter the cost; measured
+    with the intrinsics (``deck-landing calibrate`` stores it in the intrinsics file).
     ``noise_from_sensors``: a host that knows its sensors (the simulator) replaces the ToF
-    noise above by the configured sensor's model, and the pixel sigma by the camera's
-    configured corner noise where it has one.
+    noise above by the configured sensor's model, and the pixel sigma and corner offset by
+    the camera's: the configured corner noise in ``project`` mode (no offset), the
+    calibrated ones of the intrinsics file when rendering.
     """
 
     pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
+    pixel_sigma_axes_px: float = 0.0
     tof_sigma_0_m: float = VL53L1X_SIGMA_0_M
     tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
     tof_resolution_m: float = VL53L1X_RESOLUTION_M
+    tof_sigma_min_m: float = 0.0
     max_iterations: int = 12
     range_gate_sigma: float = 6.0
     max_reprojection_error_px: float = 10.0
@@ -120,13 +134,16 @@ class TightConfig:
     history_timeout_s: float = 0.5
     start_cost_margin: float = 50.0
     principal_point: str = "touch_points"
+    corner_bias_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
     noise_from_sensors: bool = True
 
     def __post_init__(self) -> None:
         require_range("pixel_sigma_px", self.pixel_sigma_px, 0.0, low_inclusive=False)
+        require_range("pixel_sigma_axes_px", self.pixel_sigma_axes_px, 0.0)
         require_range("tof_sigma_0_m", self.tof_sigma_0_m, 0.0)
         require_range("tof_sigma_per_m", self.tof_sigma_per_m, 0.0)
         require_range("tof_resolution_m", self.tof_resolution_m, 0.0)
+        require_range("tof_sigma_min_m", self.tof_sigma_min_m, 0.0)
         require_range("max_iterations", self.max_iterations, 1)
         require_range("range_gate_sigma", self.range_gate_sigma, 0.0, low_inclusive=False)
         require_range(
@@ -140,10 +157,18 @@ class TightConfig:
         require_range("history_timeout_s", self.history_timeout_s, 0.0)
         require_range("start_cost_margin", self.start_cost_margin, 0.0)
         require_choice("principal_point", self.principal_point, PRINCIPAL_POINT_SOURCES)
+        if len(self.corner_bias_px) != 3 or not all(
+            math.isfinite(float(v)) for v in self.corner_bias_px
+        ):
+            raise ConfigError(
+                "corner_bias_px", f"{self.corner_bias_px!r}: need three finite numbers (a, b, c)"
+            )
 
     @property
     def tof_noise(self) -> TofNoiseModel:
-        return TofNoiseModel(self.tof_sigma_0_m, self.tof_sigma_per_m, self.tof_resolution_m)
+        return TofNoiseModel(
+            self.tof_sigma_0_m, self.tof_sigma_per_m, self.tof_resolution_m, self.tof_sigma_min_m
+        )
 
 
 def rotation_exp(dtheta: np.ndarray) -> np.ndarray:
@@ -454,6 +479,7 @@ class TightEstimator(GuardedEstimator):
             )
         self.intrinsics = intrinsics
         self._noise = self.config.tof_noise
+        self._corner_bias = CornerBias(*(float(v) for v in self.config.corner_bias_px))
         self._model = tag_corners_in_tag_frame(self.tag_size)
         self._k = intrinsics.matrix
         self._undistorter = geometry.Undistorter(intrinsics)
@@ -503,6 +529,18 @@ class TightEstimator(GuardedEstimator):
             return np.empty(0), np.empty((0, 3))
         use = valid & (ranges > 0.0) & (ranges <= MAX_RANGE_M)
         return ranges[use], self.tof_positions_c[use]
+
+    def _pixel_sigma(self, corners: np.ndarray, usable: np.ndarray) -> float:
+        """This frame's corner sigma: the configured one, or its model against the edges'
+        angle to the pixel axes (the larger of the two ends when the angle is unknown)."""
+        cfg = self.config
+        diagonal, axes = cfg.pixel_sigma_px, cfg.pixel_sigma_axes_px
+        if not axes > 0.0:
+            return diagonal
+        alignment = edge_axis_alignment(corners) if usable.all() else math.nan
+        if not math.isfinite(alignment):
+            return max(diagonal, axes)
+        return math.sqrt(diagonal * diagonal + (axes * axes - diagonal * diagonal) * alignment)
 
     # -- starts ------------------------------------------------------------------------
     def _plane_start(
@@ -621,6 +659,8 @@ class TightEstimator(GuardedEstimator):
         corners, usable, reason = self._corners(frame)
         if corners is None:
             return DeckPoseEstimate.invalid(self.name, timestamp, reason)
+        if usable.all():
+            corners = self._corner_bias.correct(corners)
         undistorted = corners.copy()
         if self._undistorter.active:
             undistorted[usable] = self._undistorter(corners[usable])
@@ -631,12 +671,13 @@ class TightEstimator(GuardedEstimator):
         if not starts:
             return DeckPoseEstimate.invalid(self.name, timestamp, NO_INITIAL_POSE)
         dropped = 0
+        pixel_sigma = self._pixel_sigma(corners, usable)
         while True:
             problem = TightProblem(
                 self._model[usable],
                 corners[usable],
                 self.intrinsics,
-                self.config.pixel_sigma_px,
+                pixel_sigma,
                 sensors,
                 ranges,
                 self._noise.sigma(ranges),
@@ -657,7 +698,7 @@ class TightEstimator(GuardedEstimator):
                 s for s in starts if s[0].startswith("ippe")
             ]
         n_px = 2 * problem.n_corners
-        pixel_res = solution.residuals[:n_px] * self.config.pixel_sigma_px
+        pixel_res = solution.residuals[:n_px] * problem.pixel_sigma_px
         rms_px = math.sqrt(float(pixel_res @ pixel_res) / problem.n_corners)
         if not rms_px <= self.config.max_reprojection_error_px:
             return DeckPoseEstimate.invalid(self.name, timestamp, REPROJECTION_ERROR)
@@ -674,6 +715,7 @@ class TightEstimator(GuardedEstimator):
         extras = {
             "cost": solution.cost,
             "reprojection_error_px": rms_px,
+            "pixel_sigma_px": problem.pixel_sigma_px,
             "ranges_used": problem.n_ranges,
             "ranges_dropped": dropped,
             "corners_used": problem.n_corners,

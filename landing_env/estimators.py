@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
+from estimation.corner_bias import CornerBiasFit
 from estimation.estimator import DeckPoseEstimator
 from estimation.fusion import FusionConfig
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
@@ -148,6 +149,19 @@ def load_intrinsics(config: DeckLandingConfig) -> CameraIntrinsics:
     return result.to_intrinsics()
 
 
+def load_tag_corner_fit(config: DeckLandingConfig) -> CornerBiasFit | None:
+    """The tag corners' offset and noise the intrinsics file measured for its camera (None
+    with ``estimation.intrinsics: exact`` or a file made without them)."""
+    if config.estimation.intrinsics == "exact":
+        return None
+    path = config.estimation.intrinsics_path
+    try:
+        result = IntrinsicsCalibrationResult.load(path)
+        return None if result.tag_corners is None else CornerBiasFit.from_dict(result.tag_corners)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError("estimation.intrinsics_file", f"{path}: {exc}") from None
+
+
 def load_tof_calibration(config: DeckLandingConfig) -> TofCameraCalibration:
     """The ToF–camera look-up IHRCF and CRHF use: the calibration file's, or the exact map."""
     est = config.estimation
@@ -214,6 +228,15 @@ def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
             # the analytic camera's corner noise is exactly the configured one (0: exact
             # corners, weighted as 0.01 px so that the weights stay finite)
             changes["pixel_sigma_px"] = max(camera.pixel_noise_px, PROJECT_PIXEL_SIGMA_FLOOR_PX)
+        else:
+            fit = load_tag_corner_fit(config)
+            if fit is not None:
+                # the detector's corner offset and noise measured on this camera
+                bias = fit.bias
+                changes["corner_bias_px"] = (bias.a_px, bias.b_px, bias.c_px2)
+                measured = fit.sigma_diagonal_px > 0.0 and fit.sigma_axes_px > 0.0
+                changes["pixel_sigma_px"] = fit.sigma_diagonal_px if measured else fit.sigma_px
+                changes["pixel_sigma_axes_px"] = fit.sigma_axes_px if measured else 0.0
         return dataclasses.replace(settings, **changes)
     return settings
 

@@ -129,3 +129,37 @@ def test_install_is_refused_for_another_camera(tmp_path) -> None:
     with pytest.raises(ConfigError, match="install"):
         run_calibration(config, out_dir=tmp_path, views=3, stages=2, install=True, progress=False)
     assert not any(tmp_path.iterdir())
+
+
+def test_the_tag_rig_measures_the_realistic_cameras_shrunken_tag() -> None:
+    """The realistic camera blurs in linear light before its gamma: the detected tag is
+    smaller than the tag, most on diagonal edges; the fitted offset explains most of the
+    corners' scatter."""
+    from landing_env.calibration.tag_corner_sim import TagRigConfig, calibrate_tag_corners_in_sim
+
+    config = load_config("realistic")
+    rig = TagRigConfig(stages=3, views_per_stage=8, min_height_m=1.5, max_height_m=2.5)
+    report = calibrate_tag_corners_in_sim(config, rig=rig, rng=np.random.default_rng(1))
+    fit = report.fit
+    assert report.missed_views == 0 and fit.views == 24
+    assert -0.2 < fit.bias.b_px < -0.05  # diagonal edges move inwards by 0.05-0.2 px more
+    assert fit.sigma_px < 0.6 * fit.sigma_uncorrected_px
+
+
+def test_the_realistic_intrinsics_file_gives_tight_its_corner_offset_and_noise() -> None:
+    """Rendering with the realistic calibration: tight gets the file's measured offset and
+    corner noise; project mode's analytic corners have no offset."""
+    from estimation.tight import TightConfig
+    from landing_env.estimators import _with_sensor_noise, load_tag_corner_fit
+
+    config = load_config("realistic")
+    fit = load_tag_corner_fit(config)
+    assert fit is not None
+    settings = _with_sensor_noise(TightConfig(), config)
+    assert settings.corner_bias_px == (fit.bias.a_px, fit.bias.b_px, fit.bias.c_px2)
+    assert settings.pixel_sigma_px == fit.sigma_diagonal_px
+    assert settings.pixel_sigma_axes_px == fit.sigma_axes_px
+    project = load_config("realistic", overrides={"camera.mode": "project"})
+    assert _with_sensor_noise(TightConfig(), project).corner_bias_px == (0.0, 0.0, 0.0)
+    exact = load_config("realistic", overrides={"estimation.intrinsics": "exact"})
+    assert load_tag_corner_fit(exact) is None

@@ -395,3 +395,33 @@ def test_the_drones_own_rotation_does_not_enter_the_deck_attitude() -> None:
     # and pitch, 0.24° in yaw)
     single = 0.8 * np.degrees(sigma_cd[3:])
     assert np.all(mean[:2] < 0.4 * single[:2]) and mean[2] < 0.8 * single[2], (mean, single)
+
+
+def test_the_deck_oscillator_swings_roll_and_pitch_about_level_with_the_stationary_spread() -> None:
+    """With a deck period set, roll and pitch follow a damped oscillator about level (yaw keeps
+    its rate), and with no measurement their variance settles at the second-order model's
+    q / (4 zeta w0^3) instead of growing without bound as under constant rates."""
+    from estimation.fusion.model import W, predict
+
+    period, psd, dt = 9.0, 0.002, 1.0 / 240.0
+    w0 = 2.0 * math.pi / period
+    hover = np.array([0.0, 0.0, 9.81])  # level drone at rest: no relative acceleration
+    x = np.zeros(N_STATE)
+    x[TH] = [0.05, -0.04, 0.3]
+    x[W] = [0.0, 0.0, 0.01]
+    cov = np.eye(N_STATE) * 1e-8
+    swing = x.copy()
+    for _ in range(round(period / 2.0 / dt)):  # half a period, undamped
+        swing, _ = predict(swing, cov, hover, np.eye(3), dt, 0.0, 0.0, 0.0, 0.0, w0, 0.0)
+    np.testing.assert_allclose(swing[TH][:2], [-0.05, 0.04], rtol=0.02)
+    assert swing[TH][2] == pytest.approx(0.3 + 0.01 * period / 2.0, rel=1e-9)
+    zeta = 0.3
+    for _ in range(round(60.0 / dt)):
+        x, cov = predict(x, cov, hover, np.eye(3), dt, 0.0, psd, 0.0, 0.0, w0, zeta)
+    stationary = psd / (4.0 * zeta * w0**3)
+    assert cov[6, 6] == pytest.approx(stationary, rel=0.1)
+    assert cov[7, 7] == pytest.approx(stationary, rel=0.1)
+    assert cov[8, 8] > 10.0 * stationary  # yaw: constant rate, its variance keeps growing
+    assert np.all(np.abs(x[TH][:2]) < 1e-3)  # damped back to level
+    with pytest.raises(ConfigError, match="deck_period_s"):
+        FusionConfig(deck_period_s=-1.0)

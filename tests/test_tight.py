@@ -331,12 +331,15 @@ def test_degenerate_inputs_give_invalid_estimates_not_exceptions(case: str) -> N
 )
 def test_fuzzed_inputs_never_raise(corners, ranges, valid) -> None:
     frame = CameraFrame(0.0, (TagDetection(0, np.array(corners).reshape(4, 2)),))
-    estimate = tight().estimate(frame, RangeReading(0.0, np.array(ranges), np.array(valid)))
-    if estimate.valid:
-        assert np.all(np.isfinite(estimate.as_vector()))
-        assert np.all(np.isfinite(estimate.covariance))
-    else:
-        assert estimate.reason
+    reading = RangeReading(0.0, np.array(ranges), np.array(valid))
+    # with and without the realistic camera's corner offset (estimation/corner_bias.py)
+    for estimator in (tight(), tight(corner_bias_px=(-0.017, -0.105, -4.96))):
+        estimate = estimator.estimate(frame, reading)
+        if estimate.valid:
+            assert np.all(np.isfinite(estimate.as_vector()))
+            assert np.all(np.isfinite(estimate.covariance))
+        else:
+            assert estimate.reason
 
 
 def test_config_rejects_bad_settings_naming_the_key() -> None:

@@ -52,6 +52,11 @@ class FusionConfig:
     deck_accel_psd: float = 0.02
     #: white deck angular-acceleration PSD (of the Euler angles), rad^2/s^3
     deck_angular_accel_psd: float = 0.002
+    #: the deck's roll/pitch natural period, s (0: constant-rate Euler angles, the white
+    #: angular acceleration above); with a period, roll and pitch are a damped oscillator about
+    #: level driven by that noise (estimation/fusion/model.py), damping ratio below
+    deck_period_s: float = 0.0
+    deck_damping_ratio: float = 0.3
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
     accel_noise_density: float = 1.0e-3
     accel_bias_random_walk: float = 4.0e-4
@@ -101,6 +106,8 @@ class FusionConfig:
         for name in (
             "deck_accel_psd",
             "deck_angular_accel_psd",
+            "deck_period_s",
+            "deck_damping_ratio",
             "accel_noise_density",
             "accel_bias_random_walk",
             "tof_sigma_per_m",
@@ -118,6 +125,11 @@ class FusionConfig:
             key = f"{name}_sigma"
             setattr(self, key, tuple(float(v) for v in getattr(self, key)))
             _check_sigmas(key, getattr(self, key))
+
+    @property
+    def deck_w0(self) -> float:
+        """The deck's natural angular frequency, rad/s (0: none)."""
+        return 2.0 * math.pi / self.deck_period_s if self.deck_period_s > 0.0 else 0.0
 
     @property
     def tof_noise(self) -> TofNoiseModel:

@@ -328,6 +328,8 @@ class DeckFusion:
                     cfg.deck_angular_accel_psd,
                     cfg.accel_noise_density,
                     cfg.accel_bias_random_walk,
+                    cfg.deck_w0,
+                    cfg.deck_damping_ratio,
                 )
             time = max(time, event.time)
         elif event.kind == "tof":

@@ -13,7 +13,11 @@ State (15), all in the world frame's axes W (gravity-aligned, z up):
 The drone's attitude R_WB is an *input* (the autopilot's attitude estimate), never a state:
 the filter estimates only the relative state.  The IMU's specific force gives the drone's
 acceleration ``R_WB (f - ba) + g``; the deck's acceleration is white noise (velocity random
-walk, PSD ``deck_accel_psd``), and so is the deck's Euler acceleration.
+walk, PSD ``deck_accel_psd``), and so is the deck's Euler acceleration, or, with a deck
+period set (``deck_period_s``), the deck's roll and pitch are a damped oscillator about level
+driven by that white noise (the second-order wave-response model of ship motion, e.g. Fossen,
+*Handbook of Marine Craft Hydrodynamics and Motion Control*, Sec. 10.2):
+``th'' = -w0² th - 2 zeta w0 th' + noise``.
 """
 
 from __future__ import annotations
@@ -93,15 +97,28 @@ def predict(
     q_angular: float,
     accel_noise_density: float,
     bias_walk: float,
+    deck_w0: float = 0.0,
+    deck_zeta: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """One IMU sample of prediction over ``dt`` (the sample's specific force, body frame)."""
+    """One IMU sample of prediction over ``dt`` (the sample's specific force, body frame).
+
+    ``deck_w0`` (rad/s, 0: constant Euler rates) and ``deck_zeta``: the deck's roll and pitch
+    oscillate about level with this natural frequency and damping ratio."""
     # relative acceleration = deck (zero mean) - drone (from the IMU)
     a_rel = -(r_wb @ (accel_b - x[BA])) - GRAVITY_W
     x = x.copy()
     x[P] += x[V] * dt + 0.5 * dt * dt * a_rel
     x[V] += a_rel * dt
-    x[TH] += x[W] * dt
+    rates = x[W].copy()
+    x[TH] += rates * dt
     f = np.eye(N_STATE)
+    if deck_w0 > 0.0:
+        # roll and pitch (not yaw): restoring towards level and damping, explicit Euler
+        stiffness, damping = deck_w0 * deck_w0 * dt, 2.0 * deck_zeta * deck_w0 * dt
+        angles = x[TH][:2] - rates[:2] * dt
+        x[9:11] -= stiffness * angles + damping * rates[:2]
+        f[9, 6] = f[10, 7] = -stiffness
+        f[9, 9] = f[10, 10] = 1.0 - damping
     f[P, V] = dt * _I3
     f[P, BA] = 0.5 * dt * dt * r_wb
     f[V, BA] = dt * r_wb
