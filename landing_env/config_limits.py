@@ -90,6 +90,7 @@ LIMITS: dict[str, Limit] = {
     "estimation.fusion.deck_angular_accel_psd": _nonneg(1e3),
     "estimation.fusion.deck_period_s": _nonneg(1e3, "0: no deck oscillator; ships roll at 5-30 s"),
     "estimation.fusion.deck_damping_ratio": _nonneg(10.0),
+    "estimation.fusion.deck_attitude_rms_deg": _positive(90.0, "roll, pitch"),
     "estimation.fusion.accel_noise_density": _NOISE_DENSITY,
     "estimation.fusion.accel_bias_random_walk": _NOISE_DENSITY,
     "estimation.fusion.initial_accel_bias_sigma": _positive(1e3),

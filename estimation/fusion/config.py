@@ -57,6 +57,14 @@ class FusionConfig:
     #: level driven by that noise (estimation/fusion/model.py), damping ratio below
     deck_period_s: float = 0.0
     deck_damping_ratio: float = 0.3
+    #: the sea's two wave components as seen in the deck's roll and in its pitch: periods, s
+    #: (empty: none).  With both set, roll and pitch are each the fourth-order model of two
+    #: components (estimation/fusion/model.py) with the damping ratio above, driven by the
+    #: white noise that gives the model the sea's spread deck_attitude_rms_deg (roll, pitch);
+    #: deck_period_s is then unused and deck_angular_accel_psd drives yaw alone
+    deck_roll_periods_s: tuple[float, ...] = ()
+    deck_pitch_periods_s: tuple[float, ...] = ()
+    deck_attitude_rms_deg: tuple[float, ...] = (3.0, 3.0)
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
     accel_noise_density: float = 1.0e-3
     accel_bias_random_walk: float = 4.0e-4
@@ -115,6 +123,21 @@ class FusionConfig:
             "tof_resolution_m",
         ):
             require_range(name, getattr(self, name), 0.0)
+        self.deck_roll_periods_s = tuple(float(v) for v in self.deck_roll_periods_s)
+        self.deck_pitch_periods_s = tuple(float(v) for v in self.deck_pitch_periods_s)
+        self.deck_attitude_rms_deg = tuple(float(v) for v in self.deck_attitude_rms_deg)
+        for key in ("deck_roll_periods_s", "deck_pitch_periods_s"):
+            periods = getattr(self, key)
+            if periods and (len(periods) != 2 or not all(p > 0.0 for p in periods)):
+                raise ConfigError(key, f"{periods!r}: two periods > 0 (s), or [] for none")
+        if bool(self.deck_roll_periods_s) != bool(self.deck_pitch_periods_s):
+            raise ConfigError("deck_pitch_periods_s", "set with deck_roll_periods_s, or neither")
+        if len(self.deck_attitude_rms_deg) != 2 or not all(
+            v > 0.0 for v in self.deck_attitude_rms_deg
+        ):
+            raise ConfigError("deck_attitude_rms_deg", "two values > 0: roll, pitch (deg)")
+        if self.deck_roll_periods_s and not self.deck_damping_ratio > 0.0:
+            raise ConfigError("deck_damping_ratio", "must be > 0 with the wave periods")
         for name in (
             "initial_accel_bias_sigma",
             "initial_velocity_sigma",
@@ -130,6 +153,29 @@ class FusionConfig:
     def deck_w0(self) -> float:
         """The deck's natural angular frequency, rad/s (0: none)."""
         return 2.0 * math.pi / self.deck_period_s if self.deck_period_s > 0.0 else 0.0
+
+    @property
+    def deck4(self) -> tuple | None:
+        """The fourth-order deck model per axis (roll, pitch), each ``(polynomial, PSD,
+        stationary sigmas of acceleration and jerk)`` (:func:`~estimation.fusion.model.
+        deck_spectrum`), or None when no wave periods are set."""
+        if not self.deck_roll_periods_s:
+            return None
+        from estimation.fusion.model import deck_spectrum
+
+        return tuple(
+            deck_spectrum(
+                2.0 * math.pi / periods[0],
+                2.0 * math.pi / periods[1],
+                self.deck_damping_ratio,
+                math.radians(rms),
+            )
+            for periods, rms in zip(
+                (self.deck_roll_periods_s, self.deck_pitch_periods_s),
+                self.deck_attitude_rms_deg,
+                strict=True,
+            )
+        )
 
     @property
     def tof_noise(self) -> TofNoiseModel:

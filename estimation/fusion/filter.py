@@ -32,6 +32,7 @@ from estimation.fusion.config import FusionConfig
 from estimation.fusion.model import (
     BA,
     N_STATE,
+    N_STATE_4,
     TH,
     P,
     V,
@@ -133,14 +134,16 @@ class DeckFusion:
         self.tof_origins_b = self.t_bc + mounts @ R_BC.T
         self._gates = {dof: float(chi2.ppf(config.gate_probability, dof)) for dof in range(1, 7)}
         self._tof_noise = config.tof_noise
+        self._deck4 = config.deck4
+        self._n = N_STATE_4 if self._deck4 is not None else N_STATE
         self.reset()
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self) -> None:
         """Forget everything (a new episode)."""
-        cov = np.zeros((N_STATE, N_STATE))
+        cov = np.zeros((self._n, self._n))
         cov[BA, BA] = np.eye(3) * self.config.initial_accel_bias_sigma**2
-        self._base = _Snapshot(-math.inf, np.zeros(N_STATE), cov, False, -math.inf)
+        self._base = _Snapshot(-math.inf, np.zeros(self._n), cov, False, -math.inf)
         self._head = self._base
         self._events: list[_Event] = []
         self._keys: list[tuple[float, int, int]] = []
@@ -330,6 +333,7 @@ class DeckFusion:
                     cfg.accel_bias_random_walk,
                     cfg.deck_w0,
                     cfg.deck_damping_ratio,
+                    self._deck4,
                 )
             time = max(time, event.time)
         elif event.kind == "tof":
@@ -353,10 +357,10 @@ class DeckFusion:
     ) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
         assert event.noise is not None and event.mask is not None
-        new_x = np.zeros(N_STATE)
+        new_x = np.zeros(self._n)
         new_x[P], new_x[TH] = event.data[:3], event.data[3:]
         new_x[BA] = x[BA]  # the IMU's bias does not depend on the vision
-        new_cov = np.zeros((N_STATE, N_STATE))
+        new_cov = np.zeros((self._n, self._n))
         noise = event.noise.copy()
         # a component the source does not give starts wide open (the gate will not bite)
         noise[~event.mask, :] = 0.0
@@ -368,6 +372,11 @@ class DeckFusion:
         new_cov[V, V] = np.eye(3) * cfg.initial_velocity_sigma**2
         new_cov[W, W] = np.eye(3) * cfg.initial_rate_sigma**2
         new_cov[BA, BA] = cov[BA, BA]
+        if self._deck4 is not None:
+            # the deck's angular acceleration and jerk start at the sea's stationary spread
+            for i, (_, _, (sigma_accel, sigma_jerk)) in enumerate(self._deck4):
+                new_cov[15 + i, 15 + i] = sigma_accel**2
+                new_cov[17 + i, 17 + i] = sigma_jerk**2
         return new_x, new_cov
 
     def _update_pose(
@@ -375,7 +384,7 @@ class DeckFusion:
     ) -> tuple[np.ndarray, np.ndarray, bool]:
         assert event.noise is not None and event.mask is not None
         mask = event.mask
-        h_full = np.zeros((6, N_STATE))
+        h_full = np.zeros((6, self._n))
         h_full[0:3, P] = np.eye(3)
         h_full[3:6, TH] = np.eye(3)
         innovation = event.data - np.concatenate([x[P], x[TH]])
@@ -468,7 +477,7 @@ class DeckFusion:
         x = head.x
         translation = r_wc.T @ (x[P] - r_wb @ self.t_bc)
         rotation = r_wc.T @ rotation_zyx(x[TH]) @ R_PD
-        jac = np.zeros((6, N_STATE))
+        jac = np.zeros((6, self._n))
         jac[0:3, P] = r_wc.T
         # d(euler of R_CD)/d(th) by central differences (three tiny matrix products)
         step = 1e-6

@@ -18,6 +18,14 @@ period set (``deck_period_s``), the deck's roll and pitch are a damped oscillato
 driven by that white noise (the second-order wave-response model of ship motion, e.g. Fossen,
 *Handbook of Marine Craft Hydrodynamics and Motion Control*, Sec. 10.2):
 ``th'' = -w0² th - 2 zeta w0 th' + noise``.
+
+With the sea's two wave components given (``deck_roll_periods_s``, ``deck_pitch_periods_s``)
+roll and pitch are each the fourth-order model of those components, the product of two such
+second-order factors ``(s² + 2 zeta w1 s + w1²)(s² + 2 zeta w2 s + w2²) th = noise`` in
+phase-variable form (a fourth-order wave spectrum with a peak at each component).  The
+state then has four more entries (``AJ``: the roll and pitch angular accelerations 15:17 and
+jerks 17:19), the white noise drives the jerk's rate, and its PSD is set so that the model's
+stationary roll/pitch spread is the sea's (:func:`deck_spectrum`): no tuned constant.
 """
 
 from __future__ import annotations
@@ -28,7 +36,11 @@ from functools import lru_cache
 import numpy as np
 
 N_STATE = 15
+#: the state's size with the fourth-order (two-component) deck model
+N_STATE_4 = 19
 P, V, TH, W, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+#: roll and pitch angular accelerations and jerks (fourth-order deck model only)
+AJ = slice(15, 19)
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
 _I3 = np.eye(3)
 
@@ -69,12 +81,49 @@ def deck_normal(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normal, jacobian
 
 
+def deck_polynomial(w1: float, w2: float, zeta: float) -> tuple[float, float, float, float]:
+    """``(a0, a1, a2, a3)`` of ``s⁴ + a3 s³ + a2 s² + a1 s + a0``, the product of the two
+    second-order factors ``s² + 2 zeta w s + w²``."""
+    b1, c1, b2, c2 = 2.0 * zeta * w1, w1 * w1, 2.0 * zeta * w2, w2 * w2
+    return (c1 * c2, b1 * c2 + b2 * c1, c1 + c2 + b1 * b2, b1 + b2)
+
+
+@lru_cache(maxsize=16)
+def deck_spectrum(
+    w1: float, w2: float, zeta: float, sigma_rad: float
+) -> tuple[tuple[float, float, float, float], float, tuple[float, float]]:
+    """The fourth-order deck model matched to a sea whose roll/pitch spread is ``sigma_rad``:
+    its polynomial, the driving PSD ``q`` (rad²/s⁷) that gives it that stationary variance
+    (continuous Lyapunov equation of the phase-variable form) and the stationary sigmas of the
+    angular acceleration and jerk (the priors of those states)."""
+    from scipy.linalg import solve_continuous_lyapunov
+
+    a0, a1, a2, a3 = deck_polynomial(w1, w2, zeta)
+    a = np.zeros((4, 4))
+    a[0, 1] = a[1, 2] = a[2, 3] = 1.0
+    a[3] = (-a0, -a1, -a2, -a3)
+    g = np.zeros((4, 4))
+    g[3, 3] = 1.0
+    unit = solve_continuous_lyapunov(a, -g)  # stationary covariance for q = 1
+    q = sigma_rad * sigma_rad / float(unit[0, 0])
+    return (a0, a1, a2, a3), q, (math.sqrt(q * unit[2, 2]), math.sqrt(q * unit[3, 3]))
+
+
 @lru_cache(maxsize=64)
 def _process_noise(
-    dt: float, q_accel: float, q_angular: float, accel_noise_density: float, bias_walk: float
+    dt: float,
+    q_accel: float,
+    q_angular: float,
+    accel_noise_density: float,
+    bias_walk: float,
+    q_deck4: tuple[float, float] | None = None,
 ) -> np.ndarray:
-    """The discrete process noise over ``dt`` (cached: it does not depend on the state)."""
-    q = np.zeros((N_STATE, N_STATE))
+    """The discrete process noise over ``dt`` (cached: it does not depend on the state).
+
+    ``q_deck4``: the fourth-order deck model's jerk-rate PSDs of roll and pitch, whose noise
+    then enters through the jerk alone (yaw keeps the white angular acceleration)."""
+    n = N_STATE_4 if q_deck4 is not None else N_STATE
+    q = np.zeros((n, n))
     d1, d2, d3 = dt, dt * dt / 2.0, dt * dt * dt / 3.0
     # white-acceleration (continuous) noise integrated over dt, per axis
     for pos, vel, psd in ((P, V, q_accel), (TH, W, q_angular)):
@@ -83,6 +132,11 @@ def _process_noise(
         q[vel, vel] = psd * d1 * _I3
     q[V, V] += accel_noise_density**2 * d1 * _I3
     q[BA, BA] = bias_walk**2 * d1 * _I3
+    if q_deck4 is not None:
+        for i in (6, 7, 9, 10):  # roll and pitch: angle and rate rows and columns
+            q[i, :] = 0.0
+            q[:, i] = 0.0
+        q[17, 17], q[18, 18] = q_deck4[0] * d1, q_deck4[1] * d1
     q.setflags(write=False)
     return q
 
@@ -99,11 +153,15 @@ def predict(
     bias_walk: float,
     deck_w0: float = 0.0,
     deck_zeta: float = 0.0,
+    deck4: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One IMU sample of prediction over ``dt`` (the sample's specific force, body frame).
 
     ``deck_w0`` (rad/s, 0: constant Euler rates) and ``deck_zeta``: the deck's roll and pitch
-    oscillate about level with this natural frequency and damping ratio."""
+    oscillate about level with this natural frequency and damping ratio.  ``deck4``: the
+    fourth-order model of roll and of pitch, each as :func:`deck_spectrum` gives it (the state
+    then has :data:`N_STATE_4` entries), in place of the oscillator."""
+    n = x.shape[0]
     # relative acceleration = deck (zero mean) - drone (from the IMU)
     a_rel = -(r_wb @ (accel_b - x[BA])) - GRAVITY_W
     x = x.copy()
@@ -111,8 +169,21 @@ def predict(
     x[V] += a_rel * dt
     rates = x[W].copy()
     x[TH] += rates * dt
-    f = np.eye(N_STATE)
-    if deck_w0 > 0.0:
+    f = np.eye(n)
+    if deck4 is not None:
+        # roll and pitch: angle <- rate <- acceleration <- jerk <- the polynomial, explicit Euler
+        angles, accel, jerk = x[TH][:2] - rates[:2] * dt, x[15:17].copy(), x[17:19].copy()
+        x[9:11] += accel * dt
+        x[15:17] += jerk * dt
+        for i in range(2):
+            a0, a1, a2, a3 = deck4[i][0]
+            x[17 + i] -= (a0 * angles[i] + a1 * rates[i] + a2 * accel[i] + a3 * jerk[i]) * dt
+            f[9 + i, 15 + i] = f[15 + i, 17 + i] = dt
+            f[17 + i, 6 + i], f[17 + i, 9 + i] = -a0 * dt, -a1 * dt
+            f[17 + i, 15 + i], f[17 + i, 17 + i] = -a2 * dt, 1.0 - a3 * dt
+        q_deck4 = (deck4[0][1], deck4[1][1])
+        noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk, q_deck4)
+    elif deck_w0 > 0.0:
         # roll and pitch (not yaw): restoring towards level and damping, explicit Euler
         stiffness, damping = deck_w0 * deck_w0 * dt, 2.0 * deck_zeta * deck_w0 * dt
         angles = x[TH][:2] - rates[:2] * dt
@@ -123,7 +194,8 @@ def predict(
     f[P, BA] = 0.5 * dt * dt * r_wb
     f[V, BA] = dt * r_wb
     f[TH, W] = dt * _I3
-    noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk)
+    if deck4 is None:
+        noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk)
     return x, f @ cov @ f.T + noise
 
 
@@ -144,7 +216,7 @@ def tof_model(
     predicted = float(normal @ q) / along
     if predicted <= 0.0:
         return None
-    h = np.zeros(N_STATE)
+    h = np.zeros(x.shape[0])
     h[P] = normal / along
     h[TH] = (q - predicted * direction) @ d_normal / along
     return predicted, h
