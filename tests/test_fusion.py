@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
@@ -537,3 +539,41 @@ def test_the_two_component_deck_model_is_consistent_and_carries_late_poses_forwa
     low, high = chi2.ppf([0.025, 0.975], runs * len(deck)) / runs
     assert low <= float(np.mean(nees_end)) <= high, np.mean(nees_end)
     assert np.mean(errors) < 0.8 * np.mean(errors_flat), (np.mean(errors), np.mean(errors_flat))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    periods=st.lists(st.floats(-1.0, 2e3) | st.just(math.nan), min_size=0, max_size=3),
+    zeta=st.floats(0.0, 10.0),
+    rms=st.floats(-1.0, 200.0) | st.just(math.nan),
+)
+def test_fuzzed_wave_components_are_refused_naming_their_key_or_never_raise(
+    periods: list[float], zeta: float, rms: float
+) -> None:
+    """Any wave periods, damping and RMS: a ConfigError naming the key, or a filter that steps
+    through delayed poses without raising and gives finite or invalid estimates."""
+    try:
+        config = make_config(
+            sources=("tight",),
+            deck_roll_periods_s=tuple(periods),
+            deck_pitch_periods_s=tuple(reversed(periods)),
+            deck_attitude_rms_deg=(rms, 3.0),
+            deck_damping_ratio=zeta,
+        )
+    except ConfigError as error:
+        assert error.key in {
+            "deck_roll_periods_s",
+            "deck_pitch_periods_s",
+            "deck_attitude_rms_deg",
+            "deck_damping_ratio",
+        }, error
+        return
+    fusion = make_fusion(config)
+    rng = np.random.default_rng(0)
+    sigma_cd = np.array([0.002, 0.002, 0.004, *np.radians([1.0, 1.0, 0.3])])
+    late = []
+    for frame in synthetic_run(rng, config, duration=1.0, pose_every=1):
+        estimate = fusion.step(frame.time, frame.r_wb, frame.imu, None, late)
+        late = [_as_tight(frame, rng, sigma_cd)]
+        if estimate.valid:
+            assert np.all(np.isfinite(estimate.translation))

@@ -128,16 +128,18 @@ class FusionConfig:
         self.deck_attitude_rms_deg = tuple(float(v) for v in self.deck_attitude_rms_deg)
         for key in ("deck_roll_periods_s", "deck_pitch_periods_s"):
             periods = getattr(self, key)
-            if periods and (len(periods) != 2 or not all(p > 0.0 for p in periods)):
-                raise ConfigError(key, f"{periods!r}: two periods > 0 (s), or [] for none")
+            # explicit Euler at the IMU rate needs w dt << 1: waves at sea are 2-30 s
+            if periods and (len(periods) != 2 or not all(0.5 <= p <= 1e3 for p in periods)):
+                raise ConfigError(key, f"{periods!r}: two periods in 0.5-1000 s, or [] for none")
         if bool(self.deck_roll_periods_s) != bool(self.deck_pitch_periods_s):
             raise ConfigError("deck_pitch_periods_s", "set with deck_roll_periods_s, or neither")
         if len(self.deck_attitude_rms_deg) != 2 or not all(
-            v > 0.0 for v in self.deck_attitude_rms_deg
+            0.0 < v <= 90.0 for v in self.deck_attitude_rms_deg
         ):
-            raise ConfigError("deck_attitude_rms_deg", "two values > 0: roll, pitch (deg)")
-        if self.deck_roll_periods_s and not self.deck_damping_ratio > 0.0:
-            raise ConfigError("deck_damping_ratio", "must be > 0 with the wave periods")
+            raise ConfigError("deck_attitude_rms_deg", "two values in (0, 90]: roll, pitch (deg)")
+        if self.deck_roll_periods_s and not self.deck_damping_ratio >= 0.005:
+            # undamped, the model has no stationary spread to derive its driving noise from
+            raise ConfigError("deck_damping_ratio", "must be >= 0.005 with the wave periods")
         for name in (
             "initial_accel_bias_sigma",
             "initial_velocity_sigma",
