@@ -241,9 +241,38 @@ def _with_sensor_noise(settings: object, config: DeckLandingConfig) -> object:
     return settings
 
 
+def deck_waves_of_motion(config: DeckLandingConfig) -> dict | None:
+    """The fusion's wave components from a ``sinusoids`` motion: per roll and pitch the
+    periods of its two largest components and the axis' RMS, ``sqrt(sum A² / 2)`` (None for
+    another motion or an axis with fewer than two components)."""
+    motion = config.motion
+    if motion.kind != "sinusoids":
+        return None
+    waves: dict = {}
+    rms = []
+    for axis, key in ((3, "deck_roll_periods_s"), (4, "deck_pitch_periods_s")):
+        amplitudes = np.abs(np.asarray(motion.sinusoids.amplitudes[axis], dtype=float))
+        frequencies = np.asarray(motion.sinusoids.frequencies_hz[axis], dtype=float)
+        if len(amplitudes) < 2:
+            return None
+        largest = np.argsort(amplitudes)[::-1][:2]
+        waves[key] = tuple(sorted((float(1.0 / frequencies[i]) for i in largest), reverse=True))
+        rms.append(float(np.sqrt(np.sum(amplitudes**2) / 2.0)))
+    waves["deck_attitude_rms_deg"] = tuple(rms)
+    return waves
+
+
 def fusion_settings(config: DeckLandingConfig) -> FusionConfig:
-    """The fusion's settings with the configured ToF sensors' noise, where it asks for it."""
+    """The fusion's settings with the configured ToF sensors' noise and the sea's wave
+    components, where it asks for them."""
     fusion = config.estimation.fusion
+    if fusion.deck_waves_from_motion:
+        waves = deck_waves_of_motion(config)
+        if waves is not None:
+            try:
+                fusion = dataclasses.replace(fusion, **waves)
+            except ValueError as error:  # estimation's ConfigError: a wave out of its range
+                raise ConfigError("motion.sinusoids", f"as the fusion's waves: {error}") from None
     if not fusion.noise_from_sensors:
         return fusion
     noise = sensor_tof_noise(config)

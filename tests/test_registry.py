@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 
@@ -140,3 +141,18 @@ def test_the_simulator_hands_tight_and_fused_its_configured_sensor_noise() -> No
     assert _with_sensor_noise(project.estimation.tight, project).pixel_sigma_px == 0.01
     kept = load_config("realistic", overrides={"estimation.tight.noise_from_sensors": False})
     assert _with_sensor_noise(kept.estimation.tight, kept) == kept.estimation.tight
+
+
+def test_the_simulator_hands_fused_the_seas_wave_components_when_asked() -> None:
+    """With ``deck_waves_from_motion`` the fusion's roll and pitch model takes the motion's
+    two largest components and its RMS; without it (or for another motion) none is set."""
+    from landing_env.config import load_config
+    from landing_env.estimators import fusion_settings
+
+    fusion = fusion_settings(load_config("realistic"))  # the bench: 5 + 1.5 deg per axis
+    np.testing.assert_allclose(fusion.deck_roll_periods_s, (1 / 0.091, 1 / 0.23))
+    np.testing.assert_allclose(fusion.deck_pitch_periods_s, (1 / 0.11, 1 / 0.25))
+    np.testing.assert_allclose(fusion.deck_attitude_rms_deg, [math.sqrt((25 + 2.25) / 2)] * 2)
+    assert fusion_settings(load_config("paper-stewart")).deck_roll_periods_s == ()
+    sea = load_config("bench-ss4", overrides={"estimation.fusion.deck_waves_from_motion": True})
+    assert fusion_settings(sea).deck_roll_periods_s == ()

@@ -65,6 +65,9 @@ class FusionConfig:
     deck_roll_periods_s: tuple[float, ...] = ()
     deck_pitch_periods_s: tuple[float, ...] = ()
     deck_attitude_rms_deg: tuple[float, ...] = (3.0, 3.0)
+    #: a simulator (or any host that knows the sea) replaces the three above by the sea's own
+    #: (landing_env: the two largest roll and pitch components of a `sinusoids` motion)
+    deck_waves_from_motion: bool = False
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
     accel_noise_density: float = 1.0e-3
     accel_bias_random_walk: float = 4.0e-4
