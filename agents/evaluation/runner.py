@@ -289,6 +289,10 @@ def ensure_ray(address: str | None, workers: int) -> bool:
         pythonpath = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
         kwargs["num_cpus"] = workers
         kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": pythonpath}}
+        # Ray runs its workers at nice 15 (a cluster keeps its control plane responsive so);
+        # here they are the job the user asked for, at the user's priority as the former
+        # process pool's were, not behind every other process of the session
+        kwargs["_system_config"] = {"worker_niceness": 0}
     ray.init(address=address, **kwargs)
     return True
 
