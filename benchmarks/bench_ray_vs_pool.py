@@ -120,9 +120,11 @@ def _tree() -> dict[tuple[int, str], float]:
 class TreeCpu:
     """CPU seconds used by this process and all its descendants while it runs, those that
     exit meanwhile included (sampled every ``period_s``, each process's last sample kept; a
-    parent's children's time is not used: Ray's raylet does not reap its workers into it)."""
+    parent's children's time is not used: Ray's raylet does not reap its workers into it).
+    Sampled rarely: the sampling thread shares the interpreter with the pool's one-worker
+    row, which runs its episodes in this process."""
 
-    def __init__(self, period_s: float = 0.25) -> None:
+    def __init__(self, period_s: float = 1.0) -> None:
         import threading
 
         self.period_s = period_s
