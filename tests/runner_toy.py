@@ -11,6 +11,12 @@ from estimation.errors import ConfigError
 
 
 class _Env:
+    made = 0  # environments made in this process
+
+    def __init__(self) -> None:
+        _Env.made += 1
+        self.number = _Env.made
+
     def close(self) -> None:
         pass
 
@@ -32,7 +38,15 @@ class ToyEvaluation:
             os._exit(3)  # the worker process dies
         if seed == task.options.get("raise_seed"):
             raise RuntimeError(f"episode {seed} blew up")
-        return EpisodeRecord(task.policy, task.scenario, seed, "success", True, 0.001 * seed)
+        record = EpisodeRecord(task.policy, task.scenario, seed, "success", True, 0.001 * seed)
+        if task.options.get("report_worker"):
+            record.failed_checks = f"{os.getpid()}:{env.number}"  # which process, which env
+        return record
+
+
+def square(x: int) -> int:
+    """A task for :func:`agents.evaluation.runner.map_tasks`."""
+    return x * x
 
 
 TOY = ToyEvaluation()

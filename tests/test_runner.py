@@ -69,6 +69,43 @@ def test_results_are_written_as_they_arrive_and_resume_skips_finished_seeds(
     assert len(path.read_text().splitlines()) == 5
 
 
+def test_a_session_keeps_its_workers_and_their_env_from_run_to_run(ray_session: None) -> None:
+    def workers(options: dict) -> set[tuple[str, str]]:
+        task = EpisodeTask(TOY, "p", "s", {"report_worker": True, **options})
+        result = run_episodes(task, list(range(6)), workers=2)
+        assert [r.seed for r in result.records] == list(range(6)) and not result.failures
+        return {tuple(r.failed_checks.split(":")) for r in result.records}
+
+    first, again = workers({}), workers({})
+    assert len({pid for pid, _ in first}) == 2  # both workers ran episodes
+    assert again == first  # the same processes, the same environments: no start-up again
+    other = workers({"variant": 1})  # another task: the same processes, new environments
+    assert {pid for pid, _ in other} == {pid for pid, _ in first}
+    assert not other & first  # no (process, environment) pair again
+
+
+def test_tasks_after_episodes_in_one_session_get_the_idle_workers_cpus(
+    ray_session: None,
+) -> None:
+    from agents.evaluation.runner import map_tasks
+    from tests.runner_toy import square
+
+    run_episodes(EpisodeTask(TOY, "p", "s", {}), list(range(4)), workers=2)
+    # the two idle actors hold both CPUs of the session: the tasks must not wait for them
+    assert map_tasks(square, [1, 2, 3], workers=2) == [1, 4, 9]
+
+
+def test_local_workers_run_at_the_users_priority(ray_session: None) -> None:
+    import os
+
+    @ray.remote(num_cpus=1)
+    def niceness() -> int:
+        return os.nice(0)
+
+    # Ray's default is nice 15; the former pool's workers ran at the caller's priority
+    assert ray.get(niceness.remote()) == os.nice(0)
+
+
 def test_the_shared_record_types_live_in_a_leaf_module() -> None:
     import ast
 

@@ -17,14 +17,11 @@ processes.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
 import shlex
 import sys
 from collections import Counter
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +29,7 @@ import numpy as np
 
 from agents.cli_args import add_batch_arguments, positive_int
 from agents.cli_args import parse_overrides as _parse_overrides
-from agents.evaluation.landing import HELD_OUT_SEED, failures_note, wilson_interval
+from agents.evaluation.landing import HELD_OUT_SEED
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import (
     EpisodeTask,
@@ -43,6 +40,17 @@ from agents.evaluation.runner import (
     run_episodes,
     split_runs,
 )
+from agents.evaluation.summary import (
+    Column,
+    counts_cell,
+    finite_mean,
+    finite_p95,
+    print_summary,
+    success_cell,
+    success_fields,
+    write_summary_files,
+)
+from agents.evaluation.summary import markdown_table as summary_table
 from landing_env.errors import ConfigError, require_choice
 
 #: the policies of this evaluation and the estimator each reads by default
@@ -245,11 +253,6 @@ def evaluate_policy(
 
 
 # ------------------------------------------------------------------------------ summaries
-def _finite(values: list[float]) -> np.ndarray:
-    array = np.asarray(values, dtype=float)
-    return array[np.isfinite(array)]
-
-
 @dataclass
 class ApproachSummary:
     """One policy's figures over its episodes (touchdown metrics over those that touched down)."""
@@ -274,73 +277,48 @@ class ApproachSummary:
 
 def summarise(episodes: list[ApproachEpisode]) -> ApproachSummary:
     """The table's figures for one policy's episodes."""
-    if not episodes:
-        raise ValueError("no episodes to summarise")
-    n = len(episodes)
-    k = sum(e.success for e in episodes)
-    low, high = wilson_interval(k, n)
 
-    def stat(name: str, fn: Callable[[np.ndarray], float]) -> float:
-        values = _finite([getattr(e, name) for e in episodes])
-        return float(fn(values)) if values.size else math.nan
+    def column(name: str) -> list[float]:
+        return [getattr(e, name) for e in episodes]
 
     return ApproachSummary(
-        policy=episodes[0].policy,
-        estimator=episodes[0].estimator,
-        episodes=n,
-        successes=k,
-        success_rate=k / n,
-        success_ci_low=low,
-        success_ci_high=high,
-        offset_mean_m=stat("lateral_offset_m", np.mean),
-        offset_p95_m=stat("lateral_offset_m", lambda v: np.percentile(v, 95)),
-        time_to_land_mean_s=stat("time_to_land_s", np.mean),
-        time_to_land_p95_s=stat("time_to_land_s", lambda v: np.percentile(v, 95)),
-        normal_speed_mean=stat("relative_normal_speed", np.mean),
-        deck_tilt_mean_deg=stat("deck_tilt_deg", np.mean),
+        policy=episodes[0].policy if episodes else "",
+        estimator=episodes[0].estimator if episodes else "",
+        **success_fields(episodes),
+        offset_mean_m=finite_mean(column("lateral_offset_m")),
+        offset_p95_m=finite_p95(column("lateral_offset_m")),
+        time_to_land_mean_s=finite_mean(column("time_to_land_s")),
+        time_to_land_p95_s=finite_p95(column("time_to_land_s")),
+        normal_speed_mean=finite_mean(column("relative_normal_speed")),
+        deck_tilt_mean_deg=finite_mean(column("deck_tilt_deg")),
         relocations=sum(e.relocations for e in episodes),
         searches=sum(e.searches for e in episodes),
         outcomes=dict(Counter(e.outcome for e in episodes)),
     )
 
 
-TABLE_HEADER = (
-    "policy",
-    "estimator",
-    "episodes",
-    "success (95% CI)",
-    "offset mean / p95 (m)",
-    "time to land mean / p95 (s)",
-    "v_n mean (m/s)",
-    "deck tilt mean (deg)",
-    "relocations / searches",
-    "outcomes",
+#: the columns of the approach table (:func:`agents.evaluation.summary.markdown_table`)
+COLUMNS: tuple[Column, ...] = (
+    Column("policy", lambda s: s.policy),
+    Column("estimator", lambda s: s.estimator),
+    Column("episodes", lambda s: str(s.episodes)),
+    Column("success (95% CI)", success_cell),
+    Column("offset mean / p95 (m)", lambda s: f"{s.offset_mean_m:.3f} / {s.offset_p95_m:.3f}"),
+    Column(
+        "time to land mean / p95 (s)",
+        lambda s: f"{s.time_to_land_mean_s:.1f} / {s.time_to_land_p95_s:.1f}",
+    ),
+    Column("v_n mean (m/s)", lambda s: f"{s.normal_speed_mean:.3f}"),
+    Column("deck tilt mean (deg)", lambda s: f"{s.deck_tilt_mean_deg:.2f}"),
+    Column("relocations / searches", lambda s: f"{s.relocations} / {s.searches}"),
+    Column("outcomes", lambda s: counts_cell(s.outcomes)),
 )
+TABLE_HEADER = tuple(c.header for c in COLUMNS)
 
 
 def markdown_table(summaries: list[ApproachSummary]) -> str:
     """One row per policy."""
-    lines = [
-        "| " + " | ".join(TABLE_HEADER) + " |",
-        "|" + "|".join("---" for _ in TABLE_HEADER) + "|",
-    ]
-    for s in summaries:
-        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(s.outcomes.items()))
-        cells = (
-            s.policy,
-            s.estimator,
-            str(s.episodes),
-            f"{100 * s.success_rate:.1f}% ({100 * s.success_ci_low:.1f}–"
-            f"{100 * s.success_ci_high:.1f})",
-            f"{s.offset_mean_m:.3f} / {s.offset_p95_m:.3f}",
-            f"{s.time_to_land_mean_s:.1f} / {s.time_to_land_p95_s:.1f}",
-            f"{s.normal_speed_mean:.3f}",
-            f"{s.deck_tilt_mean_deg:.2f}",
-            f"{s.relocations} / {s.searches}",
-            outcomes,
-        )
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return summary_table(summaries, COLUMNS)
 
 
 def plot_trajectories(results: dict[str, list[ApproachEpisode]], path: Path, title: str) -> None:
@@ -448,7 +426,6 @@ def evaluate_approach(
     summaries = [summarise(r) for r in results.values()]
     files: list[Path] = []
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
         title = (
             f"{scenario}: {episodes} episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
@@ -456,46 +433,33 @@ def evaluate_approach(
         if "svgs-routine" in results:
             title += f"; svgs-routine commits through the {routine_timing} timing"
         wall = sum(e.wall_time_s for r in results.values() for e in r)
-        table = out_dir / f"{stem}.md"
-        table.write_text(
-            f"# Approach: {scenario}\n\n{title}\n\n"
-            + (f"Command: `{command}`\n\n" if command else "")
-            + markdown_table(summaries)
-            + f"\n\nSimulation wall time over all episodes: {wall:.0f} s (summed over workers)\n"
-            + failures_note(failures)
+        files = write_summary_files(
+            out_dir,
+            stem,
+            heading=f"Approach: {scenario}",
+            title=title,
+            table=markdown_table(summaries),
+            summaries=summaries,
+            results=results,
+            failures=failures,
+            settings={
+                "scenario": scenario,
+                "first_seed": first_seed,
+                "overrides": overrides or {},
+                "routine_timing": routine_timing,
+            },
+            command=command,
+            notes=f"Simulation wall time over all episodes: {wall:.0f} s (summed over workers)",
+            csv_exclude=("trajectory",),
         )
-        summary_json = out_dir / f"{stem}.json"
-        summary_json.write_text(
-            json.dumps(
-                {
-                    "scenario": scenario,
-                    "first_seed": first_seed,
-                    "overrides": overrides or {},
-                    "routine_timing": routine_timing,
-                    "command": command,
-                    "summaries": [asdict(s) for s in summaries],
-                },
-                indent=2,
-            )
-        )
-        episodes_csv = out_dir / f"{stem}_episodes.csv"
-        columns = [k for k in asdict(next(iter(results.values()))[0]) if k != "trajectory"]
-        with episodes_csv.open("w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
-            writer.writeheader()
-            for rs in results.values():
-                writer.writerows(asdict(e) for e in rs)
         figure = out_dir / f"{stem}.png"
         plot_trajectories(results, figure, title)
-        files = [table, summary_json, episodes_csv, figure]
+        files.append(figure)
     return ApproachEvaluation(scenario, summaries, results, files, failures)
 
 
 # ------------------------------------------------------------------------------ command line
 def _evaluate_approach(args: argparse.Namespace) -> int:
-    from rich.console import Console
-
-    console = Console()
     command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     evaluation = evaluate_approach(
         list(args.policy),
@@ -512,13 +476,9 @@ def _evaluate_approach(args: argparse.Namespace) -> int:
         address=args.address,
         resume=args.resume,
     )
-    console.print(f"\n[bold]{args.scenario}[/bold]")
-    print(markdown_table(evaluation.summaries))
-    note = failures_note(evaluation.failures)
-    if note:
-        console.print(note, style="yellow")
-    for path in evaluation.files:
-        console.print(f"  wrote {path}")
+    print_summary(
+        args.scenario, markdown_table(evaluation.summaries), evaluation.failures, evaluation.files
+    )
     return 0
 
 

@@ -19,11 +19,9 @@ and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +39,19 @@ from agents.evaluation.runner import (
     run_episodes,
     split_runs,
 )
+from agents.evaluation.summary import (  # noqa: F401  (wilson_interval, failures_note re-exported)
+    Column,
+    counts_cell,
+    failures_note,
+    finite_mean,
+    finite_p95,
+    print_summary,
+    success_cell,
+    success_fields,
+    wilson_interval,
+    write_summary_files,
+)
+from agents.evaluation.summary import markdown_table as summary_table
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
@@ -305,26 +316,6 @@ def run_policy(
 
 
 # ------------------------------------------------------------------------------ summaries
-def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
-    """The Wilson score interval of a success rate (scipy's ``binomtest``)."""
-    from scipy.stats import binomtest
-
-    if trials == 0:
-        return math.nan, math.nan
-    ci = binomtest(successes, trials).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(ci.low), float(ci.high)
-
-
-def _mean(values: np.ndarray) -> float:
-    values = values[np.isfinite(values)]
-    return float(values.mean()) if values.size else math.nan
-
-
-def _p95(values: np.ndarray) -> float:
-    values = values[np.isfinite(values)]
-    return float(np.percentile(values, 95)) if values.size else math.nan
-
-
 @dataclass
 class LandingSummary:
     """One policy on one scenario; touchdown metrics over the episodes that touched down."""
@@ -380,29 +371,20 @@ def compare_with_oracle(
 
 def summarise(results: list[EpisodeResult]) -> LandingSummary:
     """The figures of the table for the episodes of one policy on one scenario."""
-    if not results:
-        raise ValueError("no episodes to summarise")
-    n = len(results)
-    k = sum(r.success for r in results)
-    low, high = wilson_interval(k, n)
 
-    def column(name: str) -> np.ndarray:
-        return np.array([getattr(r, name) for r in results], dtype=float)
+    def column(name: str) -> list[float]:
+        return [getattr(r, name) for r in results]
 
     return LandingSummary(
-        policy=results[0].policy,
-        scenario=results[0].scenario,
-        episodes=n,
-        successes=k,
-        success_rate=k / n,
-        success_ci_low=low,
-        success_ci_high=high,
-        normal_speed_mean=_mean(column("relative_normal_speed")),
-        normal_speed_p95=_p95(column("relative_normal_speed")),
-        deck_tilt_mean_deg=_mean(column("deck_tilt_deg")),
-        deck_tilt_p95_deg=_p95(column("deck_tilt_deg")),
-        lateral_offset_mean_m=_mean(column("lateral_offset_m")),
-        time_to_land_mean_s=_mean(column("time_to_land_s")),
+        policy=results[0].policy if results else "",
+        scenario=results[0].scenario if results else "",
+        **success_fields(results),
+        normal_speed_mean=finite_mean(column("relative_normal_speed")),
+        normal_speed_p95=finite_p95(column("relative_normal_speed")),
+        deck_tilt_mean_deg=finite_mean(column("deck_tilt_deg")),
+        deck_tilt_p95_deg=finite_p95(column("deck_tilt_deg")),
+        lateral_offset_mean_m=finite_mean(column("lateral_offset_m")),
+        time_to_land_mean_s=finite_mean(column("time_to_land_s")),
         outcomes=dict(Counter(r.outcome for r in results)),
         failures=dict(
             Counter(
@@ -415,64 +397,47 @@ def summarise(results: list[EpisodeResult]) -> LandingSummary:
                 if check
             )
         ),
-        bounce_p95_m=_p95(column("bounce_height_m")),
-        peak_load_p95_g=_p95(column("peak_load_g")),
+        bounce_p95_m=finite_p95(column("bounce_height_m")),
+        peak_load_p95_g=finite_p95(column("peak_load_g")),
     )
 
 
-TABLE_HEADER = (
-    "policy",
-    "episodes",
-    "success (95% CI)",
-    "v_n mean (m/s)",
-    "v_n p95 (m/s)",
-    "tilt mean / p95 (deg)",
-    "offset mean (m)",
-    "time to land (s)",
-    "bounce p95 (mm)",
-    "peak load p95 (g)",
-    "outcomes",
-    "failed checks",
-    "oracle",
-    "gap (points)",
-    "failures no timing avoids",
+def _oracle_cells(s: LandingSummary) -> tuple[str, str, str]:
+    if not math.isfinite(s.oracle_success_rate):
+        return ("", "", "")
+    return (
+        f"{100 * s.oracle_success_rate:.1f}%",
+        f"{s.gap_points:+.1f}",
+        f"{s.unavoidable_failures} of {s.episodes - s.successes}",
+    )
+
+
+#: the columns of the landing table (:func:`agents.evaluation.summary.markdown_table`)
+COLUMNS: tuple[Column, ...] = (
+    Column("policy", lambda s: s.policy),
+    Column("episodes", lambda s: str(s.episodes)),
+    Column("success (95% CI)", success_cell),
+    Column("v_n mean (m/s)", lambda s: f"{s.normal_speed_mean:.3f}"),
+    Column("v_n p95 (m/s)", lambda s: f"{s.normal_speed_p95:.3f}"),
+    Column(
+        "tilt mean / p95 (deg)", lambda s: f"{s.deck_tilt_mean_deg:.2f} / {s.deck_tilt_p95_deg:.2f}"
+    ),
+    Column("offset mean (m)", lambda s: f"{s.lateral_offset_mean_m:.3f}"),
+    Column("time to land (s)", lambda s: f"{s.time_to_land_mean_s:.2f}"),
+    Column("bounce p95 (mm)", lambda s: f"{1000 * s.bounce_p95_m:.1f}"),
+    Column("peak load p95 (g)", lambda s: f"{s.peak_load_p95_g:.1f}"),
+    Column("outcomes", lambda s: counts_cell(s.outcomes)),
+    Column("failed checks", lambda s: counts_cell(s.failures)),
+    Column("oracle", lambda s: _oracle_cells(s)[0]),
+    Column("gap (points)", lambda s: _oracle_cells(s)[1]),
+    Column("failures no timing avoids", lambda s: _oracle_cells(s)[2]),
 )
+TABLE_HEADER = tuple(c.header for c in COLUMNS)
 
 
 def markdown_table(summaries: list[LandingSummary]) -> str:
     """The summaries as a Markdown table (one row per policy)."""
-    lines = [
-        "| " + " | ".join(TABLE_HEADER) + " |",
-        "|" + "|".join("---" for _ in TABLE_HEADER) + "|",
-    ]
-    for s in summaries:
-        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(s.outcomes.items()))
-        cells = (
-            s.policy,
-            str(s.episodes),
-            f"{100 * s.success_rate:.1f}% ({100 * s.success_ci_low:.1f}–"
-            f"{100 * s.success_ci_high:.1f})",
-            f"{s.normal_speed_mean:.3f}",
-            f"{s.normal_speed_p95:.3f}",
-            f"{s.deck_tilt_mean_deg:.2f} / {s.deck_tilt_p95_deg:.2f}",
-            f"{s.lateral_offset_mean_m:.3f}",
-            f"{s.time_to_land_mean_s:.2f}",
-            f"{1000 * s.bounce_p95_m:.1f}",
-            f"{s.peak_load_p95_g:.1f}",
-            outcomes,
-            ", ".join(f"{k} {v}" for k, v in sorted(s.failures.items())) or "-",
-            *(
-                (
-                    f"{100 * s.oracle_success_rate:.1f}%",
-                    f"{s.gap_points:+.1f}",
-                    f"{s.unavoidable_failures} of {s.episodes - s.successes}",
-                )
-                if math.isfinite(s.oracle_success_rate)
-                else ("", "", "")
-            ),
-        )
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return summary_table(summaries, COLUMNS)
 
 
 def plot_results(
@@ -594,57 +559,34 @@ def evaluate_landing(
     compare_with_oracle(summaries, results)
     files: list[Path] = []
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
         stem = f"landing_{scenario}"
         title = (
             f"{SCENARIOS[scenario].description}; {estimator.upper()} in the observation; "
             f"{episodes} held-out episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
         )
-        table = out_dir / f"{stem}.md"
-        table.write_text(
-            f"# Landing: {scenario}\n\n{title}\n\n"
-            + (f"Command: `{command}`\n\n" if command else "")
-            + markdown_table(summaries)
-            + "\n"
-            + failures_note(failures)
+        files = write_summary_files(
+            out_dir,
+            stem,
+            heading=f"Landing: {scenario}",
+            title=title,
+            table=markdown_table(summaries),
+            summaries=summaries,
+            results=results,
+            failures=failures,
+            settings={
+                "scenario": scenario,
+                "estimator": estimator,
+                "camera_mode": camera_mode,
+                "first_seed": first_seed,
+                "overrides": extra_overrides or {},
+            },
+            command=command,
         )
-        summary_json = out_dir / f"{stem}.json"
-        summary_json.write_text(
-            json.dumps(
-                {
-                    "scenario": scenario,
-                    "estimator": estimator,
-                    "camera_mode": camera_mode,
-                    "first_seed": first_seed,
-                    "overrides": extra_overrides or {},
-                    "command": command,
-                    "summaries": [asdict(s) for s in summaries],
-                },
-                indent=2,
-            )
-        )
-        episodes_csv = out_dir / f"{stem}_episodes.csv"
-        with episodes_csv.open("w", newline="") as handle:
-            first = next(iter(results.values()))[0]
-            writer = csv.DictWriter(handle, fieldnames=list(asdict(first)))
-            writer.writeheader()
-            for rs in results.values():
-                writer.writerows(asdict(r) for r in rs)
         figure = out_dir / f"{stem}.png"
         plot_results(results, summaries, figure, title)
-        files = [table, summary_json, episodes_csv, figure]
+        files.append(figure)
     return LandingEvaluation(scenario, summaries, results, files, failures)
-
-
-def failures_note(failures: dict[str, list[SeedFailure]]) -> str:
-    """A line per crashed seed, for the table's file (empty when none crashed)."""
-    if not failures:
-        return ""
-    lines = ["", "Seeds whose worker crashed (not in the table):", ""]
-    for name, fs in failures.items():
-        lines += [f"- {name}, seed {f.seed}: {f.error}" for f in fs]
-    return "\n".join(lines) + "\n"
 
 
 # ------------------------------------------------------------------------------ command line
@@ -652,11 +594,8 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
     import shlex
     import sys
 
-    from rich.console import Console
-
     from agents.policies import POLICY_NAMES
 
-    console = Console()
     policies = list(POLICY_NAMES) if args.policy == ["all"] else args.policy
     command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     for scenario in args.scenario:
@@ -678,13 +617,12 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             oracle=not args.no_oracle,
             allow_mismatch=tuple(args.allow_mismatch),
         )
-        console.print(f"\n[bold]{scenario}[/bold]: {SCENARIOS[scenario].description}")
-        print(markdown_table(evaluation.summaries))
-        note = failures_note(evaluation.failures)
-        if note:
-            console.print(note, style="yellow")
-        for path in evaluation.files:
-            console.print(f"  wrote {path}")
+        print_summary(
+            f"{scenario}: {SCENARIOS[scenario].description}",
+            markdown_table(evaluation.summaries),
+            evaluation.failures,
+            evaluation.files,
+        )
     return 0
 
 

@@ -7,7 +7,9 @@
 * one worker on this machine: in this process (no start-up cost), the same results;
 * more workers, or ``address``: on Ray (``ray.init()`` on this machine by default, an existing
   cluster with ``address``), one actor per worker holding its environment, seeds handed out
-  one at a time, so the results are those of the serial run seed by seed;
+  one at a time, so the results are those of the serial run seed by seed; within a
+  :func:`batch_session` the actors outlive a run, and the next run (the next policy) takes
+  them, without starting worker processes and importing the simulation again;
 * a bad config fails fast, before any worker starts, with its message
   (:class:`~estimation.errors.ConfigError` naming the key);
 * a worker that crashes (its process dies, or its episode raises) is reported with its seed
@@ -242,27 +244,28 @@ def _run_serial(
 
 # ------------------------------------------------------------------------------ Ray
 class _EpisodeWorker:
-    """A Ray actor: one environment and policy, episodes one seed at a time."""
+    """A Ray actor: one environment and policy, kept from seed to seed and from call to call
+    (built again only when the task changes), episodes one seed at a time."""
 
-    def __init__(self, task: EpisodeTask) -> None:
+    def __init__(self) -> None:
         from landing_env._quiet import quiet_stdout
 
-        self.task = task
-        self.evaluation = get_evaluation(task.evaluation)
         with quiet_stdout():
             import landing_env  # noqa: F401  (registers the ids, PyBullet silenced)
-        # a user error is raised again by run(): Ray keeps the error of a task (with its
-        # type), but only the text of an actor's failed construction
-        self.error: BaseException | None = None
-        try:
-            self.env, self.policy = self.evaluation.make(task)
-        except USER_ERRORS as exc:
-            self.error = exc
+        self.task: EpisodeTask | None = None
+        self.env: Any = None
+        self.policy: Any = None
 
-    def run(self, seed: int) -> dict[str, Any]:
-        if self.error is not None:
-            raise self.error
-        record = self.evaluation.run_episode(self.env, self.policy, seed, self.task)
+    def run(self, task: EpisodeTask, seed: int) -> dict[str, Any]:
+        evaluation = get_evaluation(task.evaluation)
+        if task != self.task:
+            if self.env is not None:
+                self.env.close()
+            self.task, self.env = None, None
+            # a user error raised here reaches the driver with its type (as a task's error)
+            self.env, self.policy = evaluation.make(task)
+            self.task = task
+        record = evaluation.run_episode(self.env, self.policy, seed, task)
         return record.to_json()
 
 
@@ -286,24 +289,51 @@ def ensure_ray(address: str | None, workers: int) -> bool:
         pythonpath = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
         kwargs["num_cpus"] = workers
         kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": pythonpath}}
+        # Ray runs its workers at nice 15 (a cluster keeps its control plane responsive so);
+        # here they are the job the user asked for, at the user's priority as the former
+        # process pool's were, not behind every other process of the session
+        kwargs["_system_config"] = {"worker_niceness": 0}
     ray.init(address=address, **kwargs)
     return True
 
 
+#: the idle actors of the current :func:`batch_session` (None outside one): a session's
+#: later runs (the next policy) take them instead of starting worker processes again
+_IDLE_ACTORS: list[Any] | None = None
+
+
 @contextlib.contextmanager
 def batch_session(workers: int, address: str | None) -> Iterator[None]:
-    """Keep one Ray session over several :func:`run_episodes` calls (several policies) when
-    the job uses Ray; shut it down at the end if this started it."""
+    """Keep one Ray session, and its workers, over several :func:`run_episodes` calls
+    (several policies) when the job uses Ray; shut it down at the end if this started it."""
+    global _IDLE_ACTORS
     started = False
-    if address is not None or workers > 1:
+    uses_ray = address is not None or workers > 1
+    if uses_ray:
         started = ensure_ray(address, workers)
+    outer = _IDLE_ACTORS
+    if uses_ray and outer is None:
+        _IDLE_ACTORS = []
     try:
         yield
     finally:
+        if uses_ray and outer is None:
+            _release_idle_actors()
+            _IDLE_ACTORS = None
         if started:
             import ray
 
             ray.shutdown()
+
+
+def _release_idle_actors() -> None:
+    """Kill the session's idle actors (they hold a CPU each that a task may need)."""
+    if not _IDLE_ACTORS:
+        return
+    import ray
+
+    while _IDLE_ACTORS:
+        ray.kill(_IDLE_ACTORS.pop())
 
 
 def _run_ray(
@@ -332,14 +362,15 @@ def _run_ray(
             if queue[0] in suspects and calls:
                 break  # a suspect runs alone
             seed = queue.popleft()
-            ref = actor.run.remote(seed)
+            ref = actor.run.remote(task, seed)
             calls.append((ref, seed))
             running[ref] = actor
             if seed in suspects:
                 break
 
     def new_actor() -> None:
-        actor = actor_class.remote(task)
+        kept = _IDLE_ACTORS.pop() if _IDLE_ACTORS else None
+        actor = kept if kept is not None else actor_class.remote()
         inflight[actor] = deque()
         fill(actor)
 
@@ -381,6 +412,7 @@ def _run_ray(
         suspects.update(unfinished)
         queue.extendleft(reversed(unfinished))
 
+    finished = False
     try:
         for _ in range(min(workers, len(seeds))):
             new_actor()
@@ -400,9 +432,13 @@ def _run_ray(
             calls.remove(next(call for call in calls if call[0] == ref))
             accept(data)
             fill(actor)
+        finished = True
     finally:
         for actor in inflight:
-            ray.kill(actor)
+            if finished and _IDLE_ACTORS is not None and not started:
+                _IDLE_ACTORS.append(actor)  # idle now: the session's next run takes it
+            else:
+                ray.kill(actor)
         if started:
             ray.shutdown()
     return records, failures
@@ -435,6 +471,7 @@ def map_tasks(
         from ray.exceptions import RayTaskError
 
         with batch_session(workers, address):
+            _release_idle_actors()  # their CPUs are the tasks'
             remote = ray.remote(num_cpus=1, max_retries=0)(fn)
             refs = [remote.remote(item) for item in items]
             index = {ref: i for i, ref in enumerate(refs)}
