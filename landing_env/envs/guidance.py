@@ -87,8 +87,10 @@ class GuidanceGains:
     #: in the deck-frame descent, the tag unseen this long above ``blind_range_m`` pauses the
     #: descent until it is seen again, seconds
     lost_tag_pause_s: float = 0.3
-    #: ... and the drone climbs at this speed relative to the deck meanwhile, m/s
+    #: ... and the drone climbs at this speed relative to the deck meanwhile, m/s, up to
+    #: ``max_search_range_m`` above it
     lost_tag_climb_speed: float = 0.2
+    max_search_range_m: float = 2.5
     #: in the deck-frame descent, the tag must stay inside the view: the descent slows to a
     #: stop as the tag's farthest corner comes within ``view_margin`` (tangent of the angle)
     #: of this half field of view (tangent: half the image width over the focal length,
@@ -113,6 +115,7 @@ class GuidanceGains:
         ):
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         require_range("lost_tag_climb_speed", self.lost_tag_climb_speed, 0.0)
+        require_range("max_search_range_m", self.max_search_range_m, 0.0, low_inclusive=False)
         require_range("view_half_tan", self.view_half_tan, 0.0)
         require_range("view_margin", self.view_margin, 0.0)
         require_range("tag_half_size_m", self.tag_half_size_m, 0.0)
@@ -474,6 +477,8 @@ class DeckGuidance:
                 speed = -g.lost_tag_climb_speed
             elif centre and g.view_half_tan > 0.0 and observation["deck_pose_valid"][0]:
                 speed *= self._view_factor(observation)
+            if speed < 0.0 and height >= g.max_search_range_m:
+                speed = 0.0  # climb to widen the view, but no higher than this
             yaw_rate = self._yaw_rate(observation) if centre else 0.0
             return self._deck_frame_setpoint(own, -speed, yaw_rate, centre=True)
         height = self.range_m(observation)
