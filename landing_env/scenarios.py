@@ -81,17 +81,19 @@ def _landing(
 #: the guidance flies in the deck's frame (deck-velocity feed-forward, relative descent speed,
 #: the camera aimed at the tag and the descent held while the tag nears the image edge;
 #: landing_env/envs/guidance.py); below 0.8 m, where the 0.30 m tag no longer fits the view
-#: of a camera leaning 10-25 deg in wind, it descends on the track and the ToF; the descent
-#: may pause to find the tag again, so it gets 10 s
+#: of a camera leaning 10-25 deg in wind, it descends on the track and the ToF; below 0.5 m
+#: it waits out gusts that lean the drone more than 18 deg; the descent may pause to find the
+#: tag again or for a lull, so it gets 15 s
 SHIP_TIMING: dict[str, Any] = {
     "hold_height_m": 2.0,
-    "descent_timeout_s": 10.0,
+    "descent_timeout_s": 15.0,
     "guidance": {
         "track_deck": True,
         "k_xy": 1.5,
         "blind_range_m": 0.8,
         # 256 px / 458.5 px: half the image over the focal length of the default camera
         "view_half_tan": 0.558,
+        "flare_range_m": 0.5,
     },
 }
 

@@ -91,6 +91,14 @@ class GuidanceGains:
     #: ``max_search_range_m`` above it
     lost_tag_climb_speed: float = 0.2
     max_search_range_m: float = 2.5
+    #: touchdown when the lean allows: below ``flare_range_m`` the deck-frame descent holds
+    #: its height over the deck while the drone leans more than ``max_touchdown_lean_deg``
+    #: from the vertical (a gust), for at most ``max_flare_wait_s``; 0 turns it off.  A
+    #: drone that meets the deck leaning 22 deg or more tips over or bounces when its motors
+    #: stop (measured on the ship decks), one leaning 18 deg or less stands
+    flare_range_m: float = 0.0
+    max_touchdown_lean_deg: float = 18.0
+    max_flare_wait_s: float = 3.0
     #: in the deck-frame descent, the tag must stay inside the view: the descent slows to a
     #: stop as the tag's farthest corner comes within ``view_margin`` (tangent of the angle)
     #: of this half field of view (tangent: half the image width over the focal length,
@@ -116,6 +124,9 @@ class GuidanceGains:
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         require_range("lost_tag_climb_speed", self.lost_tag_climb_speed, 0.0)
         require_range("max_search_range_m", self.max_search_range_m, 0.0, low_inclusive=False)
+        require_range("flare_range_m", self.flare_range_m, 0.0, 3.0)
+        require_range("max_touchdown_lean_deg", self.max_touchdown_lean_deg, 0.0, 90.0)
+        require_range("max_flare_wait_s", self.max_flare_wait_s, 0.0)
         require_range("view_half_tan", self.view_half_tan, 0.0)
         require_range("view_margin", self.view_margin, 0.0)
         require_range("tag_half_size_m", self.tag_half_size_m, 0.0)
@@ -296,12 +307,14 @@ class DeckGuidance:
         self._lean = np.zeros(2)
         self._lean_started = False
         self._tag_unseen_s = math.inf
+        self._flare_wait_s = 0.0
 
     def reset(self) -> None:
         self._last_range = math.inf
         self._lean = np.zeros(2)
         self._lean_started = False
         self._tag_unseen_s = math.inf
+        self._flare_wait_s = 0.0
         self.tracker.reset()
 
     def observe(self, observation: dict[str, np.ndarray], own: OwnState | None) -> None:
@@ -479,6 +492,12 @@ class DeckGuidance:
                 speed *= self._view_factor(observation)
             if speed < 0.0 and height >= g.max_search_range_m:
                 speed = 0.0  # climb to widen the view, but no higher than this
+            if 0.0 < height < g.flare_range_m and self._flare_wait_s < g.max_flare_wait_s:
+                lean_deg = math.degrees(math.acos(float(np.clip(own.rotation_wb[2, 2], -1, 1))))
+                if lean_deg > g.max_touchdown_lean_deg:
+                    # a gust leans the drone over: wait over the deck for the lull
+                    speed = 0.0
+                    self._flare_wait_s += self.dt
             yaw_rate = self._yaw_rate(observation) if centre else 0.0
             return self._deck_frame_setpoint(own, -speed, yaw_rate, centre=True)
         height = self.range_m(observation)
