@@ -142,3 +142,21 @@ def test_on_the_ship_deck_the_deck_frame_descent_lands_where_the_bench_guidance_
     assert sum(t["outcome"] == "success" for t in plain) < sum(
         t["outcome"] == "success" for t in tracked
     )
+
+
+def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> None:
+    gains = GuidanceGains(
+        track_deck=True, blind_range_m=0.8, flare_range_m=0.5, max_touchdown_lean_deg=18.0
+    )
+    guidance = DeckGuidance(gains, DT)
+    upright = _level((0.0, 0.0, 0.4))
+    gusted = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.4, 0))
+    for _ in range(40):
+        guidance.observe(_observation(None, tof_m=0.4), upright)
+    assert guidance.descend(_observation(None, tof_m=0.4), upright).velocity_h[2] < -0.2
+    # leaning 23 deg: hold over the deck for the lull, at most max_flare_wait_s
+    waits = [
+        guidance.descend(_observation(None, tof_m=0.4), gusted).velocity_h[2] for _ in range(80)
+    ]
+    assert abs(waits[0]) < 0.05
+    assert waits[-1] < -0.2  # after 3 s it lands all the same
