@@ -160,3 +160,48 @@ def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> 
     ]
     assert abs(waits[0]) < 0.05
     assert waits[-1] < -0.2  # after 3 s it lands all the same
+
+
+def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation() -> None:
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    finite = st.floats(-50.0, 50.0, allow_nan=False)
+    angle = st.floats(-3.1, 3.1, allow_nan=False)
+
+    @settings(max_examples=150, deadline=None, derandomize=True)
+    @given(
+        st.lists(
+            st.tuples(
+                st.tuples(finite, finite, finite, angle, st.floats(-1.5, 1.5), angle),
+                st.booleans(),
+                st.lists(st.floats(0.0, 4.0), min_size=4, max_size=4),
+                st.lists(st.booleans(), min_size=4, max_size=4),
+                st.tuples(st.floats(-0.7, 0.7), st.floats(-0.7, 0.7), angle),
+            ),
+            min_size=1,
+            max_size=12,
+        )
+    )
+    def run(steps) -> None:
+        gains = GuidanceGains(
+            track_deck=True, view_half_tan=0.558, blind_range_m=0.8, flare_range_m=0.5
+        )
+        guidance = DeckGuidance(gains, DT)
+        for pose, seen, ranges, valid, (roll, pitch, yaw) in steps:
+            observation = {
+                "deck_pose": np.array(pose, dtype=np.float32),
+                "deck_pose_valid": np.array([int(seen)], dtype=np.int8),
+                "tof_range": np.array(ranges, dtype=np.float32),
+                "tof_valid": np.array(valid, dtype=np.int8),
+            }
+            own = OwnState(np.zeros(3), np.zeros(3), matrix_from_euler_zyx(roll, pitch, yaw))
+            guidance.observe(observation, own)
+            for setpoint in (
+                guidance.hold(observation, 2.0, own),
+                guidance.descend(observation, own),
+            ):
+                assert np.all(np.isfinite(setpoint.velocity_h))
+                assert math.isfinite(setpoint.yaw_rate)
+
+    run()
