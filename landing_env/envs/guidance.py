@@ -337,16 +337,16 @@ class DeckGuidance:
         return self.gains.track_deck and own is not None and self.tracker.valid
 
     def _deck_frame_setpoint(
-        self, own: OwnState, vertical_h: float, yaw_rate: float, centre: bool
+        self, own: OwnState, vertical_h: float, yaw_rate: float
     ) -> VelocitySetpoint:
-        """Deck velocity + proportional correction of the horizontal offset (when ``centre``)
-        and the given relative vertical speed, turned into the heading frame."""
+        """Deck velocity + proportional correction of the horizontal offset and the given
+        relative vertical speed, turned into the heading frame."""
         g = self.gains
         deck_v = self.tracker.velocity_w
         relative = np.zeros(2)
         if not self.tracker.horizontal_valid:
             deck_v[:2] = 0.0
-        elif centre:
+        else:
             # aim the camera, not the body, at the tag: stand upwind of it by the height
             # times the lean, so that the tag stays near the image centre
             # (the aim point moves with the deck and, as the height changes, along the lean)
@@ -454,7 +454,7 @@ class DeckGuidance:
                 )
             )
             yaw_rate = self._yaw_rate(observation)
-            return self._deck_frame_setpoint(own, vz, yaw_rate, centre=True)
+            return self._deck_frame_setpoint(own, vz, yaw_rate)
         vx, vy, yaw_rate = self._centre(observation)
         height = self.range_m(observation)
         vz = 0.0
@@ -499,7 +499,7 @@ class DeckGuidance:
                     speed = 0.0
                     self._flare_wait_s += self.dt
             yaw_rate = self._yaw_rate(observation) if centre else 0.0
-            return self._deck_frame_setpoint(own, -speed, yaw_rate, centre=True)
+            return self._deck_frame_setpoint(own, -speed, yaw_rate)
         height = self.range_m(observation)
         if math.isfinite(height):
             self._last_range = height
