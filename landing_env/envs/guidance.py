@@ -94,8 +94,8 @@ class GuidanceGains:
     #: touchdown when the lean allows: below ``flare_range_m`` the deck-frame descent holds
     #: its height over the deck while the drone leans more than ``max_touchdown_lean_deg``
     #: from the vertical (a gust), for at most ``max_flare_wait_s``; 0 turns it off.  On
-    #: the ship decks 2 % of the touchdowns below 18 deg tipped over or bounced when the
-    #: motors stopped, 8 % at 18-22 deg and a third above 22 deg (README "Landing on the ship")
+    #: the ship decks 5 % of the touchdowns below 18 deg tipped over or bounced when the
+    #: motors stopped, 16 % at 18-22 deg and 39 % above 22 deg (README "Landing on the ship")
     flare_range_m: float = 0.0
     max_touchdown_lean_deg: float = 18.0
     max_flare_wait_s: float = 3.0
