@@ -56,6 +56,7 @@ from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     FLYING_OVERRIDES,
+    SHIP_ESTIMATOR,
     SHIP_TIMING,
     START_OVERRIDES,
     landing_overrides,
@@ -77,6 +78,8 @@ class Scenario:
     description: str
     #: settings of the timing task (DeckLandingTiming-v0's ``timing``) for this scenario
     timing: dict[str, Any] = field(default_factory=dict)
+    #: the estimate in the observation unless ``--estimator`` says otherwise
+    estimator: str = "ihrcf"
 
 
 #: the bench's per-axis scale factors (SeaStateConfig.scale), printed with its scenarios
@@ -109,21 +112,25 @@ SCENARIOS: dict[str, Scenario] = {
         "ship-ss3",
         "30 m vessel's helideck, sea state 3 (Hs 0.88 m, Tp 7.5 s)",
         SHIP_TIMING,
+        SHIP_ESTIMATOR,
     ),
     "ship-ss4": Scenario(
         "ship-ss4",
         "30 m vessel's helideck, sea state 4 (Hs 1.88 m, Tp 8.8 s)",
         SHIP_TIMING,
+        SHIP_ESTIMATOR,
     ),
     "ship-ss5": Scenario(
         "ship-ss5",
         "30 m vessel's helideck, sea state 5 (Hs 3.25 m, Tp 9.7 s)",
         SHIP_TIMING,
+        SHIP_ESTIMATOR,
     ),
     "ship-ss6": Scenario(
         "ship-ss6",
         "30 m vessel's helideck, sea state 6 (Hs 5.0 m, Tp 12.4 s)",
         SHIP_TIMING,
+        SHIP_ESTIMATOR,
     ),
 }
 
@@ -605,7 +612,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             args.episodes,
             Path(args.out),
             args.seed,
-            args.estimator,
+            args.estimator or SCENARIOS[scenario].estimator,
             args.mode,
             args.model,
             args.workers,
@@ -645,7 +652,13 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
     landing.add_argument("--episodes", type=positive_int, default=100)
     landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
-    landing.add_argument("--estimator", choices=ESTIMATORS, default="ihrcf")
+    landing.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default=None,
+        help="the estimate in the observation (default: the scenario's: ihrcf on the bench, "
+        "tight on the ship decks, where a ToF ray can miss the pad)",
+    )
     landing.add_argument("--mode", choices=("project", "render"), default="project")
     landing.add_argument("--model", default=None, help="a trained timing model (timing-ppo)")
     landing.add_argument("--out", default="results/landing", help="output directory")

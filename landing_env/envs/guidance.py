@@ -5,6 +5,33 @@ the truth) into velocity set-points: hold centred over the tag at a height, or f
 descent to touchdown.  ``DeckLandingTiming-v0`` holds and descends with it, and the
 ``align-descend`` policy of ``DeckLanding-v0`` flies its approach and descent with the same
 gains.
+
+Two laws, chosen by ``GuidanceGains.track_deck``:
+
+* off (the bench default): proportional servoing on the camera-frame tag offset and range,
+  as the papers' bench needs (a deck that heaves centimetres, no wind);
+* on (the ship scenarios): the guidance flies **in the deck's frame**.
+  - A constant-velocity Kalman filter per world axis (:class:`DeckTracker`) tracks where the
+    deck is and how fast it moves, from the tag seen by a *level* camera (the drone's lean
+    removed) and, with the tag lost, the ToF ranges, plus the drone's own navigation
+    estimate (:class:`OwnState`: the autopilot's position, velocity and attitude, as PX4's
+    EKF2 gives them to a companion computer).
+  - The set-point is the estimated deck velocity (feed-forward) plus a proportional
+    correction of the deck-relative position, so the drone holds station on a deck that
+    surges, sways and heaves without the lag of a proportional law; the velocity loop's
+    integrator (the PX4-style cascade of :mod:`landing_env.physics.controller`) rejects the
+    mean wind.
+  - The camera, not the body, is aimed at the tag: a drone leaning into the wind looks
+    downwind, so it stands upwind of the tag by the height times its (low-passed) lean.
+  - The final descent's speed is *relative* to the deck (the deck's vertical velocity minus
+    a range-scheduled descent speed), so the drone meets a heaving deck at about
+    ``touchdown_speed``.  It slows to a stop while the tag nears the image edge
+    (``view_half_tan``) and climbs back while the tag is lost above ``blind_range_m``.
+  This is the structure of ship-landing guidance that tracks the deck rather than the sea
+  (Marconi, Isidori & Serrani 2002, *Automatica* 38:21-32: vertical landing on an
+  oscillating platform with an internal model of its motion; Herissé et al. 2012, *IEEE
+  T-RO* 28:77-89: landing on a moving platform from the relative motion the camera sees).
+  The motors are cut at the first contact (``World.settle``), as a land detector does.
 """
 
 from __future__ import annotations
@@ -14,7 +41,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.frames import camera_to_heading_xy
+from estimation.frames import (
+    camera_to_heading_xy,
+    euler_zyx_from_matrix,
+    level_from_body,
+    levelled_deck_pose,
+)
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 
@@ -40,6 +72,44 @@ class GuidanceGains:
     #: aligned when the horizontal error is below this plus ``align_tolerance_per_m`` * range
     align_tolerance_m: float = 0.08
     align_tolerance_per_m: float = 0.08
+    #: fly in the deck's frame (deck-velocity feed-forward from :class:`DeckTracker`, relative
+    #: descent speed); needs the drone's navigation estimate (:class:`OwnState`)
+    track_deck: bool = False
+    #: the tracker's process noise: the deck's acceleration spectral density, m^2/s^3 (the
+    #: ship decks' vertical acceleration is 0.3-0.8 m/s^2 RMS at 0.1-0.2 Hz)
+    tracker_accel_psd: float = 0.5
+    #: the tracker's measurement noise (1 sigma) of the deck position, metres
+    tracker_position_sigma_m: float = 0.02
+    #: without any measurement for this long the tracker is dropped (the plain law flies)
+    tracker_coast_s: float = 1.5
+    #: time constant of the low-pass on the drone's lean (for aiming the camera), seconds
+    lean_filter_s: float = 1.0
+    #: in the deck-frame descent, the tag unseen this long above ``blind_range_m`` pauses the
+    #: descent until it is seen again, seconds
+    lost_tag_pause_s: float = 0.3
+    #: ... and the drone climbs at this speed relative to the deck meanwhile, m/s, up to
+    #: ``max_search_range_m`` above it
+    lost_tag_climb_speed: float = 0.2
+    max_search_range_m: float = 2.5
+    #: touchdown when the lean allows: below ``flare_range_m`` the deck-frame descent holds
+    #: its height over the deck while the drone leans more than ``max_touchdown_lean_deg``
+    #: from the vertical (a gust), for at most ``max_flare_wait_s``; 0 turns it off.  On
+    #: the ship decks 5 % of the touchdowns below 18 deg tipped over or bounced when the
+    #: motors stopped, 16 % at 18-22 deg and 39 % above 22 deg (README "Landing on the ship")
+    flare_range_m: float = 0.0
+    max_touchdown_lean_deg: float = 18.0
+    max_flare_wait_s: float = 3.0
+    #: in the deck-frame descent, the tag must stay inside the view: the descent slows to a
+    #: stop as the tag's farthest corner comes within ``view_margin`` (tangent of the angle)
+    #: of this half field of view (tangent: half the image width over the focal length,
+    #: 256 / 458.5 for the default camera), and climbs beyond it; 0 turns the gate off
+    view_half_tan: float = 0.0
+    view_margin: float = 0.08
+    #: half the tag's side, metres (for the gate: the corners, not the centre, must fit)
+    tag_half_size_m: float = 0.15
+    #: a coasting track's velocity decays with this time constant (the deck's horizontal
+    #: motion is oscillatory: holding a stale velocity drifts away), seconds
+    tracker_velocity_decay_s: float = 1.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -52,13 +122,166 @@ class GuidanceGains:
             "touchdown_speed",
         ):
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
-        for name in ("k_yaw", "blind_range_m", "align_tolerance_m", "align_tolerance_per_m"):
+        require_range("lost_tag_climb_speed", self.lost_tag_climb_speed, 0.0)
+        require_range("max_search_range_m", self.max_search_range_m, 0.0, low_inclusive=False)
+        require_range("flare_range_m", self.flare_range_m, 0.0, 3.0)
+        require_range("max_touchdown_lean_deg", self.max_touchdown_lean_deg, 0.0, 90.0)
+        require_range("max_flare_wait_s", self.max_flare_wait_s, 0.0)
+        require_range("view_half_tan", self.view_half_tan, 0.0)
+        require_range("view_margin", self.view_margin, 0.0)
+        require_range("tag_half_size_m", self.tag_half_size_m, 0.0)
+        for name in (
+            "k_yaw",
+            "blind_range_m",
+            "align_tolerance_m",
+            "align_tolerance_per_m",
+        ):
             require_range(name, getattr(self, name), 0.0)
+        for name in (
+            "tracker_accel_psd",
+            "tracker_position_sigma_m",
+            "tracker_coast_s",
+            "lean_filter_s",
+            "lost_tag_pause_s",
+            "tracker_velocity_decay_s",
+        ):
+            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         if self.touchdown_speed > self.descent_speed:
             raise ConfigError(
                 "touchdown_speed",
                 f"{self.touchdown_speed} must not exceed descent_speed = {self.descent_speed}",
             )
+
+
+@dataclass(frozen=True)
+class OwnState:
+    """The drone's own navigation estimate, as the autopilot gives it to the guidance (PX4's
+    EKF2 local position: position and velocity in a local level frame, attitude); in the
+    simulation the true state stands in for it, as for the levelled history."""
+
+    position_w: np.ndarray
+    velocity_w: np.ndarray
+    rotation_wb: np.ndarray
+
+    @property
+    def yaw(self) -> float:
+        return float(euler_zyx_from_matrix(self.rotation_wb)[2])
+
+
+class DeckTracker:
+    """Where the deck (the tag centre) is and how fast it moves, in the world frame.
+
+    One constant-velocity Kalman filter per axis (white-noise acceleration of spectral density
+    ``accel_psd``; Bar-Shalom, Li & Kirubarajan 2001, *Estimation with Applications to
+    Tracking and Navigation*, Sec. 6.2.2).  A measurement is the drone's position plus the
+    tag offset seen by a level camera (the deck pose rotated by the drone's roll and pitch,
+    then by its yaw); with the tag lost, the ToF ranges (their mean along the body axis,
+    times the cosine of the drone's tilt) still measure the height.  The vertical position
+    tracked is the drone's centre's height minus the camera's range, so that ``range =
+    own z - tracked z``.  Without measurements a track coasts with its velocity decaying
+    (``velocity_decay_s``): the deck of a ship hove-to oscillates about a fixed mean, so the
+    last position is the best guess of where to look again; the height track is dropped
+    after ``coast_s`` without a range.
+    """
+
+    def __init__(
+        self,
+        accel_psd: float,
+        position_sigma_m: float,
+        coast_s: float,
+        velocity_decay_s: float = math.inf,
+    ) -> None:
+        self.accel_psd = accel_psd
+        self.r = position_sigma_m**2
+        self.coast_s = coast_s
+        self.velocity_decay_s = velocity_decay_s
+        self.reset()
+
+    def reset(self) -> None:
+        #: per axis (x, y, z): state [position, velocity] and its 2x2 covariance
+        self.state = np.zeros((3, 2))
+        self.cov = np.zeros((3, 2, 2))
+        self.started = np.zeros(3, dtype=bool)
+        self.unseen_s = np.full(3, math.inf)
+
+    @property
+    def valid(self) -> bool:
+        """The height has a track (the horizontal axes may have lost theirs)."""
+        return bool(self.started[2])
+
+    @property
+    def horizontal_valid(self) -> bool:
+        return bool(self.started[:2].all())
+
+    @property
+    def position_w(self) -> np.ndarray:
+        return self.state[:, 0].copy()
+
+    @property
+    def velocity_w(self) -> np.ndarray:
+        return self.state[:, 1].copy()
+
+    def update(self, observation: dict[str, np.ndarray], own: OwnState, dt: float) -> None:
+        """Predict by ``dt`` and correct with whatever this observation measures."""
+        self._predict(dt)
+        measured = self.measure(observation, own)
+        for axis in range(3):
+            value = measured[axis]
+            if math.isfinite(value):
+                self._correct(axis, value)
+                self.unseen_s[axis] = 0.0
+            elif axis == 2 and self.unseen_s[axis] > self.coast_s:
+                # no range for that long: the height track is dropped (the horizontal ones
+                # coast on: a hove-to ship's deck oscillates about a fixed mean position)
+                self.started[axis] = False
+            else:
+                # coasting: let the velocity decay (an oscillating deck's stale velocity
+                # would carry the track away)
+                self.state[axis, 1] *= math.exp(-dt / self.velocity_decay_s)
+
+    @staticmethod
+    def measure(observation: dict[str, np.ndarray], own: OwnState) -> np.ndarray:
+        """The deck position in the world this observation gives (NaN where it gives none)."""
+        measured = np.full(3, math.nan)
+        yaw = own.yaw
+        c, s = math.cos(yaw), math.sin(yaw)
+        if observation["deck_pose_valid"][0]:
+            level = levelled_deck_pose(
+                observation["deck_pose"].astype(float), level_from_body(own.rotation_wb)
+            )
+            forward, left = camera_to_heading_xy(level[:2])
+            measured[0] = own.position_w[0] + c * forward - s * left
+            measured[1] = own.position_w[1] + s * forward + c * left
+            measured[2] = own.position_w[2] - float(level[2])
+            return measured
+        valid = observation["tof_valid"].astype(bool)
+        if valid.any():
+            cos_tilt = float(np.clip(own.rotation_wb[2, 2], 0.5, 1.0))
+            height = float(np.mean(observation["tof_range"][valid])) * cos_tilt
+            measured[2] = own.position_w[2] - height
+        return measured
+
+    def _predict(self, dt: float) -> None:
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        q = self.accel_psd * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        for axis in range(3):
+            if self.started[axis]:
+                self.state[axis] = f @ self.state[axis]
+                self.cov[axis] = f @ self.cov[axis] @ f.T + q
+        self.unseen_s += dt
+
+    def _correct(self, axis: int, value: float) -> None:
+        if not self.started[axis]:
+            self.state[axis] = (value, 0.0)
+            # a deck moving at up to ~2 m/s: start with that velocity uncertainty
+            self.cov[axis] = np.diag([self.r, 4.0])
+            self.started[axis] = True
+            return
+        p = self.cov[axis]
+        innovation = value - self.state[axis, 0]
+        gain = p[:, 0] / (p[0, 0] + self.r)
+        self.state[axis] = self.state[axis] + gain * innovation
+        self.cov[axis] = p - np.outer(gain, p[0, :])
 
 
 class DeckGuidance:
@@ -70,12 +293,80 @@ class DeckGuidance:
     z up), m/s, rad/s.
     """
 
-    def __init__(self, gains: GuidanceGains | None = None) -> None:
+    def __init__(self, gains: GuidanceGains | None = None, dt: float = 0.05) -> None:
         self.gains = gains or GuidanceGains()
+        self.dt = dt
+        g = self.gains
+        self.tracker = DeckTracker(
+            g.tracker_accel_psd,
+            g.tracker_position_sigma_m,
+            g.tracker_coast_s,
+            g.tracker_velocity_decay_s,
+        )
         self._last_range = math.inf
+        self._lean = np.zeros(2)
+        self._lean_started = False
+        self._tag_unseen_s = math.inf
+        self._flare_wait_s = 0.0
 
     def reset(self) -> None:
         self._last_range = math.inf
+        self._lean = np.zeros(2)
+        self._lean_started = False
+        self._tag_unseen_s = math.inf
+        self._flare_wait_s = 0.0
+        self.tracker.reset()
+
+    def observe(self, observation: dict[str, np.ndarray], own: OwnState | None) -> None:
+        """Feed one control period's observation to the deck tracker (``track_deck`` only;
+        call it once per control period, before :meth:`hold` or :meth:`descend`)."""
+        if self.gains.track_deck and own is not None:
+            self.tracker.update(observation, own, self.dt)
+            seen = bool(observation["deck_pose_valid"][0])
+            self._tag_unseen_s = 0.0 if seen else self._tag_unseen_s + self.dt
+            # the lean (the body z axis' horizontal slope), low-passed: the camera looks
+            # that much downwind of the point under the drone
+            z_b = own.rotation_wb[:, 2]
+            lean = z_b[:2] / max(float(z_b[2]), 0.5)
+            if not self._lean_started:
+                self._lean, self._lean_started = lean, True
+            alpha = self.dt / (self.gains.lean_filter_s + self.dt)
+            self._lean = self._lean + alpha * (lean - self._lean)
+
+    def _tracking(self, own: OwnState | None) -> bool:
+        return self.gains.track_deck and own is not None and self.tracker.valid
+
+    def _deck_frame_setpoint(
+        self, own: OwnState, vertical_h: float, yaw_rate: float
+    ) -> VelocitySetpoint:
+        """Deck velocity + proportional correction of the horizontal offset and the given
+        relative vertical speed, turned into the heading frame."""
+        g = self.gains
+        deck_v = self.tracker.velocity_w
+        relative = np.zeros(2)
+        if not self.tracker.horizontal_valid:
+            deck_v[:2] = 0.0
+        else:
+            # aim the camera, not the body, at the tag: stand upwind of it by the height
+            # times the lean, so that the tag stays near the image centre
+            # (the aim point moves with the deck and, as the height changes, along the lean)
+            aim = self.tracker.position_w[:2] + max(self._last_range, 0.0) * self._lean
+            offset = aim - own.position_w[:2]
+            relative = g.k_xy * offset + vertical_h * self._lean
+            speed = float(np.hypot(*relative))
+            if speed > g.max_horizontal_speed:
+                relative *= g.max_horizontal_speed / speed
+        v_w = np.array([deck_v[0] + relative[0], deck_v[1] + relative[1], deck_v[2] + vertical_h])
+        yaw = own.yaw
+        c, s = math.cos(yaw), math.sin(yaw)
+        v_h = np.array([c * v_w[0] + s * v_w[1], -s * v_w[0] + c * v_w[1], v_w[2]])
+        return VelocitySetpoint(v_h, yaw_rate)
+
+    def tracked_range_m(self, own: OwnState) -> float:
+        """The camera's height above the deck from the tracker (NaN without a track)."""
+        if not self.tracker.valid:
+            return math.nan
+        return float(own.position_w[2] - self.tracker.position_w[2])
 
     def range_m(self, observation: dict[str, np.ndarray]) -> float:
         """Camera height above the deck: the mean of the valid ToF ranges, else the tag's z.
@@ -119,15 +410,51 @@ class DeckGuidance:
         speed = math.hypot(vx, vy)
         if speed > g.max_horizontal_speed:
             vx, vy = vx * g.max_horizontal_speed / speed, vy * g.max_horizontal_speed / speed
-        yaw_rate = -g.k_yaw * float(observation["deck_pose"][5])
-        return vx, vy, yaw_rate
+        return vx, vy, self._yaw_rate(observation)
 
-    def hold(self, observation: dict[str, np.ndarray], target_range_m: float) -> VelocitySetpoint:
+    def _view_factor(self, observation: dict[str, np.ndarray]) -> float:
+        """1 while the tag sits well inside the image, falling to 0 at ``view_margin`` from
+        its edge and to -1 (climb) at the edge: descending brings the tag's corners outwards,
+        so the descent waits for the centring to bring the tag in first."""
+        g = self.gains
+        x, y, z = (float(v) for v in observation["deck_pose"][:3])
+        if z <= 0.0:
+            return 0.0
+        extent = max(abs(x), abs(y)) / z + g.tag_half_size_m / z
+        room = g.view_half_tan - extent
+        if room >= 2.0 * g.view_margin:
+            return 1.0
+        return float(np.clip((room - g.view_margin) / g.view_margin, -1.0, 1.0))
+
+    def _yaw_rate(self, observation: dict[str, np.ndarray]) -> float:
+        """Turn towards the tag's yaw (zero when the tag is not seen)."""
+        if not observation["deck_pose_valid"][0]:
+            return 0.0
+        return -self.gains.k_yaw * float(observation["deck_pose"][5])
+
+    def hold(
+        self,
+        observation: dict[str, np.ndarray],
+        target_range_m: float,
+        own: OwnState | None = None,
+    ) -> VelocitySetpoint:
         """Centre over the tag and hold the camera ``target_range_m`` above the deck.
 
-        With nothing seen the drone holds its height (zero vertical set-point).
+        With nothing seen the drone holds its height (zero vertical set-point).  With
+        ``track_deck`` and ``own``, it holds station in the deck's frame instead.
         """
         g = self.gains
+        if self._tracking(own):
+            assert own is not None
+            height = self.tracked_range_m(own)
+            self._last_range = height
+            vz = float(
+                np.clip(
+                    g.k_z * (target_range_m - height), -g.max_vertical_speed, g.max_vertical_speed
+                )
+            )
+            yaw_rate = self._yaw_rate(observation)
+            return self._deck_frame_setpoint(own, vz, yaw_rate)
         vx, vy, yaw_rate = self._centre(observation)
         height = self.range_m(observation)
         vz = 0.0
@@ -140,10 +467,39 @@ class DeckGuidance:
             )
         return VelocitySetpoint(np.array([vx, vy, vz]), yaw_rate)
 
-    def descend(self, observation: dict[str, np.ndarray]) -> VelocitySetpoint:
+    def descend(
+        self, observation: dict[str, np.ndarray], own: OwnState | None = None
+    ) -> VelocitySetpoint:
         """The final descent: centre while the tag is seen, slow to ``touchdown_speed`` near the
-        deck, and keep going down on the last range when everything is lost close to it."""
+        deck, and keep going down on the last range when everything is lost close to it.
+
+        With ``track_deck`` and ``own`` the speeds are relative to the deck: the set-point is
+        the deck's estimated velocity plus the centring correction and minus the scheduled
+        descent speed, so the drone meets the deck at ``touchdown_speed`` relative to it."""
         g = self.gains
+        if self._tracking(own):
+            assert own is not None
+            measured = self.range_m(observation)
+            height = measured if math.isfinite(measured) else self.tracked_range_m(own)
+            self._last_range = height
+            speed = float(np.clip(g.descent_gain * height, g.touchdown_speed, g.descent_speed))
+            centre = height > g.blind_range_m
+            if centre and self._tag_unseen_s > g.lost_tag_pause_s:
+                # the tag is lost above the blind range: climb slowly (relative to the deck,
+                # widening the view) and re-centre on the tracked deck until it is seen again
+                speed = -g.lost_tag_climb_speed
+            elif centre and g.view_half_tan > 0.0 and observation["deck_pose_valid"][0]:
+                speed *= self._view_factor(observation)
+            if speed < 0.0 and height >= g.max_search_range_m:
+                speed = 0.0  # climb to widen the view, but no higher than this
+            if 0.0 < height < g.flare_range_m and self._flare_wait_s < g.max_flare_wait_s:
+                lean_deg = math.degrees(math.acos(float(np.clip(own.rotation_wb[2, 2], -1, 1))))
+                if lean_deg > g.max_touchdown_lean_deg:
+                    # a gust leans the drone over: wait over the deck for the lull
+                    speed = 0.0
+                    self._flare_wait_s += self.dt
+            yaw_rate = self._yaw_rate(observation) if centre else 0.0
+            return self._deck_frame_setpoint(own, -speed, yaw_rate)
         height = self.range_m(observation)
         if math.isfinite(height):
             self._last_range = height

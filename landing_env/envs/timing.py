@@ -33,7 +33,7 @@ from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_d
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
-from landing_env.envs.guidance import DeckGuidance, GuidanceGains
+from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
 from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError, require_range
@@ -206,7 +206,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         rate_window = max(2, round(self.timing.rate_window_s * sim.env_hz))
         self.layout = TimingObservationLayout(n_history, self.timing.hold_height_m)
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
-        self.guidance = DeckGuidance(self.timing.guidance)
+        self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -241,12 +241,13 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.guidance.reset()
         self.history.reset()
         self._base_observation = base_observation
+        self.guidance.observe(base_observation, self._own_state())
         self._record()
         self.frames_of_last_step = []
         self.periods_of_last_step = []
         # warm-up: hold until the history is full; the agent decides only from then on
         for _ in range(self.history.length - 1):
-            self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
+            self._advance(self._hold_setpoint())
             if self._outcome is not Outcome.IN_FLIGHT:
                 raise RuntimeError(
                     f"the episode ended ({self._outcome.value}) during the warm-up hold; "
@@ -267,7 +268,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         if choice == WAIT:
             waited = 0.0
             for _ in range(self.timing.steps_per_decision):
-                self._advance(self.guidance.hold(self._base_observation, self.timing.hold_height_m))
+                self._advance(self._hold_setpoint())
                 waited += self.env_dt
                 if self._outcome is not Outcome.IN_FLIGHT:
                     break
@@ -294,9 +295,22 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._outcome = self._outcome_after(self._report)
         self._sensing = self._sense()
         self._base_observation = self._observation()
+        self.guidance.observe(self._base_observation, self._own_state())
         self._record()
         if self.record_periods:
             self._record_period()
+
+    def _own_state(self) -> OwnState:
+        """The drone's navigation estimate for the guidance (the true state standing in for
+        the autopilot's, as for the levelled history)."""
+        state = self.world.drone_state()
+        return OwnState(state.position_w, state.velocity_w, state.rotation_wb)
+
+    def _hold_setpoint(self) -> VelocitySetpoint:
+        assert self._base_observation is not None
+        return self.guidance.hold(
+            self._base_observation, self.timing.hold_height_m, self._own_state()
+        )
 
     def _record_period(self) -> None:
         assert self._sensing is not None and self._base_observation is not None
@@ -341,7 +355,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 self._outcome = Outcome.TIMEOUT
                 break
             assert self._base_observation is not None
-            self._advance(self.guidance.descend(self._base_observation))
+            self._advance(self.guidance.descend(self._base_observation, self._own_state()))
         end = self._touchdown.time_s if self._touchdown is not None else self.world.time
         self._descent_s = end - start
 

@@ -1,0 +1,207 @@
+"""The deck-frame guidance of the ship scenarios (``GuidanceGains.track_deck``).
+
+Unit behaviour on synthetic observations (no simulation), then real landings on the ship deck.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimation.frames import R_BC, matrix_from_euler_zyx
+from landing_env.config import load_config
+from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
+
+DT = 0.05
+
+
+def _observation(
+    deck_offset_c: tuple[float, float, float] | None, tof_m: float | None = None
+) -> dict[str, np.ndarray]:
+    """An observation of a level deck ``deck_offset_c`` (x, y, z) in the camera frame."""
+    pose = np.zeros(6, dtype=np.float32)
+    valid = deck_offset_c is not None
+    if valid:
+        pose[:3] = deck_offset_c
+    ranges = np.full(4, tof_m if tof_m is not None else 0.0, dtype=np.float32)
+    return {
+        "deck_pose": pose,
+        "deck_pose_valid": np.array([int(valid)], dtype=np.int8),
+        "tof_range": ranges,
+        "tof_valid": np.full(4, int(tof_m is not None), dtype=np.int8),
+    }
+
+
+def _level(position: tuple[float, float, float], velocity=(0.0, 0.0, 0.0)) -> OwnState:
+    return OwnState(np.array(position, float), np.array(velocity, float), np.eye(3))
+
+
+def test_the_deck_tracker_recovers_the_heave_rate_of_a_deck_seen_only_by_its_ranges() -> None:
+    guidance = DeckGuidance(GuidanceGains(track_deck=True), DT)
+    rng = np.random.default_rng(0)
+    errors = []
+    for k in range(400):
+        t = k * DT
+        deck_z = 0.5 * math.sin(2 * math.pi * t / 8.8)
+        deck_vz = 0.5 * 2 * math.pi / 8.8 * math.cos(2 * math.pi * t / 8.8)
+        height = 2.0 - deck_z + rng.normal(0.0, 0.007)  # VL53L1X-like noise at 2 m
+        guidance.observe(_observation(None, tof_m=height), _level((0.0, 0.0, 2.0)))
+        if t > 5.0:
+            errors.append(guidance.tracker.velocity_w[2] - deck_vz)
+    # the heave rate is 0.36 m/s in amplitude; the track follows it to a few cm/s
+    assert np.sqrt(np.mean(np.square(errors))) < 0.06
+
+
+def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it() -> None:
+    gains = GuidanceGains(track_deck=True, touchdown_speed=0.25)
+    guidance = DeckGuidance(gains, DT)
+    for k in range(100):  # the deck rises at 1 m/s under a drone that holds its height
+        height = 2.0 - 1.0 * k * DT
+        guidance.observe(_observation((0.0, 0.0, height)), _level((0.0, 0.0, 2.0)))
+    setpoint = guidance.descend(_observation((0.0, 0.0, 0.1)), _level((0.0, 0.0, 2.0)))
+    # the deck's 1 m/s upwards minus 0.25 m/s relative: the drone climbs at 0.75 m/s
+    assert setpoint.velocity_h[2] == pytest.approx(0.75, abs=0.05)
+    plain = DeckGuidance(GuidanceGains(touchdown_speed=0.25))
+    assert plain.descend(_observation((0.0, 0.0, 0.1))).velocity_h[2] == pytest.approx(-0.25)
+
+
+def test_a_drone_leaning_into_the_wind_holds_upwind_of_the_tag_so_the_camera_sees_it() -> None:
+    guidance = DeckGuidance(GuidanceGains(track_deck=True), DT)
+    # leaning 15 deg nose-down into a wind from ahead (+x): body z tilts towards +x
+    leaning = OwnState(np.array([0.0, 0.0, 2.0]), np.zeros(3), matrix_from_euler_zyx(0, 0.26, 0))
+    # the tag straight below the drone, seen by the tilted camera 15 deg off its axis
+    tag_c = (leaning.rotation_wb @ R_BC).T @ np.array([0.0, 0.0, -2.0])
+    for _ in range(60):
+        guidance.observe(_observation(tuple(tag_c)), leaning)
+    assert np.allclose(guidance.tracker.position_w[:2], 0.0, atol=0.02)
+    setpoint = guidance.hold(_observation(tuple(tag_c)), 2.0, leaning)
+    # forward (upwind) towards 2 m x tan(15 deg) = 0.53 m ahead of the tag, at k_xy = 0.8
+    assert setpoint.velocity_h[0] == pytest.approx(0.8 * 2.0 * math.tan(0.26), abs=0.03)
+    assert abs(setpoint.velocity_h[1]) < 0.05
+
+
+def test_the_descent_stops_as_the_tag_nears_the_image_edge_and_climbs_when_it_is_lost() -> None:
+    gains = GuidanceGains(track_deck=True, view_half_tan=0.558, blind_range_m=0.8)
+    guidance = DeckGuidance(gains, DT)
+    own = _level((0.0, 0.0, 2.0))
+    for _ in range(40):
+        guidance.observe(_observation((0.0, 0.0, 2.0)), own)
+    centred = guidance.descend(_observation((0.0, 0.0, 2.0)), own).velocity_h[2]
+    near_edge = guidance.descend(_observation((0.8, 0.0, 2.0)), own).velocity_h[2]
+    assert centred < -0.5  # full descent speed
+    # the far corner at tan 0.475 of 0.558, inside the 0.08 margin: stopped
+    assert abs(near_edge) < 0.05
+    for _ in range(10):  # the tag lost for half a second (the ranges still see the deck)
+        guidance.observe(_observation(None, tof_m=2.0), own)
+    lost = guidance.descend(_observation(None, tof_m=2.0), own).velocity_h[2]
+    assert lost == pytest.approx(gains.lost_tag_climb_speed, abs=0.02)
+
+
+def test_the_ship_decks_judge_the_drone_to_deck_attitude_by_the_gear_clearance_angle() -> None:
+    assert load_config("ship-ss4").touchdown.max_relative_attitude_deg == 40.0
+    assert load_config("ship-ss6").touchdown.max_relative_attitude_deg == 40.0
+    assert load_config("bench-ss4").touchdown.max_relative_attitude_deg == 10.0
+
+
+def _land_now(track: bool, seeds: range) -> list[dict]:
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+    from landing_env.scenarios import SCENARIO_IDS
+
+    scenario = SCENARIO_IDS["DeckLandingTiming-ShipSS4-v1"]
+    timing = dict(scenario.task_kwargs["timing"])
+    timing["guidance"] = {**timing["guidance"], "track_deck": track}
+    env = gym.make(
+        "DeckLandingTiming-v0",
+        config="ship-ss4",
+        overrides={**scenario.overrides, "estimation.observed": "truth"},
+        timing=timing,
+    )
+    touchdowns = []
+    try:
+        for seed in seeds:
+            env.reset(seed=seed)
+            _, _, _, _, info = env.step(1)
+            touchdowns.append({"outcome": info["outcome"], **info.get("touchdown", {})})
+    finally:
+        env.close()
+    return touchdowns
+
+
+def test_on_the_ship_deck_the_deck_frame_descent_lands_where_the_bench_guidance_hits_hard() -> None:
+    seeds = range(1_000_000, 1_000_003)
+    tracked = _land_now(True, seeds)
+    plain = _land_now(False, seeds)
+    assert sum(t["outcome"] == "success" for t in tracked) >= 2
+    speeds = [t["relative_normal_speed"] for t in tracked if "relative_normal_speed" in t]
+    assert len(speeds) == 3 and max(speeds) < 0.4
+    # the bench's law descends at 0.25 m/s relative to the world: the heave decides
+    assert sum(t["outcome"] == "success" for t in plain) < sum(
+        t["outcome"] == "success" for t in tracked
+    )
+
+
+def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> None:
+    gains = GuidanceGains(
+        track_deck=True, blind_range_m=0.8, flare_range_m=0.5, max_touchdown_lean_deg=18.0
+    )
+    guidance = DeckGuidance(gains, DT)
+    upright = _level((0.0, 0.0, 0.4))
+    gusted = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.4, 0))
+    for _ in range(40):
+        guidance.observe(_observation(None, tof_m=0.4), upright)
+    assert guidance.descend(_observation(None, tof_m=0.4), upright).velocity_h[2] < -0.2
+    # leaning 23 deg: hold over the deck for the lull, at most max_flare_wait_s
+    waits = [
+        guidance.descend(_observation(None, tof_m=0.4), gusted).velocity_h[2] for _ in range(80)
+    ]
+    assert abs(waits[0]) < 0.05
+    assert waits[-1] < -0.2  # after 3 s it lands all the same
+
+
+def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation() -> None:
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    finite = st.floats(-50.0, 50.0, allow_nan=False)
+    angle = st.floats(-3.1, 3.1, allow_nan=False)
+
+    @settings(max_examples=150, deadline=None, derandomize=True)
+    @given(
+        st.lists(
+            st.tuples(
+                st.tuples(finite, finite, finite, angle, st.floats(-1.5, 1.5), angle),
+                st.booleans(),
+                st.lists(st.floats(0.0, 4.0), min_size=4, max_size=4),
+                st.lists(st.booleans(), min_size=4, max_size=4),
+                st.tuples(st.floats(-0.7, 0.7), st.floats(-0.7, 0.7), angle),
+            ),
+            min_size=1,
+            max_size=12,
+        )
+    )
+    def run(steps) -> None:
+        gains = GuidanceGains(
+            track_deck=True, view_half_tan=0.558, blind_range_m=0.8, flare_range_m=0.5
+        )
+        guidance = DeckGuidance(gains, DT)
+        for pose, seen, ranges, valid, (roll, pitch, yaw) in steps:
+            observation = {
+                "deck_pose": np.array(pose, dtype=np.float32),
+                "deck_pose_valid": np.array([int(seen)], dtype=np.int8),
+                "tof_range": np.array(ranges, dtype=np.float32),
+                "tof_valid": np.array(valid, dtype=np.int8),
+            }
+            own = OwnState(np.zeros(3), np.zeros(3), matrix_from_euler_zyx(roll, pitch, yaw))
+            guidance.observe(observation, own)
+            for setpoint in (
+                guidance.hold(observation, 2.0, own),
+                guidance.descend(observation, own),
+            ):
+                assert np.all(np.isfinite(setpoint.velocity_h))
+                assert math.isfinite(setpoint.yaw_rate)
+
+    run()
