@@ -35,6 +35,8 @@ class LabelSet:
     margin: np.ndarray
     success: np.ndarray
     deck_tilt_deg: np.ndarray
+    #: time from the commit to the first contact (or to the end of a descent without one), s
+    descent_s: np.ndarray
     #: episode number (in ``seeds`` order) and decision of each example
     episode: np.ndarray
     decision: np.ndarray
@@ -101,6 +103,7 @@ def collect_labels(
                 rows["margin"].append(max(touchdown_margin(touchdown, thresholds), MIN_MARGIN))
                 rows["success"].append(info["outcome"] == "success")
                 rows["deck_tilt_deg"].append(float(touchdown.get("deck_tilt_deg", math.nan)))
+                rows["descent_s"].append(float(info["descent_s"]))
                 rows["episode"].append(number)
                 rows["decision"].append(decision)
             observation, _, terminated, truncated, _ = env.step(0)
@@ -113,6 +116,7 @@ def collect_labels(
         margin=np.array(rows["margin"], dtype=float),
         success=np.array(rows["success"], dtype=bool),
         deck_tilt_deg=np.array(rows["deck_tilt_deg"], dtype=float),
+        descent_s=np.array(rows["descent_s"], dtype=float),
         episode=np.array(rows["episode"], dtype=int),
         decision=np.array(rows["decision"], dtype=int),
         waited=waited,

@@ -14,9 +14,10 @@ motion a descent ahead from its recent history with a linear (AR / Kalman) model
    roll and pitch) of the estimated roll and pitch 1.0-2.7 s ahead is fitted on half the
    episodes' estimate series (self-supervised: no labels needed) and applied to the other half,
    and the other way round.
-3. Printed: the predictor's tilt error against the touchdown's deck tilt per horizon, the
-   success of a commit per bin of the predicted largest tilt over the likely contact times
-   (1.6-2.0 s), and the replayed rule "commit when that prediction is below a threshold".
+3. Printed: the time from the commit to the first contact, the predictor's tilt error against
+   the touchdown's deck tilt per horizon, the success of a commit per bin of the predicted
+   largest tilt over the likely contact times (1.6-2.0 s), and the replayed rule "commit
+   when that prediction is below a threshold".
 """
 
 from __future__ import annotations
@@ -91,13 +92,14 @@ def main() -> None:
     args = parser.parse_args()
 
     started = time.process_time()
-    margin, tilt, predicted, episode = [], [], [], []
+    margin, tilt, predicted, episode, descent = [], [], [], [], []
     for k, scenario in enumerate(args.scenario):
         env = make_timing_env(scenario, args.sensing, "tight", {"touchdown.settle_time_s": 0.5})
         layout = env.unwrapped.layout
         seeds = list(range(args.seed + 10_000 * k, args.seed + 10_000 * k + args.episodes))
         labels = collect_labels(env, seeds, args.max_decisions, args.every)
         env.close()
+        descent.append(labels.descent_s[np.isfinite(labels.deck_tilt_deg)])
         series = [estimate_series(w, layout) for w in labels.waited]
         halves = (np.arange(len(series)) % 2 == 0, np.arange(len(series)) % 2 == 1)
         for fit_on, apply_to in (halves, halves[::-1]):
@@ -113,6 +115,11 @@ def main() -> None:
         f"{len(margin)} labelled decisions of {len(np.unique(episode))} episodes "
         f"({', '.join(args.scenario)}, sensing {args.sensing}, tight observed), "
         f"{time.process_time() - started:.0f} s CPU"
+    )
+    descent = np.concatenate(descent)
+    print(
+        f"commit to first contact: {descent.mean():.2f} s mean, {descent.std():.2f} s sd, "
+        f"{descent.min():.2f}-{descent.max():.2f} s"
     )
     now = replay_rule(margin, np.ones(len(margin), dtype=bool), episode)
     best = np.mean([margin[episode == e].max() >= 0.0 for e in np.unique(episode)])
