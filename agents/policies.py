@@ -15,6 +15,9 @@
 * ``timing-dqn-realistic`` (``DeckLandingTiming-v0``): the DQN trained for realistic sensing
   with the ``tight`` estimate observed, ``agents/models/timing_dqn_realistic.zip`` (its card
   says so; ``configs/train/timing_dqn_realistic.yaml``).
+* ``timing-dqn-randomised`` (``DeckLandingTiming-v0``): that DQN trained on from its weights
+  over bench sea states 4 and 5 and ideal, realistic and twice-realistic sensing,
+  ``agents/models/timing_dqn_randomised.zip`` (``configs/train/timing_dqn_randomised.yaml``).
 """
 
 from __future__ import annotations
@@ -489,6 +492,7 @@ POLICY_ENVS: dict[str, str] = {
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
     "timing-dqn-realistic": "DeckLandingTiming-v0",
+    "timing-dqn-randomised": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 

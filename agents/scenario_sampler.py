@@ -31,6 +31,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.errors import ConfigError, require_range
 
 ENV_ID = "DeckLandingTiming-v0"
@@ -39,6 +40,18 @@ ENV_ID = "DeckLandingTiming-v0"
 SENSING_PROFILES: dict[str, dict[str, Any]] = {
     "ideal": {},
     "tof-vl53l1x": {"tof.noise": "vl53l1x"},
+    # configs/sensors/realistic.yaml: OV9281-class camera with its fitted corner noise,
+    # VL53L1X ToF, k1 = -0.05 with its calibrations
+    "realistic": {"sensors": "realistic"},
+    # the same with twice the noise standard deviations: the ToF's sigma_0 and sigma_per_m
+    # doubled, and the corner noise's sigma = sqrt(base^2 + size/side + (blur*b)^2) doubled
+    # (base and blur x2, size x4), a margin for sensors worse than their datasheets
+    "realistic-2x": {
+        "sensors": "realistic",
+        "tof.sigma_0": 2.0 * VL53L1X_SIGMA_0_M,
+        "tof.sigma_per_m": 2.0 * VL53L1X_SIGMA_PER_M,
+        "camera.pixel_noise_fit": [0.274, 8.588, 0.228, 0.0],
+    },
 }
 
 

@@ -89,6 +89,9 @@ class TrainSettings:
     #: threads of the learner's torch: one, so that the gradient steps do not compete with
     #: the environment processes for the cores (the network is small)
     torch_threads: int = 1
+    #: start from this trained model's weights (same algorithm and network; its card must
+    #: describe the same task, observation and estimator): training goes on from it
+    init_model: str | None = None
 
     def __post_init__(self) -> None:
         require_choice("algo", self.algo, ALGOS)
@@ -322,6 +325,24 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     return train_env, eval_env
 
 
+def _start_from(model: Any, path: str, env: Any) -> None:
+    """Load ``path``'s weights into ``model`` after checking its card against ``env`` (the
+    sensing may differ: a randomised training draws several)."""
+    from agents.model_metadata import check_compatible, env_signature, read_metadata
+
+    found = Path(path)
+    if not found.is_absolute() and not found.is_file():
+        # a path in the repository (agents/models/...) from anywhere
+        found = Path(__file__).resolve().parent.parent / path
+    if not found.is_file():
+        raise ConfigError("deck_landing.init_model", f"{path!r} does not exist")
+    card = read_metadata(found)
+    if card is None:
+        raise ConfigError("deck_landing.init_model", f"{path} has no card")
+    check_compatible(card, env_signature(env), found.name, allow=("sensing",))
+    model.set_parameters(str(found), exact_match=True, device="cpu")
+
+
 def train(
     config: TrainConfig,
     out_dir: str | Path | None = None,
@@ -358,6 +379,8 @@ def train(
             verbose=0,
             **algorithm_kwargs(config.hyperparams),
         )
+        if settings.init_model:
+            _start_from(model, settings.init_model, eval_env.envs[0])
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():

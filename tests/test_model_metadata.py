@@ -64,6 +64,23 @@ def test_the_realistic_model_was_trained_on_realistic_sensing_with_tight_observe
         make_env_and_policy("timing-dqn-realistic", "bench-ss4", "tight")
 
 
+def test_the_randomised_model_serves_ideal_and_realistic_sensing_with_tight_observed() -> None:
+    card = read_metadata(shipped_timing_model("dqn-randomised"))
+    assert card is not None and card.algo == "dqn" and card.env_id == "DeckLandingTiming-v0"
+    assert card.estimator == "tight" and card.sensing == ["ideal", "realistic"]
+    settings = card.training_config["deck_landing"]
+    assert settings["init_model"].endswith("timing_dqn_realistic.zip")
+    assert set(settings["randomise"]["scenarios"]) == {"bench-ss4", "bench-ss5"}
+    for sensing in ({"sensors": "realistic"}, {}):
+        env, policy = make_env_and_policy(
+            "timing-dqn-randomised", "bench-ss5", "tight", extra_overrides=sensing
+        )
+        env.close()
+        assert isinstance(policy, TrainedTimingPolicy)
+    with pytest.raises(ConfigError, match=r"^estimator: "):
+        make_env_and_policy("timing-dqn-randomised", "bench-ss4", "ihrcf")
+
+
 def test_a_scenario_id_is_signed_as_its_task() -> None:
     import gymnasium as gym
 

@@ -109,6 +109,23 @@ def test_new_sensing_profiles_plug_in_by_name() -> None:
         register_sensing_profile("", {})
 
 
+def test_twice_the_realistic_noise_doubles_every_noise_sigma() -> None:
+    from landing_env.config import load_config
+    from landing_env.sensors.corner_noise import sigma_px
+
+    realistic = load_config("default", SENSING_PROFILES["realistic"])
+    doubled = load_config("default", SENSING_PROFILES["realistic-2x"])
+    assert doubled.sensors == realistic.sensors == "realistic"
+    ranges = np.array([0.1, 0.7, 3.0])
+    np.testing.assert_allclose(doubled.tof.sigma(ranges), 2.0 * realistic.tof.sigma(ranges))
+    side, blur = np.array([20.0, 80.0, 300.0]), np.array([0.0, 1.0, 3.0])
+    np.testing.assert_allclose(
+        sigma_px(doubled.camera.pixel_noise_fit, side, blur),
+        2.0 * sigma_px(realistic.camera.pixel_noise_fit, side, blur),
+        rtol=1e-3,
+    )
+
+
 def test_the_randomised_yaml_is_rl_zoo_style_and_loads() -> None:
     from sb3_contrib import RecurrentPPO
 

@@ -161,3 +161,47 @@ def test_rl_zoo3_trains_on_the_shipped_yaml_unmodified(tmp_path: Path) -> None:
     env = gym.make(SCENARIO_ENV_ID)
     assert model.observation_space.shape == env.observation_space.shape
     env.close()
+
+
+def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import DQN
+
+    from agents.policies import shipped_timing_model
+    from agents.training import _start_from
+
+    realistic = shipped_timing_model("dqn-realistic")
+    trained = DQN.load(realistic, device="cpu")
+    for estimator, refused in (("tight", False), ("ihrcf", True)):
+        env = gym.make(
+            SCENARIO_ENV_ID,
+            overrides={"sensors": "realistic", "estimation.observed": estimator},
+        )
+        try:
+            model = DQN("MlpPolicy", env, policy_kwargs={"net_arch": [64, 64]}, device="cpu")
+            if refused:
+                with pytest.raises(ConfigError, match="estimator"):
+                    _start_from(model, str(realistic), env)
+                continue
+            _start_from(model, str(realistic), env)
+        finally:
+            env.close()
+        for name, value in trained.policy.state_dict().items():
+            assert torch.equal(model.policy.state_dict()[name], value), name
+    with pytest.raises(ConfigError, match="init_model"):
+        _start_from(model, "no/such/model.zip", env)
+
+
+def test_the_randomised_dqn_yaml_fine_tunes_the_realistic_model() -> None:
+    from stable_baselines3 import DQN
+
+    path = CONFIG.with_name("timing_dqn_randomised.yaml")
+    data = yaml.safe_load(path.read_text())
+    algo_args = set(inspect.signature(DQN.__init__).parameters)
+    assert set(data["DeckLandingTiming-v0"]) <= set(ZOO_META_KEYS) | algo_args
+    config = load_train_config(path)
+    assert config.settings.algo == "dqn"
+    assert Path(config.settings.init_model).name == "timing_dqn_realistic.zip"
+    assert config.settings.randomise["estimator"] == "tight"
+    assert set(config.settings.randomise["sensing"]) == {"ideal", "realistic", "realistic-2x"}
