@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from typing import Any
 
 import cv2
 import numpy as np
@@ -93,6 +94,15 @@ class AprilTagDetector:
             raise ValueError(f"nthreads must be >= 1, got {nthreads}")
         self.families = families
         self.max_hamming = max_hamming
+        self._arguments = (
+            families,
+            quad_decimate,
+            quad_sigma,
+            refine_edges,
+            decode_sharpening,
+            nthreads,
+            max_hamming,
+        )
         #: images with a smaller side hold no tag and are never passed to the native code
         self.min_side_px = min_detect_side_px(quad_decimate)
         self._detector = Detector(
@@ -109,6 +119,17 @@ class AprilTagDetector:
     def close(self) -> None:
         """Free the C detector now (it is freed on collection otherwise)."""
         self._finalizer()
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> AprilTagDetector:
+        """Shared, not copied: a detection depends on its image alone (no state is carried
+        from one call to the next), and the native detector holds C pointers that cannot be
+        copied. An environment snapshot (the oracle's look-ahead) relies on this."""
+        memo[id(self)] = self
+        return self
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled as its settings: the receiving process builds its own native detector."""
+        return (AprilTagDetector, self._arguments)
 
     def detect(self, gray_or_rgb: np.ndarray) -> tuple[TagDetection, ...]:
         """Detect tags; corners are 4x2 OpenCV pixels in AprilTag order (see module doc)."""

@@ -55,6 +55,42 @@ def test_a_restored_snapshot_replays_the_episode_bit_for_bit() -> None:
     assert final == final_reference
 
 
+def test_a_snapshot_in_render_mode_shares_the_detector_and_replays_the_episode() -> None:
+    # the AprilTag detector holds C pointers: a snapshot shares it (a detection depends on
+    # its image alone) instead of failing to copy it, so the oracle runs in render mode too
+    env, _ = make_env_and_policy("land-now", "bench-ss4", camera_mode="render")
+    base = env.unwrapped
+    try:
+        env.reset(seed=5)
+        here = save_snapshot(base)
+        reference = [env.step(0)[0] for _ in range(3)]
+        restore_snapshot(base, here, keep=False)
+        replay = [env.step(0)[0] for _ in range(3)]
+    finally:
+        env.close()
+    for ref, got in zip(reference, replay, strict=True):
+        np.testing.assert_array_equal(ref, got)
+
+
+def test_a_pickled_detector_detects_what_the_original_detects() -> None:
+    import pickle
+
+    from estimation.detection import AprilTagDetector
+    from landing_env.scene.deck import opencv_tag_bits
+
+    detector = AprilTagDetector(quad_decimate=2.0)
+    image = np.full((400, 400), 255, dtype=np.uint8)
+    image[100:300, 100:300] = (np.kron(opencv_tag_bits(0), np.ones((25, 25))) * 255).astype(
+        np.uint8
+    )
+    copy = pickle.loads(pickle.dumps(detector))
+    assert copy is not detector and copy.min_side_px == detector.min_side_px
+    (original,) = detector.detect(image)
+    (copied,) = copy.detect(image)
+    assert copied.tag_id == original.tag_id == 0
+    np.testing.assert_array_equal(copied.corners_px, original.corners_px)
+
+
 def test_margin_is_the_smallest_relative_slack_of_the_graded_criteria() -> None:
     limits = TouchdownConfig(max_normal_speed=0.5, max_deck_tilt_deg=5.0)
     touchdown = {"relative_normal_speed": 0.25, "deck_tilt_deg": 4.0, "relative_attitude_deg": 2.0}
