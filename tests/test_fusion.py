@@ -445,7 +445,14 @@ def test_the_two_component_deck_model_settles_at_the_seas_spread_and_rings_at_it
     undamped = np.sort(np.abs(roots))  # |root| of each factor is its natural frequency
     np.testing.assert_allclose(undamped[::2], [2 * math.pi / 11.0, 2 * math.pi / 4.4], rtol=1e-9)
     deck4 = config.deck4
-    assert deck4 is not None
+    # the config builds each axis' model from its own periods
+    assert deck4 is not None and len(deck4) == 2
+    np.testing.assert_allclose(
+        deck4[0][0], deck_polynomial(2 * math.pi / 11.0, 2 * math.pi / 4.4, 0.3), rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        deck4[1][0], deck_polynomial(2 * math.pi / 9.0, 2 * math.pi / 4.0, 0.3), rtol=1e-12
+    )
     dt = 1.0 / 240.0
     hover = np.array([0.0, 0.0, 9.81])
     x = np.zeros(N_STATE_4)
