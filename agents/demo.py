@@ -255,12 +255,11 @@ def run_timing_demo(
     """`make demo`, part 2: the shipped timing policy waits over a sea-state deck and lands.
 
     The camera is rendered and the tag detected for real (the policy was trained with the
-    projected camera).  ``policy_name`` None picks the shipped policy trained for the run's
-    sensing: ``timing-dqn`` with IHRCF's estimate observed under ideal sensing,
-    ``timing-dqn-realistic`` with ``tight``'s under ``sensors: realistic`` (``deck-landing demo
-    --sensors realistic``).  Writes ``timing_camera.mp4`` and ``timing_trajectory.png``.  The
-    seed is offset into the held-out range, so that the episode is not one the policy was
-    trained on.
+    projected camera).  ``policy_name`` None picks ``timing-dqn-timed`` with ``tight``'s
+    estimate observed (trained under ``sensors: realistic``, ``deck-landing demo --sensors
+    realistic``; under ideal sensing its card's sensing is allowed to differ).  Writes
+    ``timing_camera.mp4`` and ``timing_trajectory.png``.  The seed is offset into the
+    held-out range, so that the episode is not one the policy was trained on.
     """
     from agents.evaluation.landing import HELD_OUT_SEED, SCENARIOS, make_env_and_policy
     from agents.policies import shipped_timing_model
@@ -269,16 +268,25 @@ def run_timing_demo(
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     estimator = "ihrcf"
+    allow: tuple[str, ...] = ()
     if policy_name is None:
+        # the policy trained on the timed descent the bench scenarios fly, with tight observed
+        # under realistic sensing; under ideal sensing it lands as well (the README's tables:
+        # on this bench the deck's motion, not the estimate's noise, limits the timing)
         realistic = load_config(SCENARIOS[scenario].config).sensors == "realistic"
-        policy_name = "timing-dqn-realistic" if realistic else "timing-dqn"
-        estimator = "tight" if realistic else "ihrcf"
+        policy_name, estimator = "timing-dqn-timed", "tight"
+        allow = () if realistic else ("sensing",)
     model = shipped_timing_model(policy_name.removeprefix("timing-"))
     if not model.is_file():
         console.print(f"[yellow]no trained timing policy at {model}: part 2 skipped[/yellow]")
         return None
     env, policy = make_env_and_policy(
-        policy_name, scenario, estimator, camera_mode="render", render_mode="rgb_array"
+        policy_name,
+        scenario,
+        estimator,
+        camera_mode="render",
+        render_mode="rgb_array",
+        allow_mismatch=allow,
     )
     base = env.unwrapped
     base.record_periods = True

@@ -51,22 +51,23 @@ def make_timing_env(
     overrides: dict[str, Any] | None = None,
 ) -> Any:
     """The timing environment of ``scenario`` under the sensing profile ``sensing``
-    (:data:`agents.scenario_sampler.SENSING_PROFILES`), built as the evaluation builds it."""
+    (:data:`agents.scenario_sampler.SENSING_PROFILES`), built as the evaluation builds it
+    (``overrides`` under ``timing.`` set the timing task, e.g. its descent)."""
     import gymnasium as gym
 
     import landing_env  # noqa: F401  (registers the environments)
-    from agents.evaluation.landing import SCENARIOS, scenario_overrides
+    from agents.evaluation.landing import SCENARIOS, scenario_overrides, split_timing_overrides
     from agents.scenario_sampler import ENV_ID, SENSING_PROFILES
     from landing_env.errors import require_choice
 
     require_choice("sensing", sensing, tuple(SENSING_PROFILES))
+    world, timing = split_timing_overrides(overrides or {}, SCENARIOS[scenario].timing)
     settings = {
         **scenario_overrides(scenario, ENV_ID, estimator),
         **SENSING_PROFILES[sensing],
-        **(overrides or {}),
+        **world,
     }
-    timing = SCENARIOS[scenario].timing
-    kwargs = {"timing": dict(timing)} if timing else {}
+    kwargs = {"timing": timing} if timing else {}
     return gym.make(
         ENV_ID, config=SCENARIOS[scenario].config, overrides=settings, render_mode=None, **kwargs
     )

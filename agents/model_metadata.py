@@ -95,6 +95,28 @@ def sensing_profile(config: Any) -> str:
     return ",".join(departures) if departures else "ideal"
 
 
+#: what a card written before a field was recorded was trained with (the descent was the
+#: range-scheduled one until the timed descent came)
+LEGACY_OBSERVATION: dict[str, Any] = {"descent": {"profile": "range"}}
+
+
+def descent_signature(gains: Any, wave_off_tilt_deg: float = 0.0) -> dict[str, Any]:
+    """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
+    and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
+    and whether a bad commit is waved off, so another descent is another task even where the
+    observation's layout is the same."""
+    if gains.descent_profile == "range":
+        return {"profile": "range"}
+    signature: dict[str, Any] = {
+        "profile": gains.descent_profile,
+        "time_s": float(gains.descent_time_s),
+        "touchdown_speed": float(gains.touchdown_speed),
+    }
+    if wave_off_tilt_deg > 0.0:
+        signature["wave_off_tilt_deg"] = float(wave_off_tilt_deg)
+    return signature
+
+
 def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     """Every setting that changes what a timing observation's values mean.
 
@@ -112,6 +134,7 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     n_history = max(1, round(timing.history_s * env_hz))
     layout = TimingObservationLayout(n_history, timing.hold_height_m)
     return {
+        "descent": descent_signature(timing.guidance, timing.wave_off_tilt_deg),
         "size": layout.size,
         "n_history": n_history,
         "history_features": list(HISTORY_FEATURES),
@@ -166,14 +189,21 @@ def check_compatible(
             continue
         have = signature[name]
         if name == "observation":
-            for key, trained in card.observation.items():
+            described = {**LEGACY_OBSERVATION, **card.observation}
+            for key, trained in described.items():
                 if have.get(key) != trained:
                     raise ConfigError(
                         f"observation.{key}",
                         f"{model} was trained with {trained!r}, the environment has "
-                        f"{have.get(key)!r}: use the timing settings it was trained with",
+                        f"{have.get(key)!r}: use the timing settings it was trained with"
+                        + (
+                            " (the range-scheduled descent: --set "
+                            "timing.guidance.descent_profile=range)"
+                            if key == "descent" and trained == LEGACY_OBSERVATION["descent"]
+                            else ""
+                        ),
                     )
-            extra = sorted(set(have) - set(card.observation))
+            extra = sorted(set(have) - set(described))
             if extra:
                 raise ConfigError(
                     "observation", f"{model}'s card does not describe {extra}; retrain or re-stamp"
@@ -268,7 +298,9 @@ def main(argv: list[str] | None = None) -> int:
     from agents.training import ENV_ID, load_train_config
 
     config = load_train_config(args.config)
-    env = gym.make(ENV_ID, **{"render_mode": None, **config.settings.env_kwargs})
+    # the id it was trained on (a scenario id builds its scenario's timing settings, the
+    # descent included)
+    env = gym.make(config.env_id or ENV_ID, **{"render_mode": None, **config.settings.env_kwargs})
     try:
         card = card_for_training(env, config)
     finally:

@@ -18,6 +18,17 @@
 * ``timing-dqn-randomised`` (``DeckLandingTiming-v0``): that DQN trained on from its weights
   over bench sea states 4 and 5 and ideal, realistic and twice-realistic sensing,
   ``agents/models/timing_dqn_randomised.zip`` (``configs/train/timing_dqn_randomised.yaml``).
+  These three were trained on the range-scheduled final descent (the bench scenarios of
+  ``deck-landing evaluate landing`` fly the timed one: run them with
+  ``--set timing.guidance.descent_profile=range``).
+* ``timing-dqn-timed`` (``DeckLandingTiming-v0``): the DQN trained for realistic sensing with
+  ``tight`` observed on the **timed** final descent (``DeckLandingTiming-BenchSS4-v1``; the
+  contact a fixed 1.3 s after the commit), ``agents/models/timing_dqn_timed.zip``
+  (``configs/train/timing_dqn_timed.yaml``).
+* ``timing-dqn-waveoff`` (``DeckLandingTiming-v0``): the same on the timed descent with the
+  wave-off (``timing.wave_off_tilt_deg`` 4.5: a descent whose deck is predicted too tilted at
+  the contact is aborted 0.4-0.7 s in), ``agents/models/timing_dqn_waveoff.zip``
+  (``configs/train/timing_dqn_waveoff.yaml``).
 """
 
 from __future__ import annotations
@@ -493,6 +504,8 @@ POLICY_ENVS: dict[str, str] = {
     "timing-ppo": "DeckLandingTiming-v0",
     "timing-dqn-realistic": "DeckLandingTiming-v0",
     "timing-dqn-randomised": "DeckLandingTiming-v0",
+    "timing-dqn-timed": "DeckLandingTiming-v0",
+    "timing-dqn-waveoff": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 

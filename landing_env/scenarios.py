@@ -98,6 +98,14 @@ SHIP_TIMING: dict[str, Any] = {
 }
 
 
+#: the bench's timing task from v1 on: the **timed** final descent (GuidanceGains.descent_profile;
+#: the height over the deck tracks a 1.2 s reference, so the feet touch 1.30 +- 0.06 s after the
+#: commit, where v0's range-scheduled descent, cushioned by the ground effect in its last
+#: centimetres, took 1.85 +- 0.35 s): a timing policy predicts the deck a fixed, shorter time
+#: ahead (README "Timing with a timed descent")
+BENCH_TIMING: dict[str, Any] = {"guidance": {"descent_profile": "timed"}}
+
+
 #: the estimate observed over a ship deck: ``tight`` uses the ToF rays that hit the pad (1-3 of
 #: 4 when the drone leans or drifts near its edge, where a missed ray finds the sea 12 m below,
 #: beyond its range) and the tag alone without any, where IHRCF and CRHF need all four
@@ -136,6 +144,15 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
     "DeckLandingTiming-BenchSS5-v0": _landing(
         "DeckLandingTiming-v0", "bench-ss5", "timing task over a bench-ss5 deck"
     ),
+    **{
+        f"DeckLandingTiming-BenchSS{n}-v1": _landing(
+            "DeckLandingTiming-v0",
+            f"bench-ss{n}",
+            f"timing task over a bench-ss{n} deck, the timed final descent",
+            {"timing": BENCH_TIMING},
+        )
+        for n in (3, 4, 5)
+    },
     "DeckLandingTiming-PaperStewart-v0": _landing(
         "DeckLandingTiming-v0", "paper-stewart", "timing task over the papers' Stewart bench"
     ),

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from agents.evaluation.landing import make_env_and_policy
+from agents.evaluation.landing import RANGE_DESCENT, make_env_and_policy
 from agents.model_metadata import (
+    LEGACY_OBSERVATION,
     METADATA_NAME,
     ModelMetadata,
     check_compatible,
@@ -38,12 +39,14 @@ def test_the_shipped_model_says_what_it_was_trained_on() -> None:
     assert card.camera_mode == "project" and card.algo == "dqn"
     assert card.training_config_source.endswith("configs/train/timing_dqn.yaml")
     assert card.training_config["hyperparams"]["gamma"] == 0.998
-    assert card.observation == observation_signature(TimingConfig(), 20.0)
+    # written before the descent was recorded: the card stands for the range-scheduled one
+    assert "descent" not in card.observation
+    assert {**LEGACY_OBSERVATION, **card.observation} == observation_signature(TimingConfig(), 20.0)
     assert card.observation["size"] == 409
 
 
 def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> None:
-    env, policy = make_env_and_policy("timing-dqn", "bench-ss4")
+    env, policy = make_env_and_policy("timing-dqn", "bench-ss4", extra_overrides=RANGE_DESCENT)
     env.close()
     assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.estimator == "ihrcf"
 
@@ -56,12 +59,17 @@ def test_the_realistic_model_was_trained_on_realistic_sensing_with_tight_observe
     assert card.estimator == "tight" and card.sensing == ["realistic"]
     assert card.training_config_source.endswith("configs/train/timing_dqn_realistic.yaml")
     env, policy = make_env_and_policy(
-        "timing-dqn-realistic", "bench-ss4", "tight", extra_overrides={"sensors": "realistic"}
+        "timing-dqn-realistic",
+        "bench-ss4",
+        "tight",
+        extra_overrides={"sensors": "realistic", **RANGE_DESCENT},
     )
     env.close()
     assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.sensing == ["realistic"]
     with pytest.raises(ConfigError, match=r"^sensing: .*realistic"):
-        make_env_and_policy("timing-dqn-realistic", "bench-ss4", "tight")
+        make_env_and_policy(
+            "timing-dqn-realistic", "bench-ss4", "tight", extra_overrides=RANGE_DESCENT
+        )
 
 
 def test_the_randomised_model_serves_ideal_and_realistic_sensing_with_tight_observed() -> None:
@@ -73,12 +81,17 @@ def test_the_randomised_model_serves_ideal_and_realistic_sensing_with_tight_obse
     assert set(settings["randomise"]["scenarios"]) == {"bench-ss4", "bench-ss5"}
     for sensing in ({"sensors": "realistic"}, {}):
         env, policy = make_env_and_policy(
-            "timing-dqn-randomised", "bench-ss5", "tight", extra_overrides=sensing
+            "timing-dqn-randomised",
+            "bench-ss5",
+            "tight",
+            extra_overrides={**sensing, **RANGE_DESCENT},
         )
         env.close()
         assert isinstance(policy, TrainedTimingPolicy)
     with pytest.raises(ConfigError, match=r"^estimator: "):
-        make_env_and_policy("timing-dqn-randomised", "bench-ss4", "ihrcf")
+        make_env_and_policy(
+            "timing-dqn-randomised", "bench-ss4", "ihrcf", extra_overrides=RANGE_DESCENT
+        )
 
 
 def test_a_scenario_id_is_signed_as_its_task() -> None:
@@ -95,19 +108,24 @@ def test_a_scenario_id_is_signed_as_its_task() -> None:
     ("kwargs", "field"),
     [
         ({"estimator": "crhf"}, r"^estimator: .*ihrcf.*crhf"),
-        ({"extra_overrides": {"tof.noise": "vl53l1x"}}, r"^sensing: .*tof\.noise=vl53l1x"),
+        (
+            {"extra_overrides": {"tof.noise": "vl53l1x", **RANGE_DESCENT}},
+            r"^sensing: .*tof\.noise=vl53l1x",
+        ),
     ],
 )
 def test_a_different_estimator_or_sensing_is_refused_by_name(kwargs: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
-        make_env_and_policy("timing-dqn", "bench-ss4", **kwargs)
+        make_env_and_policy(
+            "timing-dqn", "bench-ss4", **{"extra_overrides": RANGE_DESCENT, **kwargs}
+        )
 
 
 def test_a_mismatch_can_be_allowed_on_purpose() -> None:
     env, policy = make_env_and_policy(
         "timing-dqn",
         "bench-ss4",
-        extra_overrides={"tof.noise": "vl53l1x"},
+        extra_overrides={"tof.noise": "vl53l1x", **RANGE_DESCENT},
         allow_mismatch=("sensing",),
     )
     env.close()

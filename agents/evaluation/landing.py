@@ -19,6 +19,7 @@ and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 from collections import Counter
 from dataclasses import dataclass, field
@@ -55,6 +56,7 @@ from agents.evaluation.summary import markdown_table as summary_table
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
+    BENCH_TIMING,
     FLYING_OVERRIDES,
     SHIP_ESTIMATOR,
     SHIP_TIMING,
@@ -62,6 +64,10 @@ from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-
     landing_overrides,
 )
 from landing_env.stewart.motion import SeaStateConfig
+
+#: the dotted override that flies the bench's range-scheduled final descent (the descent of the
+#: ``-v0`` timing ids, which the models trained before the timed descent were trained on)
+RANGE_DESCENT: dict[str, Any] = {"timing.guidance.descent_profile": "range"}
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -96,16 +102,19 @@ SCENARIOS: dict[str, Scenario] = {
         "bench-ss3",
         "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
         + BENCH_SCALE,
+        BENCH_TIMING,
     ),
     "bench-ss4": Scenario(
         "bench-ss4",
         "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
         + BENCH_SCALE,
+        BENCH_TIMING,
     ),
     "bench-ss5": Scenario(
         "bench-ss5",
         "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
         + BENCH_SCALE,
+        BENCH_TIMING,
     ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
     "ship-ss3": Scenario(
@@ -153,6 +162,31 @@ class EpisodeResult(EpisodeRecord):
 
     #: the timing task's wait before the commit, seconds (NaN for align-descend)
     wait_s: float = math.nan
+    #: the timing task's waved-off descents (``timing.wave_off_tilt_deg``)
+    wave_offs: int = 0
+
+
+def split_timing_overrides(
+    overrides: dict[str, Any], timing: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Dotted overrides split into the world config's and the timing task's (the keys under
+    ``timing.``, e.g. ``timing.guidance.descent_profile=range``, laid over ``timing``, the
+    scenario's settings)."""
+    world: dict[str, Any] = {}
+    merged = copy.deepcopy(dict(timing))
+    for key, value in overrides.items():
+        if not key.startswith("timing."):
+            world[key] = value
+            continue
+        *parents, leaf = key.removeprefix("timing.").split(".")
+        node = merged
+        for part in parents:
+            child = node.setdefault(part, {})
+            if not isinstance(child, dict):
+                raise ConfigError(key, f"timing.{part} is a value, not a section")
+            node = child
+        node[leaf] = value
+    return world, merged
 
 
 def make_env_and_policy(
@@ -177,12 +211,9 @@ def make_env_and_policy(
 
     require_choice("policy", policy_name, tuple(POLICY_ENVS))
     env_id = POLICY_ENVS[policy_name]
-    overrides = {
-        **scenario_overrides(scenario, env_id, estimator, camera_mode),
-        **(extra_overrides or {}),
-    }
-    timing = SCENARIOS[scenario].timing
-    kwargs = {"timing": dict(timing)} if timing and env_id == "DeckLandingTiming-v0" else {}
+    world, timing = split_timing_overrides(extra_overrides or {}, SCENARIOS[scenario].timing)
+    overrides = {**scenario_overrides(scenario, env_id, estimator, camera_mode), **world}
+    kwargs = {"timing": timing} if timing and env_id == "DeckLandingTiming-v0" else {}
     env = gym.make(
         env_id,
         config=SCENARIOS[scenario].config,
@@ -222,6 +253,7 @@ def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: st
         outcome=info["outcome"],
         success=info["outcome"] == "success",
         wait_s=float(info.get("wait_s", math.nan)),
+        wave_offs=int(info.get("wave_offs", 0)),
     )
     result.record_end(info)
     return result
@@ -236,8 +268,14 @@ class _LandingEvaluation:
         from agents.policies import POLICY_ENVS
         from landing_env.config import load_config
 
+        from landing_env.config_loading import build_dataclass
+        from landing_env.envs.timing import TimingConfig
+
         require_choice("policy", task.policy, tuple(POLICY_ENVS))
         o = task.options
+        world, timing = split_timing_overrides(
+            o.get("extra_overrides") or {}, SCENARIOS[task.scenario].timing
+        )
         overrides = {
             **scenario_overrides(
                 task.scenario,
@@ -245,9 +283,10 @@ class _LandingEvaluation:
                 o.get("estimator", "ihrcf"),
                 o.get("camera_mode", "project"),
             ),
-            **(o.get("extra_overrides") or {}),
+            **world,
         }
         load_config(SCENARIOS[task.scenario].config, overrides)
+        build_dataclass(TimingConfig, timing, "timing")
 
     def make(self, task: EpisodeTask) -> tuple[Any, Any]:
         return make_env_and_policy(task.policy, task.scenario, **task.options)
@@ -340,6 +379,8 @@ class LandingSummary:
     deck_tilt_p95_deg: float
     lateral_offset_mean_m: float
     time_to_land_mean_s: float
+    #: waved-off descents per episode (the timing task with ``timing.wave_off_tilt_deg``)
+    wave_offs_mean: float = 0.0
     outcomes: dict[str, int] = field(default_factory=dict)
     #: how often each touchdown check failed (an episode can fail several), and crashes
     failures: dict[str, int] = field(default_factory=dict)
@@ -392,6 +433,7 @@ def summarise(results: list[EpisodeResult]) -> LandingSummary:
         deck_tilt_p95_deg=finite_p95(column("deck_tilt_deg")),
         lateral_offset_mean_m=finite_mean(column("lateral_offset_m")),
         time_to_land_mean_s=finite_mean(column("time_to_land_s")),
+        wave_offs_mean=float(np.mean([r.wave_offs for r in results])) if results else 0.0,
         outcomes=dict(Counter(r.outcome for r in results)),
         failures=dict(
             Counter(
@@ -431,6 +473,7 @@ COLUMNS: tuple[Column, ...] = (
     ),
     Column("offset mean (m)", lambda s: f"{s.lateral_offset_mean_m:.3f}"),
     Column("time to land (s)", lambda s: f"{s.time_to_land_mean_s:.2f}"),
+    Column("wave-offs", lambda s: f"{s.wave_offs_mean:.2f}"),
     Column("bounce p95 (mm)", lambda s: f"{1000 * s.bounce_p95_m:.1f}"),
     Column("peak load p95 (g)", lambda s: f"{s.peak_load_p95_g:.1f}"),
     Column("outcomes", lambda s: counts_cell(s.outcomes)),
@@ -681,6 +724,7 @@ def add_landing_parser(evaluate_group: Any) -> None:
         nargs="*",
         default=[],
         metavar="KEY=VALUE",
-        help="dotted config overrides applied last, e.g. tof.noise=vl53l1x",
+        help="dotted config overrides applied last, e.g. tof.noise=vl53l1x; keys under timing. "
+        "set the timing task (e.g. timing.guidance.descent_profile=range: the v0 descent)",
     )
     landing.set_defaults(func=_evaluate_landing)

@@ -19,10 +19,16 @@ another):
 
 * ``v0``: the layout above, the deck pose levelled (``level_history``, the default), z and the
   ranges relative to the hold height, scaled by ``HISTORY_SCALES`` and ``TOF_SCALE``.
+
+The scenario ids carry their own versions: ``DeckLandingTiming-BenchSS{3,4,5}-v1`` fly the
+**timed** final descent (``guidance.descent_profile``; ``-v0``: the range schedule), with the
+same observation layout.  What the commit starts is part of the task a model learns, so a
+model's card records the descent (and the wave-off, ``wave_off_tilt_deg``) and refuses another.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,6 +58,10 @@ __all__ = [
     "TimingObservationLayout",
     "TimingObservationParts",
 ]
+
+_ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
+    HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
+)
 
 #: the camera sits this far below the drone's centre of mass (body z), metres; the start
 #: height puts the *camera* at the hold height
@@ -155,6 +165,20 @@ class TimingConfig:
     #: camera-frame pose
     level_history: bool = True
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
+    #: wave-off (the go-around of ship landing): during a chosen (not forced) timed descent,
+    #: from ``wave_off_from_s`` (at least one decision period) after the commit until
+    #: ``wave_off_until_s`` (the tag leaves the view at about 0.75 s), the deck tilt
+    #: predicted at the contact (the newest history row's roll and pitch carried along their
+    #: least-squares rates to ``expected_contact_s`` after the commit) above
+    #: ``wave_off_tilt_deg`` aborts the descent: the guidance climbs back to the hold (within
+    #: 5 cm, at most 1.5 s) in the same step, which ends without a touchdown, and the agent
+    #: decides again (``info["wave_offs"]``; the aborted descent and the climb count as
+    #: waiting).  0 turns it off
+    wave_off_tilt_deg: float = 0.0
+    wave_off_from_s: float = 0.4
+    wave_off_until_s: float = 0.7
+    #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
+    expected_contact_s: float = 1.3
 
     def __post_init__(self) -> None:
         require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
@@ -169,6 +193,23 @@ class TimingConfig:
         require_range("steps_per_decision", self.steps_per_decision, 1, 20)
         require_range("wait_limit_s", self.wait_limit_s, 0.0, low_inclusive=False)
         require_range("descent_timeout_s", self.descent_timeout_s, 0.5)
+        require_range("wave_off_tilt_deg", self.wave_off_tilt_deg, 0.0, 45.0)
+        require_range("wave_off_from_s", self.wave_off_from_s, 0.0, 10.0)
+        require_range(
+            "wave_off_until_s",
+            self.wave_off_until_s,
+            self.wave_off_from_s,
+            10.0,
+            bounds_from=f"wave_off_from_s = {self.wave_off_from_s}",
+        )
+        require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
+        if self.wave_off_tilt_deg > 0.0 and self.guidance.descent_profile != "timed":
+            raise ConfigError(
+                "wave_off_tilt_deg",
+                f"{self.wave_off_tilt_deg} needs the timed descent (guidance.descent_profile "
+                f"= 'timed', not {self.guidance.descent_profile!r}): only it has a known "
+                "contact time to predict the deck at",
+            )
 
 
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
@@ -229,6 +270,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._committed = False
         self._forced = False
         self._descent_s = 0.0
+        self._wave_offs = 0
         self._observation_clipped = False
         self._base_observation: dict[str, np.ndarray] | None = None
 
@@ -276,9 +318,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             terms["time"] = -r.time_cost * waited
             if self._outcome is Outcome.IN_FLIGHT and self._wait_s >= self.timing.wait_limit_s:
                 self._forced = True
-                self._descend()
+                self._descend(wave_off=False)
         else:
-            self._descend()
+            aborted_s = self._descend(wave_off=self._wait_s < self.timing.wait_limit_s)
+            terms["time"] = -r.time_cost * aborted_s
         terms.update(touchdown_terms(self._outcome, self._touchdown, r))
         self._reward_terms = terms
         terminated = self._outcome is not Outcome.IN_FLIGHT
@@ -345,8 +388,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             pose = levelled_deck_pose(pose, level_from_body(self.world.drone_state().rotation_wb))
         self.history.push(pose)
 
-    def _descend(self) -> None:
-        """The final descent, run to touchdown (or crash, or the descent timeout)."""
+    def _descend(self, wave_off: bool) -> float:
+        """The final descent, run to touchdown (or crash, or the descent timeout), or until a
+        wave-off (``wave_off`` allows it); returns the seconds a wave-off cost (else 0)."""
         self._committed = True
         start = self.world.time
         while self._outcome is Outcome.IN_FLIGHT:
@@ -356,8 +400,41 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 break
             assert self._base_observation is not None
             self._advance(self.guidance.descend(self._base_observation, self._own_state()))
+            elapsed = self.world.time - start
+            if wave_off and self._outcome is Outcome.IN_FLIGHT and self._wave_off_due(elapsed):
+                # go around: climb back to the hold (within 5 cm, or for at most 1.5 s) before
+                # the agent decides again, so that the next descent starts where they all do
+                self._committed = False
+                self._wave_offs += 1
+                back = self.world.time
+                while self._outcome is Outcome.IN_FLIGHT and self.world.time - back < 1.5:
+                    self._advance(self._hold_setpoint())
+                    height = self.guidance.range_m(self._base_observation)
+                    if abs(height - self.timing.hold_height_m) < 0.05:
+                        break
+                elapsed = self.world.time - start
+                self._wait_s += elapsed
+                return elapsed
         end = self._touchdown.time_s if self._touchdown is not None else self.world.time
         self._descent_s = end - start
+        return 0.0
+
+    def _wave_off_due(self, elapsed_s: float) -> bool:
+        """The deck tilt predicted at the contact is beyond ``wave_off_tilt_deg`` while a
+        wave-off is still possible (see :class:`TimingConfig`)."""
+        t = self.timing
+        decision_s = t.steps_per_decision * self.env_dt
+        first = max(decision_s, t.wave_off_from_s) - 1e-9
+        if t.wave_off_tilt_deg <= 0.0 or not first <= elapsed_s <= t.wave_off_until_s:
+            return False
+        row = self.history.rows()[-1]
+        if row[_VALID] < 0.5:
+            return False  # nothing to predict with: the descent goes on
+        ahead = max(t.expected_contact_s - elapsed_s, 0.0)
+        roll = row[_ROLL] + row[_ROLL_RATE] * ahead
+        pitch = row[_PITCH] + row[_PITCH_RATE] * ahead
+        tilt = math.degrees(math.acos(float(np.clip(math.cos(roll) * math.cos(pitch), -1, 1))))
+        return tilt > t.wave_off_tilt_deg
 
     def _flat_observation(self) -> np.ndarray:
         assert self._base_observation is not None
@@ -384,6 +461,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "committed": self._committed,
                 "forced_commit": self._forced,
                 "descent_s": self._descent_s,
+                "wave_offs": getattr(self, "_wave_offs", 0),
                 "observation_clipped": getattr(self, "_observation_clipped", False),
                 # read by SB3's EvalCallback for its success rate
                 "is_success": self._outcome is Outcome.SUCCESS,
