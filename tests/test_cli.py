@@ -105,14 +105,15 @@ def test_demo_runs_a_short_projected_episode_without_the_timing_part(tmp_path: P
 def test_demo_timing_part_flies_the_realistic_policy_under_realistic_sensing(
     tmp_path: Path, monkeypatch, capsys
 ) -> None:
-    """`deck-landing demo --sensors realistic` refused the ideal-trained timing-dqn."""
+    """`deck-landing demo --sensors realistic` flies the policy trained for realistic sensing
+    (once it refused the ideal-trained timing-dqn)."""
     from agents.demo import run_timing_demo
     from landing_env.config import SENSORS_ENV
 
     monkeypatch.setenv(SENSORS_ENV, "realistic")
     log = run_timing_demo(seed=4, out_dir=tmp_path)
     assert log is not None and log.final_info["outcome"] == "success"
-    assert "timing-dqn-realistic" in capsys.readouterr().out
+    assert "timing-dqn-timed" in capsys.readouterr().out
     assert (tmp_path / "timing_camera.mp4").stat().st_size > 0
 
 

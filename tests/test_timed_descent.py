@@ -229,3 +229,66 @@ def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
 
 
 RANGE = {"timing.guidance.descent_profile": "range"}
+
+
+@pytest.mark.parametrize("name", ["timed", "waveoff"])
+def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None:
+    from pathlib import Path
+
+    from agents.training import load_train_config
+
+    train = Path(__file__).resolve().parent.parent / "configs" / "train"
+    config = load_train_config(train / f"timing_dqn_{name}.yaml")
+    realistic = load_train_config(train / "timing_dqn_realistic.yaml")
+    assert config.env_id == "DeckLandingTiming-BenchSS4-v1"
+    for key in set(realistic.hyperparams) - {"env_kwargs"}:
+        assert config.hyperparams[key] == realistic.hyperparams[key], key
+    assert config.settings.env_kwargs["overrides"]["sensors"] == "realistic"
+    env = gym.make(config.env_id, **config.settings.env_kwargs)
+    timing = env.unwrapped.timing
+    env.close()
+    # the task keyword replaces the id's timing settings: the descent must still be the timed one
+    assert timing.guidance.descent_profile == "timed"
+    assert timing.wave_off_tilt_deg == (4.5 if name == "waveoff" else 0.0)
+
+
+def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> None:
+    from agents.evaluation.landing import make_env_and_policy
+    from agents.policies import shipped_timing_model
+
+    timed = read_metadata(shipped_timing_model("dqn-timed"))
+    waveoff = read_metadata(shipped_timing_model("dqn-waveoff"))
+    assert timed is not None and waveoff is not None
+    assert timed.observation["descent"] == descent_signature(GuidanceGains(descent_profile="timed"))
+    assert waveoff.observation["descent"]["wave_off_tilt_deg"] == 4.5
+    assert timed.estimator == waveoff.estimator == "tight"
+    realistic = {"sensors": "realistic"}
+    env, _ = make_env_and_policy(
+        "timing-dqn-waveoff",
+        "bench-ss4",
+        "tight",
+        extra_overrides={**realistic, "timing.wave_off_tilt_deg": 4.5},
+    )
+    env.close()
+    with pytest.raises(ConfigError, match=r"observation\.descent"):
+        make_env_and_policy("timing-dqn-waveoff", "bench-ss4", "tight", extra_overrides=realistic)
+    with pytest.raises(ConfigError, match=r"observation\.descent"):
+        make_env_and_policy(
+            "timing-dqn-timed", "bench-ss4", "tight", extra_overrides={**realistic, **RANGE}
+        )
+
+
+def test_the_timed_policy_beats_land_now_on_held_out_seeds_under_realistic_sensing() -> None:
+    from agents.evaluation.landing import evaluate_policy
+
+    episodes, first, realistic = 24, 2_000_000, {"sensors": "realistic"}
+    learned = evaluate_policy(
+        "timing-dqn-timed", "bench-ss4", episodes, first, "tight", extra_overrides=realistic
+    )
+    now = evaluate_policy(
+        "land-now", "bench-ss4", episodes, first, "tight", extra_overrides=realistic
+    )
+    learned_rate = np.mean([r.success for r in learned])
+    now_rate = np.mean([r.success for r in now])
+    assert learned_rate > now_rate + 0.1
+    assert learned_rate >= 0.8

@@ -267,7 +267,6 @@ class _LandingEvaluation:
     def validate(self, task: EpisodeTask) -> None:
         from agents.policies import POLICY_ENVS
         from landing_env.config import load_config
-
         from landing_env.config_loading import build_dataclass
         from landing_env.envs.timing import TimingConfig
 
