@@ -276,3 +276,38 @@ def test_fuzzed_timing_decisions_keep_every_observation_in_its_space(
         assert math.isfinite(reward)
         if terminated or truncated:
             break
+
+
+@pytest.fixture(scope="module")
+def wave_off_env() -> gym.Env:
+    # the timed descent with a wave-off that often fires: commits climb back and decide again
+    environment = gym.make(
+        "DeckLandingTiming-BenchSS4-v1",
+        timing={"guidance": {"descent_profile": "timed"}, "wave_off_tilt_deg": 2.0},
+    )
+    yield environment
+    environment.close()
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31 - 1), decisions=st.lists(st.integers(0, 1), max_size=30))
+def test_fuzzed_decisions_with_wave_offs_stay_in_the_space_and_within_the_step_limit(
+    wave_off_env: gym.Env, seed: int, decisions: list[int]
+) -> None:
+    observation, _ = wave_off_env.reset(seed=seed)
+    limit = wave_off_env.spec.max_episode_steps
+    steps = 0
+    for decision in decisions:
+        observation, reward, terminated, truncated, info = wave_off_env.step(decision)
+        steps += 1
+        assert wave_off_env.observation_space.contains(observation)
+        assert math.isfinite(reward)
+        assert reward <= 0.0 or terminated  # only a touchdown pays
+        # a wave-off costs at least a decision period of waiting, so the step limit (the
+        # decisions until the wait limit forces the commit) still bounds the episode; the last
+        # one may start just before the limit: at most its window and its climb beyond it
+        timing = wave_off_env.unwrapped.timing
+        assert info["wait_s"] <= timing.wait_limit_s + timing.wave_off_until_s + 1.5 + 0.1
+        if terminated or truncated:
+            break
+    assert steps <= limit

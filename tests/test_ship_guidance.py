@@ -162,7 +162,8 @@ def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> 
     assert waits[-1] < -0.2  # after 3 s it lands all the same
 
 
-def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation() -> None:
+@pytest.mark.parametrize("profile", ["range", "timed"])
+def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(profile: str) -> None:
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
@@ -185,7 +186,11 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation() ->
     )
     def run(steps) -> None:
         gains = GuidanceGains(
-            track_deck=True, view_half_tan=0.558, blind_range_m=0.8, flare_range_m=0.5
+            track_deck=True,
+            view_half_tan=0.558,
+            blind_range_m=0.8,
+            flare_range_m=0.5,
+            descent_profile=profile,
         )
         guidance = DeckGuidance(gains, DT)
         for pose, seen, ranges, valid, (roll, pitch, yaw) in steps:
@@ -197,9 +202,13 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation() ->
             }
             own = OwnState(np.zeros(3), np.zeros(3), matrix_from_euler_zyx(roll, pitch, yaw))
             guidance.observe(observation, own)
+            # descents in a row (a timed descent's clock runs), the bench law without the
+            # drone's own state, then a hold (which restarts the clock)
             for setpoint in (
-                guidance.hold(observation, 2.0, own),
                 guidance.descend(observation, own),
+                guidance.descend(observation, own),
+                guidance.descend(observation, None),
+                guidance.hold(observation, 2.0, own),
             ):
                 assert np.all(np.isfinite(setpoint.velocity_h))
                 assert math.isfinite(setpoint.yaw_rate)
