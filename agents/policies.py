@@ -29,6 +29,9 @@
   wave-off (``timing.wave_off_tilt_deg`` 4.5: a descent whose deck is predicted too tilted at
   the contact is aborted 0.4-0.7 s in), ``agents/models/timing_dqn_waveoff.zip``
   (``configs/train/timing_dqn_waveoff.yaml``).
+* ``timing-dqn-waveoff30`` (``DeckLandingTiming-v0``): the same with a 30 s wait limit
+  (``--set timing.wave_off_tilt_deg=4.5 timing.wait_limit_s=30``),
+  ``agents/models/timing_dqn_waveoff30.zip`` (``configs/train/timing_dqn_waveoff30.yaml``).
 """
 
 from __future__ import annotations
@@ -506,6 +509,7 @@ POLICY_ENVS: dict[str, str] = {
     "timing-dqn-randomised": "DeckLandingTiming-v0",
     "timing-dqn-timed": "DeckLandingTiming-v0",
     "timing-dqn-waveoff": "DeckLandingTiming-v0",
+    "timing-dqn-waveoff30": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 

@@ -198,6 +198,8 @@ def test_no_wave_off_without_the_threshold_and_none_on_the_range_schedule() -> N
         )
     with pytest.raises(ConfigError, match="wave_off_until_s"):
         _bench_timing(wave_off_from_s=0.6, wave_off_until_s=0.5)
+    with pytest.raises(ConfigError, match="wave_off_predictor"):
+        _bench_timing(wave_off_tilt_deg=4.0, wave_off_predictor="cubic")
 
 
 def test_the_card_records_the_wave_off() -> None:
@@ -231,7 +233,7 @@ def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
 RANGE = {"timing.guidance.descent_profile": "range"}
 
 
-@pytest.mark.parametrize("name", ["timed", "waveoff"])
+@pytest.mark.parametrize("name", ["timed", "waveoff", "waveoff30"])
 def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None:
     from pathlib import Path
 
@@ -249,7 +251,8 @@ def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None
     env.close()
     # the task keyword replaces the id's timing settings: the descent must still be the timed one
     assert timing.guidance.descent_profile == "timed"
-    assert timing.wave_off_tilt_deg == (4.5 if name == "waveoff" else 0.0)
+    assert timing.wave_off_tilt_deg == (0.0 if name == "timed" else 4.5)
+    assert timing.wait_limit_s == (30.0 if name == "waveoff30" else 15.0)
 
 
 def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> None:
@@ -292,3 +295,29 @@ def test_the_timed_policy_beats_land_now_on_held_out_seeds_under_realistic_sensi
     now_rate = np.mean([r.success for r in now])
     assert learned_rate > now_rate + 0.1
     assert learned_rate >= 0.8
+
+
+def test_the_quadratic_wave_off_predictor_follows_a_curving_deck() -> None:
+    # a deck whose roll has just peaked (4 deg, 0.2 s ago): a parabola through the last second
+    # sees it fall back before the contact; the straight line sees it still above the threshold
+    env = _bench_timing(wave_off_tilt_deg=3.0)
+    base = env.unwrapped
+    env.reset(seed=3)
+    base.history.reset()
+    dt = base.env_dt
+    times = np.arange(-1.0 + dt, dt / 2, dt)
+    for t in times:
+        roll = np.radians(2.0 - 4.0 * (t + 0.2) ** 2 + 2.0)  # peak 4 deg at t = -0.2 s
+        base.history.push(np.array([0.0, 0.0, 0.7, roll, 0.0, 0.0]))
+    rows = base.history.rows()
+    assert rows[-1, 9] == 1.0
+    base.timing.wave_off_predictor = "linear"
+    linear = base._wave_off_due(0.5)
+    base.timing.wave_off_predictor = "quadratic"
+    quadratic = base._wave_off_due(0.5)
+    env.close()
+    # 0.8 s ahead the parabola is at 4 - 4 * 1.0^2 = 0 deg: no wave-off; the straight line
+    # carries the newest 3.84 deg along the rate window's slope (+0.2 deg/s, the parabola's
+    # at the window's centre, 0.225 s back) to 4.0 deg: a wave-off
+    assert np.degrees(rows[-1, 7]) == pytest.approx(0.2, abs=0.05)
+    assert linear and not quadratic

@@ -42,7 +42,7 @@ from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
 from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.envs.rewards import touchdown_terms, zero_terms
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome
@@ -58,6 +58,9 @@ __all__ = [
     "TimingObservationLayout",
     "TimingObservationParts",
 ]
+
+#: the wave-off's predictors of the deck tilt at the contact (``TimingConfig.wave_off_predictor``)
+WAVE_OFF_PREDICTORS = ("linear", "quadratic")
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -177,6 +180,11 @@ class TimingConfig:
     wave_off_tilt_deg: float = 0.0
     wave_off_from_s: float = 0.4
     wave_off_until_s: float = 0.7
+    #: how the wave-off predicts the deck: ``linear`` (the newest row carried along its 0.5 s
+    #: least-squares rates) or ``quadratic`` (a parabola fitted to roll and pitch over the last
+    #: ``wave_off_window_s``: the deck's curvature, at the price of a noisier acceleration)
+    wave_off_predictor: str = "linear"
+    wave_off_window_s: float = 1.0
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
     expected_contact_s: float = 1.3
 
@@ -203,6 +211,14 @@ class TimingConfig:
             bounds_from=f"wave_off_from_s = {self.wave_off_from_s}",
         )
         require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
+        require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
+        require_range(
+            "wave_off_window_s",
+            self.wave_off_window_s,
+            0.2,
+            self.history_s,
+            bounds_from=f"history_s = {self.history_s}",
+        )
         if self.wave_off_tilt_deg > 0.0 and self.guidance.descent_profile != "timed":
             raise ConfigError(
                 "wave_off_tilt_deg",
@@ -427,12 +443,20 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         first = max(decision_s, t.wave_off_from_s) - 1e-9
         if t.wave_off_tilt_deg <= 0.0 or not first <= elapsed_s <= t.wave_off_until_s:
             return False
-        row = self.history.rows()[-1]
+        rows = self.history.rows()
+        row = rows[-1]
         if row[_VALID] < 0.5:
             return False  # nothing to predict with: the descent goes on
         ahead = max(t.expected_contact_s - elapsed_s, 0.0)
         roll = row[_ROLL] + row[_ROLL_RATE] * ahead
         pitch = row[_PITCH] + row[_PITCH_RATE] * ahead
+        if t.wave_off_predictor == "quadratic":
+            recent = rows[-max(3, round(t.wave_off_window_s / self.env_dt)) :]
+            times = (np.arange(len(recent)) - (len(recent) - 1)) * self.env_dt
+            valid = recent[:, _VALID] > 0.5
+            if valid.sum() >= 5:
+                fit = np.polyfit(times[valid], recent[valid][:, [_ROLL, _PITCH]], 2)
+                roll, pitch = (float(np.polyval(fit[:, k], ahead)) for k in range(2))
         tilt = math.degrees(math.acos(float(np.clip(math.cos(roll) * math.cos(pitch), -1, 1))))
         return tilt > t.wave_off_tilt_deg
 
