@@ -100,7 +100,9 @@ def sensing_profile(config: Any) -> str:
 LEGACY_OBSERVATION: dict[str, Any] = {"descent": {"profile": "range"}}
 
 
-def descent_signature(gains: Any, wave_off_tilt_deg: float = 0.0) -> dict[str, Any]:
+def descent_signature(
+    gains: Any, wave_off_tilt_deg: float = 0.0, wave_off_predictor: str = "linear"
+) -> dict[str, Any]:
     """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
     and whether a bad commit is waved off, so another descent is another task even where the
@@ -114,6 +116,8 @@ def descent_signature(gains: Any, wave_off_tilt_deg: float = 0.0) -> dict[str, A
     }
     if wave_off_tilt_deg > 0.0:
         signature["wave_off_tilt_deg"] = float(wave_off_tilt_deg)
+        if wave_off_predictor != "linear":
+            signature["wave_off_predictor"] = wave_off_predictor
     return signature
 
 
@@ -134,7 +138,9 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     n_history = max(1, round(timing.history_s * env_hz))
     layout = TimingObservationLayout(n_history, timing.hold_height_m)
     return {
-        "descent": descent_signature(timing.guidance, timing.wave_off_tilt_deg),
+        "descent": descent_signature(
+            timing.guidance, timing.wave_off_tilt_deg, timing.wave_off_predictor
+        ),
         "size": layout.size,
         "n_history": n_history,
         "history_features": list(HISTORY_FEATURES),

@@ -206,6 +206,8 @@ def test_the_card_records_the_wave_off() -> None:
     gains = GuidanceGains(descent_profile="timed")
     assert "wave_off_tilt_deg" not in descent_signature(gains)
     assert descent_signature(gains, 4.5)["wave_off_tilt_deg"] == 4.5
+    assert "wave_off_predictor" not in descent_signature(gains, 4.5)
+    assert descent_signature(gains, 4.5, "quadratic")["wave_off_predictor"] == "quadratic"
 
 
 def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
