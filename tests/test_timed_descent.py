@@ -266,6 +266,9 @@ def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> N
     assert timed is not None and waveoff is not None
     assert timed.observation["descent"] == descent_signature(GuidanceGains(descent_profile="timed"))
     assert waveoff.observation["descent"]["wave_off_tilt_deg"] == 4.5
+    patient = read_metadata(shipped_timing_model("dqn-waveoff30"))
+    assert patient is not None and patient.observation["wait_limit_s"] == 30.0
+    assert patient.observation["descent"] == waveoff.observation["descent"]
     assert timed.estimator == waveoff.estimator == "tight"
     realistic = {"sensors": "realistic"}
     env, _ = make_env_and_policy(

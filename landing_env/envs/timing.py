@@ -212,13 +212,16 @@ class TimingConfig:
         )
         require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
         require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
-        require_range(
-            "wave_off_window_s",
-            self.wave_off_window_s,
-            0.2,
-            self.history_s,
-            bounds_from=f"history_s = {self.history_s}",
-        )
+        require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
+        if self.wave_off_predictor == "quadratic":
+            # the parabola is fitted to the history: the window must fit in it
+            require_range(
+                "wave_off_window_s",
+                self.wave_off_window_s,
+                0.2,
+                self.history_s,
+                bounds_from=f"history_s = {self.history_s}",
+            )
         if self.wave_off_tilt_deg > 0.0 and self.guidance.descent_profile != "timed":
             raise ConfigError(
                 "wave_off_tilt_deg",
