@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.evaluation.landing import split_timing_overrides
+from agents.evaluation.landing import RANGE_DESCENT, split_timing_overrides
 from agents.model_metadata import (
     LEGACY_OBSERVATION,
     check_compatible,
@@ -223,16 +223,13 @@ def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
                 "land-now",
                 "bench-ss4",
                 "tight",
-                extra_overrides={"timing.wave_off_tilt_deg": 4.5, **RANGE},
+                extra_overrides={"timing.wave_off_tilt_deg": 4.5, **RANGE_DESCENT},
             )
         )
     with pytest.raises(ConfigError, match="no_such_key"):
         LANDING_EVALUATION.validate(
             landing_task("land-now", "bench-ss4", extra_overrides={"timing.no_such_key": 1})
         )
-
-
-RANGE = {"timing.guidance.descent_profile": "range"}
 
 
 @pytest.mark.parametrize("name", ["timed", "waveoff", "waveoff30"])
@@ -282,7 +279,7 @@ def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> N
         make_env_and_policy("timing-dqn-waveoff", "bench-ss4", "tight", extra_overrides=realistic)
     with pytest.raises(ConfigError, match=r"observation\.descent"):
         make_env_and_policy(
-            "timing-dqn-timed", "bench-ss4", "tight", extra_overrides={**realistic, **RANGE}
+            "timing-dqn-timed", "bench-ss4", "tight", extra_overrides={**realistic, **RANGE_DESCENT}
         )
 
 
