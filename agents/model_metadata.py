@@ -101,7 +101,11 @@ LEGACY_OBSERVATION: dict[str, Any] = {"descent": {"profile": "range"}}
 
 
 def descent_signature(
-    gains: Any, wave_off_tilt_deg: float = 0.0, wave_off_predictor: str = "linear"
+    gains: Any,
+    wave_off_tilt_deg: float = 0.0,
+    wave_off_predictor: str = "linear",
+    tilt_model: str = "",
+    wave_off_probability: float = 0.8,
 ) -> dict[str, Any]:
     """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
@@ -118,6 +122,9 @@ def descent_signature(
         signature["wave_off_tilt_deg"] = float(wave_off_tilt_deg)
         if wave_off_predictor != "linear":
             signature["wave_off_predictor"] = wave_off_predictor
+        if wave_off_predictor == "model":
+            signature["tilt_model"] = tilt_model
+            signature["wave_off_probability"] = float(wave_off_probability)
     return signature
 
 
@@ -139,7 +146,11 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     layout = TimingObservationLayout(n_history, timing.hold_height_m)
     return {
         "descent": descent_signature(
-            timing.guidance, timing.wave_off_tilt_deg, timing.wave_off_predictor
+            timing.guidance,
+            timing.wave_off_tilt_deg,
+            timing.wave_off_predictor,
+            timing.tilt_model,
+            timing.wave_off_probability,
         ),
         "size": layout.size,
         "n_history": n_history,

@@ -214,6 +214,111 @@ class QuiescentPolicy:
         return self.act(observation)
 
 
+@dataclass
+class PredictiveConfig:
+    """When the predictive policy commits (see :class:`PredictivePolicy`)."""
+
+    #: the contact's time after the commit the deck is predicted at, seconds (the timed
+    #: descent's: 1.29 +- 0.06 s measured, README "Timing with a timed descent")
+    contact_s: float = 1.3
+    #: commit when the predicted chance that the deck's tilt at the contact is within the
+    #: touchdown limit is at least this fraction of the best chance the predictor gives at
+    #: this horizon (that of a level deck predicted: 0.99+ at bench sea state 4, 0.9 at 5),
+    #: so the rule means the same at every sea state (0.95: 99 % at bench-ss4 and 91 % at
+    #: ss5 on 100 episodes, with the model wave-off; 0.98: 100 % and 83 %)
+    min_probability: float = 0.95
+    #: from this fraction of the wait limit on, the required fraction falls linearly to
+    #: ``final_probability`` at the limit (a commit the policy chooses beats the forced one)
+    relax_from: float = 0.7
+    final_probability: float = 0.8
+
+    def __post_init__(self) -> None:
+        require_range("contact_s", self.contact_s, 0.0, 10.0)
+        require_range("min_probability", self.min_probability, 0.0, 1.0)
+        require_range("relax_from", self.relax_from, 0.0, 1.0)
+        require_range(
+            "final_probability",
+            self.final_probability,
+            0.0,
+            self.min_probability,
+            bounds_from=f"min_probability = {self.min_probability}",
+        )
+
+    def threshold(self, wait_fraction: float) -> float:
+        """The chance a commit needs after ``wait_fraction`` of the wait limit."""
+        if wait_fraction <= self.relax_from or self.relax_from >= 1.0:
+            return self.min_probability
+        w = min((wait_fraction - self.relax_from) / (1.0 - self.relax_from), 1.0)
+        return (1.0 - w) * self.min_probability + w * self.final_probability
+
+
+class PredictivePolicy:
+    """Commit when the deck's tilt at the contact is predicted within the limit with a chance
+    near the best the predictor can give: a
+    :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
+    the estimated deck motion, :mod:`agents.deck_predictor`) on the observation's history,
+    ``contact_s`` ahead; the chance is that of the Gaussian prediction error measured on
+    held-out episodes.  Needs a history at least as long as the predictor's window
+    (``timing.history_s``)."""
+
+    name = "predictive"
+
+    def __init__(
+        self,
+        layout: TimingObservationLayout,
+        dt: float,
+        predictor: Any,
+        max_tilt_deg: float,
+        config: PredictiveConfig | None = None,
+    ) -> None:
+        from estimation.deck_prediction import LinearTiltPredictor
+
+        if not isinstance(predictor, LinearTiltPredictor):
+            predictor = LinearTiltPredictor.load(predictor)
+        if abs(predictor.dt_s - dt) > 1e-9:
+            raise ConfigError(
+                "simulation.env_hz",
+                f"the deck-tilt predictor was fitted at {1.0 / predictor.dt_s:g} Hz, the "
+                f"environment runs at {1.0 / dt:g} Hz",
+            )
+        if layout.n_history < predictor.n_window:
+            raise ConfigError(
+                "timing.history_s",
+                f"{layout.n_history * dt:g} s is shorter than the deck-tilt predictor's "
+                f"{predictor.window_s:g} s window: set timing.history_s={predictor.window_s:g}",
+            )
+        self.layout = layout
+        self.dt = dt
+        self.predictor = predictor
+        self.max_tilt_deg = max_tilt_deg
+        self.config = config or PredictiveConfig()
+        self.last: Any = None
+        self.last_probability = 0.0
+
+    def reset(self) -> None:
+        self.last = None
+        self.last_probability = 0.0
+
+    def probability(self, observation: np.ndarray) -> float:
+        """The predicted chance that a commit now meets a deck within the tilt limit."""
+        parts = self.layout.decode(observation)
+        rows = parts.history
+        self.last = self.predictor.predict(
+            rows[:, [_ROLL, _PITCH]], rows[:, _VALID] > 0.5, self.config.contact_s
+        )
+        self.last_probability = self.last.probability_within(self.max_tilt_deg)
+        return self.last_probability
+
+    def act(self, observation: np.ndarray) -> int:
+        wait_fraction = float(self.layout.decode(observation).wait_fraction)
+        chance = self.probability(observation)
+        best = self.last.best_probability_within(self.max_tilt_deg)
+        return int(best > 0.0 and chance >= self.config.threshold(wait_fraction) * best)
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
 def _model_class(path: Path) -> Any:
     """PPO, DQN or RecurrentPPO, read from the saved model's data (no trial loading)."""
     from stable_baselines3 import DQN, PPO
@@ -510,8 +615,29 @@ POLICY_ENVS: dict[str, str] = {
     "timing-dqn-timed": "DeckLandingTiming-v0",
     "timing-dqn-waveoff": "DeckLandingTiming-v0",
     "timing-dqn-waveoff30": "DeckLandingTiming-v0",
+    "predictive": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
+
+
+def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
+    """The deck-tilt predictor of the predictive policy: ``--model``, else the scenario's
+    (``timing.tilt_model``), loaded; a missing or malformed one names the key."""
+    from estimation.deck_prediction import LinearTiltPredictor
+    from landing_env.resources import tilt_predictor_path
+
+    if model_path is None and not scenario_model:
+        raise ConfigError(
+            "timing.tilt_model",
+            "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
+            "timing.tilt_model=NAME or pass --model FILE; fit one with "
+            "`python -m agents.deck_predictor fit`)",
+        )
+    path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
+    try:
+        return LinearTiltPredictor.load(path)
+    except (OSError, ValueError) as error:
+        raise ConfigError("timing.tilt_model", f"{path}: {error}") from None
 
 
 def make_policy(
@@ -536,6 +662,13 @@ def make_policy(
         return LandNowPolicy()
     if name == "quiescent":
         return QuiescentPolicy(base.layout, dt)
+    if name == "predictive":
+        return PredictivePolicy(
+            base.layout,
+            dt,
+            _tilt_model(model_path, base.timing.tilt_model),
+            base.config.touchdown.max_deck_tilt_deg,
+        )
     if name == "oracle":
         from agents.oracle import OracleTimingPolicy
 

@@ -49,4 +49,17 @@ def cache_dir() -> Path:
     return Path(user_cache_dir("deck-landing", appauthor=False))
 
 
-__all__ = ["CONFIG_PACKAGE", "cache_dir", "config_dir"]
+#: the shipped deck-tilt predictors (:mod:`estimation.deck_prediction`, fitted by
+#: :mod:`agents.deck_predictor` on a scenario family's estimated deck motion)
+PREDICTOR_DIR = Path(__file__).resolve().parent / "assets" / "predictors"
+
+
+def tilt_predictor_path(name: str) -> Path:
+    """The file of the deck-tilt predictor ``name``: a shipped one by its family (``bench``:
+    ``assets/predictors/deck_tilt_bench.npz``) or a path to a ``.npz``."""
+    if name and "/" not in name and "\\" not in name and not name.endswith(".npz"):
+        return PREDICTOR_DIR / f"deck_tilt_{name}.npz"
+    return Path(name).expanduser()
+
+
+__all__ = ["CONFIG_PACKAGE", "PREDICTOR_DIR", "cache_dir", "config_dir", "tilt_predictor_path"]

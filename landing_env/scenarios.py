@@ -105,6 +105,23 @@ SHIP_TIMING: dict[str, Any] = {
 #: ahead (README "Timing with a timed descent")
 BENCH_TIMING: dict[str, Any] = {"guidance": {"descent_profile": "timed"}}
 
+#: what the ``predictive`` timing flies with (v2 of the bench ids): an 8 s history, the window
+#: of the scenario's deck-tilt predictor (``tilt_model``, landing_env/assets/predictors), and
+#: the wave-off by that predictor: 0.4-0.7 s into a chosen descent, a chance below 0.8 that
+#: the deck is within 5 deg at the contact aborts it (README "Predicting the deck a descent
+#: ahead")
+PREDICTIVE_TIMING: dict[str, Any] = {
+    "history_s": 8.0,
+    "wave_off_tilt_deg": 5.0,
+    "wave_off_predictor": "model",
+    "wave_off_probability": 0.8,
+}
+
+
+def bench_predictive_timing(sea_state: int) -> dict[str, Any]:
+    """The timing settings of ``DeckLandingTiming-BenchSS<n>-v2``."""
+    return {**BENCH_TIMING, **PREDICTIVE_TIMING, "tilt_model": f"bench-ss{sea_state}"}
+
 
 #: the estimate observed over a ship deck: ``tight`` uses the ToF rays that hit the pad (1-3 of
 #: 4 when the drone leans or drifts near its edge, where a missed ray finds the sea 12 m below,
@@ -150,6 +167,16 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
             f"bench-ss{n}",
             f"timing task over a bench-ss{n} deck, the timed final descent",
             {"timing": BENCH_TIMING},
+        )
+        for n in (3, 4, 5)
+    },
+    **{
+        f"DeckLandingTiming-BenchSS{n}-v2": _landing(
+            "DeckLandingTiming-v0",
+            f"bench-ss{n}",
+            f"timing task over a bench-ss{n} deck, the timed descent, an 8 s history and the "
+            "deck-tilt predictor's wave-off",
+            {"timing": bench_predictive_timing(n)},
         )
         for n in (3, 4, 5)
     },
@@ -229,17 +256,20 @@ def _step_limit(scenario: ScenarioId) -> int:
     if scenario.task == "DeckLandingTiming-v0":
         from landing_env.envs.timing import TimingConfig
 
-        timing = TimingConfig(**scenario.task_kwargs.get("timing", {}))
+        timing = build_dataclass(TimingConfig, scenario.task_kwargs.get("timing", {}), "timing")
     return episode_step_limit(SimpleNamespace(simulation=sim), timing)
 
 
 __all__ = [
+    "BENCH_TIMING",
     "FLYING_OVERRIDES",
+    "PREDICTIVE_TIMING",
     "SCENARIO_IDS",
     "SHIP_TIMING",
     "START_OVERRIDES",
     "TASKS",
     "ScenarioId",
+    "bench_predictive_timing",
     "episode_step_limit",
     "landing_overrides",
     "register_all",

@@ -58,6 +58,7 @@ from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     BENCH_TIMING,
     FLYING_OVERRIDES,
+    PREDICTIVE_TIMING,
     SHIP_ESTIMATOR,
     SHIP_TIMING,
     START_OVERRIDES,
@@ -68,6 +69,10 @@ from landing_env.stewart.motion import SeaStateConfig
 #: the dotted override that flies the bench's range-scheduled final descent (the descent of the
 #: ``-v0`` timing ids, which the models trained before the timed descent were trained on)
 RANGE_DESCENT: dict[str, Any] = {"timing.guidance.descent_profile": "range"}
+
+#: the dotted overrides the ``predictive`` policy flies with (landing_env.scenarios'
+#: ``PREDICTIVE_TIMING``: an 8 s history and the deck-tilt predictor's wave-off)
+PREDICTIVE_OVERRIDES: dict[str, Any] = {f"timing.{k}": v for k, v in PREDICTIVE_TIMING.items()}
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -102,19 +107,19 @@ SCENARIOS: dict[str, Scenario] = {
         "bench-ss3",
         "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
         + BENCH_SCALE,
-        BENCH_TIMING,
+        {**BENCH_TIMING, "tilt_model": "bench-ss3"},
     ),
     "bench-ss4": Scenario(
         "bench-ss4",
         "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
         + BENCH_SCALE,
-        BENCH_TIMING,
+        {**BENCH_TIMING, "tilt_model": "bench-ss4"},
     ),
     "bench-ss5": Scenario(
         "bench-ss5",
         "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
         + BENCH_SCALE,
-        BENCH_TIMING,
+        {**BENCH_TIMING, "tilt_model": "bench-ss5"},
     ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
     "ship-ss3": Scenario(

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from estimation.deck_prediction import LinearTiltPredictor
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import WAIT, validate_action
@@ -44,6 +45,7 @@ from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome
 
@@ -60,7 +62,7 @@ __all__ = [
 ]
 
 #: the wave-off's predictors of the deck tilt at the contact (``TimingConfig.wave_off_predictor``)
-WAVE_OFF_PREDICTORS = ("linear", "quadratic")
+WAVE_OFF_PREDICTORS = ("linear", "quadratic", "model")
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -183,8 +185,19 @@ class TimingConfig:
     #: how the wave-off predicts the deck: ``linear`` (the newest row carried along its 0.5 s
     #: least-squares rates) or ``quadratic`` (a parabola fitted to roll and pitch over the last
     #: ``wave_off_window_s``: the deck's curvature, at the price of a noisier acceleration)
+    #: or ``model``: the scenario's fitted linear (Wiener) predictor ``tilt_model``
+    #: (:class:`~estimation.deck_prediction.LinearTiltPredictor` on the history, which must be
+    #: at least its window long), which aborts when the chance that the tilt at the contact is
+    #: within ``wave_off_tilt_deg`` is below ``wave_off_probability`` (its error measured on
+    #: held-out episodes: the chance is honest where a straight line's is not)
     wave_off_predictor: str = "linear"
     wave_off_window_s: float = 1.0
+    wave_off_probability: float = 0.8
+    #: the deck-tilt predictor of this scenario: a shipped one by name (``bench-ss4``:
+    #: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
+    #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
+    #: ``predictive`` policy; empty: none
+    tilt_model: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
     expected_contact_s: float = 1.3
 
@@ -213,6 +226,7 @@ class TimingConfig:
         require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
         require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
         require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
+        require_range("wave_off_probability", self.wave_off_probability, 0.0, 1.0)
         if self.wave_off_predictor == "quadratic":
             # the parabola is fitted to the history: the window must fit in it
             require_range(
@@ -267,6 +281,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.layout = TimingObservationLayout(n_history, self.timing.hold_height_m)
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
+        self.wave_off_model = self._load_wave_off_model()
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -278,6 +293,46 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.frames_of_last_step: list[np.ndarray] = []
         self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
+
+    def _load_wave_off_model(self) -> LinearTiltPredictor | None:
+        """The wave-off's fitted predictor (``wave_off_predictor = model``), checked against
+        the history it will read."""
+        t = self.timing
+        if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
+            return None
+        if not t.tilt_model:
+            self.world.close()
+            raise ConfigError(
+                "timing.tilt_model",
+                "is empty; the model wave-off needs the scenario's deck-tilt predictor "
+                "(e.g. bench-ss4, or a file written by `python -m agents.deck_predictor fit`)",
+            )
+        path = tilt_predictor_path(t.tilt_model)
+        try:
+            model = LinearTiltPredictor.load(path)
+        except (OSError, ValueError) as error:
+            self.world.close()
+            shipped = sorted(p.stem.removeprefix("deck_tilt_") for p in PREDICTOR_DIR.glob("*.npz"))
+            raise ConfigError(
+                "timing.tilt_model",
+                f"{t.tilt_model!r}: {error}; give a shipped one ({', '.join(shipped)}) "
+                "or a file written by `python -m agents.deck_predictor fit`",
+            ) from None
+        if abs(model.dt_s - self.env_dt) > 1e-9:
+            self.world.close()
+            raise ConfigError(
+                "timing.tilt_model",
+                f"{path.name} was fitted at {1 / model.dt_s:g} Hz; simulation.env_hz is "
+                f"{1 / self.env_dt:g}",
+            )
+        if self.history.length < model.n_window:
+            self.world.close()
+            raise ConfigError(
+                "timing.history_s",
+                f"{t.history_s:g} s is shorter than the wave-off model's {model.window_s:g} s "
+                f"window: set timing.history_s={model.window_s:g}",
+            )
+        return model
 
     @property
     def episode_step_limit(self) -> int:
@@ -451,6 +506,13 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         if row[_VALID] < 0.5:
             return False  # nothing to predict with: the descent goes on
         ahead = max(t.expected_contact_s - elapsed_s, 0.0)
+        if self.wave_off_model is not None:
+            prediction = self.wave_off_model.predict(
+                rows[:, [_ROLL, _PITCH]], rows[:, _VALID] > 0.5, ahead
+            )
+            if not prediction.valid:
+                return False  # nothing to predict with: the descent goes on
+            return prediction.probability_within(t.wave_off_tilt_deg) < t.wave_off_probability
         roll = row[_ROLL] + row[_ROLL_RATE] * ahead
         pitch = row[_PITCH] + row[_PITCH_RATE] * ahead
         if t.wave_off_predictor == "quadratic":

@@ -1,0 +1,356 @@
+"""The deck-tilt predictor: the Wiener predictor fitted on estimated motion, its honest error,
+the predictive timing policy and the wave-off that read it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from agents.deck_predictor import HORIZONS_S, futures
+from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
+from landing_env.errors import ConfigError
+from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
+
+DT = 0.05
+WINDOW_S = 4.0
+
+
+def _deck_series(seed: int, seconds: float, noise_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """A deck rolling and pitching as a few random-phase waves (3-6 s periods), the truth and
+    a noisy estimate of it, at 20 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, DT)
+    truth = np.zeros((len(t), 2))
+    for axis in range(2):
+        for period in rng.uniform(3.0, 6.0, 4):
+            truth[:, axis] += math.radians(1.5) * np.sin(
+                2 * math.pi * t / period + rng.uniform(0, 2 * math.pi)
+            )
+    return truth, truth + noise_rad * rng.standard_normal(truth.shape)
+
+
+def _examples(
+    seeds: range, noise_rad: float = math.radians(0.3)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Examples every decision (0.1 s) of each series: the window of estimates and the truth at
+    each horizon."""
+    n = round(WINDOW_S / DT)
+    histories, truth_rows, groups = [], [], []
+    for seed in seeds:
+        truth, estimate = _deck_series(seed, 60.0, noise_rad)
+        for k in range(n, len(truth), 2):
+            window = np.column_stack([estimate[k - n + 1 : k + 1], np.ones(n)])
+            histories.append(window)
+            truth_rows.append(truth[k])
+            groups.append(seed)
+    groups_array = np.array(groups)
+    future = futures(np.array(truth_rows), groups_array, HORIZONS_S, 2 * DT)
+    return np.array(histories), future, groups_array
+
+
+@pytest.fixture(scope="module")
+def predictor() -> LinearTiltPredictor:
+    histories, future, groups = _examples(range(12))
+    return LinearTiltPredictor.fit(histories, future, groups, HORIZONS_S, WINDOW_S, DT)
+
+
+def test_the_fitted_predictor_beats_holding_the_last_estimate_a_second_ahead(predictor):
+    histories, future, _ = _examples(range(100, 104))
+    k = int(np.argmin(abs(HORIZONS_S - 1.0)))
+    errors, hold = [], []
+    for history, target in zip(histories, future[:, k], strict=True):
+        if not np.all(np.isfinite(target)):
+            continue
+        p = predictor.predict(history[:, :2], history[:, 2] > 0.5, 1.0)
+        assert p.valid
+        errors.append([p.roll - target[0], p.pitch - target[1]])
+        hold.append(history[-1, :2] - target)
+    rms = np.sqrt(np.mean(np.square(errors)))
+    assert rms < 0.5 * np.sqrt(np.mean(np.square(hold)))
+
+
+def test_the_held_out_covariance_matches_the_error_on_new_episodes(predictor):
+    histories, future, _ = _examples(range(200, 206))
+    k = int(np.argmin(abs(HORIZONS_S - 1.3)))
+    residuals = []
+    for history, target in zip(histories, future[:, k], strict=True):
+        if np.all(np.isfinite(target)):
+            p = predictor.predict(history[:, :2], history[:, 2] > 0.5, 1.3)
+            residuals.append([p.roll - target[0], p.pitch - target[1]])
+    measured = np.sqrt(np.mean(np.square(residuals), axis=0))
+    claimed = np.sqrt(np.diag(predictor.covariance[k]))
+    np.testing.assert_allclose(measured, claimed, rtol=0.3)
+
+
+def test_the_error_grows_with_the_horizon(predictor):
+    sigma = np.sqrt(predictor.covariance[:, 0, 0])
+    assert sigma[int(np.argmin(abs(HORIZONS_S - 1.5)))] > 2.0 * sigma[1]
+
+
+def test_a_horizon_between_fitted_ones_interpolates_the_two(predictor):
+    history, _, _ = _examples(range(300, 301))
+    rows = history[10]
+    a = predictor.predict(rows[:, :2], rows[:, 2] > 0.5, 1.2)
+    b = predictor.predict(rows[:, :2], rows[:, 2] > 0.5, 1.3)
+    mid = predictor.predict(rows[:, :2], rows[:, 2] > 0.5, 1.25)
+    assert mid.roll == pytest.approx(0.5 * (a.roll + b.roll), abs=1e-12)
+    np.testing.assert_allclose(mid.covariance, 0.5 * (a.covariance + b.covariance), atol=1e-15)
+
+
+def test_the_chance_of_a_level_isotropic_prediction_is_rayleigh():
+    sigma_deg = 2.0
+    cov = np.eye(2) * math.radians(sigma_deg) ** 2
+    p = TiltPrediction(True, "", 1.3, 0.0, 0.0, cov)
+    for limit in (1.0, 2.0, 5.0):
+        expected = 1.0 - math.exp(-(limit**2) / (2 * sigma_deg**2))
+        assert p.probability_within(limit) == pytest.approx(expected, abs=0.01)
+
+
+def test_the_chance_falls_as_the_predicted_tilt_nears_and_passes_the_limit():
+    cov = np.eye(2) * math.radians(1.0) ** 2
+    chances = [
+        TiltPrediction(True, "", 1.3, math.radians(r), 0.0, cov).probability_within(5.0)
+        for r in (0.0, 3.0, 5.0, 8.0)
+    ]
+    # at the limit: below one half, since the pitch spread only adds tilt
+    assert chances[0] > 0.99 and 0.4 < chances[2] < 0.5
+    assert chances[3] < 0.01 and chances == sorted(chances, reverse=True)
+
+
+def test_an_invalid_prediction_has_no_chance_and_says_why():
+    p = TiltPrediction(False, "too few valid estimates in the window")
+    assert p.probability_within(5.0) == 0.0 and math.isnan(p.tilt_deg)
+
+
+def test_too_few_valid_estimates_give_an_invalid_prediction_with_the_reason(predictor):
+    n = predictor.n_window
+    rows = np.zeros((n, 2))
+    valid = np.zeros(n, dtype=bool)
+    valid[-3:] = True
+    p = predictor.predict(rows, valid, 1.3)
+    assert not p.valid and "too few valid" in p.reason
+    valid = np.ones(n, dtype=bool)
+    valid[-10:] = False
+    p = predictor.predict(rows, valid, 1.3)
+    assert not p.valid and "newest" in p.reason
+
+
+def test_a_short_history_or_a_horizon_beyond_the_fit_is_refused_with_the_reason(predictor):
+    p = predictor.predict(np.zeros((5, 2)), np.ones(5, dtype=bool), 1.3)
+    assert not p.valid and "needs" in p.reason
+    n = predictor.n_window
+    p = predictor.predict(np.zeros((n, 2)), np.ones(n, dtype=bool), 5.0)
+    assert not p.valid and "outside" in p.reason
+
+
+def test_gaps_are_filled_so_a_few_dropouts_barely_move_the_prediction(predictor):
+    history, _, _ = _examples(range(400, 401))
+    rows = history[50]
+    full = predictor.predict(rows[:, :2], np.ones(len(rows), dtype=bool), 1.3)
+    valid = np.ones(len(rows), dtype=bool)
+    valid[10:15] = False
+    holed = rows[:, :2].copy()
+    holed[10:15] = 1e3  # garbage where invalid must not be read
+    gapped = predictor.predict(holed, valid, 1.3)
+    assert gapped.valid and abs(gapped.roll - full.roll) < math.radians(0.3)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    arrays(
+        np.float64,
+        st.tuples(st.integers(0, 100), st.integers(1, 3)),
+        elements=st.floats(allow_nan=True, allow_infinity=True, width=64),
+    ),
+    st.floats(allow_nan=True, allow_infinity=True),
+)
+def test_prediction_never_raises_on_any_input(history, horizon):
+    histories, future, groups = _examples(range(2))
+    small = LinearTiltPredictor.fit(histories, future, groups, HORIZONS_S, WINDOW_S, DT)
+    valid = np.isfinite(history).all(axis=1) if history.ndim == 2 else np.ones(0, dtype=bool)
+    p = small.predict(history, valid, horizon)
+    assert p.valid or p.reason
+    assert 0.0 <= p.probability_within(5.0) <= 1.0
+
+
+def test_save_and_load_give_the_same_predictions(predictor, tmp_path):
+    path = predictor.save(tmp_path / "p.npz")
+    loaded = LinearTiltPredictor.load(path)
+    history, _, _ = _examples(range(500, 501))
+    rows = history[7]
+    a = predictor.predict(rows[:, :2], rows[:, 2] > 0.5, 1.3)
+    b = loaded.predict(rows[:, :2], rows[:, 2] > 0.5, 1.3)
+    assert (a.roll, a.pitch) == (b.roll, b.pitch)
+    assert loaded.metadata["heldout_rms_deg"] == predictor.metadata["heldout_rms_deg"]
+
+
+def test_a_file_that_is_not_a_predictor_is_refused_naming_it(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not numpy")
+    with pytest.raises(ValueError, match=r"bad\.npz"):
+        LinearTiltPredictor.load(bad)
+
+
+def test_fitting_refuses_mismatched_shapes():
+    histories, future, groups = _examples(range(2))
+    with pytest.raises(ValueError, match="futures"):
+        LinearTiltPredictor.fit(histories, future[:, :3], groups, HORIZONS_S, WINDOW_S, DT)
+    with pytest.raises(ValueError, match="histories"):
+        LinearTiltPredictor.fit(histories[:, :, :2], future, groups, HORIZONS_S, WINDOW_S, DT)
+    with pytest.raises(ValueError, match="two episodes"):
+        LinearTiltPredictor.fit(histories, future, np.zeros(len(groups)), HORIZONS_S, WINDOW_S, DT)
+
+
+def test_futures_shift_within_an_episode_and_stop_at_its_end():
+    truth = np.arange(10.0)[:, None].repeat(2, axis=1)
+    episode = np.array([0] * 6 + [1] * 4)
+    out = futures(truth, episode, np.array([0.0, 0.2]), 0.1)
+    np.testing.assert_array_equal(out[:, 0, 0], truth[:, 0])
+    assert out[0, 1, 0] == 2.0 and out[3, 1, 0] == 5.0
+    assert np.isnan(out[4, 1, 0]) and np.isnan(out[5, 1, 0]) and out[6, 1, 0] == 8.0
+    with pytest.raises(ValueError, match="multiples"):
+        futures(truth, episode, np.array([0.15]), 0.1)
+
+
+# ------------------------------------------------------------------ shipped predictors
+@pytest.mark.parametrize("scenario", ["bench-ss3", "bench-ss4", "bench-ss5"])
+def test_each_bench_scenario_ships_a_predictor_fitted_on_its_estimated_motion(scenario):
+    predictor = LinearTiltPredictor.load(tilt_predictor_path(scenario))
+    assert predictor.metadata["scenarios"] == [scenario]
+    assert predictor.metadata["sensing"] == "realistic"
+    assert predictor.metadata["estimator"] == "tight"
+    assert predictor.window_s == 8.0 and predictor.dt_s == pytest.approx(0.05)
+    # the error a descent ahead is a fraction of the 5 deg limit, and larger at rougher seas
+    k = int(np.argmin(abs(predictor.horizons_s - 1.3)))
+    assert max(predictor.metadata["heldout_rms_deg"][k]) < 3.5
+
+
+def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):
+    assert tilt_predictor_path("bench-ss4") == PREDICTOR_DIR / "deck_tilt_bench-ss4.npz"
+    assert tilt_predictor_path(str(tmp_path / "x.npz")) == tmp_path / "x.npz"
+
+
+# ------------------------------------------------------------------ the environment
+def _env(**timing):
+    from agents.hindsight import make_timing_env
+
+    return make_timing_env(
+        "bench-ss4", "ideal", "truth", {f"timing.{k}": v for k, v in timing.items()}
+    )
+
+
+def test_the_model_wave_off_needs_a_history_as_long_as_its_window():
+    with pytest.raises(ConfigError, match=r"timing\.history_s"):
+        _env(wave_off_tilt_deg=5.0, wave_off_predictor="model")
+
+
+def test_the_model_wave_off_needs_a_predictor():
+    with pytest.raises(ConfigError, match=r"timing\.tilt_model"):
+        _env(wave_off_tilt_deg=5.0, wave_off_predictor="model", tilt_model="", history_s=8.0)
+    with pytest.raises(ConfigError, match=r"timing\.tilt_model"):
+        _env(
+            wave_off_tilt_deg=5.0,
+            wave_off_predictor="model",
+            tilt_model="no-such-sea",
+            history_s=8.0,
+        )
+
+
+def test_a_certainty_demanding_model_wave_off_aborts_every_chosen_descent():
+    env = _env(
+        wave_off_tilt_deg=5.0,
+        wave_off_predictor="model",
+        wave_off_probability=1.0,
+        history_s=8.0,
+        wait_limit_s=6.0,
+    )
+    try:
+        env.reset(seed=3)
+        _, _, terminated, _, info = env.step(1)
+        assert not terminated and info["wave_offs"] == 1 and not info["committed"]
+        while not terminated:
+            _, _, terminated, _, info = env.step(1)
+        # only a commit at or past the wait limit is never waved off
+        assert info["wait_s"] >= 6.0 and info["wave_offs"] >= 2
+    finally:
+        env.close()
+
+
+def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
+    env = _env(
+        wave_off_tilt_deg=5.0, wave_off_predictor="model", wave_off_probability=0.0, history_s=8.0
+    )
+    try:
+        env.reset(seed=3)
+        _, _, terminated, _, info = env.step(1)
+        assert terminated and info["wave_offs"] == 0
+    finally:
+        env.close()
+
+
+# ------------------------------------------------------------------ the policy
+def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window():
+    from agents.policies import make_policy
+
+    env = _env()
+    try:
+        with pytest.raises(ConfigError, match=r"timing\.history_s=8"):
+            make_policy("predictive", env)
+    finally:
+        env.close()
+
+
+def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
+    from agents.policies import make_policy
+    from landing_env.envs.history import HISTORY_FEATURES
+
+    env = _env(history_s=8.0)
+    try:
+        policy = make_policy("predictive", env)
+        layout = env.unwrapped.layout
+        rows = np.zeros((layout.n_history, len(HISTORY_FEATURES)))
+        rows[:, HISTORY_FEATURES.index("valid")] = 1.0
+        rows[:, HISTORY_FEATURES.index("z")] = layout.hold_height_m
+        tof = np.full(4, layout.hold_height_m)
+        level, _ = layout.encode(rows, tof, np.ones(4, dtype=bool), 0.1)
+        assert policy.act(level) == 1 and policy.last_probability > 0.98
+        rows[:, HISTORY_FEATURES.index("roll")] = math.radians(8.0)
+        tilted, _ = layout.encode(rows, tof, np.ones(4, dtype=bool), 0.1)
+        assert policy.act(tilted) == 0 and policy.last_probability < 0.5
+    finally:
+        env.close()
+
+
+def test_the_required_chance_relaxes_only_near_the_wait_limit():
+    from agents.policies import PredictiveConfig
+
+    config = PredictiveConfig(min_probability=0.98, relax_from=0.7, final_probability=0.8)
+    assert config.threshold(0.0) == config.threshold(0.7) == 0.98
+    assert config.threshold(0.85) == pytest.approx(0.89)
+    assert config.threshold(1.0) == pytest.approx(0.8)
+    with pytest.raises(ConfigError, match="final_probability"):
+        PredictiveConfig(min_probability=0.9, final_probability=0.95)
+
+
+def test_the_v2_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs():
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+    from agents.policies import make_policy
+
+    env = gym.make("DeckLandingTiming-BenchSS4-v2")
+    try:
+        base = env.unwrapped
+        assert base.layout.n_history == 160 and base.wave_off_model is not None
+        assert base.timing.tilt_model == "bench-ss4"
+        policy = make_policy("predictive", env)
+        observation, _ = env.reset(seed=11)
+        assert env.observation_space.contains(observation)
+        assert policy.act(observation) in (0, 1) and policy.last.valid
+    finally:
+        env.close()
