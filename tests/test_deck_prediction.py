@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.deck_predictor import HORIZONS_S, futures
+from agents.deck_predictor import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
@@ -85,6 +85,42 @@ def test_the_held_out_covariance_matches_the_error_on_new_episodes(predictor):
     measured = np.sqrt(np.mean(np.square(residuals), axis=0))
     claimed = np.sqrt(np.diag(predictor.covariance[k]))
     np.testing.assert_allclose(measured, claimed, rtol=0.3)
+
+
+def test_a_channel_that_leads_the_tilt_is_used_to_predict_it():
+    """Heave that leads roll by a second (as a wave reaches the heave before it tilts the
+    deck) makes the roll a second ahead predictable: a predictor with ``z`` among its channels
+    finds it, one on roll and pitch alone cannot."""
+    n = round(WINDOW_S / DT)
+    histories, targets, groups = [], [], []
+    for seed in range(8):
+        truth, _ = _deck_series(seed, 70.0, 0.0)
+        lead = round(1.0 / DT)
+        # z(t) = roll(t + 1 s): the heave channel shows now the roll a second ahead
+        roll, pitch, z = truth[:-lead, 0], truth[:-lead, 1], truth[lead:, 0]
+        noise = np.random.default_rng(seed).normal(0.0, math.radians(0.1), (len(roll), 3))
+        series = np.column_stack([z, roll, pitch]) + noise
+        for k in range(n, len(roll) - 20, 2):
+            histories.append(np.column_stack([series[k - n + 1 : k + 1], np.ones(n)]))
+            targets.append([roll[k], pitch[k]])
+            groups.append(seed)
+    histories_a = np.array(histories)
+    future = futures(np.array(targets), np.array(groups), HORIZONS_S, 2 * DT)
+    both = LinearTiltPredictor.fit(
+        histories_a,
+        future,
+        np.array(groups),
+        HORIZONS_S,
+        WINDOW_S,
+        DT,
+        channels=("z", "roll", "pitch"),
+    )
+    alone = LinearTiltPredictor.fit(
+        histories_a[:, :, 1:], future, np.array(groups), HORIZONS_S, WINDOW_S, DT
+    )
+    k = int(np.argmin(abs(HORIZONS_S - 1.0)))
+    assert both.channels == ("z", "roll", "pitch") and len(both.scales) == 3
+    assert both.covariance[k][0, 0] < 0.2 * alone.covariance[k][0, 0]
 
 
 def test_the_error_grows_with_the_horizon(predictor):
@@ -185,7 +221,7 @@ def test_save_and_load_give_the_same_predictions(predictor, tmp_path):
     rows = history[7]
     a = predictor.predict(rows[:, :2], rows[:, 2] > 0.5, 1.3)
     b = loaded.predict(rows[:, :2], rows[:, 2] > 0.5, 1.3)
-    assert (a.roll, a.pitch) == (b.roll, b.pitch)
+    assert (a.roll, a.pitch) == (b.roll, b.pitch) and loaded.channels == predictor.channels
     assert loaded.metadata["heldout_rms_deg"] == predictor.metadata["heldout_rms_deg"]
 
 
@@ -225,6 +261,7 @@ def test_each_bench_scenario_ships_a_predictor_fitted_on_its_estimated_motion(sc
     assert predictor.metadata["sensing"] == "realistic"
     assert predictor.metadata["estimator"] == "tight"
     assert predictor.window_s == 8.0 and predictor.dt_s == pytest.approx(0.05)
+    assert predictor.channels == CHANNELS
     # the error a descent ahead is a fraction of the 5 deg limit, and larger at rougher seas
     k = int(np.argmin(abs(predictor.horizons_s - 1.3)))
     assert max(predictor.metadata["heldout_rms_deg"][k]) < 3.5
@@ -262,8 +299,9 @@ def test_the_model_wave_off_needs_a_predictor():
 
 
 def test_a_certainty_demanding_model_wave_off_aborts_every_chosen_descent():
+    # a deck within 0.5 deg, for certain: no prediction promises that
     env = _env(
-        wave_off_tilt_deg=5.0,
+        wave_off_tilt_deg=0.5,
         wave_off_predictor="model",
         wave_off_probability=1.0,
         history_s=8.0,
@@ -354,3 +392,13 @@ def test_the_v2_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_n
         assert policy.act(observation) in (0, 1) and policy.last.valid
     finally:
         env.close()
+
+
+def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
+    from agents.model_metadata import descent_signature
+    from landing_env.envs.guidance import GuidanceGains
+
+    gains = GuidanceGains(descent_profile="timed")
+    signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
+    assert signature["tilt_model"] == "bench-ss4" and signature["wave_off_probability"] == 0.8
+    assert "tilt_model" not in descent_signature(gains, 5.0, "linear", "bench-ss4")

@@ -318,6 +318,14 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 f"{t.tilt_model!r}: {error}; give a shipped one ({', '.join(shipped)}) "
                 "or a file written by `python -m agents.deck_predictor fit`",
             ) from None
+        unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
+        if unknown:
+            self.world.close()
+            raise ConfigError(
+                "timing.tilt_model",
+                f"{path.name} reads {unknown}, which the history does not hold "
+                f"({', '.join(HISTORY_FEATURES)})",
+            )
         if abs(model.dt_s - self.env_dt) > 1e-9:
             self.world.close()
             raise ConfigError(
@@ -507,9 +515,8 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             return False  # nothing to predict with: the descent goes on
         ahead = max(t.expected_contact_s - elapsed_s, 0.0)
         if self.wave_off_model is not None:
-            prediction = self.wave_off_model.predict(
-                rows[:, [_ROLL, _PITCH]], rows[:, _VALID] > 0.5, ahead
-            )
+            columns = [HISTORY_FEATURES.index(name) for name in self.wave_off_model.channels]
+            prediction = self.wave_off_model.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
             if not prediction.valid:
                 return False  # nothing to predict with: the descent goes on
             return prediction.probability_within(t.wave_off_tilt_deg) < t.wave_off_probability
