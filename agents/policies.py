@@ -51,7 +51,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from estimation.frames import camera_to_heading_xy
+from estimation.frames import camera_to_heading_xy, tilt_deg
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.envs.guidance import DeckGuidance, GuidanceGains
@@ -122,12 +122,6 @@ class CalmPrediction:
     #: fitted heave rate of the deck relative to the camera (m/s)
     heave_rate: float
     reason: str = ""
-
-
-def tilt_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
-    """Angle between the tag's z axis and the optical axis for ZYX roll and pitch, degrees."""
-    cosine = np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)
-    return np.degrees(np.arccos(cosine))
 
 
 def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPrediction:

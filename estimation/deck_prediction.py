@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from estimation.frames import tilt_deg
+
 #: standard-normal points (a scrambled Sobol set, fixed) for the probability of a 2-D Gaussian
 #: tilt inside a circle: deterministic, and 1/N-accurate where Monte Carlo is 1/sqrt(N)
 _N_POINTS = 4096
@@ -47,12 +49,6 @@ def _normal_points() -> np.ndarray:
 
 
 _POINTS: np.ndarray | None = None
-
-
-def tilt_from_roll_pitch_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
-    """The angle of a deck with ZYX roll and pitch (rad) from level, degrees."""
-    cosine = np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)
-    return np.degrees(np.arccos(cosine))
 
 
 @dataclass(frozen=True)
@@ -70,7 +66,7 @@ class TiltPrediction:
     @property
     def tilt_deg(self) -> float:
         """The tilt of the predicted mean, degrees (NaN when invalid)."""
-        return float(tilt_from_roll_pitch_deg(self.roll, self.pitch)) if self.valid else math.nan
+        return float(tilt_deg(self.roll, self.pitch)) if self.valid else math.nan
 
     @property
     def sigma_deg(self) -> tuple[float, float]:
@@ -91,7 +87,7 @@ class TiltPrediction:
         except np.linalg.LinAlgError:
             return 0.0
         samples = np.array([self.roll, self.pitch]) + _POINTS @ factor.T
-        return float(np.mean(tilt_from_roll_pitch_deg(samples[:, 0], samples[:, 1]) <= limit_deg))
+        return float(np.mean(tilt_deg(samples[:, 0], samples[:, 1]) <= limit_deg))
 
     def best_probability_within(self, limit_deg: float) -> float:
         """The chance a level deck predicted with this covariance would have: the most any

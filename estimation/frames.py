@@ -149,6 +149,14 @@ def deck_pose_in_camera(
     return r_cd, t_cd
 
 
+def tilt_deg(roll: np.ndarray | float, pitch: np.ndarray | float) -> np.ndarray:
+    """The angle between a frame's z axis and the reference z axis for ZYX ``roll`` and
+    ``pitch`` (rad; yaw does not tilt), degrees: the deck's tilt from level for the levelled
+    pose, the tag's from the optical axis for the camera-frame one."""
+    cosine = np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0)
+    return np.degrees(np.arccos(cosine))
+
+
 def level_from_body(r_wb: np.ndarray) -> np.ndarray:
     """R_HB: the body frame in the levelled heading frame H (the drone's roll and pitch
     removed, its yaw kept), from the drone's attitude R_WB (an autopilot's estimate)."""

@@ -28,7 +28,6 @@ model's card records the descent (and the wave-off, ``wave_off_tilt_deg``) and r
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,7 +35,12 @@ import numpy as np
 from gymnasium import spaces
 
 from estimation.deck_prediction import LinearTiltPredictor
-from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
+from estimation.frames import (
+    euler_zyx_from_matrix,
+    level_from_body,
+    levelled_deck_pose,
+    tilt_deg,
+)
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
@@ -529,8 +533,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             if valid.sum() >= 5:
                 fit = np.polyfit(times[valid], recent[valid][:, [_ROLL, _PITCH]], 2)
                 roll, pitch = (float(np.polyval(fit[:, k], ahead)) for k in range(2))
-        tilt = math.degrees(math.acos(float(np.clip(math.cos(roll) * math.cos(pitch), -1, 1))))
-        return tilt > t.wave_off_tilt_deg
+        return float(tilt_deg(roll, pitch)) > t.wave_off_tilt_deg
 
     def _flat_observation(self) -> np.ndarray:
         assert self._base_observation is not None
