@@ -402,3 +402,28 @@ def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
     assert signature["tilt_model"] == "bench-ss4" and signature["wave_off_probability"] == 0.8
     assert "tilt_model" not in descent_signature(gains, 5.0, "linear", "bench-ss4")
+
+
+def test_random_decisions_on_a_v2_id_under_realistic_sensing_never_leave_the_space():
+    """A soak of the v2 timing task (model wave-off in the loop, realistic sensing): random
+    waits and commits, every observation inside the space, every reward finite."""
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+
+    env = gym.make("DeckLandingTiming-BenchSS5-v2", overrides={"sensors": "realistic"})
+    rng = np.random.default_rng(7)
+    try:
+        for episode in range(3):
+            observation, _ = env.reset(seed=100 + episode)
+            assert env.observation_space.contains(observation)
+            done = False
+            while not done:
+                action = int(rng.random() < 0.15)
+                observation, reward, terminated, truncated, info = env.step(action)
+                assert env.observation_space.contains(observation)
+                assert math.isfinite(reward)
+                done = terminated or truncated
+            assert info["outcome"] != "in_flight" and info["wave_offs"] >= 0
+    finally:
+        env.close()
