@@ -223,8 +223,8 @@ class PredictiveConfig:
     #: commit when the predicted chance that the deck's tilt at the contact is within the
     #: touchdown limit is at least this fraction of the best chance the predictor gives at
     #: this horizon (that of a level deck predicted: 1.00 at bench sea state 4, 0.97 at 5),
-    #: so the rule means the same at every sea state (0.95: 99.5 % at bench-ss4 and 94.0 % at
-    #: ss5 on 200 held-out episodes with the model wave-off; 0.98 gave 100 and 90 % on 100)
+    #: so the rule means the same at every sea state (0.95: 97.5 % at bench-ss4 and 91.0 % at
+    #: ss5 on 200 fresh held-out episodes with the model wave-off; chosen on 100 others)
     min_probability: float = 0.95
     #: from this fraction of the wait limit on, the required fraction falls linearly to
     #: ``final_probability`` at the limit (a commit the policy chooses beats the forced one)
