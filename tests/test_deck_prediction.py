@@ -427,3 +427,26 @@ def test_random_decisions_on_a_v2_id_under_realistic_sensing_never_leave_the_spa
             assert info["outcome"] != "in_flight" and info["wave_offs"] >= 0
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, -1e9])
+def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(bad):
+    from dataclasses import fields
+
+    from landing_env.config_loading import build_dataclass
+    from landing_env.envs.timing import TimingConfig
+
+    numeric = [
+        f.name
+        for f in fields(TimingConfig)
+        if f.type in ("float", "int") and f.name != "level_history"
+    ]
+    assert {"wave_off_probability", "expected_contact_s", "wait_limit_s"} <= set(numeric)
+    for key in numeric:
+        value = (
+            int(bad)
+            if isinstance(getattr(TimingConfig(), key), int) and math.isfinite(bad)
+            else bad
+        )
+        with pytest.raises(ConfigError, match=key):
+            build_dataclass(TimingConfig, {key: value}, "timing")
