@@ -306,8 +306,9 @@ class PredictivePolicy:
 
     def probability(self, observation: np.ndarray) -> float:
         """The predicted chance that a commit now meets a deck within the tilt limit."""
-        parts = self.layout.decode(observation)
-        rows = parts.history
+        return self._chance(self.layout.decode(observation).history)
+
+    def _chance(self, rows: np.ndarray) -> float:
         self.last = self.predictor.predict(
             rows[:, self.columns], rows[:, _VALID] > 0.5, self.config.contact_s
         )
@@ -315,10 +316,10 @@ class PredictivePolicy:
         return self.last_probability
 
     def act(self, observation: np.ndarray) -> int:
-        wait_fraction = float(self.layout.decode(observation).wait_fraction)
-        chance = self.probability(observation)
+        parts = self.layout.decode(observation)
+        chance = self._chance(parts.history)
         best = self.last.best_probability_within(self.max_tilt_deg)
-        return int(best > 0.0 and chance >= self.config.threshold(wait_fraction) * best)
+        return int(best > 0.0 and chance >= self.config.threshold(parts.wait_fraction) * best)
 
     def __call__(self, observation: np.ndarray) -> int:
         return self.act(observation)

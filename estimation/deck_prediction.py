@@ -68,13 +68,6 @@ class TiltPrediction:
         """The tilt of the predicted mean, degrees (NaN when invalid)."""
         return float(tilt_deg(self.roll, self.pitch)) if self.valid else math.nan
 
-    @property
-    def sigma_deg(self) -> tuple[float, float]:
-        """Standard deviations of the predicted roll and pitch, degrees."""
-        if not self.valid:
-            return (math.nan, math.nan)
-        return tuple(float(v) for v in np.degrees(np.sqrt(np.diag(self.covariance))))  # type: ignore[return-value]
-
     def probability_within(self, limit_deg: float) -> float:
         """P(tilt <= ``limit_deg``) under the Gaussian prediction (0 when invalid)."""
         global _POINTS

@@ -424,7 +424,7 @@ def test_random_decisions_on_a_v2_id_under_realistic_sensing_never_leave_the_spa
                 assert env.observation_space.contains(observation)
                 assert math.isfinite(reward)
                 done = terminated or truncated
-            assert info["outcome"] != "in_flight" and info["wave_offs"] >= 0
+            assert info["outcome"] != "in_flight"
     finally:
         env.close()
 
