@@ -106,6 +106,8 @@ def descent_signature(
     wave_off_predictor: str = "linear",
     tilt_model: str = "",
     wave_off_probability: float = 0.8,
+    wave_off_rule: str = "fixed",
+    opportunity_s: float = 1.0,
 ) -> dict[str, Any]:
     """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
@@ -124,7 +126,11 @@ def descent_signature(
             signature["wave_off_predictor"] = wave_off_predictor
         if wave_off_predictor == "model":
             signature["tilt_model"] = tilt_model
-            signature["wave_off_probability"] = float(wave_off_probability)
+            if wave_off_rule == "value":
+                signature["wave_off_rule"] = wave_off_rule
+                signature["opportunity_s"] = float(opportunity_s)
+            else:
+                signature["wave_off_probability"] = float(wave_off_probability)
     return signature
 
 
@@ -151,6 +157,8 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
             timing.wave_off_predictor,
             timing.tilt_model,
             timing.wave_off_probability,
+            timing.wave_off_rule,
+            timing.opportunity_s,
         ),
         "size": layout.size,
         "n_history": n_history,

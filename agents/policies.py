@@ -31,9 +31,11 @@
   (``configs/train/timing_dqn_waveoff.yaml``).
 * ``predictive`` (``DeckLandingTiming-v0``): commit when the scenario's deck-tilt predictor
   (:mod:`estimation.deck_prediction`, a Wiener predictor fitted on the estimated motion,
-  ``timing.tilt_model``) gives a chance near its best that the deck is within the touchdown
-  limit at the contact (:class:`PredictivePolicy`); it reads an 8 s history
-  (``DeckLandingTiming-BenchSS{3,4,5}-v2``, which also wave off by the same predictor).
+  ``timing.tilt_model``) gives a chance that the deck is within the touchdown limit at the
+  contact worth more than waiting on (the optimal-stopping value of the chances it gives,
+  :mod:`estimation.optimal_stopping`; :class:`PredictivePolicy`); it reads an 8 s history
+  (``DeckLandingTiming-BenchSS{3,4,5}-v3``, which also wave off by the same predictor and
+  the same value).
 * ``timing-dqn-waveoff30`` (``DeckLandingTiming-v0``): the same with a 30 s wait limit
   (``--set timing.wave_off_tilt_deg=4.5 timing.wait_limit_s=30``),
   ``agents/models/timing_dqn_waveoff30.zip`` (``configs/train/timing_dqn_waveoff30.yaml``).
@@ -220,45 +222,23 @@ class PredictiveConfig:
     #: the contact's time after the commit the deck is predicted at, seconds (the timed
     #: descent's: 1.29 +- 0.06 s measured, README "Timing with a timed descent")
     contact_s: float = 1.3
-    #: commit when the predicted chance that the deck's tilt at the contact is within the
-    #: touchdown limit is at least this fraction of the best chance the predictor gives at
-    #: this horizon (that of a level deck predicted: 1.00 at bench sea state 4, 0.97 at 5),
-    #: so the rule means the same at every sea state (0.95: 97.5 % at bench-ss4 and 91.0 % at
-    #: ss5 on 200 fresh held-out episodes with the model wave-off; chosen on 100 others)
-    min_probability: float = 0.95
-    #: from this fraction of the wait limit on, the required fraction falls linearly to
-    #: ``final_probability`` at the limit (a commit the policy chooses beats the forced one)
-    relax_from: float = 0.7
-    final_probability: float = 0.8
 
     def __post_init__(self) -> None:
         require_range("contact_s", self.contact_s, 0.0, 10.0)
-        require_range("min_probability", self.min_probability, 0.0, 1.0)
-        require_range("relax_from", self.relax_from, 0.0, 1.0)
-        require_range(
-            "final_probability",
-            self.final_probability,
-            0.0,
-            self.min_probability,
-            bounds_from=f"min_probability = {self.min_probability}",
-        )
-
-    def threshold(self, wait_fraction: float) -> float:
-        """The chance a commit needs after ``wait_fraction`` of the wait limit."""
-        if wait_fraction <= self.relax_from or self.relax_from >= 1.0:
-            return self.min_probability
-        w = min((wait_fraction - self.relax_from) / (1.0 - self.relax_from), 1.0)
-        return (1.0 - w) * self.min_probability + w * self.final_probability
 
 
 class PredictivePolicy:
-    """Commit when the deck's tilt at the contact is predicted within the limit with a chance
-    near the best the predictor can give: a
-    :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
-    the estimated deck motion, :mod:`agents.deck_predictor`) on the observation's history,
-    ``contact_s`` ahead; the chance is that of the Gaussian prediction error measured on
-    held-out episodes.  Needs a history at least as long as the predictor's window
-    (``timing.history_s``)."""
+    """Commit when the chance of a good contact is worth more than waiting for a better one.
+
+    The chance: that the deck's tilt at the contact, ``contact_s`` ahead, is within the
+    limit, by a :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener
+    predictor fitted to the estimated deck motion, :mod:`agents.deck_predictor`) on the
+    observation's history, with the Gaussian error measured on held-out episodes.  What
+    waiting is worth: the optimal-stopping value
+    (:class:`~estimation.optimal_stopping.StoppingValues`) of the chances the predictor gave
+    held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
+    independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
+    history at least as long as the predictor's window (``timing.history_s``)."""
 
     name = "predictive"
 
@@ -268,9 +248,12 @@ class PredictivePolicy:
         dt: float,
         predictor: Any,
         max_tilt_deg: float,
+        wait_limit_s: float,
+        opportunity_s: float,
         config: PredictiveConfig | None = None,
     ) -> None:
         from estimation.deck_prediction import LinearTiltPredictor
+        from estimation.optimal_stopping import StoppingValues
 
         if not isinstance(predictor, LinearTiltPredictor):
             predictor = LinearTiltPredictor.load(predictor)
@@ -291,12 +274,25 @@ class PredictivePolicy:
             raise ConfigError(
                 "timing.tilt_model", f"the predictor reads {unknown}, not in the history"
             )
+        require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
+        require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
+        self.config = config or PredictiveConfig()
+        chances = predictor.chances(self.config.contact_s, max_tilt_deg)
+        if chances.size == 0:
+            raise ConfigError(
+                "timing.tilt_model",
+                "the predictor holds no held-out predictions to weigh a chance against "
+                f"(or none {self.config.contact_s:g} s ahead): refit it with "
+                "`python -m agents.deck_predictor fit`",
+            )
+        self.values = StoppingValues.from_samples(chances)
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
         self.layout = layout
         self.dt = dt
         self.predictor = predictor
         self.max_tilt_deg = max_tilt_deg
-        self.config = config or PredictiveConfig()
+        self.wait_limit_s = wait_limit_s
+        self.opportunity_s = opportunity_s
         self.last: Any = None
         self.last_probability = 0.0
 
@@ -308,6 +304,12 @@ class PredictivePolicy:
         """The predicted chance that a commit now meets a deck within the tilt limit."""
         return self._chance(self.layout.decode(observation).history)
 
+    def threshold(self, wait_fraction: float) -> float:
+        """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of
+        waiting on."""
+        remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
+        return self.values.threshold(remaining_s, self.opportunity_s)
+
     def _chance(self, rows: np.ndarray) -> float:
         self.last = self.predictor.predict(
             rows[:, self.columns], rows[:, _VALID] > 0.5, self.config.contact_s
@@ -318,8 +320,7 @@ class PredictivePolicy:
     def act(self, observation: np.ndarray) -> int:
         parts = self.layout.decode(observation)
         chance = self._chance(parts.history)
-        best = self.last.best_probability_within(self.max_tilt_deg)
-        return int(best > 0.0 and chance >= self.config.threshold(parts.wait_fraction) * best)
+        return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
 
     def __call__(self, observation: np.ndarray) -> int:
         return self.act(observation)
@@ -674,6 +675,8 @@ def make_policy(
             dt,
             _tilt_model(model_path, base.timing.tilt_model),
             base.config.touchdown.max_deck_tilt_deg,
+            base.timing.wait_limit_s,
+            base.timing.opportunity_s,
         )
     if name == "oracle":
         from agents.oracle import OracleTimingPolicy

@@ -70,17 +70,13 @@ class TiltPrediction:
 
     def probability_within(self, limit_deg: float) -> float:
         """P(tilt <= ``limit_deg``) under the Gaussian prediction (0 when invalid)."""
-        global _POINTS
         if not self.valid:
             return 0.0
-        if _POINTS is None:
-            _POINTS = _normal_points()
-        try:
-            factor = np.linalg.cholesky(self.covariance + 1e-14 * np.eye(2))
-        except np.linalg.LinAlgError:
-            return 0.0
-        samples = np.array([self.roll, self.pitch]) + _POINTS @ factor.T
-        return float(np.mean(tilt_deg(samples[:, 0], samples[:, 1]) <= limit_deg))
+        return float(
+            _probabilities_within(np.array([[self.roll, self.pitch]]), self.covariance, limit_deg)[
+                0
+            ]
+        )
 
     def best_probability_within(self, limit_deg: float) -> float:
         """The chance a level deck predicted with this covariance would have: the most any
@@ -89,6 +85,28 @@ class TiltPrediction:
             return 0.0
         level = TiltPrediction(True, "", self.horizon_s, 0.0, 0.0, self.covariance)
         return level.probability_within(limit_deg)
+
+
+def _probabilities_within(
+    means: np.ndarray, covariance: np.ndarray, limit_deg: float, chunk: int = 64
+) -> np.ndarray:
+    """P(tilt <= ``limit_deg``) for Gaussians of (roll, pitch) ``means`` (M, 2), rad, sharing
+    ``covariance``; 0 for a covariance that is not one."""
+    global _POINTS
+    if _POINTS is None:
+        _POINTS = _normal_points()
+    try:
+        factor = np.linalg.cholesky(np.asarray(covariance, dtype=float) + 1e-14 * np.eye(2))
+    except np.linalg.LinAlgError:
+        return np.zeros(len(means))
+    offsets = _POINTS @ factor.T
+    out = np.empty(len(means))
+    for start in range(0, len(means), chunk):
+        samples = means[start : start + chunk, None, :] + offsets[None]
+        out[start : start + chunk] = np.mean(
+            tilt_deg(samples[..., 0], samples[..., 1]) <= limit_deg, axis=1
+        )
+    return out
 
 
 def _invalid(reason: str, horizon_s: float = math.nan) -> TiltPrediction:
@@ -123,11 +141,18 @@ class LinearTiltPredictor:
     channels: tuple[str, ...] = ("roll", "pitch")
     #: each channel's divisor (m or rad); empty: ones
     scales: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (H, M, 2) the predicted roll and pitch (rad) of M held-out examples at each horizon:
+    #: the distribution of predictions the sea offers (:meth:`chances`); empty: not recorded
+    heldout_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     def __post_init__(self) -> None:
         self.channels = tuple(self.channels)
         scales = np.asarray(self.scales, dtype=float).reshape(-1)
         self.scales = scales if scales.size else np.ones(len(self.channels))
+        means = np.asarray(self.heldout_means, dtype=float)
+        self.heldout_means = (
+            means.reshape(len(self.horizons_s), -1, 2) if means.size else np.zeros((0, 0, 2))
+        )
 
     @property
     def n_window(self) -> int:
@@ -183,6 +208,22 @@ class LinearTiltPredictor:
             return _invalid("non-finite prediction", horizon_s)
         return TiltPrediction(True, "", horizon_s, float(mean[0]), float(mean[1]), covariance)
 
+    def chances(self, horizon_s: float, limit_deg: float) -> np.ndarray:
+        """The chance that the tilt ``horizon_s`` ahead is within ``limit_deg``, for each of
+        the held-out examples recorded at fitting: how such chances are distributed over the
+        sea (empty when none were recorded or the horizon is outside the fitted ones)."""
+        h = self.horizons_s
+        if self.heldout_means.size == 0 or not (
+            math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9
+        ):
+            return np.zeros(0)
+        k = int(np.clip(np.searchsorted(h, horizon_s) - 1, 0, max(len(h) - 2, 0)))
+        j = min(k + 1, len(h) - 1)
+        w = 0.0 if j == k else float(np.clip((horizon_s - h[k]) / (h[j] - h[k]), 0.0, 1.0))
+        means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
+        covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
+        return _probabilities_within(means, covariance, limit_deg)
+
     # ---------------------------------------------------------------- fitting
     @classmethod
     def fit(
@@ -198,6 +239,7 @@ class LinearTiltPredictor:
         holdout_fraction: float = 0.25,
         metadata: dict[str, Any] | None = None,
         channels: tuple[str, ...] = ("roll", "pitch"),
+        record: int = 1000,
     ) -> LinearTiltPredictor:
         """Fit on examples: ``histories`` (N, n, C + 1) of the C ``channels`` and validity,
         ``futures`` (N, H, 2) the true roll and pitch at each horizon (NaN where unknown),
@@ -205,7 +247,9 @@ class LinearTiltPredictor:
 
         The ridge penalty is chosen per horizon on held-out episodes (the last
         ``holdout_fraction`` of the groups), the covariance is the held-out residuals' (an
-        honest error), and the coefficients are then refitted on every example."""
+        honest error), and the coefficients are then refitted on every example.  The
+        predictions of ``record`` held-out examples (evenly spaced) are kept: the
+        distribution of predictions (:meth:`chances`)."""
         histories = np.asarray(histories, dtype=float)
         futures = np.asarray(futures, dtype=float)
         groups = np.asarray(groups).reshape(-1)
@@ -255,6 +299,11 @@ class LinearTiltPredictor:
         coefficients = np.zeros((len(horizons_s), n_features, 2))
         covariance = np.zeros((len(horizons_s), 2, 2))
         chosen, rms = [], []
+        held_rows = np.where(held)[0]
+        recorded = held_rows[
+            np.linspace(0, len(held_rows) - 1, min(record, len(held_rows))).astype(int)
+        ]
+        heldout_means = np.zeros((len(horizons_s), len(recorded), 2))
         scale = float(np.mean(x[:, :-1] ** 2)) or 1.0  # features are scaled: about 1
         for k in range(len(horizons_s)):
             known = np.all(np.isfinite(y[:, k]), axis=1)
@@ -271,6 +320,9 @@ class LinearTiltPredictor:
             assert best is not None
             _, ridge, residual = best
             covariance[k] = np.cov(residual.T)
+            heldout_means[k] = x[recorded] @ _ridge(
+                x[train], y[train, k], ridge * scale * train.sum()
+            )
             coefficients[k] = _ridge(x[known], y[known, k], ridge * scale * known.sum())
             chosen.append(ridge)
             rms.append(np.degrees(np.sqrt(np.diag(covariance[k]))).round(3).tolist())
@@ -293,6 +345,7 @@ class LinearTiltPredictor:
             metadata=info,
             channels=channels,
             scales=scales,
+            heldout_means=heldout_means,
         )
 
     # ---------------------------------------------------------------- files
@@ -314,6 +367,7 @@ class LinearTiltPredictor:
                 metadata=json.dumps(self.metadata),
                 channels=json.dumps(list(self.channels)),
                 scales=self.scales,
+                heldout_means=self.heldout_means.astype(np.float32),
             )
         return path
 
@@ -335,6 +389,9 @@ class LinearTiltPredictor:
                     json.loads(str(data["metadata"])),
                     tuple(json.loads(str(data["channels"]))),
                     np.asarray(data["scales"], dtype=float),
+                    np.asarray(data["heldout_means"], dtype=float)
+                    if "heldout_means" in data
+                    else np.zeros((0, 0, 2)),
                 )
         except (OSError, KeyError, ValueError) as error:
             raise ValueError(f"{path} is not a deck-tilt predictor file: {error}") from error

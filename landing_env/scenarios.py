@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from landing_env.errors import require_choice
+
 #: the task environments: id -> entry point
 TASKS: dict[str, str] = {
     "DeckLanding-v0": "landing_env.envs.deck_landing:DeckLandingEnv",
@@ -105,22 +107,30 @@ SHIP_TIMING: dict[str, Any] = {
 #: ahead (README "Timing with a timed descent")
 BENCH_TIMING: dict[str, Any] = {"guidance": {"descent_profile": "timed"}}
 
-#: what the ``predictive`` timing flies with (v2 of the bench ids): an 8 s history, the window
+#: what the ``predictive`` timing flies with (v3 of the bench ids): an 8 s history, the window
 #: of the scenario's deck-tilt predictor (``tilt_model``, landing_env/assets/predictors), and
-#: the wave-off by that predictor: 0.4-0.7 s into a chosen descent, a chance below 0.8 that
-#: the deck is within 5 deg at the contact aborts it (README "Predicting the deck a descent
-#: ahead")
+#: the wave-off by that predictor: 0.4-0.7 s into a chosen descent, a chance that the deck is
+#: within 5 deg at the contact below the value of waiting on (the optimal-stopping value over
+#: the wait left) aborts it (README "Predicting the deck a descent ahead")
 PREDICTIVE_TIMING: dict[str, Any] = {
     "history_s": 8.0,
     "wave_off_tilt_deg": 5.0,
     "wave_off_predictor": "model",
-    "wave_off_probability": 0.8,
+    "wave_off_rule": "value",
 }
 
 
-def bench_predictive_timing(sea_state: int) -> dict[str, Any]:
-    """The timing settings of ``DeckLandingTiming-BenchSS<n>-v2``."""
-    return {**BENCH_TIMING, **PREDICTIVE_TIMING, "tilt_model": f"bench-ss{sea_state}"}
+def bench_predictive_timing(sea_state: int, version: int = 3) -> dict[str, Any]:
+    """The timing settings of ``DeckLandingTiming-BenchSS<n>-v<version>`` (v2: the model
+    wave-off below a fixed chance of 0.8; v3: below the value of waiting on)."""
+    require_choice("version", version, (2, 3))
+    rule = {"wave_off_rule": "fixed", "wave_off_probability": 0.8} if version == 2 else {}
+    return {
+        **BENCH_TIMING,
+        **PREDICTIVE_TIMING,
+        **rule,
+        "tilt_model": f"bench-ss{sea_state}",
+    }
 
 
 #: the estimate observed over a ship deck: ``tight`` uses the ToF rays that hit the pad (1-3 of
@@ -175,7 +185,17 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
             "DeckLandingTiming-v0",
             f"bench-ss{n}",
             f"timing task over a bench-ss{n} deck, the timed descent, an 8 s history and the "
-            "deck-tilt predictor's wave-off",
+            "deck-tilt predictor's wave-off below a fixed chance",
+            {"timing": bench_predictive_timing(n, version=2)},
+        )
+        for n in (3, 4, 5)
+    },
+    **{
+        f"DeckLandingTiming-BenchSS{n}-v3": _landing(
+            "DeckLandingTiming-v0",
+            f"bench-ss{n}",
+            f"timing task over a bench-ss{n} deck, the timed descent, an 8 s history and the "
+            "deck-tilt predictor's wave-off below the value of waiting on",
             {"timing": bench_predictive_timing(n)},
         )
         for n in (3, 4, 5)

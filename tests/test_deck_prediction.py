@@ -225,6 +225,32 @@ def test_save_and_load_give_the_same_predictions(predictor, tmp_path):
     assert loaded.metadata["heldout_rms_deg"] == predictor.metadata["heldout_rms_deg"]
 
 
+def test_the_held_out_chances_match_how_often_the_deck_is_within_the_limit(predictor):
+    # the distribution of chances recorded at fitting describes the sea: their mean is the
+    # fraction of new episodes' moments whose deck is within the limit a second later
+    limit = 2.0
+    chances = predictor.chances(1.0, limit)
+    assert 100 <= len(chances) <= 1000 and np.all((chances >= 0.0) & (chances <= 1.0))
+    _, future, _ = _examples(range(50, 60))
+    k = int(np.argmin(np.abs(HORIZONS_S - 1.0)))
+    truth = future[:, k][np.all(np.isfinite(future[:, k]), axis=1)]
+    within = np.mean(np.degrees(np.hypot(truth[:, 0], truth[:, 1])) <= limit)
+    assert chances.mean() == pytest.approx(within, abs=0.06)
+    assert predictor.chances(9.0, limit).size == 0
+
+
+def test_a_predictor_file_without_held_out_predictions_still_loads(predictor, tmp_path):
+    path = predictor.save(tmp_path / "p.npz")
+    with np.load(path) as data:
+        kept = {k: data[k] for k in data.files if k != "heldout_means"}
+    np.savez(tmp_path / "old.npz", **kept)
+    old = LinearTiltPredictor.load(tmp_path / "old.npz")
+    assert old.chances(1.0, 2.0).size == 0
+    assert LinearTiltPredictor.load(path).chances(1.0, 2.0) == pytest.approx(
+        predictor.chances(1.0, 2.0), abs=1e-3
+    )
+
+
 def test_a_file_that_is_not_a_predictor_is_refused_naming_it(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not numpy")
@@ -364,28 +390,85 @@ def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted
         env.close()
 
 
-def test_the_required_chance_relaxes_only_near_the_wait_limit():
-    from agents.policies import PredictiveConfig
+def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_the_wait_runs_out():
+    from agents.policies import make_policy
 
-    config = PredictiveConfig(min_probability=0.98, relax_from=0.7, final_probability=0.8)
-    assert config.threshold(0.0) == config.threshold(0.7) == 0.98
-    assert config.threshold(0.85) == pytest.approx(0.89)
-    assert config.threshold(1.0) == pytest.approx(0.8)
-    with pytest.raises(ConfigError, match="final_probability"):
-        PredictiveConfig(min_probability=0.9, final_probability=0.95)
+    env = _env(history_s=8.0)
+    try:
+        policy = make_policy("predictive", env)
+        thresholds = [policy.threshold(f) for f in np.linspace(0.0, 1.0, 31)]
+        assert np.all(np.diff(thresholds) <= 1e-12)
+        chances = policy.predictor.chances(1.3, 5.0)
+        # 15 s of wait at bench sea state 4: nearly the best chance the sea offers
+        assert thresholds[0] > np.quantile(chances, 0.75)
+        # the last second: no better than the average chance, and nothing at the limit
+        assert policy.threshold(0.95) <= chances.mean() + 0.2 and thresholds[-1] == 0.0
+    finally:
+        env.close()
 
 
-def test_the_v2_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs():
+def test_a_predictor_without_held_out_predictions_is_refused_by_the_policy_and_the_value_wave_off(
+    tmp_path,
+):
+    from agents.policies import make_policy
+
+    bare = LinearTiltPredictor.load(tilt_predictor_path("bench-ss4"))
+    bare.heldout_means = np.zeros((0, 0, 2))
+    path = bare.save(tmp_path / "bare.npz")
+    env = _env(history_s=8.0)
+    try:
+        with pytest.raises(ConfigError, match=r"timing\.tilt_model.*refit"):
+            make_policy("predictive", env, model_path=path)
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match=r"timing\.wave_off_rule.*refit"):
+        _env(
+            wave_off_tilt_deg=5.0,
+            wave_off_predictor="model",
+            wave_off_rule="value",
+            tilt_model=str(path),
+            history_s=8.0,
+        )
+
+
+def test_the_value_wave_off_needs_the_model_predictor():
+    with pytest.raises(ConfigError, match="wave_off_rule"):
+        _env(wave_off_tilt_deg=5.0, wave_off_rule="value")
+
+
+def test_the_value_wave_off_demands_less_as_the_wait_runs_out_and_nothing_at_the_limit():
+    env = _env(
+        wave_off_tilt_deg=5.0, wave_off_predictor="model", wave_off_rule="value", history_s=8.0
+    )
+    try:
+        base = env.unwrapped
+        env.reset(seed=3)
+        demanded = []
+        for wait_s in (0.0, 5.0, 10.0, 13.0, 14.0):
+            base._wait_s = wait_s
+            demanded.append(base._wave_off_chance(0.5))
+        assert demanded == sorted(demanded, reverse=True) and demanded[0] > 0.95
+        assert demanded[-1] == 0.0  # after the climb back nothing is left: never abort
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_v2_and_v3_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs(
+    version,
+):
     import gymnasium as gym
 
     import landing_env  # noqa: F401
     from agents.policies import make_policy
 
-    env = gym.make("DeckLandingTiming-BenchSS4-v2")
+    env = gym.make(f"DeckLandingTiming-BenchSS4-v{version}")
     try:
         base = env.unwrapped
         assert base.layout.n_history == 160 and base.wave_off_model is not None
         assert base.timing.tilt_model == "bench-ss4"
+        assert base.timing.wave_off_rule == ("fixed" if version == 2 else "value")
+        assert (base.wave_off_values is None) == (version == 2)
         policy = make_policy("predictive", env)
         observation, _ = env.reset(seed=11)
         assert env.observation_space.contains(observation)
@@ -401,17 +484,20 @@ def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     gains = GuidanceGains(descent_profile="timed")
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
     assert signature["tilt_model"] == "bench-ss4" and signature["wave_off_probability"] == 0.8
+    valued = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8, "value", 1.0)
+    assert valued["wave_off_rule"] == "value" and valued["opportunity_s"] == 1.0
+    assert "wave_off_probability" not in valued
     assert "tilt_model" not in descent_signature(gains, 5.0, "linear", "bench-ss4")
 
 
-def test_random_decisions_on_a_v2_id_under_realistic_sensing_never_leave_the_space():
-    """A soak of the v2 timing task (model wave-off in the loop, realistic sensing): random
+def test_random_decisions_on_a_v3_id_under_realistic_sensing_never_leave_the_space():
+    """A soak of the v3 timing task (model wave-off in the loop, realistic sensing): random
     waits and commits, every observation inside the space, every reward finite."""
     import gymnasium as gym
 
     import landing_env  # noqa: F401
 
-    env = gym.make("DeckLandingTiming-BenchSS5-v2", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-BenchSS5-v3", overrides={"sensors": "realistic"})
     rng = np.random.default_rng(7)
     try:
         for episode in range(3):
@@ -441,7 +527,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
         for f in fields(TimingConfig)
         if f.type in ("float", "int") and f.name != "level_history"
     ]
-    assert {"wave_off_probability", "expected_contact_s", "wait_limit_s"} <= set(numeric)
+    assert {"wave_off_probability", "opportunity_s", "wait_limit_s"} <= set(numeric)
     for key in numeric:
         value = (
             int(bad)

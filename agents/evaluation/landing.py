@@ -499,33 +499,48 @@ def plot_results(
     summaries: list[LandingSummary],
     path: Path,
     title: str,
-    speed_limit: float = 0.5,
+    speed_limit: float | None = None,
+    tilt_limit_deg: float | None = None,
 ) -> None:
-    """Histogram of touchdown speeds per policy, and success rates with their intervals."""
+    """Histograms of the touchdown's relative normal speed and deck tilt per policy (with the
+    success limits, by default the touchdown checks' own), and success rates with their
+    intervals."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax_hist, ax_bar) = plt.subplots(1, 2, figsize=(13, 4.5))
-    speeds_all = [
-        r.relative_normal_speed
-        for rs in results.values()
-        for r in rs
-        if math.isfinite(r.relative_normal_speed)
-    ]
-    high = max([speed_limit * 1.3, *speeds_all])
-    bins = np.linspace(0.0, high, 31)
-    for name, rs in results.items():
-        speeds = [r.relative_normal_speed for r in rs if math.isfinite(r.relative_normal_speed)]
-        ax_hist.hist(speeds, bins=bins, histtype="step", linewidth=1.8, label=name)
-    ax_hist.axvline(speed_limit, color="k", linestyle="--", linewidth=1, label="success limit")
-    ax_hist.set(
-        xlabel="relative normal speed at touchdown (m/s)",
-        ylabel="episodes",
-        title="Touchdown speeds",
-    )
-    ax_hist.legend()
+    from landing_env.config import TouchdownConfig
+
+    limits = TouchdownConfig()
+    speed_limit = limits.max_normal_speed if speed_limit is None else speed_limit
+    tilt_limit_deg = limits.max_deck_tilt_deg if tilt_limit_deg is None else tilt_limit_deg
+    fig, (ax_speed, ax_tilt, ax_bar) = plt.subplots(1, 3, figsize=(16, 4.8))
+    for ax, field_name, limit, label, heading in (
+        (
+            ax_speed,
+            "relative_normal_speed",
+            speed_limit,
+            "relative normal speed at touchdown (m/s)",
+            "Touchdown speeds",
+        ),
+        (ax_tilt, "deck_tilt_deg", tilt_limit_deg, "deck tilt at touchdown (deg)", "Deck tilt"),
+    ):
+        values_all = [
+            getattr(r, field_name)
+            for rs in results.values()
+            for r in rs
+            if math.isfinite(getattr(r, field_name))
+        ]
+        bins = np.linspace(0.0, max([limit * 1.3, *values_all]), 31)
+        for name, rs in results.items():
+            values = [getattr(r, field_name) for r in rs if math.isfinite(getattr(r, field_name))]
+            ax.hist(values, bins=bins, histtype="step", linewidth=1.8, label=name)
+        ax.axvline(limit, color="k", linestyle="--", linewidth=1, label="success limit")
+        ax.set(xlabel=label, ylabel="episodes", title=heading)
+        ax.legend(fontsize="small")
     names = [s.policy for s in summaries]
     rates = np.array([100 * s.success_rate for s in summaries])
     errors = np.array(
@@ -538,7 +553,8 @@ def plot_results(
     for i, rate in enumerate(rates):
         ax_bar.text(i, 2, f"{rate:.1f}%", ha="center", color="white", fontweight="bold")
     ax_bar.set(ylim=(0, 105), ylabel="success rate (%)", title="Success with 95% Wilson interval")
-    fig.suptitle(title)
+    ax_bar.tick_params(axis="x", labelrotation=20 if len(names) > 3 else 0)
+    fig.suptitle(textwrap.fill(title, 170), fontsize="medium")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

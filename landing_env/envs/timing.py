@@ -41,6 +41,7 @@ from estimation.frames import (
     levelled_deck_pose,
     tilt_deg,
 )
+from estimation.optimal_stopping import StoppingValues
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
@@ -67,6 +68,11 @@ __all__ = [
 
 #: the wave-off's predictors of the deck tilt at the contact (``TimingConfig.wave_off_predictor``)
 WAVE_OFF_PREDICTORS = ("linear", "quadratic", "model")
+#: what the model wave-off compares its chance with (``TimingConfig.wave_off_rule``)
+WAVE_OFF_RULES = ("fixed", "value")
+#: a wave-off climbs back to the hold for at most this long, seconds (it nearly always takes
+#: all of it: the last 5 cm to the hold are slow)
+WAVE_OFF_CLIMB_S = 1.5
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -197,6 +203,18 @@ class TimingConfig:
     wave_off_predictor: str = "linear"
     wave_off_window_s: float = 1.0
     wave_off_probability: float = 0.8
+    #: what the ``model`` wave-off compares the chance with: ``fixed``
+    #: (``wave_off_probability``) or ``value``: the value of waiting on, i.e. the
+    #: optimal-stopping value (:mod:`estimation.optimal_stopping`) of the chance a commit
+    #: gets, over the wait that will be left once the climb back is done, with one
+    #: independent opportunity per ``opportunity_s``: it aborts a descent only when a retry
+    #: is expected to do better, so less and less often as the wait limit nears
+    wave_off_rule: str = "fixed"
+    #: the deck's chance of a good contact decorrelates over about this long: the wait left
+    #: holds one independent opportunity per ``opportunity_s`` (read by the ``value``
+    #: wave-off and the ``predictive`` policy; 1 s was chosen offline on the predictors'
+    #: fitting episodes at bench sea states 4 and 5, README "Predicting the deck")
+    opportunity_s: float = 1.0
     #: the deck-tilt predictor of this scenario: a shipped one by name (``bench-ss4``:
     #: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
     #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
@@ -231,6 +249,14 @@ class TimingConfig:
         require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
         require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
         require_range("wave_off_probability", self.wave_off_probability, 0.0, 1.0)
+        require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
+        require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
+        if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
+            raise ConfigError(
+                "wave_off_rule",
+                "'value' weighs the model wave-off's chance: it needs wave_off_predictor = "
+                f"model (not {self.wave_off_predictor!r})",
+            )
         if self.wave_off_predictor == "quadratic":
             # the parabola is fitted to the history: the window must fit in it
             require_range(
@@ -286,6 +312,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
         self.wave_off_model = self._load_wave_off_model()
+        self.wave_off_values = self._wave_off_values()
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -297,6 +324,23 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.frames_of_last_step: list[np.ndarray] = []
         self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
+
+    def _wave_off_values(self) -> StoppingValues | None:
+        """The value of waiting on for the ``value`` wave-off: from the chances the
+        predictor gave held-out examples at the contact."""
+        t = self.timing
+        if self.wave_off_model is None or t.wave_off_rule != "value":
+            return None
+        chances = self.wave_off_model.chances(t.expected_contact_s, t.wave_off_tilt_deg)
+        if chances.size == 0:
+            self.world.close()
+            raise ConfigError(
+                "timing.wave_off_rule",
+                f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
+                f"examples {t.expected_contact_s:g} s ahead, which it does not hold: refit it "
+                "with `python -m agents.deck_predictor fit`",
+            )
+        return StoppingValues.from_samples(chances)
 
     def _load_wave_off_model(self) -> LinearTiltPredictor | None:
         """The wave-off's fitted predictor (``wave_off_predictor = model``), checked against
@@ -493,7 +537,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 self._committed = False
                 self._wave_offs += 1
                 back = self.world.time
-                while self._outcome is Outcome.IN_FLIGHT and self.world.time - back < 1.5:
+                while (
+                    self._outcome is Outcome.IN_FLIGHT and self.world.time - back < WAVE_OFF_CLIMB_S
+                ):
                     self._advance(self._hold_setpoint())
                     height = self.guidance.range_m(self._base_observation)
                     if abs(height - self.timing.hold_height_m) < 0.05:
@@ -504,6 +550,16 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         end = self._touchdown.time_s if self._touchdown is not None else self.world.time
         self._descent_s = end - start
         return 0.0
+
+    def _wave_off_chance(self, elapsed_s: float) -> float:
+        """The chance of a deck within the limit below which the model wave-off aborts,
+        ``elapsed_s`` into the descent: ``wave_off_probability``, or with the ``value`` rule
+        the value of waiting on after the climb back."""
+        t = self.timing
+        if self.wave_off_values is None:
+            return t.wave_off_probability
+        remaining_s = t.wait_limit_s - self._wait_s - elapsed_s - WAVE_OFF_CLIMB_S
+        return self.wave_off_values.threshold(remaining_s, t.opportunity_s)
 
     def _wave_off_due(self, elapsed_s: float) -> bool:
         """The deck tilt predicted at the contact is beyond ``wave_off_tilt_deg`` while a
@@ -523,7 +579,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             prediction = self.wave_off_model.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
             if not prediction.valid:
                 return False  # nothing to predict with: the descent goes on
-            return prediction.probability_within(t.wave_off_tilt_deg) < t.wave_off_probability
+            return prediction.probability_within(t.wave_off_tilt_deg) < self._wave_off_chance(
+                elapsed_s
+            )
         roll = row[_ROLL] + row[_ROLL_RATE] * ahead
         pitch = row[_PITCH] + row[_PITCH_RATE] * ahead
         if t.wave_off_predictor == "quadratic":

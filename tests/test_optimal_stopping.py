@@ -1,0 +1,85 @@
+"""The optimal-stopping value of waiting for a better chance (estimation.optimal_stopping)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from estimation.optimal_stopping import StoppingValues
+
+#: a uniform distribution on [0, 1], as evenly spaced quantiles
+UNIFORM = (np.arange(20000) + 0.5) / 20000
+
+
+def test_with_no_opportunity_left_the_value_is_the_mean_chance_of_a_forced_commit():
+    values = StoppingValues.from_samples(np.array([0.2, 0.4, 0.9]))
+    assert values.value(0) == pytest.approx(0.5)
+
+
+def test_uniform_chances_give_moser_s_recursion():
+    # the house-selling problem with uniform offers: V_m = (1 + V_{m-1}^2) / 2 (Moser 1956)
+    values = StoppingValues.from_samples(UNIFORM)
+    expected = 0.5
+    for m in range(1, 30):
+        expected = (1.0 + expected**2) / 2.0
+        assert values.value(m) == pytest.approx(expected, abs=1e-4)
+
+
+def test_the_value_rises_with_the_wait_left_towards_the_best_chance():
+    rng = np.random.default_rng(3)
+    samples = rng.beta(2.0, 3.0, 5000)
+    values = StoppingValues.from_samples(samples)
+    assert np.all(np.diff(values.values) >= 0.0)
+    assert values.values[-1] <= samples.max() + 1e-12
+    assert values.threshold(30.0, 1.0) > values.threshold(3.0, 1.0) > values.threshold(0.5, 1.0)
+    # one opportunity per 2 s: 10 s left are worth what 5 opportunities are
+    assert values.threshold(10.0, 2.0) == pytest.approx(values.value(5))
+
+
+def test_nothing_left_or_nothing_known_takes_any_chance():
+    values = StoppingValues.from_samples(UNIFORM)
+    assert values.threshold(0.0, 1.0) == 0.0 and values.threshold(-3.0, 1.0) == 0.0
+    assert values.threshold(math.nan, 1.0) == 0.0 and values.value(math.inf) == 0.0
+    assert StoppingValues.from_samples(np.array([])).threshold(10.0, 1.0) == 0.0
+    nan_only = StoppingValues.from_samples(np.array([math.nan, math.inf]))
+    assert nan_only.threshold(10.0, 1.0) == 0.0
+
+
+def _play(rule, draws: np.ndarray) -> float:
+    """The mean chance taken by ``rule(x, left)`` over rows of independent draws (the last
+    draw of a row is taken if none was before it)."""
+    taken = []
+    for row in draws:
+        for index, x in enumerate(row):
+            left = len(row) - 1 - index
+            if left == 0 or rule(x, left):
+                taken.append(x)
+                break
+    return float(np.mean(taken))
+
+
+def test_the_value_rule_takes_better_chances_than_any_fixed_threshold():
+    rng = np.random.default_rng(11)
+    samples = rng.beta(2.0, 3.0, 20000)
+    values = StoppingValues.from_samples(samples)
+    draws = rng.beta(2.0, 3.0, (4000, 8))
+    best = _play(lambda x, left: x >= values.value(left), draws)
+    for fixed in (0.3, 0.5, 0.6, 0.7, 0.8):
+        assert best > _play(lambda x, left, f=fixed: x >= f, draws)
+    # and it earns what the value promised
+    assert best == pytest.approx(values.value(7), abs=0.01)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=50),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(allow_nan=True, allow_infinity=True),
+)
+def test_the_values_never_raise_on_any_input(samples, remaining, opportunity):
+    values = StoppingValues.from_samples(np.array(samples, dtype=float))
+    assert isinstance(values.threshold(remaining, opportunity), float)
