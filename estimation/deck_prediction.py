@@ -72,11 +72,8 @@ class TiltPrediction:
         """P(tilt <= ``limit_deg``) under the Gaussian prediction (0 when invalid)."""
         if not self.valid:
             return 0.0
-        return float(
-            _probabilities_within(np.array([[self.roll, self.pitch]]), self.covariance, limit_deg)[
-                0
-            ]
-        )
+        mean = np.array([[self.roll, self.pitch]])
+        return float(_probabilities_within(mean, self.covariance, limit_deg)[0])
 
     def best_probability_within(self, limit_deg: float) -> float:
         """The chance a level deck predicted with this covariance would have: the most any
@@ -310,19 +307,17 @@ class LinearTiltPredictor:
             train, test = known & ~held, known & held
             if train.sum() < n_features or test.sum() < 5:
                 raise ValueError(f"too few examples with a known future at {horizons_s[k]} s")
-            best: tuple[float, float, np.ndarray] | None = None
+            best: tuple[float, float, np.ndarray, np.ndarray] | None = None
             for ridge in ridges:
                 a = _ridge(x[train], y[train, k], ridge * scale * train.sum())
                 residual = y[test, k] - x[test] @ a
                 error = float(np.mean(residual**2))
                 if best is None or error < best[0]:
-                    best = (error, ridge, residual)
+                    best = (error, ridge, residual, a)
             assert best is not None
-            _, ridge, residual = best
+            _, ridge, residual, fitted = best
             covariance[k] = np.cov(residual.T)
-            heldout_means[k] = x[recorded] @ _ridge(
-                x[train], y[train, k], ridge * scale * train.sum()
-            )
+            heldout_means[k] = x[recorded] @ fitted
             coefficients[k] = _ridge(x[known], y[known, k], ridge * scale * known.sum())
             chosen.append(ridge)
             rms.append(np.degrees(np.sqrt(np.diag(covariance[k]))).round(3).tolist())

@@ -369,6 +369,24 @@ def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window()
         env.close()
 
 
+def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
+    from agents.policies import make_policy
+
+    env = _env(history_s=8.0)
+    try:
+        policy = make_policy("predictive", env)
+        space = env.observation_space
+        space.seed(5)
+        decisions = {policy.act(space.sample()) for _ in range(50)}
+        assert decisions <= {0, 1}
+        # the space's corners: all lows, all highs, all zeros
+        for observation in (space.low, space.high, np.zeros_like(space.low)):
+            assert policy.act(observation.astype(space.dtype)) in (0, 1)
+            assert 0.0 <= policy.last_probability <= 1.0
+    finally:
+        env.close()
+
+
 def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
     from agents.policies import make_policy
     from landing_env.envs.history import HISTORY_FEATURES
@@ -536,3 +554,28 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
         )
         with pytest.raises(ConfigError, match=key):
             build_dataclass(TimingConfig, {key: value}, "timing")
+
+
+def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_overrides_win():
+    from agents.evaluation.landing import make_env_and_policy
+
+    env, policy = make_env_and_policy("predictive", "bench-ss4", "tight")
+    try:
+        base = env.unwrapped
+        assert base.layout.n_history == 160 and base.timing.wave_off_rule == "value"
+        assert policy.predictor.metadata["scenarios"] == ["bench-ss4"]
+    finally:
+        env.close()
+    env, _ = make_env_and_policy(
+        "predictive", "bench-ss4", "tight", extra_overrides={"timing.wave_off_rule": "fixed"}
+    )
+    try:
+        assert env.unwrapped.timing.wave_off_rule == "fixed"
+    finally:
+        env.close()
+    # the other policies fly the scenario as it is
+    env, _ = make_env_and_policy("quiescent", "bench-ss4", "tight")
+    try:
+        assert env.unwrapped.timing.history_s == 2.0 and env.unwrapped.wave_off_model is None
+    finally:
+        env.close()

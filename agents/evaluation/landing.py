@@ -70,9 +70,11 @@ from landing_env.stewart.motion import SeaStateConfig
 #: ``-v0`` timing ids, which the models trained before the timed descent were trained on)
 RANGE_DESCENT: dict[str, Any] = {"timing.guidance.descent_profile": "range"}
 
-#: the dotted overrides the ``predictive`` policy flies with (landing_env.scenarios'
-#: ``PREDICTIVE_TIMING``: an 8 s history and the deck-tilt predictor's wave-off)
-PREDICTIVE_OVERRIDES: dict[str, Any] = {f"timing.{k}": v for k, v in PREDICTIVE_TIMING.items()}
+#: the timing settings a policy flies with on top of the scenario's, unless ``--set`` says
+#: otherwise: the ``predictive`` policy reads an 8 s history and flies with the wave-off by
+#: the scenario's deck-tilt predictor (landing_env.scenarios' ``PREDICTIVE_TIMING``, the
+#: settings of the v3 bench ids)
+POLICY_TIMING: dict[str, dict[str, Any]] = {"predictive": PREDICTIVE_TIMING}
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
@@ -216,7 +218,10 @@ def make_env_and_policy(
 
     require_choice("policy", policy_name, tuple(POLICY_ENVS))
     env_id = POLICY_ENVS[policy_name]
-    world, timing = split_timing_overrides(extra_overrides or {}, SCENARIOS[scenario].timing)
+    world, timing = split_timing_overrides(
+        extra_overrides or {},
+        {**SCENARIOS[scenario].timing, **POLICY_TIMING.get(policy_name, {})},
+    )
     overrides = {**scenario_overrides(scenario, env_id, estimator, camera_mode), **world}
     kwargs = {"timing": timing} if timing and env_id == "DeckLandingTiming-v0" else {}
     env = gym.make(

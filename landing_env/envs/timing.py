@@ -198,8 +198,8 @@ class TimingConfig:
     #: or ``model``: the scenario's fitted linear (Wiener) predictor ``tilt_model``
     #: (:class:`~estimation.deck_prediction.LinearTiltPredictor` on the history, which must be
     #: at least its window long), which aborts when the chance that the tilt at the contact is
-    #: within ``wave_off_tilt_deg`` is below ``wave_off_probability`` (its error measured on
-    #: held-out episodes: the chance is honest where a straight line's is not)
+    #: within ``wave_off_tilt_deg`` is below what ``wave_off_rule`` asks (its error measured
+    #: on held-out episodes: the chance is honest where a straight line's is not)
     wave_off_predictor: str = "linear"
     wave_off_window_s: float = 1.0
     wave_off_probability: float = 0.8
@@ -213,7 +213,8 @@ class TimingConfig:
     #: the deck's chance of a good contact decorrelates over about this long: the wait left
     #: holds one independent opportunity per ``opportunity_s`` (read by the ``value``
     #: wave-off and the ``predictive`` policy; 1 s was chosen offline on the predictors'
-    #: fitting episodes at bench sea states 4 and 5, README "Predicting the deck")
+    #: fitting episodes at bench sea states 4 and 5 and checked on the tuning seeds, README
+    #: "Predicting the deck a descent ahead")
     opportunity_s: float = 1.0
     #: the deck-tilt predictor of this scenario: a shipped one by name (``bench-ss4``:
     #: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
