@@ -253,7 +253,6 @@ class PredictivePolicy:
         config: PredictiveConfig | None = None,
     ) -> None:
         from estimation.deck_prediction import LinearTiltPredictor
-        from estimation.optimal_stopping import StoppingValues
 
         if not isinstance(predictor, LinearTiltPredictor):
             predictor = LinearTiltPredictor.load(predictor)
@@ -277,15 +276,15 @@ class PredictivePolicy:
         require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
         require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
         self.config = config or PredictiveConfig()
-        chances = predictor.chances(self.config.contact_s, max_tilt_deg)
-        if chances.size == 0:
+        values = predictor.stopping_values(self.config.contact_s, max_tilt_deg)
+        if values is None:
             raise ConfigError(
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
                 f"(or none {self.config.contact_s:g} s ahead): refit it with "
                 "`python -m agents.deck_predictor fit`",
             )
-        self.values = StoppingValues.from_samples(chances)
+        self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
         self.layout = layout
         self.dt = dt

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from estimation.frames import tilt_deg
+from estimation.optimal_stopping import StoppingValues
 
 #: standard-normal points (a scrambled Sobol set, fixed) for the probability of a 2-D Gaussian
 #: tilt inside a circle: deterministic, and 1/N-accurate where Monte Carlo is 1/sqrt(N)
@@ -74,14 +75,6 @@ class TiltPrediction:
             return 0.0
         mean = np.array([[self.roll, self.pitch]])
         return float(_probabilities_within(mean, self.covariance, limit_deg)[0])
-
-    def best_probability_within(self, limit_deg: float) -> float:
-        """The chance a level deck predicted with this covariance would have: the most any
-        prediction at this horizon can give (0 when invalid)."""
-        if not self.valid:
-            return 0.0
-        level = TiltPrediction(True, "", self.horizon_s, 0.0, 0.0, self.covariance)
-        return level.probability_within(limit_deg)
 
 
 def _probabilities_within(
@@ -220,6 +213,12 @@ class LinearTiltPredictor:
         means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
         covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
         return _probabilities_within(means, covariance, limit_deg)
+
+    def stopping_values(self, horizon_s: float, limit_deg: float) -> StoppingValues | None:
+        """The value of waiting for a better chance (:mod:`estimation.optimal_stopping`) when
+        the chances are distributed as :meth:`chances`; None when none were recorded."""
+        chances = self.chances(horizon_s, limit_deg)
+        return StoppingValues.from_samples(chances) if chances.size else None
 
     # ---------------------------------------------------------------- fitting
     @classmethod

@@ -237,6 +237,9 @@ def test_the_held_out_chances_match_how_often_the_deck_is_within_the_limit(predi
     within = np.mean(np.degrees(np.hypot(truth[:, 0], truth[:, 1])) <= limit)
     assert chances.mean() == pytest.approx(within, abs=0.06)
     assert predictor.chances(9.0, limit).size == 0
+    # the value of waiting with nothing left is the forced commit's: the mean chance
+    assert predictor.stopping_values(1.0, limit).value(0) == pytest.approx(chances.mean())
+    assert predictor.stopping_values(9.0, limit) is None
 
 
 def test_a_predictor_file_without_held_out_predictions_still_loads(predictor, tmp_path):

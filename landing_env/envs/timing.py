@@ -332,8 +332,8 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         t = self.timing
         if self.wave_off_model is None or t.wave_off_rule != "value":
             return None
-        chances = self.wave_off_model.chances(t.expected_contact_s, t.wave_off_tilt_deg)
-        if chances.size == 0:
+        values = self.wave_off_model.stopping_values(t.expected_contact_s, t.wave_off_tilt_deg)
+        if values is None:
             self.world.close()
             raise ConfigError(
                 "timing.wave_off_rule",
@@ -341,7 +341,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 f"examples {t.expected_contact_s:g} s ahead, which it does not hold: refit it "
                 "with `python -m agents.deck_predictor fit`",
             )
-        return StoppingValues.from_samples(chances)
+        return values
 
     def _load_wave_off_model(self) -> LinearTiltPredictor | None:
         """The wave-off's fitted predictor (``wave_off_predictor = model``), checked against
