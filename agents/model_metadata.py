@@ -108,11 +108,13 @@ def descent_signature(
     wave_off_probability: float = 0.8,
     wave_off_rule: str = "fixed",
     opportunity_s: float = 1.0,
+    contact_times_s: tuple[float, ...] = (),
 ) -> dict[str, Any]:
     """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
     and whether a bad commit is waved off, so another descent is another task even where the
-    observation's layout is the same."""
+    observation's layout is the same.  ``contact_times_s``: the contact times a commit
+    chooses among (``TimingConfig.contact_window_s``; empty or one: the fixed descent)."""
     if gains.descent_profile == "range":
         return {"profile": "range"}
     signature: dict[str, Any] = {
@@ -131,6 +133,10 @@ def descent_signature(
                 signature["opportunity_s"] = float(opportunity_s)
             else:
                 signature["wave_off_probability"] = float(wave_off_probability)
+    if len(contact_times_s) > 1:
+        # the descent's duration is chosen at each commit by this predictor
+        signature["contact_times_s"] = [float(c) for c in contact_times_s]
+        signature["tilt_model"] = tilt_model
     return signature
 
 
@@ -159,6 +165,7 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
             timing.wave_off_probability,
             timing.wave_off_rule,
             timing.opportunity_s,
+            timing.contact_times_s,
         ),
         "size": layout.size,
         "n_history": n_history,

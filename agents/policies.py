@@ -215,25 +215,16 @@ class QuiescentPolicy:
         return self.act(observation)
 
 
-@dataclass
-class PredictiveConfig:
-    """When the predictive policy commits (see :class:`PredictivePolicy`)."""
-
-    #: the contact's time after the commit the deck is predicted at, seconds (the timed
-    #: descent's: 1.29 +- 0.06 s measured, README "Timing with a timed descent")
-    contact_s: float = 1.3
-
-    def __post_init__(self) -> None:
-        require_range("contact_s", self.contact_s, 0.0, 10.0)
-
-
 class PredictivePolicy:
     """Commit when the chance of a good contact is worth more than waiting for a better one.
 
-    The chance: that the deck's tilt at the contact, ``contact_s`` ahead, is within the
-    limit, by a :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener
-    predictor fitted to the estimated deck motion, :mod:`agents.deck_predictor`) on the
-    observation's history, with the Gaussian error measured on held-out episodes.  What
+    The chance: that the deck's tilt at the contact is within the limit, by a
+    :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
+    the estimated deck motion, :mod:`agents.deck_predictor`) on the observation's history,
+    with the Gaussian error measured on held-out episodes; the contact comes at one of
+    ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
+    1.3 s, or a window the environment's descent chooses the best of, the same way), and the
+    chance is that of the best.  What
     waiting is worth: the optimal-stopping value
     (:class:`~estimation.optimal_stopping.StoppingValues`) of the chances the predictor gave
     held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
@@ -250,7 +241,7 @@ class PredictivePolicy:
         max_tilt_deg: float,
         wait_limit_s: float,
         opportunity_s: float,
-        config: PredictiveConfig | None = None,
+        contact_times_s: tuple[float, ...] = (1.3,),
     ) -> None:
         from estimation.deck_prediction import LinearTiltPredictor
 
@@ -275,14 +266,16 @@ class PredictivePolicy:
             )
         require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
         require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
-        self.config = config or PredictiveConfig()
-        values = predictor.stopping_values(self.config.contact_s, max_tilt_deg)
+        self.contact_times_s = tuple(float(c) for c in contact_times_s)
+        if not self.contact_times_s:
+            raise ConfigError("timing.contact_window_s", "gives no contact time")
+        values = predictor.stopping_values(self.contact_times_s, max_tilt_deg)
         if values is None:
             raise ConfigError(
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
-                f"(or none {self.config.contact_s:g} s ahead): refit it with "
-                "`python -m agents.deck_predictor fit`",
+                f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
+                "refit it with `python -m agents.deck_predictor fit`",
             )
         self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
@@ -310,8 +303,8 @@ class PredictivePolicy:
         return self.values.threshold(remaining_s, self.opportunity_s)
 
     def _chance(self, rows: np.ndarray) -> float:
-        self.last = self.predictor.predict(
-            rows[:, self.columns], rows[:, _VALID] > 0.5, self.config.contact_s
+        self.last = self.predictor.best_within(
+            rows[:, self.columns], rows[:, _VALID] > 0.5, self.contact_times_s, self.max_tilt_deg
         )
         self.last_probability = self.last.probability_within(self.max_tilt_deg)
         return self.last_probability
@@ -676,6 +669,7 @@ def make_policy(
             base.config.touchdown.max_deck_tilt_deg,
             base.timing.wait_limit_s,
             base.timing.opportunity_s,
+            base.timing.contact_times_s,
         )
     if name == "oracle":
         from agents.oracle import OracleTimingPolicy

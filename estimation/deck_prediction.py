@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -179,18 +180,16 @@ class LinearTiltPredictor:
         """Roll and pitch ``horizon_s`` ahead from a history of the ``channels`` (coefficients
         and covariance interpolated linearly between the fitted horizons); never raises on
         data."""
-        h = self.horizons_s
-        if not (math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9):
-            return _invalid(f"horizon {horizon_s} s outside the fitted {h[0]}-{h[-1]} s")
         phi = self.features(values, valid)
         if isinstance(phi, str):
             return _invalid(phi, horizon_s)
-        k = int(np.clip(np.searchsorted(h, horizon_s) - 1, 0, max(len(h) - 2, 0)))
-        if len(h) == 1:
-            w = 0.0
-        else:
-            w = float(np.clip((horizon_s - h[k]) / (h[k + 1] - h[k]), 0.0, 1.0))
-        j = min(k + 1, len(h) - 1)
+        return self._from_features(phi, horizon_s)
+
+    def _from_features(self, phi: np.ndarray, horizon_s: float) -> TiltPrediction:
+        h = self.horizons_s
+        if not (math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9):
+            return _invalid(f"horizon {horizon_s} s outside the fitted {h[0]}-{h[-1]} s")
+        k, j, w = self._bracket(horizon_s)
         coefficients = (1.0 - w) * self.coefficients[k] + w * self.coefficients[j]
         covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
         mean = phi @ coefficients
@@ -198,27 +197,68 @@ class LinearTiltPredictor:
             return _invalid("non-finite prediction", horizon_s)
         return TiltPrediction(True, "", horizon_s, float(mean[0]), float(mean[1]), covariance)
 
-    def chances(self, horizon_s: float, limit_deg: float) -> np.ndarray:
-        """The chance that the tilt ``horizon_s`` ahead is within ``limit_deg``, for each of
-        the held-out examples recorded at fitting: how such chances are distributed over the
-        sea (empty when none were recorded or the horizon is outside the fitted ones)."""
+    def best_within(
+        self,
+        values: np.ndarray,
+        valid: np.ndarray,
+        horizons_s: Sequence[float],
+        limit_deg: float,
+    ) -> TiltPrediction:
+        """Of the predictions at ``horizons_s`` (the contact times a descent can be given),
+        the one with the best chance that the tilt is within ``limit_deg`` (the earliest of
+        equal ones); invalid, with the reason, when none can be made.  Never raises on data."""
+        phi = self.features(values, valid)
+        if isinstance(phi, str):
+            return _invalid(phi)
+        best, best_chance = _invalid("no contact time given"), -1.0
+        for horizon_s in horizons_s:
+            prediction = self._from_features(phi, float(horizon_s))
+            if not prediction.valid:
+                best = best if best.valid else prediction
+                continue
+            chance = prediction.probability_within(limit_deg)
+            if chance > best_chance:
+                best, best_chance = prediction, chance
+        return best
+
+    def chances(self, horizons_s: float | Sequence[float], limit_deg: float) -> np.ndarray:
+        """The chance that the tilt ``horizons_s`` ahead is within ``limit_deg`` (with several
+        horizons, the best of them: a descent whose contact time is chosen among them), for
+        each of the held-out examples recorded at fitting: how such chances are distributed
+        over the sea (empty when none were recorded or a horizon is outside the fitted ones)."""
+        horizons = np.atleast_1d(np.asarray(horizons_s, dtype=float))
         h = self.horizons_s
-        if self.heldout_means.size == 0 or not (
-            math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9
+        if (
+            self.heldout_means.size == 0
+            or horizons.size == 0
+            or not np.all(np.isfinite(horizons))
+            or horizons.min() < h[0] - 1e-9
+            or horizons.max() > h[-1] + 1e-9
         ):
             return np.zeros(0)
+        best = np.zeros(self.heldout_means.shape[1])
+        for horizon_s in horizons:
+            k, j, w = self._bracket(float(horizon_s))
+            means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
+            covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
+            best = np.maximum(best, _probabilities_within(means, covariance, limit_deg))
+        return best
+
+    def stopping_values(
+        self, horizons_s: float | Sequence[float], limit_deg: float
+    ) -> StoppingValues | None:
+        """The value of waiting for a better chance (:mod:`estimation.optimal_stopping`) when
+        the chances are distributed as :meth:`chances`; None when none were recorded."""
+        chances = self.chances(horizons_s, limit_deg)
+        return StoppingValues.from_samples(chances) if chances.size else None
+
+    def _bracket(self, horizon_s: float) -> tuple[int, int, float]:
+        """The fitted horizons either side of ``horizon_s`` and the weight of the later one."""
+        h = self.horizons_s
         k = int(np.clip(np.searchsorted(h, horizon_s) - 1, 0, max(len(h) - 2, 0)))
         j = min(k + 1, len(h) - 1)
         w = 0.0 if j == k else float(np.clip((horizon_s - h[k]) / (h[j] - h[k]), 0.0, 1.0))
-        means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
-        covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
-        return _probabilities_within(means, covariance, limit_deg)
-
-    def stopping_values(self, horizon_s: float, limit_deg: float) -> StoppingValues | None:
-        """The value of waiting for a better chance (:mod:`estimation.optimal_stopping`) when
-        the chances are distributed as :meth:`chances`; None when none were recorded."""
-        chances = self.chances(horizon_s, limit_deg)
-        return StoppingValues.from_samples(chances) if chances.size else None
+        return k, j, w
 
     # ---------------------------------------------------------------- fitting
     @classmethod

@@ -242,6 +242,39 @@ def test_the_held_out_chances_match_how_often_the_deck_is_within_the_limit(predi
     assert predictor.stopping_values(9.0, limit) is None
 
 
+def test_the_best_of_several_contact_times_is_the_one_with_the_best_chance(predictor):
+    _, estimate = _deck_series(41, 20.0, math.radians(0.3))
+    n = round(WINDOW_S / DT)
+    horizons = (0.8, 1.0, 1.2, 1.4)
+    chosen = set()
+    for end in range(n, len(estimate), 37):
+        window, flags = estimate[end - n : end], np.ones(n)
+        singles = [predictor.predict(window, flags, h).probability_within(2.0) for h in horizons]
+        best = predictor.best_within(window, flags, horizons, 2.0)
+        assert best.valid and best.probability_within(2.0) == pytest.approx(max(singles))
+        assert best.horizon_s == horizons[int(np.argmax(singles))]
+        chosen.add(best.horizon_s)
+    # the best moment moves with the deck: no one contact time wins everywhere
+    assert len(chosen) >= 2
+    # beyond the fit a contact time is skipped; with none left, or no history, it says why
+    assert predictor.best_within(window, flags, (1.0, 99.0), 2.0).horizon_s == 1.0
+    assert "outside" in predictor.best_within(window, flags, (99.0,), 2.0).reason
+    assert not predictor.best_within(window, flags, (), 2.0).valid
+    assert "valid" in predictor.best_within(window, np.zeros(n), horizons, 2.0).reason
+
+
+def test_a_window_s_held_out_chances_are_the_best_of_its_contact_times_and_worth_more(predictor):
+    window = (1.0, 1.2, 1.4)
+    best = predictor.chances(window, 2.0)
+    each = np.stack([predictor.chances(h, 2.0) for h in window])
+    np.testing.assert_allclose(best, each.max(axis=0))
+    one = predictor.stopping_values(1.2, 2.0)
+    several = predictor.stopping_values(window, 2.0)
+    assert one is not None and several is not None
+    assert several.value(0) > one.value(0) and several.value(10) >= one.value(10)
+    assert predictor.chances((1.0, 99.0), 2.0).size == 0
+
+
 def test_a_predictor_file_without_held_out_predictions_still_loads(predictor, tmp_path):
     path = predictor.save(tmp_path / "p.npz")
     with np.load(path) as data:
@@ -360,6 +393,69 @@ def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
         env.close()
 
 
+def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_contact():
+    from landing_env.envs.guidance import GuidanceGains
+    from landing_env.envs.timing import TimingConfig
+
+    timed = GuidanceGains(descent_profile="timed")
+    config = TimingConfig(guidance=timed, contact_window_s=[1.2, 1.5])
+    assert config.contact_times_s == (1.2, 1.3, 1.4, 1.5)
+    assert config.descent_time_for(1.5) == pytest.approx(1.4)
+    assert TimingConfig(guidance=timed).contact_times_s == (1.3,)
+
+
+@pytest.mark.parametrize(
+    ("window", "extra", "key"),
+    [
+        ([1.5, 1.2], {}, "contact_window_s"),
+        ([0.6, 1.2], {}, "contact_window_s"),
+        ([1.2], {}, "contact_window_s"),
+        ([1.2, math.nan], {}, "contact_window_s"),
+        ([1.2, 1.5], {"guidance": {"descent_profile": "range"}}, "contact_window_s"),
+        ([1.2, 1.5], {"contact_step_s": 0.0}, "contact_step_s"),
+    ],
+)
+def test_a_bad_contact_window_is_refused_naming_the_key(window, extra, key):
+    from landing_env.config_loading import build_dataclass
+    from landing_env.envs.timing import TimingConfig
+
+    data = {"guidance": {"descent_profile": "timed"}, "contact_window_s": window}
+    data.update(extra)
+    with pytest.raises(ConfigError, match=key):
+        build_dataclass(TimingConfig, data, "timing")
+
+
+def test_a_contact_window_needs_a_predictor():
+    with pytest.raises(ConfigError, match=r"timing\.tilt_model.*contact_window_s"):
+        _env(contact_window_s=[1.2, 1.5], tilt_model="", history_s=8.0)
+    with pytest.raises(ConfigError, match=r"timing\.history_s"):
+        _env(contact_window_s=[1.2, 1.5])
+
+
+def test_each_commit_times_its_descent_to_meet_the_deck_when_the_predictor_prefers():
+    from agents.policies import make_policy
+
+    env = _env(contact_window_s=[1.2, 1.5], history_s=8.0)
+    try:
+        policy = make_policy("predictive", env)
+        assert policy.contact_times_s == (1.2, 1.3, 1.4, 1.5)
+        planned = []
+        for seed in range(6):
+            observation, _ = env.reset(seed=seed)
+            for _ in range(seed * 7):
+                observation, *_ = env.step(0)
+            policy.act(observation)
+            _, _, terminated, _, info = env.step(1)
+            assert terminated and info["wave_offs"] == 0
+            # the environment chose as the policy weighed it, and the feet met the deck then
+            assert info["planned_contact_s"] == pytest.approx(policy.last.horizon_s)
+            assert abs(info["descent_s"] - info["planned_contact_s"]) < 0.15
+            planned.append(info["planned_contact_s"])
+        assert len(set(planned)) >= 2
+    finally:
+        env.close()
+
+
 # ------------------------------------------------------------------ the policy
 def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window():
     from agents.policies import make_policy
@@ -474,8 +570,8 @@ def test_the_value_wave_off_demands_less_as_the_wait_runs_out_and_nothing_at_the
         env.close()
 
 
-@pytest.mark.parametrize("version", [2, 3])
-def test_the_v2_and_v3_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs(
+@pytest.mark.parametrize("version", [2, 3, 4])
+def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs(
     version,
 ):
     import gymnasium as gym
@@ -486,11 +582,13 @@ def test_the_v2_and_v3_bench_ids_carry_the_history_and_wave_off_the_predictive_p
     env = gym.make(f"DeckLandingTiming-BenchSS4-v{version}")
     try:
         base = env.unwrapped
-        assert base.layout.n_history == 160 and base.wave_off_model is not None
+        assert base.layout.n_history == 160 and base.tilt_predictor is not None
         assert base.timing.tilt_model == "bench-ss4"
         assert base.timing.wave_off_rule == ("fixed" if version == 2 else "value")
         assert (base.wave_off_values is None) == (version == 2)
+        assert len(base.timing.contact_times_s) == (4 if version == 4 else 1)
         policy = make_policy("predictive", env)
+        assert policy.contact_times_s == base.timing.contact_times_s
         observation, _ = env.reset(seed=11)
         assert env.observation_space.contains(observation)
         assert policy.act(observation) in (0, 1) and policy.last.valid
@@ -509,16 +607,20 @@ def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     assert valued["wave_off_rule"] == "value" and valued["opportunity_s"] == 1.0
     assert "wave_off_probability" not in valued
     assert "tilt_model" not in descent_signature(gains, 5.0, "linear", "bench-ss4")
+    chosen = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8, "value", 1.0, (1.2, 1.3))
+    assert chosen["contact_times_s"] == [1.2, 1.3]
+    assert "contact_times_s" not in descent_signature(gains, 0.0, contact_times_s=(1.3,))
 
 
-def test_random_decisions_on_a_v3_id_under_realistic_sensing_never_leave_the_space():
-    """A soak of the v3 timing task (model wave-off in the loop, realistic sensing): random
-    waits and commits, every observation inside the space, every reward finite."""
+def test_random_decisions_on_a_v4_id_under_realistic_sensing_never_leave_the_space():
+    """A soak of the v4 timing task (the chosen contact time and the model wave-off in the
+    loop, realistic sensing): random waits and commits, every observation inside the space,
+    every reward finite, every contact time in the window."""
     import gymnasium as gym
 
     import landing_env  # noqa: F401
 
-    env = gym.make("DeckLandingTiming-BenchSS5-v3", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-BenchSS5-v4", overrides={"sensors": "realistic"})
     rng = np.random.default_rng(7)
     try:
         for episode in range(3):
@@ -530,6 +632,7 @@ def test_random_decisions_on_a_v3_id_under_realistic_sensing_never_leave_the_spa
                 observation, reward, terminated, truncated, info = env.step(action)
                 assert env.observation_space.contains(observation)
                 assert math.isfinite(reward)
+                assert 1.2 - 1e-9 <= info["planned_contact_s"] <= 1.5 + 1e-9
                 done = terminated or truncated
             assert info["outcome"] != "in_flight"
     finally:
@@ -579,6 +682,6 @@ def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_ov
     # the other policies fly the scenario as it is
     env, _ = make_env_and_policy("quiescent", "bench-ss4", "tight")
     try:
-        assert env.unwrapped.timing.history_s == 2.0 and env.unwrapped.wave_off_model is None
+        assert env.unwrapped.timing.history_s == 2.0 and env.unwrapped.tilt_predictor is None
     finally:
         env.close()

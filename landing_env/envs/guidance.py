@@ -365,6 +365,8 @@ class DeckGuidance:
         #: the timed descent's clock and start height (None: not descending)
         self._descent_clock_s: float | None = None
         self._descent_start_m = 0.0
+        #: the timed descent's duration (``plan_descent``; the gains' by default)
+        self.descent_time_s = self.gains.descent_time_s
 
     def reset(self) -> None:
         self._last_range = math.inf
@@ -373,7 +375,16 @@ class DeckGuidance:
         self._tag_unseen_s = math.inf
         self._flare_wait_s = 0.0
         self._descent_clock_s = None
+        self.descent_time_s = self.gains.descent_time_s
         self.tracker.reset()
+
+    def plan_descent(self, duration_s: float | None = None) -> None:
+        """Give the next timed descent this duration (None: ``gains.descent_time_s``), e.g. to
+        meet the deck at a chosen moment; it is kept between 0.2 and 10 s."""
+        duration = self.gains.descent_time_s if duration_s is None else duration_s
+        if not math.isfinite(duration):
+            duration = self.gains.descent_time_s
+        self.descent_time_s = float(np.clip(duration, 0.2, 10.0))
 
     def observe(self, observation: dict[str, np.ndarray], own: OwnState | None) -> None:
         """Feed one control period's observation to the deck tracker (``track_deck`` only;
@@ -484,7 +495,7 @@ class DeckGuidance:
         reference, _ = timed_descent_reference(
             self._descent_clock_s,
             self._descent_start_m,
-            g.descent_time_s,
+            self.descent_time_s,
             g.touchdown_speed,
             g.contact_range_m,
         )
@@ -493,7 +504,7 @@ class DeckGuidance:
         _, rate = timed_descent_reference(
             self._descent_clock_s + g.descent_lead_s,
             self._descent_start_m,
-            g.descent_time_s,
+            self.descent_time_s,
             g.touchdown_speed,
             g.contact_range_m,
         )

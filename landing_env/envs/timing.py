@@ -22,12 +22,15 @@ another):
 
 The scenario ids carry their own versions: ``DeckLandingTiming-BenchSS{3,4,5}-v1`` fly the
 **timed** final descent (``guidance.descent_profile``; ``-v0``: the range schedule), with the
-same observation layout.  What the commit starts is part of the task a model learns, so a
-model's card records the descent (and the wave-off, ``wave_off_tilt_deg``) and refuses another.
+same observation layout; ``-v2`` and ``-v3`` add an 8 s history and the deck-tilt predictor's
+wave-off, and ``-v4`` the contact time each commit chooses (``contact_window_s``).  What the
+commit starts is part of the task a model learns, so a model's card records the descent (and
+the wave-off, ``wave_off_tilt_deg``, and the contact times) and refuses another.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -73,6 +76,8 @@ WAVE_OFF_RULES = ("fixed", "value")
 #: a wave-off climbs back to the hold for at most this long, seconds (it nearly always takes
 #: all of it: the last 5 cm to the hold are slow)
 WAVE_OFF_CLIMB_S = 1.5
+#: the shortest timed descent a contact window may ask for, seconds
+MIN_CHOSEN_DESCENT_S = 1.0
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -223,6 +228,16 @@ class TimingConfig:
     tilt_model: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
     expected_contact_s: float = 1.3
+    #: the contact time chosen at each commit: with a window ``[first, last]`` (seconds after
+    #: the commit) the deck-tilt predictor ``tilt_model`` predicts the deck at every
+    #: ``contact_step_s`` of it, and the timed descent is given the duration that meets the
+    #: deck where the chance of a tilt within the touchdown limit is best (its reference
+    #: ``guidance.descent_time_s`` shifted by the contact's shift from
+    #: ``expected_contact_s``): the commit picks *when* to touch as well as when to leave.
+    #: Empty: every descent takes ``guidance.descent_time_s`` (contact at
+    #: ``expected_contact_s``)
+    contact_window_s: list[float] = field(default_factory=list)
+    contact_step_s: float = 0.1
 
     def __post_init__(self) -> None:
         require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
@@ -267,6 +282,7 @@ class TimingConfig:
                 self.history_s,
                 bounds_from=f"history_s = {self.history_s}",
             )
+        self._check_contact_window()
         if self.wave_off_tilt_deg > 0.0 and self.guidance.descent_profile != "timed":
             raise ConfigError(
                 "wave_off_tilt_deg",
@@ -274,6 +290,47 @@ class TimingConfig:
                 f"= 'timed', not {self.guidance.descent_profile!r}): only it has a known "
                 "contact time to predict the deck at",
             )
+
+    def _check_contact_window(self) -> None:
+        require_range("contact_step_s", self.contact_step_s, 0.05, 1.0)
+        window = list(self.contact_window_s)
+        if not window:
+            return
+        if len(window) != 2 or not all(isinstance(v, int | float) for v in window):
+            raise ConfigError(
+                "contact_window_s", f"{window!r} must be [first, last] seconds, or empty"
+            )
+        if self.guidance.descent_profile != "timed":
+            raise ConfigError(
+                "contact_window_s",
+                "needs the timed descent (guidance.descent_profile = 'timed', not "
+                f"{self.guidance.descent_profile!r}): only it can be given a contact time",
+            )
+        # the shortest descent must still meet the deck gently: below 1.0 s the touchdown
+        # speed grows (bench-ss5: 0.33 m/s mean at 1.0 s, 0.42 at 0.9, against 0.21 from 1.2 s)
+        lag_s = self.expected_contact_s - self.guidance.descent_time_s
+        require_range(
+            "contact_window_s",
+            window[0],
+            lag_s + MIN_CHOSEN_DESCENT_S,
+            window[1],
+            bounds_from=f"a descent of at least {MIN_CHOSEN_DESCENT_S} s and the window's last",
+        )
+        require_range("contact_window_s", window[1], window[0], 10.0)
+
+    @property
+    def contact_times_s(self) -> tuple[float, ...]:
+        """The contact times a commit chooses among (seconds after it): the window's grid,
+        or ``expected_contact_s`` alone."""
+        if not self.contact_window_s:
+            return (self.expected_contact_s,)
+        first, last = (float(v) for v in self.contact_window_s)
+        n = math.floor((last - first) / self.contact_step_s + 1e-9)
+        return tuple(round(first + i * self.contact_step_s, 9) for i in range(n + 1))
+
+    def descent_time_for(self, contact_s: float) -> float:
+        """The timed descent's duration whose contact comes ``contact_s`` after the commit."""
+        return self.guidance.descent_time_s + contact_s - self.expected_contact_s
 
 
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
@@ -312,7 +369,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.layout = TimingObservationLayout(n_history, self.timing.hold_height_m)
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
-        self.wave_off_model = self._load_wave_off_model()
+        #: the scenario's deck-tilt predictor, read by the model wave-off and the contact
+        #: window (None when neither is on)
+        self.tilt_predictor = self._load_tilt_predictor()
         self.wave_off_values = self._wave_off_values()
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
@@ -330,30 +389,35 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         """The value of waiting on for the ``value`` wave-off: from the chances the
         predictor gave held-out examples at the contact."""
         t = self.timing
-        if self.wave_off_model is None or t.wave_off_rule != "value":
+        if self.tilt_predictor is None or t.wave_off_rule != "value":
             return None
-        values = self.wave_off_model.stopping_values(t.expected_contact_s, t.wave_off_tilt_deg)
+        if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
+            return None
+        values = self.tilt_predictor.stopping_values(t.contact_times_s, t.wave_off_tilt_deg)
         if values is None:
             self.world.close()
             raise ConfigError(
                 "timing.wave_off_rule",
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
-                f"examples {t.expected_contact_s:g} s ahead, which it does not hold: refit it "
+                f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
+                "does not hold: refit it "
                 "with `python -m agents.deck_predictor fit`",
             )
         return values
 
-    def _load_wave_off_model(self) -> LinearTiltPredictor | None:
-        """The wave-off's fitted predictor (``wave_off_predictor = model``), checked against
-        the history it will read."""
+    def _load_tilt_predictor(self) -> LinearTiltPredictor | None:
+        """The fitted deck-tilt predictor (read by the ``model`` wave-off and the contact
+        window), checked against the history it will read."""
         t = self.timing
-        if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
+        wave_off = t.wave_off_predictor == "model" and t.wave_off_tilt_deg > 0.0
+        if not (wave_off or t.contact_window_s):
             return None
+        user = "the model wave-off" if wave_off else "timing.contact_window_s"
         if not t.tilt_model:
             self.world.close()
             raise ConfigError(
                 "timing.tilt_model",
-                "is empty; the model wave-off needs the scenario's deck-tilt predictor "
+                f"is empty; {user} needs the scenario's deck-tilt predictor "
                 "(e.g. bench-ss4, or a file written by `python -m agents.deck_predictor fit`)",
             )
         path = tilt_predictor_path(t.tilt_model)
@@ -386,7 +450,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             self.world.close()
             raise ConfigError(
                 "timing.history_s",
-                f"{t.history_s:g} s is shorter than the wave-off model's {model.window_s:g} s "
+                f"{t.history_s:g} s is shorter than the deck-tilt predictor's {model.window_s:g} s "
                 f"window: set timing.history_s={model.window_s:g}",
             )
         return model
@@ -401,6 +465,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._committed = False
         self._forced = False
         self._descent_s = 0.0
+        self._contact_s = self.timing.expected_contact_s
         self._wave_offs = 0
         self._observation_clipped = False
         self._base_observation: dict[str, np.ndarray] | None = None
@@ -523,6 +588,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         """The final descent, run to touchdown (or crash, or the descent timeout), or until a
         wave-off (``wave_off`` allows it); returns the seconds a wave-off cost (else 0)."""
         self._committed = True
+        self._plan_contact()
         start = self.world.time
         while self._outcome is Outcome.IN_FLIGHT:
             if self.world.time - start >= self.timing.descent_timeout_s:
@@ -552,6 +618,26 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._descent_s = end - start
         return 0.0
 
+    def _plan_contact(self) -> None:
+        """The contact time of the descent starting now: with ``contact_window_s``, the one in
+        it where the predictor gives the best chance of a deck within the touchdown limit
+        (``expected_contact_s`` when it cannot predict); the guidance's timed descent is given
+        the duration that meets the deck then."""
+        t = self.timing
+        self._contact_s = t.expected_contact_s
+        if t.contact_window_s and self.tilt_predictor is not None:
+            rows = self.history.rows()
+            columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+            best = self.tilt_predictor.best_within(
+                rows[:, columns],
+                rows[:, _VALID] > 0.5,
+                t.contact_times_s,
+                self.config.touchdown.max_deck_tilt_deg,
+            )
+            if best.valid:
+                self._contact_s = best.horizon_s
+        self.guidance.plan_descent(t.descent_time_for(self._contact_s))
+
     def _wave_off_chance(self, elapsed_s: float) -> float:
         """The chance of a deck within the limit below which the model wave-off aborts,
         ``elapsed_s`` into the descent: ``wave_off_probability``, or with the ``value`` rule
@@ -574,10 +660,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         row = rows[-1]
         if row[_VALID] < 0.5:
             return False  # nothing to predict with: the descent goes on
-        ahead = max(t.expected_contact_s - elapsed_s, 0.0)
-        if self.wave_off_model is not None:
-            columns = [HISTORY_FEATURES.index(name) for name in self.wave_off_model.channels]
-            prediction = self.wave_off_model.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
+        ahead = max(self._contact_s - elapsed_s, 0.0)
+        if t.wave_off_predictor == "model" and self.tilt_predictor is not None:
+            columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+            prediction = self.tilt_predictor.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
             if not prediction.valid:
                 return False  # nothing to predict with: the descent goes on
             return prediction.probability_within(t.wave_off_tilt_deg) < self._wave_off_chance(
@@ -619,6 +705,8 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "committed": self._committed,
                 "forced_commit": self._forced,
                 "descent_s": self._descent_s,
+                # the contact time the last commit aimed at, seconds after it
+                "planned_contact_s": getattr(self, "_contact_s", self.timing.expected_contact_s),
                 "wave_offs": getattr(self, "_wave_offs", 0),
                 "observation_clipped": getattr(self, "_observation_clipped", False),
                 # read by SB3's EvalCallback for its success rate
