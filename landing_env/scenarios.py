@@ -128,11 +128,22 @@ PREDICTIVE_TIMING: dict[str, Any] = {
 }
 
 
+#: what each version of the predictive bench ids flies (``bench_predictive_timing``)
+PREDICTIVE_VERSIONS: dict[int, str] = {
+    2: "the timed descent, an 8 s history and the deck-tilt predictor's wave-off below a "
+    "fixed chance",
+    3: "the timed descent, an 8 s history and the deck-tilt predictor's wave-off below the "
+    "value of waiting on",
+    4: "the timed descent whose contact time each commit chooses by the deck-tilt predictor, "
+    "an 8 s history and the predictor's wave-off below the value of waiting on",
+}
+
+
 def bench_predictive_timing(sea_state: int, version: int = 4) -> dict[str, Any]:
     """The timing settings of ``DeckLandingTiming-BenchSS<n>-v<version>`` (v2: the model
     wave-off below a fixed chance of 0.8; v3: below the value of waiting on; v4: and the
     contact time chosen in ``CONTACT_WINDOW_S``; v2 and v3 have the fixed 1.3 s contact)."""
-    require_choice("version", version, (2, 3, 4))
+    require_choice("version", version, tuple(PREDICTIVE_VERSIONS))
     rule: dict[str, Any] = {} if version == 4 else {"contact_window_s": []}
     if version == 2:
         rule.update({"wave_off_rule": "fixed", "wave_off_probability": 0.8})
@@ -192,34 +203,13 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
         for n in (3, 4, 5)
     },
     **{
-        f"DeckLandingTiming-BenchSS{n}-v2": _landing(
+        f"DeckLandingTiming-BenchSS{n}-v{version}": _landing(
             "DeckLandingTiming-v0",
             f"bench-ss{n}",
-            f"timing task over a bench-ss{n} deck, the timed descent, an 8 s history and the "
-            "deck-tilt predictor's wave-off below a fixed chance",
-            {"timing": bench_predictive_timing(n, version=2)},
+            f"timing task over a bench-ss{n} deck, {what}",
+            {"timing": bench_predictive_timing(n, version=version)},
         )
-        for n in (3, 4, 5)
-    },
-    **{
-        f"DeckLandingTiming-BenchSS{n}-v3": _landing(
-            "DeckLandingTiming-v0",
-            f"bench-ss{n}",
-            f"timing task over a bench-ss{n} deck, the timed descent, an 8 s history and the "
-            "deck-tilt predictor's wave-off below the value of waiting on",
-            {"timing": bench_predictive_timing(n, version=3)},
-        )
-        for n in (3, 4, 5)
-    },
-    **{
-        f"DeckLandingTiming-BenchSS{n}-v4": _landing(
-            "DeckLandingTiming-v0",
-            f"bench-ss{n}",
-            f"timing task over a bench-ss{n} deck, the timed descent whose contact time each "
-            "commit chooses by the deck-tilt predictor, an 8 s history and the predictor's "
-            "wave-off below the value of waiting on",
-            {"timing": bench_predictive_timing(n)},
-        )
+        for version, what in PREDICTIVE_VERSIONS.items()
         for n in (3, 4, 5)
     },
     "DeckLandingTiming-PaperStewart-v0": _landing(
