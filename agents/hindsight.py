@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,15 @@ class LabelSet:
     decision: np.ndarray
     #: every waited observation of each episode, labelled or not (the estimate's series)
     waited: list[np.ndarray]
+
+    def save(self, path: str | Path) -> Path:
+        """Write the labelled arrays (not ``waited``) to a compressed ``.npz``."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        arrays.pop("waited")
+        np.savez_compressed(path, **arrays)
+        return path
 
 
 def make_timing_env(

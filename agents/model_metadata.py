@@ -115,9 +115,16 @@ def descent_signature(
     and whether a bad commit is waved off, so another descent is another task even where the
     observation's layout is the same.  ``contact_times_s``: the contact times a commit
     chooses among (``TimingConfig.contact_window_s``; empty or one: the fixed descent)."""
+    # the deck tracker's model and lead, where not the default (the ship's guidance from v2)
+    tracking: dict[str, Any] = {}
+    if getattr(gains, "tracker_model", "velocity") != "velocity" or getattr(
+        gains, "deck_lead_s", 0.0
+    ):
+        tracking = {"tracker_model": gains.tracker_model, "deck_lead_s": float(gains.deck_lead_s)}
     if gains.descent_profile == "range":
-        return {"profile": "range"}
+        return {"profile": "range", **tracking}
     signature: dict[str, Any] = {
+        **tracking,
         "profile": gains.descent_profile,
         "time_s": float(gains.descent_time_s),
         "touchdown_speed": float(gains.touchdown_speed),

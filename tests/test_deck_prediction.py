@@ -610,6 +610,13 @@ def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     chosen = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8, "value", 1.0, (1.2, 1.3))
     assert chosen["contact_times_s"] == [1.2, 1.3]
     assert "contact_times_s" not in descent_signature(gains, 0.0, contact_times_s=(1.3,))
+    ship = GuidanceGains(tracker_model="acceleration", deck_lead_s=0.2)
+    assert descent_signature(ship) == {
+        "profile": "range",
+        "tracker_model": "acceleration",
+        "deck_lead_s": 0.2,
+    }
+    assert descent_signature(GuidanceGains()) == {"profile": "range"}
 
 
 def test_random_decisions_on_a_v4_id_under_realistic_sensing_never_leave_the_space():

@@ -9,7 +9,7 @@ import pytest
 from agents.hindsight import MIN_MARGIN, collect_labels, make_timing_env, replay_rule
 
 
-def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives() -> None:
+def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives(tmp_path) -> None:
     env = make_timing_env("bench-ss4", "realistic", "tight")
     try:
         labels = collect_labels(env, [800_123], max_decisions=5, every=2, progress=False)
@@ -29,6 +29,11 @@ def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives() -> None
     assert labels.success[2] == (info["outcome"] == "success")
     assert labels.deck_tilt_deg[2] == pytest.approx(info["touchdown"]["deck_tilt_deg"])
     assert np.all(labels.margin >= MIN_MARGIN)
+    # the labels are written for later analysis and read back the same
+    saved = np.load(labels.save(tmp_path / "labels" / "bench-ss4.npz"))
+    assert "waited" not in saved.files
+    np.testing.assert_array_equal(saved["observations"], labels.observations)
+    np.testing.assert_array_equal(saved["success"], labels.success)
 
 
 def test_the_replay_commits_at_the_first_decision_the_rule_accepts() -> None:

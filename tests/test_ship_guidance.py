@@ -54,6 +54,57 @@ def test_the_deck_tracker_recovers_the_heave_rate_of_a_deck_seen_only_by_its_ran
     assert np.sqrt(np.mean(np.square(errors))) < 0.06
 
 
+def test_the_acceleration_tracker_leads_a_heaving_deck_s_velocity_by_the_loop_s_lag() -> None:
+    """A deck heaving 0.5 m at 8.8 s, seen by its ranges: the constant-acceleration track
+    gives the heave acceleration, and its velocity carried 0.2 s ahead (``deck_lead_s``) is
+    closer to the deck's velocity 0.2 s later than the constant-velocity track's."""
+    omega = 2 * math.pi / 8.8
+    rng = np.random.default_rng(1)
+    trackers = {
+        model: DeckGuidance(GuidanceGains(track_deck=True, tracker_model=model), DT)
+        for model in ("velocity", "acceleration")
+    }
+    errors: dict[str, list[float]] = {"velocity": [], "acceleration": [], "accel": []}
+    for k in range(400):
+        t = k * DT
+        height = 2.0 - 0.5 * math.sin(omega * t) + rng.normal(0.0, 0.007)
+        for guidance in trackers.values():
+            guidance.observe(_observation(None, tof_m=height), _level((0.0, 0.0, 2.0)))
+        if t > 5.0:
+            ahead = 0.5 * omega * math.cos(omega * (t + 0.2))
+            plain, led = trackers["velocity"].tracker, trackers["acceleration"].tracker
+            errors["velocity"].append(plain.velocity_w[2] - ahead)
+            errors["acceleration"].append(led.velocity_w[2] + 0.2 * led.acceleration_w[2] - ahead)
+            errors["accel"].append(led.acceleration_w[2] + 0.5 * omega**2 * math.sin(omega * t))
+    rms = {key: float(np.sqrt(np.mean(np.square(v)))) for key, v in errors.items()}
+    # the heave acceleration is 0.25 m/s^2 in amplitude
+    assert rms["accel"] < 0.1
+    assert rms["acceleration"] < 0.8 * rms["velocity"]
+    assert np.all(trackers["velocity"].tracker.acceleration_w == 0.0)
+
+
+def test_a_bad_tracker_setting_is_refused_naming_its_key() -> None:
+    from landing_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="tracker_model"):
+        GuidanceGains(tracker_model="kalman")
+    with pytest.raises(ConfigError, match="deck_lead_s"):
+        GuidanceGains(deck_lead_s=-0.1)
+    with pytest.raises(ConfigError, match="tracker_jerk_psd"):
+        GuidanceGains(tracker_jerk_psd=0.0)
+
+
+def test_the_ship_timing_ids_v2_track_and_lead_the_deck_s_acceleration_and_v1_do_not() -> None:
+    from landing_env.scenarios import SCENARIO_IDS
+
+    for n in (3, 4, 5, 6):
+        old = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v1"].task_kwargs["timing"]["guidance"]
+        new = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v2"].task_kwargs["timing"]["guidance"]
+        assert "tracker_model" not in old and "deck_lead_s" not in old
+        assert new["tracker_model"] == "acceleration" and new["deck_lead_s"] == 0.2
+        assert {k: v for k, v in new.items() if k in old} == old
+
+
 def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it() -> None:
     gains = GuidanceGains(track_deck=True, touchdown_speed=0.25)
     guidance = DeckGuidance(gains, DT)
@@ -105,13 +156,13 @@ def test_the_ship_decks_judge_the_drone_to_deck_attitude_by_the_gear_clearance_a
     assert load_config("bench-ss4").touchdown.max_relative_attitude_deg == 10.0
 
 
-def _land_now(track: bool, seeds: range) -> list[dict]:
+def _land_now(track: bool, seeds: range, version: int = 1) -> list[dict]:
     import gymnasium as gym
 
     import landing_env  # noqa: F401
     from landing_env.scenarios import SCENARIO_IDS
 
-    scenario = SCENARIO_IDS["DeckLandingTiming-ShipSS4-v1"]
+    scenario = SCENARIO_IDS[f"DeckLandingTiming-ShipSS4-v{version}"]
     timing = dict(scenario.task_kwargs["timing"])
     timing["guidance"] = {**timing["guidance"], "track_deck": track}
     env = gym.make(
@@ -131,9 +182,12 @@ def _land_now(track: bool, seeds: range) -> list[dict]:
     return touchdowns
 
 
-def test_on_the_ship_deck_the_deck_frame_descent_lands_where_the_bench_guidance_hits_hard() -> None:
+@pytest.mark.parametrize("version", [1, 2])
+def test_on_the_ship_deck_the_deck_frame_descent_lands_where_the_bench_guidance_hits_hard(
+    version: int,
+) -> None:
     seeds = range(1_000_000, 1_000_003)
-    tracked = _land_now(True, seeds)
+    tracked = _land_now(True, seeds, version)
     plain = _land_now(False, seeds)
     assert sum(t["outcome"] == "success" for t in tracked) >= 2
     speeds = [t["relative_normal_speed"] for t in tracked if "relative_normal_speed" in t]
@@ -162,8 +216,12 @@ def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> 
     assert waits[-1] < -0.2  # after 3 s it lands all the same
 
 
-@pytest.mark.parametrize("profile", ["range", "timed"])
-def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(profile: str) -> None:
+@pytest.mark.parametrize(
+    ("profile", "model"), [("range", "velocity"), ("timed", "velocity"), ("range", "acceleration")]
+)
+def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(
+    profile: str, model: str
+) -> None:
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
@@ -191,6 +249,8 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(prof
             blind_range_m=0.8,
             flare_range_m=0.5,
             descent_profile=profile,
+            tracker_model=model,
+            deck_lead_s=0.2 if model == "acceleration" else 0.0,
         )
         guidance = DeckGuidance(gains, DT)
         for pose, seen, ranges, valid, (roll, pitch, yaw) in steps:

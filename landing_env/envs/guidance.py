@@ -11,12 +11,13 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
 * off (the bench default): proportional servoing on the camera-frame tag offset and range,
   as the papers' bench needs (a deck that heaves centimetres, no wind);
 * on (the ship scenarios): the guidance flies **in the deck's frame**.
-  - A constant-velocity Kalman filter per world axis (:class:`DeckTracker`) tracks where the
-    deck is and how fast it moves, from the tag seen by a *level* camera (the drone's lean
-    removed) and, with the tag lost, the ToF ranges, plus the drone's own navigation
-    estimate (:class:`OwnState`: the autopilot's position, velocity and attitude, as PX4's
-    EKF2 gives them to a companion computer).
-  - The set-point is the estimated deck velocity (feed-forward) plus a proportional
+  - - A constant-velocity (or constant-acceleration, ``tracker_model``) Kalman filter per world axis
+    (:class:`DeckTracker`) tracks where the deck is and how fast it moves, from the tag seen by a
+    *level* camera (the drone's lean removed) and, with the tag lost, the ToF ranges, plus the
+    drone's own navigation estimate (:class:`OwnState`: the autopilot's position, velocity and
+    attitude, as PX4's EKF2 gives them to a companion computer).
+  - The set-point is the estimated deck velocity (feed-forward; with the acceleration model,
+    carried ``deck_lead_s`` ahead to meet the velocity loop's lag) plus a proportional
     correction of the deck-relative position, so the drone holds station on a deck that
     surges, sways and heaves without the lag of a proportional law; the velocity loop's
     integrator (the PX4-style cascade of :mod:`landing_env.physics.controller`) rejects the
@@ -63,6 +64,8 @@ from landing_env.physics.controller import VelocitySetpoint
 
 #: the final descent's profiles (:attr:`GuidanceGains.descent_profile`)
 DESCENT_PROFILES = ("range", "timed")
+#: the deck tracker's motion models (:attr:`GuidanceGains.tracker_model`)
+TRACKER_MODELS = ("velocity", "acceleration")
 
 
 def timed_descent_reference(
@@ -159,6 +162,19 @@ class GuidanceGains:
     #: a coasting track's velocity decays with this time constant (the deck's horizontal
     #: motion is oscillatory: holding a stale velocity drifts away), seconds
     tracker_velocity_decay_s: float = 1.0
+    #: the tracker's motion model: ``"velocity"`` (constant velocity, white-noise
+    #: acceleration of ``tracker_accel_psd``) or ``"acceleration"`` (constant acceleration,
+    #: white-noise jerk of ``tracker_jerk_psd``: Bar-Shalom, Li & Kirubarajan 2001, Sec.
+    #: 6.2.3), whose acceleration estimate is fed forward ``deck_lead_s`` ahead
+    tracker_model: str = "velocity"
+    #: the deck's jerk spectral density for the ``acceleration`` model, m^2/s^5 (a heave of
+    #: 0.5-1 m/s^2 at 0.1-0.15 Hz: a jerk of 0.3-1 m/s^3)
+    tracker_jerk_psd: float = 2.0
+    #: the set-point carries the deck's velocity this far ahead (its velocity plus the tracked
+    #: acceleration times this): the velocity loop lags its set-point by about its time
+    #: constant (``controller.vel_p_z`` = 5/s: 0.2 s), so a set-point of the present deck
+    #: velocity meets an accelerating deck late; 0 turns it off, seconds
+    deck_lead_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -173,6 +189,9 @@ class GuidanceGains:
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         require_range("lost_tag_climb_speed", self.lost_tag_climb_speed, 0.0)
         require_choice("descent_profile", self.descent_profile, DESCENT_PROFILES)
+        require_choice("tracker_model", self.tracker_model, TRACKER_MODELS)
+        require_range("tracker_jerk_psd", self.tracker_jerk_psd, 0.0, low_inclusive=False)
+        require_range("deck_lead_s", self.deck_lead_s, 0.0, 2.0)
         require_range("descent_time_s", self.descent_time_s, 0.2, 10.0)
         require_range("descent_track_gain", self.descent_track_gain, 0.0, 20.0)
         require_range("descent_lead_s", self.descent_lead_s, 0.0, 2.0)
@@ -226,17 +245,16 @@ class DeckTracker:
     """Where the deck (the tag centre) is and how fast it moves, in the world frame.
 
     One constant-velocity Kalman filter per axis (white-noise acceleration of spectral density
-    ``accel_psd``; Bar-Shalom, Li & Kirubarajan 2001, *Estimation with Applications to
-    Tracking and Navigation*, Sec. 6.2.2).  A measurement is the drone's position plus the
-    tag offset seen by a level camera (the deck pose rotated by the drone's roll and pitch,
-    then by its yaw); with the tag lost, the ToF ranges (their mean along the body axis,
-    times the cosine of the drone's tilt) still measure the height.  The vertical position
-    tracked is the drone's centre's height minus the camera's range, so that ``range =
-    own z - tracked z``.  Without measurements a track coasts with its velocity decaying
-    (``velocity_decay_s``): the deck of a ship hove-to oscillates about a fixed mean, so the
-    last position is the best guess of where to look again; the height track is dropped
-    after ``coast_s`` without a range.
-    """
+    ``accel_psd``; Bar-Shalom, Li & Kirubarajan 2001, *Estimation with Applications to Tracking and
+    Navigation*, Sec. 6.2.2), or with ``model = "acceleration"`` a constant-acceleration one
+    (white-noise jerk of density ``jerk_psd``, Sec. 6.2.3).  A measurement is the drone's position
+    plus the tag offset seen by a level camera (the deck pose rotated by the drone's roll and pitch,
+    then by its yaw); with the tag lost, the ToF ranges (their mean along the body axis, times the
+    cosine of the drone's tilt) still measure the height.  The vertical position tracked is the
+    drone's centre's height minus the camera's range, so that ``range = own z - tracked z``.
+    Without measurements a track coasts with its velocity decaying (``velocity_decay_s``): the deck
+    of a ship hove-to oscillates about a fixed mean, so the last position is the best guess of where
+    to look again; the height track is dropped after ``coast_s`` without a range."""
 
     def __init__(
         self,
@@ -244,17 +262,24 @@ class DeckTracker:
         position_sigma_m: float,
         coast_s: float,
         velocity_decay_s: float = math.inf,
+        model: str = "velocity",
+        jerk_psd: float = 2.0,
     ) -> None:
+        require_choice("tracker_model", model, TRACKER_MODELS)
         self.accel_psd = accel_psd
+        self.jerk_psd = jerk_psd
         self.r = position_sigma_m**2
         self.coast_s = coast_s
         self.velocity_decay_s = velocity_decay_s
+        self.model = model
+        #: states per axis: position, velocity (and acceleration)
+        self.order = 3 if model == "acceleration" else 2
         self.reset()
 
     def reset(self) -> None:
-        #: per axis (x, y, z): state [position, velocity] and its 2x2 covariance
-        self.state = np.zeros((3, 2))
-        self.cov = np.zeros((3, 2, 2))
+        #: per axis (x, y, z): state [position, velocity(, acceleration)] and its covariance
+        self.state = np.zeros((3, self.order))
+        self.cov = np.zeros((3, self.order, self.order))
         self.started = np.zeros(3, dtype=bool)
         self.unseen_s = np.full(3, math.inf)
 
@@ -275,6 +300,11 @@ class DeckTracker:
     def velocity_w(self) -> np.ndarray:
         return self.state[:, 1].copy()
 
+    @property
+    def acceleration_w(self) -> np.ndarray:
+        """The tracked acceleration (zeros for the constant-velocity model)."""
+        return self.state[:, 2].copy() if self.order == 3 else np.zeros(3)
+
     def update(self, observation: dict[str, np.ndarray], own: OwnState, dt: float) -> None:
         """Predict by ``dt`` and correct with whatever this observation measures."""
         self._predict(dt)
@@ -289,9 +319,9 @@ class DeckTracker:
                 # coast on: a hove-to ship's deck oscillates about a fixed mean position)
                 self.started[axis] = False
             else:
-                # coasting: let the velocity decay (an oscillating deck's stale velocity
-                # would carry the track away)
-                self.state[axis, 1] *= math.exp(-dt / self.velocity_decay_s)
+                # coasting: let the velocity (and acceleration) decay (an oscillating
+                # deck's stale velocity would carry the track away)
+                self.state[axis, 1:] *= math.exp(-dt / self.velocity_decay_s)
 
     @staticmethod
     def measure(observation: dict[str, np.ndarray], own: OwnState) -> np.ndarray:
@@ -316,8 +346,18 @@ class DeckTracker:
         return measured
 
     def _predict(self, dt: float) -> None:
-        f = np.array([[1.0, dt], [0.0, 1.0]])
-        q = self.accel_psd * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        if self.order == 3:
+            f = np.array([[1.0, dt, dt**2 / 2.0], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+            q = self.jerk_psd * np.array(
+                [
+                    [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
+                    [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
+                    [dt**3 / 6.0, dt**2 / 2.0, dt],
+                ]
+            )
+        else:
+            f = np.array([[1.0, dt], [0.0, 1.0]])
+            q = self.accel_psd * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
         for axis in range(3):
             if self.started[axis]:
                 self.state[axis] = f @ self.state[axis]
@@ -326,9 +366,11 @@ class DeckTracker:
 
     def _correct(self, axis: int, value: float) -> None:
         if not self.started[axis]:
-            self.state[axis] = (value, 0.0)
-            # a deck moving at up to ~2 m/s: start with that velocity uncertainty
-            self.cov[axis] = np.diag([self.r, 4.0])
+            self.state[axis] = 0.0
+            self.state[axis, 0] = value
+            # a deck moving at up to ~2 m/s and accelerating at up to ~1 m/s^2: start with
+            # those uncertainties
+            self.cov[axis] = np.diag([self.r, 4.0, 1.0][: self.order])
             self.started[axis] = True
             return
         p = self.cov[axis]
@@ -356,6 +398,8 @@ class DeckGuidance:
             g.tracker_position_sigma_m,
             g.tracker_coast_s,
             g.tracker_velocity_decay_s,
+            g.tracker_model,
+            g.tracker_jerk_psd,
         )
         self._last_range = math.inf
         self._lean = np.zeros(2)
@@ -411,7 +455,8 @@ class DeckGuidance:
         """Deck velocity + proportional correction of the horizontal offset and the given
         relative vertical speed, turned into the heading frame."""
         g = self.gains
-        deck_v = self.tracker.velocity_w
+        # the deck's velocity ``deck_lead_s`` ahead: the velocity loop's lag is met early
+        deck_v = self.tracker.velocity_w + g.deck_lead_s * self.tracker.acceleration_w
         relative = np.zeros(2)
         if not self.tracker.horizontal_valid:
             deck_v[:2] = 0.0

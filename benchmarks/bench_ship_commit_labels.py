@@ -1,0 +1,140 @@
+"""What better timing could still win on a ship deck, measured on hindsight labels.
+
+    python -m benchmarks.bench_ship_commit_labels [--scenario ship-ss4] [--sensing realistic]
+        [--episodes 120] [--seed 6000] [--max-decisions 150] [--every 5]
+        [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
+
+The oracle (:mod:`agents.oracle`) tries a commit at every decision (0.1 s apart) and knows the
+gusts and the heave to come; its lead over a policy mixes what the observation could tell and
+what no observation tells.  This benchmark separates the two:
+
+1. Seeded waiting episodes of the timing task (not the evaluation's held-out seeds); at every
+   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.hindsight`), so each
+   labelled decision has the touchdown committing then would have given.
+2. Printed: the success of a commit at a labelled decision; how failures cluster in time (the
+   chance that the commit ``every`` decisions later lands after one that failed, against after
+   one that landed: persistent causes are in principle visible, isolated ones are luck); the
+   best any commit on the labels' grid could do (the oracle on that grid); committing at once
+   (``land-now``); and the ``quiescent`` rule (:func:`agents.policies.predict_calm`) replayed
+   with its defaults and with each of a grid of its settings (:func:`agents.hindsight.replay_rule`;
+   an episode without a calm decision commits at its last label), all judged by the outcome.
+
+The labels are written to ``--out`` (``<scenario>_labels.npz``) for further analysis.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agents.cli_args import add_set_argument, parse_overrides
+from agents.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
+from agents.policies import CalmConfig, predict_calm
+
+#: the grid of the ``quiescent`` rule's settings replayed
+CALM_GRID = {
+    "window_s": (1.3, 2.0),
+    "max_tilt_deg": (3.0, 4.0, 5.0),
+    "max_heave_rate": (0.1, 0.15, 0.3),
+    "min_valid_fraction": (0.8, 1.0),
+}
+
+
+def clustering(labels: LabelSet) -> tuple[float, float, int, int]:
+    """P(the next labelled commit lands | this one landed), P(... | this one failed), and of
+    the failures inside an episode's labels, how many had both neighbours land."""
+    after_ok, after_fail, isolated, inner = [], [], 0, 0
+    for episode in np.unique(labels.episode):
+        s = labels.success[labels.episode == episode]
+        for k in range(len(s) - 1):
+            (after_ok if s[k] else after_fail).append(bool(s[k + 1]))
+        for k in range(1, len(s) - 1):
+            if not s[k]:
+                inner += 1
+                isolated += int(s[k - 1] and s[k + 1])
+    return (
+        float(np.mean(after_ok)) if after_ok else float("nan"),
+        float(np.mean(after_fail)) if after_fail else float("nan"),
+        isolated,
+        inner,
+    )
+
+
+def calm_commits(labels: LabelSet, layout, dt: float, config: CalmConfig) -> np.ndarray:
+    """Whether the ``quiescent`` rule with ``config`` commits at each labelled decision."""
+    return np.array(
+        [predict_calm(layout.decode(o).history, dt, config).calm for o in labels.observations]
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="ship-ss4")
+    parser.add_argument("--sensing", default="realistic")
+    parser.add_argument("--estimator", default="tight")
+    parser.add_argument("--episodes", type=int, default=120)
+    parser.add_argument("--seed", type=int, default=6000)
+    parser.add_argument("--max-decisions", type=int, default=150)
+    parser.add_argument("--every", type=int, default=5)
+    parser.add_argument("--out", default="results/ship_labels")
+    add_set_argument(parser)
+    args = parser.parse_args(argv)
+
+    env = make_timing_env(
+        args.scenario, args.sensing, args.estimator, parse_overrides(args.set or [])
+    )
+    base = env.unwrapped
+    started = time.perf_counter()
+    try:
+        labels = collect_labels(
+            env,
+            list(range(args.seed, args.seed + args.episodes)),
+            args.max_decisions,
+            args.every,
+        )
+    finally:
+        env.close()
+    path = labels.save(Path(args.out) / f"{args.scenario}_labels.npz")
+    grid_s = args.every * base.timing.steps_per_decision * base.env_dt
+    episodes = np.unique(labels.episode)
+    print(
+        f"{args.scenario}, {args.sensing}, {args.estimator}: {len(episodes)} episodes (seeds "
+        f"{args.seed}-{args.seed + args.episodes - 1}), a commit tried every {grid_s:g} s of the "
+        f"first {args.max_decisions * base.timing.steps_per_decision * base.env_dt:g} s "
+        f"({len(labels.success)} labels, {time.perf_counter() - started:.0f} s); labels in {path}"
+    )
+    print(f"a commit at a labelled decision lands: {labels.success.mean():.3f}")
+    ok_next, fail_next, isolated, inner = clustering(labels)
+    print(
+        f"the commit {grid_s:g} s later lands: {ok_next:.3f} after one that landed, "
+        f"{fail_next:.3f} after one that failed; {isolated} of {inner} failures had both "
+        "neighbours land"
+    )
+    best = np.mean([labels.success[labels.episode == e].any() for e in episodes])
+    # judged by the outcome (every check: a tip-over or a bounce fails with a positive margin)
+    landed = np.where(labels.success, 0.0, -1.0)
+    now = replay_rule(landed, np.ones(len(landed), bool), labels.episode)
+    print(f"any commit on the {grid_s:g} s grid (its oracle): {best:.3f}")
+    print(f"land-now (the first label): {now['success']:.3f}")
+    layout, dt = base.layout, base.env_dt
+    default = replay_rule(landed, calm_commits(labels, layout, dt, CalmConfig()), labels.episode)
+    print(f"quiescent (its defaults): {default['success']:.3f}")
+    rows = []
+    for values in itertools.product(*CALM_GRID.values()):
+        settings = dict(zip(CALM_GRID, values, strict=True))
+        commits = calm_commits(labels, layout, dt, CalmConfig(**settings))
+        result = replay_rule(landed, commits, labels.episode)
+        rows.append((result["success"], result["episodes_without_commit"], settings))
+    rows.sort(key=lambda row: -row[0])
+    print(f"quiescent over its {len(rows)} settings of CALM_GRID, best first:")
+    for success, without, settings in rows[:5]:
+        print(f"  {success:.3f} ({without:.0f} episodes never calm)  {settings}")
+    print(f"  worst: {rows[-1][0]:.3f}  {rows[-1][2]}")
+
+
+if __name__ == "__main__":
+    main()
