@@ -58,7 +58,7 @@ from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.envs.guidance import DeckGuidance, GuidanceGains
 from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
-from landing_env.envs.timing import TimingObservationLayout
+from landing_env.envs.timing import TimingConfig, TimingObservationLayout
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
@@ -241,7 +241,7 @@ class PredictivePolicy:
         max_tilt_deg: float,
         wait_limit_s: float,
         opportunity_s: float,
-        contact_times_s: tuple[float, ...] = (1.3,),
+        contact_times_s: tuple[float, ...] | None = None,
     ) -> None:
         from estimation.deck_prediction import LinearTiltPredictor
 
@@ -266,6 +266,9 @@ class PredictivePolicy:
             )
         require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
         require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
+        if contact_times_s is None:
+            # the timing task's default: the timed descent's one contact time
+            contact_times_s = TimingConfig().contact_times_s
         self.contact_times_s = tuple(float(c) for c in contact_times_s)
         if not self.contact_times_s:
             raise ConfigError("timing.contact_window_s", "gives no contact time")
