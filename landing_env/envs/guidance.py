@@ -11,11 +11,11 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
 * off (the bench default): proportional servoing on the camera-frame tag offset and range,
   as the papers' bench needs (a deck that heaves centimetres, no wind);
 * on (the ship scenarios): the guidance flies **in the deck's frame**.
-  - - A constant-velocity (or constant-acceleration, ``tracker_model``) Kalman filter per world axis
-    (:class:`DeckTracker`) tracks where the deck is and how fast it moves, from the tag seen by a
-    *level* camera (the drone's lean removed) and, with the tag lost, the ToF ranges, plus the
-    drone's own navigation estimate (:class:`OwnState`: the autopilot's position, velocity and
-    attitude, as PX4's EKF2 gives them to a companion computer).
+  - A constant-velocity (or constant-acceleration, ``tracker_model``) Kalman filter per
+    world axis (:class:`DeckTracker`) tracks where the deck is and how fast it moves, from
+    the tag seen by a *level* camera (the drone's lean removed) and, with the tag lost, the
+    ToF ranges, plus the drone's own navigation estimate (:class:`OwnState`: the autopilot's
+    position, velocity and attitude, as PX4's EKF2 gives them to a companion computer).
   - The set-point is the estimated deck velocity (feed-forward; with the acceleration model,
     carried ``deck_lead_s`` ahead to meet the velocity loop's lag) plus a proportional
     correction of the deck-relative position, so the drone holds station on a deck that
