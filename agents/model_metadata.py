@@ -121,6 +121,9 @@ def descent_signature(
         gains, "deck_lead_s", 0.0
     ):
         tracking = {"tracker_model": gains.tracker_model, "deck_lead_s": float(gains.deck_lead_s)}
+    # the go-around with the deck lost, where not the default (the ship's guidance from v3)
+    if getattr(gains, "lost_deck", "descend") != "descend":
+        tracking["lost_deck"] = gains.lost_deck
     if gains.descent_profile == "range":
         return {"profile": "range", **tracking}
     signature: dict[str, Any] = {

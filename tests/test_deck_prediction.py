@@ -617,6 +617,8 @@ def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
         "deck_lead_s": 0.2,
     }
     assert descent_signature(GuidanceGains()) == {"profile": "range"}
+    searching = GuidanceGains(tracker_model="acceleration", deck_lead_s=0.2, lost_deck="search")
+    assert descent_signature(searching) == {**descent_signature(ship), "lost_deck": "search"}
 
 
 def test_random_decisions_on_a_v4_id_under_realistic_sensing_never_leave_the_space():

@@ -324,7 +324,7 @@ def test_rotor_thrust_and_torques(params: QuadrotorParams) -> None:
 def test_linear_drag_acts_in_the_body_frame(params: QuadrotorParams) -> None:
     client = make_world(gravity=0.0, ground=False)
     drag = np.array([0.1, 0.4, 0.3])
-    prm = dataclasses.replace(params, linear_drag_b=drag)
+    prm = dataclasses.replace(params, linear_drag_b=drag, drag_airframe_fraction=1.0)
     drone = Quadrotor(client, prm)
     # Yawed 90 deg: world x is body -y, so world-x motion feels the body-y coefficient.
     drone.reset((0.0, 0.0, 5.0), yaw=math.pi / 2, velocity_w=(1.0, 0.0, 0.0))
@@ -534,3 +534,46 @@ def test_wind_can_be_set_from_outside(params: QuadrotorParams) -> None:
         client.stepSimulation()
     assert drone.last_wind_w == (3.0, -1.0, 0.0)
     np.testing.assert_allclose(drone.read_state().position_w, modelled[-1], atol=1e-12)
+
+
+def _drag_decay(params: QuadrotorParams, omega: float) -> float:
+    """World-x speed left after 0.5 s of drag alone (no gravity), the rotors held at
+    ``omega``, from 1 m/s."""
+    client = make_world(gravity=0.0, ground=False)
+    drone = Quadrotor(client, params)
+    drone.reset((0.0, 0.0, 5.0), 0.0, velocity_w=(1.0, 0.0, 0.0))
+    drone.armed = omega > 0.0  # disarmed rotors stay stopped
+    drone.set_rotor_speeds(np.full(4, omega))
+    for _ in range(120):
+        drone.apply_rotor_commands(np.full(4, omega), DT)
+        client.stepSimulation()
+    return float(drone.read_state().velocity_w[0])
+
+
+def test_the_rotor_drag_fades_with_the_rotor_speed_and_the_airframe_s_does_not(
+    params: QuadrotorParams,
+) -> None:
+    """At hover the whole identified drag acts; with the rotors stopped only the airframe's
+    share (``drag.airframe_fraction``), so a drone whose motors are cut on a deck in wind is no
+    longer pushed as hard as one flying."""
+    fraction = params.drag_airframe_fraction
+    assert 0.0 < fraction < 1.0
+    d, m = params.linear_drag_b[0], params.mass
+    assert _drag_decay(params, params.hover_omega) == pytest.approx(
+        math.exp(-d / m * 0.5), rel=2e-3
+    )
+    stopped = _drag_decay(params, 0.0)
+    assert stopped == pytest.approx(math.exp(-fraction * d / m * 0.5), rel=2e-3)
+    half = _drag_decay(params, 0.5 * params.hover_omega)
+    assert half == pytest.approx(
+        math.exp(-(fraction + 0.5 * (1 - fraction)) * d / m * 0.5), rel=2e-3
+    )
+
+
+def test_a_bad_airframe_drag_fraction_is_refused_naming_its_yaml_key(tmp_path: Path) -> None:
+    def above_one(data: dict) -> None:
+        data["drag"]["airframe_fraction"] = 1.5
+
+    with pytest.raises(ConfigError) as info:
+        QuadrotorParams.from_yaml(_write_variant(tmp_path, above_one))
+    assert info.value.key == "drag.airframe_fraction"

@@ -103,6 +103,8 @@ def test_the_ship_timing_ids_v2_track_and_lead_the_deck_s_acceleration_and_v1_do
         assert "tracker_model" not in old and "deck_lead_s" not in old
         assert new["tracker_model"] == "acceleration" and new["deck_lead_s"] == 0.2
         assert {k: v for k, v in new.items() if k in old} == old
+        v3 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v3"].task_kwargs["timing"]["guidance"]
+        assert v3 == {**new, "lost_deck": "search"} and "lost_deck" not in new
 
 
 def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it() -> None:
@@ -148,6 +150,67 @@ def test_the_descent_stops_as_the_tag_nears_the_image_edge_and_climbs_when_it_is
         guidance.observe(_observation(None, tof_m=2.0), own)
     lost = guidance.descend(_observation(None, tof_m=2.0), own).velocity_h[2]
     assert lost == pytest.approx(gains.lost_tag_climb_speed, abs=0.02)
+
+
+def _lose_the_deck(lost_deck: str) -> tuple[DeckGuidance, OwnState]:
+    """A track of the deck straight below at 2 m, then 2 s with neither the tag nor a range
+    (longer than the tracker's 1.5 s coast) while the drone drifts 0.5 m forward and 0.3 m
+    right."""
+    guidance = DeckGuidance(GuidanceGains(track_deck=True, lost_deck=lost_deck), DT)
+    for _ in range(40):
+        guidance.observe(_observation((0.0, 0.0, 2.0), tof_m=2.0), _level((0.0, 0.0, 2.0)))
+        guidance.descend(_observation((0.0, 0.0, 2.0), tof_m=2.0), _level((0.0, 0.0, 2.0)))
+    drifted = _level((0.5, -0.3, 2.0))
+    for _ in range(40):
+        guidance.observe(_observation(None), drifted)
+    return guidance, drifted
+
+
+def test_with_the_deck_lost_high_up_the_search_climbs_back_over_it_where_v2_descends_blind() -> (
+    None
+):
+    searching, drifted = _lose_the_deck("search")
+    assert not searching.tracker.valid and searching.tracker.horizontal_valid
+    climb = searching.descend(_observation(None), drifted).velocity_h
+    # climbing at lost_tag_climb_speed, back towards the deck's tracked position (behind,
+    # to the left), where the plain law goes straight down at the last range's speed
+    assert climb[2] == pytest.approx(searching.gains.lost_tag_climb_speed, abs=1e-6)
+    assert climb[0] < -0.3 and climb[1] > 0.2
+    blind = _lose_the_deck("descend")[0].descend(_observation(None), drifted).velocity_h
+    assert blind[2] < -0.5 and np.allclose(blind[:2], 0.0)
+    # the hold searches too, and no higher than max_search_range_m over the deck's last height
+    assert searching.hold(_observation(None), 2.0, drifted).velocity_h[2] > 0.1
+    high = _level((0.5, -0.3, searching.gains.max_search_range_m + 0.1))
+    assert searching.descend(_observation(None), high).velocity_h[2] == pytest.approx(0.0)
+
+
+def test_the_search_ends_when_the_deck_is_seen_again_and_the_descent_goes_on() -> None:
+    guidance, _ = _lose_the_deck("search")
+    above = _level((0.5, -0.3, 2.4))
+    guidance.descend(_observation(None), above)
+    for _ in range(10):  # the tag straight below again, 2.4 m down
+        guidance.observe(_observation((0.0, 0.0, 2.4), tof_m=2.4), above)
+    assert guidance.tracker.valid
+    assert guidance.descend(_observation((0.0, 0.0, 2.4), tof_m=2.4), above).velocity_h[2] < -0.3
+
+
+def test_a_track_lost_close_to_the_deck_keeps_descending_on_the_last_range() -> None:
+    """Below ``blind_range_m`` the deck is there to land on: no go-around."""
+    guidance = DeckGuidance(GuidanceGains(track_deck=True, lost_deck="search"), DT)
+    low = _level((0.0, 0.0, 0.2))
+    for _ in range(20):
+        guidance.observe(_observation(None, tof_m=0.2), low)
+        guidance.descend(_observation(None, tof_m=0.2), low)
+    for _ in range(40):
+        guidance.observe(_observation(None), low)
+    assert guidance.descend(_observation(None), low).velocity_h[2] < 0.0
+
+
+def test_a_bad_lost_deck_setting_is_refused_naming_its_key_and_choices() -> None:
+    from landing_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"lost_deck.*search"):
+        GuidanceGains(lost_deck="climb")
 
 
 def test_the_ship_decks_judge_the_drone_to_deck_attitude_by_the_gear_clearance_angle() -> None:
@@ -274,3 +337,26 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(
                 assert math.isfinite(setpoint.yaw_rate)
 
     run()
+
+
+def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_again() -> None:
+    """ship-ss4, seed 1000007 of the evaluation: a gust leans the drone 25 deg at the 2 m
+    hold, the tag and all four rays leave the 2 m pad; v2's guidance flies on down blind, past
+    the pad's edge, until the descent times out; v3's climbs back over the deck's last track,
+    finds it again and lands."""
+    from agents.evaluation.landing import make_env_and_policy, run_episode
+
+    outcomes = {}
+    for lost_deck in ("descend", "search"):
+        env, policy = make_env_and_policy(
+            "land-now",
+            "ship-ss4",
+            "tight",
+            extra_overrides={"sensors": "realistic", "timing.guidance.lost_deck": lost_deck},
+        )
+        try:
+            outcomes[lost_deck] = run_episode(env, policy, 1_000_007, "land-now", "ship-ss4")
+        finally:
+            env.close()
+    assert outcomes["descend"].outcome == "timeout"
+    assert outcomes["search"].success

@@ -66,6 +66,9 @@ from landing_env.physics.controller import VelocitySetpoint
 DESCENT_PROFILES = ("range", "timed")
 #: the deck tracker's motion models (:attr:`GuidanceGains.tracker_model`)
 TRACKER_MODELS = ("velocity", "acceleration")
+#: what the deck-frame guidance does once the deck's height track is lost
+#: (:attr:`GuidanceGains.lost_deck`)
+LOST_DECK_ACTIONS = ("descend", "search")
 
 
 def timed_descent_reference(
@@ -175,6 +178,17 @@ class GuidanceGains:
     #: constant (``controller.vel_p_z`` = 5/s: 0.2 s), so a set-point of the present deck
     #: velocity meets an accelerating deck late; 0 turns it off, seconds
     deck_lead_s: float = 0.0
+    #: what the deck-frame guidance does once neither the tag nor a ToF range has measured
+    #: the deck for ``tracker_coast_s`` (the height track dropped) while the drone was above
+    #: ``blind_range_m``: ``"descend"`` flies the plain law on (nothing seen: straight down
+    #: at the last range's speed, which off the pad's edge falls past the deck) or
+    #: ``"search"``: the go-around of ship landing (a pilot who loses the visual reference
+    #: on the approach aborts and climbs; CAP 437, *Standards for offshore helicopter
+    #: landing areas*, and the US Navy's NATOPS LHA/LHD procedures): climb at
+    #: ``lost_tag_climb_speed`` to ``max_search_range_m`` over the deck's last tracked height,
+    #: re-centred (the camera aimed) on its coasting horizontal track, until a measurement
+    #: restarts the track and the descent
+    lost_deck: str = "descend"
 
     def __post_init__(self) -> None:
         for name in (
@@ -190,6 +204,7 @@ class GuidanceGains:
         require_range("lost_tag_climb_speed", self.lost_tag_climb_speed, 0.0)
         require_choice("descent_profile", self.descent_profile, DESCENT_PROFILES)
         require_choice("tracker_model", self.tracker_model, TRACKER_MODELS)
+        require_choice("lost_deck", self.lost_deck, LOST_DECK_ACTIONS)
         require_range("tracker_jerk_psd", self.tracker_jerk_psd, 0.0, low_inclusive=False)
         require_range("deck_lead_s", self.deck_lead_s, 0.0, 2.0)
         require_range("descent_time_s", self.descent_time_s, 0.2, 10.0)
@@ -282,6 +297,8 @@ class DeckTracker:
         self.cov = np.zeros((3, self.order, self.order))
         self.started = np.zeros(3, dtype=bool)
         self.unseen_s = np.full(3, math.inf)
+        #: the deck's height when its track was last measured (None: never measured)
+        self.last_height_w: float | None = None
 
     @property
     def valid(self) -> bool:
@@ -314,6 +331,8 @@ class DeckTracker:
             if math.isfinite(value):
                 self._correct(axis, value)
                 self.unseen_s[axis] = 0.0
+                if axis == 2:
+                    self.last_height_w = float(self.state[2, 0])
             elif axis == 2 and self.unseen_s[axis] > self.coast_s:
                 # no range for that long: the height track is dropped (the horizontal ones
                 # coast on: a hove-to ship's deck oscillates about a fixed mean position)
@@ -406,6 +425,8 @@ class DeckGuidance:
         self._lean_started = False
         self._tag_unseen_s = math.inf
         self._flare_wait_s = 0.0
+        #: searching for the lost deck (``lost_deck = "search"``)
+        self._search_on = False
         #: the timed descent's clock and start height (None: not descending)
         self._descent_clock_s: float | None = None
         self._descent_start_m = 0.0
@@ -419,6 +440,7 @@ class DeckGuidance:
         self._tag_unseen_s = math.inf
         self._flare_wait_s = 0.0
         self._descent_clock_s = None
+        self._search_on = False
         self.descent_time_s = self.gains.descent_time_s
         self.tracker.reset()
 
@@ -457,6 +479,8 @@ class DeckGuidance:
         g = self.gains
         # the deck's velocity ``deck_lead_s`` ahead: the velocity loop's lag is met early
         deck_v = self.tracker.velocity_w + g.deck_lead_s * self.tracker.acceleration_w
+        if not self.tracker.valid:
+            deck_v[2] = 0.0  # the height track is lost (searching): no stale heave rate
         relative = np.zeros(2)
         if not self.tracker.horizontal_valid:
             deck_v[:2] = 0.0
@@ -475,6 +499,35 @@ class DeckGuidance:
         c, s = math.cos(yaw), math.sin(yaw)
         v_h = np.array([c * v_w[0] + s * v_w[1], -s * v_w[0] + c * v_w[1], v_w[2]])
         return VelocitySetpoint(v_h, yaw_rate)
+
+    def _searching(self, own: OwnState | None) -> bool:
+        """``lost_deck = "search"`` applies: the deck's height track, once held, is lost while
+        the drone was last above ``blind_range_m``."""
+        g = self.gains
+        if (
+            not g.track_deck
+            or g.lost_deck != "search"
+            or own is None
+            or self.tracker.valid
+            or self.tracker.last_height_w is None
+        ):
+            self._search_on = False
+        elif self._last_range > g.blind_range_m:
+            self._search_on = True  # and it goes on until the track is found again
+        return self._search_on
+
+    def _search(self, own: OwnState) -> VelocitySetpoint:
+        """The go-around with the deck lost (see ``GuidanceGains.lost_deck``): climb at
+        ``lost_tag_climb_speed`` to ``max_search_range_m`` over the deck's last tracked
+        height, over its coasting horizontal track; a timed descent starts again once the
+        deck is found."""
+        g = self.gains
+        self._descent_clock_s = None
+        assert self.tracker.last_height_w is not None
+        above = float(own.position_w[2]) - self.tracker.last_height_w
+        self._last_range = above
+        climb = g.lost_tag_climb_speed if above < g.max_search_range_m else 0.0
+        return self._deck_frame_setpoint(own, climb, 0.0)
 
     def tracked_range_m(self, own: OwnState) -> float:
         """The camera's height above the deck from the tracker (NaN without a track)."""
@@ -590,6 +643,9 @@ class DeckGuidance:
         """
         g = self.gains
         self._descent_clock_s = None
+        if self._searching(own):
+            assert own is not None
+            return self._search(own)
         if self._tracking(own):
             assert own is not None
             height = self.tracked_range_m(own)
@@ -658,6 +714,9 @@ class DeckGuidance:
                 speed = 0.0  # climb to widen the view, but no higher than this
             yaw_rate = self._yaw_rate(observation) if centre else 0.0
             return self._deck_frame_setpoint(own, -speed, yaw_rate)
+        if self._searching(own):
+            assert own is not None
+            return self._search(own)
         height = self.range_m(observation)
         if math.isfinite(height):
             self._last_range = height

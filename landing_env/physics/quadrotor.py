@@ -79,6 +79,12 @@ class QuadrotorParams:
     #: body z of the ToF sensors (m) and their distance from the camera axis (m)
     tof_mount_z: float
     tof_arm_distance: float
+    #: the part of ``linear_drag_b`` that is the airframe's own (arms, body, gear: it acts
+    #: whatever the rotors do); the rest is rotor drag (blade flapping and induced drag), which
+    #: grows with the rotor speed, so it is scaled by the mean rotor speed over the hover speed
+    #: (at hover the whole ``linear_drag_b`` acts; with the motors cut to idle, little of the
+    #: rotor part does).  1 keeps the whole drag whatever the rotor speed
+    drag_airframe_fraction: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("inertia_diag", "rotor_positions_b", "spin_directions"):
@@ -143,6 +149,7 @@ class QuadrotorParams:
         _require_shape("linear_drag_b", self.linear_drag_b, (3,))
         if np.any(self.linear_drag_b < 0.0):
             raise ConfigError("linear_drag_b", "drag coefficients must be >= 0")
+        require_range("drag_airframe_fraction", self.drag_airframe_fraction, 0.0, 1.0)
         require_choice("ground_effect_model", self.ground_effect_model, _GROUND_EFFECT_MODELS)
         require_range("ground_effect_coefficient", self.ground_effect_coefficient, 0.0, 10.0)
         require_range("ground_effect_max_gain", self.ground_effect_max_gain, 1.0, 10.0)
@@ -234,6 +241,7 @@ class QuadrotorParams:
                 omega_min=motors.number("omega_min"),
                 omega_max=motors.number("omega_max"),
                 linear_drag_b=drag.get("linear_b"),
+                drag_airframe_fraction=drag.number("airframe_fraction"),
                 ground_effect_enabled=bool(ground.get("enabled")),
                 ground_effect_model=str(ground.get("model")),
                 ground_effect_coefficient=ground.number("coefficient"),
@@ -272,6 +280,7 @@ _YAML_KEYS: dict[str, str] = {
     "omega_min": "motors.omega_min",
     "omega_max": "motors.omega_max",
     "linear_drag_b": "drag.linear_b",
+    "drag_airframe_fraction": "drag.airframe_fraction",
     "ground_effect_model": "ground_effect.model",
     "ground_effect_coefficient": "ground_effect.coefficient",
     "ground_effect_max_gain": "ground_effect.max_gain",
@@ -636,6 +645,9 @@ class Quadrotor:
         )
         d0, d1, d2 = prm.linear_drag_b.tolist()
         self._drag = (float(d0), float(d1), float(d2))
+        # drag = linear_b (airframe + (1 - airframe) * mean rotor speed / hover speed)
+        self._drag_airframe = float(prm.drag_airframe_fraction)
+        self._drag_per_omega = (1.0 - self._drag_airframe) / (4.0 * float(prm.hover_omega))
         self._ground_effect_on = bool(prm.ground_effect_enabled)
         self._ge_const = prm.ground_effect_coefficient * (prm.rotor_radius / 4.0) ** 2
         self._ge_multirotor = prm.ground_effect_model == "sanchez_cuevas"
@@ -734,9 +746,14 @@ class Quadrotor:
         ay = vel[1] - wind[1]
         az = vel[2] - wind[2]
         d0, d1, d2 = self._drag
-        fx = -d0 * (r00 * ax + r10 * ay + r20 * az)
-        fy = -d1 * (r01 * ax + r11 * ay + r21 * az)
-        fz -= d2 * (r02 * ax + r12 * ay + r22 * az)
+        # the rotor drag grows with the rotor speed (Mahony, Kumar & Corke 2012), the
+        # airframe's does not: at hover the scale is 1
+        scale = self._drag_airframe + self._drag_per_omega * (
+            omega[0] + omega[1] + omega[2] + omega[3]
+        )
+        fx = -scale * d0 * (r00 * ax + r10 * ay + r20 * az)
+        fy = -scale * d1 * (r01 * ax + r11 * ay + r21 * az)
+        fz -= scale * d2 * (r02 * ax + r12 * ay + r22 * az)
 
         # The net force acts at the whole body's CoM (drag through the CoM, as modelled); the
         # thrusts' torques about it equal the torques computed above because the CoM lies on
