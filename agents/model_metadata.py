@@ -162,11 +162,24 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
         OBSERVATION_LIMIT,
         TOF_SCALE,
         TimingObservationLayout,
+        observed_prediction_size,
     )
 
     n_history = max(1, round(timing.history_s * env_hz))
-    layout = TimingObservationLayout(n_history, timing.hold_height_m)
+    layout = TimingObservationLayout(
+        n_history, timing.hold_height_m, observed_prediction_size(timing)
+    )
+    # the prediction observation's values mean what its predictor and contact times make them
+    prediction: dict[str, Any] = {}
+    if timing.observation != "history":
+        prediction = {
+            "observation": timing.observation,
+            "tilt_model": timing.tilt_model,
+            "contact_times_s": [float(c) for c in timing.contact_times_s],
+            "opportunity_s": float(timing.opportunity_s),
+        }
     return {
+        **prediction,
         "descent": descent_signature(
             timing.guidance,
             timing.wave_off_tilt_deg,

@@ -39,6 +39,11 @@
 * ``timing-dqn-waveoff30`` (``DeckLandingTiming-v0``): the same with a 30 s wait limit
   (``--set timing.wave_off_tilt_deg=4.5 timing.wait_limit_s=30``),
   ``agents/models/timing_dqn_waveoff30.zip`` (``configs/train/timing_dqn_waveoff30.yaml``).
+* ``timing-dqn-predictive`` (``DeckLandingTiming-v0``): a DQN that weighs what ``predictive``
+  weighs: it observes, in place of the history, the deck-tilt predictor's chance at each
+  contact time and the value of waiting on (``timing.observation: prediction``,
+  ``DeckLandingTiming-BenchSS{3,4,5}-v5``), ``agents/models/timing_dqn_predictive.zip``
+  (``configs/train/timing_dqn_predictive.yaml``).
 """
 
 from __future__ import annotations
@@ -618,6 +623,7 @@ POLICY_ENVS: dict[str, str] = {
     "timing-dqn-waveoff": "DeckLandingTiming-v0",
     "timing-dqn-waveoff30": "DeckLandingTiming-v0",
     "predictive": "DeckLandingTiming-v0",
+    "timing-dqn-predictive": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 
@@ -662,6 +668,11 @@ def make_policy(
         )
     if name == "land-now":
         return LandNowPolicy()
+    if name in ("quiescent", "predictive") and not base.layout.history_observed:
+        raise ConfigError(
+            "timing.observation",
+            f"is {base.timing.observation!r}; {name} reads the deck-pose history: use 'history'",
+        )
     if name == "quiescent":
         return QuiescentPolicy(base.layout, dt)
     if name == "predictive":

@@ -161,15 +161,20 @@ PREDICTIVE_VERSIONS: dict[int, str] = {
     "value of waiting on",
     4: "the timed descent whose contact time each commit chooses by the deck-tilt predictor, "
     "an 8 s history and the predictor's wave-off below the value of waiting on",
+    5: "v4's descent and wave-off, observing instead of the history the deck-tilt predictor's "
+    "chance at each contact time and the value of waiting on (for a learned policy)",
 }
 
 
 def bench_predictive_timing(sea_state: int, version: int = 4) -> dict[str, Any]:
     """The timing settings of ``DeckLandingTiming-BenchSS<n>-v<version>`` (v2: the model
     wave-off below a fixed chance of 0.8; v3: below the value of waiting on; v4: and the
-    contact time chosen in ``CONTACT_WINDOW_S``; v2 and v3 have the fixed 1.3 s contact)."""
+    contact time chosen in ``CONTACT_WINDOW_S``; v2 and v3 have the fixed 1.3 s contact; v5:
+    v4 observing the predictor's chances and the value of waiting instead of the history)."""
     require_choice("version", version, tuple(PREDICTIVE_VERSIONS))
-    rule: dict[str, Any] = {} if version == 4 else {"contact_window_s": []}
+    rule: dict[str, Any] = {} if version >= 4 else {"contact_window_s": []}
+    if version == 5:
+        rule["observation"] = "prediction"
     if version == 2:
         rule.update({"wave_off_rule": "fixed", "wave_off_probability": 0.8})
     return {

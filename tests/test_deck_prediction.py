@@ -694,3 +694,123 @@ def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_ov
         assert env.unwrapped.timing.history_s == 2.0 and env.unwrapped.tilt_predictor is None
     finally:
         env.close()
+
+
+def test_the_prediction_layout_round_trips_its_values_in_place_of_the_history():
+    from landing_env.envs.timing import TimingObservationLayout
+
+    layout = TimingObservationLayout(160, 0.7, n_prediction=6)
+    assert not layout.history_observed and layout.size == 6 + 9
+    prediction = np.array([0.9, 0.8, 0.7, 0.6, 0.85, 1.0])
+    tof = np.array([0.7, 0.71, np.nan, 0.69])
+    valid = np.array([True, True, False, True])
+    flat, clipped = layout.encode(np.zeros((160, 10)), tof, valid, 0.25, prediction)
+    parts = layout.decode(flat)
+    assert not clipped and np.allclose(parts.prediction, prediction, atol=1e-6)
+    assert parts.history.shape == (0, 10) and parts.wait_fraction == pytest.approx(0.25)
+    assert np.allclose(parts.tof_range[valid], tof[valid], atol=1e-5)
+    with pytest.raises(ValueError, match="prediction values"):
+        layout.encode(np.zeros((160, 10)), tof, valid, 0.25, prediction[:4])
+
+
+def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on():
+    """What a v5 observation holds is what the ``predictive`` rule computes from the same
+    history: the chance at each contact time and the value of waiting over the wait left."""
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+    from landing_env.envs.history import HISTORY_FEATURES
+
+    env = gym.make("DeckLandingTiming-BenchSS5-v5", overrides={"sensors": "realistic"})
+    try:
+        base = env.unwrapped
+        assert env.observation_space.shape == (4 + 2 + 9,)
+        observation, _ = env.reset(seed=21)
+        for _ in range(30):
+            observation, _, terminated, _, info = env.step(0)
+            assert not terminated
+        parts = base.layout.decode(observation)
+        rows = base.history.rows()
+        columns = [HISTORY_FEATURES.index(n) for n in base.tilt_predictor.channels]
+        valid = rows[:, HISTORY_FEATURES.index("valid")] > 0.5
+        expected = [
+            base.tilt_predictor.predict(rows[:, columns], valid, h).probability_within(5.0)
+            for h in base.timing.contact_times_s
+        ]
+        assert parts.prediction[5] == 1.0
+        assert np.allclose(parts.prediction[:4], expected, atol=1e-6)
+        left = base.timing.wait_limit_s - info["wait_s"]
+        value = base.observed_values.threshold(left, base.timing.opportunity_s)
+        assert parts.prediction[4] == pytest.approx(value, abs=1e-6)
+        assert 0.0 < value < 1.0
+    finally:
+        env.close()
+
+
+def test_the_history_reading_policies_refuse_a_prediction_observation_naming_the_key():
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+    from agents.policies import make_policy
+    from landing_env.errors import ConfigError
+
+    env = gym.make("DeckLandingTiming-BenchSS4-v5")
+    try:
+        for name in ("quiescent", "predictive"):
+            with pytest.raises(ConfigError, match=r"timing\.observation"):
+                make_policy(name, env)
+        assert make_policy("land-now", env).act(env.reset(seed=1)[0]) == 1
+    finally:
+        env.close()
+
+
+def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+    from landing_env.envs.timing import TimingConfig
+    from landing_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="observation"):
+        TimingConfig(observation="chances")
+    with pytest.raises(ConfigError, match=r"timing\.tilt_model"):
+        gym.make("DeckLandingTiming-v0", config="bench-ss4", timing={"observation": "prediction"})
+
+
+def test_a_model_card_tells_the_prediction_observation_from_the_history():
+    from agents.model_metadata import observation_signature
+    from landing_env.config_loading import build_dataclass
+    from landing_env.envs.timing import TimingConfig
+    from landing_env.scenarios import bench_predictive_timing
+
+    v4 = observation_signature(
+        build_dataclass(TimingConfig, bench_predictive_timing(5, 4), "t"), 20
+    )
+    v5 = observation_signature(
+        build_dataclass(TimingConfig, bench_predictive_timing(5, 5), "t"), 20
+    )
+    assert "observation" not in v4 and v4["size"] == 160 * 10 + 9
+    assert v5["observation"] == "prediction" and v5["tilt_model"] == "bench-ss5"
+    assert v5["contact_times_s"] == [1.2, 1.3, 1.4, 1.5] and v5["size"] == 15
+
+
+def test_random_decisions_on_a_v5_id_under_realistic_sensing_never_leave_the_space():
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401
+
+    env = gym.make("DeckLandingTiming-BenchSS4-v5", overrides={"sensors": "realistic"})
+    rng = np.random.default_rng(8)
+    try:
+        for episode in range(2):
+            observation, _ = env.reset(seed=300 + episode)
+            done = False
+            while not done:
+                assert env.observation_space.contains(observation)
+                assert np.all((observation[:6] >= 0.0) & (observation[:6] <= 1.0))
+                observation, reward, terminated, truncated, info = env.step(int(rng.random() < 0.1))
+                assert math.isfinite(reward)
+                done = terminated or truncated
+            assert info["outcome"] != "in_flight"
+    finally:
+        env.close()

@@ -73,8 +73,12 @@ RANGE_DESCENT: dict[str, Any] = {"timing.guidance.descent_profile": "range"}
 #: the timing settings a policy flies with on top of the scenario's, unless ``--set`` says
 #: otherwise: the ``predictive`` policy reads an 8 s history and flies with the wave-off by
 #: the scenario's deck-tilt predictor (landing_env.scenarios' ``PREDICTIVE_TIMING``, the
-#: settings of the v3 bench ids)
-POLICY_TIMING: dict[str, dict[str, Any]] = {"predictive": PREDICTIVE_TIMING}
+#: settings of the v4 bench ids); ``timing-dqn-predictive`` the same, observing the
+#: predictor's chances instead of the history (the v5 bench ids)
+POLICY_TIMING: dict[str, dict[str, Any]] = {
+    "predictive": PREDICTIVE_TIMING,
+    "timing-dqn-predictive": {**PREDICTIVE_TIMING, "observation": "prediction"},
+}
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000

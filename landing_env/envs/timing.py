@@ -78,6 +78,8 @@ WAVE_OFF_RULES = ("fixed", "value")
 WAVE_OFF_CLIMB_S = 1.5
 #: the shortest timed descent a contact window may ask for, seconds
 MIN_CHOSEN_DESCENT_S = 1.0
+#: what the observation holds (``TimingConfig.observation``)
+OBSERVATION_KINDS = ("history", "prediction")
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -108,20 +110,37 @@ class TimingObservationParts:
     tof_valid: np.ndarray
     #: waited time / wait limit
     wait_fraction: float
+    #: the prediction layout's values (see :class:`TimingObservationLayout`); empty otherwise
+    prediction: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
 class TimingObservationLayout:
     """Layout of the flat observation: ``n_history`` rows of :data:`HISTORY_FEATURES`
     (scaled by :data:`HISTORY_SCALES`, z and the ToF ranges relative to the hold height),
-    then 4 ToF ranges, 4 ToF validities and the wait fraction."""
+    then 4 ToF ranges, 4 ToF validities and the wait fraction.
+
+    With ``n_prediction`` > 0 (``TimingConfig.observation = "prediction"``) the history rows
+    are replaced by ``n_prediction`` values of the deck-tilt predictor, all in [0, 1]: the
+    chance of a deck within the touchdown limit at each of the ``n_prediction - 2`` contact
+    times, the value of waiting on (the chance a later commit is expected to get), and 1 when
+    the prediction is valid (0: too little seen; the chances are then 0)."""
 
     n_history: int
     hold_height_m: float
+    n_prediction: int = 0
+
+    @property
+    def history_observed(self) -> bool:
+        """The observation holds the history rows (not the prediction)."""
+        return self.n_prediction == 0
 
     @property
     def size(self) -> int:
-        return self.n_history * len(HISTORY_FEATURES) + 9
+        head = (
+            self.n_history * len(HISTORY_FEATURES) if self.history_observed else self.n_prediction
+        )
+        return head + 9
 
     @property
     def space(self) -> spaces.Box:
@@ -133,17 +152,25 @@ class TimingObservationLayout:
         tof_range: np.ndarray,
         tof_valid: np.ndarray,
         wait_fraction: float,
+        prediction: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool]:
-        """The flat observation and whether any value had to be clipped to the bounds."""
-        rows = np.array(history, dtype=float)
-        valid = rows[:, 9] > 0.5
-        rows[valid, 2] -= self.hold_height_m
-        rows *= HISTORY_SCALES
+        """The flat observation and whether any value had to be clipped to the bounds
+        (``prediction``: the prediction layout's values, needed by it)."""
+        if self.history_observed:
+            rows = np.array(history, dtype=float)
+            valid = rows[:, 9] > 0.5
+            rows[valid, 2] -= self.hold_height_m
+            rows *= HISTORY_SCALES
+            head = rows.ravel()
+        else:
+            head = np.nan_to_num(np.asarray(prediction, dtype=float).reshape(-1))
+            if head.size != self.n_prediction:
+                raise ValueError(
+                    f"{head.size} prediction values; the layout needs {self.n_prediction}"
+                )
         tof_valid = np.asarray(tof_valid, dtype=bool)
         tof = np.where(tof_valid, np.nan_to_num(tof_range) - self.hold_height_m, 0.0)
-        flat = np.concatenate(
-            [rows.ravel(), tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]]
-        )
+        flat = np.concatenate([head, tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]])
         clipped = bool(np.any(np.abs(flat) > OBSERVATION_LIMIT))
         flat = np.clip(flat, -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
         return flat.astype(np.float32), clipped
@@ -153,13 +180,19 @@ class TimingObservationLayout:
         flat = np.asarray(observation, dtype=float).reshape(-1)
         if flat.size != self.size:
             raise ValueError(f"observation has {flat.size} values; the layout needs {self.size}")
-        n = self.n_history * len(HISTORY_FEATURES)
-        rows = flat[:n].reshape(self.n_history, len(HISTORY_FEATURES)) / HISTORY_SCALES
-        valid = rows[:, 9] > 0.5
-        rows[valid, 2] += self.hold_height_m
+        prediction = np.zeros(0)
+        if self.history_observed:
+            n = self.n_history * len(HISTORY_FEATURES)
+            rows = flat[:n].reshape(self.n_history, len(HISTORY_FEATURES)) / HISTORY_SCALES
+            valid = rows[:, 9] > 0.5
+            rows[valid, 2] += self.hold_height_m
+        else:
+            n = self.n_prediction
+            rows = np.zeros((0, len(HISTORY_FEATURES)))
+            prediction = flat[:n].copy()
         tof_valid = flat[n + 4 : n + 8] > 0.5
         tof = np.where(tof_valid, flat[n : n + 4] / TOF_SCALE + self.hold_height_m, np.nan)
-        return TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]))
+        return TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]), prediction)
 
 
 # ------------------------------------------------------------------------------ the task
@@ -238,6 +271,13 @@ class TimingConfig:
     #: ``expected_contact_s``)
     contact_window_s: list[float] = field(default_factory=list)
     contact_step_s: float = 0.1
+    #: what the observation holds: ``history`` (the deck-pose history, as every id up to the
+    #: bench's v4) or ``prediction``: instead of the history, what the ``predictive`` rule
+    #: weighs, for a learned policy to weigh: the chance ``tilt_model`` gives of a deck within
+    #: the touchdown limit at each of ``contact_times_s``, the value of waiting on (the
+    #: optimal-stopping value of such chances over the wait left, one opportunity per
+    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`)
+    observation: str = "history"
 
     def __post_init__(self) -> None:
         require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
@@ -266,6 +306,7 @@ class TimingConfig:
         require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
         require_range("wave_off_probability", self.wave_off_probability, 0.0, 1.0)
         require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
+        require_choice("observation", self.observation, OBSERVATION_KINDS)
         require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
         if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
             raise ConfigError(
@@ -333,6 +374,11 @@ class TimingConfig:
         return self.guidance.descent_time_s + contact_s - self.expected_contact_s
 
 
+def observed_prediction_size(timing: TimingConfig) -> int:
+    """How many prediction values the observation holds (0: the history instead)."""
+    return len(timing.contact_times_s) + 2 if timing.observation == "prediction" else 0
+
+
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
     """Wait or commit over the moving deck (see the module docstring).
 
@@ -366,13 +412,17 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         sim = self.config.simulation
         n_history = max(1, round(self.timing.history_s * sim.env_hz))
         rate_window = max(2, round(self.timing.rate_window_s * sim.env_hz))
-        self.layout = TimingObservationLayout(n_history, self.timing.hold_height_m)
+        self.layout = TimingObservationLayout(
+            n_history, self.timing.hold_height_m, observed_prediction_size(self.timing)
+        )
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
-        #: the scenario's deck-tilt predictor, read by the model wave-off and the contact
-        #: window (None when neither is on)
+        #: the scenario's deck-tilt predictor, read by the model wave-off, the contact
+        #: window and the prediction observation (None when none is on)
         self.tilt_predictor = self._load_tilt_predictor()
         self.wave_off_values = self._wave_off_values()
+        #: the value of waiting on that the prediction observation holds
+        self.observed_values = self._observed_values()
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -405,14 +455,39 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             )
         return values
 
+    def _observed_values(self) -> StoppingValues | None:
+        """The value of waiting on for the prediction observation: from the chances the
+        predictor gave held-out examples at the contact times, within the touchdown limit."""
+        t = self.timing
+        if t.observation != "prediction" or self.tilt_predictor is None:
+            return None
+        limit = self.config.touchdown.max_deck_tilt_deg
+        values = self.tilt_predictor.stopping_values(t.contact_times_s, limit)
+        if values is None:
+            self.world.close()
+            raise ConfigError(
+                "timing.observation",
+                f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
+                f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
+                "does not hold: refit it with `python -m agents.deck_predictor fit`",
+            )
+        return values
+
     def _load_tilt_predictor(self) -> LinearTiltPredictor | None:
-        """The fitted deck-tilt predictor (read by the ``model`` wave-off and the contact
-        window), checked against the history it will read."""
+        """The fitted deck-tilt predictor (read by the ``model`` wave-off, the contact
+        window and the prediction observation), checked against the history it will read."""
         t = self.timing
         wave_off = t.wave_off_predictor == "model" and t.wave_off_tilt_deg > 0.0
-        if not (wave_off or t.contact_window_s):
+        observed = t.observation == "prediction"
+        if not (wave_off or t.contact_window_s or observed):
             return None
-        user = "the model wave-off" if wave_off else "timing.contact_window_s"
+        user = (
+            "the model wave-off"
+            if wave_off
+            else "timing.contact_window_s"
+            if t.contact_window_s
+            else "timing.observation = 'prediction'"
+        )
         if not t.tilt_model:
             self.world.close()
             raise ConfigError(
@@ -688,8 +763,33 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             self._base_observation["tof_range"].astype(float),
             tof_valid,
             min(self._wait_s / self.timing.wait_limit_s, 1.0),
+            None if self.layout.history_observed else self._prediction_values(),
         )
         return observation
+
+    def _prediction_values(self) -> np.ndarray:
+        """The prediction observation's values (:class:`TimingObservationLayout`): the chance
+        at each contact time, the value of waiting on, the validity."""
+        t = self.timing
+        assert self.tilt_predictor is not None and self.observed_values is not None
+        rows = self.history.rows()
+        columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+        limit = self.config.touchdown.max_deck_tilt_deg
+        chances = np.zeros(len(t.contact_times_s))
+        valid = True
+        for k, horizon in enumerate(t.contact_times_s):
+            prediction = self.tilt_predictor.predict(
+                rows[:, columns], rows[:, _VALID] > 0.5, horizon
+            )
+            if prediction.valid:
+                chances[k] = prediction.probability_within(limit)
+            else:
+                valid = False
+        if not valid:
+            chances[:] = 0.0
+        remaining_s = max(t.wait_limit_s - self._wait_s, 0.0)
+        value = self.observed_values.threshold(remaining_s, t.opportunity_s)
+        return np.concatenate([chances, [float(np.clip(value, 0.0, 1.0)), float(valid)]])
 
     def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
         """At the hold height over the deck, offset and yawed within ``start``'s limits."""
