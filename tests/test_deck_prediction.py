@@ -814,3 +814,35 @@ def test_random_decisions_on_a_v5_id_under_realistic_sensing_never_leave_the_spa
             assert info["outcome"] != "in_flight"
     finally:
         env.close()
+
+
+def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history():
+    """``timing-dqn-predictive`` was trained on DeckLandingTiming-BenchSS5-v5 (realistic,
+    ``tight``): its card records the prediction observation; a history observation (the v4
+    settings) is refused naming the key; on held-out seeds it lands at least as often as
+    ``land-now``."""
+    from agents.evaluation.landing import evaluate_policy, make_env_and_policy
+    from agents.model_metadata import read_metadata
+    from agents.policies import shipped_timing_model
+    from landing_env.errors import ConfigError
+
+    card = read_metadata(shipped_timing_model("dqn-predictive"))
+    assert card is not None and card.observation["observation"] == "prediction"
+    assert card.observation["tilt_model"] == "bench-ss5" and card.estimator == "tight"
+    realistic = {"sensors": "realistic"}
+    with pytest.raises(ConfigError, match=r"observation"):
+        make_env_and_policy(
+            "timing-dqn-predictive",
+            "bench-ss5",
+            "tight",
+            extra_overrides={**realistic, "timing.observation": "history"},
+        )
+    episodes, first = 12, 2_000_000
+    learned = evaluate_policy(
+        "timing-dqn-predictive", "bench-ss5", episodes, first, "tight", extra_overrides=realistic
+    )
+    now = evaluate_policy(
+        "land-now", "bench-ss5", episodes, first, "tight", extra_overrides=realistic
+    )
+    assert np.mean([r.success for r in learned]) >= np.mean([r.success for r in now])
+    assert np.mean([r.success for r in learned]) >= 0.75

@@ -104,7 +104,8 @@ def test_the_ship_timing_ids_v2_track_and_lead_the_deck_s_acceleration_and_v1_do
         assert new["tracker_model"] == "acceleration" and new["deck_lead_s"] == 0.2
         assert {k: v for k, v in new.items() if k in old} == old
         v3 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v3"].task_kwargs["timing"]["guidance"]
-        assert v3 == {**new, "lost_deck": "search"} and "lost_deck" not in new
+        assert v3 == {**new, "lost_deck": "search", "flare_range_m": 0.0}
+        assert "lost_deck" not in new and new["flare_range_m"] == 0.5
 
 
 def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it() -> None:
