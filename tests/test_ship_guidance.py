@@ -281,10 +281,16 @@ def test_near_the_deck_the_descent_waits_while_a_gust_leans_the_drone_over() -> 
 
 
 @pytest.mark.parametrize(
-    ("profile", "model"), [("range", "velocity"), ("timed", "velocity"), ("range", "acceleration")]
+    ("profile", "model", "lost_deck"),
+    [
+        ("range", "velocity", "descend"),
+        ("timed", "velocity", "descend"),
+        ("range", "acceleration", "descend"),
+        ("timed", "acceleration", "search"),
+    ],
 )
 def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(
-    profile: str, model: str
+    profile: str, model: str, lost_deck: str
 ) -> None:
     from hypothesis import given, settings
     from hypothesis import strategies as st
@@ -315,6 +321,9 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(
             descent_profile=profile,
             tracker_model=model,
             deck_lead_s=0.2 if model == "acceleration" else 0.0,
+            lost_deck=lost_deck,
+            # a short coast, so that a few unseen steps drop the track and start the search
+            tracker_coast_s=0.1 if lost_deck == "search" else 1.5,
         )
         guidance = DeckGuidance(gains, DT)
         for pose, seen, ranges, valid, (roll, pitch, yaw) in steps:

@@ -27,7 +27,9 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
   - The final descent's speed is *relative* to the deck (the deck's vertical velocity minus
     a range-scheduled descent speed), so the drone meets a heaving deck at about
     ``touchdown_speed``.  It slows to a stop while the tag nears the image edge
-    (``view_half_tan``) and climbs back while the tag is lost above ``blind_range_m``.
+    (``view_half_tan``) and climbs back while the tag is lost above ``blind_range_m``; with
+    ``lost_deck = "search"`` it goes around when the deck itself is lost (neither tag nor
+    range for the tracker's coast): a climb over the deck's last height and track.
   This is the structure of ship-landing guidance that tracks the deck rather than the sea
   (Marconi, Isidori & Serrani 2002, *Automatica* 38:21-32: vertical landing on an
   oscillating platform with an internal model of its motion; Herissé et al. 2012, *IEEE
