@@ -455,6 +455,11 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             )
         return values
 
+    def _predictor_columns(self) -> list[int]:
+        """The history's columns the deck-tilt predictor reads."""
+        assert self.tilt_predictor is not None
+        return [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+
     def _observed_values(self) -> StoppingValues | None:
         """The value of waiting on for the prediction observation: from the chances the
         predictor gave held-out examples at the contact times, within the touchdown limit."""
@@ -702,7 +707,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._contact_s = t.expected_contact_s
         if t.contact_window_s and self.tilt_predictor is not None:
             rows = self.history.rows()
-            columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+            columns = self._predictor_columns()
             best = self.tilt_predictor.best_within(
                 rows[:, columns],
                 rows[:, _VALID] > 0.5,
@@ -737,7 +742,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             return False  # nothing to predict with: the descent goes on
         ahead = max(self._contact_s - elapsed_s, 0.0)
         if t.wave_off_predictor == "model" and self.tilt_predictor is not None:
-            columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+            columns = self._predictor_columns()
             prediction = self.tilt_predictor.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
             if not prediction.valid:
                 return False  # nothing to predict with: the descent goes on
@@ -773,7 +778,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         t = self.timing
         assert self.tilt_predictor is not None and self.observed_values is not None
         rows = self.history.rows()
-        columns = [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
+        columns = self._predictor_columns()
         limit = self.config.touchdown.max_deck_tilt_deg
         chances = np.zeros(len(t.contact_times_s))
         valid = True
