@@ -85,7 +85,10 @@ def collect(
     numbers: list[int] = []
     try:
         for number in tqdm(range(episodes), desc=scenario, unit="ep", disable=not progress):
-            env.reset(seed=first_seed + number)
+            _, info = env.reset(seed=first_seed + number)
+            if info.get("hold_failed"):
+                env.step(0)  # the warm-up hold ended the episode: nothing to predict from
+                continue
             while True:
                 world = base.world
                 r_cd, t_cd = world.true_deck_pose_c()

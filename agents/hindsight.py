@@ -102,7 +102,12 @@ def collect_labels(
     }
     waited: list[np.ndarray] = []
     for number, seed in enumerate(tqdm(seeds, desc="labels", unit="ep", disable=not progress)):
-        observation, _ = env.reset(seed=seed)
+        observation, info = env.reset(seed=seed)
+        if info.get("hold_failed"):
+            # the warm-up hold ended the episode: there is no decision to label
+            env.step(0)
+            waited.append(np.array([observation], dtype=np.float32))
+            continue
         series = [observation]
         for decision in range(max_decisions):
             if decision % every == 0:

@@ -370,3 +370,40 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
             env.close()
     assert outcomes["descend"].outcome == "timeout"
     assert outcomes["search"].success
+
+
+def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_raised() -> None:
+    """ship-ss5, realistic sensing, a 10 s history: in seed 6010 the heaving deck meets the
+    drone during the warm-up hold.  reset returns an observation inside the space with
+    ``info["hold_failed"]``; the first step, whatever its action, ends the episode with that
+    outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
+    from agents.evaluation.landing import make_env_and_policy, run_episode
+    from agents.hindsight import make_timing_env
+
+    env = make_timing_env("ship-ss5", "realistic", "tight", {"timing.history_s": 10.0})
+    try:
+        observation, info = env.reset(seed=6010)
+        assert info["hold_failed"] and info["outcome"] != "in_flight"
+        assert env.observation_space.contains(observation)
+        observation, reward, terminated, truncated, info = env.step(1)
+        assert terminated and not truncated
+        assert info["hold_failed"] and not info["is_success"]
+        assert info["reward_success"] == 0.0 and reward < 0.0
+        assert not info["committed"]
+        assert env.observation_space.contains(observation)
+        # the next episode starts cleanly
+        _, info = env.reset(seed=6011)
+        assert not info["hold_failed"] and info["outcome"] == "in_flight"
+    finally:
+        env.close()
+    env, policy = make_env_and_policy(
+        "land-now",
+        "ship-ss5",
+        "tight",
+        extra_overrides={"sensors": "realistic", "timing.history_s": 10.0},
+    )
+    try:
+        result = run_episode(env, policy, 6010, "land-now", "ship-ss5")
+    finally:
+        env.close()
+    assert result.outcome == "hold_failed" and not result.success

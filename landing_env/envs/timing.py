@@ -549,6 +549,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._wave_offs = 0
         self._observation_clipped = False
         self._base_observation: dict[str, np.ndarray] | None = None
+        #: the warm-up hold ended the episode (the deck rose into the drone, a gust crashed
+        #: it); the first step reports that outcome instead of deciding
+        self._hold_failed = False
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(
@@ -563,25 +566,34 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._record()
         self.frames_of_last_step = []
         self.periods_of_last_step = []
-        # warm-up: hold until the history is full; the agent decides only from then on
+        # warm-up: hold until the history is full; the agent decides only from then on.  A
+        # warm-up that ends the episode (a ship deck heaving into the hold, a gust) does not
+        # raise: reset returns (``info["hold_failed"]``) and the first step, whatever its
+        # action, ends the episode with that outcome
         for _ in range(self.history.length - 1):
             self._advance(self._hold_setpoint())
             if self._outcome is not Outcome.IN_FLIGHT:
-                raise RuntimeError(
-                    f"the episode ended ({self._outcome.value}) during the warm-up hold; "
-                    f"raise timing.hold_height_m ({self.timing.hold_height_m} m)"
-                )
+                self._hold_failed = True
+                break
         return self._flat_observation(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._base_observation is None:
             raise RuntimeError("call reset() before step()")
+        choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
+        r = self.config.reward
+        if self._hold_failed and self._outcome is not Outcome.IN_FLIGHT:
+            # the warm-up's end, reported once; the action is moot
+            self._hold_failed = False
+            # no success bonus: the drone did not choose to land
+            terms = {**zero_terms(), **touchdown_terms(self._outcome, self._touchdown, r)}
+            self._reward_terms = {**terms, "success": 0.0}
+            reward = float(sum(self._reward_terms.values()))
+            return self._flat_observation(), reward, True, False, self._info(hold_failed=True)
         if self._outcome is not Outcome.IN_FLIGHT:
             raise RuntimeError("the episode has ended; call reset()")
-        choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
         self.frames_of_last_step = []
         self.periods_of_last_step = []
-        r = self.config.reward
         terms = zero_terms()
         if choice == WAIT:
             waited = 0.0
@@ -802,10 +814,13 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         options.setdefault("height_m", self.timing.hold_height_m + CAMERA_BELOW_COM_M)
         return super()._start_pose(options)
 
-    def _info(self) -> dict[str, Any]:
+    def _info(self, hold_failed: bool | None = None) -> dict[str, Any]:
         info = super()._info()
+        info_hold_failed = self._hold_failed if hold_failed is None else hold_failed
         info.update(
             {
+                # the warm-up hold ended the episode (reported by reset and the one step after)
+                "hold_failed": info_hold_failed,
                 "wait_s": self._wait_s,
                 "committed": self._committed,
                 "forced_commit": self._forced,
@@ -815,7 +830,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "wave_offs": getattr(self, "_wave_offs", 0),
                 "observation_clipped": getattr(self, "_observation_clipped", False),
                 # read by SB3's EvalCallback for its success rate
-                "is_success": self._outcome is Outcome.SUCCESS,
+                "is_success": self._outcome is Outcome.SUCCESS and not info_hold_failed,
             }
         )
         return info
