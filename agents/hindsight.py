@@ -53,6 +53,17 @@ class LabelSet:
         np.savez_compressed(path, **arrays)
         return path
 
+    @classmethod
+    def load(cls, path: str | Path) -> LabelSet:
+        """Read a file written by :meth:`save` (``waited`` is not kept: empty)."""
+        with np.load(Path(path), allow_pickle=False) as data:
+            fields = {
+                name: np.asarray(data[name])
+                for name in cls.__dataclass_fields__
+                if name != "waited"
+            }
+        return cls(**fields, waited=[])
+
 
 def make_timing_env(
     scenario: str,

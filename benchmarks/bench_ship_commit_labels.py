@@ -3,6 +3,7 @@
     python -m benchmarks.bench_ship_commit_labels [--scenario ship-ss4] [--sensing realistic]
         [--episodes 120] [--seed 6000] [--max-decisions 150] [--every 5]
         [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
+        [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz]
 
 The oracle (:mod:`agents.oracle`) tries a commit at every decision (0.1 s apart) and knows the
 gusts and the heave to come; its lead over a policy mixes what the observation could tell and
@@ -18,6 +19,10 @@ what no observation tells.  This benchmark separates the two:
    (``land-now``); and the ``quiescent`` rule (:func:`agents.policies.predict_calm`) replayed
    with its defaults and with each of a grid of its settings (:func:`agents.hindsight.replay_rule`;
    an episode without a calm decision commits at its last label), all judged by the outcome.
+3. What the observation can tell: a commit-chance model (:mod:`estimation.commit_chance`, a
+   logistic regression on statistics of the observed deck motion over ``--windows``) fitted on
+   the labels, its held-out AUC (episodes in 5 folds), and its held-out chances replayed
+   against the optimal-stopping value of waiting on.
 
 The labels are written to ``--out`` (``<scenario>_labels.npz``) for further analysis.
 """
@@ -34,6 +39,8 @@ import numpy as np
 from agents.cli_args import add_set_argument, parse_overrides
 from agents.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
 from agents.policies import CalmConfig, predict_calm
+from estimation.commit_chance import CommitChanceModel, commit_features
+from estimation.optimal_stopping import StoppingValues
 
 #: the grid of the ``quiescent`` rule's settings replayed
 CALM_GRID = {
@@ -71,6 +78,33 @@ def calm_commits(labels: LabelSet, layout, dt: float, config: CalmConfig) -> np.
     )
 
 
+def learned_chance(
+    labels: LabelSet, layout, dt: float, windows_s: tuple[float, ...]
+) -> CommitChanceModel:
+    """The commit-chance model fitted on the labels (held-out chances by episode folds)."""
+    features = []
+    for observation in labels.observations:
+        parts = layout.decode(observation)
+        features.append(
+            commit_features(parts.history, dt, windows_s, parts.tof_valid, parts.wait_fraction)
+        )
+    return CommitChanceModel.fit(np.array(features), labels.success, labels.episode, windows_s, dt)
+
+
+def value_commits(
+    chances: np.ndarray,
+    decision: np.ndarray,
+    decision_s: float,
+    wait_limit_s: float,
+    opportunity_s: float,
+) -> np.ndarray:
+    """Whether a chance beats the value of waiting on (over the wait left at its decision)."""
+    values = StoppingValues.from_samples(chances)
+    left = wait_limit_s - decision * decision_s
+    thresholds = np.array([values.threshold(float(r), opportunity_s) for r in left])
+    return np.nan_to_num(chances, nan=0.0) >= thresholds
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="ship-ss4")
@@ -81,6 +115,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-decisions", type=int, default=150)
     parser.add_argument("--every", type=int, default=5)
     parser.add_argument("--out", default="results/ship_labels")
+    parser.add_argument(
+        "--windows",
+        default="1,2",
+        help="the learned commit chance's windows, seconds (within timing.history_s)",
+    )
+    parser.add_argument(
+        "--labels", default="", help="replay a saved label file instead of collecting labels"
+    )
     add_set_argument(parser)
     args = parser.parse_args(argv)
 
@@ -90,15 +132,22 @@ def main(argv: list[str] | None = None) -> None:
     base = env.unwrapped
     started = time.perf_counter()
     try:
-        labels = collect_labels(
-            env,
-            list(range(args.seed, args.seed + args.episodes)),
-            args.max_decisions,
-            args.every,
-        )
+        if args.labels:
+            labels = LabelSet.load(args.labels)
+        else:
+            labels = collect_labels(
+                env,
+                list(range(args.seed, args.seed + args.episodes)),
+                args.max_decisions,
+                args.every,
+            )
     finally:
         env.close()
-    path = labels.save(Path(args.out) / f"{args.scenario}_labels.npz")
+    path = (
+        Path(args.labels)
+        if args.labels
+        else labels.save(Path(args.out) / f"{args.scenario}_labels.npz")
+    )
     grid_s = args.every * base.timing.steps_per_decision * base.env_dt
     episodes = np.unique(labels.episode)
     print(
@@ -134,6 +183,28 @@ def main(argv: list[str] | None = None) -> None:
     for success, without, settings in rows[:5]:
         print(f"  {success:.3f} ({without:.0f} episodes never calm)  {settings}")
     print(f"  worst: {rows[-1][0]:.3f}  {rows[-1][2]}")
+    windows = tuple(float(w) for w in args.windows.split(","))
+    model = learned_chance(labels, layout, dt, windows)
+    weights = sorted(zip(model.names, model.weights[:-1], strict=True), key=lambda r: -abs(r[1]))
+    print(
+        f"the learned commit chance (estimation.commit_chance, windows {list(windows)} s): "
+        f"held-out AUC {model.metadata['heldout_auc']:.3f}; largest standardised weights: "
+        + ", ".join(f"{name} {w:+.2f}" for name, w in weights[:4])
+    )
+    decision_s = base.timing.steps_per_decision * dt
+    for opportunity_s in (1.0, 3.0):
+        commits = value_commits(
+            model.heldout_chances,
+            labels.decision,
+            decision_s,
+            base.timing.wait_limit_s,
+            opportunity_s,
+        )
+        result = replay_rule(landed, commits, labels.episode)
+        print(
+            f"  its held-out chance against the value of waiting on (one opportunity per "
+            f"{opportunity_s:g} s): {result['success']:.3f}"
+        )
 
 
 if __name__ == "__main__":

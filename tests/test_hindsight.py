@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.hindsight import MIN_MARGIN, collect_labels, make_timing_env, replay_rule
+from agents.hindsight import MIN_MARGIN, LabelSet, collect_labels, make_timing_env, replay_rule
 
 
 def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives(tmp_path) -> None:
@@ -34,6 +34,10 @@ def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives(tmp_path)
     assert "waited" not in saved.files
     np.testing.assert_array_equal(saved["observations"], labels.observations)
     np.testing.assert_array_equal(saved["success"], labels.success)
+    loaded = LabelSet.load(tmp_path / "labels" / "bench-ss4.npz")
+    np.testing.assert_array_equal(loaded.margin, labels.margin)
+    np.testing.assert_array_equal(loaded.decision, labels.decision)
+    assert loaded.waited == []
 
 
 def test_the_replay_commits_at_the_first_decision_the_rule_accepts() -> None:
