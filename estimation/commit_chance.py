@@ -282,7 +282,7 @@ class CommitChanceModel:
                 "labels": len(y),
                 "episodes": len(unique),
                 "base_rate": float(y.mean()),
-                "heldout_auc": _auc(heldout, y),
+                "heldout_auc": _auc(heldout[np.isfinite(heldout)], y[np.isfinite(heldout)]),
                 "penalty": penalty,
                 "folds": folds,
             }
