@@ -4,6 +4,7 @@ the predictive timing policy and the wave-off that read it."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -829,6 +830,20 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     card = read_metadata(shipped_timing_model("dqn-predictive"))
     assert card is not None and card.observation["observation"] == "prediction"
     assert card.observation["tilt_model"] == "bench-ss5" and card.estimator == "tight"
+    # the second stage's card names its config and where it started from: the first stage's
+    # final model, on the same task
+    from agents.training import load_train_config
+
+    train = Path(__file__).resolve().parent.parent / "configs" / "train"
+    first = load_train_config(train / "timing_dqn_predictive.yaml")
+    second = load_train_config(train / "timing_dqn_predictive_finetune.yaml")
+    assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v5"
+    assert second.settings.env_kwargs == first.settings.env_kwargs
+    assert second.settings.init_model == f"{first.settings.out_dir}/timing_dqn_final.zip"
+    assert card.training_config_source.endswith("configs/train/timing_dqn_predictive_finetune.yaml")
+    assert card.training_config["deck_landing"]["init_model"].endswith(
+        "timing_dqn_predictive/timing_dqn_final.zip"
+    )
     realistic = {"sensors": "realistic"}
     with pytest.raises(ConfigError, match=r"observation"):
         make_env_and_policy(
