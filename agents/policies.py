@@ -43,7 +43,8 @@
   weighs: it observes, in place of the history, the deck-tilt predictor's chance at each
   contact time and the value of waiting on (``timing.observation: prediction``,
   ``DeckLandingTiming-BenchSS{3,4,5}-v5``), ``agents/models/timing_dqn_predictive.zip``
-  (``configs/train/timing_dqn_predictive.yaml``).
+  (``configs/train/timing_dqn_predictive.yaml``, then trained on by
+  ``configs/train/timing_dqn_predictive_finetune.yaml``).
 """
 
 from __future__ import annotations
