@@ -3,7 +3,7 @@
     python -m benchmarks.bench_ship_commit_labels [--scenario ship-ss4] [--sensing realistic]
         [--episodes 120] [--seed 6000] [--max-decisions 150] [--every 5]
         [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
-        [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz]
+        [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz] [--plot FILE.png]
 
 The oracle (:mod:`agents.oracle`) tries a commit at every decision (0.1 s apart) and knows the
 gusts and the heave to come; its lead over a policy mixes what the observation could tell and
@@ -105,6 +105,64 @@ def value_commits(
     return np.nan_to_num(chances, nan=0.0) >= thresholds
 
 
+def plot_labels(
+    labels: LabelSet,
+    chances: np.ndarray,
+    calm: np.ndarray,
+    grid_s: float,
+    title: str,
+    path: Path,
+) -> Path:
+    """Each episode's hindsight outcomes along its wait (a row per episode, the roughest at
+    the top), where ``quiescent`` commits, and the learned chance of each label beside the
+    outcome (a histogram per outcome)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    episodes = np.unique(labels.episode)
+    order = sorted(episodes, key=lambda e: labels.success[labels.episode == e].mean())
+    decisions = np.unique(labels.decision)
+    step = int(np.diff(decisions).min()) if len(decisions) > 1 else 1
+    width = int(labels.decision.max() // step) + 1
+    raster = np.full((len(order), width), np.nan)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 5), width_ratios=[2.2, 1])
+    for row, episode in enumerate(order):
+        mine = labels.episode == episode
+        columns = labels.decision[mine] // step
+        raster[row, columns] = labels.success[mine]
+        hits = np.where(calm[mine])[0]
+        column = columns[hits[0]] if len(hits) else columns[-1]
+        left.plot((column + 0.5) * grid_s, row + 0.5, "kx", markersize=4)
+    left.pcolormesh(
+        np.arange(width + 1) * grid_s,
+        np.arange(len(order) + 1),
+        np.ma.masked_invalid(raster),
+        cmap=ListedColormap(["#d62728", "#2ca02c"]),
+        vmin=0,
+        vmax=1,
+    )
+    left.set_xlabel("commit at (s into the wait)")
+    left.set_ylabel("episode (roughest at the top)")
+    left.invert_yaxis()
+    left.set_title("a commit then: lands (green) or fails (red); x: quiescent's commit", fontsize=9)
+    bins = np.linspace(0.0, 1.0, 21)
+    finite = np.isfinite(chances)
+    right.hist(chances[finite & labels.success], bins, alpha=0.6, color="#2ca02c", label="lands")
+    right.hist(chances[finite & ~labels.success], bins, alpha=0.6, color="#d62728", label="fails")
+    right.set_xlabel("learned commit chance (held out)")
+    right.set_ylabel("commits")
+    right.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="ship-ss4")
@@ -123,6 +181,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--labels", default="", help="replay a saved label file instead of collecting labels"
     )
+    parser.add_argument("--plot", default="", help="write the labels' figure here (.png)")
     add_set_argument(parser)
     args = parser.parse_args(argv)
 
@@ -205,6 +264,15 @@ def main(argv: list[str] | None = None) -> None:
             f"  its held-out chance against the value of waiting on (one opportunity per "
             f"{opportunity_s:g} s): {result['success']:.3f}"
         )
+    if args.plot:
+        title = (
+            f"{args.scenario}, {args.sensing}, {args.estimator}: hindsight commits of "
+            f"{len(episodes)} waiting episodes (held-out AUC of the learned chance "
+            f"{model.metadata['heldout_auc']:.2f})"
+        )
+        calm = calm_commits(labels, layout, dt, CalmConfig())
+        figure = plot_labels(labels, model.heldout_chances, calm, grid_s, title, Path(args.plot))
+        print(f"wrote {figure}")
 
 
 if __name__ == "__main__":
