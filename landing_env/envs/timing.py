@@ -552,6 +552,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         #: the warm-up hold ended the episode (the deck rose into the drone, a gust crashed
         #: it); the first step reports that outcome instead of deciding
         self._hold_failed = False
+        self._hold_failure_reported = False
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(
@@ -582,14 +583,14 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise RuntimeError("call reset() before step()")
         choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
         r = self.config.reward
-        if self._hold_failed and self._outcome is not Outcome.IN_FLIGHT:
+        if self._hold_failed and not self._hold_failure_reported:
             # the warm-up's end, reported once; the action is moot
-            self._hold_failed = False
+            self._hold_failure_reported = True
             # no success bonus: the drone did not choose to land
             terms = {**zero_terms(), **touchdown_terms(self._outcome, self._touchdown, r)}
             self._reward_terms = {**terms, "success": 0.0}
             reward = float(sum(self._reward_terms.values()))
-            return self._flat_observation(), reward, True, False, self._info(hold_failed=True)
+            return self._flat_observation(), reward, True, False, self._info()
         if self._outcome is not Outcome.IN_FLIGHT:
             raise RuntimeError("the episode has ended; call reset()")
         self.frames_of_last_step = []
@@ -814,13 +815,13 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         options.setdefault("height_m", self.timing.hold_height_m + CAMERA_BELOW_COM_M)
         return super()._start_pose(options)
 
-    def _info(self, hold_failed: bool | None = None) -> dict[str, Any]:
+    def _info(self) -> dict[str, Any]:
         info = super()._info()
-        info_hold_failed = self._hold_failed if hold_failed is None else hold_failed
+        hold_failed = getattr(self, "_hold_failed", False)
         info.update(
             {
                 # the warm-up hold ended the episode (reported by reset and the one step after)
-                "hold_failed": info_hold_failed,
+                "hold_failed": hold_failed,
                 "wait_s": self._wait_s,
                 "committed": self._committed,
                 "forced_commit": self._forced,
@@ -830,7 +831,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "wave_offs": getattr(self, "_wave_offs", 0),
                 "observation_clipped": getattr(self, "_observation_clipped", False),
                 # read by SB3's EvalCallback for its success rate
-                "is_success": self._outcome is Outcome.SUCCESS and not info_hold_failed,
+                "is_success": self._outcome is Outcome.SUCCESS and not hold_failed,
             }
         )
         return info
