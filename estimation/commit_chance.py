@@ -249,6 +249,11 @@ class CommitChanceModel:
         """Fit on labelled decisions (``features`` rows of :func:`commit_features`,
         ``success`` 0/1); ``groups`` (the episodes) split the ``folds`` for the held-out
         chances, so no episode is judged by a fit that saw it."""
+        if not windows_s or min(windows_s) <= 0.0 or not dt_s > 0.0:
+            raise ValueError(
+                f"windows_s {list(windows_s)} and dt_s {dt_s} must be positive (and windows_s "
+                "not empty)"
+            )
         x = np.asarray(features, dtype=float)
         y = np.asarray(success, dtype=float).reshape(-1)
         g = np.asarray(groups).reshape(-1)

@@ -111,6 +111,10 @@ def test_fitting_refuses_labels_that_do_not_match_their_features():
         CommitChanceModel.fit(x, y[:-1], g, WINDOWS, DT)
     with pytest.raises(ValueError, match="features; windows"):
         CommitChanceModel.fit(x[:, :-1], y, g, WINDOWS, DT)
+    with pytest.raises(ValueError, match="must be positive"):
+        CommitChanceModel.fit(x, y, g, WINDOWS, 0.0)
+    with pytest.raises(ValueError, match="must be positive"):
+        CommitChanceModel.fit(x, y, g, (), DT)
 
 
 def test_too_little_seen_gives_an_invalid_chance_with_its_reason():
