@@ -31,7 +31,6 @@ samples: an invalid chance with its reason).
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -40,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from estimation.array_files import load_arrays, save_arrays
 from estimation.frames import tilt_deg
 from estimation.optimal_stopping import StoppingValues
 
@@ -305,38 +305,32 @@ class CommitChanceModel:
     # ---------------------------------------------------------------- files
     def save(self, path: str | Path) -> Path:
         """Write to ``path`` (``.npz``; the metadata as JSON inside)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("wb") as handle:
-            np.savez_compressed(
-                handle,
-                windows_s=np.array(self.windows_s, dtype=float),
-                dt_s=self.dt_s,
-                mean=self.mean,
-                scale=self.scale,
-                weights=self.weights,
-                heldout_chances=self.heldout_chances,
-                metadata=json.dumps(self.metadata),
-            )
-        return path
+        arrays = {
+            "windows_s": np.array(self.windows_s, dtype=float),
+            "dt_s": self.dt_s,
+            "mean": self.mean,
+            "scale": self.scale,
+            "weights": self.weights,
+            "heldout_chances": self.heldout_chances,
+        }
+        return save_arrays(path, arrays, self.metadata)
 
     @classmethod
     def load(cls, path: str | Path) -> CommitChanceModel:
         """Read a file written by :meth:`save`; a malformed one is a ``ValueError`` naming it."""
-        path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                model = cls(
-                    tuple(float(w) for w in data["windows_s"]),
-                    float(data["dt_s"]),
-                    np.asarray(data["mean"], dtype=float),
-                    np.asarray(data["scale"], dtype=float),
-                    np.asarray(data["weights"], dtype=float),
-                    np.asarray(data["heldout_chances"], dtype=float),
-                    json.loads(str(data["metadata"])),
-                )
-        except (OSError, KeyError, ValueError) as error:
-            raise ValueError(f"{path} is not a commit-chance model file: {error}") from error
+
+        def build(data: Any, metadata: dict[str, Any]) -> CommitChanceModel:
+            return cls(
+                tuple(float(w) for w in data["windows_s"]),
+                float(data["dt_s"]),
+                np.asarray(data["mean"], dtype=float),
+                np.asarray(data["scale"], dtype=float),
+                np.asarray(data["weights"], dtype=float),
+                np.asarray(data["heldout_chances"], dtype=float),
+                metadata,
+            )
+
+        model = load_arrays(path, "commit-chance model", build)
         n = len(feature_names(model.windows_s))
         if (
             not model.windows_s

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from estimation.array_files import load_arrays, save_arrays
 from estimation.frames import tilt_deg
 from estimation.optimal_stopping import StoppingValues
 
@@ -385,50 +386,44 @@ class LinearTiltPredictor:
     # ---------------------------------------------------------------- files
     def save(self, path: str | Path) -> Path:
         """Write to ``path`` (``.npz``; the metadata as JSON inside)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("wb") as handle:
-            np.savez_compressed(
-                handle,
-                window_s=self.window_s,
-                dt_s=self.dt_s,
-                block=self.block,
-                horizons_s=self.horizons_s,
-                coefficients=self.coefficients,
-                covariance=self.covariance,
-                min_valid_fraction=self.min_valid_fraction,
-                max_gap_s=self.max_gap_s,
-                metadata=json.dumps(self.metadata),
-                channels=json.dumps(list(self.channels)),
-                scales=self.scales,
-                heldout_means=self.heldout_means.astype(np.float32),
-            )
-        return path
+        arrays = {
+            "window_s": self.window_s,
+            "dt_s": self.dt_s,
+            "block": self.block,
+            "horizons_s": self.horizons_s,
+            "coefficients": self.coefficients,
+            "covariance": self.covariance,
+            "min_valid_fraction": self.min_valid_fraction,
+            "max_gap_s": self.max_gap_s,
+            "channels": json.dumps(list(self.channels)),
+            "scales": self.scales,
+            "heldout_means": self.heldout_means.astype(np.float32),
+        }
+        return save_arrays(path, arrays, self.metadata)
 
     @classmethod
     def load(cls, path: str | Path) -> LinearTiltPredictor:
         """Read a file written by :meth:`save`; a malformed one is a ``ValueError`` naming it."""
-        path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                predictor = cls(
-                    float(data["window_s"]),
-                    float(data["dt_s"]),
-                    int(data["block"]),
-                    np.asarray(data["horizons_s"], dtype=float),
-                    np.asarray(data["coefficients"], dtype=float),
-                    np.asarray(data["covariance"], dtype=float),
-                    float(data["min_valid_fraction"]),
-                    float(data["max_gap_s"]),
-                    json.loads(str(data["metadata"])),
-                    tuple(json.loads(str(data["channels"]))),
-                    np.asarray(data["scales"], dtype=float),
-                    np.asarray(data["heldout_means"], dtype=float)
-                    if "heldout_means" in data
-                    else np.zeros((0, 0, 2)),
-                )
-        except (OSError, KeyError, ValueError) as error:
-            raise ValueError(f"{path} is not a deck-tilt predictor file: {error}") from error
+
+        def build(data: Any, metadata: dict[str, Any]) -> LinearTiltPredictor:
+            return cls(
+                float(data["window_s"]),
+                float(data["dt_s"]),
+                int(data["block"]),
+                np.asarray(data["horizons_s"], dtype=float),
+                np.asarray(data["coefficients"], dtype=float),
+                np.asarray(data["covariance"], dtype=float),
+                float(data["min_valid_fraction"]),
+                float(data["max_gap_s"]),
+                metadata,
+                tuple(json.loads(str(data["channels"]))),
+                np.asarray(data["scales"], dtype=float),
+                np.asarray(data["heldout_means"], dtype=float)
+                if "heldout_means" in data
+                else np.zeros((0, 0, 2)),
+            )
+
+        predictor = load_arrays(path, "deck-tilt predictor", build)
         h = len(predictor.horizons_s)
         n_features = len(predictor.channels) * (predictor.n_window // predictor.block) + 1
         shapes = (predictor.coefficients.shape, predictor.covariance.shape)

@@ -1,0 +1,42 @@
+"""The files of fitted estimation models: named NumPy arrays and JSON metadata in one ``.npz``.
+
+One home for how :class:`~estimation.deck_prediction.LinearTiltPredictor` and
+:class:`~estimation.commit_chance.CommitChanceModel` are written and read: compressed, no
+pickles (``allow_pickle=False``: a model file cannot run code), the metadata as a JSON string,
+and a malformed file reported as a ``ValueError`` that names it and what it should have been.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+T = TypeVar("T")
+
+
+def save_arrays(path: str | Path, arrays: Mapping[str, Any], metadata: Mapping[str, Any]) -> Path:
+    """Write ``arrays`` and ``metadata`` (as JSON, under ``metadata``) to ``path``; its folder is
+    made when missing.  Returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        np.savez_compressed(handle, **arrays, metadata=json.dumps(dict(metadata)))
+    return path
+
+
+def load_arrays(
+    path: str | Path, kind: str, build: Callable[[Mapping[str, np.ndarray], dict[str, Any]], T]
+) -> T:
+    """Read ``path`` and ``build`` the model from its arrays and metadata; a missing, unreadable
+    or malformed file (a missing key, a bad value) is a ``ValueError`` naming it as not a
+    ``kind`` file."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return build(data, json.loads(str(data["metadata"])))
+    except (OSError, KeyError, ValueError) as error:
+        raise ValueError(f"{path} is not a {kind} file: {error}") from error
