@@ -207,13 +207,23 @@ def main(argv: list[str] | None = None) -> None:
         if args.labels
         else labels.save(Path(args.out) / f"{args.scenario}_labels.npz")
     )
-    grid_s = args.every * base.timing.steps_per_decision * base.env_dt
+    decision_s = base.timing.steps_per_decision * base.env_dt
+    # the labels' own grid (a replayed file need not match the command's --every)
+    decisions = np.unique(labels.decision)
+    every = int(np.diff(decisions).min()) if len(decisions) > 1 else args.every
+    grid_s = every * decision_s
     episodes = np.unique(labels.episode)
+    if args.labels:
+        origin = f"replayed from {path}"
+    else:
+        origin = (
+            f"seeds {args.seed}-{args.seed + args.episodes - 1}, "
+            f"{time.perf_counter() - started:.0f} s; labels in {path}"
+        )
     print(
-        f"{args.scenario}, {args.sensing}, {args.estimator}: {len(episodes)} episodes (seeds "
-        f"{args.seed}-{args.seed + args.episodes - 1}), a commit tried every {grid_s:g} s of the "
-        f"first {args.max_decisions * base.timing.steps_per_decision * base.env_dt:g} s "
-        f"({len(labels.success)} labels, {time.perf_counter() - started:.0f} s); labels in {path}"
+        f"{args.scenario}, {args.sensing}, {args.estimator}: {len(episodes)} episodes, a commit "
+        f"tried every {grid_s:g} s from 0 to {decisions.max() * decision_s:g} s into the wait "
+        f"({len(labels.success)} labels; {origin})"
     )
     print(f"a commit at a labelled decision lands: {labels.success.mean():.3f}")
     ok_next, fail_next, isolated, inner = clustering(labels)
