@@ -32,7 +32,7 @@ from rich.console import Console
 from rich.table import Table
 from tqdm import tqdm
 
-from agents.cli_args import positive_int
+from agents.cli_args import add_set_argument, parse_overrides, positive_int
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
@@ -243,10 +243,12 @@ def run_calibration(
     console: Console | None = None,
     workers: int = 1,
     address: str | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> CalibrationRun:
-    """Run both calibrations, print the figures and write the files (see the module doc)."""
+    """Run both calibrations, print the figures and write the files (see the module doc);
+    ``overrides`` (dotted keys) apply on top of a named config."""
     console = console or Console()
-    cfg = config if isinstance(config, DeckLandingConfig) else load_config(config)
+    cfg = config if isinstance(config, DeckLandingConfig) else load_config(config, overrides)
     if install:
         differences = _layout_differences(cfg)
         if differences:
@@ -331,6 +333,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         install=args.install,
         workers=args.workers,
         address=args.address,
+        overrides=parse_overrides(args.set),
     )
     return 0
 
@@ -366,4 +369,5 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also copy the files to configs/calibration/ (the environment's defaults)",
     )
+    add_set_argument(parser)
     parser.set_defaults(func=_calibrate)

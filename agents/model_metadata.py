@@ -79,11 +79,20 @@ def sensing_profile(config: Any) -> str:
 
     A config under ``sensors: realistic`` (or another named bundle) has that name; under
     ``sensors: ideal``, ``ideal`` when no sensor noise is configured, else the settings that
-    depart from ideal (``tof.noise=vl53l1x``, ...).
+    depart from ideal (``tof.noise=vl53l1x``, ...).  A lens other than the standard one is
+    named after it (``realistic,lens=wide``): the camera sees another field at another
+    resolution.
     """
+    lens = getattr(config, "lens", "standard")
+    suffix = "" if lens == "standard" else f",lens={lens}"
+    return _sensing_without_lens(config) + suffix
+
+
+def _sensing_without_lens(config: Any) -> str:
     declared = getattr(config, "sensors", None) or "ideal"
     if declared != "ideal":
-        # a named bundle (``sensors: realistic``: camera profile, ToF noise, lens, calibrations)
+        # a named bundle (``sensors: realistic``: camera profile, ToF noise, distortion,
+        # calibrations)
         return str(declared)
     departures = []
     if config.tof.noise != "none":

@@ -680,7 +680,7 @@ def make_policy(
         return PredictivePolicy(
             base.layout,
             dt,
-            _tilt_model(model_path, base.timing.tilt_model),
+            _tilt_model(model_path, base.resolved_tilt_model()),
             base.config.touchdown.max_deck_tilt_deg,
             base.timing.wait_limit_s,
             base.timing.opportunity_s,

@@ -51,6 +51,18 @@ class CameraIntrinsics:
             pixels[in_front, 1] = self.fy * normalised[:, 1] + self.cy
         return pixels
 
+    def half_view_tan(self) -> float:
+        """The tangent of the narrowest half field of view: from the optical axis to the
+        nearest image edge (its midpoint, the lens distortion removed), along the image axes.
+        A point whose normalised coordinates are within it on both axes is in the image."""
+        last_u, last_v = self.width - 1.0, self.height - 1.0
+        edges = np.array([[0.0, self.cy], [last_u, self.cy], [self.cx, 0.0], [self.cx, last_v]])
+        ideal = self.undistort_pixels(edges)
+        tangents = np.concatenate(
+            [np.abs(ideal[:2, 0] - self.cx) / self.fx, np.abs(ideal[2:, 1] - self.cy) / self.fy]
+        )
+        return float(np.min(tangents))
+
     def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
         """Remove lens distortion from Nx2 pixels (returns pixels of the ideal pinhole)."""
         pixels = np.atleast_2d(np.asarray(pixels, dtype=float))

@@ -43,6 +43,9 @@ CONFIG_DIR = config_dir()
 
 #: ``sensors``: each name is a preset in ``configs/sensors/`` laid over the scenario
 SENSOR_SETS = ("ideal", "realistic")
+#: ``lens``: each name is a preset in ``configs/lenses/`` (the camera's lens and the
+#: calibrations made for it under each sensing profile) laid over the sensing preset
+LENS_SETS = ("standard", "wide")
 #: the environment variable ``deck-landing --sensors`` sets (worker processes inherit it);
 #: it is the default of the ``sensors`` key
 SENSORS_ENV = "DECK_LANDING_SENSORS"
@@ -280,6 +283,16 @@ class DeckLandingConfig:
     #: noise, lens distortion, VL53L1X ToF noise and the calibrations made for them): the
     #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
     sensors: str = "ideal"
+    #: the camera's lens: "standard" (58 deg horizontal field of view, the papers' camera) or
+    #: "wide" (80 deg, the ship scenarios'): the preset ``configs/lenses/<name>.yaml`` (focal
+    #: lengths and, per sensing profile, the calibration files made for it) laid over the
+    #: sensing preset, under explicit overrides
+    lens: str = "standard"
+    #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
+    #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
+    #: ``python -m agents.deck_predictor fit``); ``timing.tilt_model: scenario`` reads it.
+    #: Empty: none fitted
+    deck_predictor: str = ""
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     action: ActionConfig = field(default_factory=ActionConfig)
     start: StartConfig = field(default_factory=StartConfig)
@@ -322,6 +335,7 @@ class DeckLandingConfig:
                 "ship; the Stewart bench takes static, sinusoids, sea_state or csv",
             )
         require_choice("sensors", self.sensors, SENSOR_SETS)
+        require_choice("lens", self.lens, LENS_SETS)
 
 
 def available_configs() -> list[str]:
@@ -376,6 +390,9 @@ def load_config(
         user = deep_merge(user, {"sensors": sensors})
     if sensors is not None:
         data = deep_merge(data, sensor_preset(sensors))
+    lens = user.get("lens", data.get("lens"))
+    if lens is not None:
+        data = deep_merge(data, lens_preset(lens, sensors or "ideal"))
     return build_dataclass(DeckLandingConfig, deep_merge(data, user), base=base, check=check_value)
 
 
@@ -384,3 +401,26 @@ def sensor_preset(name: str) -> dict[str, Any]:
     require_choice("sensors", name, SENSOR_SETS)
     with (CONFIG_DIR / "sensors" / f"{name}.yaml").open() as handle:
         return {"sensors": name, **(yaml.safe_load(handle) or {})}
+
+
+def lens_preset(name: str, sensors: str = "ideal") -> dict[str, Any]:
+    """The settings ``lens: name`` stands for under the sensing profile ``sensors``
+    (``configs/lenses/<name>.yaml``: its ``camera`` section, and its ``calibration`` section's
+    entry for that profile, which names the calibration files made for this lens)."""
+    require_choice("lens", name, LENS_SETS)
+    require_choice("sensors", sensors, SENSOR_SETS)
+    path = CONFIG_DIR / "lenses" / f"{name}.yaml"
+    with path.open() as handle:
+        data = yaml.safe_load(handle) or {}
+    calibration = data.get("calibration", {})
+    if not isinstance(calibration, dict) or set(calibration) != set(SENSOR_SETS):
+        raise ConfigError(
+            "lens",
+            f"{path}: 'calibration' must name the files for each sensing profile "
+            f"({', '.join(SENSOR_SETS)})",
+        )
+    preset: dict[str, Any] = {"lens": name, "camera": dict(data.get("camera", {}))}
+    files = calibration[sensors]
+    if files:
+        preset["estimation"] = dict(files)
+    return preset

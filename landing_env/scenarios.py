@@ -122,10 +122,25 @@ SHIP_TIMING_V2: dict[str, Any] = {
 #: cut (quadrotor.yaml ``drag.airframe_fraction``) a leaning touchdown seldom tips over, and
 #: waiting low over the deck for a lean below 18 deg (which sea state 5's wind never gives)
 #: only let the drone drift off the pad (README "Landing on the ship")
-SHIP_TIMING: dict[str, Any] = {
+SHIP_TIMING_V3: dict[str, Any] = {
     **SHIP_TIMING_V2,
     "guidance": {**SHIP_TIMING_V2["guidance"], "lost_deck": "search", "flare_range_m": 0.0},
 }
+
+#: the ship's timing task from ``-v4`` on: the scenario's own lens (``ship-ss5`` and
+#: ``ship-ss6`` fit the wide one, ``lens: wide``, configs/lenses/wide.yaml: 80 deg across
+#: where the standard lens sees 58 deg; the ids up to v3 keep the standard lens everywhere)
+#: and the view gate's half field of view taken from the camera's calibration
+#: (``view_from_camera``) instead of the standard lens's 0.558: a drone leaning 20-30 deg
+#: into the wind of sea states 5 and 6 keeps the tag in view (README "A wider lens for the
+#: ship")
+SHIP_TIMING: dict[str, Any] = {
+    **SHIP_TIMING_V3,
+    "guidance": {**SHIP_TIMING_V3["guidance"], "view_from_camera": True},
+}
+
+#: the ids made before the ship scenarios' wide lens keep the standard one
+STANDARD_LENS = {"lens": "standard"}
 
 
 #: the bench's timing task from v1 on: the **timed** final descent (GuidanceGains.descent_profile;
@@ -169,8 +184,9 @@ PREDICTIVE_VERSIONS: dict[int, str] = {
 }
 
 
-def bench_predictive_timing(sea_state: int, version: int = 4) -> dict[str, Any]:
-    """The timing settings of ``DeckLandingTiming-BenchSS<n>-v<version>`` (v2: the model
+def bench_predictive_timing(version: int = 4) -> dict[str, Any]:
+    """The timing settings of ``DeckLandingTiming-BenchSS<n>-v<version>``, whatever the sea
+    state (each reads its scenario's own deck-tilt predictor; v2: the model
     wave-off below a fixed chance of 0.8; v3: below the value of waiting on; v4: and the
     contact time chosen in ``CONTACT_WINDOW_S``; v2 and v3 have the fixed 1.3 s contact; v5:
     v4 observing the predictor's chances and the value of waiting instead of the history)."""
@@ -184,7 +200,8 @@ def bench_predictive_timing(sea_state: int, version: int = 4) -> dict[str, Any]:
         **BENCH_TIMING,
         **PREDICTIVE_TIMING,
         **rule,
-        "tilt_model": f"bench-ss{sea_state}",
+        # the scenario's own predictor (bench-ss<n>.yaml's deck_predictor)
+        "tilt_model": "scenario",
     }
 
 
@@ -198,31 +215,40 @@ def _ship_ids() -> dict[str, ScenarioId]:
     """v1: the deck-frame guidance (``SHIP_TIMING_V1``), ``tight`` observed and the ship
     configs' touchdown envelope (v0: the bench's guidance, IHRCF, 10 deg drone-to-deck
     attitude); the timing task's v2: the deck's acceleration tracked and led
-    (``SHIP_TIMING_V2``); v3: and a go-around with the deck lost (``SHIP_TIMING``)."""
+    (``SHIP_TIMING_V2``); v3: and a go-around with the deck lost (``SHIP_TIMING_V3``); v4:
+    the scenario's lens (wide at sea states 5 and 6), the view gate from the camera
+    (``SHIP_TIMING``).  The landing task's v1 has the standard lens, its v2 the scenario's."""
     ids: dict[str, ScenarioId] = {}
+    timing_task = "DeckLandingTiming-v0"
     for n in (3, 4, 5, 6):
         for version, timing, what in (
             (1, SHIP_TIMING_V1, ""),
             (2, SHIP_TIMING_V2, ", the deck's acceleration tracked and led"),
             (
                 3,
-                SHIP_TIMING,
+                SHIP_TIMING_V3,
                 ", the deck's acceleration led, a go-around with the deck lost, no flare",
             ),
+            (4, SHIP_TIMING, ", v3's guidance through the scenario's lens (wide from ss5)"),
         ):
+            lens = STANDARD_LENS if version < 4 else {}
             ids[f"DeckLandingTiming-ShipSS{n}-v{version}"] = ScenarioId(
-                "DeckLandingTiming-v0",
+                timing_task,
                 f"ship-ss{n}",
                 f"timing task over a 30 m vessel's helideck at sea state {n}{what}",
-                landing_overrides("DeckLandingTiming-v0", SHIP_ESTIMATOR),
+                {**landing_overrides(timing_task, SHIP_ESTIMATOR), **lens},
                 {"timing": timing},
             )
-        ids[f"DeckLanding-ShipSS{n}-v1"] = ScenarioId(
-            "DeckLanding-v0",
-            f"ship-ss{n}",
-            f"align and descend onto a 30 m vessel's helideck at sea state {n}",
-            landing_overrides("DeckLanding-v0", SHIP_ESTIMATOR),
-        )
+        for version, lens, what in (
+            (1, STANDARD_LENS, ""),
+            (2, {}, " through the scenario's lens (wide from ss5)"),
+        ):
+            ids[f"DeckLanding-ShipSS{n}-v{version}"] = ScenarioId(
+                "DeckLanding-v0",
+                f"ship-ss{n}",
+                f"align and descend onto a 30 m vessel's helideck at sea state {n}{what}",
+                {**landing_overrides("DeckLanding-v0", SHIP_ESTIMATOR), **lens},
+            )
     return ids
 
 
@@ -251,7 +277,7 @@ SCENARIO_IDS: dict[str, ScenarioId] = {
             "DeckLandingTiming-v0",
             f"bench-ss{n}",
             f"timing task over a bench-ss{n} deck, {what}",
-            {"timing": bench_predictive_timing(n, version=version)},
+            {"timing": bench_predictive_timing(version)},
         )
         for version, what in PREDICTIVE_VERSIONS.items()
         for n in (3, 4, 5)
@@ -345,6 +371,8 @@ __all__ = [
     "SHIP_TIMING",
     "SHIP_TIMING_V1",
     "SHIP_TIMING_V2",
+    "SHIP_TIMING_V3",
+    "STANDARD_LENS",
     "START_OVERRIDES",
     "TASKS",
     "ScenarioId",

@@ -584,7 +584,8 @@ def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_po
     try:
         base = env.unwrapped
         assert base.layout.n_history == 160 and base.tilt_predictor is not None
-        assert base.timing.tilt_model == "bench-ss4"
+        # the scenario's own predictor: bench-ss4.yaml's deck_predictor
+        assert base.timing.tilt_model == "scenario" and base.resolved_tilt_model() == "bench-ss4"
         assert base.timing.wave_off_rule == ("fixed" if version == 2 else "value")
         assert (base.wave_off_values is None) == (version == 2)
         assert len(base.timing.contact_times_s) == (4 if version == 4 else 1)
@@ -784,14 +785,10 @@ def test_a_model_card_tells_the_prediction_observation_from_the_history():
     from landing_env.envs.timing import TimingConfig
     from landing_env.scenarios import bench_predictive_timing
 
-    v4 = observation_signature(
-        build_dataclass(TimingConfig, bench_predictive_timing(5, 4), "t"), 20
-    )
-    v5 = observation_signature(
-        build_dataclass(TimingConfig, bench_predictive_timing(5, 5), "t"), 20
-    )
+    v4 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(4), "t"), 20)
+    v5 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(5), "t"), 20)
     assert "observation" not in v4 and v4["size"] == 160 * 10 + 9
-    assert v5["observation"] == "prediction" and v5["tilt_model"] == "bench-ss5"
+    assert v5["observation"] == "prediction" and v5["tilt_model"] == "scenario"
     assert v5["contact_times_s"] == [1.2, 1.3, 1.4, 1.5] and v5["size"] == 15
 
 
@@ -819,9 +816,10 @@ def test_random_decisions_on_a_v5_id_under_realistic_sensing_never_leave_the_spa
 
 def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history():
     """``timing-dqn-predictive`` was trained on DeckLandingTiming-BenchSS5-v5 (realistic,
-    ``tight``): its card records the prediction observation; a history observation (the v4
-    settings) is refused naming the key; on held-out seeds it lands at least as often as
-    ``land-now``."""
+    ``tight``), then over both bench sea states and the sensing profiles: its card records the
+    prediction observation read from the scenario's own predictor; a history observation (the
+    v4 settings) is refused naming the key; on held-out seeds it lands at least as often as
+    ``land-now``, and it runs at sea state 4 and on ideal sensing without a flag."""
     from agents.evaluation.landing import evaluate_policy, make_env_and_policy
     from agents.model_metadata import read_metadata
     from agents.policies import shipped_timing_model
@@ -829,7 +827,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
 
     card = read_metadata(shipped_timing_model("dqn-predictive"))
     assert card is not None and card.observation["observation"] == "prediction"
-    assert card.observation["tilt_model"] == "bench-ss5" and card.estimator == "tight"
+    assert card.observation["tilt_model"] == "scenario" and card.estimator == "tight"
     # the second stage's card names its config and where it started from: the first stage's
     # final model, on the same task
     from agents.training import load_train_config
@@ -840,10 +838,17 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v5"
     assert second.settings.env_kwargs == first.settings.env_kwargs
     assert second.settings.init_model == f"{first.settings.out_dir}/timing_dqn_final.zip"
-    assert card.training_config_source.endswith("configs/train/timing_dqn_predictive_finetune.yaml")
-    assert card.training_config["deck_landing"]["init_model"].endswith(
-        "timing_dqn_predictive/timing_dqn_final.zip"
+    # the third stage (session 11) went on from the second's final weights, randomised over
+    # both bench sea states (each its own predictor) and the sensing: one card serves them all
+    third = load_train_config(train / "timing_dqn_predictive_randomised.yaml")
+    assert third.settings.init_model == f"{second.settings.out_dir}/timing_dqn_final.zip"
+    assert card.training_config_source.endswith(
+        "configs/train/timing_dqn_predictive_randomised.yaml"
     )
+    assert card.training_config["deck_landing"]["init_model"].endswith(
+        "timing_dqn_predictive_finetune/timing_dqn_final.zip"
+    )
+    assert set(card.sensing) == {"ideal", "realistic"}
     realistic = {"sensors": "realistic"}
     with pytest.raises(ConfigError, match=r"observation"):
         make_env_and_policy(
@@ -861,3 +866,44 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     )
     assert np.mean([r.success for r in learned]) >= np.mean([r.success for r in now])
     assert np.mean([r.success for r in learned]) >= 0.75
+    # the card accepts bench-ss4 (its own predictor) under ideal sensing as it is
+    env, policy = make_env_and_policy("timing-dqn-predictive", "bench-ss4", "tight")
+    try:
+        assert env.unwrapped.resolved_tilt_model() == "bench-ss4"
+        assert policy is not None
+    finally:
+        env.close()
+
+
+def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_none_is_fitted():
+    """``timing.tilt_model: scenario`` reads the config's ``deck_predictor``; a scenario that
+    names none (paper-stewart) is refused naming the key and what it reads."""
+    from landing_env.envs.timing import DeckLandingTimingEnv
+
+    loaded = {}
+    for n in (3, 5):
+        env = DeckLandingTimingEnv(
+            f"bench-ss{n}",
+            timing={
+                "history_s": 8.0,
+                "observation": "prediction",
+                "tilt_model": "scenario",
+                "guidance": {"descent_profile": "timed"},
+            },
+        )
+        try:
+            assert env.resolved_tilt_model() == f"bench-ss{n}"
+            loaded[n] = env.tilt_predictor
+        finally:
+            env.close()
+    # two fitted predictors, not one file read twice
+    assert loaded[3] is not None and loaded[5] is not None
+    assert loaded[3].coefficients.shape != loaded[5].coefficients.shape or not np.allclose(
+        loaded[3].coefficients, loaded[5].coefficients
+    )
+    with pytest.raises(ConfigError, match=r"timing\.tilt_model.*deck_predictor"):
+        DeckLandingTimingEnv(
+            "paper-stewart",
+            overrides={"simulation.drone_fixed": False},
+            timing={"history_s": 8.0, "observation": "prediction", "tilt_model": "scenario"},
+        )

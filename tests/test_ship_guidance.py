@@ -350,10 +350,10 @@ def test_the_deck_frame_guidance_gives_finite_setpoints_for_any_observation(
 
 
 def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_again() -> None:
-    """ship-ss4, seed 1000007 of the evaluation: a gust leans the drone 25 deg at the 2 m
-    hold, the tag and all four rays leave the 2 m pad; v2's guidance flies on down blind, past
-    the pad's edge, until the descent times out; v3's climbs back over the deck's last track,
-    finds it again and lands."""
+    """ship-ss4 through the standard lens (the ids up to v3), seed 1000007 of the evaluation:
+    a gust leans the drone 25 deg at the 2 m hold, the tag and all four rays leave the 2 m
+    pad; v2's guidance flies on down blind, past the pad's edge, until the descent times out;
+    v3's climbs back over the deck's last track, finds it again and lands."""
     from agents.evaluation.landing import make_env_and_policy, run_episode
 
     outcomes = {}
@@ -362,7 +362,12 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
             "land-now",
             "ship-ss4",
             "tight",
-            extra_overrides={"sensors": "realistic", "timing.guidance.lost_deck": lost_deck},
+            extra_overrides={
+                "sensors": "realistic",
+                "lens": "standard",
+                "timing.guidance.lost_deck": lost_deck,
+                "timing.guidance.view_from_camera": False,
+            },
         )
         try:
             outcomes[lost_deck] = run_episode(env, policy, 1_000_007, "land-now", "ship-ss4")

@@ -208,3 +208,20 @@ def test_the_randomised_dqn_yaml_fine_tunes_the_realistic_model() -> None:
     assert Path(config.settings.init_model).name == "timing_dqn_realistic.zip"
     assert config.settings.randomise["estimator"] == "tight"
     assert set(config.settings.randomise["sensing"]) == {"ideal", "realistic", "realistic-2x"}
+
+
+def test_the_randomised_predictive_yaml_flies_v5_over_each_scenarios_own_predictor() -> None:
+    """The third stage of ``timing-dqn-predictive`` writes the bench's v5 timing out in its
+    YAML: it must stay the settings the v5 ids fly, and it draws both bench sea states, each
+    reading its own predictor (``tilt_model: scenario``)."""
+    from landing_env.config_loading import build_dataclass
+    from landing_env.envs.timing import TimingConfig
+    from landing_env.scenarios import bench_predictive_timing
+
+    config = load_train_config(CONFIG.with_name("timing_dqn_predictive_randomised.yaml"))
+    written = build_dataclass(TimingConfig, config.settings.env_kwargs["timing"], "timing")
+    assert written == build_dataclass(TimingConfig, bench_predictive_timing(5), "timing")
+    assert written.tilt_model == "scenario"
+    assert set(config.settings.randomise["scenarios"]) == {"bench-ss4", "bench-ss5"}
+    second_stage = "timing_dqn_predictive_finetune/timing_dqn_final.zip"
+    assert config.settings.init_model.endswith(second_stage)

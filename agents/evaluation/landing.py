@@ -54,6 +54,7 @@ from agents.evaluation.summary import (  # noqa: F401  (wilson_interval, failure
 )
 from agents.evaluation.summary import markdown_table as summary_table
 from estimation.registry import ESTIMATOR_NAMES
+from landing_env.envs.timing import SCENARIO_TILT_MODEL
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     BENCH_TIMING,
@@ -113,19 +114,19 @@ SCENARIOS: dict[str, Scenario] = {
         "bench-ss3",
         "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
         + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": "bench-ss3"},
+        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
     ),
     "bench-ss4": Scenario(
         "bench-ss4",
         "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
         + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": "bench-ss4"},
+        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
     ),
     "bench-ss5": Scenario(
         "bench-ss5",
         "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
         + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": "bench-ss5"},
+        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
     ),
     "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
     "ship-ss3": Scenario(

@@ -161,6 +161,11 @@ class GuidanceGains:
     #: of this half field of view (tangent: half the image width over the focal length,
     #: 256 / 458.5 for the default camera), and climbs beyond it; 0 turns the gate off
     view_half_tan: float = 0.0
+    #: the gate's half field of view is the camera's, as its calibration gives it (the
+    #: narrowest half view, :meth:`~estimation.camera_model.CameraIntrinsics.half_view_tan`;
+    #: the timing task sets ``view_half_tan`` from it), not the number above: a lens change
+    #: cannot leave the gate behind
+    view_from_camera: bool = False
     view_margin: float = 0.08
     #: half the tag's side, metres (for the gate: the corners, not the centre, must fit)
     tag_half_size_m: float = 0.15

@@ -31,7 +31,7 @@ the wave-off, ``wave_off_tilt_deg``, and the contact times) and refuses another.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +52,7 @@ from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
 from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import episode_step_limit
@@ -78,6 +79,9 @@ WAVE_OFF_RULES = ("fixed", "value")
 WAVE_OFF_CLIMB_S = 1.5
 #: the shortest timed descent a contact window may ask for, seconds
 MIN_CHOSEN_DESCENT_S = 1.0
+#: ``TimingConfig.tilt_model`` that stands for the scenario's own predictor (its config's
+#: ``deck_predictor``): one model card then fits every scenario it was trained over
+SCENARIO_TILT_MODEL = "scenario"
 #: what the observation holds (``TimingConfig.observation``)
 OBSERVATION_KINDS = ("history", "prediction")
 
@@ -254,8 +258,9 @@ class TimingConfig:
     #: fitting episodes at bench sea states 4 and 5 and checked on the tuning seeds, README
     #: "Predicting the deck a descent ahead")
     opportunity_s: float = 1.0
-    #: the deck-tilt predictor of this scenario: a shipped one by name (``bench-ss4``:
-    #: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
+    #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
+    #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
+    #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
     #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
     #: ``predictive`` policy; empty: none
     tilt_model: str = ""
@@ -416,7 +421,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             n_history, self.timing.hold_height_m, observed_prediction_size(self.timing)
         )
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
-        self.guidance = DeckGuidance(self.timing.guidance, self.env_dt)
+        self.guidance = DeckGuidance(self._guidance_gains(), self.env_dt)
         #: the scenario's deck-tilt predictor, read by the model wave-off, the contact
         #: window and the prediction observation (None when none is on)
         self.tilt_predictor = self._load_tilt_predictor()
@@ -434,6 +439,14 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.frames_of_last_step: list[np.ndarray] = []
         self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
+
+    def _guidance_gains(self) -> GuidanceGains:
+        """The guidance's gains, the view gate's half field of view taken from the camera's
+        calibration where ``view_from_camera`` asks for it."""
+        gains = self.timing.guidance
+        if not gains.view_from_camera:
+            return gains
+        return replace(gains, view_half_tan=load_intrinsics(self.config).half_view_tan())
 
     def _wave_off_values(self) -> StoppingValues | None:
         """The value of waiting on for the ``value`` wave-off: from the chances the
@@ -478,6 +491,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             )
         return values
 
+    def resolved_tilt_model(self) -> str:
+        """``timing.tilt_model``, ``scenario`` resolved to the config's ``deck_predictor``
+        (the predictor fitted to this scenario's deck; empty when it names none)."""
+        name = self.timing.tilt_model
+        return self.config.deck_predictor if name == SCENARIO_TILT_MODEL else name
+
     def _load_tilt_predictor(self) -> LinearTiltPredictor | None:
         """The fitted deck-tilt predictor (read by the ``model`` wave-off, the contact
         window and the prediction observation), checked against the history it will read."""
@@ -493,14 +512,20 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             if t.contact_window_s
             else "timing.observation = 'prediction'"
         )
-        if not t.tilt_model:
+        name = self.resolved_tilt_model()
+        if not name:
             self.world.close()
+            what = (
+                "'scenario' reads the scenario's deck_predictor, which this config does not name"
+                if t.tilt_model == SCENARIO_TILT_MODEL
+                else "is empty"
+            )
             raise ConfigError(
                 "timing.tilt_model",
-                f"is empty; {user} needs the scenario's deck-tilt predictor "
+                f"{what}; {user} needs the scenario's deck-tilt predictor "
                 "(e.g. bench-ss4, or a file written by `python -m agents.deck_predictor fit`)",
             )
-        path = tilt_predictor_path(t.tilt_model)
+        path = tilt_predictor_path(name)
         try:
             model = LinearTiltPredictor.load(path)
         except (OSError, ValueError) as error:
@@ -508,7 +533,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             shipped = sorted(p.stem.removeprefix("deck_tilt_") for p in PREDICTOR_DIR.glob("*.npz"))
             raise ConfigError(
                 "timing.tilt_model",
-                f"{t.tilt_model!r}: {error}; give a shipped one ({', '.join(shipped)}) "
+                f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
                 "or a file written by `python -m agents.deck_predictor fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
