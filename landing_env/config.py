@@ -284,7 +284,7 @@ class DeckLandingConfig:
     #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
     sensors: str = "ideal"
     #: the camera's lens: "standard" (58 deg horizontal field of view, the papers' camera) or
-    #: "wide" (80 deg, the ship scenarios'): the preset ``configs/lenses/<name>.yaml`` (focal
+    #: "wide" (80 deg, ship-ss5's and ship-ss6's): the preset ``configs/lenses/<name>.yaml`` (focal
     #: lengths and, per sensing profile, the calibration files made for it) laid over the
     #: sensing preset, under explicit overrides
     lens: str = "standard"

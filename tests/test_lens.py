@@ -155,3 +155,16 @@ def test_any_camera_keeps_a_point_within_its_half_view_inside_the_image(
     pixels = camera.project(rays)
     assert np.all(pixels >= -0.5) and np.all(pixels[:, 0] <= camera.width - 0.5)
     assert np.all(pixels[:, 1] <= camera.height - 0.5)
+
+
+def test_a_view_gate_from_a_camera_its_calibration_does_not_fit_is_refused_naming_the_file() -> (
+    None
+):
+    from landing_env.envs.timing import DeckLandingTimingEnv
+
+    with pytest.raises(ConfigError, match=r"estimation\.intrinsics_file"):
+        DeckLandingTimingEnv(
+            "ship-ss5",
+            overrides={"camera.fx": 300.0, "estimation.observed": "truth"},
+            timing={"hold_height_m": 2.0, "guidance": {"view_from_camera": True}},
+        )

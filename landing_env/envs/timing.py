@@ -446,7 +446,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         gains = self.timing.guidance
         if not gains.view_from_camera:
             return gains
-        return replace(gains, view_half_tan=load_intrinsics(self.config).half_view_tan())
+        try:
+            half_view_tan = load_intrinsics(self.config).half_view_tan()
+        except ConfigError:
+            self.world.close()
+            raise
+        return replace(gains, view_half_tan=half_view_tan)
 
     def _wave_off_values(self) -> StoppingValues | None:
         """The value of waiting on for the ``value`` wave-off: from the chances the
