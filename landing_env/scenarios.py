@@ -139,6 +139,10 @@ SHIP_TIMING: dict[str, Any] = {
     "guidance": {**SHIP_TIMING_V3["guidance"], "view_from_camera": True},
 }
 
+#: ``timing.tilt_model`` that stands for the scenario's own deck-tilt predictor (its config's
+#: ``deck_predictor``): one model card then fits every scenario it was trained over
+SCENARIO_TILT_MODEL = "scenario"
+
 #: the ids made before the ship scenarios' wide lens keep the standard one
 STANDARD_LENS = {"lens": "standard"}
 
@@ -201,7 +205,7 @@ def bench_predictive_timing(version: int = 4) -> dict[str, Any]:
         **PREDICTIVE_TIMING,
         **rule,
         # the scenario's own predictor (bench-ss<n>.yaml's deck_predictor)
-        "tilt_model": "scenario",
+        "tilt_model": SCENARIO_TILT_MODEL,
     }
 
 
@@ -368,6 +372,7 @@ __all__ = [
     "FLYING_OVERRIDES",
     "PREDICTIVE_TIMING",
     "SCENARIO_IDS",
+    "SCENARIO_TILT_MODEL",
     "SHIP_TIMING",
     "SHIP_TIMING_V1",
     "SHIP_TIMING_V2",

@@ -54,12 +54,12 @@ from agents.evaluation.summary import (  # noqa: F401  (wilson_interval, failure
 )
 from agents.evaluation.summary import markdown_table as summary_table
 from estimation.registry import ESTIMATOR_NAMES
-from landing_env.envs.timing import SCENARIO_TILT_MODEL
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
     BENCH_TIMING,
     FLYING_OVERRIDES,
     PREDICTIVE_TIMING,
+    SCENARIO_TILT_MODEL,
     SHIP_ESTIMATOR,
     SHIP_TIMING,
     START_OVERRIDES,

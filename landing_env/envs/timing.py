@@ -55,7 +55,7 @@ from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.scenarios import episode_step_limit
+from landing_env.scenarios import SCENARIO_TILT_MODEL, episode_step_limit
 from landing_env.touchdown import Outcome
 
 #: the guidance and the history live in their own modules; importing them from here still works
@@ -79,9 +79,6 @@ WAVE_OFF_RULES = ("fixed", "value")
 WAVE_OFF_CLIMB_S = 1.5
 #: the shortest timed descent a contact window may ask for, seconds
 MIN_CHOSEN_DESCENT_S = 1.0
-#: ``TimingConfig.tilt_model`` that stands for the scenario's own predictor (its config's
-#: ``deck_predictor``): one model card then fits every scenario it was trained over
-SCENARIO_TILT_MODEL = "scenario"
 #: what the observation holds (``TimingConfig.observation``)
 OBSERVATION_KINDS = ("history", "prediction")
 
