@@ -165,3 +165,87 @@ class OracleTimingPolicy:
             restore_snapshot(env, start, keep=False)
         plan.chosen = choose(plan.candidates)
         return plan
+
+
+class DeckOracleTimingPolicy:
+    """``deck-oracle``: the issue's bound in the strict sense, the timing that **knows the deck's
+    future motion** and nothing else to come.
+
+    :class:`OracleTimingPolicy` knows the whole future: the deck's, and also the gusts' and
+    every sensor's noise (they are all fixed by the episode's seed), so it commits where the
+    wind will happen to be kind; no policy on board could foresee a gust's innovations, and
+    a share of its lead over every policy is that foresight.  This oracle acts causally: at
+    every ``check_every_s`` of the wait it tries a commit *now* in ``draws`` futures that share
+    the deck's motion (a fixed function of time) and the present state (the drone, the gust,
+    the estimates) but draw the gusts' innovations and the sensors' noise anew
+    (:meth:`~landing_env.world.World.redraw_unknowable_future`), and commits at the
+    first moment where at least ``min_chance`` of them land.  The episode itself then goes on
+    with its own future.  Its success is what a timing policy with perfect deck prediction
+    reaches with this rule: the part of the full oracle's lead that better deck sensing and
+    prediction could win; the rest is the wind's.
+    """
+
+    name = "deck-oracle"
+
+    def __init__(
+        self,
+        env: Any,
+        draws: int = 16,
+        min_chance: float = 1.0,
+        check_every_s: float = 0.2,
+        seed: int = 0,
+    ) -> None:
+        self.env = env.unwrapped
+        if not hasattr(self.env, "layout"):
+            raise TypeError("the deck oracle acts in DeckLandingTiming-v0")
+        require_range("draws", draws, 1, 64)
+        require_range("min_chance", min_chance, 0.0, 1.0, low_inclusive=False)
+        decision_s = self.env.env_dt * self.env.timing.steps_per_decision
+        require_range("check_every_s", check_every_s, decision_s - 1e-9, 10.0)
+        self.draws = int(draws)
+        self.min_chance = float(min_chance)
+        #: decisions between two look-aheads
+        self.stride = max(1, round(check_every_s / decision_s))
+        self.seed = int(seed)
+        self._decisions = 0
+        #: (decision, chance) of each look-ahead of the episode so far
+        self.chances: list[tuple[int, float]] = []
+
+    def reset(self) -> None:
+        self._decisions = 0
+        self.chances = []
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+    def act(self, observation: np.ndarray) -> int:
+        del observation  # the oracle reads the environment
+        decision = self._decisions
+        self._decisions += 1
+        if decision % self.stride:
+            return 0
+        chance = self.chance(decision)
+        self.chances.append((decision, chance))
+        return int(chance >= self.min_chance - 1e-12)
+
+    def chance(self, decision: int = 0) -> float:
+        """The share of ``draws`` futures (the deck's own, the rest drawn anew) in which a
+        commit now lands; the environment is left as found.  It stops trying once
+        ``min_chance`` is out of reach."""
+        env = self.env
+        episode_seed = int(env.np_random_seed) % 2**32
+        needed = self.min_chance * self.draws - 1e-9
+        landed = 0
+        here = save_snapshot(env)
+        try:
+            for k in range(self.draws):
+                restore_snapshot(env, here, keep=True)
+                sequence = np.random.SeedSequence([self.seed, episode_seed, decision, k])
+                env.world.redraw_unknowable_future(np.random.default_rng(sequence))
+                _, _, _, _, info = env.step(1)
+                landed += int(info["outcome"] == Outcome.SUCCESS.value)
+                if landed + (self.draws - k - 1) < needed:
+                    break  # the rest cannot reach min_chance
+        finally:
+            restore_snapshot(env, here, keep=False)
+        return landed / self.draws

@@ -9,6 +9,9 @@
 * ``oracle`` (``DeckLandingTiming-v0``): the best timing of all, found by trying every commit
   in a saved copy of the episode (privileged: it knows the future, :mod:`agents.oracle`);
   the upper bar.
+* ``deck-oracle`` (``DeckLandingTiming-v0``): the timing that knows the deck's future and
+  nothing else to come (the gusts and the sensors' noise drawn anew in its look-ahead,
+  :class:`agents.oracle.DeckOracleTimingPolicy`): the bar for timing by deck prediction.
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -616,6 +619,7 @@ POLICY_ENVS: dict[str, str] = {
     "quiescent": "DeckLandingTiming-v0",
     "land-now": "DeckLandingTiming-v0",
     "oracle": "DeckLandingTiming-v0",
+    "deck-oracle": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
     "timing-dqn-realistic": "DeckLandingTiming-v0",
@@ -690,6 +694,10 @@ def make_policy(
         from agents.oracle import OracleTimingPolicy
 
         return OracleTimingPolicy(env)
+    if name == "deck-oracle":
+        from agents.oracle import DeckOracleTimingPolicy
+
+        return DeckOracleTimingPolicy(env)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_env(env, allow_mismatch)

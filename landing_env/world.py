@@ -220,6 +220,19 @@ class World:
         self._state = self.drone.read_state()
         self._hover_rotors()
 
+    def redraw_unknowable_future(self, rng: np.random.Generator) -> None:
+        """Give the future what no one on board could know a new draw from ``rng``: the gusts'
+        innovations (the present gust kept) and every sensor's noise.  The deck's motion, a
+        fixed function of time since the reset, and the present state stay: a look-ahead
+        from a snapshot then knows the deck's future but not the wind's (the deck oracle,
+        :mod:`agents.oracle`)."""
+        streams = rng.spawn(5)
+        self.wind.redraw(streams[0])
+        self.camera.rng = streams[1]
+        self.tof.rng = streams[2]
+        self.imu.rng = streams[3]
+        self.rangefinder.rng = streams[4]
+
     def _watch_height(self) -> float:
         """Height above the deck's home below which contacts are checked every physics step.
 

@@ -181,3 +181,146 @@ def test_evaluating_a_timing_policy_runs_the_oracle_beside_it() -> None:
         ["land-now"], "bench-ss4", 1, out_dir=None, workers=1, progress=False, oracle=False
     )
     assert set(without.results) == {"land-now"}
+
+
+# ------------------------------------------------------------------------------ deck oracle
+def _hold_steps(env, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The deck's and the drone's positions over ``steps`` waits."""
+    base = env.unwrapped
+    deck, drone = [], []
+    for _ in range(steps):
+        env.step(0)
+        deck.append(base.world.deck_state().position_w.copy())
+        drone.append(base.world.drone_state().position_w.copy())
+    return np.array(deck), np.array(drone)
+
+
+def test_redrawing_the_unknowable_future_keeps_the_deck_and_changes_the_wind() -> None:
+    env, _ = make_env_and_policy("land-now", "ship-ss4")
+    base = env.unwrapped
+    try:
+        env.reset(seed=11)
+        here = save_snapshot(base)
+        runs = {}
+        for name, seed in (("a", 1), ("b", 2), ("a again", 1)):
+            restore_snapshot(base, here, keep=True)
+            gust_now = base.world.wind.gust_w
+            base.world.redraw_unknowable_future(np.random.default_rng(seed))
+            # the present gust is kept: only its innovations are new
+            np.testing.assert_array_equal(base.world.wind.gust_w, gust_now)
+            runs[name] = _hold_steps(env, 10)
+        release_snapshot(base, here)
+    finally:
+        env.close()
+    (deck_a, drone_a), (deck_b, drone_b), (deck_a2, drone_a2) = runs.values()
+    np.testing.assert_array_equal(deck_a, deck_b)  # the deck's future is the episode's own
+    assert np.abs(drone_a - drone_b).max() > 1e-4  # the wind's is another draw
+    np.testing.assert_array_equal(drone_a, drone_a2)  # and a seeded one
+    np.testing.assert_array_equal(deck_a, deck_a2)
+
+
+def test_the_deck_oracle_looks_ahead_without_changing_the_episode() -> None:
+    from agents.oracle import DeckOracleTimingPolicy
+
+    env, _ = make_env_and_policy("land-now", "bench-ss4")
+    try:
+        env.reset(seed=4)
+        reference = [env.step(0)[0] for _ in range(3)]
+        env.reset(seed=4)
+        oracle = DeckOracleTimingPolicy(env, draws=3, min_chance=0.5)
+        chances = [oracle.chance(decision) for decision in range(2)]
+        replay = [env.step(0)[0] for _ in range(3)]
+        env.reset(seed=4)
+        again = [oracle.chance(decision) for decision in range(2)]
+    finally:
+        env.close()
+    for ref, got in zip(reference, replay, strict=True):
+        np.testing.assert_array_equal(ref, got)
+    assert all(c in (0.0, 1 / 3, 2 / 3, 1.0) for c in chances)
+    assert again == chances  # seeded by the episode and the decision
+
+
+def test_the_deck_oracle_commits_at_its_first_check_whose_draws_land() -> None:
+    from agents.oracle import DeckOracleTimingPolicy
+
+    env, oracle = make_env_and_policy("deck-oracle", "bench-ss4")
+    try:
+        assert isinstance(oracle, DeckOracleTimingPolicy) and oracle.name == "deck-oracle"
+        result = run_episode(env, oracle, 1000000, "deck-oracle", "bench-ss4")
+        wait_limit_s = env.unwrapped.timing.wait_limit_s
+    finally:
+        env.close()
+    decisions, chances = zip(*oracle.chances, strict=True)
+    # it checked every stride-th decision, waited while the chance fell short, then committed
+    assert list(decisions) == [k * oracle.stride for k in range(len(decisions))]
+    assert all(c < oracle.min_chance for c in chances[:-1])
+    # the last check's draws landed, or the wait limit forced the commit
+    assert chances[-1] >= oracle.min_chance or result.wait_s >= wait_limit_s - 1e-6
+    assert result.outcome in {"success", "hard_landing", "crash", "timeout"}
+
+
+def test_the_deck_oracle_names_a_bad_setting() -> None:
+    from agents.oracle import DeckOracleTimingPolicy
+    from landing_env.errors import ConfigError
+
+    env, _ = make_env_and_policy("land-now", "bench-ss4")
+    try:
+        for kwargs, key in (
+            ({"draws": 0}, "draws"),
+            ({"min_chance": 0.0}, "min_chance"),
+            ({"check_every_s": 0.01}, "check_every_s"),
+        ):
+            with pytest.raises(ConfigError, match=key):
+                DeckOracleTimingPolicy(env, **kwargs)
+    finally:
+        env.close()
+    env, _ = make_env_and_policy("align-descend", "bench-ss4")
+    try:
+        with pytest.raises(TypeError, match="DeckLandingTiming"):
+            DeckOracleTimingPolicy(env)
+    finally:
+        env.close()
+
+
+def test_the_summary_gives_the_gap_to_the_deck_oracle() -> None:
+    def episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
+        return [
+            EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
+            for seed, ok in enumerate(successes)
+        ]
+
+    results = {
+        "land-now": episodes("land-now", [True, False, False, True]),
+        "deck-oracle": episodes("deck-oracle", [True, True, False, True]),
+        "oracle": episodes("oracle", [True, True, True, True]),
+    }
+    summaries = [summarise(rs) for rs in results.values()]
+    compare_with_oracle(summaries, results)
+    land_now, deck_oracle, oracle = summaries
+    assert land_now.deck_oracle_success_rate == pytest.approx(0.75)
+    assert land_now.deck_gap_points == pytest.approx(25.0)
+    assert land_now.gap_points == pytest.approx(50.0)
+    # the full oracle's lead over the deck oracle: the wind's and the noise's foresight
+    assert deck_oracle.gap_points == pytest.approx(25.0)
+    assert oracle.deck_gap_points == pytest.approx(-25.0)
+    table = markdown_table(summaries)
+    assert "gap to deck oracle" in table and "+25.0" in table
+
+
+def test_evaluating_with_the_deck_oracle_runs_it_and_fills_its_gap() -> None:
+    evaluation = evaluate_landing(
+        ["land-now"],
+        "bench-ss4",
+        1,
+        out_dir=None,
+        workers=1,
+        progress=False,
+        oracle=False,
+        deck_oracle=True,
+    )
+    assert set(evaluation.results) == {"land-now", "deck-oracle"}
+    land_now, deck_oracle = evaluation.summaries
+    assert land_now.deck_gap_points == pytest.approx(
+        100 * (deck_oracle.success_rate - land_now.success_rate)
+    )
+    assert math.isnan(land_now.gap_points)  # the full oracle did not run

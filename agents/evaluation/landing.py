@@ -9,6 +9,10 @@ touchdown speeds per policy, success rates with their intervals).  With a timing
 them the ``oracle`` (:mod:`agents.oracle`, the best any timing could do on the same seeds) runs
 too, unless ``--no-oracle``: each timing policy's row gives the oracle's success, the gap in
 points and how many of its failures the oracle failed as well (no timing could avoid them).
+The oracle foresees the wind's gusts and the sensors' noise as well as the deck; with
+``--deck-oracle`` the deck oracle runs too, which foresees the deck alone (the wind and the
+noise to come drawn anew in its look-ahead), and each row gives the gap to it as well: the
+part of the gap that better deck sensing and prediction could close.
 
 Scenarios are the shipped bench (``bench-ss*``, ``paper-stewart``) and full-scale ship-deck
 (``ship-ss*``) configs with the drone flying instead of pinned, the tag
@@ -404,14 +408,27 @@ class LandingSummary:
     gap_points: float = math.nan
     #: this policy's failures on seeds where the oracle failed too: no timing avoids them
     unavoidable_failures: int = 0
+    #: the deck oracle's success on the same seeds (it knows the deck's future, not the
+    #: wind's: :class:`agents.oracle.DeckOracleTimingPolicy`); NaN without it
+    deck_oracle_success_rate: float = math.nan
+    #: deck oracle minus this policy, percentage points
+    deck_gap_points: float = math.nan
 
 
 def compare_with_oracle(
     summaries: list[LandingSummary], results: dict[str, list[EpisodeResult]]
 ) -> None:
-    """Fill in the oracle's columns of the timing policies' summaries (seed by seed)."""
+    """Fill in the oracles' columns of the timing policies' summaries (seed by seed): the
+    full oracle's, and the deck oracle's where it ran."""
     from agents.policies import POLICY_ENVS
 
+    deck_oracle = results.get("deck-oracle")
+    if deck_oracle:
+        deck_rate = sum(r.success for r in deck_oracle) / len(deck_oracle)
+        for summary in summaries:
+            if POLICY_ENVS.get(summary.policy) == POLICY_ENVS["deck-oracle"]:
+                summary.deck_oracle_success_rate = deck_rate
+                summary.deck_gap_points = 100.0 * (deck_rate - summary.success_rate)
     oracle = results.get("oracle")
     if not oracle:
         return
@@ -473,6 +490,12 @@ def _oracle_cells(s: LandingSummary) -> tuple[str, str, str]:
     )
 
 
+def _deck_oracle_cells(s: LandingSummary) -> tuple[str, str]:
+    if not math.isfinite(s.deck_oracle_success_rate):
+        return ("", "")
+    return (f"{100 * s.deck_oracle_success_rate:.1f}%", f"{s.deck_gap_points:+.1f}")
+
+
 #: the columns of the landing table (:func:`agents.evaluation.summary.markdown_table`)
 COLUMNS: tuple[Column, ...] = (
     Column("policy", lambda s: s.policy),
@@ -493,6 +516,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("oracle", lambda s: _oracle_cells(s)[0]),
     Column("gap (points)", lambda s: _oracle_cells(s)[1]),
     Column("failures no timing avoids", lambda s: _oracle_cells(s)[2]),
+    Column("deck oracle", lambda s: _deck_oracle_cells(s)[0]),
+    Column("gap to deck oracle", lambda s: _deck_oracle_cells(s)[1]),
 )
 TABLE_HEADER = tuple(c.header for c in COLUMNS)
 
@@ -598,17 +623,22 @@ def evaluate_landing(
     resume: bool = False,
     oracle: bool = True,
     allow_mismatch: tuple[str, ...] = (),
+    deck_oracle: bool = False,
 ) -> LandingEvaluation:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
 
-    With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last)."""
+    With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last); with
+    ``deck_oracle`` the deck oracle too (it knows the deck's future, not the wind's: costlier,
+    a look-ahead of several descents at each check)."""
     from agents.policies import POLICY_ENVS
 
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     timing_env = POLICY_ENVS["oracle"]
-    if oracle and "oracle" not in policies and timing_env in {POLICY_ENVS[p] for p in policies}:
-        policies = [*policies, "oracle"]
+    timing_policy = timing_env in {POLICY_ENVS[p] for p in policies}
+    for wanted, name in ((deck_oracle, "deck-oracle"), (oracle, "oracle")):
+        if wanted and timing_policy and name not in policies:
+            policies = [*policies, name]
     runs: dict[str, RunResult] = {}
     for name in policies:  # a bad config fails before Ray starts
         task = landing_task(name, scenario, estimator, camera_mode, model_path, extra_overrides)
@@ -694,6 +724,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             resume=args.resume,
             oracle=not args.no_oracle,
             allow_mismatch=tuple(args.allow_mismatch),
+            deck_oracle=args.deck_oracle,
         )
         print_summary(
             f"{scenario}: {SCENARIOS[scenario].description}",
@@ -746,6 +777,13 @@ def add_landing_parser(evaluate_group: Any) -> None:
         "--no-oracle",
         action="store_true",
         help="do not run the oracle timing (the best any timing could do) beside timing policies",
+    )
+    landing.add_argument(
+        "--deck-oracle",
+        action="store_true",
+        help="also run the deck oracle beside timing policies: it knows the deck's future "
+        "motion but not the wind's or the sensors' noise (several look-ahead descents at each "
+        "check: a few times the oracle's cost)",
     )
     landing.add_argument(
         "--set",

@@ -145,6 +145,14 @@ class WindModel:
             self._gust = [0.0, 0.0, 0.0]
         self._last_value = self._compose()
 
+    def redraw(self, rng: np.random.Generator) -> None:
+        """Draw the gusts' future innovations from ``rng``, keeping the present gust: the wind
+        from now on is another realisation of the same process, from the same state (what
+        a look-ahead that must not know the future gusts tries, :mod:`agents.oracle`)."""
+        self._rng = rng
+        self._normals = []
+        self._next_normal = 0
+
     @property
     def gust_w(self) -> np.ndarray:
         """The current gust component (m/s, world frame), without the mean."""
