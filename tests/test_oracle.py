@@ -148,16 +148,18 @@ def test_the_oracle_refuses_the_align_descend_task() -> None:
         env.close()
 
 
-def test_the_summary_gives_the_oracle_the_gap_and_the_unavoidable_failures() -> None:
-    def episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
-        return [
-            EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
-            for seed, ok in enumerate(successes)
-        ]
+def _episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
+    """Episode records of ``policy`` on seeds 0, 1, ... with these successes."""
+    return [
+        EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
+        for seed, ok in enumerate(successes)
+    ]
 
+
+def test_the_summary_gives_the_oracle_the_gap_and_the_unavoidable_failures() -> None:
     results = {
-        "land-now": episodes("land-now", [True, False, False, True]),
-        "oracle": episodes("oracle", [True, True, False, True]),
+        "land-now": _episodes("land-now", [True, False, False, True]),
+        "oracle": _episodes("oracle", [True, True, False, True]),
     }
     summaries = [summarise(rs) for rs in results.values()]
     compare_with_oracle(summaries, results)
@@ -283,16 +285,10 @@ def test_the_deck_oracle_names_a_bad_setting() -> None:
 
 
 def test_the_summary_gives_the_gap_to_the_deck_oracle() -> None:
-    def episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
-        return [
-            EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
-            for seed, ok in enumerate(successes)
-        ]
-
     results = {
-        "land-now": episodes("land-now", [True, False, False, True]),
-        "deck-oracle": episodes("deck-oracle", [True, True, False, True]),
-        "oracle": episodes("oracle", [True, True, True, True]),
+        "land-now": _episodes("land-now", [True, False, False, True]),
+        "deck-oracle": _episodes("deck-oracle", [True, True, False, True]),
+        "oracle": _episodes("oracle", [True, True, True, True]),
     }
     summaries = [summarise(rs) for rs in results.values()]
     compare_with_oracle(summaries, results)
