@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agents.evaluation.landing import (
     EpisodeResult,
@@ -320,3 +322,28 @@ def test_evaluating_with_the_deck_oracle_runs_it_and_fills_its_gap() -> None:
         100 * (deck_oracle.success_rate - land_now.success_rate)
     )
     assert math.isnan(land_now.gap_points)  # the full oracle did not run
+
+
+@given(
+    draws=st.integers(-3, 80),
+    min_chance=st.floats(-1.0, 2.0) | st.just(math.nan),
+    check_every_s=st.floats(-1.0, 20.0) | st.just(math.nan),
+)
+@settings(max_examples=60, deadline=None)
+def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
+    draws: int, min_chance: float, check_every_s: float
+) -> None:
+    from types import SimpleNamespace
+
+    from agents.oracle import DeckOracleTimingPolicy
+    from landing_env.errors import ConfigError
+
+    timing = SimpleNamespace(steps_per_decision=2)
+    env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))
+    try:
+        oracle = DeckOracleTimingPolicy(env, draws, min_chance, check_every_s)
+    except ConfigError as error:
+        assert error.key in {"draws", "min_chance", "check_every_s"}
+        return
+    assert 1 <= oracle.draws <= 64 and 0.0 < oracle.min_chance <= 1.0
+    assert oracle.stride >= 1 and oracle.chances == []
