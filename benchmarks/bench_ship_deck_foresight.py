@@ -36,6 +36,7 @@ import numpy as np
 from agents.evaluation.landing import HELD_OUT_SEED, make_env_and_policy
 from agents.evaluation.runner import map_tasks
 from agents.policies import CalmConfig, predict_calm
+from estimation.frames import tilt_deg
 from landing_env.envs.history import HISTORY_FEATURES
 from landing_env.errors import ConfigError, require_choice, require_range
 
@@ -48,7 +49,7 @@ _VALID = HISTORY_FEATURES.index("valid")
 
 def true_tilt_deg(poses: np.ndarray) -> np.ndarray:
     """The tilt from level (deg) of deck poses (..., 6): the angle of the deck's normal."""
-    return np.degrees(np.arccos(np.clip(np.cos(poses[..., 3]) * np.cos(poses[..., 4]), -1, 1)))
+    return tilt_deg(poses[..., 3], poses[..., 4])
 
 
 def true_history(motion: Any, t: float, dt: float, n: int) -> np.ndarray:
