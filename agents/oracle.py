@@ -194,11 +194,15 @@ class DeckOracleTimingPolicy:
         min_chance: float = 1.0,
         check_every_s: float = 0.2,
         seed: int = 0,
+        min_margin: float = 0.0,
     ) -> None:
         self.env = env.unwrapped
         if not hasattr(self.env, "layout"):
-            raise TypeError("the deck oracle acts in DeckLandingTiming-v0")
+            raise TypeError(f"{self.name} acts in DeckLandingTiming-v0")
         require_range("draws", draws, 1, 64)
+        require_range("min_margin", min_margin, 0.0, 1.0)
+        #: a tried commit lands only with this much slack on every graded criterion
+        self.min_margin = float(min_margin)
         require_range("min_chance", min_chance, 0.0, 1.0, low_inclusive=False)
         decision_s = self.env.env_dt * self.env.timing.steps_per_decision
         require_range("check_every_s", check_every_s, decision_s - 1e-9, 10.0)
@@ -234,6 +238,9 @@ class DeckOracleTimingPolicy:
         ``min_chance`` is out of reach."""
         env = self.env
         episode_seed = int(env.np_random_seed) % 2**32
+        deck_future = self.deck_future()
+        if deck_future is None:
+            return 0.0  # no future to try (a forecast that cannot be made): wait
         needed = self.min_chance * self.draws - 1e-9
         landed = 0
         here = save_snapshot(env)
@@ -242,10 +249,28 @@ class DeckOracleTimingPolicy:
                 restore_snapshot(env, here, keep=True)
                 sequence = np.random.SeedSequence([self.seed, episode_seed, decision, k])
                 env.world.redraw_unknowable_future(np.random.default_rng(sequence))
+                if deck_future is not True:
+                    env.world.stewart.motion = deck_future
                 _, _, _, _, info = env.step(1)
-                landed += int(info["outcome"] == Outcome.SUCCESS.value)
+                landed += int(self.lands(info))
                 if landed + (self.draws - k - 1) < needed:
                     break  # the rest cannot reach min_chance
         finally:
             restore_snapshot(env, here, keep=False)
         return landed / self.draws
+
+    def deck_future(self) -> Any:
+        """The deck's motion the look-ahead plays: ``True`` for the episode's own (this
+        oracle's), a motion source to play instead, or None when there is none (wait)."""
+        return True
+
+    def lands(self, info: dict[str, Any]) -> bool:
+        """Whether a tried commit counts as landing: success, and at least ``min_margin``
+        of slack on the graded criteria (:func:`touchdown_margin`)."""
+        if info["outcome"] != Outcome.SUCCESS.value:
+            return False
+        if self.min_margin <= 0.0:
+            return True
+        return touchdown_margin(info.get("touchdown"), self.env.config.touchdown) >= (
+            self.min_margin - 1e-12
+        )

@@ -12,6 +12,9 @@
 * ``deck-oracle`` (``DeckLandingTiming-v0``): the timing that knows the deck's future and
   nothing else to come (the gusts and the sensors' noise drawn anew in its look-ahead,
   :class:`agents.oracle.DeckOracleTimingPolicy`): the bar for timing by deck prediction.
+* ``deck-forecast`` (``DeckLandingTiming-v0``): the deck oracle with the deck's future
+  replaced by a forecast from the ship's helideck monitoring system
+  (:mod:`agents.deck_forecast`; its look-ahead still flies a copy of the simulation).
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -620,6 +623,7 @@ POLICY_ENVS: dict[str, str] = {
     "land-now": "DeckLandingTiming-v0",
     "oracle": "DeckLandingTiming-v0",
     "deck-oracle": "DeckLandingTiming-v0",
+    "deck-forecast": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
     "timing-dqn-realistic": "DeckLandingTiming-v0",
@@ -698,6 +702,10 @@ def make_policy(
         from agents.oracle import DeckOracleTimingPolicy
 
         return DeckOracleTimingPolicy(env)
+    if name == "deck-forecast":
+        from agents.deck_forecast import DeckForecastTimingPolicy
+
+        return DeckForecastTimingPolicy(env)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_env(env, allow_mismatch)

@@ -14,7 +14,10 @@ forecasting for real-time control of wave energy converters*, IEEE Trans. Sustai
 *true* motion later, it is the Wiener predictor from noisy data: it smooths and predicts at
 once, and its held-out residuals give the prediction's covariance.
 
-:class:`LinearTiltPredictor` maps the last ``window_s`` of the deck's (levelled) pose, the
+:class:`LinearMotionPredictor` is that predictor for any of the pose's values (the ship's
+helideck forecast, :mod:`agents.deck_forecast`, predicts surge, sway, heave, roll and pitch
+8 s ahead from the ship's own motion record); :class:`LinearTiltPredictor` is the one of roll
+and pitch.  It maps the last ``window_s`` of the deck's (levelled) pose, the
 ``channels`` it was fitted on (roll and pitch, and the position: heave, surge and sway answer
 the same waves, so the cross-spectra sharpen the tilt's prediction; at bench sea state 5 from
 2.7 to 1.9 deg of roll error at 1.3 s), to its roll and pitch at each fitted horizon, with a
@@ -31,13 +34,20 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from estimation.array_files import load_arrays, save_arrays
 from estimation.frames import tilt_deg
 from estimation.optimal_stopping import StoppingValues
+
+_P = TypeVar("_P", bound="LinearMotionPredictor")
+
+#: the targets that are angles (reported in degrees)
+_ANGLES = {"roll", "pitch", "yaw"}
+#: targets' display scale: angles in degrees, positions in metres
+_DISPLAY_SCALE = {name: math.degrees(1.0) for name in _ANGLES}
 
 #: standard-normal points (a scrambled Sobol set, fixed) for the probability of a 2-D Gaussian
 #: tilt inside a circle: deterministic, and 1/N-accurate where Monte Carlo is 1/sqrt(N)
@@ -106,15 +116,17 @@ def _invalid(reason: str, horizon_s: float = math.nan) -> TiltPrediction:
 
 
 @dataclass
-class LinearTiltPredictor:
-    """Direct multi-horizon linear predictor of the deck's roll and pitch.
+class LinearMotionPredictor:
+    """Direct multi-horizon linear predictor of the deck's pose values ``targets``.
 
     Features: the last ``window_s`` of each of ``channels`` (pose values in m and rad, one
     sample per ``dt_s``, oldest first, gaps filled linearly), averaged in blocks of ``block``
     samples and divided by the channel's ``scales`` (its spread in the fitting data, so the
     ridge penalty treats metres and radians alike), and a constant.  For each horizon
-    ``horizons_s[k]``: ``coefficients[k]`` (features, 2) and the held-out residual
-    ``covariance[k]`` (2, 2) of (roll, pitch).
+    ``horizons_s[k]``: ``coefficients[k]`` (features, T) and the held-out residual
+    ``covariance[k]`` (T, T) of the T ``targets``.  :class:`LinearTiltPredictor` is the one of
+    roll and pitch that the timing task reads; the ship's helideck forecast
+    (:mod:`agents.deck_forecast`) predicts the whole pose from the ship's own motion record.
     """
 
     window_s: float
@@ -133,17 +145,25 @@ class LinearTiltPredictor:
     channels: tuple[str, ...] = ("roll", "pitch")
     #: each channel's divisor (m or rad); empty: ones
     scales: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: (H, M, 2) the predicted roll and pitch (rad) of M held-out examples at each horizon:
-    #: the distribution of predictions the sea offers (:meth:`chances`); empty: not recorded
+    #: (H, M, T) the predicted targets of M held-out examples at each horizon: the
+    #: distribution of predictions the sea offers (:meth:`LinearTiltPredictor.chances`);
+    #: empty: not recorded
     heldout_means: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
+    #: the pose values it predicts, by name (m and rad)
+    targets: tuple[str, ...] = ("roll", "pitch")
+
+    #: what a file of this kind is called in errors
+    KIND = "deck-motion predictor"
 
     def __post_init__(self) -> None:
         self.channels = tuple(self.channels)
+        self.targets = tuple(self.targets)
         scales = np.asarray(self.scales, dtype=float).reshape(-1)
         self.scales = scales if scales.size else np.ones(len(self.channels))
         means = np.asarray(self.heldout_means, dtype=float)
+        t = len(self.targets)
         self.heldout_means = (
-            means.reshape(len(self.horizons_s), -1, 2) if means.size else np.zeros((0, 0, 2))
+            means.reshape(len(self.horizons_s), -1, t) if means.size else np.zeros((0, 0, t))
         )
 
     @property
@@ -175,6 +195,246 @@ class LinearTiltPredictor:
         )
         blocks = filled[n % self.block :].reshape(-1, self.block, c).mean(axis=1) / self.scales
         return np.concatenate([blocks.ravel(), [1.0]])
+
+    # ---------------------------------------------------------------- prediction
+    def predict_targets(self, values: np.ndarray, valid: np.ndarray) -> np.ndarray | str:
+        """The ``targets`` at every fitted horizon, (H, T), from a history of the ``channels``,
+        or the reason there is none; never raises on data."""
+        phi = self.features(values, valid)
+        if isinstance(phi, str):
+            return phi
+        means = np.einsum("f,hft->ht", phi, self.coefficients)
+        if not np.all(np.isfinite(means)):
+            return "non-finite prediction"
+        return means
+
+    def _bracket(self, horizon_s: float) -> tuple[int, int, float]:
+        """The fitted horizons either side of ``horizon_s`` and the weight of the later one."""
+        h = self.horizons_s
+        k = int(np.clip(np.searchsorted(h, horizon_s) - 1, 0, max(len(h) - 2, 0)))
+        j = min(k + 1, len(h) - 1)
+        w = 0.0 if j == k else float(np.clip((horizon_s - h[k]) / (h[j] - h[k]), 0.0, 1.0))
+        return k, j, w
+
+    # ---------------------------------------------------------------- fitting
+    @classmethod
+    def fit(
+        cls: type[_P],
+        histories: np.ndarray,
+        futures: np.ndarray,
+        groups: np.ndarray,
+        horizons_s: np.ndarray,
+        window_s: float,
+        dt_s: float,
+        block: int = 2,
+        ridges: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2),
+        holdout_fraction: float = 0.25,
+        metadata: dict[str, Any] | None = None,
+        channels: tuple[str, ...] = ("roll", "pitch"),
+        record: int = 1000,
+        targets: tuple[str, ...] | None = None,
+    ) -> _P:
+        """Fit on examples: ``histories`` (N, n, C + 1) of the C ``channels`` and validity,
+        ``futures`` (N, H, T) the true ``targets`` (the class's own by default) at each
+        horizon (NaN where unknown), ``groups`` (N,) the episode of each example.
+
+        The ridge penalty is chosen per horizon on held-out episodes (the last
+        ``holdout_fraction`` of the groups), the covariance is the held-out residuals' (an
+        honest error), and the coefficients are then refitted on every example.  The
+        predictions of ``record`` held-out examples (evenly spaced) are kept: the
+        distribution of predictions (:meth:`chances`)."""
+        histories = np.asarray(histories, dtype=float)
+        futures = np.asarray(futures, dtype=float)
+        groups = np.asarray(groups).reshape(-1)
+        horizons_s = np.asarray(horizons_s, dtype=float).reshape(-1)
+        c = len(channels)
+        targets = tuple(targets) if targets is not None else cls.default_targets()
+        n_targets = len(targets)
+        if histories.ndim != 3 or histories.shape[2] != c + 1:
+            raise ValueError(
+                f"histories must be (N, n, {c + 1}): {', '.join(channels)} and validity"
+            )
+        if futures.shape != (len(histories), len(horizons_s), n_targets):
+            raise ValueError(
+                f"futures must be (N, {len(horizons_s)}, {n_targets}), got {futures.shape}"
+            )
+        if len(groups) != len(histories):
+            raise ValueError("groups needs one entry per example")
+        if block < 1:
+            raise ValueError("block must be >= 1")
+        ok = histories[..., c] > 0.5
+        scales = np.array(
+            [float(np.std(histories[..., k][ok])) if ok.any() else 1.0 for k in range(c)]
+        )
+        scales = np.where(scales > 1e-12, scales, 1.0)
+        template = cls(
+            window_s,
+            dt_s,
+            block,
+            horizons_s,
+            np.zeros(0),
+            np.zeros(0),
+            channels=channels,
+            scales=scales,
+            targets=targets,
+        )
+        rows, keep = [], []
+        for index, history in enumerate(histories):
+            phi = template.features(history[:, :c], history[:, c] > 0.5)
+            if not isinstance(phi, str):
+                rows.append(phi)
+                keep.append(index)
+        if len(rows) < 10:
+            raise ValueError(f"only {len(rows)} examples with a valid window; need at least 10")
+        x = np.array(rows)
+        y = futures[keep]
+        g = groups[keep]
+        unique = np.unique(g)
+        held = np.isin(g, unique[int(len(unique) * (1.0 - holdout_fraction)) :])
+        if held.all() or not held.any():
+            raise ValueError("need at least two episodes (groups) to hold some out")
+        n_features = x.shape[1]
+        coefficients = np.zeros((len(horizons_s), n_features, n_targets))
+        covariance = np.zeros((len(horizons_s), n_targets, n_targets))
+        chosen, rms = [], []
+        held_rows = np.where(held)[0]
+        recorded = held_rows[
+            np.linspace(0, len(held_rows) - 1, min(record, len(held_rows))).astype(int)
+        ]
+        heldout_means = np.zeros((len(horizons_s), len(recorded), n_targets))
+        display = np.array([_DISPLAY_SCALE.get(name, 1.0) for name in targets])
+        grams: dict[bytes, np.ndarray] = {}
+        scale = float(np.mean(x[:, :-1] ** 2)) or 1.0  # features are scaled: about 1
+        for k in range(len(horizons_s)):
+            known = np.all(np.isfinite(y[:, k]), axis=1)
+            train, test = known & ~held, known & held
+            if train.sum() < n_features or test.sum() < 5:
+                raise ValueError(f"too few examples with a known future at {horizons_s[k]} s")
+            best: tuple[float, float, np.ndarray, np.ndarray] | None = None
+            gram = grams.setdefault(train.tobytes(), x[train].T @ x[train])
+            for ridge in ridges:
+                a = _ridge(x[train], y[train, k], ridge * scale * train.sum(), gram)
+                residual = y[test, k] - x[test] @ a
+                error = float(np.mean(residual**2))
+                if best is None or error < best[0]:
+                    best = (error, ridge, residual, a)
+            assert best is not None
+            _, ridge, residual, fitted = best
+            covariance[k] = np.atleast_2d(np.cov(residual.T))
+            heldout_means[k] = x[recorded] @ fitted
+            coefficients[k] = _ridge(
+                x[known],
+                y[known, k],
+                ridge * scale * known.sum(),
+                grams.setdefault(known.tobytes(), x[known].T @ x[known]),
+            )
+            chosen.append(ridge)
+            rms.append((display * np.sqrt(np.diag(covariance[k]))).round(3).tolist())
+        info = dict(metadata or {})
+        info.update(
+            {
+                "examples": len(x),
+                "episodes": len(unique),
+                "ridge": chosen,
+                # angles in degrees, positions in metres
+                ("heldout_rms_deg" if set(targets) <= _ANGLES else "heldout_rms"): rms,
+            }
+        )
+        return cls(
+            window_s,
+            dt_s,
+            block,
+            horizons_s,
+            coefficients,
+            covariance,
+            metadata=info,
+            channels=channels,
+            scales=scales,
+            heldout_means=heldout_means,
+            targets=targets,
+        )
+
+    @classmethod
+    def default_targets(cls) -> tuple[str, ...]:
+        """The targets a fit predicts unless told otherwise."""
+        return ("roll", "pitch")
+
+    # ---------------------------------------------------------------- files
+    def save(self, path: str | Path) -> Path:
+        """Write to ``path`` (``.npz``; the metadata as JSON inside)."""
+        arrays = {
+            "window_s": self.window_s,
+            "dt_s": self.dt_s,
+            "block": self.block,
+            "horizons_s": self.horizons_s,
+            "coefficients": self.coefficients,
+            "covariance": self.covariance,
+            "min_valid_fraction": self.min_valid_fraction,
+            "max_gap_s": self.max_gap_s,
+            "channels": json.dumps(list(self.channels)),
+            "scales": self.scales,
+            "heldout_means": self.heldout_means.astype(np.float32),
+            "targets": json.dumps(list(self.targets)),
+        }
+        return save_arrays(path, arrays, self.metadata)
+
+    @classmethod
+    def load(cls: type[_P], path: str | Path) -> _P:
+        """Read a file written by :meth:`save`; a malformed one is a ``ValueError`` naming it."""
+
+        def build(data: Any, metadata: dict[str, Any]) -> _P:
+            return cls(
+                float(data["window_s"]),
+                float(data["dt_s"]),
+                int(data["block"]),
+                np.asarray(data["horizons_s"], dtype=float),
+                np.asarray(data["coefficients"], dtype=float),
+                np.asarray(data["covariance"], dtype=float),
+                float(data["min_valid_fraction"]),
+                float(data["max_gap_s"]),
+                metadata,
+                tuple(json.loads(str(data["channels"]))),
+                np.asarray(data["scales"], dtype=float),
+                np.asarray(data["heldout_means"], dtype=float)
+                if "heldout_means" in data
+                else np.zeros((0, 0, 2)),
+                tuple(json.loads(str(data["targets"])))
+                if "targets" in data
+                else cls.default_targets(),
+            )
+
+        predictor = load_arrays(path, cls.KIND, build)
+        h, t = len(predictor.horizons_s), len(predictor.targets)
+        n_features = len(predictor.channels) * (predictor.n_window // predictor.block) + 1
+        shapes = (predictor.coefficients.shape, predictor.covariance.shape)
+        if shapes != ((h, n_features, t), (h, t, t)) or len(predictor.scales) != len(
+            predictor.channels
+        ):
+            raise ValueError(f"{path}: coefficient or covariance shapes do not match its window")
+        return predictor
+
+
+def _ridge(
+    x: np.ndarray, y: np.ndarray, penalty: float, gram: np.ndarray | None = None
+) -> np.ndarray:
+    """Least squares with an L2 penalty on every coefficient but the constant (the last);
+    ``gram`` is ``x.T @ x`` when already known."""
+    gram = x.T @ x if gram is None else gram
+    regulariser = penalty * np.eye(x.shape[1])
+    regulariser[-1, -1] = 0.0
+    return np.linalg.solve(gram + regulariser, x.T @ y)
+
+
+class LinearTiltPredictor(LinearMotionPredictor):
+    """The deck's roll and pitch a descent ahead (``targets`` = roll, pitch), with the chance
+    that the tilt is within a limit."""
+
+    KIND = "deck-tilt predictor"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.targets != ("roll", "pitch"):
+            raise ValueError(f"a tilt predictor predicts roll and pitch, not {self.targets}")
 
     # ---------------------------------------------------------------- prediction
     def predict(self, values: np.ndarray, valid: np.ndarray, horizon_s: float) -> TiltPrediction:
@@ -252,191 +512,3 @@ class LinearTiltPredictor:
         the chances are distributed as :meth:`chances`; None when none were recorded."""
         chances = self.chances(horizons_s, limit_deg)
         return StoppingValues.from_samples(chances) if chances.size else None
-
-    def _bracket(self, horizon_s: float) -> tuple[int, int, float]:
-        """The fitted horizons either side of ``horizon_s`` and the weight of the later one."""
-        h = self.horizons_s
-        k = int(np.clip(np.searchsorted(h, horizon_s) - 1, 0, max(len(h) - 2, 0)))
-        j = min(k + 1, len(h) - 1)
-        w = 0.0 if j == k else float(np.clip((horizon_s - h[k]) / (h[j] - h[k]), 0.0, 1.0))
-        return k, j, w
-
-    # ---------------------------------------------------------------- fitting
-    @classmethod
-    def fit(
-        cls,
-        histories: np.ndarray,
-        futures: np.ndarray,
-        groups: np.ndarray,
-        horizons_s: np.ndarray,
-        window_s: float,
-        dt_s: float,
-        block: int = 2,
-        ridges: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2),
-        holdout_fraction: float = 0.25,
-        metadata: dict[str, Any] | None = None,
-        channels: tuple[str, ...] = ("roll", "pitch"),
-        record: int = 1000,
-    ) -> LinearTiltPredictor:
-        """Fit on examples: ``histories`` (N, n, C + 1) of the C ``channels`` and validity,
-        ``futures`` (N, H, 2) the true roll and pitch at each horizon (NaN where unknown),
-        ``groups`` (N,) the episode of each example.
-
-        The ridge penalty is chosen per horizon on held-out episodes (the last
-        ``holdout_fraction`` of the groups), the covariance is the held-out residuals' (an
-        honest error), and the coefficients are then refitted on every example.  The
-        predictions of ``record`` held-out examples (evenly spaced) are kept: the
-        distribution of predictions (:meth:`chances`)."""
-        histories = np.asarray(histories, dtype=float)
-        futures = np.asarray(futures, dtype=float)
-        groups = np.asarray(groups).reshape(-1)
-        horizons_s = np.asarray(horizons_s, dtype=float).reshape(-1)
-        c = len(channels)
-        if histories.ndim != 3 or histories.shape[2] != c + 1:
-            raise ValueError(
-                f"histories must be (N, n, {c + 1}): {', '.join(channels)} and validity"
-            )
-        if futures.shape != (len(histories), len(horizons_s), 2):
-            raise ValueError(f"futures must be (N, {len(horizons_s)}, 2), got {futures.shape}")
-        if len(groups) != len(histories):
-            raise ValueError("groups needs one entry per example")
-        if block < 1:
-            raise ValueError("block must be >= 1")
-        ok = histories[..., c] > 0.5
-        scales = np.array(
-            [float(np.std(histories[..., k][ok])) if ok.any() else 1.0 for k in range(c)]
-        )
-        scales = np.where(scales > 1e-12, scales, 1.0)
-        template = cls(
-            window_s,
-            dt_s,
-            block,
-            horizons_s,
-            np.zeros(0),
-            np.zeros(0),
-            channels=channels,
-            scales=scales,
-        )
-        rows, keep = [], []
-        for index, history in enumerate(histories):
-            phi = template.features(history[:, :c], history[:, c] > 0.5)
-            if not isinstance(phi, str):
-                rows.append(phi)
-                keep.append(index)
-        if len(rows) < 10:
-            raise ValueError(f"only {len(rows)} examples with a valid window; need at least 10")
-        x = np.array(rows)
-        y = futures[keep]
-        g = groups[keep]
-        unique = np.unique(g)
-        held = np.isin(g, unique[int(len(unique) * (1.0 - holdout_fraction)) :])
-        if held.all() or not held.any():
-            raise ValueError("need at least two episodes (groups) to hold some out")
-        n_features = x.shape[1]
-        coefficients = np.zeros((len(horizons_s), n_features, 2))
-        covariance = np.zeros((len(horizons_s), 2, 2))
-        chosen, rms = [], []
-        held_rows = np.where(held)[0]
-        recorded = held_rows[
-            np.linspace(0, len(held_rows) - 1, min(record, len(held_rows))).astype(int)
-        ]
-        heldout_means = np.zeros((len(horizons_s), len(recorded), 2))
-        scale = float(np.mean(x[:, :-1] ** 2)) or 1.0  # features are scaled: about 1
-        for k in range(len(horizons_s)):
-            known = np.all(np.isfinite(y[:, k]), axis=1)
-            train, test = known & ~held, known & held
-            if train.sum() < n_features or test.sum() < 5:
-                raise ValueError(f"too few examples with a known future at {horizons_s[k]} s")
-            best: tuple[float, float, np.ndarray, np.ndarray] | None = None
-            for ridge in ridges:
-                a = _ridge(x[train], y[train, k], ridge * scale * train.sum())
-                residual = y[test, k] - x[test] @ a
-                error = float(np.mean(residual**2))
-                if best is None or error < best[0]:
-                    best = (error, ridge, residual, a)
-            assert best is not None
-            _, ridge, residual, fitted = best
-            covariance[k] = np.cov(residual.T)
-            heldout_means[k] = x[recorded] @ fitted
-            coefficients[k] = _ridge(x[known], y[known, k], ridge * scale * known.sum())
-            chosen.append(ridge)
-            rms.append(np.degrees(np.sqrt(np.diag(covariance[k]))).round(3).tolist())
-        info = dict(metadata or {})
-        info.update(
-            {
-                "examples": len(x),
-                "episodes": len(unique),
-                "ridge": chosen,
-                "heldout_rms_deg": rms,
-            }
-        )
-        return cls(
-            window_s,
-            dt_s,
-            block,
-            horizons_s,
-            coefficients,
-            covariance,
-            metadata=info,
-            channels=channels,
-            scales=scales,
-            heldout_means=heldout_means,
-        )
-
-    # ---------------------------------------------------------------- files
-    def save(self, path: str | Path) -> Path:
-        """Write to ``path`` (``.npz``; the metadata as JSON inside)."""
-        arrays = {
-            "window_s": self.window_s,
-            "dt_s": self.dt_s,
-            "block": self.block,
-            "horizons_s": self.horizons_s,
-            "coefficients": self.coefficients,
-            "covariance": self.covariance,
-            "min_valid_fraction": self.min_valid_fraction,
-            "max_gap_s": self.max_gap_s,
-            "channels": json.dumps(list(self.channels)),
-            "scales": self.scales,
-            "heldout_means": self.heldout_means.astype(np.float32),
-        }
-        return save_arrays(path, arrays, self.metadata)
-
-    @classmethod
-    def load(cls, path: str | Path) -> LinearTiltPredictor:
-        """Read a file written by :meth:`save`; a malformed one is a ``ValueError`` naming it."""
-
-        def build(data: Any, metadata: dict[str, Any]) -> LinearTiltPredictor:
-            return cls(
-                float(data["window_s"]),
-                float(data["dt_s"]),
-                int(data["block"]),
-                np.asarray(data["horizons_s"], dtype=float),
-                np.asarray(data["coefficients"], dtype=float),
-                np.asarray(data["covariance"], dtype=float),
-                float(data["min_valid_fraction"]),
-                float(data["max_gap_s"]),
-                metadata,
-                tuple(json.loads(str(data["channels"]))),
-                np.asarray(data["scales"], dtype=float),
-                np.asarray(data["heldout_means"], dtype=float)
-                if "heldout_means" in data
-                else np.zeros((0, 0, 2)),
-            )
-
-        predictor = load_arrays(path, "deck-tilt predictor", build)
-        h = len(predictor.horizons_s)
-        n_features = len(predictor.channels) * (predictor.n_window // predictor.block) + 1
-        shapes = (predictor.coefficients.shape, predictor.covariance.shape)
-        if shapes != ((h, n_features, 2), (h, 2, 2)) or len(predictor.scales) != len(
-            predictor.channels
-        ):
-            raise ValueError(f"{path}: coefficient or covariance shapes do not match its window")
-        return predictor
-
-
-def _ridge(x: np.ndarray, y: np.ndarray, penalty: float) -> np.ndarray:
-    """Least squares with an L2 penalty on every coefficient but the constant (the last)."""
-    gram = x.T @ x
-    regulariser = penalty * np.eye(x.shape[1])
-    regulariser[-1, -1] = 0.0
-    return np.linalg.solve(gram + regulariser, x.T @ y)

@@ -273,6 +273,8 @@ def test_the_deck_oracle_names_a_bad_setting() -> None:
             ({"draws": 0}, "draws"),
             ({"min_chance": 0.0}, "min_chance"),
             ({"check_every_s": 0.01}, "check_every_s"),
+            ({"min_margin": -0.1}, "min_margin"),
+            ({"min_margin": 1.1}, "min_margin"),
         ):
             with pytest.raises(ConfigError, match=key):
                 DeckOracleTimingPolicy(env, **kwargs)
@@ -328,10 +330,11 @@ def test_evaluating_with_the_deck_oracle_runs_it_and_fills_its_gap() -> None:
     draws=st.integers(-3, 80),
     min_chance=st.floats(-1.0, 2.0) | st.just(math.nan),
     check_every_s=st.floats(-1.0, 20.0) | st.just(math.nan),
+    min_margin=st.floats(-1.0, 2.0) | st.just(math.nan),
 )
 @settings(max_examples=60, deadline=None)
 def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
-    draws: int, min_chance: float, check_every_s: float
+    draws: int, min_chance: float, check_every_s: float, min_margin: float
 ) -> None:
     from types import SimpleNamespace
 
@@ -341,9 +344,12 @@ def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
     timing = SimpleNamespace(steps_per_decision=2)
     env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))
     try:
-        oracle = DeckOracleTimingPolicy(env, draws, min_chance, check_every_s)
+        oracle = DeckOracleTimingPolicy(
+            env, draws, min_chance, check_every_s, min_margin=min_margin
+        )
     except ConfigError as error:
-        assert error.key in {"draws", "min_chance", "check_every_s"}
+        assert error.key in {"draws", "min_chance", "check_every_s", "min_margin"}
         return
     assert 1 <= oracle.draws <= 64 and 0.0 < oracle.min_chance <= 1.0
+    assert 0.0 <= oracle.min_margin <= 1.0
     assert oracle.stride >= 1 and oracle.chances == []

@@ -384,6 +384,72 @@ class SeaStateMotion:
         return np.real(self._rate_coefficients @ np.exp(1j * self._omega * t))
 
 
+# ------------------------------------------------------------------------------- forecast
+class ForecastMotion:
+    """The deck's motion as a forecast has it: ``truth`` up to ``t0_s`` (the past happened),
+    then a cubic spline through the forecast poses ``poses`` (H, 6) at ``t0_s + horizons_s``
+    (``horizons_s[0]`` = 0), held at the last one beyond.
+
+    A look-ahead plays it in place of the episode's own motion
+    (:mod:`agents.deck_forecast`).  The spline starts at the true pose and velocity of
+    ``t0_s`` so that the servoed deck does not jump: the forecast's own error at horizon 0
+    (the HMS's noise, a few cm) is added back with a ``fade_s`` time constant, and the
+    spline's second derivative is zero at its end.
+    """
+
+    def __init__(
+        self,
+        truth: MotionSource,
+        t0_s: float,
+        horizons_s: np.ndarray,
+        poses: np.ndarray,
+        fade_s: float = 1.0,
+    ) -> None:
+        from scipy.interpolate import CubicSpline
+
+        horizons = np.asarray(horizons_s, dtype=float).reshape(-1)
+        poses = np.asarray(poses, dtype=float)
+        if poses.shape != (len(horizons), 6) or len(horizons) < 2:
+            raise ValueError(
+                f"poses must be (H, 6) at H >= 2 horizons, got {poses.shape} at {len(horizons)}"
+            )
+        if abs(horizons[0]) > 1e-9 or np.any(np.diff(horizons) <= 0):
+            raise ValueError("horizons_s must start at 0 and increase")
+        require_range("fade_s", fade_s, 0.0, low_inclusive=False)
+        self.truth = truth
+        self.t0_s = float(t0_s)
+        self.end_s = self.t0_s + float(horizons[-1])
+        now = np.asarray(truth.pose(self.t0_s), dtype=float)
+        joined = poses + np.outer(np.exp(-horizons / fade_s), now - poses[0])
+        start_rate = np.asarray(truth.velocity(self.t0_s), dtype=float)
+        self._spline = CubicSpline(
+            self.t0_s + horizons, joined, axis=0, bc_type=((1, start_rate), (2, np.zeros(6)))
+        )
+        self._rate = self._spline.derivative()
+        self._last = joined[-1]
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        times = np.asarray(times, dtype=float).reshape(-1)
+        out = np.empty((len(times), 6))
+        past = times <= self.t0_s
+        if past.any():
+            out[past] = sample_poses(self.truth, times[past])
+        ahead = ~past
+        if ahead.any():
+            out[ahead] = self._spline(np.minimum(times[ahead], self.end_s))
+        return out
+
+    def pose(self, t: float) -> np.ndarray:
+        return self.poses(np.array([t]))[0]
+
+    def velocity(self, t: float) -> np.ndarray:
+        if t <= self.t0_s:
+            return np.asarray(self.truth.velocity(t), dtype=float)
+        if t >= self.end_s:
+            return np.zeros(6)
+        return np.asarray(self._rate(t), dtype=float)
+
+
 # ------------------------------------------------------------------------------- csv
 class CsvMotionError(ValueError):
     """A motion CSV file is malformed; the message names the file and the row."""
