@@ -188,6 +188,60 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         return ForecastMotion(truth, t0, self.forecast.horizons_s, full)
 
 
+def plot_forecasts(
+    forecast: LinearMotionPredictor,
+    source: Any,
+    scenario: str,
+    path: str,
+    starts_s: tuple[float, ...] = (40.0, 57.0, 74.0, 91.0),
+) -> str:
+    """Heave, roll and pitch of a sea the forecast never saw: the truth, the HMS record, and
+    the forecast made at each of ``starts_s`` with its held-out 1-sigma band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=FIT_SEED - 1)
+    span = np.arange(starts_s[0] - 12.0, starts_s[-1] + HORIZONS_S[-1], 0.05)
+    truth = np.asarray(source.poses(span), dtype=float)
+    times, measured = monitor.window(span[-1], span[-1] - span[0])
+    sigma = np.sqrt(np.diagonal(forecast.covariance, axis1=1, axis2=2))
+    figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    for axis, (channel, label, scale) in zip(
+        axes,
+        (
+            (2, "heave (m)", 1.0),
+            (3, "roll (deg)", math.degrees(1.0)),
+            (4, "pitch (deg)", math.degrees(1.0)),
+        ),
+        strict=True,
+    ):
+        axis.plot(span, scale * truth[:, channel], color="k", lw=1.2, label="truth")
+        axis.plot(times, scale * measured[:, channel], ".", color="0.6", ms=2, label="HMS (10 Hz)")
+        for k, t0 in enumerate(starts_s):
+            _, window = monitor.window(t0, forecast.window_s)
+            predicted = forecast.predict_targets(window, np.ones(len(window), dtype=bool))
+            if isinstance(predicted, str):
+                continue
+            ahead = t0 + forecast.horizons_s
+            mean = scale * predicted[:, channel]
+            band = scale * sigma[:, channel]
+            axis.plot(ahead, mean, color="C0", lw=1.5, label="forecast" if k == 0 else None)
+            axis.fill_between(ahead, mean - band, mean + band, color="C0", alpha=0.2, lw=0)
+            axis.axvline(t0, color="C0", lw=0.5, ls=":")
+        axis.set_ylabel(label)
+    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[-1].set_xlabel("time (s)")
+    figure.suptitle(
+        f"{scenario}: the helideck forecast from the ship's HMS, 8 s ahead (band: held-out 1 sigma)"
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m agents.deck_forecast --scenario ship-ss5``: fit the scenario's forecast and
     print its held-out error per horizon, against holding the present (persistence)."""
@@ -198,11 +252,16 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--scenario", nargs="+", default=["ship-ss5"], choices=sorted(SCENARIOS))
+    parser.add_argument(
+        "--plot", metavar="PNG", help="also plot forecasts against the truth (first scenario)"
+    )
     args = parser.parse_args(argv)
-    for scenario in args.scenario:
+    for index, scenario in enumerate(args.scenario):
         motion = load_config(SCENARIOS[scenario].config).motion
         forecast = fit_deck_forecast(motion)
         source = make_motion_source(motion, np.random.default_rng([FIT_SEED - 1]))
+        if args.plot and index == 0:
+            print(f"wrote {plot_forecasts(forecast, source, scenario, args.plot)}")
         times = np.arange(0.0, RECORD_S, 0.1)
         poses = np.asarray(source.poses(times), dtype=float)[:, : len(HMS_CHANNELS)]
         print(f"{scenario}: held-out RMS error (x, y, z m; roll, pitch deg), persistence after")

@@ -240,3 +240,12 @@ def test_the_deck_forecast_refuses_a_forecast_of_another_rate_or_channels(small_
             DeckForecastTimingPolicy(env, forecast=small_forecast, min_margin=1.5)
     finally:
         env.close()
+
+
+def test_the_forecast_plot_draws_a_sea_the_forecast_never_saw(small_forecast, tmp_path):
+    from agents.deck_forecast import plot_forecasts
+
+    source = make_motion_source(_ship_motion(4), np.random.default_rng(5))
+    path = plot_forecasts(small_forecast, source, "ship-ss4", str(tmp_path / "forecast.png"))
+    with open(path, "rb") as handle:
+        assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
