@@ -40,7 +40,12 @@ from agents.oracle import DeckOracleTimingPolicy
 from estimation.deck_prediction import LinearMotionPredictor
 from landing_env.errors import ConfigError, require_range
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
-from landing_env.stewart.motion import ForecastMotion, MotionConfig, make_motion_source
+from landing_env.stewart.motion import (
+    ForecastMotion,
+    MotionConfig,
+    make_motion_source,
+    sample_poses,
+)
 
 #: the forecast's horizons, seconds: every 0.5 s to 8 s (a commit's descent, contact and
 #: settle take 3-7 s)
@@ -93,7 +98,7 @@ def fit_deck_forecast(
         source = make_motion_source(motion, np.random.default_rng([seed + k]))
         monitor = HelideckMonitor(source, hms, seed=seed + k)
         times, measured = monitor.window(0.0, record_s)
-        truth = np.asarray(source.poses(times), dtype=float)[:, : len(HMS_CHANNELS)]
+        truth = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
         ends = np.arange(n_window - 1, len(times) - steps[-1], stride)
         windows = np.stack([measured[end - n_window + 1 : end + 1] for end in ends])
         histories.append(np.concatenate([windows, np.ones((*windows.shape[:2], 1))], axis=2))
@@ -204,7 +209,7 @@ def plot_forecasts(
 
     monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=FIT_SEED - 1)
     span = np.arange(starts_s[0] - 12.0, starts_s[-1] + HORIZONS_S[-1], 0.05)
-    truth = np.asarray(source.poses(span), dtype=float)
+    truth = sample_poses(source, span)
     times, measured = monitor.window(span[-1], span[-1] - span[0])
     sigma = np.sqrt(np.diagonal(forecast.covariance, axis1=1, axis2=2))
     figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
@@ -263,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.plot and index == 0:
             print(f"wrote {plot_forecasts(forecast, source, scenario, args.plot)}")
         times = np.arange(0.0, RECORD_S, 0.1)
-        poses = np.asarray(source.poses(times), dtype=float)[:, : len(HMS_CHANNELS)]
+        poses = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
         print(f"{scenario}: held-out RMS error (x, y, z m; roll, pitch deg), persistence after")
         for k, horizon in enumerate(forecast.horizons_s):
             lag = round(horizon / 0.1)
