@@ -128,6 +128,28 @@ def test_forecast_motion_refuses_poses_that_do_not_fit_its_horizons() -> None:
         ForecastMotion(truth, 0.0, HORIZONS_S, np.zeros((len(HORIZONS_S), 6)), fade_s=0.0)
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    t0=st.floats(-100.0, 100.0) | st.just(math.nan),
+    offset=st.floats(-50.0, 50.0) | st.just(math.nan) | st.just(math.inf),
+    times=st.lists(st.floats(-200.0, 200.0), min_size=1, max_size=20),
+)
+def test_forecast_motion_of_any_finite_forecast_is_finite_and_refuses_a_non_finite_one(
+    t0, offset, times
+):
+    truth = Swell()
+    forecast = truth.poses(np.nan_to_num(t0) + HORIZONS_S) + offset
+    try:
+        motion = ForecastMotion(truth, t0, HORIZONS_S, forecast)
+    except ValueError as error:
+        assert not (math.isfinite(t0) and math.isfinite(offset))
+        assert "finite" in str(error)
+        return
+    poses = motion.poses(np.array(times))
+    assert poses.shape == (len(times), 6) and np.all(np.isfinite(poses))
+    assert all(np.all(np.isfinite(motion.velocity(t))) for t in times)
+
+
 # ------------------------------------------------------------------------------ the forecast
 def test_the_helideck_forecast_beats_holding_the_present_on_a_sea_it_never_saw(small_forecast):
     source = make_motion_source(_ship_motion(4), np.random.default_rng(777))

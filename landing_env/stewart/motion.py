@@ -415,6 +415,8 @@ class ForecastMotion:
             )
         if abs(horizons[0]) > 1e-9 or np.any(np.diff(horizons) <= 0):
             raise ValueError("horizons_s must start at 0 and increase")
+        if not (np.all(np.isfinite(poses)) and math.isfinite(t0_s)):
+            raise ValueError("poses and t0_s must be finite")
         require_range("fade_s", fade_s, 0.0, low_inclusive=False)
         self.truth = truth
         self.t0_s = float(t0_s)
