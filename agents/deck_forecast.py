@@ -22,16 +22,34 @@ future replaced by that forecast:
   when all of them land with ``min_margin`` of slack on every graded criterion (the
   forecast's error eats into the margin the deck oracle can spend to the last bit).
 
-What it still shares with the oracles: the look-ahead flies a saved copy of the simulation
-(:mod:`landing_env.envs.snapshot`), so the drone's side of the prediction (its own state, the
-guidance, the touchdown's physics) is a perfect model.  A drone would carry a model of its own
-closed loop instead; what this policy measures is how much of the deck oracle's lead a
-realistic deck forecast keeps.
+What ``deck-forecast`` still shares with the oracles: the look-ahead flies a saved copy of the
+simulation (:mod:`landing_env.envs.snapshot`), so the drone's side of the prediction (its own
+state, the guidance, the touchdown's physics) is a perfect model; it measures how much of the
+deck oracle's lead a realistic deck forecast keeps.
+
+``deck-forecast-onboard`` (:class:`OnboardModelConfig`) plays the same look-ahead as a model
+the drone carries would: it knows only what the drone knows of the present.
+
+* **Where it is over the deck**: its deck-pose estimate (the observed estimator's), not the
+  truth.  Each look-ahead moves the drone so that the deck is where the estimate puts it
+  plus a draw of the estimate's own error (its covariance), a sample of where the deck may
+  truly be; the estimators keep what they believed.  With no valid estimate it waits.
+* **The present gust**: the drone's wind estimate (the truth plus an error drawn once per
+  decision, :attr:`OnboardModelConfig.gust_error_mps`), and in each look-ahead a draw around
+  that estimate with the same spread.
+* **Its own airframe**: each look-ahead scales the linear drag and the rotors' thrust by
+  draws within :class:`OnboardModelConfig`'s fractions (an identified drag is known to a few
+  tens of percent; thrust goes with the day's air density).
+
+The guidance, the controller, the touchdown's physics and the estimators' software are the
+drone's own code and stay exact; so do its own attitude and velocity (its navigation).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -68,7 +86,60 @@ FORECAST_KINDS: tuple[str, ...] = ("ship", "sea_state")
 #: the HMS errors' stream of an episode (apart from the look-ahead's draws)
 _HMS_STREAM = 0x4D5
 
+#: the onboard model's streams: the wind estimate of a decision, and each look-ahead's draws
+_WIND_ESTIMATE_STREAM = 0x57E
+_MODEL_STREAM = 0x30D
+
 _FITTED: dict[str, LinearMotionPredictor] = {}
+
+
+@dataclass(frozen=True)
+class OnboardModelConfig:
+    """What ``deck-forecast-onboard``'s look-ahead does not know of the present, 1 sigma.
+
+    * ``gust_error_mps`` (x, y, z in the world frame): the error of the drone's estimate of
+      the present wind.  Yu et al. (2025, *Design and implementation of a high-precision
+      wind-estimation UAV with onboard sensors*, arXiv:2512.10428) estimate it from the
+      airframe's dynamics (a disturbance observer) to 0.22 m/s RMS in outdoor hover, under
+      0.38 m/s in dynamic flight and under 0.17 m/s vertically, with a purpose-built
+      airframe; 0.4 m/s per horizontal axis and 0.2 m/s vertically take a drone that was
+      not built to measure wind.
+    * ``drag_error_fraction``: each look-ahead scales the linear drag by a uniform draw in
+      1 +- this (the identified drag of a quadrotor is known to a few tens of percent; an
+      assumption, not a measured figure).
+    * ``thrust_error_fraction``: each look-ahead scales the rotors' thrust coefficient by a
+      uniform draw in 1 +- this: thrust goes with the air's density, and a 30 degC day at
+      sea is 5 % thinner than the ISA's 15 degC (ideal gas law) that the model assumes.
+    * ``position_from_estimate``: start from the deck-pose estimate (False: the true
+      relative position, as ``deck-forecast``), moved by a draw of its error,
+      ``position_error_m`` (camera axes x, y, z).  The defaults round up `tight`'s measured
+      RMS error at the 2 m hold of ``ship-ss5`` with realistic sensing, 2.5, 2.5 and
+      10.4 mm (``python -m benchmarks.bench_onboard_estimate_error``); its own covariance
+      reports 0.1-0.4 mm there, some 25 times too confident to draw from.
+    """
+
+    gust_error_mps: tuple[float, float, float] = (0.4, 0.4, 0.2)
+    drag_error_fraction: float = 0.2
+    position_from_estimate: bool = True
+    position_error_m: tuple[float, float, float] = (0.003, 0.003, 0.010)
+    thrust_error_fraction: float = 0.05
+
+    def __post_init__(self) -> None:
+        for key, high, axes in (
+            ("gust_error_mps", 10.0, "m/s, world x, y, z"),
+            ("position_error_m", 1.0, "m, camera x, y, z"),
+        ):
+            values = tuple(float(v) for v in getattr(self, key))
+            if len(values) != 3:
+                raise ConfigError(key, f"needs 3 values ({axes})")
+            for value in values:
+                require_range(key, value, 0.0, high)
+            object.__setattr__(self, key, values)
+        require_range("drag_error_fraction", self.drag_error_fraction, 0.0, 0.9)
+        require_range("thrust_error_fraction", self.thrust_error_fraction, 0.0, 0.5)
+        if not isinstance(self.position_from_estimate, bool):
+            value = self.position_from_estimate
+            raise ConfigError("position_from_estimate", f"must be true or false, got {value!r}")
 
 
 def fit_deck_forecast(
@@ -145,8 +216,16 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         min_margin: float = 0.15,
         hms: HelideckMonitorConfig | None = None,
         forecast: LinearMotionPredictor | None = None,
+        onboard: OnboardModelConfig | None = None,
     ) -> None:
         super().__init__(env, draws, min_chance, check_every_s, seed, min_margin)
+        #: None: the look-ahead knows the present exactly (``deck-forecast``)
+        self.onboard = onboard
+        if onboard is not None:
+            self.name = "deck-forecast-onboard"
+        #: this decision's (estimate - truth) of the deck's position in C, the factor of the
+        #: estimate's error, and the drone's wind estimate (world, m/s)
+        self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.hms = hms or HelideckMonitorConfig()
         self.forecast = forecast or deck_forecast_for(self.env.config.motion, self.hms)
         if (
@@ -176,9 +255,16 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             self._monitor = HelideckMonitor(self.env.world.stewart.motion, self.hms, hms_seed)
         return self._monitor
 
-    def deck_future(self) -> Any:
+    def deck_future(self, decision: int = 0) -> Any:
         world = self.env.world
         t0 = float(world.time)
+        if self.onboard is not None:
+            belief = self._onboard_belief(decision)
+            self._belief = None
+            if isinstance(belief, str):
+                self.last_forecast = belief
+                return None
+            self._belief = belief
         _, measured = self.monitor().window(t0, self.forecast.window_s)
         poses = self.forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
         self.last_forecast = poses
@@ -191,6 +277,73 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         if not np.all(np.isfinite(full)) or not math.isfinite(t0):
             return None
         return ForecastMotion(truth, t0, self.forecast.horizons_s, full)
+
+    def _onboard_belief(self, decision: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
+        """What the drone believes of the present at ``decision``: the deck's position in C as
+        estimated less the truth, the factor of that estimate's error (1 sigma), and its wind
+        estimate; or why it cannot say."""
+        env = self.env
+        assert self.onboard is not None
+        sensing = getattr(env, "_sensing", None)
+        if sensing is None:
+            return "no sensing yet"
+        estimate = sensing.estimates.get(env.config.estimation.observed)
+        if estimate is None or not estimate.valid:
+            return "no valid deck-pose estimate: the drone does not know where the deck is"
+        t_est = np.asarray(estimate.translation, dtype=float)
+        if t_est.shape != (3,) or not np.all(np.isfinite(t_est)):
+            return "the deck-pose estimate is not finite"
+        factor = np.diag(self.onboard.position_error_m)
+        _, t_true = env.world.true_deck_pose_c()
+        episode_seed = int(env.np_random_seed) % 2**32
+        sequence = np.random.SeedSequence(
+            [self.seed, episode_seed, decision, _WIND_ESTIMATE_STREAM]
+        )
+        error = np.random.default_rng(sequence).normal(0.0, self.onboard.gust_error_mps)
+        wind_estimate = env.world.wind.gust_w + error
+        return t_est - np.asarray(t_true, dtype=float), factor, wind_estimate
+
+    def model_draw(self, decision: int, draw: int) -> None:
+        """Make the restored copy the drone's model of the present (``deck-forecast-onboard``):
+        the drone where its estimate (and a draw of its error) puts it over the deck, the
+        present gust drawn around its wind estimate, the drag and the thrust scaled by
+        draws (the plant; the controller keeps its nominal model)."""
+        if self.onboard is None or self._belief is None:
+            return
+        env = self.env
+        world = env.world
+        offset_c, factor, wind_estimate = self._belief
+        episode_seed = int(env.np_random_seed) % 2**32
+        rng = np.random.default_rng(
+            np.random.SeedSequence([self.seed, episode_seed, decision, draw, _MODEL_STREAM])
+        )
+        normals = rng.standard_normal(7)
+        drag_scale, thrust_scale = 1.0 + (2.0 * rng.random(2) - 1.0) * (
+            self.onboard.drag_error_fraction,
+            self.onboard.thrust_error_fraction,
+        )
+        if self.onboard.position_from_estimate:
+            # the deck, seen from the camera, where the estimate puts it less a draw of the
+            # estimate's error: move the drone by the opposite, keeping its velocities
+            _, rotation_wc = world.camera_pose_w()
+            shift_w = -(rotation_wc @ (offset_c - factor @ normals[:3]))
+            state = world.drone_state()
+            client = world.client
+            body = world.drone.body_id
+            velocity, angular = client.getBaseVelocity(body)
+            client.resetBasePositionAndOrientation(
+                body, (state.position_w + shift_w).tolist(), state.quaternion_xyzw.tolist()
+            )
+            client.resetBaseVelocity(body, velocity, angular)
+            world._state = world.drone.read_state()
+        gust = wind_estimate + np.asarray(self.onboard.gust_error_mps) * normals[3:6]
+        world.wind.set_present_gust_w(gust)
+        params = world.drone.params
+        world.drone.params = dataclasses.replace(
+            params,
+            linear_drag_b=np.asarray(params.linear_drag_b, dtype=float) * drag_scale,
+            k_f=float(params.k_f) * thrust_scale,
+        )
 
 
 def plot_forecasts(

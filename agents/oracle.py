@@ -238,7 +238,7 @@ class DeckOracleTimingPolicy:
         ``min_chance`` is out of reach."""
         env = self.env
         episode_seed = int(env.np_random_seed) % 2**32
-        deck_future = self.deck_future()
+        deck_future = self.deck_future(decision)
         if deck_future is None:
             return 0.0  # no future to try (a forecast that cannot be made): wait
         needed = self.min_chance * self.draws - 1e-9
@@ -251,6 +251,7 @@ class DeckOracleTimingPolicy:
                 env.world.redraw_unknowable_future(np.random.default_rng(sequence))
                 if deck_future is not True:
                     env.world.stewart.motion = deck_future
+                self.model_draw(decision, k)
                 _, _, _, _, info = env.step(1)
                 landed += int(self.lands(info))
                 if landed + (self.draws - k - 1) < needed:
@@ -259,10 +260,17 @@ class DeckOracleTimingPolicy:
             restore_snapshot(env, here, keep=False)
         return landed / self.draws
 
-    def deck_future(self) -> Any:
-        """The deck's motion the look-ahead plays: ``True`` for the episode's own (this
-        oracle's), a motion source to play instead, or None when there is none (wait)."""
+    def deck_future(self, decision: int = 0) -> Any:
+        """The deck's motion the look-ahead of ``decision`` plays: ``True`` for the episode's
+        own (this oracle's), a motion source to play instead, or None when there is none
+        (wait)."""
+        del decision
         return True
+
+    def model_draw(self, decision: int, draw: int) -> None:
+        """Change the restored copy before look-ahead ``draw`` of ``decision`` plays it: what
+        the look-ahead does not know of the present (this oracle knows it all: nothing)."""
+        del decision, draw
 
     def lands(self, info: dict[str, Any]) -> bool:
         """Whether a tried commit counts as landing: success, and at least ``min_margin``

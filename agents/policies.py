@@ -15,6 +15,9 @@
 * ``deck-forecast`` (``DeckLandingTiming-v0``): the deck oracle with the deck's future
   replaced by a forecast from the ship's helideck monitoring system
   (:mod:`agents.deck_forecast`; its look-ahead still flies a copy of the simulation).
+* ``deck-forecast-onboard`` (``DeckLandingTiming-v0``): the same look-ahead as a model the
+  drone carries: started from its own deck-pose estimate and wind estimate, with its drag
+  uncertain (:class:`agents.deck_forecast.OnboardModelConfig`).
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -624,6 +627,7 @@ POLICY_ENVS: dict[str, str] = {
     "oracle": "DeckLandingTiming-v0",
     "deck-oracle": "DeckLandingTiming-v0",
     "deck-forecast": "DeckLandingTiming-v0",
+    "deck-forecast-onboard": "DeckLandingTiming-v0",
     "timing-dqn": "DeckLandingTiming-v0",
     "timing-ppo": "DeckLandingTiming-v0",
     "timing-dqn-realistic": "DeckLandingTiming-v0",
@@ -706,6 +710,10 @@ def make_policy(
         from agents.deck_forecast import DeckForecastTimingPolicy
 
         return DeckForecastTimingPolicy(env)
+    if name == "deck-forecast-onboard":
+        from agents.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+
+        return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig())
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_env(env, allow_mismatch)

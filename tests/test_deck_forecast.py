@@ -3,6 +3,7 @@ look-ahead plays, and the deck-forecast timing policy that tries commits in it."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -10,11 +11,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.deck_forecast import HORIZONS_S, DeckForecastTimingPolicy, fit_deck_forecast
+from agents.deck_forecast import (
+    HORIZONS_S,
+    DeckForecastTimingPolicy,
+    OnboardModelConfig,
+    fit_deck_forecast,
+)
 from agents.evaluation.landing import SCENARIOS, make_env_and_policy
 from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
+from landing_env.physics.wind import WindConfig, WindModel
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
 from landing_env.stewart.motion import ForecastMotion, MotionConfig, make_motion_source
 
@@ -271,3 +278,165 @@ def test_the_forecast_plot_draws_a_sea_the_forecast_never_saw(small_forecast, tm
     path = plot_forecasts(small_forecast, source, "ship-ss4", str(tmp_path / "forecast.png"))
     with open(path, "rb") as handle:
         assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------------- the onboard model
+def test_the_onboard_model_starts_the_drone_where_its_estimate_puts_it(small_forecast):
+    """With no error drawn, the copy's drone sees the deck exactly where its estimate put
+    it, flies in its wind estimate's gust and keeps its velocity; the episode is unchanged."""
+    env, _ = make_env_and_policy(
+        "land-now", "ship-ss4", "tight", extra_overrides={"sensors": "realistic"}
+    )
+    exact = OnboardModelConfig(
+        thrust_error_fraction=0.0,
+        gust_error_mps=(0.0, 0.0, 0.0),
+        drag_error_fraction=0.0,
+        position_error_m=(0.0, 0.0, 0.0),
+    )
+    try:
+        env.reset(seed=3)
+        for _ in range(3):
+            env.step(0)
+        base = env.unwrapped
+        policy = DeckForecastTimingPolicy(env, draws=1, forecast=small_forecast, onboard=exact)
+        estimate = base._sensing.estimates["tight"]
+        assert estimate.valid
+        _, t_true = base.world.true_deck_pose_c()
+        velocity = base.world.drone_state().velocity_w.copy()
+        gust = base.world.wind.gust_w.copy()
+        drag = base.world.drone.params.linear_drag_b.copy()
+        k_f = base.world.drone.params.k_f
+        assert policy.deck_future(7) is not None
+        policy.model_draw(7, 0)
+        _, t_model = base.world.true_deck_pose_c()
+        moved_velocity = base.world.drone_state().velocity_w
+        np.testing.assert_allclose(t_model, estimate.translation, atol=1e-9)
+        assert np.linalg.norm(t_model - t_true) > 0.0  # the estimate was not the truth
+        np.testing.assert_allclose(moved_velocity, velocity, atol=1e-12)
+        np.testing.assert_allclose(base.world.wind.gust_w, gust, atol=1e-12)
+        np.testing.assert_array_equal(base.world.drone.params.linear_drag_b, drag)
+        assert base.world.drone.params.k_f == k_f
+    finally:
+        env.close()
+
+
+def test_the_onboard_model_draws_its_errors_with_the_spreads_set():
+    env, _ = make_env_and_policy(
+        "land-now", "ship-ss5", "tight", extra_overrides={"sensors": "realistic"}
+    )
+    model = OnboardModelConfig(
+        gust_error_mps=(0.4, 0.4, 0.2), drag_error_fraction=0.2, position_from_estimate=False
+    )
+    forecast = fit_deck_forecast(_ship_motion(5), realizations=2, record_s=300.0)
+    try:
+        env.reset(seed=4)
+        base = env.unwrapped
+        while not base._sensing.estimates["tight"].valid:
+            env.step(0)
+        policy = DeckForecastTimingPolicy(env, draws=1, forecast=forecast, onboard=model)
+        truth = base.world.wind.gust_w.copy()
+        drag = base.world.drone.params.linear_drag_b.copy()
+        k_f = base.world.drone.params.k_f
+        estimates, gusts, scales = [], [], []
+        for decision in range(60):
+            policy.deck_future(decision)
+            assert policy._belief is not None
+            estimates.append(policy._belief[2])
+            for draw in range(4):
+                policy.model_draw(decision, draw)
+                gusts.append(base.world.wind.gust_w - policy._belief[2])
+                params = base.world.drone.params
+                scales.append([*(params.linear_drag_b / drag), params.k_f / k_f])
+                base.world.wind.set_present_gust_w(truth)
+                base.world.drone.params = dataclasses.replace(params, linear_drag_b=drag, k_f=k_f)
+    finally:
+        env.close()
+    estimate_spread = np.std(np.asarray(estimates) - truth, axis=0)
+    draw_spread = np.std(np.asarray(gusts), axis=0)
+    for spread in (estimate_spread, draw_spread):
+        np.testing.assert_allclose(spread, [0.4, 0.4, 0.2], rtol=0.35)
+    scales = np.asarray(scales)
+    assert np.allclose(scales[:, :3], scales[:, :1])  # one scale for the whole drag
+    assert 0.8 - 1e-9 <= scales[:, 0].min() < 0.9 and 1.1 < scales[:, 0].max() <= 1.2 + 1e-9
+    assert 0.95 - 1e-9 <= scales[:, 3].min() < 0.97 and 1.03 < scales[:, 3].max() <= 1.05 + 1e-9
+
+
+def test_the_onboard_model_waits_when_the_drone_has_no_deck_estimate(small_forecast, monkeypatch):
+    env, _ = make_env_and_policy("land-now", "ship-ss4", "tight")
+    try:
+        env.reset(seed=2)
+        base = env.unwrapped
+        policy = DeckForecastTimingPolicy(
+            env, draws=2, forecast=small_forecast, onboard=OnboardModelConfig()
+        )
+        invalid = dataclasses.replace(base._sensing.estimates["tight"], valid=False)
+        monkeypatch.setitem(base._sensing.estimates, "tight", invalid)
+        assert policy.chance(0) == 0.0
+        assert "no valid deck-pose estimate" in policy.last_forecast
+    finally:
+        env.close()
+
+
+def test_the_onboard_look_ahead_leaves_the_episode_as_it_was_and_repeats(small_forecast):
+    env, _ = make_env_and_policy(
+        "land-now", "ship-ss4", "tight", extra_overrides={"sensors": "realistic"}
+    )
+    try:
+        env.reset(seed=8)
+        reference = [env.step(0)[0] for _ in range(3)]
+        env.reset(seed=8)
+        policy = DeckForecastTimingPolicy(
+            env, draws=2, min_chance=0.5, forecast=small_forecast, onboard=OnboardModelConfig()
+        )
+        chances = [policy.chance(decision) for decision in range(2)]
+        replay = [env.step(0)[0] for _ in range(3)]
+        env.reset(seed=8)
+        again = [policy.chance(decision) for decision in range(2)]
+    finally:
+        env.close()
+    for ref, got in zip(reference, replay, strict=True):
+        np.testing.assert_array_equal(ref, got)
+    assert again == chances and policy.name == "deck-forecast-onboard"
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    gust=st.lists(st.floats(-20.0, 20.0), min_size=3, max_size=3),
+    drag=st.floats(-1.0, 2.0),
+    position=st.lists(st.floats(-0.5, 2.0), min_size=3, max_size=3),
+    thrust=st.floats(-1.0, 1.0),
+)
+def test_any_onboard_setting_builds_or_is_refused_naming_its_key(gust, drag, position, thrust):
+    valid = (
+        all(0 <= g <= 10 for g in gust)
+        and 0 <= drag <= 0.9
+        and all(0 <= p <= 1 for p in position)
+        and 0 <= thrust <= 0.5
+    )
+    build = lambda: OnboardModelConfig(tuple(gust), drag, True, tuple(position), thrust)  # noqa: E731
+    if valid:
+        build()
+        return
+    with pytest.raises(
+        ConfigError,
+        match=r"gust_error_mps|drag_error_fraction|position_error_m|thrust_error_fraction",
+    ):
+        build()
+
+
+def test_a_present_gust_can_be_set_and_the_process_goes_on_from_it():
+    config = WindConfig(enabled=True, mean_velocity_w=(8.0, 6.0, 0.0), turbulence="dryden")
+    wind = WindModel(config, np.random.default_rng(1))
+    wind.velocity(0.0, 0.01)
+    wind.set_present_gust_w(np.array([1.0, -2.0, 0.5]))
+    np.testing.assert_allclose(wind.gust_w, [1.0, -2.0, 0.5], atol=1e-12)
+    np.testing.assert_allclose(wind.velocity(0.0, 0.01), [9.0, 4.0, 0.5], atol=1e-12)
+    after = wind.velocity(0.01, 0.01) - np.array([8.0, 6.0, 0.0])
+    assert np.linalg.norm(after - [1.0, -2.0, 0.5]) < 0.5  # it goes on from there
+    with pytest.raises(ValueError, match="gust_w"):
+        wind.set_present_gust_w(np.array([np.nan, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="gust_w"):
+        wind.set_present_gust_w(np.zeros(2))
+    calm = WindModel(WindConfig(enabled=False), np.random.default_rng(1))
+    calm.set_present_gust_w(np.ones(3))
+    np.testing.assert_array_equal(calm.velocity(0.0, 0.01), np.zeros(3))

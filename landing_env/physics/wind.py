@@ -153,6 +153,21 @@ class WindModel:
         self._normals = []
         self._next_normal = 0
 
+    def set_present_gust_w(self, gust_w: np.ndarray) -> None:
+        """Replace the present gust (m/s, world frame, without the mean) by ``gust_w``; the
+        process goes on from it.  A model that does not know the present gust exactly plays
+        one drawn around its estimate (:mod:`agents.deck_forecast`).  Disabled wind stays
+        zero; a non-finite gust is refused by name."""
+        gust = np.asarray(gust_w, dtype=float).reshape(-1)
+        if gust.shape != (3,) or not np.all(np.isfinite(gust)):
+            raise ValueError(f"gust_w must be 3 finite m/s values, got {gust_w!r}")
+        if not self.config.enabled:
+            return
+        cx, sx = self._axes
+        gx, gy, gz = (float(v) for v in gust)
+        self._gust = [cx * gx + sx * gy, -sx * gx + cx * gy, gz]
+        self._last_value = self._compose()
+
     @property
     def gust_w(self) -> np.ndarray:
         """The current gust component (m/s, world frame), without the mean."""
