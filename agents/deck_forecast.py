@@ -43,6 +43,10 @@ the drone carries would: it knows only what the drone knows of the present.
 
 The guidance, the controller, the touchdown's physics and the estimators' software are the
 drone's own code and stay exact; so do its own attitude and velocity (its navigation).
+Registered as a policy, it also lowers its standard over the last 5 s of the wait, to half
+the look-aheads at the wait limit (``deadline_chance``,
+:meth:`~agents.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
+land beats the blind one the limit would force.
 """
 
 from __future__ import annotations
@@ -217,8 +221,12 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         hms: HelideckMonitorConfig | None = None,
         forecast: LinearMotionPredictor | None = None,
         onboard: OnboardModelConfig | None = None,
+        deadline_chance: float | None = None,
+        relax_s: float = 5.0,
     ) -> None:
-        super().__init__(env, draws, min_chance, check_every_s, seed, min_margin)
+        super().__init__(
+            env, draws, min_chance, check_every_s, seed, min_margin, deadline_chance, relax_s
+        )
         #: None: the look-ahead knows the present exactly (``deck-forecast``)
         self.onboard = onboard
         if onboard is not None:

@@ -17,7 +17,8 @@
   (:mod:`agents.deck_forecast`; its look-ahead still flies a copy of the simulation).
 * ``deck-forecast-onboard`` (``DeckLandingTiming-v0``): the same look-ahead as a model the
   drone carries: started from its own deck-pose estimate and wind estimate, with its drag
-  uncertain (:class:`agents.deck_forecast.OnboardModelConfig`).
+  and thrust uncertain (:class:`agents.deck_forecast.OnboardModelConfig`), and its standard
+  falling to half the look-aheads over the last 5 s of the wait.
 * ``timing-dqn`` / ``timing-ppo`` (``DeckLandingTiming-v0``): a trained SB3 policy,
   ``agents/models/timing_dqn.zip`` (shipped) or ``timing_ppo.zip``, or any model file trained
   by :mod:`agents.training`.
@@ -713,7 +714,7 @@ def make_policy(
     if name == "deck-forecast-onboard":
         from agents.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 
-        return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig())
+        return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig(), deadline_chance=0.5)
     default = shipped_timing_model(name.removeprefix("timing-"))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_env(env, allow_mismatch)
