@@ -325,7 +325,7 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         rng = np.random.default_rng(
             np.random.SeedSequence([self.seed, episode_seed, decision, draw, _MODEL_STREAM])
         )
-        normals = rng.standard_normal(7)
+        normals = rng.standard_normal(7)  # position 3, gust 3, one spare (kept: the streams)
         drag_scale, thrust_scale = 1.0 + (2.0 * rng.random(2) - 1.0) * (
             self.onboard.drag_error_fraction,
             self.onboard.thrust_error_fraction,
@@ -334,16 +334,7 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             # the deck, seen from the camera, where the estimate puts it less a draw of the
             # estimate's error: move the drone by the opposite, keeping its velocities
             _, rotation_wc = world.camera_pose_w()
-            shift_w = -(rotation_wc @ (offset_c - factor @ normals[:3]))
-            state = world.drone_state()
-            client = world.client
-            body = world.drone.body_id
-            velocity, angular = client.getBaseVelocity(body)
-            client.resetBasePositionAndOrientation(
-                body, (state.position_w + shift_w).tolist(), state.quaternion_xyzw.tolist()
-            )
-            client.resetBaseVelocity(body, velocity, angular)
-            world._state = world.drone.read_state()
+            world.shift_drone(-(rotation_wc @ (offset_c - factor @ normals[:3])))
         gust = wind_estimate + np.asarray(self.onboard.gust_error_mps) * normals[3:6]
         world.wind.set_present_gust_w(gust)
         params = world.drone.params

@@ -257,6 +257,22 @@ class World:
         self.drone.reset(position_w, yaw)
         self._state = self.drone.read_state()
 
+    def shift_drone(self, shift_w: np.ndarray) -> None:
+        """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
+        without stepping time: a look-ahead's model of where the drone is
+        (:mod:`agents.deck_forecast`).  A non-finite or misshapen shift is refused by name."""
+        shift = np.asarray(shift_w, dtype=float).reshape(-1)
+        if shift.shape != (3,) or not np.all(np.isfinite(shift)):
+            raise ValueError(f"shift_w must be 3 finite metres, got {shift_w!r}")
+        state = self.drone_state()
+        body = self.drone.body_id
+        velocity, angular = self.client.getBaseVelocity(body)
+        self.client.resetBasePositionAndOrientation(
+            body, (state.position_w + shift).tolist(), state.quaternion_xyzw.tolist()
+        )
+        self.client.resetBaseVelocity(body, velocity, angular)
+        self._state = self.drone.read_state()
+
     def _hover_rotors(self) -> None:
         """Spin the rotors up to hover so that an episode does not start with a drop."""
         hover = math.sqrt(self.params.mass * GRAVITY / (4.0 * self.params.k_f))

@@ -440,3 +440,24 @@ def test_a_present_gust_can_be_set_and_the_process_goes_on_from_it():
     calm = WindModel(WindConfig(enabled=False), np.random.default_rng(1))
     calm.set_present_gust_w(np.ones(3))
     np.testing.assert_array_equal(calm.velocity(0.0, 0.01), np.zeros(3))
+
+
+def test_shifting_the_drone_keeps_its_attitude_and_velocities_and_refuses_a_bad_shift():
+    env, _ = make_env_and_policy("land-now", "ship-ss4", "tight")
+    try:
+        env.reset(seed=5)
+        env.step(0)
+        world = env.unwrapped.world
+        before = world.drone_state()
+        position, velocity = before.position_w.copy(), before.velocity_w.copy()
+        attitude = before.quaternion_xyzw.copy()
+        world.shift_drone(np.array([0.1, -0.2, 0.05]))
+        after = world.drone_state()
+        np.testing.assert_allclose(after.position_w - position, [0.1, -0.2, 0.05], atol=1e-9)
+        np.testing.assert_allclose(after.velocity_w, velocity, atol=1e-12)
+        np.testing.assert_allclose(after.quaternion_xyzw, attitude, atol=1e-12)
+        for bad in (np.array([np.nan, 0.0, 0.0]), np.zeros(2)):
+            with pytest.raises(ValueError, match="shift_w"):
+                world.shift_drone(bad)
+    finally:
+        env.close()
