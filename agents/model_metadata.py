@@ -167,25 +167,42 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     """
     from landing_env.envs.history import HISTORY_FEATURES
     from landing_env.envs.timing import (
+        FORECAST_SCALES,
         HISTORY_SCALES,
         OBSERVATION_LIMIT,
+        OWN_STATE_FEATURES,
+        OWN_STATE_SCALES,
         TOF_SCALE,
-        TimingObservationLayout,
-        observed_prediction_size,
+        timing_layout,
     )
 
-    n_history = max(1, round(timing.history_s * env_hz))
-    layout = TimingObservationLayout(
-        n_history, timing.hold_height_m, observed_prediction_size(timing)
-    )
+    layout = timing_layout(timing, env_hz)
+    n_history = layout.n_history
     # the prediction observation's values mean what its predictor and contact times make them
     prediction: dict[str, Any] = {}
-    if timing.observation != "history":
+    if timing.observation == "prediction":
         prediction = {
             "observation": timing.observation,
             "tilt_model": timing.tilt_model,
             "contact_times_s": [float(c) for c in timing.contact_times_s],
             "opportunity_s": float(timing.opportunity_s),
+        }
+    elif timing.observation == "forecast":
+        # the forecast's horizons, window and record, and the own state's features
+        from landing_env.sea.hms import HMS_CHANNELS
+        from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
+
+        prediction = {
+            "observation": timing.observation,
+            "forecast": {
+                "channels": list(HMS_CHANNELS),
+                "horizons_s": [float(h) for h in HORIZONS_S],
+                "window_s": float(WINDOW_S),
+                "fitted_on": f"{REALIZATIONS} records of {RECORD_S:g} s",
+                "scales": [float(v) for v in FORECAST_SCALES],
+                "own_state": list(OWN_STATE_FEATURES),
+                "own_state_scales": [float(v) for v in OWN_STATE_SCALES],
+            },
         }
     return {
         **prediction,

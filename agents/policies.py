@@ -682,7 +682,7 @@ def make_policy(
         )
     if name == "land-now":
         return LandNowPolicy()
-    if name in ("quiescent", "predictive") and not base.layout.history_observed:
+    if name in ("quiescent", "predictive") and base.layout.observed_rows != base.layout.n_history:
         raise ConfigError(
             "timing.observation",
             f"is {base.timing.observation!r}; {name} reads the deck-pose history: use 'history'",

@@ -139,6 +139,10 @@ SHIP_TIMING: dict[str, Any] = {
     "guidance": {**SHIP_TIMING_V3["guidance"], "view_from_camera": True},
 }
 
+#: the ship timing ids' v5: v4 observing, after the history, the ship's helideck forecast (its
+#: HMS record 0-8 s ahead) and the drone's own velocity and lean (``timing.observation``)
+SHIP_TIMING_FORECAST: dict[str, Any] = {**SHIP_TIMING, "observation": "forecast"}
+
 #: ``timing.tilt_model`` that stands for the scenario's own deck-tilt predictor (its config's
 #: ``deck_predictor``): one model card then fits every scenario it was trained over
 SCENARIO_TILT_MODEL = "scenario"
@@ -221,7 +225,9 @@ def _ship_ids() -> dict[str, ScenarioId]:
     attitude); the timing task's v2: the deck's acceleration tracked and led
     (``SHIP_TIMING_V2``); v3: and a go-around with the deck lost (``SHIP_TIMING_V3``); v4:
     the scenario's lens (wide at sea states 5 and 6), the view gate from the camera
-    (``SHIP_TIMING``).  The landing task's v1 has the standard lens, its v2 the scenario's."""
+    (``SHIP_TIMING``); v5: v4 observing the helideck forecast and the drone's own state
+    (``SHIP_TIMING_FORECAST``).  The landing task's v1 has the standard lens, its v2 the
+    scenario's."""
     ids: dict[str, ScenarioId] = {}
     timing_task = "DeckLandingTiming-v0"
     for n in (3, 4, 5, 6):
@@ -234,6 +240,11 @@ def _ship_ids() -> dict[str, ScenarioId]:
                 ", the deck's acceleration led, a go-around with the deck lost, no flare",
             ),
             (4, SHIP_TIMING, ", v3's guidance through the scenario's lens (wide from ss5)"),
+            (
+                5,
+                SHIP_TIMING_FORECAST,
+                ", v4 observing the ship's helideck forecast and its own state",
+            ),
         ):
             lens = STANDARD_LENS if version < 4 else {}
             ids[f"DeckLandingTiming-ShipSS{n}-v{version}"] = ScenarioId(

@@ -26,6 +26,10 @@ same observation layout; ``-v2`` and ``-v3`` add an 8 s history and the deck-til
 wave-off, and ``-v4`` the contact time each commit chooses (``contact_window_s``).  What the
 commit starts is part of the task a model learns, so a model's card records the descent (and
 the wave-off, ``wave_off_tilt_deg``, and the contact times) and refuses another.
+The ship ids ``DeckLandingTiming-ShipSS{3,4,5,6}-v5`` are their ``-v4`` observing
+``forecast`` (``TimingConfig.observation``): the history's newest row and, after the wait
+fraction, the ship's helideck forecast 0-8 s ahead (:mod:`landing_env.sea.hms_forecast`) and
+the drone's own velocity and lean (:class:`TimingObservationLayout`).
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from estimation.deck_prediction import LinearTiltPredictor
+from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
 from estimation.frames import (
     euler_zyx_from_matrix,
     level_from_body,
@@ -56,6 +60,8 @@ from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import SCENARIO_TILT_MODEL, episode_step_limit
+from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
+from landing_env.sea.hms_forecast import FORECAST_KINDS, HORIZONS_S, deck_forecast_for
 from landing_env.touchdown import Outcome
 
 #: the guidance and the history live in their own modules; importing them from here still works
@@ -80,7 +86,7 @@ WAVE_OFF_CLIMB_S = 1.5
 #: the shortest timed descent a contact window may ask for, seconds
 MIN_CHOSEN_DESCENT_S = 1.0
 #: what the observation holds (``TimingConfig.observation``)
-OBSERVATION_KINDS = ("history", "prediction")
+OBSERVATION_KINDS = ("history", "prediction", "forecast")
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -98,6 +104,13 @@ HISTORY_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 10.0, 10.0, 10.0, 
 TOF_SCALE = 10.0
 #: bound of every scaled observation value; beyond it a value is clipped and flagged
 OBSERVATION_LIMIT = 50.0
+#: scale of the ``forecast`` observation's helideck forecast (surge, sway, heave in m, from
+#: the forecast's present; roll and pitch in rad): decimetres and tenths of a radian
+FORECAST_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0])
+#: the drone's own state in the ``forecast`` observation: its velocity in its heading frame
+#: (m/s) and its roll and pitch (rad), scaled to order one
+OWN_STATE_FEATURES: tuple[str, ...] = ("vx_h", "vy_h", "vz_h", "roll", "pitch")
+OWN_STATE_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0])
 
 
 @dataclass
@@ -113,6 +126,13 @@ class TimingObservationParts:
     wait_fraction: float
     #: the prediction layout's values (see :class:`TimingObservationLayout`); empty otherwise
     prediction: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: the forecast layout's helideck forecast, (horizons, 5) of surge, sway, heave (m, from
+    #: the forecast's present) and roll, pitch (rad); empty otherwise
+    forecast: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
+    #: the forecast was made (False: no HMS record yet; its values are then 0)
+    forecast_valid: bool = False
+    #: the forecast layout's own state (:data:`OWN_STATE_FEATURES`, SI); empty otherwise
+    own_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -125,11 +145,19 @@ class TimingObservationLayout:
     are replaced by ``n_prediction`` values of the deck-tilt predictor, all in [0, 1]: the
     chance of a deck within the touchdown limit at each of the ``n_prediction - 2`` contact
     times, the value of waiting on (the chance a later commit is expected to get), and 1 when
-    the prediction is valid (0: too little seen; the chances are then 0)."""
+    the prediction is valid (0: too little seen; the chances are then 0).
+
+    With ``n_forecast`` > 0 (``TimingConfig.observation = "forecast"``) only the newest
+    history row is observed (the deck's motion is in the forecast) and ``n_forecast * 5 + 1 +
+    5`` values follow the wait fraction: the ship's helideck
+    forecast (:mod:`landing_env.sea.hms_forecast`) at its ``n_forecast`` horizons (surge, sway
+    and heave from the forecast's present, roll and pitch; :data:`FORECAST_SCALES`), 1 when
+    it was made, and the drone's own state (:data:`OWN_STATE_FEATURES`)."""
 
     n_history: int
     hold_height_m: float
     n_prediction: int = 0
+    n_forecast: int = 0
 
     @property
     def history_observed(self) -> bool:
@@ -137,11 +165,21 @@ class TimingObservationLayout:
         return self.n_prediction == 0
 
     @property
+    def observed_rows(self) -> int:
+        """How many of the newest history rows the observation holds."""
+        if not self.history_observed:
+            return 0
+        return 1 if self.n_forecast else self.n_history
+
+    @property
     def size(self) -> int:
         head = (
-            self.n_history * len(HISTORY_FEATURES) if self.history_observed else self.n_prediction
+            self.observed_rows * len(HISTORY_FEATURES)
+            if self.history_observed
+            else self.n_prediction
         )
-        return head + 9
+        tail = self.n_forecast * len(FORECAST_SCALES) + 1 + len(OWN_STATE_SCALES)
+        return head + 9 + (tail if self.n_forecast else 0)
 
     @property
     def space(self) -> spaces.Box:
@@ -154,11 +192,15 @@ class TimingObservationLayout:
         tof_valid: np.ndarray,
         wait_fraction: float,
         prediction: np.ndarray | None = None,
+        forecast: np.ndarray | None = None,
+        own_state: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool]:
         """The flat observation and whether any value had to be clipped to the bounds
-        (``prediction``: the prediction layout's values, needed by it)."""
+        (``prediction``: the prediction layout's values, needed by it; ``forecast``: the
+        forecast layout's (n_forecast, 5) forecast, None when none was made, and
+        ``own_state``, needed by it)."""
         if self.history_observed:
-            rows = np.array(history, dtype=float)
+            rows = np.array(history, dtype=float)[-self.observed_rows :]
             valid = rows[:, 9] > 0.5
             rows[valid, 2] -= self.hold_height_m
             rows *= HISTORY_SCALES
@@ -171,10 +213,30 @@ class TimingObservationLayout:
                 )
         tof_valid = np.asarray(tof_valid, dtype=bool)
         tof = np.where(tof_valid, np.nan_to_num(tof_range) - self.hold_height_m, 0.0)
-        flat = np.concatenate([head, tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]])
+        parts = [head, tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]]
+        if self.n_forecast:
+            parts.extend(self._forecast_values(forecast, own_state))
+        flat = np.concatenate(parts)
         clipped = bool(np.any(np.abs(flat) > OBSERVATION_LIMIT))
         flat = np.clip(flat, -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
         return flat.astype(np.float32), clipped
+
+    def _forecast_values(
+        self, forecast: np.ndarray | None, own_state: np.ndarray | None
+    ) -> list[np.ndarray]:
+        shape = (self.n_forecast, len(FORECAST_SCALES))
+        valid = forecast is not None
+        values = np.zeros(shape) if forecast is None else np.asarray(forecast, dtype=float)
+        if values.shape != shape:
+            raise ValueError(f"forecast has shape {values.shape}; the layout needs {shape}")
+        own = np.asarray(own_state if own_state is not None else [], dtype=float).reshape(-1)
+        if own.size != len(OWN_STATE_SCALES):
+            raise ValueError(
+                f"own_state has {own.size} values; the layout needs {len(OWN_STATE_FEATURES)} "
+                f"({', '.join(OWN_STATE_FEATURES)})"
+            )
+        scaled = np.nan_to_num(values * FORECAST_SCALES).ravel()
+        return [scaled, [float(valid)], np.nan_to_num(own * OWN_STATE_SCALES)]
 
     def decode(self, observation: np.ndarray) -> TimingObservationParts:
         """Undo :meth:`encode` (up to clipping and float32 rounding)."""
@@ -183,8 +245,8 @@ class TimingObservationLayout:
             raise ValueError(f"observation has {flat.size} values; the layout needs {self.size}")
         prediction = np.zeros(0)
         if self.history_observed:
-            n = self.n_history * len(HISTORY_FEATURES)
-            rows = flat[:n].reshape(self.n_history, len(HISTORY_FEATURES)) / HISTORY_SCALES
+            n = self.observed_rows * len(HISTORY_FEATURES)
+            rows = flat[:n].reshape(self.observed_rows, len(HISTORY_FEATURES)) / HISTORY_SCALES
             valid = rows[:, 9] > 0.5
             rows[valid, 2] += self.hold_height_m
         else:
@@ -193,7 +255,15 @@ class TimingObservationLayout:
             prediction = flat[:n].copy()
         tof_valid = flat[n + 4 : n + 8] > 0.5
         tof = np.where(tof_valid, flat[n : n + 4] / TOF_SCALE + self.hold_height_m, np.nan)
-        return TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]), prediction)
+        parts = TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]), prediction)
+        if self.n_forecast:
+            start = n + 9
+            size = self.n_forecast * len(FORECAST_SCALES)
+            block = flat[start : start + size].reshape(self.n_forecast, len(FORECAST_SCALES))
+            parts.forecast = block / FORECAST_SCALES
+            parts.forecast_valid = bool(flat[start + size] > 0.5)
+            parts.own_state = flat[start + size + 1 :] / OWN_STATE_SCALES
+        return parts
 
 
 # ------------------------------------------------------------------------------ the task
@@ -278,7 +348,10 @@ class TimingConfig:
     #: weighs, for a learned policy to weigh: the chance ``tilt_model`` gives of a deck within
     #: the touchdown limit at each of ``contact_times_s``, the value of waiting on (the
     #: optimal-stopping value of such chances over the wait left, one opportunity per
-    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`)
+    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`);
+    #: or ``forecast``: the history's newest row, and after it the ship's helideck forecast
+    #: (its HMS record 0-8 s ahead, :mod:`landing_env.sea.hms_forecast`; a sea scenario's)
+    #: and the drone's own velocity and lean, what the deck oracle weighs against each other
     observation: str = "history"
 
     def __post_init__(self) -> None:
@@ -381,6 +454,22 @@ def observed_prediction_size(timing: TimingConfig) -> int:
     return len(timing.contact_times_s) + 2 if timing.observation == "prediction" else 0
 
 
+def observed_forecast_size(timing: TimingConfig) -> int:
+    """How many horizons of the helideck forecast the observation holds (0: none)."""
+    return len(HORIZONS_S) if timing.observation == "forecast" else 0
+
+
+def timing_layout(timing: TimingConfig, env_hz: float) -> TimingObservationLayout:
+    """The observation layout of ``timing`` at ``env_hz`` decisions' control rate."""
+    n_history = max(1, round(timing.history_s * env_hz))
+    return TimingObservationLayout(
+        n_history,
+        timing.hold_height_m,
+        observed_prediction_size(timing),
+        observed_forecast_size(timing),
+    )
+
+
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
     """Wait or commit over the moving deck (see the module docstring).
 
@@ -412,11 +501,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "True pins the drone (the papers' bench); the timing task flies it: set it false",
             )
         sim = self.config.simulation
-        n_history = max(1, round(self.timing.history_s * sim.env_hz))
         rate_window = max(2, round(self.timing.rate_window_s * sim.env_hz))
-        self.layout = TimingObservationLayout(
-            n_history, self.timing.hold_height_m, observed_prediction_size(self.timing)
-        )
+        self.layout = timing_layout(self.timing, sim.env_hz)
+        n_history = self.layout.n_history
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self._guidance_gains(), self.env_dt)
         #: the scenario's deck-tilt predictor, read by the model wave-off, the contact
@@ -425,6 +512,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.wave_off_values = self._wave_off_values()
         #: the value of waiting on that the prediction observation holds
         self.observed_values = self._observed_values()
+        #: the ship's helideck forecast the forecast observation holds (None when not on),
+        #: and this episode's HMS record
+        self.deck_forecast = self._load_deck_forecast()
+        self._monitor: HelideckMonitor | None = None
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -469,6 +560,21 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "with `python -m agents.deck_predictor fit`",
             )
         return values
+
+    def _load_deck_forecast(self) -> LinearMotionPredictor | None:
+        """The helideck forecast of this scenario's sea, fitted once per process (the
+        ``forecast`` observation's; None otherwise)."""
+        if self.timing.observation != "forecast":
+            return None
+        kind = self.config.motion.kind
+        if kind not in FORECAST_KINDS:
+            self.world.close()
+            raise ConfigError(
+                "timing.observation",
+                f"'forecast' needs a sea to forecast (motion.kind one of {FORECAST_KINDS}), "
+                f"not {kind!r}",
+            )
+        return deck_forecast_for(self.config.motion, HelideckMonitorConfig())
 
     def _predictor_columns(self) -> list[int]:
         """The history's columns the deck-tilt predictor reads."""
@@ -590,6 +696,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.guidance.reset()
         self.history.reset()
         self._base_observation = base_observation
+        if self.deck_forecast is not None:
+            # the ship's HMS record of this episode (its errors drawn from the episode's seed)
+            hms_seed = int(self.np_random.integers(2**31))
+            self._monitor = HelideckMonitor(
+                self.world.stewart.motion, HelideckMonitorConfig(), hms_seed
+            )
         self.guidance.observe(base_observation, self._own_state())
         self._record()
         self.frames_of_last_step = []
@@ -809,8 +921,29 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             tof_valid,
             min(self._wait_s / self.timing.wait_limit_s, 1.0),
             None if self.layout.history_observed else self._prediction_values(),
+            *self._forecast_observation(),
         )
         return observation
+
+    def _forecast_observation(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The forecast observation's helideck forecast (None: none could be made) and the
+        drone's own state; (None, None) when the observation holds none."""
+        if self.deck_forecast is None:
+            return None, None
+        state = self.world.drone_state()
+        roll, pitch, yaw = euler_zyx_from_matrix(state.rotation_wb)
+        c, s = math.cos(yaw), math.sin(yaw)
+        v = np.asarray(state.velocity_w, dtype=float)
+        own = np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2], roll, pitch])
+        if self._monitor is None:
+            return None, own
+        _, measured = self._monitor.window(float(self.world.time), self.deck_forecast.window_s)
+        poses = self.deck_forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
+        if isinstance(poses, str) or not np.all(np.isfinite(poses)):
+            return None, own
+        poses = np.array(poses, dtype=float)
+        poses[:, :3] -= poses[0, :3]
+        return poses, own
 
     def _prediction_values(self) -> np.ndarray:
         """The prediction observation's values (:class:`TimingObservationLayout`): the chance

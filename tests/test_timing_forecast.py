@@ -1,0 +1,190 @@
+"""The timing task's ``forecast`` observation (the ship ids' v5): the history, then the ship's
+helideck forecast and the drone's own velocity and lean."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import landing_env  # noqa: F401  (registers the ids)
+from agents.model_metadata import check_compatible, env_signature
+from estimation.frames import euler_zyx_from_matrix
+from landing_env.envs.history import HISTORY_FEATURES
+from landing_env.envs.timing import (
+    OWN_STATE_FEATURES,
+    TimingObservationLayout,
+)
+from landing_env.errors import ConfigError
+from landing_env.scenarios import SCENARIO_IDS
+from landing_env.sea.hms_forecast import HORIZONS_S
+from landing_env.stewart.motion import sample_poses
+
+FORECAST_ID = "DeckLandingTiming-ShipSS5-v5"
+
+
+@pytest.fixture(scope="module")
+def ship_env():
+    env = gym.make(FORECAST_ID, overrides={"sensors": "realistic"})
+    yield env
+    env.close()
+
+
+def test_the_ship_ids_v5_observe_the_v4_history_then_the_forecast_and_own_state() -> None:
+    for n in (3, 4, 5, 6):
+        v4 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v4"]
+        v5 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v5"]
+        assert v5.config == v4.config and v5.overrides == v4.overrides
+        timing_v4, timing_v5 = v4.task_kwargs["timing"], v5.task_kwargs["timing"]
+        assert timing_v5 == {**timing_v4, "observation": "forecast"}
+
+
+def test_the_layout_round_trips_the_forecast_and_own_state() -> None:
+    layout = TimingObservationLayout(n_history=3, hold_height_m=2.0, n_forecast=len(HORIZONS_S))
+    history = np.zeros((3, len(HISTORY_FEATURES)))
+    history[:, 2] = 2.0
+    history[:, 9] = 1.0
+    rng = np.random.default_rng(1)
+    forecast = rng.normal(0.0, [0.5, 0.5, 1.0, 0.05, 0.05], (len(HORIZONS_S), 5))
+    own = np.array([0.3, -0.2, 0.1, 0.2, -0.35])
+    tof = np.full(4, 2.0)
+    flat, clipped = layout.encode(history, tof, np.ones(4, bool), 0.5, None, forecast, own)
+    assert not clipped and flat.shape == (layout.size,) == (1 * 10 + 9 + 17 * 5 + 1 + 5,)
+    parts = layout.decode(flat)
+    np.testing.assert_allclose(parts.history, history[-1:], atol=1e-6)  # the newest row only
+    np.testing.assert_allclose(parts.forecast, forecast, atol=1e-5)
+    np.testing.assert_allclose(parts.own_state, own, atol=1e-6)
+    assert parts.forecast_valid and parts.wait_fraction == pytest.approx(0.5)
+    # no forecast made: zeros, flagged invalid; the own state is still there
+    flat, _ = layout.encode(history, tof, np.ones(4, bool), 0.5, None, None, own)
+    parts = layout.decode(flat)
+    assert not parts.forecast_valid and not parts.forecast.any()
+    np.testing.assert_allclose(parts.own_state, own, atol=1e-6)
+
+
+def test_the_layout_refuses_a_forecast_or_own_state_of_the_wrong_shape() -> None:
+    layout = TimingObservationLayout(n_history=2, hold_height_m=2.0, n_forecast=4)
+    history = np.zeros((2, len(HISTORY_FEATURES)))
+    tof = np.full(4, 2.0)
+    with pytest.raises(ValueError, match=r"forecast has shape \(3, 5\); the layout needs \(4, 5\)"):
+        layout.encode(history, tof, np.ones(4, bool), 0.0, None, np.zeros((3, 5)), np.zeros(5))
+    with pytest.raises(ValueError, match=r"own_state has 0 values.*vx_h"):
+        layout.encode(history, tof, np.ones(4, bool), 0.0, None, np.zeros((4, 5)), None)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    values=st.lists(
+        st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=90, max_size=90
+    )
+)
+def test_any_forecast_values_encode_inside_the_space(values: list[float]) -> None:
+    layout = TimingObservationLayout(n_history=2, hold_height_m=2.0, n_forecast=17)
+    forecast = np.array(values[:85]).reshape(17, 5)
+    own = np.array(values[85:])
+    history = np.zeros((2, len(HISTORY_FEATURES)))
+    flat, _ = layout.encode(history, np.full(4, 2.0), np.ones(4, bool), 0.0, None, forecast, own)
+    assert layout.space.contains(flat)
+
+
+def test_the_observed_forecast_follows_the_ship_and_the_own_state_is_the_drones(
+    ship_env,
+) -> None:
+    base = ship_env.unwrapped
+    assert ship_env.observation_space.shape == (base.layout.size,) == (10 + 9 + 91,)
+    observation, _ = ship_env.reset(seed=5003)
+    errors, spreads = [], []
+    for _ in range(30):
+        parts = base.layout.decode(observation)
+        assert ship_env.observation_space.contains(observation)
+        assert parts.forecast_valid
+        # the own state is the drone's: its speed and its roll and pitch
+        state = base.world.drone_state()
+        roll, pitch, _ = euler_zyx_from_matrix(state.rotation_wb)
+        np.testing.assert_allclose(parts.own_state[3:], [roll, pitch], atol=1e-5)
+        assert np.linalg.norm(parts.own_state[:3]) == pytest.approx(
+            np.linalg.norm(state.velocity_w), abs=1e-4
+        )
+        # the forecast's roll and pitch 0-2 s ahead against the ship's true motion then
+        t0 = float(base.world.time)
+        ahead = HORIZONS_S[HORIZONS_S <= 2.0]
+        truth = sample_poses(base.world.stewart.motion, t0 + ahead)[:, 3:5]
+        errors.append(parts.forecast[: len(ahead), 3:5] - truth)
+        spreads.append(truth)
+        observation, _, terminated, _, _ = ship_env.step(0)
+        if terminated:
+            break
+    error = np.sqrt(np.mean(np.concatenate(errors) ** 2))
+    spread = np.std(np.concatenate(spreads))
+    # the HMS's 0.1 deg and the forecast's error against a deck rolling degrees
+    assert error < 0.3 * spread, (np.degrees(error), np.degrees(spread))
+
+
+def test_a_seeded_reset_repeats_the_forecast_observation(ship_env) -> None:
+    first, _ = ship_env.reset(seed=5010)
+    again, _ = ship_env.reset(seed=5010)
+    other, _ = ship_env.reset(seed=5011)
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first, other)
+
+
+def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) -> None:
+    from agents.model_metadata import ModelMetadata
+
+    signature = env_signature(ship_env)
+    assert signature["observation"]["observation"] == "forecast"
+    assert signature["observation"]["forecast"]["own_state"] == list(OWN_STATE_FEATURES)
+    card = ModelMetadata(
+        env_id=signature["env_id"],
+        observation=signature["observation"],
+        estimator=signature["estimator"],
+        sensing=[signature["sensing"]],
+    )
+    check_compatible(card, signature)
+    history = gym.make("DeckLandingTiming-ShipSS5-v4", overrides={"sensors": "realistic"})
+    try:
+        with pytest.raises(ConfigError, match=r"observation\.observation: .*'forecast'"):
+            check_compatible(card, env_signature(history))
+    finally:
+        history.close()
+
+
+def test_the_history_rules_refuse_the_forecast_observation(ship_env) -> None:
+    from agents.policies import make_policy
+
+    for name in ("quiescent", "predictive"):
+        with pytest.raises(ConfigError, match=r"timing\.observation: is 'forecast'"):
+            make_policy(name, ship_env)
+
+
+def test_the_forecast_observation_needs_a_sea() -> None:
+    with pytest.raises(ConfigError, match=r"timing\.observation: 'forecast' needs a sea"):
+        gym.make(
+            "DeckLandingTiming-v0",
+            config="paper-stewart",
+            overrides={"simulation.drone_fixed": False, "camera.mode": "project"},
+            timing={"observation": "forecast"},
+        )
+
+
+def test_the_forecast_labels_benchmark_splits_the_observation_into_present_and_forecast(
+    ship_env,
+) -> None:
+    from benchmarks.bench_ship_forecast_labels import auc, observation_columns
+
+    columns = observation_columns(ship_env)
+    size = ship_env.unwrapped.layout.size
+    assert sorted(columns["present"] + columns["forecast"]) == list(range(size))
+    observation, _ = ship_env.reset(seed=5020)
+    parts = ship_env.unwrapped.layout.decode(observation)
+    block = observation[columns["forecast"]]
+    np.testing.assert_allclose(block[:-1].reshape(-1, 5) / 10.0, parts.forecast, atol=1e-5)
+    assert block[-1] == 1.0  # the forecast's validity
+    np.testing.assert_allclose(observation[columns["present"]][-5:] / 10.0, parts.own_state)
+    # the AUC of a perfect, a reversed and an uninformative score
+    success = np.array([False, False, True, True])
+    assert auc(np.array([0.1, 0.2, 0.8, 0.9]), success) == 1.0
+    assert auc(np.array([0.9, 0.8, 0.2, 0.1]), success) == 0.0
+    assert auc(np.ones(4), success) == 0.5
