@@ -149,10 +149,10 @@ class TimingObservationLayout:
 
     With ``n_forecast`` > 0 (``TimingConfig.observation = "forecast"``) only the newest
     history row is observed (the deck's motion is in the forecast) and ``n_forecast * 5 + 1 +
-    5`` values follow the wait fraction: the ship's helideck
-    forecast (:mod:`landing_env.sea.hms_forecast`) at its ``n_forecast`` horizons (surge, sway
-    and heave from the forecast's present, roll and pitch; :data:`FORECAST_SCALES`), 1 when
-    it was made, and the drone's own state (:data:`OWN_STATE_FEATURES`)."""
+    5`` values follow the wait fraction: the ship's helideck forecast
+    (:mod:`landing_env.sea.hms_forecast`) at its ``n_forecast`` horizons (surge, sway and
+    heave from the forecast's present, roll and pitch; :data:`FORECAST_SCALES`), 1 when it
+    was made, and the drone's own state (:data:`OWN_STATE_FEATURES`)."""
 
     n_history: int
     hold_height_m: float
