@@ -188,3 +188,36 @@ def test_the_forecast_labels_benchmark_splits_the_observation_into_present_and_f
     assert auc(np.array([0.1, 0.2, 0.8, 0.9]), success) == 1.0
     assert auc(np.array([0.9, 0.8, 0.2, 0.1]), success) == 0.0
     assert auc(np.ones(4), success) == 0.5
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), decisions=st.lists(st.integers(0, 1), max_size=25))
+def test_fuzzed_decisions_on_the_forecast_ids_keep_every_observation_in_its_space(
+    ship_env, seed: int, decisions: list[int]
+) -> None:
+    observation, _ = ship_env.reset(seed=seed)
+    assert ship_env.observation_space.contains(observation)
+    for decision in decisions:
+        observation, reward, terminated, truncated, _ = ship_env.step(decision)
+        assert ship_env.observation_space.contains(observation)
+        assert np.isfinite(reward)
+        if terminated or truncated:
+            break
+
+
+def test_a_forecast_that_cannot_be_made_is_flagged_not_raised(ship_env, monkeypatch) -> None:
+    base = ship_env.unwrapped
+    ship_env.reset(seed=5030)
+    forecast = base.deck_forecast
+    monkeypatch.setattr(forecast, "predict_targets", lambda *_: "too few HMS samples")
+    observation, _, _, _, _ = ship_env.step(0)
+    parts = base.layout.decode(observation)
+    assert ship_env.observation_space.contains(observation)
+    assert not parts.forecast_valid and not parts.forecast.any()
+    assert np.isfinite(parts.own_state).all() and parts.own_state.any()
+    # a forecast with a NaN in it is no forecast either
+    nan = np.full((len(HORIZONS_S), 5), np.nan)
+    monkeypatch.setattr(forecast, "predict_targets", lambda *_: nan)
+    observation, _, _, _, _ = ship_env.step(0)
+    assert ship_env.observation_space.contains(observation)
+    assert not base.layout.decode(observation).forecast_valid
