@@ -189,13 +189,17 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
         }
     elif timing.observation == "forecast":
         # the forecast's horizons, window and record, and the own state's features
-        from landing_env.sea.hms import HMS_CHANNELS
+        import dataclasses
+
+        from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
         from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
 
         prediction = {
             "observation": timing.observation,
             "forecast": {
                 "channels": list(HMS_CHANNELS),
+                # the HMS's rate and errors: what the forecast reads
+                "hms": dataclasses.asdict(HelideckMonitorConfig()),
                 "horizons_s": [float(h) for h in HORIZONS_S],
                 "window_s": float(WINDOW_S),
                 "fitted_on": f"{REALIZATIONS} records of {RECORD_S:g} s",

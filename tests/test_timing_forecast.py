@@ -136,6 +136,7 @@ def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) 
     signature = env_signature(ship_env)
     assert signature["observation"]["observation"] == "forecast"
     assert signature["observation"]["forecast"]["own_state"] == list(OWN_STATE_FEATURES)
+    assert signature["observation"]["forecast"]["hms"]["angle_noise_deg"] == 0.1
     card = ModelMetadata(
         env_id=signature["env_id"],
         observation=signature["observation"],
