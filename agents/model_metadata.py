@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError
 
 #: the card's name inside the SB3 zip
@@ -236,8 +237,17 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     }
 
 
-def env_signature(env: Any) -> dict[str, Any]:
-    """The checked fields of a ``DeckLandingTiming`` environment (wrapped or not)."""
+def env_signature(env: Any, lookahead: Any = None) -> dict[str, Any]:
+    """The checked fields of a ``DeckLandingTiming`` environment (wrapped or not).
+
+    Observed through the look-ahead (:class:`agents.lookahead.LookaheadTimingWrapper` in
+    ``env``'s wrappers, or its ``lookahead`` settings given), the observation's size and
+    meaning are the look-ahead's."""
+    from agents.lookahead import find_lookahead
+
+    if lookahead is None:
+        wrapper = find_lookahead(env)
+        lookahead = wrapper.settings if wrapper is not None else None
     base = env.unwrapped
     spec = getattr(base, "spec", None)
     from agents.training import ENV_ID
@@ -247,9 +257,12 @@ def env_signature(env: Any) -> dict[str, Any]:
     # a scenario id (DeckLandingTiming-BenchSS4-v0) is its task on a config: the task's id and
     # version say what the observation means
     scenario = SCENARIO_IDS.get(env_id)
+    observation = observation_signature(base.timing, base.config.simulation.env_hz)
+    if lookahead is not None:
+        observation = {**observation, "size": lookahead.size, "lookahead": lookahead.signature()}
     return {
         "env_id": scenario.task if scenario is not None else env_id,
-        "observation": observation_signature(base.timing, base.config.simulation.env_hz),
+        "observation": observation,
         "estimator": base.config.estimation.observed,
         "sensing": sensing_profile(base.config),
         "camera_mode": base.config.camera.mode,
@@ -341,8 +354,15 @@ def write_metadata(path: str | Path, card: ModelMetadata) -> None:
 
 def card_for_training(env: Any, config: Any, sensing: list[str] | None = None) -> ModelMetadata:
     """The card of a model trained by :func:`agents.training.train` with ``config`` in
-    environments like ``env`` (``sensing``: every profile the training sampled)."""
-    signature = env_signature(env)
+    environments like ``env`` (``sensing``: every profile the training sampled); a training
+    with ``deck_landing.lookahead`` is signed with its look-ahead, the env wrapped or not."""
+    lookahead = None
+    settings = getattr(config, "settings", None)
+    if getattr(settings, "lookahead", None) is not None:
+        from agents.lookahead import LookaheadSettings
+
+        lookahead = build_dataclass(LookaheadSettings, settings.lookahead, "deck_landing.lookahead")
+    signature = env_signature(env, lookahead)
     return ModelMetadata(
         env_id=signature["env_id"],
         observation=signature["observation"],

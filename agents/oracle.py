@@ -167,6 +167,17 @@ class OracleTimingPolicy:
         return plan
 
 
+@dataclass(frozen=True)
+class TriedCommit:
+    """One look-ahead's commit: whether it counts as landing (:meth:`DeckOracleTimingPolicy.lands`:
+    success with the required slack), whether it succeeded at all, and its
+    :func:`touchdown_margin`."""
+
+    lands: bool
+    success: bool
+    margin: float
+
+
 class DeckOracleTimingPolicy:
     """``deck-oracle``: the issue's bound in the strict sense, the timing that **knows the deck's
     future motion** and nothing else to come.
@@ -261,12 +272,22 @@ class DeckOracleTimingPolicy:
         """The share of ``draws`` futures (the deck's own, the rest drawn anew) in which a
         commit now lands; the environment is left as found.  It stops trying once
         :meth:`required_chance` is out of reach."""
+        tries = self.try_commits(decision, self.required_chance(decision) * self.draws - 1e-9)
+        if tries is None:
+            return 0.0  # no future to try (a forecast that cannot be made): wait
+        return sum(t.lands for t in tries) / self.draws
+
+    def try_commits(self, decision: int = 0, needed: float = 0.0) -> list[TriedCommit] | None:
+        """A commit now tried in each of ``draws`` futures (the deck's own, the rest drawn
+        anew), in order; the environment is left as found.  It stops once fewer than
+        ``needed`` of them could land (0: try them all).  None when there is no deck future
+        to try (a forecast that cannot be made)."""
         env = self.env
         episode_seed = int(env.np_random_seed) % 2**32
         deck_future = self.deck_future(decision)
         if deck_future is None:
-            return 0.0  # no future to try (a forecast that cannot be made): wait
-        needed = self.required_chance(decision) * self.draws - 1e-9
+            return None
+        tries: list[TriedCommit] = []
         landed = 0
         here = save_snapshot(env)
         try:
@@ -278,12 +299,18 @@ class DeckOracleTimingPolicy:
                     env.world.stewart.motion = deck_future
                 self.model_draw(decision, k)
                 _, _, _, _, info = env.step(1)
-                landed += int(self.lands(info))
+                tried = TriedCommit(
+                    lands=self.lands(info),
+                    success=info["outcome"] == Outcome.SUCCESS.value,
+                    margin=touchdown_margin(info.get("touchdown"), env.config.touchdown),
+                )
+                tries.append(tried)
+                landed += int(tried.lands)
                 if landed + (self.draws - k - 1) < needed:
                     break  # the rest cannot reach min_chance
         finally:
             restore_snapshot(env, here, keep=False)
-        return landed / self.draws
+        return tries
 
     def deck_future(self, decision: int = 0) -> Any:
         """The deck's motion the look-ahead of ``decision`` plays: ``True`` for the episode's

@@ -55,6 +55,10 @@
   ``DeckLandingTiming-BenchSS{3,4,5}-v5``), ``agents/models/timing_dqn_predictive.zip``
   (``configs/train/timing_dqn_predictive.yaml``, then trained on by
   ``configs/train/timing_dqn_predictive_finetune.yaml``).
+* ``timing-dqn-lookahead`` (``DeckLandingTiming-v0``, sea scenarios): a DQN that weighs what
+  ``deck-forecast-onboard``'s look-ahead foresees: every 0.5 s it reads a few commits tried
+  in the onboard model's futures and decides (:mod:`agents.lookahead`,
+  ``configs/train/timing_dqn_lookahead.yaml``), ``agents/models/timing_dqn_lookahead.zip``.
 """
 
 from __future__ import annotations
@@ -390,6 +394,12 @@ class TrainedTimingPolicy:
         from agents.model_metadata import check_compatible, env_signature
 
         base = env.unwrapped
+        if "lookahead" in self.metadata.observation:
+            raise ConfigError(
+                "policy",
+                f"{self.path.name} decides on the onboard look-ahead's features: evaluate it "
+                "with --policy timing-dqn-lookahead",
+            )
         self.check_layout(base.layout.size)
         check_compatible(self.metadata, env_signature(base), self.path.name, allow_mismatch)
 
@@ -638,6 +648,7 @@ POLICY_ENVS: dict[str, str] = {
     "timing-dqn-waveoff30": "DeckLandingTiming-v0",
     "predictive": "DeckLandingTiming-v0",
     "timing-dqn-predictive": "DeckLandingTiming-v0",
+    "timing-dqn-lookahead": "DeckLandingTiming-v0",
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICY_ENVS)
 
@@ -716,6 +727,10 @@ def make_policy(
 
         return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig(), deadline_chance=0.5)
     default = shipped_timing_model(name.removeprefix("timing-"))
+    if name == "timing-dqn-lookahead":
+        from agents.lookahead import LookaheadTimingPolicy
+
+        return LookaheadTimingPolicy(model_path or default, env, tuple(allow_mismatch))
     policy = TrainedTimingPolicy(model_path or default)
     policy.check_env(env, allow_mismatch)
     return policy

@@ -92,6 +92,9 @@ class TrainSettings:
     #: start from this trained model's weights (same algorithm and network; its card must
     #: describe the same task, observation and estimator): training goes on from it
     init_model: str | None = None
+    #: decide on the onboard look-ahead's features (:class:`agents.lookahead.LookaheadSettings`:
+    #: draws, check_every_s, min_margin, checks, seed) instead of the task's observation
+    lookahead: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         require_choice("algo", self.algo, ALGOS)
@@ -104,6 +107,15 @@ class TrainSettings:
             from agents.scenario_sampler import RandomiseSettings
 
             build_dataclass(RandomiseSettings, self.randomise, "deck_landing.randomise")
+        if self.lookahead is not None:
+            from agents.lookahead import LookaheadSettings
+
+            if self.randomise is not None:
+                raise ConfigError(
+                    "deck_landing.lookahead",
+                    "looks ahead in one scenario's environment; drop deck_landing.randomise",
+                )
+            build_dataclass(LookaheadSettings, self.lookahead, "deck_landing.lookahead")
 
 
 @dataclass
@@ -314,14 +326,20 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
             "randomise": s.randomise,
             "timing": s.env_kwargs.get("timing", {}),
         }
+    wrapping: dict[str, Any] = {}
+    if s.lookahead is not None:
+        from agents.lookahead import LookaheadTimingWrapper
+
+        wrapping = {"wrapper_class": LookaheadTimingWrapper, "wrapper_kwargs": s.lookahead}
     train_env = make_vec_env(
         env_id,
         n_envs=config.n_envs,
         seed=s.seed,
         vec_env_cls=vec_cls,
         env_kwargs=env_kwargs,
+        **wrapping,
     )
-    eval_env = make_vec_env(env_id, n_envs=1, seed=s.eval.seed, env_kwargs=env_kwargs)
+    eval_env = make_vec_env(env_id, n_envs=1, seed=s.eval.seed, env_kwargs=env_kwargs, **wrapping)
     return train_env, eval_env
 
 

@@ -1,0 +1,447 @@
+"""The onboard look-ahead as an observation: a learned timing that weighs what it foresees.
+
+``deck-forecast-onboard`` (:mod:`agents.deck_forecast`) tries a commit now in a handful of
+futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
+and wind estimate with their errors, its airframe's uncertain drag and thrust) and commits
+by a fixed rule: all of them land with 15 % slack, the standard falling over the last 5 s.
+Whether a look-ahead's verdict is worth acting on now or worth waiting for a better one
+is what a learned policy can weigh instead, as ``timing-dqn-predictive`` weighs the
+deck-tilt predictor's chances.
+
+:class:`LookaheadTimingWrapper` turns the timing task into that decision.  Every
+``check_every_s`` of the wait the agent sees :data:`LOOKAHEAD_FEATURES` of the look-ahead
+(``draws`` tried commits, all of them run: no early stop) for this check and the one before,
+and the wait used; between checks the drone holds (a wait of ``check_every_s`` is one step
+of the wrapped task, its rewards summed).  The same features reach a trained model at
+evaluation through :class:`LookaheadTimingPolicy`, which acts on the bare task and waits
+between its checks: the features of a given episode and check are the same in both (the
+look-ahead's draws are seeded by the episode and the decision).
+
+The look-ahead is the onboard model's (:class:`~agents.deck_forecast.OnboardModelConfig`):
+what the drone knows of the present, the HMS forecast of the deck; the drone's own code
+(guidance, controller, estimators) flies it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.oracle import TriedCommit
+from landing_env.errors import ConfigError, require_range
+
+#: per check, in order: whether a look-ahead was made (a deck-pose estimate and a forecast
+#: were there), the share of draws that land with the slack, the share that succeed at all,
+#: and the mean and the least of each draw's score (its margin, clipped to [-1, 1]; -1 for a
+#: draw that failed)
+LOOKAHEAD_FEATURES: tuple[str, ...] = ("valid", "chance", "success", "mean_score", "min_score")
+
+#: the score of a tried commit that did not succeed
+FAILED_SCORE = -1.0
+
+
+@dataclass(frozen=True)
+class LookaheadSettings:
+    """The look-ahead behind the observation (``deck_landing.lookahead`` of a training YAML).
+
+    * ``draws``: futures tried per check (each is a full descent and touchdown: ~0.17 s of
+      this machine's CPU at ``ship-ss5``);
+    * ``check_every_s``: the wait between checks (a multiple of the task's decision);
+    * ``min_margin``: the slack a draw needs to count in ``chance``
+      (:func:`agents.oracle.touchdown_margin`);
+    * ``checks``: how many checks the observation holds (this one first);
+    * ``seed``: the look-ahead's own streams (with the episode's seed and the decision).
+    """
+
+    draws: int = 4
+    check_every_s: float = 0.5
+    min_margin: float = 0.15
+    checks: int = 2
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        require_range("draws", self.draws, 1, 64)
+        require_range("check_every_s", self.check_every_s, 0.0, 10.0, low_inclusive=False)
+        require_range("min_margin", self.min_margin, 0.0, 1.0)
+        require_range("checks", self.checks, 1, 16)
+        if isinstance(self.draws, bool) or isinstance(self.checks, bool):
+            raise ConfigError("draws", "must be an integer")
+
+    @property
+    def size(self) -> int:
+        """The observation's length: the features of each check, then the wait fraction."""
+        return self.checks * len(LOOKAHEAD_FEATURES) + 1
+
+    def signature(self) -> dict[str, Any]:
+        """What the observation's values mean, for a model's card."""
+        from agents.deck_forecast import OnboardModelConfig
+
+        return {
+            **asdict(self),
+            "features": list(LOOKAHEAD_FEATURES),
+            "failed_score": FAILED_SCORE,
+            "onboard": {
+                k: list(v) if isinstance(v, tuple) else v
+                for k, v in asdict(OnboardModelConfig()).items()
+            },
+        }
+
+
+def check_features(tries: list[TriedCommit] | None) -> np.ndarray:
+    """:data:`LOOKAHEAD_FEATURES` of one check's tried commits (None: no look-ahead made)."""
+    if not tries:
+        return np.array([0.0, 0.0, 0.0, FAILED_SCORE, FAILED_SCORE])
+    scores = np.array(
+        [
+            float(np.clip(t.margin, -1.0, 1.0))
+            if t.success and math.isfinite(t.margin)
+            else FAILED_SCORE
+            for t in tries
+        ]
+    )
+    return np.array(
+        [
+            1.0,
+            float(np.mean([t.lands for t in tries])),
+            float(np.mean([t.success for t in tries])),
+            float(np.mean(scores)),
+            float(np.min(scores)),
+        ]
+    )
+
+
+class LookaheadObserver:
+    """The look-ahead of one ``DeckLandingTiming`` environment, as features.
+
+    ``observe(decision)`` tries the commits (the environment is left as found) and returns
+    the observation: this check's features, the earlier checks', the wait used.
+    """
+
+    def __init__(
+        self, env: Any, settings: LookaheadSettings | None = None, forecast: Any = None
+    ) -> None:
+        from agents.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+
+        self.settings = settings or LookaheadSettings()
+        base = env.unwrapped
+        if not hasattr(base, "layout") or not hasattr(base, "timing"):
+            raise ConfigError("env", "the look-ahead acts in DeckLandingTiming-v0")
+        self.env = base
+        s = self.settings
+        self.planner = DeckForecastTimingPolicy(
+            base,
+            draws=s.draws,
+            min_chance=1.0,
+            check_every_s=s.check_every_s,
+            seed=s.seed,
+            min_margin=s.min_margin,
+            onboard=OnboardModelConfig(),
+            forecast=forecast,
+        )
+        decision_s = base.env_dt * base.timing.steps_per_decision
+        stride = s.check_every_s / decision_s
+        if abs(stride - round(stride)) > 1e-6:
+            raise ConfigError(
+                "lookahead.check_every_s",
+                f"{s.check_every_s:g} s is not a multiple of the task's decision, {decision_s:g} s",
+            )
+        #: the task's decisions between two checks
+        self.stride = round(stride)
+        self._history: list[np.ndarray] = []
+
+    def reset(self) -> None:
+        self.planner.reset()
+        self._history = []
+
+    def observe(self, decision: int) -> np.ndarray:
+        """Look ahead at ``decision`` (the task's steps since the reset) and build the
+        observation; an ended episode or a warm-up that failed gives an invalid check."""
+        env = self.env
+        tries: list[TriedCommit] | None = None
+        if not getattr(env, "_hold_failed", False) and env._outcome.value == "in_flight":
+            tries = self.planner.try_commits(decision, needed=0.0)
+        self._history.insert(0, check_features(tries))
+        del self._history[self.settings.checks :]
+        invalid = check_features(None)
+        checks = self._history + [invalid] * (self.settings.checks - len(self._history))
+        wait = min(max(float(env._wait_s) / float(env.timing.wait_limit_s), 0.0), 1.0)
+        return np.concatenate([*checks, [wait]]).astype(np.float32)
+
+    @property
+    def observation_space(self) -> gym.spaces.Box:
+        return gym.spaces.Box(-1.0, 1.0, (self.settings.size,), dtype=np.float32)
+
+
+class LookaheadTimingWrapper(gym.Wrapper):
+    """The timing task decided every ``check_every_s`` on the look-ahead's features.
+
+    Action 0 holds for ``check_every_s`` (the task's waits, their rewards summed; it ends
+    early if the episode does: the wait limit forces the commit); 1 commits.  The reward
+    terms of the last step are in ``info`` as the task gives them.  ``settings`` are
+    :class:`LookaheadSettings`' keys; ``forecast``: the helideck forecast to use (default: the
+    scenario's, fitted once per process).
+    """
+
+    def __init__(self, env: gym.Env, forecast: Any = None, **settings: Any) -> None:
+        super().__init__(env)
+        from landing_env.config_loading import build_dataclass
+
+        self.settings = build_dataclass(LookaheadSettings, settings, "lookahead")
+        self.observer = LookaheadObserver(env, self.settings, forecast)
+        self.observation_space = self.observer.observation_space
+        self.action_space = gym.spaces.Discrete(2)
+        self._decisions = 0
+
+    def lookahead_signature(self) -> dict[str, Any]:
+        """The observation's meaning, for a model's card."""
+        return self.settings.signature()
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        _, info = self.env.reset(**kwargs)
+        self.observer.reset()
+        self._decisions = 0
+        return self.observer.observe(0), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        from landing_env.envs.actions import validate_action
+
+        choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
+        total = 0.0
+        repeats = 1 if choice == 1 else self.observer.stride
+        terminated = truncated = False
+        info: dict[str, Any] = {}
+        for _ in range(repeats):
+            _, reward, terminated, truncated, info = self.env.step(choice)
+            self._decisions += 1
+            total += float(reward)
+            if terminated or truncated:
+                break
+        # an ended episode gives an invalid check (nothing is tried)
+        return self.observer.observe(self._decisions), total, terminated, truncated, info
+
+
+class LookaheadTimingPolicy:
+    """A model trained on :class:`LookaheadTimingWrapper`, acting in the bare timing task.
+
+    Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
+    waits.  The card is checked as :class:`~agents.policies.TrainedTimingPolicy` checks
+    one, the look-ahead's settings included.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        env: Any,
+        allow_mismatch: tuple[str, ...] = (),
+        forecast: Any = None,
+    ) -> None:
+        from agents.policies import TrainedTimingPolicy
+
+        self.trained = TrainedTimingPolicy(path)
+        card = self.trained.metadata.observation.get("lookahead")
+        if not isinstance(card, dict):
+            raise ConfigError(
+                "model",
+                f"{Path(path).name} was not trained on the look-ahead's features "
+                "(its card has no observation.lookahead): use timing-dqn with it",
+            )
+        fields = {k: card[k] for k in LookaheadSettings.__dataclass_fields__ if k in card}
+        self.settings = LookaheadSettings(**fields)
+        self.observer = LookaheadObserver(env, self.settings, forecast)
+        self.trained.check_layout(self.settings.size)
+        from agents.model_metadata import check_compatible, env_signature
+
+        check_compatible(
+            self.trained.metadata,
+            env_signature(env, self.settings),
+            self.trained.path.name,
+            allow_mismatch,
+        )
+        self.name = "timing-dqn-lookahead"
+        self._decisions = 0
+        #: (decision, observation, action) of each check of the episode
+        self.checks: list[tuple[int, np.ndarray, int]] = []
+
+    def reset(self) -> None:
+        self.observer.reset()
+        self.trained.reset()
+        self._decisions = 0
+        self.checks = []
+
+    def act(self, observation: np.ndarray) -> int:
+        del observation  # the task's own observation: the look-ahead reads the environment
+        decision = self._decisions
+        self._decisions += 1
+        if decision % self.observer.stride:
+            return 0
+        features = self.observer.observe(decision)
+        action = self.trained.act(features)
+        self.checks.append((decision, features, action))
+        return action
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+def find_lookahead(env: Any) -> LookaheadTimingWrapper | None:
+    """The look-ahead wrapper in ``env``'s wrapper chain, if any."""
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, LookaheadTimingWrapper):
+            return env
+        env = env.env
+    return None
+
+
+# ------------------------------------------------------------------------------ offline data
+#: the arrays of a transitions file (:func:`collect_transitions`)
+TRANSITION_KEYS = (
+    "observation",
+    "commit_reward",
+    "commit_success",
+    "commit_terminal",
+    "wait_reward",
+    "next_observation",
+    "wait_terminal",
+    "wait_success",
+    "episode",
+)
+
+
+def collect_transitions(
+    scenario: str,
+    seeds: list[int],
+    out: str | Path,
+    settings: LookaheadSettings | None = None,
+    estimator: str | None = None,
+    progress: bool = True,
+) -> Path:
+    """Both actions' outcomes at every check of whole episodes: the data of an offline DQN.
+
+    Each episode holds to its wait limit; at every check the look-ahead's observation is
+    recorded with the reward of a commit now, tried with the episode's own future in a saved
+    copy (as :class:`agents.oracle.OracleTimingPolicy` tries it), and with the wait's reward
+    and the next check's observation.  The episode then goes on as if it waited, so any policy
+    of the wrapper can be replayed exactly on the file (:func:`replay_success`): the states on
+    its path and their observations are the ones recorded.  The file is rewritten after every
+    episode (an interrupted run keeps what it has).
+    """
+    from tqdm import tqdm
+
+    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+    from landing_env.envs.snapshot import restore_snapshot, save_snapshot
+
+    settings = settings or LookaheadSettings()
+    env, _ = make_env_and_policy("land-now", scenario, estimator or SCENARIOS[scenario].estimator)
+    wrapper = LookaheadTimingWrapper(env, **asdict(settings))
+    base = wrapper.unwrapped
+    rows: dict[str, list[Any]] = {key: [] for key in TRANSITION_KEYS}
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        for seed in tqdm(seeds, desc=f"look-ahead transitions @ {scenario}", disable=not progress):
+            observation, _ = wrapper.reset(seed=seed)
+            while True:
+                commit = (0.0, False, True)
+                if not base._hold_failed and base._outcome.value == "in_flight":
+                    here = save_snapshot(base)
+                    try:
+                        _, reward, terminated, _, info = base.step(1)
+                    finally:
+                        restore_snapshot(base, here, keep=False)
+                    commit = (float(reward), info["outcome"] == "success", bool(terminated))
+                next_observation, reward, terminated, truncated, info = wrapper.step(0)
+                for key, value in zip(
+                    TRANSITION_KEYS,
+                    (
+                        observation,
+                        *commit,
+                        float(reward),
+                        next_observation,
+                        bool(terminated or truncated),
+                        info["outcome"] == "success",
+                        seed,
+                    ),
+                    strict=True,
+                ):
+                    rows[key].append(value)
+                observation = next_observation
+                if terminated or truncated:
+                    break
+            np.savez_compressed(
+                path,
+                settings=json.dumps(settings.signature()),
+                scenario=scenario,
+                **{key: np.asarray(value) for key, value in rows.items()},
+            )
+    finally:
+        wrapper.close()
+    return path
+
+
+def load_transitions(paths: list[str | Path]) -> dict[str, np.ndarray]:
+    """The transitions of several files, concatenated; they must share their look-ahead."""
+    parts: list[dict[str, np.ndarray]] = []
+    signature = None
+    for path in paths:
+        with np.load(path) as data:
+            if signature is None:
+                signature = str(data["settings"])
+            elif str(data["settings"]) != signature:
+                raise ConfigError("data", f"{path} was collected with another look-ahead")
+            parts.append({key: data[key] for key in TRANSITION_KEYS})
+    if not parts:
+        raise ConfigError("data", "no transitions files given")
+    return {key: np.concatenate([p[key] for p in parts]) for key in TRANSITION_KEYS}
+
+
+def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.ndarray]:
+    """The success of a policy replayed on recorded episodes, exactly: ``decide(observations)``
+    gives 1 (commit) or 0 for each check; an episode ends at its first commit (its recorded
+    outcome) or, waiting throughout, as the wait limit ended it.  Returns the success rate
+    and each episode's check of commit (-1: never)."""
+    actions = np.asarray(decide(data["observation"])).reshape(-1)
+    episodes = data["episode"]
+    successes, chosen = [], []
+    for seed in np.unique(episodes):
+        index = np.flatnonzero(episodes == seed)
+        commits = index[(actions[index] == 1) & data["commit_terminal"][index]]
+        if len(commits):
+            successes.append(bool(data["commit_success"][commits[0]]))
+            chosen.append(int(np.searchsorted(index, commits[0])))
+        else:
+            successes.append(bool(data["wait_success"][index[-1]]))
+            chosen.append(-1)
+    return float(np.mean(successes)), np.asarray(chosen)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m agents.lookahead collect``: record transitions (:func:`collect_transitions`);
+    ``train``: fit a DQN on them offline (:func:`agents.lookahead_training.train_offline`)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m agents.lookahead", description=main.__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    collect = sub.add_parser("collect", help="both actions' outcomes at every check")
+    collect.add_argument("--scenario", default="ship-ss5")
+    collect.add_argument("--seed", type=int, default=10_000, help="first episode seed")
+    collect.add_argument("--episodes", type=int, default=60)
+    collect.add_argument("--draws", type=int, default=LookaheadSettings.draws)
+    collect.add_argument("--check-every-s", type=float, default=LookaheadSettings.check_every_s)
+    collect.add_argument("--out", required=True, help="the .npz to write")
+    args = parser.parse_args(argv)
+    if args.command == "collect":
+        require_range("episodes", args.episodes, 1)
+        settings = LookaheadSettings(draws=args.draws, check_every_s=args.check_every_s)
+        seeds = list(range(args.seed, args.seed + args.episodes))
+        print(f"wrote {collect_transitions(args.scenario, seeds, args.out, settings)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

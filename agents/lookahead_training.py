@@ -1,0 +1,246 @@
+"""An offline DQN on the look-ahead's transitions: SB3's DQN fitted on recorded episodes.
+
+Online, a DQN on :class:`~agents.lookahead.LookaheadTimingWrapper` learns from the one action
+it took at each check, and each check costs four descents of look-ahead (~0.7 s of CPU): in
+50 minutes on this machine it saw some 5 000 checks and still committed at the first or
+second (73 % at its 30-episode evaluations, README).  :func:`agents.lookahead.collect_transitions`
+records **both** actions' outcomes at every check of whole episodes instead (the commit tried
+in a saved copy with the episode's own future, the wait played on), so every check labels
+the commit, and the DQN is fitted on that fixed replay buffer: SB3's own Q-learning update
+(:meth:`stable_baselines3.DQN.train`, its loss, optimiser and target network), run for as many
+gradient steps as it takes, with no further simulation.  Recorded episodes held out by seed
+score each model exactly (:func:`agents.lookahead.replay_success`: a policy's path through a
+recorded episode is the recorded one up to its commit).
+
+``python -m agents.lookahead_training --config configs/train/timing_dqn_lookahead_offline.yaml
+--data results/lookahead/*.npz --out results/train/timing_dqn_lookahead_offline``
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import yaml
+
+from agents.lookahead import LookaheadSettings, load_transitions, replay_success
+from landing_env.errors import ConfigError, require_range
+
+
+class _Spaces(gym.Env):  # type: ignore[type-arg]
+    """The wrapper's spaces, for building the DQN without an environment to step."""
+
+    def __init__(self, size: int) -> None:
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (size,), dtype=np.float32)
+        self.action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        return np.zeros(self.observation_space.shape, np.float32), {}
+
+    def step(self, action: Any) -> Any:
+        raise RuntimeError("an offline DQN does not step an environment")
+
+
+def split_episodes(episodes: np.ndarray, every: int) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the training and held-out records: every ``every``-th episode (by seed, in
+    order) is held out."""
+    require_range("holdout_every", every, 2)
+    seeds = np.unique(episodes)
+    held = np.isin(episodes, seeds[every - 1 :: every])
+    return ~held, held
+
+
+def fill_buffer(model: Any, data: dict[str, np.ndarray], mask: np.ndarray) -> int:
+    """Add the masked records' transitions to ``model``'s replay buffer: the commit (where it
+    ended the episode) and the wait.  Returns how many were added."""
+    added = 0
+    for i in np.flatnonzero(mask):
+        observation = data["observation"][i][None]
+        if data["commit_terminal"][i]:
+            model.replay_buffer.add(
+                observation,
+                observation,
+                np.array([1]),
+                np.array([data["commit_reward"][i]]),
+                np.array([True]),
+                [{}],
+            )
+            added += 1
+        model.replay_buffer.add(
+            observation,
+            data["next_observation"][i][None],
+            np.array([0]),
+            np.array([data["wait_reward"][i]]),
+            np.array([bool(data["wait_terminal"][i])]),
+            [{}],
+        )
+        added += 1
+    return added
+
+
+def greedy(model: Any) -> Any:
+    """The model's deterministic decisions on a batch of observations."""
+    import torch
+
+    def decide(observations: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            q = model.q_net(torch.as_tensor(observations, dtype=torch.float32))
+        return q.argmax(dim=1).numpy()
+
+    return decide
+
+
+def train_offline(
+    config_path: str | Path,
+    data_paths: list[str | Path],
+    out_dir: str | Path,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Fit the YAML's DQN on the transitions, keep the model that replays best on the held-out
+    episodes, and write it with its card; returns the summary (also ``train_summary.yaml``)."""
+    import torch
+    from stable_baselines3 import DQN
+    from stable_baselines3.common.logger import configure
+    from tqdm import tqdm
+
+    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+    from agents.model_metadata import card_for_training, write_metadata
+    from agents.training import algorithm_kwargs, load_train_config
+
+    config = load_train_config(config_path)
+    s = config.settings
+    if s.algo != "dqn" or s.lookahead is None:
+        raise ConfigError("deck_landing", "an offline look-ahead DQN needs algo: dqn and lookahead")
+    # the YAML's own ``offline`` section: gradient_steps per round, rounds, holdout_every,
+    # scenario (whose environment signs the card)
+    offline = dict((yaml.safe_load(Path(config_path).read_text()) or {}).get("offline") or {})
+    unknown = sorted(set(offline) - {"gradient_steps", "rounds", "holdout_every", "scenario"})
+    if unknown:
+        raise ConfigError("offline", f"unknown keys {unknown}")
+    settings = LookaheadSettings(**s.lookahead)
+    data = load_transitions(list(data_paths))
+    with np.load(data_paths[0]) as first:
+        if json.loads(str(first["settings"])) != json.loads(json.dumps(settings.signature())):
+            raise ConfigError(
+                "data", "the transitions were collected with another look-ahead than the YAML's"
+            )
+    train_mask, held_mask = split_episodes(data["episode"], int(offline.get("holdout_every", 5)))
+    torch.set_num_threads(s.torch_threads)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    hyper = {k: v for k, v in config.hyperparams.items() if k != "env_kwargs"}
+    kwargs = algorithm_kwargs(hyper)
+    kwargs["buffer_size"] = max(int(kwargs.get("buffer_size", 0)), 2 * len(data["episode"]) + 1)
+    model = DQN(
+        hyper.get("policy", "MlpPolicy"),
+        _Spaces(settings.size),
+        seed=s.seed,
+        device="cpu",
+        verbose=0,
+        **kwargs,
+    )
+    model.set_logger(configure(str(out / "tb"), ["tensorboard", "csv"]))
+    added = fill_buffer(model, data, train_mask)
+    rounds = int(offline.get("rounds", 40))
+    steps = int(offline.get("gradient_steps", 500))
+    target_every = int(hyper.get("target_update_interval", 250))
+    best: tuple[float, int] = (-1.0, -1)
+    history: list[list[float]] = []
+    started = time.perf_counter()
+    done = 0
+    for _ in tqdm(range(rounds), desc="offline DQN", disable=not progress):
+        for start in range(0, steps, target_every):
+            chunk = min(target_every, steps - start)
+            model.train(gradient_steps=chunk, batch_size=int(kwargs.get("batch_size", 64)))
+            model.q_net_target.load_state_dict(model.q_net.state_dict())
+            done += chunk
+        train_rate, _ = replay_success(_subset(data, train_mask), greedy(model))
+        held_rate, _ = replay_success(_subset(data, held_mask), greedy(model))
+        history.append([done, round(train_rate, 4), round(held_rate, 4)])
+        model.logger.record("replay/train_success", train_rate)
+        model.logger.record("replay/heldout_success", held_rate)
+        model.logger.dump(done)
+        if held_rate > best[0]:
+            best = (held_rate, done)
+            model.save(out / "best_model.zip")
+    model.save(out / "timing_dqn_final.zip")
+    scenario = str(offline.get("scenario", "ship-ss5"))
+    overrides = dict(s.env_kwargs.get("overrides", {}))
+    env, _ = make_env_and_policy(
+        "land-now", scenario, SCENARIOS[scenario].estimator, extra_overrides=overrides
+    )
+    try:
+        card = card_for_training(env, config)
+    finally:
+        env.close()
+    card.note = (
+        f"offline DQN on {len(np.unique(data['episode']))} recorded episodes of {scenario} "
+        f"({added} transitions); data: {[str(p) for p in data_paths]}"
+    )
+    for saved in (out / "best_model.zip", out / "timing_dqn_final.zip"):
+        write_metadata(saved, card)
+    held = _subset(data, held_mask)
+    summary = {
+        "baselines_heldout_replay": {
+            name: round(replay_success(held, rule)[0], 4) for name, rule in RULES.items()
+        },
+        "best_check_in_hindsight_heldout": round(_hindsight(held), 4),
+        "episodes": len(np.unique(data["episode"])),
+        "held_out_episodes": len(np.unique(data["episode"][held_mask])),
+        "transitions": added,
+        "gradient_steps": done,
+        "wall_time_s": round(time.perf_counter() - started, 1),
+        "best_heldout_replay": [round(best[0], 4), best[1]],
+        "replay": history,
+    }
+    (out / "train_summary.yaml").write_text(yaml.safe_dump(summary, sort_keys=False))
+    return summary
+
+
+#: fixed rules on the same features, replayed beside the model: a commit at the first check,
+#: and deck-forecast-onboard's rule on four draws (all of them land with the margin)
+RULES: dict[str, Any] = {
+    "commit_at_once": lambda obs: np.ones(len(obs), dtype=int),
+    "all_draws_land": lambda obs: (obs[:, 1] >= 1.0 - 1e-9).astype(int),
+    "three_of_four_land": lambda obs: (obs[:, 1] >= 0.75 - 1e-9).astype(int),
+}
+
+
+def _hindsight(data: dict[str, np.ndarray]) -> float:
+    """The share of episodes where some check's commit, or the forced one, lands."""
+    return float(
+        np.mean(
+            [
+                data["commit_success"][data["episode"] == seed].any()
+                or data["wait_success"][data["episode"] == seed][-1]
+                for seed in np.unique(data["episode"])
+            ]
+        )
+    )
+
+
+def _subset(data: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
+    return {key: value[mask] for key, value in data.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.lookahead_training", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--config", required=True)
+    parser.add_argument("--data", nargs="+", required=True)
+    parser.add_argument("--out", required=True)
+    args = parser.parse_args(argv)
+    summary = train_offline(args.config, args.data, args.out)
+    print(yaml.safe_dump(summary, sort_keys=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,113 @@
+"""The offline DQN on recorded look-ahead transitions: the exact replay of a policy on recorded
+episodes, the held-out split, and a DQN fitted by SB3 that learns to wait for a good check."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from agents.lookahead import (
+    TRANSITION_KEYS,
+    LookaheadSettings,
+    load_transitions,
+    replay_success,
+)
+from agents.lookahead_training import split_episodes, train_offline
+from landing_env.errors import ConfigError
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
+
+
+def _episodes(path: Path, seeds: range, settings: LookaheadSettings, rng) -> Path:
+    """Recorded episodes where a commit lands exactly when the check's chance is 0.75 or
+    more (one check in four), and the forced commit at the end lands half the time."""
+    rows = {key: [] for key in TRANSITION_KEYS}
+    for seed in seeds:
+        chances = rng.choice([0.0, 0.25, 0.5, 0.75, 1.0], size=12, p=[0.25, 0.25, 0.25, 0.15, 0.1])
+        observations = []
+        for k, chance in enumerate(chances):
+            check = [1.0, chance, max(chance, 0.5), -1.0 + 1.2 * chance, -1.0]
+            last = observations[-1][:5] if observations else [0.0, 0.0, 0.0, -1.0, -1.0]
+            observations.append(np.array([*check, *last, k / 12], np.float32))
+        forced = bool(rng.random() < 0.5)
+        for k, chance in enumerate(chances):
+            end = k == len(chances) - 1
+            lands = chance >= 0.75
+            values = (
+                observations[k],
+                6.0 if lands else -2.0,
+                lands,
+                True,
+                (6.0 if forced else -2.0) if end else -0.05,
+                observations[min(k + 1, len(chances) - 1)],
+                end,
+                forced and end,
+                seed,
+            )
+            for key, value in zip(TRANSITION_KEYS, values, strict=True):
+                rows[key].append(value)
+    np.savez_compressed(
+        path,
+        settings=json.dumps(settings.signature()),
+        scenario="ship-ss5",
+        **{key: np.asarray(value) for key, value in rows.items()},
+    )
+    return path
+
+
+def test_a_policy_is_replayed_to_its_first_commit_or_the_forced_end(tmp_path) -> None:
+    settings = LookaheadSettings()
+    path = _episodes(tmp_path / "a.npz", range(40), settings, np.random.default_rng(0))
+    data = load_transitions([path])
+    never, chosen = replay_success(data, lambda obs: np.zeros(len(obs), int))
+    forced = [data["wait_success"][data["episode"] == s][-1] for s in range(40)]
+    assert never == pytest.approx(np.mean(forced)) and np.all(chosen == -1)
+    at_once, chosen = replay_success(data, lambda obs: np.ones(len(obs), int))
+    first = [data["commit_success"][data["episode"] == s][0] for s in range(40)]
+    assert at_once == pytest.approx(np.mean(first)) and np.all(chosen == 0)
+    # waiting for a chance of 0.75 lands wherever such a check comes
+    patient, _ = replay_success(data, lambda obs: (obs[:, 1] >= 0.75).astype(int))
+    reachable = [data["observation"][data["episode"] == s][:, 1].max() >= 0.75 for s in range(40)]
+    assert patient >= np.mean(reachable) > at_once
+
+
+def test_every_fifth_episode_is_held_out() -> None:
+    episodes = np.repeat(np.arange(100, 110), 3)
+    train, held = split_episodes(episodes, 5)
+    assert set(episodes[held]) == {104, 109} and not np.any(train & held)
+    with pytest.raises(ConfigError) as error:
+        split_episodes(episodes, 1)
+    assert error.value.key == "holdout_every"
+
+
+def test_transitions_of_another_lookahead_are_refused(tmp_path) -> None:
+    rng = np.random.default_rng(1)
+    a = _episodes(tmp_path / "a.npz", range(3), LookaheadSettings(), rng)
+    b = _episodes(tmp_path / "b.npz", range(3), LookaheadSettings(draws=8), rng)
+    with pytest.raises(ConfigError) as error:
+        load_transitions([a, b])
+    assert error.value.key == "data"
+
+
+def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None:
+    settings = LookaheadSettings()
+    data_path = _episodes(tmp_path / "d.npz", range(150), settings, np.random.default_rng(2))
+    config = yaml.safe_load(CONFIG.read_text())
+    config["offline"].update(rounds=4, gradient_steps=500)
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(config))
+    summary = train_offline(config_path, [data_path], tmp_path / "out", progress=False)
+    data = load_transitions([data_path])
+    at_once, _ = replay_success(data, lambda obs: np.ones(len(obs), int))
+    best_held = summary["best_heldout_replay"][0]
+    assert summary["held_out_episodes"] == 30
+    assert best_held >= 0.8 > at_once + 0.3  # it waits for the good checks
+    from agents.model_metadata import read_metadata
+
+    card = read_metadata(tmp_path / "out" / "best_model.zip")
+    assert card is not None and card.observation["lookahead"] == settings.signature()
+    assert card.env_id == "DeckLandingTiming-v0" and card.sensing[0].startswith("realistic")
