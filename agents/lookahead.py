@@ -70,8 +70,10 @@ class LookaheadSettings:
         require_range("check_every_s", self.check_every_s, 0.0, 10.0, low_inclusive=False)
         require_range("min_margin", self.min_margin, 0.0, 1.0)
         require_range("checks", self.checks, 1, 16)
-        if isinstance(self.draws, bool) or isinstance(self.checks, bool):
-            raise ConfigError("draws", "must be an integer")
+        for key in ("draws", "checks", "seed"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise ConfigError(key, f"must be an integer, got {value!r}")
 
     @property
     def size(self) -> int:

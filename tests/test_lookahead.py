@@ -92,7 +92,15 @@ def test_any_tried_commits_give_features_inside_the_observation_bounds(draws) ->
 
 @pytest.mark.parametrize(
     ("key", "value"),
-    [("draws", 0), ("draws", 65), ("check_every_s", 0.0), ("min_margin", 1.5), ("checks", 0)],
+    [
+        ("draws", 0),
+        ("draws", 65),
+        ("draws", 2.5),
+        ("check_every_s", 0.0),
+        ("min_margin", 1.5),
+        ("checks", 0),
+        ("checks", True),
+    ],
 )
 def test_a_bad_lookahead_setting_is_refused_naming_its_key(key: str, value: float) -> None:
     with pytest.raises(ConfigError) as error:
