@@ -95,6 +95,14 @@ class LookaheadSettings:
         }
 
 
+def in_flight(env: Any) -> bool:
+    """Whether a commit can be tried now: the episode goes on and its warm-up hold did not
+    end it (``env``: the unwrapped timing task)."""
+    from landing_env.touchdown import Outcome
+
+    return not getattr(env, "_hold_failed", False) and env._outcome is Outcome.IN_FLIGHT
+
+
 def check_features(tries: list[TriedCommit] | None) -> np.ndarray:
     """:data:`LOOKAHEAD_FEATURES` of one check's tried commits (None: no look-ahead made)."""
     if not tries:
@@ -166,7 +174,7 @@ class LookaheadObserver:
         observation; an ended episode or a warm-up that failed gives an invalid check."""
         env = self.env
         tries: list[TriedCommit] | None = None
-        if not getattr(env, "_hold_failed", False) and env._outcome.value == "in_flight":
+        if in_flight(env):
             tries = self.planner.try_commits(decision, needed=0.0)
         self._history.insert(0, check_features(tries))
         del self._history[self.settings.checks :]
@@ -199,10 +207,6 @@ class LookaheadTimingWrapper(gym.Wrapper):
         self.observation_space = self.observer.observation_space
         self.action_space = gym.spaces.Discrete(2)
         self._decisions = 0
-
-    def lookahead_signature(self) -> dict[str, Any]:
-        """The observation's meaning, for a model's card."""
-        return self.settings.signature()
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         _, info = self.env.reset(**kwargs)
@@ -350,7 +354,7 @@ def collect_transitions(
             observation, _ = wrapper.reset(seed=seed)
             while True:
                 commit = (0.0, False, True)
-                if not base._hold_failed and base._outcome.value == "in_flight":
+                if in_flight(base):
                     here = save_snapshot(base)
                     try:
                         _, reward, terminated, _, info = base.step(1)

@@ -280,7 +280,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
         from agents.model_metadata import check_compatible, read_metadata
 
         card = read_metadata(path)
-        assert card is not None
+        assert card.observation["lookahead"]["min_margin"] == 0.15  # the trained one
         with pytest.raises(ConfigError) as error:
             check_compatible(card, env_signature(other), path.name)
         assert error.value.key == "observation.lookahead"
