@@ -164,10 +164,13 @@ class LookaheadObserver:
         #: the task's decisions between two checks
         self.stride = round(stride)
         self._history: list[np.ndarray] = []
+        #: the tried commits of the latest check (None: none were tried)
+        self.last_tries: list[TriedCommit] | None = None
 
     def reset(self) -> None:
         self.planner.reset()
         self._history = []
+        self.last_tries = None
 
     def observe(self, decision: int) -> np.ndarray:
         """Look ahead at ``decision`` (the task's steps since the reset) and build the
@@ -176,6 +179,7 @@ class LookaheadObserver:
         tries: list[TriedCommit] | None = None
         if in_flight(env):
             tries = self.planner.try_commits(decision, needed=0.0)
+        self.last_tries = tries
         self._history.insert(0, check_features(tries))
         del self._history[self.settings.checks :]
         invalid = check_features(None)
@@ -317,6 +321,11 @@ TRANSITION_KEYS = (
     "wait_success",
     "episode",
 )
+#: the check an observation was made at (:func:`collect_transitions`): whether commits were
+#: tried (records,), and each draw's verdict (records, draws).  With them a file
+#: recorded with many draws gives the observations of fewer (:func:`with_draws`): a draw's
+#: future is seeded by the episode, the decision and its index, not by how many are drawn.
+DRAW_KEYS = ("check_tried", "draw_lands", "draw_success", "draw_margin")
 
 
 def collect_transitions(
@@ -326,6 +335,7 @@ def collect_transitions(
     settings: LookaheadSettings | None = None,
     estimator: str | None = None,
     progress: bool = True,
+    forecast: Any = None,
 ) -> Path:
     """Both actions' outcomes at every check of whole episodes: the data of an offline DQN.
 
@@ -334,8 +344,9 @@ def collect_transitions(
     copy (as :class:`agents.oracle.OracleTimingPolicy` tries it), and with the wait's reward
     and the next check's observation.  The episode then goes on as if it waited, so any policy
     of the wrapper can be replayed exactly on the file (:func:`replay_success`): the states on
-    its path and their observations are the ones recorded.  The file is rewritten after every
-    episode (an interrupted run keeps what it has).
+    its path and their observations are the ones recorded.  Each check's draws are kept
+    (:data:`DRAW_KEYS`), so the file also serves a look-ahead of fewer draws.  The file is
+    rewritten after every episode (an interrupted run keeps what it has).
     """
     from tqdm import tqdm
 
@@ -344,15 +355,21 @@ def collect_transitions(
 
     settings = settings or LookaheadSettings()
     env, _ = make_env_and_policy("land-now", scenario, estimator or SCENARIOS[scenario].estimator)
-    wrapper = LookaheadTimingWrapper(env, **asdict(settings))
+    wrapper = LookaheadTimingWrapper(env, forecast=forecast, **asdict(settings))
     base = wrapper.unwrapped
-    rows: dict[str, list[Any]] = {key: [] for key in TRANSITION_KEYS}
+    rows: dict[str, list[Any]] = {key: [] for key in TRANSITION_KEYS + DRAW_KEYS}
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         for seed in tqdm(seeds, desc=f"look-ahead transitions @ {scenario}", disable=not progress):
             observation, _ = wrapper.reset(seed=seed)
             while True:
+                for key, value in zip(
+                    DRAW_KEYS,
+                    _draw_arrays(wrapper.observer.last_tries, settings.draws),
+                    strict=True,
+                ):
+                    rows[key].append(value)
                 commit = (0.0, False, True)
                 if in_flight(base):
                     here = save_snapshot(base)
@@ -390,8 +407,80 @@ def collect_transitions(
     return path
 
 
-def load_transitions(paths: list[str | Path]) -> dict[str, np.ndarray]:
-    """The transitions of several files, concatenated; they must share their look-ahead."""
+def _draw_arrays(
+    tries: list[TriedCommit] | None, draws: int
+) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
+    """One check's tried commits as :data:`DRAW_KEYS`' rows."""
+    lands = np.zeros(draws, bool)
+    success = np.zeros(draws, bool)
+    margin = np.full(draws, np.nan)
+    for k, tried in enumerate((tries or [])[:draws]):
+        lands[k], success[k], margin[k] = tried.lands, tried.success, tried.margin
+    return bool(tries), lands, success, margin
+
+
+def _tries_of(data: dict[str, np.ndarray], row: int, draws: int) -> list[TriedCommit] | None:
+    """The first ``draws`` tried commits of record ``row``'s check (None: nothing tried)."""
+    if not data["check_tried"][row]:
+        return None
+    lands, success, margin = (data[key][row][:draws] for key in DRAW_KEYS[1:])
+    return [
+        TriedCommit(bool(a), bool(b), float(m))
+        for a, b, m in zip(lands, success, margin, strict=True)
+    ]
+
+
+def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict[str, np.ndarray]:
+    """The records as a look-ahead of ``settings`` (the file's, with fewer draws) sees them:
+    every observation rebuilt from the first ``settings.draws`` draws of its checks."""
+    if any(key not in data for key in DRAW_KEYS):
+        raise ConfigError("data", "the transitions hold no draws of their own: record them anew")
+    if settings.draws > data["draw_lands"].shape[1]:
+        raise ConfigError(
+            "lookahead.draws",
+            f"{settings.draws} draws asked; the transitions hold {data['draw_lands'].shape[1]}",
+        )
+    checks = settings.checks
+    features = np.array(
+        [check_features(_tries_of(data, i, settings.draws)) for i in range(len(data["episode"]))]
+    )
+    invalid = check_features(None)
+    episodes = data["episode"]
+
+    def stack(row: int, newest: np.ndarray | None, wait: float) -> np.ndarray:
+        """The observation whose newest check is ``newest`` (or row's), the earlier ones the
+        rows before it in its episode."""
+        parts = [] if newest is None else [newest]
+        k = row
+        while len(parts) < checks and k >= 0 and episodes[k] == episodes[row]:
+            parts.append(features[k])
+            k -= 1
+        parts += [invalid] * (checks - len(parts))
+        return np.concatenate([*parts, [wait]]).astype(np.float32)
+
+    out = dict(data)
+    n = len(episodes)
+    out["observation"] = np.array(
+        [stack(i, None, float(data["observation"][i][-1])) for i in range(n)], np.float32
+    )
+    out["next_observation"] = np.array(
+        [
+            stack(i + 1, None, float(data["next_observation"][i][-1]))
+            if i + 1 < n and episodes[i + 1] == episodes[i] and not data["wait_terminal"][i]
+            else stack(i, invalid, float(data["next_observation"][i][-1]))
+            for i in range(n)
+        ],
+        np.float32,
+    )
+    return out
+
+
+def load_transitions(
+    paths: list[str | Path], settings: LookaheadSettings | None = None
+) -> dict[str, np.ndarray]:
+    """The transitions of several files, concatenated; they must share their look-ahead.
+    ``settings``: the look-ahead to see them with, the files' or the same with fewer draws
+    (:func:`with_draws`)."""
     parts: list[dict[str, np.ndarray]] = []
     signature = None
     for path in paths:
@@ -400,10 +489,25 @@ def load_transitions(paths: list[str | Path]) -> dict[str, np.ndarray]:
                 signature = str(data["settings"])
             elif str(data["settings"]) != signature:
                 raise ConfigError("data", f"{path} was collected with another look-ahead")
-            parts.append({key: data[key] for key in TRANSITION_KEYS})
-    if not parts:
+            keys = TRANSITION_KEYS + tuple(k for k in DRAW_KEYS if k in data)
+            parts.append({key: data[key] for key in keys})
+    if not parts or signature is None:
         raise ConfigError("data", "no transitions files given")
-    return {key: np.concatenate([p[key] for p in parts]) for key in TRANSITION_KEYS}
+    keys = tuple(k for k in parts[0] if all(k in p for p in parts))
+    merged = {key: np.concatenate([p[key] for p in parts]) for key in keys}
+    if settings is None:
+        return merged
+    recorded = json.loads(signature)
+    wanted = json.loads(json.dumps(settings.signature()))
+    if recorded == wanted:
+        return merged
+    if {**recorded, "draws": settings.draws} != wanted or settings.draws > recorded["draws"]:
+        raise ConfigError(
+            "data",
+            "the transitions were collected with another look-ahead than the one asked "
+            f"(recorded {recorded['draws']} draws; only fewer draws can be taken from them)",
+        )
+    return with_draws(merged, settings)
 
 
 def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.ndarray]:

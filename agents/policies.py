@@ -56,9 +56,10 @@
   (``configs/train/timing_dqn_predictive.yaml``, then trained on by
   ``configs/train/timing_dqn_predictive_finetune.yaml``).
 * ``timing-dqn-lookahead`` (``DeckLandingTiming-v0``, sea scenarios): a DQN that weighs what
-  ``deck-forecast-onboard``'s look-ahead foresees: every 0.5 s it reads a few commits tried
-  in the onboard model's futures and decides (:mod:`agents.lookahead`,
-  ``configs/train/timing_dqn_lookahead.yaml``), ``agents/models/timing_dqn_lookahead.zip``.
+  ``deck-forecast-onboard``'s look-ahead foresees: every 0.5 s it reads 16 commits tried in
+  the onboard model's futures and decides (:mod:`agents.lookahead`; fitted offline on
+  recorded episodes by ``configs/train/timing_dqn_lookahead_offline.yaml``),
+  ``agents/models/timing_dqn_lookahead.zip``.
 """
 
 from __future__ import annotations

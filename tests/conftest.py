@@ -10,8 +10,20 @@ from __future__ import annotations
 
 import os
 
+import pytest
 from hypothesis import settings
 
 settings.register_profile("deterministic", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
+
+
+@pytest.fixture(scope="session")
+def small_forecast():
+    """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
+    from agents.deck_forecast import fit_deck_forecast
+    from agents.evaluation.landing import SCENARIOS
+    from landing_env.config import load_config
+
+    motion = load_config(SCENARIOS["ship-ss4"].config).motion
+    return fit_deck_forecast(motion, realizations=3, record_s=400.0)

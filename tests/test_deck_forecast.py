@@ -30,12 +30,6 @@ def _ship_motion(sea_state: int = 4) -> MotionConfig:
     return load_config(SCENARIOS[f"ship-ss{sea_state}"].config).motion
 
 
-@pytest.fixture(scope="module")
-def small_forecast() -> LinearMotionPredictor:
-    """A forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
-    return fit_deck_forecast(_ship_motion(4), realizations=3, record_s=400.0)
-
-
 # ------------------------------------------------------------------------------ the HMS
 def test_the_hms_record_is_one_fixed_record_read_through_any_window() -> None:
     source = make_motion_source(_ship_motion(4), np.random.default_rng(3))

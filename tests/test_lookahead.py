@@ -13,8 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.deck_forecast import fit_deck_forecast
-from agents.evaluation.landing import SCENARIOS
 from agents.lookahead import (
     FAILED_SCORE,
     LOOKAHEAD_FEATURES,
@@ -28,19 +26,11 @@ from agents.model_metadata import card_for_training, env_signature, write_metada
 from agents.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
 from agents.policies import TrainedTimingPolicy
 from agents.training import TrainConfig, TrainSettings
-from landing_env.config import load_config
 from landing_env.errors import ConfigError
 
 SHIP_ID = "DeckLandingTiming-ShipSS4-v4"
 #: v4 is the ship ids' history observation, which the look-ahead replaces: v5 adds only the forecast
 pytestmark = pytest.mark.filterwarnings("ignore:.*is out of date")
-
-
-@pytest.fixture(scope="module")
-def small_forecast():
-    """ship-ss4's helideck forecast fitted on two short records (seconds to fit)."""
-    motion = load_config(SCENARIOS["ship-ss4"].config).motion
-    return fit_deck_forecast(motion, realizations=2, record_s=300.0)
 
 
 @pytest.fixture(scope="module")
@@ -314,7 +304,7 @@ def test_the_shipped_lookahead_model_decides_at_ship_ss5_with_realistic_sensing(
     )
     try:
         assert isinstance(policy, LookaheadTimingPolicy)
-        assert policy.settings == LookaheadSettings(draws=4, check_every_s=0.5, checks=2)
+        assert policy.settings == LookaheadSettings(draws=16, check_every_s=0.5, checks=2)
         observation, _ = env.reset(seed=1_000_001)
         policy.reset()
         action = policy(observation)

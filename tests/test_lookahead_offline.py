@@ -13,6 +13,8 @@ import yaml
 from agents.lookahead import (
     TRANSITION_KEYS,
     LookaheadSettings,
+    check_features,
+    collect_transitions,
     load_transitions,
     replay_success,
 )
@@ -20,6 +22,13 @@ from agents.lookahead_training import split_episodes, train_offline
 from landing_env.errors import ConfigError
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
+
+
+def _config(draws: int) -> dict:
+    """The shipped offline YAML, its look-ahead of ``draws`` (the synthetic episodes' own)."""
+    config = yaml.safe_load(CONFIG.read_text())
+    config["deck_landing"]["lookahead"]["draws"] = draws
+    return config
 
 
 def _episodes(path: Path, seeds: range, settings: LookaheadSettings, rng) -> Path:
@@ -96,8 +105,8 @@ def test_transitions_of_another_lookahead_are_refused(tmp_path) -> None:
 def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None:
     settings = LookaheadSettings()
     data_path = _episodes(tmp_path / "d.npz", range(150), settings, np.random.default_rng(2))
-    config = yaml.safe_load(CONFIG.read_text())
-    config["offline"].update(rounds=4, gradient_steps=500)
+    config = _config(draws=settings.draws)
+    config["offline"].update(rounds=4, gradient_steps=500, cross_validate=False)
     config_path = tmp_path / "offline.yaml"
     config_path.write_text(yaml.safe_dump(config))
     summary = train_offline(config_path, [data_path], tmp_path / "out", progress=False)
@@ -111,3 +120,62 @@ def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and card.observation["lookahead"] == settings.signature()
     assert card.env_id == "DeckLandingTiming-v0" and card.sensing[0].startswith("realistic")
+
+
+def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws(
+    small_forecast, tmp_path
+) -> None:
+    settings = LookaheadSettings(draws=3, check_every_s=1.0)
+    path = collect_transitions(
+        "ship-ss4", [5000], tmp_path / "t.npz", settings, progress=False, forecast=small_forecast
+    )
+    recorded = load_transitions([path])
+    rebuilt = load_transitions([path], settings)  # the file's own look-ahead: as recorded
+    assert np.array_equal(rebuilt["observation"], recorded["observation"])
+    tried = np.flatnonzero(recorded["check_tried"])
+    assert len(tried) >= 5 and recorded["draw_lands"].shape[1] == 3
+    # every observation rebuilt from the draws equals the recorded one, the next ones too
+    from agents.lookahead import with_draws
+
+    same = with_draws(recorded, settings)
+    assert np.array_equal(same["observation"], recorded["observation"])
+    assert np.array_equal(same["next_observation"], recorded["next_observation"])
+    one = load_transitions([path], LookaheadSettings(draws=1, check_every_s=1.0))
+    for i in tried:
+        assert one["observation"][i][1] == float(recorded["draw_lands"][i][0])
+        assert np.array_equal(one["observation"][i][5:10], one["observation"][i - 1][:5]) or (
+            recorded["episode"][i - 1] != recorded["episode"][i]
+        )
+    assert not np.array_equal(one["observation"], recorded["observation"])
+    invalid = check_features(None)
+    assert np.array_equal(one["observation"][0][:5], invalid)
+    for asked, key in (
+        (LookaheadSettings(draws=4, check_every_s=1.0), "data"),
+        (LookaheadSettings(draws=2, check_every_s=1.0, min_margin=0.3), "data"),
+    ):
+        with pytest.raises(ConfigError) as error:
+            load_transitions([path], asked)
+        assert error.value.key == key
+
+
+def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_path) -> None:
+    settings = LookaheadSettings()
+    data_path = _episodes(tmp_path / "d.npz", range(100), settings, np.random.default_rng(3))
+    config = _config(draws=settings.draws)
+    config["offline"].update(rounds=3, gradient_steps=400, holdout_every=4, cross_validate=True)
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(config))
+    summary = train_offline(config_path, [data_path], tmp_path / "out", progress=False)
+    assert summary["held_out_episodes"] == 100 and summary["cross_validated"]
+    assert [row[0] for row in summary["replay"]] == [400, 800, 1200]
+    score, steps = summary["best_heldout_replay"]
+    assert score == max(row[1] for row in summary["replay"]) and steps in (400, 800, 1200)
+    # the model refitted on every episode for the chosen steps waits for the good checks
+    data = load_transitions([data_path])
+    at_once, _ = replay_success(data, lambda obs: np.ones(len(obs), int))
+    assert summary["chosen_model_replay_all_episodes"] >= 0.8 > at_once + 0.3
+    config["offline"]["cross_validate"] = "yes"
+    config_path.write_text(yaml.safe_dump(config))
+    with pytest.raises(ConfigError) as error:
+        train_offline(config_path, [data_path], tmp_path / "bad", progress=False)
+    assert error.value.key == "offline.cross_validate"
