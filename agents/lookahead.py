@@ -478,11 +478,13 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
 def load_transitions(
     paths: list[str | Path], settings: LookaheadSettings | None = None
 ) -> dict[str, np.ndarray]:
-    """The transitions of several files, concatenated; they must share their look-ahead.
-    ``settings``: the look-ahead to see them with, the files' or the same with fewer draws
-    (:func:`with_draws`)."""
+    """The transitions of several files, concatenated; they must share their look-ahead, and
+    an episode (its seed) may be in one file only, whatever its scenario.  Each record also
+    gets its file's ``scenario``.  ``settings``: the look-ahead to see them with, the files'
+    or the same with fewer draws (:func:`with_draws`)."""
     parts: list[dict[str, np.ndarray]] = []
     signature = None
+    seen: dict[int, str] = {}
     for path in paths:
         with np.load(path) as data:
             if signature is None:
@@ -490,7 +492,18 @@ def load_transitions(
             elif str(data["settings"]) != signature:
                 raise ConfigError("data", f"{path} was collected with another look-ahead")
             keys = TRANSITION_KEYS + tuple(k for k in DRAW_KEYS if k in data)
-            parts.append({key: data[key] for key in keys})
+            part = {key: data[key] for key in keys}
+            scenario = str(data["scenario"]) if "scenario" in data else "unknown"
+        for seed in np.unique(part["episode"]).tolist():
+            if seed in seen:
+                raise ConfigError(
+                    "data",
+                    f"episode seed {seed} is in both {seen[seed]} and {path}: an episode "
+                    "is one file's (record another scenario with other seeds)",
+                )
+            seen[seed] = str(path)
+        part["scenario"] = np.full(len(part["episode"]), scenario)
+        parts.append(part)
     if not parts or signature is None:
         raise ConfigError("data", "no transitions files given")
     keys = tuple(k for k in parts[0] if all(k in p for p in parts))

@@ -31,7 +31,9 @@ def _config(draws: int) -> dict:
     return config
 
 
-def _episodes(path: Path, seeds: range, settings: LookaheadSettings, rng) -> Path:
+def _episodes(
+    path: Path, seeds: range, settings: LookaheadSettings, rng, scenario: str = "ship-ss5"
+) -> Path:
     """Recorded episodes where a commit lands exactly when the check's chance is 0.75 or
     more (one check in four), and the forced commit at the end lands half the time."""
     rows = {key: [] for key in TRANSITION_KEYS}
@@ -62,7 +64,7 @@ def _episodes(path: Path, seeds: range, settings: LookaheadSettings, rng) -> Pat
     np.savez_compressed(
         path,
         settings=json.dumps(settings.signature()),
-        scenario="ship-ss5",
+        scenario=scenario,
         **{key: np.asarray(value) for key, value in rows.items()},
     )
     return path
@@ -179,3 +181,50 @@ def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_pa
     with pytest.raises(ConfigError) as error:
         train_offline(config_path, [data_path], tmp_path / "bad", progress=False)
     assert error.value.key == "offline.cross_validate"
+
+
+def test_an_episode_seed_recorded_in_two_files_is_refused(tmp_path) -> None:
+    rng = np.random.default_rng(4)
+    a = _episodes(tmp_path / "a.npz", range(5), LookaheadSettings(), rng)
+    b = _episodes(tmp_path / "b.npz", range(4, 8), LookaheadSettings(), rng, "ship-ss6")
+    with pytest.raises(ConfigError) as error:
+        load_transitions([a, b])
+    assert error.value.key == "data" and "seed 4" in str(error.value)
+
+
+def test_a_fit_on_two_scenarios_reports_each_ones_held_out_replay(tmp_path) -> None:
+    settings = LookaheadSettings()
+    rng = np.random.default_rng(5)
+    a = _episodes(tmp_path / "a.npz", range(60), settings, rng)
+    b = _episodes(tmp_path / "b.npz", range(100, 140), settings, rng, "ship-ss6")
+    data = load_transitions([a, b])
+    assert set(data["scenario"][data["episode"] < 100]) == {"ship-ss5"}
+    assert set(data["scenario"][data["episode"] >= 100]) == {"ship-ss6"}
+    config = _config(draws=settings.draws)
+    config["offline"].update(rounds=2, gradient_steps=500, cross_validate=True)
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(config))
+    summary = train_offline(config_path, [a, b], tmp_path / "out", progress=False)
+    by_scenario = summary["best_heldout_replay_by_scenario"]
+    assert by_scenario["ship-ss5"][1] == 60 and by_scenario["ship-ss6"][1] == 40
+    # the overall held-out replay is the episodes' mean of the scenarios' own
+    overall = (by_scenario["ship-ss5"][0] * 60 + by_scenario["ship-ss6"][0] * 40) / 100
+    assert summary["best_heldout_replay"][0] == pytest.approx(overall, abs=1e-3)
+    baselines = summary["baselines_heldout_replay_by_scenario"]["ship-ss6"]
+    held_b = load_transitions([b])
+    at_once, _ = replay_success(held_b, lambda obs: np.ones(len(obs), int))
+    assert baselines["commit_at_once"] == pytest.approx(at_once, abs=1e-4)
+    from agents.model_metadata import read_metadata
+
+    card = read_metadata(tmp_path / "out" / "best_model.zip")
+    assert card is not None and "60 of ship-ss5, 40 of ship-ss6" in card.note
+
+
+def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> None:
+    from agents.lookahead_training import RULES
+
+    rule = RULES["all_land_relaxed_to_half"]
+    observations = np.zeros((4, LookaheadSettings().size), np.float32)
+    observations[:, 1] = [0.9, 0.9, 0.5, 1.0]  # the check's chance
+    observations[:, -1] = [0.5, 0.95, 1.0, 0.0]  # the wait used, a share of the limit
+    assert rule(observations).tolist() == [0, 1, 1, 1]
