@@ -2,6 +2,7 @@
 
     python -m benchmarks.bench_hold_in_view [--scenario ship-ss4 ship-ss5 ship-ss6]
         [--sensors realistic] [--episodes 100] [--hold] [--outcomes EPISODES.jsonl]
+        [--set KEY=VALUE ...]
 
 Resets the timing task of each scenario (``land-now``'s environment: the deck-frame guidance,
 the scenario's estimator observed) on held-out seeds from 1 000 000, the seeds `evaluate
@@ -11,8 +12,9 @@ lateral offset of the deck from the camera's axis (median and 90th percentile). 
 also waits out the whole hold (action 0 until the wait limit forces the commit) and prints
 the share of the hold's decisions with a valid estimate and how many episodes had none.
 ``--outcomes`` (an evaluation's ``landing_<scenario>_<policy>.jsonl``, one scenario) splits
-that run's outcomes by whether the estimate was valid at the first decision
-(README "Sea states 5 and 6 in one model").
+that run's outcomes by whether the estimate was valid at the first decision.  ``--set``
+applies config overrides (e.g. ``wind.enabled=false``) (README "Sea states 5 and 6 in one
+model").
 """
 
 from __future__ import annotations
@@ -21,19 +23,31 @@ import argparse
 import json
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from agents.cli_args import add_set_argument, parse_overrides
 
 FIRST_SEED = 1_000_000
 
 
-def measure(scenario: str, sensors: str, episodes: int, hold: bool) -> dict[int, dict]:
+def measure(
+    scenario: str,
+    sensors: str,
+    episodes: int,
+    hold: bool,
+    overrides: dict[str, Any] | None = None,
+) -> dict[int, dict]:
     """Per seed: ``valid`` at the first decision, the deck's lateral ``offset_m`` then, and
     with ``hold`` the share of the hold's decisions with a valid estimate."""
     from agents.evaluation.landing import SCENARIOS, make_env_and_policy
 
     env, _ = make_env_and_policy(
-        "land-now", scenario, SCENARIOS[scenario].estimator, extra_overrides={"sensors": sensors}
+        "land-now",
+        scenario,
+        SCENARIOS[scenario].estimator,
+        extra_overrides={"sensors": sensors, **(overrides or {})},
     )
     base = env.unwrapped
 
@@ -71,18 +85,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--hold", action="store_true", help="also wait out the whole hold")
     parser.add_argument("--outcomes", help="an evaluation's episodes (.jsonl) of one scenario")
+    add_set_argument(parser)
     args = parser.parse_args(argv)
+    overrides = parse_overrides(args.set)
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     if args.outcomes and len(args.scenario) != 1:
         parser.error("--outcomes needs exactly one --scenario (the run's)")
     for scenario in args.scenario:
-        rows = measure(scenario, args.sensors, args.episodes, args.hold)
+        rows = measure(scenario, args.sensors, args.episodes, args.hold, overrides)
         valid = np.array([r["valid"] for r in rows.values()])
         offset = np.array([r["offset_m"] for r in rows.values()])
         p50, p90 = np.percentile(offset, [50, 90])
         print(
-            f"{scenario} ({args.sensors}, {len(rows)} seeds from {FIRST_SEED}): valid estimate "
+            f"{scenario} ({args.sensors}{''.join(' ' + s for s in args.set)}, {len(rows)} seeds "
+            f"from {FIRST_SEED}): valid estimate "
             f"at the first decision {valid.mean():.0%}; deck's lateral offset median {p50:.2f} m, "
             f"p90 {p90:.2f} m"
         )
