@@ -125,9 +125,15 @@ class StartConfig:
     #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
     #: is at t = 0 (a ship deck can be metres away from home), so the drone starts above it
     relative_to: str = "home"
+    #: start in trim with the mean wind (leaning into it, the rotors carrying the drag, the
+    #: velocity integrators holding the trim acceleration within their limit), as a drone
+    #: that arrived over the deck would be; False starts level with the rotors at hover
+    trim_to_wind: bool = False
 
     def __post_init__(self) -> None:
         require_choice("relative_to", self.relative_to, ("home", "deck"))
+        if not isinstance(self.trim_to_wind, bool):
+            raise ConfigError("trim_to_wind", f"must be true or false, got {self.trim_to_wind!r}")
         low, high = self.height_m
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
+from scipy.spatial.transform import Rotation
 
 from estimation.frames import R_BC, R_PD, deck_pose_in_camera
 from estimation.landmarks import landmark_pose_w
@@ -219,6 +220,8 @@ class World:
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
+        if self.config.start.trim_to_wind and self.config.wind.enabled:
+            self._trim_to_wind(position_w, yaw)
 
     def redraw_unknowable_future(self, rng: np.random.Generator) -> None:
         """Give the future what no one on board could know a new draw from ``rng``: the gusts'
@@ -271,6 +274,30 @@ class World:
             body, (state.position_w + shift).tolist(), state.quaternion_xyzw.tolist()
         )
         self.client.resetBaseVelocity(body, velocity, angular)
+        self._state = self.drone.read_state()
+
+    def _trim_to_wind(self, position_w: np.ndarray, yaw: float) -> None:
+        """Lean into the mean wind at rest: the thrust carries the weight and the linear body
+        drag of the air going past (found by fixed-point iteration, the drag depending on the
+        attitude), the rotors at that thrust, the controller's integrators holding it."""
+        prm = self.params
+        wind = np.asarray(self.config.wind.mean_velocity_w, dtype=float)
+        if not np.all(np.isfinite(wind)) or float(np.linalg.norm(wind)) < 1e-9:
+            return
+        heading = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        rotation = Rotation.from_euler("z", yaw).as_matrix()
+        thrust_w = np.array([0.0, 0.0, prm.mass * GRAVITY])
+        for _ in range(8):
+            drag_w = rotation @ (-prm.linear_drag_b * (rotation.T @ -wind))
+            thrust_w = np.array([0.0, 0.0, prm.mass * GRAVITY]) - drag_w
+            z_b = thrust_w / np.linalg.norm(thrust_w)
+            y_b = np.cross(z_b, heading)
+            y_b /= np.linalg.norm(y_b)
+            rotation = np.column_stack([np.cross(y_b, z_b), y_b, z_b])
+        self.drone.reset(position_w, yaw, rotation_wb=rotation)
+        thrust = float(np.linalg.norm(thrust_w))
+        self.drone.set_rotor_speeds(np.full(4, math.sqrt(thrust / (4.0 * prm.k_f))))
+        self.controller.preload_acceleration(thrust_w / prm.mass)
         self._state = self.drone.read_state()
 
     def _hover_rotors(self) -> None:

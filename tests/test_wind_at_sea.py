@@ -84,3 +84,44 @@ def test_bad_wind_keys_are_named() -> None:
         load_config("ship-ss4", overrides={"wind.turbulence": "karman"})
     with pytest.raises(ConfigError, match=r"wind\.airwake_turbulence_factor"):
         load_config("ship-ss4", overrides={"wind.airwake_turbulence_factor": 0.5})
+
+
+def _drift_in_steady_wind(trim: bool) -> tuple[float, float]:
+    """The start's lean (deg) and how far the drone drifts in 1 s of hold (m) in a steady
+    8 m/s wind with no gusts."""
+    from landing_env.physics.controller import VelocitySetpoint
+    from landing_env.world import World
+
+    overrides = {
+        "wind.enabled": True,
+        "wind.mean_velocity_w": [8.0, 0.0, 0.0],
+        "wind.gust_intensity": [0.0, 0.0, 0.0],
+        "start.trim_to_wind": trim,
+    }
+    world = World(load_config("default", overrides=overrides))
+    try:
+        world.reset(np.random.default_rng(0), np.array([0.0, 0.0, 3.0]), 0.0)
+        start = world.drone_state()
+        lean = math.degrees(math.acos(float(start.rotation_wb[2, 2])))
+        hold = VelocitySetpoint(np.zeros(3), 0.0)
+        for _ in range(round(1.0 / (world.dt * world.substeps))):
+            world.step(hold, monitor_contacts=False)
+        end = world.drone_state().position_w
+        return lean, float(np.linalg.norm(end[:2] - start.position_w[:2]))
+    finally:
+        world.close()
+
+
+def test_a_start_in_trim_leans_into_the_wind_and_holds_its_place() -> None:
+    lean, drift = _drift_in_steady_wind(trim=True)
+    level_lean, level_drift = _drift_in_steady_wind(trim=False)
+    # drag 0.25 N/(m/s) x 8 m/s against 0.8 kg x g: atan(2.0 / 7.85) = 14.3 deg
+    assert lean == pytest.approx(math.degrees(math.atan(0.25 * 8.0 / (0.8 * 9.81))), abs=0.5)
+    assert level_lean == pytest.approx(0.0, abs=1e-6)
+    assert drift < 0.1 and level_drift > 3.0 * drift
+
+
+def test_trim_to_wind_must_be_a_boolean() -> None:
+    with pytest.raises(ConfigError) as error:
+        load_config("default", overrides={"start.trim_to_wind": "yes"})
+    assert error.value.key == "start.trim_to_wind"

@@ -189,6 +189,16 @@ class CascadeController:
         #: last torque demanded of the mixer (N m, body frame), before any mixer reduction
         self.last_torque_setpoint_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    def preload_acceleration(self, acceleration_w: np.ndarray) -> None:
+        """Start the horizontal velocity integrators at ``acceleration_w``'s horizontal part
+        (m/s^2, W; a trim's), within their limit."""
+        ax, ay = float(acceleration_w[0]), float(acceleration_w[1])
+        norm = math.hypot(ax, ay)
+        limit = self.gains.vel_i_limit_xy
+        if norm > limit:
+            ax, ay = ax * limit / norm, ay * limit / norm
+        self._vel_int[0], self._vel_int[1] = ax, ay
+
     @property
     def status(self) -> ControllerStatus:
         """The limits that acted in the last :meth:`update`."""

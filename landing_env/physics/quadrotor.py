@@ -587,11 +587,17 @@ class Quadrotor:
         position_w: np.ndarray | tuple[float, float, float],
         yaw: float,
         velocity_w: np.ndarray | tuple[float, float, float] | None = None,
+        rotation_wb: np.ndarray | None = None,
     ) -> None:
-        """Put the drone level at ``position_w`` (m, W) with ``yaw`` (rad), rotors at hover."""
+        """Put the drone level at ``position_w`` (m, W) with ``yaw`` (rad), rotors at hover;
+        ``rotation_wb`` (a rotation matrix) replaces the level attitude."""
         position = [float(v) for v in position_w]
         velocity = self._zero3 if velocity_w is None else [float(v) for v in velocity_w]
         quaternion = (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+        if rotation_wb is not None:
+            from scipy.spatial.transform import Rotation
+
+            quaternion = tuple(float(v) for v in Rotation.from_matrix(rotation_wb).as_quat())
         self.client.resetBasePositionAndOrientation(self.body_id, position, quaternion)
         self.client.resetBaseVelocity(self.body_id, velocity, self._zero3)
         self._omega = [self.params.hover_omega] * 4
