@@ -296,7 +296,9 @@ class World:
             rotation = np.column_stack([np.cross(y_b, z_b), y_b, z_b])
         self.drone.reset(position_w, yaw, rotation_wb=rotation)
         thrust = float(np.linalg.norm(thrust_w))
-        self.drone.set_rotor_speeds(np.full(4, math.sqrt(thrust / (4.0 * prm.k_f))))
+        # a wind beyond what the rotors can carry starts at full speed (and is blown away)
+        omega = min(math.sqrt(thrust / (4.0 * prm.k_f)), prm.omega_max)
+        self.drone.set_rotor_speeds(np.full(4, omega))
         self.controller.preload_acceleration(thrust_w / prm.mass)
         self._state = self.drone.read_state()
 

@@ -125,3 +125,23 @@ def test_trim_to_wind_must_be_a_boolean() -> None:
     with pytest.raises(ConfigError) as error:
         load_config("default", overrides={"start.trim_to_wind": "yes"})
     assert error.value.key == "start.trim_to_wind"
+
+
+def test_a_trim_start_in_a_gale_stays_within_the_rotors_and_finite() -> None:
+    from landing_env.world import World
+
+    overrides = {
+        "wind.enabled": True,
+        "wind.mean_velocity_w": [60.0, -20.0, 0.0],
+        "start.trim_to_wind": True,
+    }
+    world = World(load_config("default", overrides=overrides))
+    try:
+        world.reset(np.random.default_rng(1), np.array([0.0, 0.0, 3.0]), 0.3)
+        state = world.drone_state()
+        assert np.all(np.isfinite(state.rotation_wb)) and np.all(np.isfinite(state.position_w))
+        assert np.all(np.asarray(world.drone._omega) <= world.params.omega_max + 1e-9)
+        # it leans into the wind: its thrust axis points upwind
+        assert state.rotation_wb[0, 2] < 0.0 and state.rotation_wb[1, 2] > 0.0
+    finally:
+        world.close()

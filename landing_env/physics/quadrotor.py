@@ -18,6 +18,7 @@ import numpy as np
 import pybullet as p
 import yaml
 from pybullet_utils.bullet_client import BulletClient
+from scipy.spatial.transform import Rotation
 
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.wind import WindModel
@@ -595,8 +596,6 @@ class Quadrotor:
         velocity = self._zero3 if velocity_w is None else [float(v) for v in velocity_w]
         quaternion = (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
         if rotation_wb is not None:
-            from scipy.spatial.transform import Rotation
-
             quaternion = tuple(float(v) for v in Rotation.from_matrix(rotation_wb).as_quat())
         self.client.resetBasePositionAndOrientation(self.body_id, position, quaternion)
         self.client.resetBaseVelocity(self.body_id, velocity, self._zero3)
