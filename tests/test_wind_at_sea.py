@@ -145,3 +145,38 @@ def test_a_trim_start_in_a_gale_stays_within_the_rotors_and_finite() -> None:
         assert state.rotation_wb[0, 2] < 0.0 and state.rotation_wb[1, 2] > 0.0
     finally:
         world.close()
+
+
+def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() -> None:
+    """The sea-state-6 timing task started in trim (realistic sensing, a gale's gusts): random
+    waits and commits, every observation inside the space, every reward finite, every episode
+    ended with an outcome; the start leans into the wind."""
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401  (registers the environments)
+
+    env = gym.make(
+        "DeckLandingTiming-ShipSS6-v1",
+        overrides={"sensors": "realistic", "start.trim_to_wind": True},
+    )
+    rng = np.random.default_rng(11)
+    try:
+        for episode in range(3):
+            observation, _ = env.reset(seed=500 + episode)
+            assert env.observation_space.contains(observation)
+            done = False
+            while not done:
+                observation, reward, terminated, truncated, info = env.step(
+                    int(rng.random() < 0.1)
+                )
+                assert env.observation_space.contains(observation)
+                assert math.isfinite(reward)
+                done = terminated or truncated
+            assert info["outcome"] != "in_flight"
+        world = env.unwrapped.world
+        world.reset(np.random.default_rng(0), world.deck_home_w + np.array([0, 0, 2.5]), 0.0)
+        mean = np.asarray(env.unwrapped.config.wind.mean_velocity_w)
+        thrust_axis = world.drone_state().rotation_wb[:, 2]
+        assert float(thrust_axis[:2] @ mean[:2]) < -0.3 * float(np.linalg.norm(mean[:2]))
+    finally:
+        env.close()
