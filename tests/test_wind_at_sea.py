@@ -156,7 +156,7 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
     import landing_env  # noqa: F401  (registers the environments)
 
     env = gym.make(
-        "DeckLandingTiming-ShipSS6-v1",
+        "DeckLandingTiming-ShipSS6-v5",
         overrides={"sensors": "realistic", "start.trim_to_wind": True},
     )
     rng = np.random.default_rng(11)
@@ -166,9 +166,7 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
             assert env.observation_space.contains(observation)
             done = False
             while not done:
-                observation, reward, terminated, truncated, info = env.step(
-                    int(rng.random() < 0.1)
-                )
+                observation, reward, terminated, truncated, info = env.step(int(rng.random() < 0.1))
                 assert env.observation_space.contains(observation)
                 assert math.isfinite(reward)
                 done = terminated or truncated
