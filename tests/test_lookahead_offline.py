@@ -143,14 +143,20 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws(
     assert np.array_equal(same["observation"], recorded["observation"])
     assert np.array_equal(same["next_observation"], recorded["next_observation"])
     one = load_transitions([path], LookaheadSettings(draws=1, check_every_s=1.0))
+    invalid = check_features(None)
+    episodes = recorded["episode"]
     for i in tried:
         assert one["observation"][i][1] == float(recorded["draw_lands"][i][0])
-        assert np.array_equal(one["observation"][i][5:10], one["observation"][i - 1][:5]) or (
-            recorded["episode"][i - 1] != recorded["episode"][i]
-        )
+        # the check before is the previous record's of the episode; none at its first
+        first = i == 0 or episodes[i - 1] != episodes[i]
+        previous = invalid if first else one["observation"][i - 1][:5]
+        assert np.array_equal(one["observation"][i][5:10], previous)
     assert not np.array_equal(one["observation"], recorded["observation"])
-    invalid = check_features(None)
-    assert np.array_equal(one["observation"][0][:5], invalid)
+    # the episode's first record has no check before it; a record with no check tried (the
+    # deck not in view) sees the invalid check as its newest
+    assert np.array_equal(one["observation"][0][5:10], invalid)
+    for i in np.flatnonzero(~recorded["check_tried"].astype(bool)):
+        assert np.array_equal(one["observation"][i][:5], invalid)
     for asked, key in (
         (LookaheadSettings(draws=4, check_every_s=1.0), "data"),
         (LookaheadSettings(draws=2, check_every_s=1.0, min_margin=0.3), "data"),

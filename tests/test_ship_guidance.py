@@ -355,6 +355,7 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
     pad; v2's guidance flies on down blind, past the pad's edge, until the descent times out;
     v3's climbs back over the deck's last track, finds it again and lands."""
     from agents.evaluation.landing import make_env_and_policy, run_episode
+    from landing_env.scenarios import ship_flight_overrides
 
     outcomes = {}
     for lost_deck in ("descend", "search"):
@@ -363,6 +364,8 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
             "ship-ss4",
             "tight",
             extra_overrides={
+                # the v3 ids' start: level, the bench's controller limits
+                **ship_flight_overrides("DeckLandingTiming-v0", 3),
                 "sensors": "realistic",
                 "lens": "standard",
                 "timing.guidance.lost_deck": lost_deck,
@@ -384,8 +387,11 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
     from agents.evaluation.landing import make_env_and_policy, run_episode
     from agents.hindsight import make_timing_env
+    from landing_env.scenarios import ship_flight_overrides
 
-    env = make_timing_env("ship-ss5", "realistic", "tight", {"timing.history_s": 10.0})
+    # the v5 ids' start (level, the bench's controller limits): the deck meets the drone
+    start = ship_flight_overrides("DeckLandingTiming-v0", 5)
+    env = make_timing_env("ship-ss5", "realistic", "tight", {"timing.history_s": 10.0, **start})
     try:
         observation, info = env.reset(seed=6010)
         assert info["hold_failed"] and info["outcome"] != "in_flight"
@@ -405,7 +411,7 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
         "land-now",
         "ship-ss5",
         "tight",
-        extra_overrides={"sensors": "realistic", "timing.history_s": 10.0},
+        extra_overrides={"sensors": "realistic", "timing.history_s": 10.0, **start},
     )
     try:
         result = run_episode(env, policy, 6010, "land-now", "ship-ss5")

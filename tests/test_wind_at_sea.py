@@ -86,17 +86,20 @@ def test_bad_wind_keys_are_named() -> None:
         load_config("ship-ss4", overrides={"wind.airwake_turbulence_factor": 0.5})
 
 
-def _drift_in_steady_wind(trim: bool) -> tuple[float, float]:
+def _drift_in_steady_wind(
+    trim: bool, speed_mps: float = 8.0, controller: dict | None = None
+) -> tuple[float, float]:
     """The start's lean (deg) and how far the drone drifts in 1 s of hold (m) in a steady
-    8 m/s wind with no gusts."""
+    wind of ``speed_mps`` with no gusts (``controller``: overrides of its gains)."""
     from landing_env.physics.controller import VelocitySetpoint
     from landing_env.world import World
 
     overrides = {
         "wind.enabled": True,
-        "wind.mean_velocity_w": [8.0, 0.0, 0.0],
+        "wind.mean_velocity_w": [speed_mps, 0.0, 0.0],
         "wind.gust_intensity": [0.0, 0.0, 0.0],
         "start.trim_to_wind": trim,
+        **{f"controller.{key}": value for key, value in (controller or {}).items()},
     }
     world = World(load_config("default", overrides=overrides))
     try:
@@ -119,6 +122,22 @@ def test_a_start_in_trim_leans_into_the_wind_and_holds_its_place() -> None:
     assert lean == pytest.approx(math.degrees(math.atan(0.25 * 8.0 / (0.8 * 9.81))), abs=0.5)
     assert level_lean == pytest.approx(0.0, abs=1e-6)
     assert drift < 0.1 and level_drift > 3.0 * drift
+
+
+def test_the_ship_configs_autopilot_limits_hold_station_in_sea_state_6s_wind() -> None:
+    """Sea state 6's 14.2 m/s mean wind needs 4.4 m/s^2 against its drag: beyond the bench's
+    3 m/s^2 velocity integrator, so a trimmed start drifts off; the ship configs' stock
+    autopilot limits (10 m/s^2, 45 deg) hold it in place."""
+    ship = load_config("ship-ss6").controller
+    bench = load_config("default").controller
+    assert ship.vel_i_limit_xy == 10.0
+    assert ship.max_tilt == pytest.approx(math.radians(45.0), abs=1e-4)
+    speed = float(np.linalg.norm(load_config("ship-ss6").wind.mean_velocity_w))
+    limits = {"vel_i_limit_xy": ship.vel_i_limit_xy, "max_tilt": ship.max_tilt}
+    _, drift_at_sea = _drift_in_steady_wind(True, speed, limits)
+    _, drift_bench = _drift_in_steady_wind(True, speed)
+    assert bench.vel_i_limit_xy == 3.0
+    assert drift_at_sea < 0.1 and drift_bench > 2.0 * drift_at_sea
 
 
 def test_trim_to_wind_must_be_a_boolean() -> None:
@@ -147,6 +166,22 @@ def test_a_trim_start_in_a_gale_stays_within_the_rotors_and_finite() -> None:
         world.close()
 
 
+def test_the_ship_ids_start_in_trim_with_stock_limits_from_their_version_on() -> None:
+    from landing_env.scenarios import SCENARIO_IDS
+
+    for n in (3, 4, 5, 6):
+        for task, trimmed in (("DeckLandingTiming", 6), ("DeckLanding", 3)):
+            for version in range(1, trimmed + 1):
+                scenario = SCENARIO_IDS[f"{task}-ShipSS{n}-v{version}"]
+                config = load_config(scenario.config, scenario.overrides)
+                at_sea = version == trimmed
+                assert config.start.trim_to_wind is at_sea, (n, task, version)
+                limit = 10.0 if at_sea else 3.0
+                assert config.controller.vel_i_limit_xy == limit, (n, task, version)
+        # the ship configs themselves start in trim (what ``evaluate landing`` flies)
+        assert load_config(f"ship-ss{n}").start.trim_to_wind is True
+
+
 def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() -> None:
     """The sea-state-6 timing task started in trim (realistic sensing, a gale's gusts): random
     waits and commits, every observation inside the space, every reward finite, every episode
@@ -155,10 +190,7 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
 
     import landing_env  # noqa: F401  (registers the environments)
 
-    env = gym.make(
-        "DeckLandingTiming-ShipSS6-v5",
-        overrides={"sensors": "realistic", "start.trim_to_wind": True},
-    )
+    env = gym.make("DeckLandingTiming-ShipSS6-v6", overrides={"sensors": "realistic"})
     rng = np.random.default_rng(11)
     try:
         for episode in range(3):
