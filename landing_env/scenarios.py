@@ -233,6 +233,7 @@ def ship_flight_overrides(task: str, version: int) -> dict[str, Any]:
     """The start and the controller's limits of the ship id ``task``-``version``: the ship
     configs' (in trim, the autopilots' limits) from ``SHIP_TRIM_VERSION`` on, level and at
     rest with the bench's limits (``ControllerGains``' defaults) before."""
+    require_choice("task", task, tuple(SHIP_TRIM_VERSION))
     if version >= SHIP_TRIM_VERSION[task]:
         return {"start.trim_to_wind": True}
     bench = ControllerGains()

@@ -180,6 +180,11 @@ def test_the_ship_ids_start_in_trim_with_stock_limits_from_their_version_on() ->
                 assert config.controller.vel_i_limit_xy == limit, (n, task, version)
         # the ship configs themselves start in trim (what ``evaluate landing`` flies)
         assert load_config(f"ship-ss{n}").start.trim_to_wind is True
+    from landing_env.scenarios import ship_flight_overrides
+
+    with pytest.raises(ConfigError) as error:
+        ship_flight_overrides("DeckLanding-v9", 3)
+    assert error.value.key == "task"
 
 
 def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() -> None:
