@@ -151,6 +151,17 @@ class OnboardModelConfig:
             raise ConfigError("position_from_estimate", f"must be true or false, got {value!r}")
 
 
+def episode_monitor(
+    env: Any, seed: int = 0, hms: HelideckMonitorConfig | None = None
+) -> HelideckMonitor:
+    """The HMS of the episode ``env`` (the unwrapped timing task, reset) was reset to: the ship's
+    deck motion, its errors seeded by the episode's seed and ``seed`` (a policy's own)."""
+    episode_seed = int(env.np_random_seed) % 2**32
+    sequence = np.random.SeedSequence([seed, episode_seed, _HMS_STREAM])
+    hms_seed = int(sequence.generate_state(1)[0])
+    return HelideckMonitor(env.world.stewart.motion, hms or HelideckMonitorConfig(), hms_seed)
+
+
 class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
 
@@ -207,10 +218,7 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     def monitor(self) -> HelideckMonitor:
         """The HMS of this episode's ship (its errors seeded by the episode and ``seed``)."""
         if self._monitor is None:
-            episode_seed = int(self.env.np_random_seed) % 2**32
-            sequence = np.random.SeedSequence([self.seed, episode_seed, _HMS_STREAM])
-            hms_seed = int(sequence.generate_state(1)[0])
-            self._monitor = HelideckMonitor(self.env.world.stewart.motion, self.hms, hms_seed)
+            self._monitor = episode_monitor(self.env, self.seed, self.hms)
         return self._monitor
 
     def deck_future(self, decision: int = 0) -> Any:

@@ -45,6 +45,15 @@ LOOKAHEAD_FEATURES: tuple[str, ...] = ("valid", "chance", "success", "mean_score
 #: the score of a tried commit that did not succeed
 FAILED_SCORE = -1.0
 
+#: the ship's HMS report the observation may carry (``hms_report_s``), each field by the value
+#: that reads 1 (the observation clips it there): the peak inclination of the deck over the
+#: window by 20 deg, its total heave by 15 m (the 5 m sea of ship-ss6 reports about 12 deg and
+#: 9 m over ten minutes; :data:`landing_env.sea.hms.REPORT_FIELDS`)
+HMS_REPORT_FEATURES: dict[str, float] = {
+    "peak_inclination": math.radians(20.0),
+    "total_heave": 15.0,
+}
+
 
 @dataclass(frozen=True)
 class LookaheadSettings:
@@ -56,7 +65,10 @@ class LookaheadSettings:
     * ``min_margin``: the slack a draw needs to count in ``chance``
       (:func:`agents.oracle.touchdown_margin`);
     * ``checks``: how many checks the observation holds (this one first);
-    * ``seed``: the look-ahead's own streams (with the episode's seed and the decision).
+    * ``seed``: the look-ahead's own streams (with the episode's seed and the decision);
+    * ``hms_report_s``: with a window (CAP 437's is 600 s), the observation also carries the
+      ship's HMS report over it (:data:`HMS_REPORT_FEATURES`, before the wait used): how
+      hard the sea moves the deck, which the look-ahead's draws do not say; 0: no report.
     """
 
     draws: int = 4
@@ -64,12 +76,14 @@ class LookaheadSettings:
     min_margin: float = 0.15
     checks: int = 2
     seed: int = 0
+    hms_report_s: float = 0.0
 
     def __post_init__(self) -> None:
         require_range("draws", self.draws, 1, 64)
         require_range("check_every_s", self.check_every_s, 0.0, 10.0, low_inclusive=False)
         require_range("min_margin", self.min_margin, 0.0, 1.0)
         require_range("checks", self.checks, 1, 16)
+        require_range("hms_report_s", self.hms_report_s, 0.0, 3600.0)
         for key in ("draws", "checks", "seed"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int | np.integer):
@@ -77,15 +91,27 @@ class LookaheadSettings:
 
     @property
     def size(self) -> int:
-        """The observation's length: the features of each check, then the wait fraction."""
-        return self.checks * len(LOOKAHEAD_FEATURES) + 1
+        """The observation's length: the features of each check, the HMS report's (if any),
+        then the wait fraction."""
+        return self.checks * len(LOOKAHEAD_FEATURES) + self.report_size + 1
+
+    @property
+    def report_size(self) -> int:
+        """How many of the observation's values are the HMS report's."""
+        return len(HMS_REPORT_FEATURES) if self.hms_report_s > 0 else 0
 
     def signature(self) -> dict[str, Any]:
         """What the observation's values mean, for a model's card."""
         from agents.deck_forecast import OnboardModelConfig
 
+        fields = asdict(self)
+        if not self.hms_report_s:
+            # a look-ahead without the report signs as before the report existed
+            del fields["hms_report_s"]
+        else:
+            fields["hms_report"] = {k: round(v, 6) for k, v in HMS_REPORT_FEATURES.items()}
         return {
-            **asdict(self),
+            **fields,
             "features": list(LOOKAHEAD_FEATURES),
             "failed_score": FAILED_SCORE,
             "onboard": {
@@ -93,6 +119,16 @@ class LookaheadSettings:
                 for k, v in asdict(OnboardModelConfig()).items()
             },
         }
+
+
+def hms_report_features(monitor: Any, t_s: float, window_s: float) -> np.ndarray:
+    """:data:`HMS_REPORT_FEATURES` of ``monitor``'s standard report over ``window_s`` up to
+    ``t_s``, each scaled to its reading of 1 and clipped to [0, 1]."""
+    from landing_env.sea.hms import REPORT_FIELDS
+
+    report = monitor.standard_report(t_s, window_s)
+    values = [report[REPORT_FIELDS.index(k)] / scale for k, scale in HMS_REPORT_FEATURES.items()]
+    return np.clip(np.nan_to_num(np.asarray(values, float), nan=1.0), 0.0, 1.0)
 
 
 def in_flight(env: Any) -> bool:
@@ -185,7 +221,14 @@ class LookaheadObserver:
         invalid = check_features(None)
         checks = self._history + [invalid] * (self.settings.checks - len(self._history))
         wait = min(max(float(env._wait_s) / float(env.timing.wait_limit_s), 0.0), 1.0)
-        return np.concatenate([*checks, [wait]]).astype(np.float32)
+        report = self.report(float(env.world.time))
+        return np.concatenate([*checks, report, [wait]]).astype(np.float32)
+
+    def report(self, t_s: float) -> np.ndarray:
+        """The HMS report's features at ``t_s`` (none without ``hms_report_s``)."""
+        if not self.settings.hms_report_s:
+            return np.zeros(0)
+        return hms_report_features(self.planner.monitor(), t_s, self.settings.hms_report_s)
 
     @property
     def observation_space(self) -> gym.spaces.Box:
@@ -446,8 +489,10 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
     )
     invalid = check_features(None)
     episodes = data["episode"]
+    # what follows the checks (the HMS report, if recorded, and the wait used) is kept
+    tail_from = checks * len(LOOKAHEAD_FEATURES)
 
-    def stack(row: int, newest: np.ndarray | None, wait: float) -> np.ndarray:
+    def stack(row: int, newest: np.ndarray | None, tail: np.ndarray) -> np.ndarray:
         """The observation whose newest check is ``newest`` (or row's), the earlier ones the
         rows before it in its episode."""
         parts = [] if newest is None else [newest]
@@ -456,18 +501,18 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
             parts.append(features[k])
             k -= 1
         parts += [invalid] * (checks - len(parts))
-        return np.concatenate([*parts, [wait]]).astype(np.float32)
+        return np.concatenate([*parts, tail]).astype(np.float32)
 
     out = dict(data)
     n = len(episodes)
     out["observation"] = np.array(
-        [stack(i, None, float(data["observation"][i][-1])) for i in range(n)], np.float32
+        [stack(i, None, data["observation"][i][tail_from:]) for i in range(n)], np.float32
     )
     out["next_observation"] = np.array(
         [
-            stack(i + 1, None, float(data["next_observation"][i][-1]))
+            stack(i + 1, None, data["next_observation"][i][tail_from:])
             if i + 1 < n and episodes[i + 1] == episodes[i] and not data["wait_terminal"][i]
-            else stack(i, invalid, float(data["next_observation"][i][-1]))
+            else stack(i, invalid, data["next_observation"][i][tail_from:])
             for i in range(n)
         ],
         np.float32,
@@ -475,13 +520,67 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
     return out
 
 
+def with_hms_report(
+    data: dict[str, np.ndarray], settings: LookaheadSettings, progress: bool = False
+) -> dict[str, np.ndarray]:
+    """The records as a look-ahead of ``settings`` (with ``hms_report_s``) sees them when they
+    were recorded without the HMS report: each observation gets the report its check would
+    have read, before its wait used.  The report is the ship's record, a fixed function of the
+    episode's seed and the time, whatever the drone does: each episode of each ``scenario`` is
+    reset again and its k-th check read at the reset's time plus k checks (a warm-up that ended
+    the episode gives its one check the report at the time the warm-up ended)."""
+    from tqdm import tqdm
+
+    from agents.deck_forecast import episode_monitor
+    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+
+    if not settings.hms_report_s:
+        raise ConfigError("lookahead.hms_report_s", "no report asked: 0 s")
+    tail_from = settings.checks * len(LOOKAHEAD_FEATURES)
+    if data["observation"].shape[1] != tail_from + 1:
+        raise ConfigError("data", "the transitions hold an HMS report already or another layout")
+    episodes, scenarios = data["episode"], data["scenario"]
+    reports = np.zeros((len(episodes), settings.report_size))
+    next_reports = np.zeros_like(reports)
+    for scenario in np.unique(scenarios).tolist():
+        if scenario not in SCENARIOS:
+            raise ConfigError(
+                "data", f"records of scenario {scenario!r}: the report needs a known scenario"
+            )
+        env, _ = make_env_and_policy("land-now", scenario, SCENARIOS[scenario].estimator)
+        base = env.unwrapped
+        try:
+            seeds = np.unique(episodes[scenarios == scenario]).tolist()
+            for seed in tqdm(seeds, desc=f"HMS reports @ {scenario}", disable=not progress):
+                base.reset(seed=int(seed))
+                monitor = episode_monitor(base, settings.seed)
+                t0 = float(base.world.time)
+                rows = np.flatnonzero((episodes == seed) & (scenarios == scenario))
+                for k, row in enumerate(rows):
+                    t = t0 + k * settings.check_every_s
+                    reports[row] = hms_report_features(monitor, t, settings.hms_report_s)
+                    next_reports[row] = hms_report_features(
+                        monitor, t + settings.check_every_s, settings.hms_report_s
+                    )
+        finally:
+            env.close()
+    out = dict(data)
+    for key, values in (("observation", reports), ("next_observation", next_reports)):
+        observed = data[key]
+        out[key] = np.concatenate(
+            [observed[:, :tail_from], values, observed[:, tail_from:]], axis=1
+        ).astype(np.float32)
+    return out
+
+
 def load_transitions(
-    paths: list[str | Path], settings: LookaheadSettings | None = None
+    paths: list[str | Path], settings: LookaheadSettings | None = None, progress: bool = False
 ) -> dict[str, np.ndarray]:
     """The transitions of several files, concatenated; they must share their look-ahead, and
     an episode (its seed) may be in one file only, whatever its scenario.  Each record also
     gets its file's ``scenario``.  ``settings``: the look-ahead to see them with, the files'
-    or the same with fewer draws (:func:`with_draws`)."""
+    or the same with fewer draws (:func:`with_draws`), or with the HMS report where the files
+    have none (:func:`with_hms_report`)."""
     parts: list[dict[str, np.ndarray]] = []
     signature = None
     seen: dict[int, str] = {}
@@ -514,13 +613,25 @@ def load_transitions(
     wanted = json.loads(json.dumps(settings.signature()))
     if recorded == wanted:
         return merged
-    if {**recorded, "draws": settings.draws} != wanted or settings.draws > recorded["draws"]:
+    report_keys = ("hms_report_s", "hms_report")
+    recorded_report = {k: recorded.pop(k) for k in report_keys if k in recorded}
+    wanted_report = {k: wanted.pop(k) for k in report_keys if k in wanted}
+    if (
+        {**recorded, "draws": settings.draws} != wanted
+        or settings.draws > recorded["draws"]
+        or (recorded_report and recorded_report != wanted_report)
+    ):
         raise ConfigError(
             "data",
             "the transitions were collected with another look-ahead than the one asked "
-            f"(recorded {recorded['draws']} draws; only fewer draws can be taken from them)",
+            f"(recorded {recorded['draws']} draws; only fewer draws can be taken from them, "
+            "and an HMS report added to records without one)",
         )
-    return with_draws(merged, settings)
+    if settings.draws != recorded["draws"]:
+        merged = with_draws(merged, settings)
+    if wanted_report and not recorded_report:
+        merged = with_hms_report(merged, settings, progress=progress)
+    return merged
 
 
 def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.ndarray]:

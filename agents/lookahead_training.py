@@ -162,7 +162,7 @@ def train_offline(
         raise ConfigError("offline", f"unknown keys {unknown}; allowed: {list(OFFLINE_KEYS)}")
     settings = LookaheadSettings(**s.lookahead)
     # the YAML's look-ahead: the files' own, or theirs with fewer draws
-    data = load_transitions(list(data_paths), settings)
+    data = load_transitions(list(data_paths), settings, progress=progress)
     every = int(offline.get("holdout_every", 5))
     cross_validate = offline.get("cross_validate", False)
     if not isinstance(cross_validate, bool):
