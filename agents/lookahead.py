@@ -47,8 +47,8 @@ FAILED_SCORE = -1.0
 
 #: the ship's HMS report the observation may carry (``hms_report_s``), each field by the value
 #: that reads 1 (the observation clips it there): the peak inclination of the deck over the
-#: window by 20 deg, its total heave by 15 m (the 5 m sea of ship-ss6 reports about 12 deg and
-#: 9 m over ten minutes; :data:`landing_env.sea.hms.REPORT_FIELDS`)
+#: window by 20 deg, its total heave by 15 m (the 5 m sea of ship-ss6 reports 11-15 deg and
+#: 7-9 m over ten minutes; :data:`landing_env.sea.hms.REPORT_FIELDS`)
 HMS_REPORT_FEATURES: dict[str, float] = {
     "peak_inclination": math.radians(20.0),
     "total_heave": 15.0,

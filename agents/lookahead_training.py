@@ -133,6 +133,7 @@ def train_offline(
     data_paths: list[str | Path],
     out_dir: str | Path,
     progress: bool = True,
+    hms_report_s: float | None = None,
 ) -> dict[str, Any]:
     """Fit the YAML's DQN on the transitions and write the chosen model with its card; returns
     the summary (also ``train_summary.yaml``).
@@ -155,6 +156,9 @@ def train_offline(
     s = config.settings
     if s.algo != "dqn" or s.lookahead is None:
         raise ConfigError("deck_landing", "an offline look-ahead DQN needs algo: dqn and lookahead")
+    if hms_report_s is not None:
+        # the YAML's look-ahead with the HMS report's window set (the card signs it too)
+        s.lookahead["hms_report_s"] = float(hms_report_s)
     # the YAML's own ``offline`` section (OFFLINE_KEYS); ``scenario``'s environment signs the card
     offline = dict((yaml.safe_load(Path(config_path).read_text()) or {}).get("offline") or {})
     unknown = sorted(set(offline) - set(OFFLINE_KEYS))
@@ -379,8 +383,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", required=True)
     parser.add_argument("--data", nargs="+", required=True)
     parser.add_argument("--out", required=True)
+    parser.add_argument(
+        "--hms-report-s",
+        type=float,
+        default=None,
+        help="the look-ahead's hms_report_s (the YAML's unless given; 600: CAP 437's report)",
+    )
     args = parser.parse_args(argv)
-    summary = train_offline(args.config, args.data, args.out)
+    summary = train_offline(args.config, args.data, args.out, hms_report_s=args.hms_report_s)
     print(yaml.safe_dump(summary, sort_keys=False))
     return 0
 
