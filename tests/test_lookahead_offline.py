@@ -274,3 +274,28 @@ def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> N
     observations[:, 1] = [0.9, 0.9, 0.5, 1.0]  # the check's chance
     observations[:, -1] = [0.5, 0.95, 1.0, 0.0]  # the wait used, a share of the limit
     assert rule(observations).tolist() == [0, 1, 1, 1]
+
+
+def test_the_discrimination_benchmark_scores_a_feature_that_orders_the_outcomes_at_one() -> None:
+    from benchmarks.bench_lookahead_discrimination import discrimination, roc_auc
+
+    rng = np.random.default_rng(3)
+    chance = rng.choice([0.0, 0.25, 0.5, 0.75, 1.0], size=400)
+    lands = chance >= 0.75
+    observation = np.zeros((400, 11), np.float32)
+    observation[:, 0], observation[:, 1] = 1.0, chance
+    observation[:, 3] = rng.random(400)  # mean score: noise here
+    data = {
+        "scenario": np.full(400, "ship-ss5"),
+        "check_tried": np.ones(400, bool),
+        "commit_terminal": np.r_[np.ones(399, bool), False],  # the last cannot commit
+        "commit_success": lands,
+        "observation": observation,
+    }
+    figures = discrimination(data)["ship-ss5"]
+    assert figures["checks"] == 399
+    assert figures["auc"]["chance"] == pytest.approx(1.0)
+    assert 0.4 < figures["auc"]["mean_score"] < 0.6
+    assert figures["by_chance"]["all"][1] == 1.0 and figures["by_chance"]["0.00-0.25"][1] == 0.0
+    assert figures["all_draws_land_share"] == pytest.approx(np.mean(chance[:399] == 1.0))
+    assert np.isnan(roc_auc(np.ones(3, bool), np.arange(3.0)))  # one class: no score
