@@ -7,8 +7,8 @@ whole episodes, with the outcome of a commit there tried in the episode's own fu
 prints, per scenario, over the checks where a look-ahead was made and a commit could be
 tried: the share whose commit lands, that share by quarter of the draws landing with the
 margin (``chance``) and when all of them do, how often all of them do, and each feature's
-area under the ROC curve for the commit's outcome (0.5: no better than chance; the
-Mann-Whitney U statistic over the two classes' sizes) (README "Fitted on episodes from the
+area under the ROC curve for the commit's outcome (0.5: no better than chance;
+``bench_ship_forecast_labels.auc``) (README "Fitted on episodes from the
 start in trim").
 """
 
@@ -17,21 +17,12 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from scipy.stats import mannwhitneyu
 
 from agents.lookahead import LOOKAHEAD_FEATURES, load_transitions
+from benchmarks.bench_ship_forecast_labels import auc
 
 #: the bins of ``chance`` (the share of draws that land with the margin), the last one "all"
 CHANCE_BINS = ((0.0, 0.25), (0.25, 0.5), (0.5, 0.75), (0.75, 1.0 - 1e-9), (1.0 - 1e-9, 1.01))
-
-
-def roc_auc(lands: np.ndarray, values: np.ndarray) -> float:
-    """The area under the ROC curve of ``values`` for the boolean ``lands`` (nan: one class)."""
-    positive, negative = values[lands], values[~lands]
-    if len(positive) == 0 or len(negative) == 0:
-        return float("nan")
-    u = mannwhitneyu(positive, negative).statistic
-    return float(u / (len(positive) * len(negative)))
 
 
 def discrimination(data: dict[str, np.ndarray]) -> dict[str, dict]:
@@ -61,8 +52,8 @@ def discrimination(data: dict[str, np.ndarray]) -> dict[str, dict]:
             "by_chance": bins,
             "all_draws_land_share": float(np.mean(chance >= 1.0 - 1e-9)) if len(chance) else 0.0,
             "auc": {
-                f"{'previous ' if k >= n else ''}{LOOKAHEAD_FEATURES[k % n]}": roc_auc(
-                    lands, observed[:, k]
+                f"{'previous ' if k >= n else ''}{LOOKAHEAD_FEATURES[k % n]}": auc(
+                    observed[:, k], lands
                 )
                 for k in range(1, 2 * n)
                 if k != n  # the validity flags: 1 wherever a look-ahead was made
