@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -125,6 +125,15 @@ class OnboardModelConfig:
       RMS error at the 2 m hold of ``ship-ss5`` with realistic sensing, 2.5, 2.5 and
       10.4 mm (``python -m benchmarks.bench_onboard_estimate_error``); its own covariance
       reports 0.1-0.4 mm there, some 25 times too confident to draw from.
+    * ``airframe_in_trim``: each drawn airframe starts in its own trim, as a drone that has
+      held its position for a while does: the aerodynamic force it holds is the one it
+      feels (its lean and thrust say so), so a drawn drag comes with the airspeed that gives
+      that force (the wind a disturbance observer infers moves with its drag model), and
+      the controller's thrust model is the drawn thrust (a hover-thrust estimator: PX4's
+      ``MPC_USE_HTE``, ArduPilot's ``MOT_THST_HOVER`` learning).  What stays unknown is how
+      the drag answers a change of airspeed, and the thrust's ceiling.
+      False (the default, the shipped look-ahead's): a drawn airframe starts with the
+      nominal one's trim and finds its own during the descent.
     """
 
     gust_error_mps: tuple[float, float, float] = (0.4, 0.4, 0.2)
@@ -132,6 +141,7 @@ class OnboardModelConfig:
     position_from_estimate: bool = True
     position_error_m: tuple[float, float, float] = (0.003, 0.003, 0.010)
     thrust_error_fraction: float = 0.05
+    airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
         for key, high, axes in (
@@ -146,9 +156,18 @@ class OnboardModelConfig:
             object.__setattr__(self, key, values)
         require_range("drag_error_fraction", self.drag_error_fraction, 0.0, 0.9)
         require_range("thrust_error_fraction", self.thrust_error_fraction, 0.0, 0.5)
-        if not isinstance(self.position_from_estimate, bool):
-            value = self.position_from_estimate
-            raise ConfigError("position_from_estimate", f"must be true or false, got {value!r}")
+        for key in ("position_from_estimate", "airframe_in_trim"):
+            value = getattr(self, key)
+            if not isinstance(value, bool):
+                raise ConfigError(key, f"must be true or false, got {value!r}")
+
+    def signature(self) -> dict[str, Any]:
+        """The model's fields for a card (``airframe_in_trim`` only where set: a card made
+        before it existed signs as before)."""
+        fields = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if not self.airframe_in_trim:
+            del fields["airframe_in_trim"]
+        return fields
 
 
 def episode_monitor(
@@ -301,6 +320,15 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             linear_drag_b=np.asarray(params.linear_drag_b, dtype=float) * drag_scale,
             k_f=float(params.k_f) * thrust_scale,
         )
+        if self.onboard.airframe_in_trim:
+            # the force the drone holds is what it feels: with drag_scale times the drag, the
+            # air goes past it 1/drag_scale as fast (the wind it infers from that force, as a
+            # disturbance observer does, moves with the drag model); the thrust model is
+            # the drawn rotors'
+            air_w = world.drone_state().velocity_w - np.asarray(world.drone.last_wind_w)
+            world.shift_wind_at_drone(air_w * (1.0 - 1.0 / drag_scale))
+            world.controller.scale_thrust_model(float(thrust_scale))
+            world.drone.set_rotor_speeds(world.drone.rotor_speeds / math.sqrt(thrust_scale))
 
 
 def plot_forecasts(

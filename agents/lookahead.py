@@ -69,6 +69,9 @@ class LookaheadSettings:
     * ``hms_report_s``: with a window (CAP 437's is 600 s), the observation also carries the
       ship's HMS report over it (:data:`HMS_REPORT_FEATURES`, before the wait used): how
       hard the sea moves the deck, which the look-ahead's draws do not say; 0: no report.
+    * ``airframe_in_trim``: the onboard model's drawn airframes start in their own trim
+      (:attr:`~agents.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
+      shipped look-ahead's draws.
     """
 
     draws: int = 4
@@ -77,6 +80,7 @@ class LookaheadSettings:
     checks: int = 2
     seed: int = 0
     hms_report_s: float = 0.0
+    airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
         require_range("draws", self.draws, 1, 64)
@@ -84,6 +88,10 @@ class LookaheadSettings:
         require_range("min_margin", self.min_margin, 0.0, 1.0)
         require_range("checks", self.checks, 1, 16)
         require_range("hms_report_s", self.hms_report_s, 0.0, 3600.0)
+        if not isinstance(self.airframe_in_trim, bool):
+            raise ConfigError(
+                "airframe_in_trim", f"must be true or false, got {self.airframe_in_trim!r}"
+            )
         for key in ("draws", "checks", "seed"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int | np.integer):
@@ -102,7 +110,6 @@ class LookaheadSettings:
 
     def signature(self) -> dict[str, Any]:
         """What the observation's values mean, for a model's card."""
-        from agents.deck_forecast import OnboardModelConfig
 
         fields = asdict(self)
         if not self.hms_report_s:
@@ -110,15 +117,20 @@ class LookaheadSettings:
             del fields["hms_report_s"]
         else:
             fields["hms_report"] = {k: round(v, 6) for k, v in HMS_REPORT_FEATURES.items()}
+        if not self.airframe_in_trim:
+            del fields["airframe_in_trim"]  # likewise
         return {
             **fields,
             "features": list(LOOKAHEAD_FEATURES),
             "failed_score": FAILED_SCORE,
-            "onboard": {
-                k: list(v) if isinstance(v, tuple) else v
-                for k, v in asdict(OnboardModelConfig()).items()
-            },
+            "onboard": self.onboard().signature(),
         }
+
+    def onboard(self) -> Any:
+        """The onboard model the look-ahead plays (:class:`OnboardModelConfig`)."""
+        from agents.deck_forecast import OnboardModelConfig
+
+        return OnboardModelConfig(airframe_in_trim=self.airframe_in_trim)
 
 
 def hms_report_features(monitor: Any, t_s: float, window_s: float) -> np.ndarray:
@@ -172,7 +184,7 @@ class LookaheadObserver:
     def __init__(
         self, env: Any, settings: LookaheadSettings | None = None, forecast: Any = None
     ) -> None:
-        from agents.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+        from agents.deck_forecast import DeckForecastTimingPolicy
 
         self.settings = settings or LookaheadSettings()
         base = env.unwrapped
@@ -187,7 +199,7 @@ class LookaheadObserver:
             check_every_s=s.check_every_s,
             seed=s.seed,
             min_margin=s.min_margin,
-            onboard=OnboardModelConfig(),
+            onboard=s.onboard(),
             forecast=forecast,
         )
         decision_s = base.env_dt * base.timing.steps_per_decision
@@ -462,7 +474,7 @@ def _draw_arrays(
     return bool(tries), lands, success, margin
 
 
-def _tries_of(data: dict[str, np.ndarray], row: int, draws: int) -> list[TriedCommit] | None:
+def recorded_tries(data: dict[str, np.ndarray], row: int, draws: int) -> list[TriedCommit] | None:
     """The first ``draws`` tried commits of record ``row``'s check (None: nothing tried)."""
     if not data["check_tried"][row]:
         return None
@@ -485,7 +497,10 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
         )
     checks = settings.checks
     features = np.array(
-        [check_features(_tries_of(data, i, settings.draws)) for i in range(len(data["episode"]))]
+        [
+            check_features(recorded_tries(data, i, settings.draws))
+            for i in range(len(data["episode"]))
+        ]
     )
     invalid = check_features(None)
     episodes = data["episode"]
@@ -667,11 +682,20 @@ def main(argv: list[str] | None = None) -> int:
     collect.add_argument("--episodes", type=int, default=60)
     collect.add_argument("--draws", type=int, default=LookaheadSettings.draws)
     collect.add_argument("--check-every-s", type=float, default=LookaheadSettings.check_every_s)
+    collect.add_argument(
+        "--airframe-in-trim",
+        action="store_true",
+        help="the onboard model's drawn airframes start in their own trim",
+    )
     collect.add_argument("--out", required=True, help="the .npz to write")
     args = parser.parse_args(argv)
     if args.command == "collect":
         require_range("episodes", args.episodes, 1)
-        settings = LookaheadSettings(draws=args.draws, check_every_s=args.check_every_s)
+        settings = LookaheadSettings(
+            draws=args.draws,
+            check_every_s=args.check_every_s,
+            airframe_in_trim=args.airframe_in_trim,
+        )
         seeds = list(range(args.seed, args.seed + args.episodes))
         print(f"wrote {collect_transitions(args.scenario, seeds, args.out, settings)}")
     return 0

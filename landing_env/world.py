@@ -423,6 +423,23 @@ class World:
         points = self.client.getContactPoints(bodyA=self.drone.body_id)
         return summarise_contacts(points, self.foot_links, self.deck_id)
 
+    def shift_wind_at_drone(self, delta_w: np.ndarray) -> None:
+        """Change the present gust so that the wind at the drone changes by ``delta_w`` (m/s,
+        world): inside the ship's airwake a gust reaches the drone scaled by its turbulence
+        factor."""
+        delta = np.asarray(delta_w, dtype=float).reshape(-1)
+        if delta.shape != (3,) or not np.all(np.isfinite(delta)):
+            raise ValueError(f"delta_w must be 3 finite m/s values, got {delta_w!r}")
+        gain = 1.0
+        if self._airwake:
+            offset = tuple((self.drone_state().position_w - self.deck_home_w).tolist())
+            gain = (
+                self.wind.airwake((1.0, 0.0, 0.0), offset)[0]
+                - self.wind.airwake((0.0, 0.0, 0.0), offset)[0]
+            )
+        if gain > 1e-9:
+            self.wind.set_present_gust_w(self.wind.gust_w + delta / gain)
+
     # ------------------------------------------------------------------ sensing and truth
     def drone_state(self) -> DroneState:
         if self._state is None:

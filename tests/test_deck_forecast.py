@@ -340,19 +340,26 @@ def test_the_onboard_model_starts_the_drone_where_its_estimate_puts_it(small_for
         env.close()
 
 
-def test_the_onboard_model_draws_its_errors_with_the_spreads_set():
+def _holding_with_an_estimate(scenario: str, seed: int):
+    """The timing task of ``scenario`` with realistic sensing, reset with ``seed`` and held
+    until ``tight`` gives a valid deck-pose estimate."""
     env, _ = make_env_and_policy(
-        "land-now", "ship-ss5", "tight", extra_overrides={"sensors": "realistic"}
+        "land-now", scenario, "tight", extra_overrides={"sensors": "realistic"}
     )
+    env.reset(seed=seed)
+    while not env.unwrapped._sensing.estimates["tight"].valid:
+        env.step(0)
+    return env
+
+
+def test_the_onboard_model_draws_its_errors_with_the_spreads_set():
     model = OnboardModelConfig(
         gust_error_mps=(0.4, 0.4, 0.2), drag_error_fraction=0.2, position_from_estimate=False
     )
     forecast = fit_deck_forecast(_ship_motion(5), realizations=2, record_s=300.0)
+    env = _holding_with_an_estimate("ship-ss5", seed=4)
+    base = env.unwrapped
     try:
-        env.reset(seed=4)
-        base = env.unwrapped
-        while not base._sensing.estimates["tight"].valid:
-            env.step(0)
         policy = DeckForecastTimingPolicy(env, draws=1, forecast=forecast, onboard=model)
         truth = base.world.wind.gust_w.copy()
         drag = base.world.drone.params.linear_drag_b.copy()
@@ -379,6 +386,60 @@ def test_the_onboard_model_draws_its_errors_with_the_spreads_set():
     assert np.allclose(scales[:, :3], scales[:, :1])  # one scale for the whole drag
     assert 0.8 - 1e-9 <= scales[:, 0].min() < 0.9 and 1.1 < scales[:, 0].max() <= 1.2 + 1e-9
     assert 0.95 - 1e-9 <= scales[:, 3].min() < 0.97 and 1.03 < scales[:, 3].max() <= 1.05 + 1e-9
+
+
+def test_an_airframe_drawn_in_trim_feels_the_same_drag_force_and_spins_for_its_thrust():
+    """With ``airframe_in_trim`` a draw moves the wind at the drone so that the drawn drag
+    gives the force the drone holds (scale x (v - w') = v - w), and its rotors and thrust model
+    are the drawn thrust's; the rest of the draw is the same as without it."""
+    from landing_env.envs.snapshot import restore_snapshot, save_snapshot
+
+    forecast = fit_deck_forecast(_ship_motion(6), realizations=2, record_s=300.0)
+    env = _holding_with_an_estimate("ship-ss6", seed=4)
+    base = env.unwrapped
+    try:
+        drawn = {}
+        for in_trim in (False, True):
+            model = OnboardModelConfig(position_from_estimate=False, airframe_in_trim=in_trim)
+            policy = DeckForecastTimingPolicy(env, draws=1, forecast=forecast, onboard=model)
+            policy.deck_future(0)
+            here = save_snapshot(base)
+            world = base.world
+            felt = np.asarray(world.drone.last_wind_w)
+            air = world.drone_state().velocity_w - felt
+            omega = world.drone.rotor_speeds.copy()
+            k_f = world.controller._k_f
+            nominal = world.drone.params
+            for draw in range(3):
+                restore_snapshot(base, here, keep=True)
+                world = base.world  # the restored copy
+                policy.model_draw(0, draw)
+                drawn[in_trim, draw] = (
+                    world.wind.gust_w,
+                    world.drone.params.linear_drag_b[0] / nominal.linear_drag_b[0],
+                    world.drone.params.k_f / nominal.k_f,
+                    world.drone.rotor_speeds / omega,
+                    world.controller._k_f / k_f,
+                )
+            restore_snapshot(base, here, keep=False)
+        # 2 m over the deck: inside the airwake, where a gust reaches the drone x 1.5
+        factor = base.config.wind.airwake_turbulence_factor
+        for draw in range(3):
+            gust, drag, thrust, spin, model_k_f = drawn[True, draw]
+            plain_gust, plain_drag, plain_thrust, plain_spin, plain_k_f = drawn[False, draw]
+            assert drag == plain_drag != 1.0 and thrust == plain_thrust != 1.0
+            np.testing.assert_allclose(
+                factor * (gust - plain_gust), air * (1.0 - 1.0 / drag), atol=1e-9
+            )
+            np.testing.assert_allclose(spin, 1.0 / np.sqrt(thrust))
+            assert model_k_f == pytest.approx(thrust) and plain_k_f == 1.0
+            np.testing.assert_array_equal(plain_spin, np.ones(4))
+    finally:
+        env.close()
+    assert "airframe_in_trim" not in OnboardModelConfig().signature()  # cards sign as before
+    assert OnboardModelConfig(airframe_in_trim=True).signature()["airframe_in_trim"] is True
+    with pytest.raises(ConfigError, match="airframe_in_trim"):
+        OnboardModelConfig(airframe_in_trim="yes")
 
 
 def test_the_onboard_model_waits_when_the_drone_has_no_deck_estimate(small_forecast, monkeypatch):

@@ -3,6 +3,7 @@ on them, the policy that plays a model trained on it in the bare task, and the m
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -92,12 +93,28 @@ def test_any_tried_commits_give_features_inside_the_observation_bounds(draws) ->
         ("checks", True),
         ("hms_report_s", -1.0),
         ("hms_report_s", 7200.0),
+        ("airframe_in_trim", "yes"),
     ],
 )
 def test_a_bad_lookahead_setting_is_refused_naming_its_key(key: str, value: float) -> None:
     with pytest.raises(ConfigError) as error:
         LookaheadSettings(**{key: value})
     assert error.value.key == key
+
+
+def test_a_lookahead_with_airframes_in_trim_signs_it_and_plays_that_onboard_model() -> None:
+    plain = LookaheadSettings()
+    in_trim = LookaheadSettings(airframe_in_trim=True)
+    # the shipped look-ahead signs as before the option existed; the other says it twice
+    assert "airframe_in_trim" not in plain.signature()
+    assert "airframe_in_trim" not in plain.signature()["onboard"]
+    assert in_trim.signature()["airframe_in_trim"] is True
+    assert in_trim.signature()["onboard"]["airframe_in_trim"] is True
+    assert in_trim.onboard().airframe_in_trim and not plain.onboard().airframe_in_trim
+    # a card rebuilds the settings it was made with (the fields it holds)
+    card = json.loads(json.dumps(in_trim.signature()))
+    fields = {k: card[k] for k in LookaheadSettings.__dataclass_fields__ if k in card}
+    assert LookaheadSettings(**fields) == in_trim
 
 
 def test_a_check_interval_off_the_tasks_decisions_is_refused(small_forecast) -> None:

@@ -300,3 +300,51 @@ def test_the_discrimination_benchmark_scores_a_feature_that_orders_the_outcomes_
     assert figures["all_draws_land_share"] == pytest.approx(np.mean(chance[:399] == 1.0))
     one_class = discrimination({**data, "commit_success": np.ones(400, bool)})["ship-ss5"]
     assert np.isnan(one_class["auc"]["chance"])  # every commit lands: nothing to rank
+
+
+def test_the_knowledge_benchmark_replays_a_recorded_episode_and_tries_each_check_again(
+    small_forecast, tmp_path
+) -> None:
+    from agents.lookahead import recorded_tries
+    from benchmarks.bench_lookahead_knowledge import VARIANTS, replay_episode
+
+    settings = LookaheadSettings(draws=2, check_every_s=1.0)
+    path = collect_transitions(
+        "ship-ss4", [5002], tmp_path / "t.npz", settings, progress=False, forecast=small_forecast
+    )
+    data = load_transitions([path])
+    checks, commits = replay_episode(
+        "ship-ss4", 5002, settings, 2, forecast=small_forecast, variants=VARIANTS
+    )
+    # the drone waits through the same checks, and a commit at each lands as recorded
+    assert len(checks) == len(data["episode"]) >= 5
+    assert commits == data["commit_success"].astype(bool).tolist()
+    tried = data["check_tried"].astype(bool)
+    for k, row in enumerate(checks):
+        for variant in ("deck-oracle", "forecast"):
+            # a look-ahead made wherever the drone's own was, each with its two draws
+            assert (row[variant] is not None) == bool(tried[k])
+            if row[variant] is not None:
+                assert len(row[variant]) == 2
+        # the drone's own look-ahead, tried again, is the recorded one draw for draw
+        assert row["onboard"] == recorded_tries(data, k, 2)
+    with pytest.raises(ConfigError) as error:
+        replay_episode("ship-ss4", 5002, settings, 2, variants=("psychic",))
+    assert error.value.key == "variants"
+
+
+def test_the_knowledge_benchmark_replays_the_all_draws_rule_and_ranks_the_checks() -> None:
+    from agents.oracle import TriedCommit
+    from benchmarks.bench_lookahead_knowledge import figures
+
+    land, fail = TriedCommit(True, True, 0.5), TriedCommit(False, False, -1.0)
+    # episode 1: all draws land at its second check, whose commit lands; episode 2: never,
+    # and its forced commit fails
+    rows = [[fail, fail], [land, land], [land, fail], None, [fail, fail], [land, fail]]
+    lands = np.array([False, True, False, False, False, False])
+    episodes = np.array([1, 1, 1, 2, 2, 2])
+    result = figures({"v": rows}, lands, episodes, {1: False, 2: False})["v"]
+    assert result["rule_success"] == 0.5
+    assert result["lands_when_all"] == 1.0
+    assert result["all_draws_land"] == 1 / 5  # of the five checks with a look-ahead
+    assert result["auc_chance"] == 1.0  # the one landing check has the highest chance

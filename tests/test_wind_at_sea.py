@@ -215,3 +215,90 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
         assert float(thrust_axis[:2] @ mean[:2]) < -0.3 * float(np.linalg.norm(mean[:2]))
     finally:
         env.close()
+
+
+def _hold_after_airframe_change(drag: float, thrust: float, in_trim: bool) -> np.ndarray:
+    """How far (m, world) a drone trimmed in a steady 8 m/s wind moves in the 1 s after its
+    drag is scaled by ``drag`` and its thrust by ``thrust`` (``in_trim``: the air going past
+    1/drag as fast, so that the force it holds stays, and its thrust model and rotor speeds
+    the new rotors', as the onboard look-ahead's ``airframe_in_trim`` does)."""
+    import dataclasses
+
+    from landing_env.physics.controller import VelocitySetpoint
+    from landing_env.world import World
+
+    overrides = {
+        "wind.enabled": True,
+        "wind.mean_velocity_w": [8.0, 0.0, 0.0],
+        "wind.gust_intensity": [0.0, 0.0, 0.0],
+        "start.trim_to_wind": True,
+    }
+    world = World(load_config("default", overrides=overrides))
+    try:
+        world.reset(np.random.default_rng(0), np.array([0.0, 0.0, 3.0]), 0.0)
+        hold = VelocitySetpoint(np.zeros(3), 0.0)
+        world.step(hold, monitor_contacts=False)
+        params = world.drone.params
+        drag_w = world.drone_state().rotation_wb @ np.asarray(world.drone.last_drag_b)
+        # the drag felt in trim: 0.25 N/(m/s) x 8 m/s, downwind
+        assert drag_w[0] == pytest.approx(2.0, rel=0.05)
+        world.drone.params = dataclasses.replace(
+            params, linear_drag_b=params.linear_drag_b * drag, k_f=params.k_f * thrust
+        )
+        if in_trim:
+            air_w = world.drone_state().velocity_w - np.asarray(world.drone.last_wind_w)
+            world.shift_wind_at_drone(air_w * (1.0 - 1.0 / drag))
+            world.controller.scale_thrust_model(thrust)
+            world.drone.set_rotor_speeds(world.drone.rotor_speeds / math.sqrt(thrust))
+        start = world.drone_state().position_w
+        for _ in range(round(1.0 / (world.dt * world.substeps))):
+            world.step(hold, monitor_contacts=False)
+        return world.drone_state().position_w - start
+    finally:
+        world.close()
+
+
+def test_a_drawn_airframe_started_in_its_own_trim_holds_where_the_nominal_trim_drifts() -> None:
+    unchanged = _hold_after_airframe_change(1.0, 1.0, in_trim=False)
+    # 30 % more drag: blown downwind from the nominal trim, hardly from its own
+    drift = np.linalg.norm(_hold_after_airframe_change(1.3, 1.0, True)[:2] - unchanged[:2])
+    nominal_drift = np.linalg.norm(_hold_after_airframe_change(1.3, 1.0, False)[:2] - unchanged[:2])
+    assert nominal_drift > 0.1 and drift < nominal_drift / 4
+    # 5 % less thrust: the nominal trim sinks, the learnt thrust model does not
+    sink = abs(_hold_after_airframe_change(1.0, 0.95, True)[2] - unchanged[2])
+    nominal_sink = abs(_hold_after_airframe_change(1.0, 0.95, False)[2] - unchanged[2])
+    assert nominal_sink > 0.04 and sink < 0.005
+    from landing_env.physics.controller import CascadeController
+    from landing_env.physics.quadrotor import QuadrotorParams
+
+    with pytest.raises(ValueError, match="factor"):
+        CascadeController(QuadrotorParams.from_yaml()).scale_thrust_model(0.0)
+
+
+def test_shifting_the_wind_at_the_drone_inside_the_airwake_moves_what_the_drone_feels() -> None:
+    from landing_env.physics.controller import VelocitySetpoint
+    from landing_env.world import World
+
+    config = load_config("ship-ss5")
+    assert config.wind.airwake_turbulence_factor != 1.0
+    felt = []
+    for delta in (np.zeros(3), np.array([0.5, -0.3, 0.1])):
+        world = World(config)
+        try:
+            # 2 m above the deck's home: inside the airwake, which scales a gust by its factor
+            world.reset(np.random.default_rng(0), world.deck_home_w + np.array([0, 0, 2.0]), 0.0)
+            hold = VelocitySetpoint(np.zeros(3), 0.0)
+            world.step(hold, monitor_contacts=False)
+            gust = world.wind.gust_w
+            world.shift_wind_at_drone(delta)
+            # the gust itself moves by the shift over the airwake's factor
+            factor = config.wind.airwake_turbulence_factor
+            np.testing.assert_allclose(world.wind.gust_w - gust, delta / factor, atol=1e-12)
+            world.step(hold, monitor_contacts=False)
+            felt.append(np.asarray(world.drone.last_wind_w))
+            with pytest.raises(ValueError, match="delta_w"):
+                world.shift_wind_at_drone(np.array([np.nan, 0.0, 0.0]))
+        finally:
+            world.close()
+    # the same gusts after, but for the shift (a step of the gusts' decay aside)
+    np.testing.assert_allclose(felt[1] - felt[0], [0.5, -0.3, 0.1], atol=0.01)

@@ -199,6 +199,17 @@ class CascadeController:
             ax, ay = ax * limit / norm, ay * limit / norm
         self._vel_int[0], self._vel_int[1] = ax, ay
 
+    def scale_thrust_model(self, factor: float) -> None:
+        """Scale the thrust the controller expects of a rotor speed (``k_f``, and with it the
+        rotors' thrust range) by ``factor``: what a hover-thrust estimator learns of rotors
+        that give ``factor`` times the nominal thrust (PX4's ``MPC_USE_HTE``, ArduPilot's
+        ``MOT_THST_HOVER`` learning)."""
+        if not math.isfinite(factor) or factor <= 0.0:
+            raise ValueError(f"factor must be a positive finite number, got {factor!r}")
+        self._k_f *= factor
+        self._f_min *= factor
+        self._f_max *= factor
+
     @property
     def status(self) -> ControllerStatus:
         """The limits that acted in the last :meth:`update`."""
