@@ -1,26 +1,29 @@
 """What each thing the drone does not know costs the look-ahead: its checks, told apart.
 
     python -m benchmarks.bench_lookahead_knowledge --data FILE.npz [--episodes N] [--draws D]
+        [--variants deck-oracle forecast onboard] [--onboard KEY=VALUE ...] [--out FILE.npz]
 
 Replays recorded look-ahead episodes (``python -m agents.lookahead collect``; the drone waits
 through every check) and, at each recorded check, tries the commit now again in ``draws``
-futures with more knowledge than the drone has, the gusts' and the sensors' draws shared
-(the same seeds) with the recorded look-ahead:
+futures of other look-aheads, the gusts' and the sensors' draws shared (the same seeds)
+with the recorded one (:data:`VARIANTS`):
 
-* ``deck oracle``: the deck's true future and the true present (drone, gust, airframe), as
+* ``deck-oracle``: the deck's true future and the true present (drone, gust, airframe), as
   :class:`agents.oracle.DeckOracleTimingPolicy`;
-* ``forecast, true present``: the ship's HMS forecast of the deck, the true present, as
-  ``deck-forecast`` (:class:`agents.deck_forecast.DeckForecastTimingPolicy`);
-* ``onboard (recorded)``: the drone's own look-ahead as recorded (its first ``draws``
-  draws): the forecast and what the drone believes of the present.
+* ``forecast``: the ship's HMS forecast of the deck, the true present, as ``deck-forecast``
+  (:class:`agents.deck_forecast.DeckForecastTimingPolicy`);
+* ``onboard``: the drone's own look-ahead with ``--onboard``'s changes to its
+  :class:`~agents.deck_forecast.OnboardModelConfig` (none: the recorded one, again);
+* ``recorded``, always: the drone's own look-ahead as recorded (its first ``draws`` draws).
 
 For each it prints the ROC AUC of the share of draws landing with the margin and of the
 mean score for the recorded commit's outcome (``bench_ship_forecast_labels.auc``), how often
 all draws land, and the success of the rule "commit at the first check where all draws land
-with the margin" replayed on the recording (README "Fitted on episodes from the start in
-trim").  Each replayed check's commit is also tried again in the episode's own future and
-compared with the record: the replay reproduces the recorded episode, or it says so (run it
-with the sensing the file was recorded with, e.g. ``DECK_LANDING_SENSORS=realistic``).
+with the margin" replayed on the recording (README "What the look-ahead does not know, at
+sea state 6").  ``--out`` saves every check's tried commits.  Each replayed check's commit
+is also tried again in the episode's own future and compared with the record: the replay
+reproduces the recorded episode, or it says so (run it with the sensing the file was
+recorded with, e.g. ``DECK_LANDING_SENSORS=realistic``).
 """
 
 from __future__ import annotations
@@ -178,7 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", help="also save every check's tried commits here (.npz)")
     args = parser.parse_args(argv)
-    onboard = build_dataclass(OnboardModelConfig, parse_overrides(args.onboard), "onboard")
+    try:
+        onboard = build_dataclass(OnboardModelConfig, parse_overrides(args.onboard), "onboard")
+    except ConfigError as error:
+        parser.error(f"--onboard: {error}")
     with np.load(args.data) as file:
         data = {key: file[key] for key in file.files}
     recorded = json.loads(str(data["settings"]))
