@@ -239,9 +239,6 @@ def _hold_after_airframe_change(drag: float, thrust: float, in_trim: bool) -> np
         hold = VelocitySetpoint(np.zeros(3), 0.0)
         world.step(hold, monitor_contacts=False)
         params = world.drone.params
-        drag_w = world.drone_state().rotation_wb @ np.asarray(world.drone.last_drag_b)
-        # the drag felt in trim: 0.25 N/(m/s) x 8 m/s, downwind
-        assert drag_w[0] == pytest.approx(2.0, rel=0.05)
         world.drone.params = dataclasses.replace(
             params, linear_drag_b=params.linear_drag_b * drag, k_f=params.k_f * thrust
         )

@@ -541,8 +541,6 @@ class Quadrotor:
         self.wind_velocity_w: np.ndarray | tuple[float, float, float] = self._zero3
         #: wind velocity (m/s, W) used for the drag in the last step
         self.last_wind_w: tuple[float, float, float] = self._zero3
-        #: the linear drag of the last step (N, body frame)
-        self.last_drag_b: tuple[float, float, float] = self._zero3
 
     def _apply_landing_gear(self) -> None:
         """Give each foot its contact stiffness, damping and friction (quadrotor.yaml).
@@ -760,9 +758,7 @@ class Quadrotor:
         )
         fx = -scale * d0 * (r00 * ax + r10 * ay + r20 * az)
         fy = -scale * d1 * (r01 * ax + r11 * ay + r21 * az)
-        dz = -scale * d2 * (r02 * ax + r12 * ay + r22 * az)
-        fz += dz
-        self.last_drag_b = (fx, fy, dz)
+        fz -= scale * d2 * (r02 * ax + r12 * ay + r22 * az)
 
         # The net force acts at the whole body's CoM (drag through the CoM, as modelled); the
         # thrusts' torques about it equal the torques computed above because the CoM lies on
