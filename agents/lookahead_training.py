@@ -134,6 +134,7 @@ def train_offline(
     out_dir: str | Path,
     progress: bool = True,
     hms_report_s: float | None = None,
+    airframe_in_trim: bool | None = None,
 ) -> dict[str, Any]:
     """Fit the YAML's DQN on the transitions and write the chosen model with its card; returns
     the summary (also ``train_summary.yaml``).
@@ -159,6 +160,9 @@ def train_offline(
     if hms_report_s is not None:
         # the YAML's look-ahead with the HMS report's window set (the card signs it too)
         s.lookahead["hms_report_s"] = float(hms_report_s)
+    if airframe_in_trim is not None:
+        # the YAML's look-ahead with its drawn airframes in their own trim (the card signs it)
+        s.lookahead["airframe_in_trim"] = bool(airframe_in_trim)
     # the YAML's own ``offline`` section (OFFLINE_KEYS); ``scenario``'s environment signs the card
     offline = dict((yaml.safe_load(Path(config_path).read_text()) or {}).get("offline") or {})
     unknown = sorted(set(offline) - set(OFFLINE_KEYS))
@@ -389,8 +393,21 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="the look-ahead's hms_report_s (the YAML's unless given; 600: CAP 437's report)",
     )
+    parser.add_argument(
+        "--airframe-in-trim",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the look-ahead's drawn airframes start in their own trim, or not (the YAML's "
+        "unless given; the data must be collected so)",
+    )
     args = parser.parse_args(argv)
-    summary = train_offline(args.config, args.data, args.out, hms_report_s=args.hms_report_s)
+    summary = train_offline(
+        args.config,
+        args.data,
+        args.out,
+        hms_report_s=args.hms_report_s,
+        airframe_in_trim=args.airframe_in_trim,
+    )
     print(yaml.safe_dump(summary, sort_keys=False))
     return 0
 

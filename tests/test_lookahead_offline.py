@@ -229,6 +229,29 @@ def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_pa
     assert error.value.key == "offline.cross_validate"
 
 
+def test_a_fit_asked_for_airframes_in_trim_takes_only_records_made_so_and_signs_it(
+    tmp_path,
+) -> None:
+    rng = np.random.default_rng(5)
+    trim = LookaheadSettings(airframe_in_trim=True)
+    in_trim = _episodes(tmp_path / "trim.npz", range(20), trim, rng)
+    nominal = _episodes(tmp_path / "nominal.npz", range(20, 40), LookaheadSettings(), rng)
+    config = _config(draws=trim.draws)
+    config["offline"].update(rounds=1, gradient_steps=50, cross_validate=False)
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(config))
+    train_offline(config_path, [in_trim], tmp_path / "out", progress=False, airframe_in_trim=True)
+    from agents.model_metadata import read_metadata
+
+    card = read_metadata(tmp_path / "out" / "best_model.zip")
+    assert card is not None and card.observation["lookahead"]["airframe_in_trim"] is True
+    with pytest.raises(ConfigError) as error:
+        train_offline(
+            config_path, [nominal], tmp_path / "bad", progress=False, airframe_in_trim=True
+        )
+    assert error.value.key == "data"
+
+
 def test_an_episode_seed_recorded_in_two_files_is_refused(tmp_path) -> None:
     rng = np.random.default_rng(4)
     a = _episodes(tmp_path / "a.npz", range(5), LookaheadSettings(), rng)
