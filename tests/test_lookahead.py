@@ -360,7 +360,9 @@ def test_the_shipped_lookahead_model_decides_at_ship_ss5_with_realistic_sensing(
     )
     try:
         assert isinstance(policy, LookaheadTimingPolicy)
-        assert policy.settings == LookaheadSettings(draws=16, check_every_s=0.5, checks=2)
+        assert policy.settings == LookaheadSettings(
+            draws=16, check_every_s=0.5, checks=2, airframe_in_trim=True
+        )
         observation, _ = env.reset(seed=1_000_001)
         policy.reset()
         action = policy(observation)

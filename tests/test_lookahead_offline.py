@@ -25,9 +25,11 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_look
 
 
 def _config(draws: int) -> dict:
-    """The shipped offline YAML, its look-ahead of ``draws`` (the synthetic episodes' own)."""
+    """The shipped offline YAML, its look-ahead of ``draws`` and of nominal airframes (the
+    synthetic episodes' own)."""
     config = yaml.safe_load(CONFIG.read_text())
     config["deck_landing"]["lookahead"]["draws"] = draws
+    config["deck_landing"]["lookahead"].pop("airframe_in_trim", None)
     return config
 
 

@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.evaluation.plots import DPI, _colour
+from agents.evaluation.plots import _colour, save_figure
 from agents.evaluation.records import ScenarioRecord, display_name, to_table_units
 
 #: (axis index, label, scale from m / degrees to the plotted unit)
@@ -121,8 +121,4 @@ def plot_fusion_dropout(
     axes[0].set_title(
         f"{record.scenario}: a vision dropout of {gap[1] - gap[0]:.2f} s (seed {record.seed})"
     )
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

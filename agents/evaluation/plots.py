@@ -52,8 +52,10 @@ def _series(record: ScenarioRecord) -> dict[str, np.ndarray]:
     return series
 
 
-def _save(fig: plt.Figure, path: Path) -> Path:
+def save_figure(fig: plt.Figure, path: Path) -> Path:
+    """Lay ``fig`` out, write it to ``path`` (its folder made if missing) and close it."""
     fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path
@@ -76,7 +78,7 @@ def plot_against_time(record: ScenarioRecord, path: Path, angles: bool) -> Path:
     axes[-1].set_xlabel("time (s)")
     kind = "Euler angles (ZYX) of the tag" if angles else "Translation of the tag"
     axes[0].set_title(f"{record.scenario}: {kind} in the camera frame")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_trajectories(record: ScenarioRecord, path: Path) -> Path:
@@ -100,7 +102,7 @@ def plot_trajectories(record: ScenarioRecord, path: Path) -> Path:
     ax3.set(xlabel="x (m)", ylabel="y (m)", zlabel="z (m)", title="XYZ view")
     ax3.invert_zaxis()
     fig.suptitle(f"{record.scenario}: trajectory of the tag in the camera frame")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_errors(record: ScenarioRecord, path: Path) -> Path:
@@ -135,7 +137,7 @@ def plot_errors(record: ScenarioRecord, path: Path) -> Path:
             ax.legend(loc="upper right", ncol=4, fontsize=8)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_all(record: ScenarioRecord, out_dir: Path) -> list[Path]:

@@ -47,7 +47,7 @@ from agents.evaluation.estimators import (
     run_scenario,
     score_record,
 )
-from agents.evaluation.plots import COLOURS, DPI
+from agents.evaluation.plots import COLOURS, save_figure
 from agents.evaluation.runner import map_tasks
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
@@ -397,10 +397,7 @@ def plot_parameter(points: list[SweepPoint], parameter: str, path: Path) -> Path
     for ax in axes[-1]:
         ax.set_xlabel(PARAMETER_LABELS[parameter])
     axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_overview(points: list[SweepPoint], path: Path) -> Path:
@@ -420,10 +417,7 @@ def plot_overview(points: list[SweepPoint], path: Path) -> Path:
             ax.set_yscale("log")
             ax.grid(alpha=0.3, which="both")
         axes[0, col].legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 #: the estimators tight is held against in :func:`plot_tight_ratio` (the issue's target:
@@ -464,10 +458,7 @@ def plot_tight_ratio(points: list[SweepPoint], path: Path) -> Path | None:
         )
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_sweep(points: list[SweepPoint], settings: SweepSettings, out_dir: Path) -> list[Path]:
