@@ -73,6 +73,9 @@ def test_bad_runs_and_targets_get_errors_that_name_them(tmp_path):
     broken.write_text('{"policy": "y"}\n')
     with pytest.raises(ConfigError, match=r"landing_x_y.jsonl:1"):
         load_cells([broken])
+    broken.write_text('{"policy": "y", "scenario": "x", "seed": 1, "success": null}\n')
+    with pytest.raises(ConfigError, match="success is None"):
+        load_cells([broken])
     for item in ("ship-ss4", "ship-ss4=-1", "=2", "ship-ss4=two"):
         with pytest.raises(ConfigError, match="SCENARIO=POINTS"):
             parse_targets([item])

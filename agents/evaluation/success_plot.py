@@ -77,7 +77,9 @@ def load_cells(paths: Sequence[Path]) -> list[Cell]:
             try:
                 record = json.loads(line)
                 key = (str(record["scenario"]), str(record["policy"]))
-                outcomes.setdefault(key, {})[int(record["seed"])] = bool(record["success"])
+                if not isinstance(record["success"], bool):
+                    raise TypeError(f"success is {record['success']!r}, not true or false")
+                outcomes.setdefault(key, {})[int(record["seed"])] = record["success"]
             except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
                 raise ConfigError(
                     "runs",
