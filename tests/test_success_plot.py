@@ -76,7 +76,11 @@ def test_bad_runs_and_targets_get_errors_that_name_them(tmp_path):
     broken.write_text('{"policy": "y", "scenario": "x", "seed": 1, "success": null}\n')
     with pytest.raises(ConfigError, match="success is None"):
         load_cells([broken])
-    for item in ("ship-ss4", "ship-ss4=-1", "=2", "ship-ss4=two"):
+    empty = tmp_path / "landing_none.jsonl"
+    empty.write_text("\n")
+    with pytest.raises(ConfigError, match="no episodes"):
+        load_cells([empty])
+    for item in ("ship-ss4", "ship-ss4=-1", "=2", "ship-ss4=two", "ship-ss4=nan", "ship-ss4=inf"):
         with pytest.raises(ConfigError, match="SCENARIO=POINTS"):
             parse_targets([item])
     assert parse_targets(["ship-ss4=2", "ship-ss5=4"]) == {"ship-ss4": 2.0, "ship-ss5": 4.0}
