@@ -406,6 +406,7 @@ def collect_transitions(
     from tqdm import tqdm
 
     from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+    from agents.model_metadata import sensing_profile
     from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     settings = settings or LookaheadSettings()
@@ -455,6 +456,8 @@ def collect_transitions(
                 path,
                 settings=json.dumps(settings.signature()),
                 scenario=scenario,
+                estimator=base.config.estimation.observed,
+                sensing=sensing_profile(base.config),
                 **{key: np.asarray(value) for key, value in rows.items()},
             )
     finally:
@@ -593,9 +596,13 @@ def load_transitions(
 ) -> dict[str, np.ndarray]:
     """The transitions of several files, concatenated; they must share their look-ahead, and
     an episode (its seed) may be in one file only, whatever its scenario.  Each record also
-    gets its file's ``scenario``.  ``settings``: the look-ahead to see them with, the files'
-    or the same with fewer draws (:func:`with_draws`), or with the HMS report where the files
-    have none (:func:`with_hms_report`)."""
+    gets its file's ``scenario``, the ``estimator`` observed (a file without one: the
+    scenario's own) and the ``sensing`` profile (:func:`agents.model_metadata.sensing_profile`;
+    a file without one: ``unknown``).  ``settings``: the look-ahead to see them with, the
+    files' or the same with fewer draws (:func:`with_draws`), or with the HMS report where
+    the files have none (:func:`with_hms_report`)."""
+    from agents.evaluation.landing import SCENARIOS
+
     parts: list[dict[str, np.ndarray]] = []
     signature = None
     seen: dict[int, str] = {}
@@ -608,6 +615,14 @@ def load_transitions(
             keys = TRANSITION_KEYS + tuple(k for k in DRAW_KEYS if k in data)
             part = {key: data[key] for key in keys}
             scenario = str(data["scenario"]) if "scenario" in data else "unknown"
+            estimator = (
+                str(data["estimator"])
+                if "estimator" in data
+                else SCENARIOS[scenario].estimator
+                if scenario in SCENARIOS
+                else "unknown"
+            )
+            sensing = str(data["sensing"]) if "sensing" in data else "unknown"
         for seed in np.unique(part["episode"]).tolist():
             if seed in seen:
                 raise ConfigError(
@@ -617,6 +632,8 @@ def load_transitions(
                 )
             seen[seed] = str(path)
         part["scenario"] = np.full(len(part["episode"]), scenario)
+        part["estimator"] = np.full(len(part["episode"]), estimator)
+        part["sensing"] = np.full(len(part["episode"]), sensing)
         parts.append(part)
     if not parts or signature is None:
         raise ConfigError("data", "no transitions files given")
@@ -687,6 +704,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the onboard model's drawn airframes start in their own trim",
     )
+    collect.add_argument(
+        "--estimator",
+        default=None,
+        help="the estimate observed (default: the scenario's; the bench's policies observe tight)",
+    )
     collect.add_argument("--out", required=True, help="the .npz to write")
     args = parser.parse_args(argv)
     if args.command == "collect":
@@ -697,7 +719,8 @@ def main(argv: list[str] | None = None) -> int:
             airframe_in_trim=args.airframe_in_trim,
         )
         seeds = list(range(args.seed, args.seed + args.episodes))
-        print(f"wrote {collect_transitions(args.scenario, seeds, args.out, settings)}")
+        path = collect_transitions(args.scenario, seeds, args.out, settings, args.estimator)
+        print(f"wrote {path}")
     return 0
 
 

@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from agents.lookahead import LookaheadSettings, load_transitions, replay_success
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError, require_choice, require_range
 
 
 class _Spaces(gym.Env):  # type: ignore[type-arg]
@@ -149,8 +149,7 @@ def train_offline(
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
-    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
-    from agents.model_metadata import card_for_training, write_metadata
+    from agents.model_metadata import write_metadata
     from agents.training import algorithm_kwargs, load_train_config
 
     config = load_train_config(config_path)
@@ -275,15 +274,7 @@ def train_offline(
     def _held_count(name: str) -> int:
         return len(np.unique(held["episode"][held["scenario"] == name]))
 
-    scenario = str(offline.get("scenario", "ship-ss5"))
-    overrides = dict(s.env_kwargs.get("overrides", {}))
-    env, _ = make_env_and_policy(
-        "land-now", scenario, SCENARIOS[scenario].estimator, extra_overrides=overrides
-    )
-    try:
-        card = card_for_training(env, config)
-    finally:
-        env.close()
+    card = sign_card(config, data, offline.get("scenario"))
     per_scenario = {
         name: len(np.unique(data["episode"][data["scenario"] == name])) for name in scenarios
     }
@@ -339,6 +330,44 @@ def train_offline(
         )
     (out / "train_summary.yaml").write_text(yaml.safe_dump(summary, sort_keys=False))
     return summary
+
+
+def sign_card(config: Any, data: dict[str, np.ndarray], scenario: str | None = None) -> Any:
+    """The card of a model fitted on ``data``: signed by the environment of each scenario and
+    estimator in the records (:func:`agents.model_metadata.merge_cards`: a fit on the ship's
+    and the bench's episodes knows both timing tasks), or by ``scenario``'s alone (the YAML's
+    ``offline.scenario``, with its default estimator)."""
+    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+    from agents.model_metadata import card_for_training, merge_cards
+
+    if scenario is not None:
+        require_choice("offline.scenario", scenario, tuple(SCENARIOS))
+        signers = [(scenario, SCENARIOS[scenario].estimator)]
+    else:
+        pairs = zip(data["scenario"].tolist(), data["estimator"].tolist(), strict=True)
+        signers = sorted(set(pairs))
+        unknown = sorted({name for name, _ in signers} - set(SCENARIOS))
+        if unknown:
+            raise ConfigError(
+                "data", f"records of unknown scenarios {unknown}: set offline.scenario to sign"
+            )
+    overrides = dict(config.settings.env_kwargs.get("overrides", {}))
+    cards = []
+    for name, estimator in signers:
+        env, _ = make_env_and_policy("land-now", name, estimator, extra_overrides=overrides)
+        try:
+            card = card_for_training(env, config)
+        finally:
+            env.close()
+        if scenario is None:
+            # the profiles the records were collected under, where they say (the world's, not
+            # the observation's: the environment signs the rest)
+            mine = (data["scenario"] == name) & (data["estimator"] == estimator)
+            recorded = set(data["sensing"][mine].tolist()) - {"unknown"}
+            if recorded:
+                card.sensing = sorted(recorded)
+        cards.append(card)
+    return merge_cards(cards)
 
 
 def _relaxed(observations: np.ndarray, relax_share: float = 1.0 / 3.0) -> np.ndarray:

@@ -53,6 +53,14 @@ class ModelMetadata:
     training_config_source: str = ""
     note: str = ""
     format: int = CARD_FORMAT
+    #: the observation signatures of the other timing tasks it was trained over, where one
+    #: fit spans several (the look-ahead's features on the ship's and the bench's descents):
+    #: an environment matches ``observation`` or one of these
+    other_observations: list[dict[str, Any]] = field(default_factory=list)
+
+    def observations(self) -> list[dict[str, Any]]:
+        """Every observation signature it was trained on, ``observation`` first."""
+        return [self.observation, *self.other_observations]
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2, sort_keys=False)
@@ -287,24 +295,19 @@ def check_compatible(
             continue
         have = signature[name]
         if name == "observation":
-            described = {**LEGACY_OBSERVATION, **card.observation}
-            for key, trained in described.items():
-                if have.get(key) != trained:
-                    raise ConfigError(
-                        f"observation.{key}",
-                        f"{model} was trained with {trained!r}, the environment has "
-                        f"{have.get(key)!r}: use the timing settings it was trained with"
-                        + (
-                            " (the range-scheduled descent: --set "
-                            "timing.guidance.descent_profile=range)"
-                            if key == "descent" and trained == LEGACY_OBSERVATION["descent"]
-                            else ""
-                        ),
-                    )
-            extra = sorted(set(have) - set(described))
-            if extra:
+            # the first of the trained observations' mismatches, unless one matches
+            errors = [
+                _observation_mismatch(trained, have, model) for trained in card.observations()
+            ]
+            first = errors[0]
+            if first is not None and all(errors):
+                more = len(errors) - 1
+                if not more:
+                    raise first
                 raise ConfigError(
-                    "observation", f"{model}'s card does not describe {extra}; retrain or re-stamp"
+                    first.key,
+                    f"{first.detail} (nor does it match the {more} other observation"
+                    f"{'s' if more > 1 else ''} on its card)",
                 )
             continue
         if name == "sensing":
@@ -322,6 +325,64 @@ def check_compatible(
                 f"{model} was trained on {trained!r}, the environment has {have!r}"
                 + hint.format(field=name),
             )
+
+
+def _observation_mismatch(
+    trained: dict[str, Any], have: dict[str, Any], model: str
+) -> ConfigError | None:
+    """How the environment's observation ``have`` differs from a ``trained`` one (None: it
+    does not)."""
+    described = {**LEGACY_OBSERVATION, **trained}
+    for key, value in described.items():
+        if have.get(key) != value:
+            return ConfigError(
+                f"observation.{key}",
+                f"{model} was trained with {value!r}, the environment has "
+                f"{have.get(key)!r}: use the timing settings it was trained with"
+                + (
+                    " (the range-scheduled descent: --set timing.guidance.descent_profile=range)"
+                    if key == "descent" and value == LEGACY_OBSERVATION["descent"]
+                    else ""
+                ),
+            )
+    extra = sorted(set(have) - set(described))
+    if extra:
+        return ConfigError(
+            "observation", f"{model}'s card does not describe {extra}; retrain or re-stamp"
+        )
+    return None
+
+
+def merge_cards(cards: list[ModelMetadata]) -> ModelMetadata:
+    """One card for a model fitted on the data of several environments (``cards``: each one's
+    card of the same training, the first the primary): their sensing profiles together and
+    each distinct observation once.  Cards that differ in the env id, the estimator or the
+    look-ahead's settings are refused: no one observation means the same in both."""
+    if not cards:
+        raise ConfigError("cards", "at least one card is needed")
+    first = cards[0]
+    for other in cards[1:]:
+        for name in ("env_id", "estimator", "camera_mode"):
+            if getattr(other, name) != getattr(first, name):
+                raise ConfigError(
+                    name,
+                    f"the fit's environments differ: {getattr(first, name)!r} and "
+                    f"{getattr(other, name)!r}",
+                )
+        for key in ("size", "lookahead"):
+            if other.observation.get(key) != first.observation.get(key):
+                raise ConfigError(
+                    f"observation.{key}", "the fit's environments observe differently"
+                )
+    observations: list[dict[str, Any]] = []
+    for card in cards:
+        for signature in card.observations():
+            if signature not in observations:
+                observations.append(signature)
+    sensing = sorted({profile for card in cards for profile in card.sensing})
+    merged = ModelMetadata(**{**asdict(first), "sensing": sensing})
+    merged.observation, merged.other_observations = observations[0], observations[1:]
+    return merged
 
 
 # ------------------------------------------------------------------------------ the zip

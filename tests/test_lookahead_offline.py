@@ -34,10 +34,18 @@ def _config(draws: int) -> dict:
 
 
 def _episodes(
-    path: Path, seeds: range, settings: LookaheadSettings, rng, scenario: str = "ship-ss5"
+    path: Path,
+    seeds: range,
+    settings: LookaheadSettings,
+    rng,
+    scenario: str = "ship-ss5",
+    estimator: str | None = None,
+    sensing: str = "realistic",
 ) -> Path:
     """Recorded episodes where a commit lands exactly when the check's chance is 0.75 or
-    more (one check in four), and the forced commit at the end lands half the time."""
+    more (one check in four), and the forced commit at the end lands half the time (with
+    ``estimator``: the file says which estimate was observed and under which ``sensing``, as
+    collected files do)."""
     rows = {key: [] for key in TRANSITION_KEYS}
     for seed in seeds:
         chances = rng.choice([0.0, 0.25, 0.5, 0.75, 1.0], size=12, p=[0.25, 0.25, 0.25, 0.15, 0.1])
@@ -67,6 +75,7 @@ def _episodes(
         path,
         settings=json.dumps(settings.signature()),
         scenario=scenario,
+        **({"estimator": estimator, "sensing": sensing} if estimator else {}),
         **{key: np.asarray(value) for key, value in rows.items()},
     )
     return path
@@ -124,6 +133,42 @@ def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and card.observation["lookahead"] == settings.signature()
     assert card.env_id == "DeckLandingTiming-v0" and card.sensing[0].startswith("realistic")
+
+
+def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path) -> None:
+    from agents.lookahead_training import sign_card
+
+    settings = LookaheadSettings()
+    rng = np.random.default_rng(5)
+    ship = _episodes(tmp_path / "ship.npz", range(4), settings, rng)
+    bench = _episodes(tmp_path / "bench.npz", range(10, 14), settings, rng, "bench-ss4", "tight")
+    data = load_transitions([ship, bench])
+    # a file without the estimator observed is the scenario's own (the ship's: tight)
+    assert set(data["estimator"].tolist()) == {"tight"}
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(_config(draws=settings.draws)))
+    from agents.training import load_train_config
+
+    card = sign_card(load_train_config(config_path), data)
+    assert card.sensing == ["realistic", "realistic,lens=wide"]
+    assert card.estimator == "tight" and len(card.observations()) == 2
+    descents = {o["descent"]["profile"] for o in card.observations()}
+    assert descents == {"range", "timed"}  # the ship's descent and the bench's
+    assert {o["hold_height_m"] for o in card.observations()} == {0.7, 2.0}
+    assert all(o["lookahead"] == settings.signature() for o in card.observations())
+    one = sign_card(load_train_config(config_path), data, "ship-ss5")
+    assert one.sensing == ["realistic,lens=wide"] and one.other_observations == []
+    with pytest.raises(ConfigError, match=r"^offline\.scenario"):
+        sign_card(load_train_config(config_path), data, "ship-ss9")
+    # the sensing profiles the records were collected under sign the card
+    ideal = _episodes(
+        tmp_path / "i.npz", range(30, 32), settings, rng, "bench-ss4", "tight", "ideal"
+    )
+    both = sign_card(load_train_config(config_path), load_transitions([ship, bench, ideal]))
+    assert both.sensing == ["ideal", "realistic", "realistic,lens=wide"]
+    mixed = _episodes(tmp_path / "mixed.npz", range(20, 22), settings, rng, "bench-ss5", "ihrcf")
+    with pytest.raises(ConfigError, match=r"^estimator"):
+        sign_card(load_train_config(config_path), load_transitions([ship, mixed]))
 
 
 def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws(

@@ -15,6 +15,7 @@ from agents.model_metadata import (
     ModelMetadata,
     check_compatible,
     env_signature,
+    merge_cards,
     observation_signature,
     read_metadata,
     sensing_profile,
@@ -161,6 +162,41 @@ def test_another_env_version_is_refused() -> None:
         check_compatible(card, signature)
     with pytest.raises(ConfigError, match="allow_mismatch"):
         check_compatible(card, signature, allow=("colour",))
+
+
+def _card(sensing: str, estimator: str = "tight", **timing: object) -> ModelMetadata:
+    """A card trained on ``DeckLandingTiming-v0`` with ``timing`` laid over the defaults."""
+    observation = observation_signature(TimingConfig(**timing), 20.0)  # type: ignore[arg-type]
+    return ModelMetadata("DeckLandingTiming-v0", observation, estimator, [sensing])
+
+
+def test_a_card_fitted_over_two_timing_tasks_accepts_either_and_refuses_a_third() -> None:
+    ship = _card("realistic,lens=wide", hold_height_m=2.0)
+    bench = _card("realistic", hold_height_m=0.7)
+    card = merge_cards([ship, bench, ship])
+    assert card.observation == ship.observation and card.other_observations == [bench.observation]
+    assert card.sensing == ["realistic", "realistic,lens=wide"]
+    for one in (ship, bench):
+        check_compatible(card, {"observation": one.observation, "sensing": "realistic"})
+    third = _card("realistic", hold_height_m=1.0)
+    with pytest.raises(ConfigError, match=r"observation\.hold_height_m: .*2\.0.*1\.0.*1 other"):
+        check_compatible(card, {"observation": third.observation})
+    # a card of one observation says so without the count
+    with pytest.raises(ConfigError, match=r"hold_height_m: .*the environment has 1\.0: use"):
+        check_compatible(bench, {"observation": third.observation})
+    again = ModelMetadata.from_json(card.to_json())
+    assert again.observations() == [ship.observation, bench.observation]
+
+
+def test_cards_of_another_estimator_or_env_are_not_merged() -> None:
+    with pytest.raises(ConfigError, match=r"^estimator: .*'tight'.*'ihrcf'"):
+        merge_cards([_card("realistic"), _card("realistic", estimator="ihrcf")])
+    other = _card("realistic")
+    other.env_id = "DeckLandingTiming-v1"
+    with pytest.raises(ConfigError, match=r"^env_id"):
+        merge_cards([_card("realistic"), other])
+    with pytest.raises(ConfigError, match=r"^cards"):
+        merge_cards([])
 
 
 def test_a_model_without_a_card_is_refused(tmp_path: Path) -> None:
