@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.oracle import TriedCommit
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError, require_choice, require_range
 
 #: per check, in order: whether a look-ahead was made (a deck-pose estimate and a forecast
 #: were there), the share of draws that land with the slack, the share that succeed at all,
@@ -391,6 +391,7 @@ def collect_transitions(
     estimator: str | None = None,
     progress: bool = True,
     forecast: Any = None,
+    sensing: str | None = None,
 ) -> Path:
     """Both actions' outcomes at every check of whole episodes: the data of an offline DQN.
 
@@ -402,15 +403,32 @@ def collect_transitions(
     its path and their observations are the ones recorded.  Each check's draws are kept
     (:data:`DRAW_KEYS`), so the file also serves a look-ahead of fewer draws.  The file is
     rewritten after every episode (an interrupted run keeps what it has).
+
+    ``sensing`` names a profile of :data:`agents.scenario_sampler.SENSING_PROFILES`
+    (``realistic-2x``: twice the realistic noise); the file records that name.  Without it the
+    ``sensors`` default applies (``DECK_LANDING_SENSORS``) and the file records
+    :func:`agents.model_metadata.sensing_profile` of the config.
     """
     from tqdm import tqdm
 
     from agents.evaluation.landing import SCENARIOS, make_env_and_policy
     from agents.model_metadata import sensing_profile
+    from agents.scenario_sampler import SENSING_PROFILES
     from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     settings = settings or LookaheadSettings()
-    env, _ = make_env_and_policy("land-now", scenario, estimator or SCENARIOS[scenario].estimator)
+    overrides: dict[str, Any] = {}
+    if sensing is not None:
+        require_choice("sensing", sensing, tuple(SENSING_PROFILES))
+        # a profile without a ``sensors`` bundle is ideal sensing plus its overrides, whatever
+        # DECK_LANDING_SENSORS says
+        overrides = {"sensors": "ideal", **SENSING_PROFILES[sensing]}
+    env, _ = make_env_and_policy(
+        "land-now",
+        scenario,
+        estimator or SCENARIOS[scenario].estimator,
+        extra_overrides=overrides,
+    )
     wrapper = LookaheadTimingWrapper(env, forecast=forecast, **asdict(settings))
     base = wrapper.unwrapped
     rows: dict[str, list[Any]] = {key: [] for key in TRANSITION_KEYS + DRAW_KEYS}
@@ -457,7 +475,7 @@ def collect_transitions(
                 settings=json.dumps(settings.signature()),
                 scenario=scenario,
                 estimator=base.config.estimation.observed,
-                sensing=sensing_profile(base.config),
+                sensing=sensing or sensing_profile(base.config),
                 **{key: np.asarray(value) for key, value in rows.items()},
             )
     finally:
@@ -709,6 +727,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="the estimate observed (default: the scenario's; the bench's policies observe tight)",
     )
+    collect.add_argument(
+        "--sensors",
+        default=None,
+        help="a sensing profile by name (ideal, realistic, realistic-2x, ...; default: the "
+        "sensors default, DECK_LANDING_SENSORS)",
+    )
     collect.add_argument("--out", required=True, help="the .npz to write")
     args = parser.parse_args(argv)
     if args.command == "collect":
@@ -719,7 +743,9 @@ def main(argv: list[str] | None = None) -> int:
             airframe_in_trim=args.airframe_in_trim,
         )
         seeds = list(range(args.seed, args.seed + args.episodes))
-        path = collect_transitions(args.scenario, seeds, args.out, settings, args.estimator)
+        path = collect_transitions(
+            args.scenario, seeds, args.out, settings, args.estimator, sensing=args.sensors
+        )
         print(f"wrote {path}")
     return 0
 

@@ -171,14 +171,25 @@ def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path
         sign_card(load_train_config(config_path), load_transitions([ship, mixed]))
 
 
-def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws(
+def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_a_named_profile(
     small_forecast, tmp_path
 ) -> None:
     settings = LookaheadSettings(draws=3, check_every_s=1.0)
     path = collect_transitions(
-        "ship-ss4", [5000], tmp_path / "t.npz", settings, progress=False, forecast=small_forecast
+        "ship-ss4",
+        [5000],
+        tmp_path / "t.npz",
+        settings,
+        progress=False,
+        forecast=small_forecast,
+        sensing="realistic-2x",
     )
     recorded = load_transitions([path])
+    # the records say the profile they were flown under, by its name
+    assert set(recorded["sensing"].tolist()) == {"realistic-2x"}
+    with pytest.raises(ConfigError) as error:
+        collect_transitions("ship-ss4", [5000], tmp_path / "x.npz", settings, sensing="noisy")
+    assert error.value.key == "sensing" and "realistic-2x" in str(error.value)
     rebuilt = load_transitions([path], settings)  # the file's own look-ahead: as recorded
     assert np.array_equal(rebuilt["observation"], recorded["observation"])
     tried = np.flatnonzero(recorded["check_tried"])
