@@ -193,8 +193,11 @@ def train_offline(
     started = time.perf_counter()
 
     scenarios = sorted(set(data["scenario"].tolist()))
-    #: each scenario's held-out successes after each round (summed over the folds)
-    held_by_scenario = {name: np.zeros(rounds) for name in scenarios}
+    #: the records' groups the replay is also scored by: each scenario's, each sensing
+    #: profile's (records of several profiles: ideal, realistic, twice realistic)
+    groups = {key: sorted(set(data[key].tolist())) for key in ("scenario", "sensing")}
+    #: each group's held-out successes after each round (summed over the folds)
+    held_by = {key: {name: np.zeros(rounds) for name in names} for key, names in groups.items()}
 
     def fit(
         train_mask: np.ndarray, held_mask: np.ndarray | None, rounds: int, logs: Path
@@ -228,12 +231,13 @@ def train_offline(
             if held_mask is not None:
                 held_rate, _ = replay_success(_subset(data, held_mask), greedy(model))
                 row.append(round(held_rate, 4))
-                for name in scenarios:
-                    mask = held_mask & (data["scenario"] == name)
-                    if mask.any():
-                        rate, chosen_checks = replay_success(_subset(data, mask), greedy(model))
-                        held_by_scenario[name][len(history)] += rate * len(chosen_checks)
-                        model.logger.record(f"replay/heldout_success_{name}", rate)
+                for key, names in groups.items():
+                    for name in names:
+                        mask = held_mask & (data[key] == name)
+                        if mask.any():
+                            rate, chosen_checks = replay_success(_subset(data, mask), greedy(model))
+                            held_by[key][name][len(history)] += rate * len(chosen_checks)
+                            model.logger.record(f"replay/heldout_success_{name}", rate)
                 model.logger.record("replay/heldout_success", held_rate)
                 if held_rate > best and not cross_validate:
                     best = held_rate
@@ -271,8 +275,8 @@ def train_offline(
         held_count = len(np.unique(data["episode"][held_mask]))
     model.save(out / "timing_dqn_final.zip")
 
-    def _held_count(name: str) -> int:
-        return len(np.unique(held["episode"][held["scenario"] == name]))
+    def _held_count(name: str, key: str = "scenario") -> int:
+        return len(np.unique(held["episode"][held[key] == name]))
 
     card = sign_card(config, data, offline.get("scenario"))
     per_scenario = {
@@ -303,14 +307,18 @@ def train_offline(
         "gradient_steps": int(history[-1][0]),
         "wall_time_s": round(time.perf_counter() - started, 1),
         "best_heldout_replay": list(best),
-        # the chosen round's held-out replay, each scenario's own (its episodes in brackets)
-        "best_heldout_replay_by_scenario": {
-            name: [
-                round(float(held_by_scenario[name][chosen]) / _held_count(name), 4),
-                _held_count(name),
-            ]
-            for name in scenarios
-            if _held_count(name)
+        # the chosen round's held-out replay, each scenario's and each sensing profile's own
+        # (its episodes in brackets)
+        **{
+            f"best_heldout_replay_by_{key}": {
+                name: [
+                    round(float(held_by[key][name][chosen]) / _held_count(name, key), 4),
+                    _held_count(name, key),
+                ]
+                for name in names
+                if _held_count(name, key)
+            }
+            for key, names in groups.items()
         },
         "baselines_heldout_replay_by_scenario": {
             name: {

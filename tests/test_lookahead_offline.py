@@ -319,11 +319,15 @@ def test_an_episode_seed_recorded_in_two_files_is_refused(tmp_path) -> None:
     assert error.value.key == "data" and "seed 4" in str(error.value)
 
 
-def test_a_fit_on_two_scenarios_reports_each_ones_held_out_replay(tmp_path) -> None:
+def test_a_fit_on_two_scenarios_reports_each_ones_and_each_sensing_profiles_replay(
+    tmp_path,
+) -> None:
     settings = LookaheadSettings()
     rng = np.random.default_rng(5)
-    a = _episodes(tmp_path / "a.npz", range(60), settings, rng)
-    b = _episodes(tmp_path / "b.npz", range(100, 140), settings, rng, "ship-ss6")
+    a = _episodes(tmp_path / "a.npz", range(60), settings, rng, "ship-ss5", "tight")
+    b = _episodes(
+        tmp_path / "b.npz", range(100, 140), settings, rng, "ship-ss6", "tight", "realistic-2x"
+    )
     data = load_transitions([a, b])
     assert set(data["scenario"][data["episode"] < 100]) == {"ship-ss5"}
     assert set(data["scenario"][data["episode"] >= 100]) == {"ship-ss6"}
@@ -337,6 +341,12 @@ def test_a_fit_on_two_scenarios_reports_each_ones_held_out_replay(tmp_path) -> N
     # the overall held-out replay is the episodes' mean of the scenarios' own
     overall = (by_scenario["ship-ss5"][0] * 60 + by_scenario["ship-ss6"][0] * 40) / 100
     assert summary["best_heldout_replay"][0] == pytest.approx(overall, abs=1e-3)
+    # here each scenario has one profile: the same figures by profile
+    by_sensing = summary["best_heldout_replay_by_sensing"]
+    assert by_sensing == {
+        "realistic": by_scenario["ship-ss5"],
+        "realistic-2x": by_scenario["ship-ss6"],
+    }
     baselines = summary["baselines_heldout_replay_by_scenario"]["ship-ss6"]
     held_b = load_transitions([b])
     at_once, _ = replay_success(held_b, lambda obs: np.ones(len(obs), int))
@@ -345,6 +355,7 @@ def test_a_fit_on_two_scenarios_reports_each_ones_held_out_replay(tmp_path) -> N
 
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and "60 of ship-ss5, 40 of ship-ss6" in card.note
+    assert card.sensing == ["realistic", "realistic-2x"]
 
 
 def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> None:
