@@ -26,10 +26,13 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_look
 
 def _config(draws: int) -> dict:
     """The shipped offline YAML, its look-ahead of ``draws`` and of nominal airframes (the
-    synthetic episodes' own)."""
+    synthetic episodes' own), one DQN rather than its ensemble (fast; the ensemble has its
+    own test)."""
     config = yaml.safe_load(CONFIG.read_text())
     config["deck_landing"]["lookahead"]["draws"] = draws
     config["deck_landing"]["lookahead"].pop("airframe_in_trim", None)
+    assert config["offline"]["ensemble"] > 1
+    config["offline"]["ensemble"] = 1
     return config
 
 
@@ -285,6 +288,52 @@ def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_pa
     with pytest.raises(ConfigError) as error:
         train_offline(config_path, [data_path], tmp_path / "bad", progress=False)
     assert error.value.key == "offline.cross_validate"
+
+
+def test_an_ensemble_is_scored_by_its_mean_q_and_shipped_as_one_distilled_dqn(tmp_path) -> None:
+    from stable_baselines3 import DQN
+
+    from agents.lookahead_training import greedy, mean_q
+
+    settings = LookaheadSettings()
+    data_path = _episodes(tmp_path / "d.npz", range(60), settings, np.random.default_rng(8))
+    config = _config(draws=settings.draws)
+    config["offline"].update(
+        rounds=2, gradient_steps=400, holdout_every=3, cross_validate=True, ensemble=3
+    )
+    config_path = tmp_path / "offline.yaml"
+    config_path.write_text(yaml.safe_dump(config))
+    summary = train_offline(config_path, [data_path], tmp_path / "out", progress=False)
+    assert summary["ensemble"] == 3
+    data = load_transitions([data_path])
+    members = [
+        DQN.load(tmp_path / "out" / "best_model_members" / f"member{k}.zip", device="cpu")
+        for k in range(3)
+    ]
+    # three members of distinct seeds: distinct Q-values, and the ensemble's is their mean
+    q = [mean_q(member, data["observation"]) for member in members]
+    assert not np.allclose(q[0], q[1])
+    np.testing.assert_allclose(mean_q(members, data["observation"]), np.mean(q, axis=0), 1e-5)
+    assert summary["chosen_model_replay_all_episodes"] == pytest.approx(
+        replay_success(data, greedy(members))[0], abs=1e-4
+    )
+    # the one DQN shipped decides as the ensemble on (nearly) every recorded observation
+    assert summary["distilled_agreement"]["best_model.zip"] >= 0.98
+    shipped = DQN.load(tmp_path / "out" / "best_model.zip", device="cpu")
+    agree = greedy(shipped)(data["observation"]) == greedy(members)(data["observation"])
+    assert agree.mean() >= 0.98
+    assert (
+        abs(
+            summary["saved_model_replay_all_episodes"] - summary["chosen_model_replay_all_episodes"]
+        )
+        <= 0.05
+    )
+    for bad in (0, 2.5, True):
+        config["offline"]["ensemble"] = bad
+        config_path.write_text(yaml.safe_dump(config))
+        with pytest.raises(ConfigError) as error:
+            train_offline(config_path, [data_path], tmp_path / "bad", progress=False)
+        assert error.value.key == "offline.ensemble"
 
 
 def test_a_fit_asked_for_airframes_in_trim_takes_only_records_made_so_and_signs_it(
