@@ -405,9 +405,10 @@ def collect_transitions(
     rewritten after every episode (an interrupted run keeps what it has).
 
     ``sensing`` names a profile of :data:`agents.scenario_sampler.SENSING_PROFILES`
-    (``realistic-2x``: twice the realistic noise); the file records that name.  Without it the
-    ``sensors`` default applies (``DECK_LANDING_SENSORS``) and the file records
-    :func:`agents.model_metadata.sensing_profile` of the config.
+    (``realistic-2x``: twice the realistic noise); the file records that name (with the
+    scenario's lens where it is not the standard one: ``realistic-2x,lens=wide``).  Without it
+    the ``sensors`` default applies (``DECK_LANDING_SENSORS``); the file records
+    :func:`agents.model_metadata.sensing_profile` either way.
     """
     from tqdm import tqdm
 
@@ -475,7 +476,7 @@ def collect_transitions(
                 settings=json.dumps(settings.signature()),
                 scenario=scenario,
                 estimator=base.config.estimation.observed,
-                sensing=sensing or sensing_profile(base.config),
+                sensing=sensing_profile(base.config, sensing),
                 **{key: np.asarray(value) for key, value in rows.items()},
             )
     finally:

@@ -83,18 +83,20 @@ class ModelMetadata:
 
 
 # ------------------------------------------------------------------------------ signatures
-def sensing_profile(config: Any) -> str:
+def sensing_profile(config: Any, profile: str | None = None) -> str:
     """The sensing profile of a ``DeckLandingConfig``.
 
     A config under ``sensors: realistic`` (or another named bundle) has that name; under
     ``sensors: ideal``, ``ideal`` when no sensor noise is configured, else the settings that
-    depart from ideal (``tof.noise=vl53l1x``, ...).  A lens other than the standard one is
-    named after it (``realistic,lens=wide``): the camera sees another field at another
-    resolution.
+    depart from ideal (``tof.noise=vl53l1x``, ...).  ``profile`` names the profile the config
+    was built from where it has a name of its own (``realistic-2x``, a bundle with its noise
+    doubled: :data:`agents.scenario_sampler.SENSING_PROFILES`).  A lens other than the
+    standard one is named after it (``realistic,lens=wide``): the camera sees another field
+    at another resolution.
     """
     lens = getattr(config, "lens", "standard")
     suffix = "" if lens == "standard" else f",lens={lens}"
-    return _sensing_without_lens(config) + suffix
+    return (profile or _sensing_without_lens(config)) + suffix
 
 
 def _sensing_without_lens(config: Any) -> str:

@@ -130,6 +130,9 @@ def test_a_model_card_names_a_lens_other_than_the_standard_one_in_its_sensing() 
     assert sensing_profile(load_config("ship-ss5", {"tof.noise": "vl53l1x"})) == (
         "tof.noise=vl53l1x,lens=wide"
     )
+    # a profile named by the caller keeps the lens it is flown with
+    assert sensing_profile(ship, "realistic-2x") == "realistic-2x,lens=wide"
+    assert sensing_profile(load_config("ship-ss4"), "realistic-2x") == "realistic-2x"
 
 
 @settings(max_examples=60, deadline=None)
