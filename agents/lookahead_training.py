@@ -21,6 +21,7 @@ that loads it is unchanged.
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -345,6 +346,9 @@ def train_offline(
             np.ones(len(data["episode"]), bool), None, chosen + 1, out / "tb" / "all"
         )
         save(ensemble, out / "best_model.zip")
+        # the final model is the chosen one: copied, not distilled again
+        shutil.copyfile(out / "best_model.zip", out / "timing_dqn_final.zip")
+        agreement["timing_dqn_final.zip"] = agreement["best_model.zip"]
         history = [[(r + 1) * steps, round(float(v), 4)] for r, v in enumerate(scores)]
         best = (round(float(scores[chosen]), 4), (chosen + 1) * steps)
         held = data
@@ -357,7 +361,7 @@ def train_offline(
         best = (float(rates[chosen]), int(history[chosen][0]))
         held = _subset(data, held_mask)
         held_count = len(np.unique(data["episode"][held_mask]))
-    save(ensemble, out / "timing_dqn_final.zip")
+        save(ensemble, out / "timing_dqn_final.zip")
 
     def _held_count(name: str, key: str = "scenario") -> int:
         return len(np.unique(held["episode"][held[key] == name]))
