@@ -10,14 +10,13 @@ given targets in points below the bound, the line a policy must reach::
     python -m agents.evaluation.success_plot RUN_DIR_OR_JSONL ... --out docs/img/figure.png \\
         --target ship-ss4=2 ship-ss5=4 ship-ss6=4
 
-A directory stands for every ``landing_*.jsonl`` in it; the same policy and scenario from two
-files is an error that names both (pass the files wanted instead of the directory).
+A directory stands for every ``landing_*.jsonl`` in it (:mod:`agents.evaluation.episode_files`
+reads them); the same policy and scenario from two files is an error that names both.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.evaluation.episode_files import load_outcomes
 from agents.evaluation.summary import wilson_interval
 from landing_env.errors import ConfigError
 
@@ -51,52 +51,12 @@ class Cell:
         return wilson_interval(self.successes, self.episodes)
 
 
-def _jsonl_files(paths: Sequence[Path]) -> list[Path]:
-    files: list[Path] = []
-    for path in paths:
-        if path.is_dir():
-            found = sorted(path.glob("landing_*.jsonl"))
-            if not found:
-                raise ConfigError("runs", f"{path} holds no landing_*.jsonl file")
-            files.extend(found)
-        elif path.is_file():
-            files.append(path)
-        else:
-            raise ConfigError("runs", f"{path} is neither a run directory nor a .jsonl file")
-    return files
-
-
 def load_cells(paths: Sequence[Path]) -> list[Cell]:
-    """Every (scenario, policy) in the runs' episode files, in the order first met."""
-    cells: dict[tuple[str, str], Cell] = {}
-    for file in _jsonl_files(paths):
-        outcomes: dict[tuple[str, str], dict[int, bool]] = {}
-        for number, line in enumerate(file.read_text().splitlines(), start=1):
-            if not line.strip():
-                continue
-            try:
-                record = json.loads(line)
-                key = (str(record["scenario"]), str(record["policy"]))
-                if not isinstance(record["success"], bool):
-                    raise TypeError(f"success is {record['success']!r}, not true or false")
-                outcomes.setdefault(key, {})[int(record["seed"])] = record["success"]
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-                raise ConfigError(
-                    "runs",
-                    f"{file}:{number} is not an episode record with scenario, policy, seed and "
-                    f"success ({exc})",
-                ) from exc
-        for key, by_seed in outcomes.items():
-            if key in cells:
-                raise ConfigError(
-                    "runs",
-                    f"policy {key[1]!r} on {key[0]!r} is in both {cells[key].source} and {file}; "
-                    "pass only one of them",
-                )
-            cells[key] = Cell(key[0], key[1], file, sum(by_seed.values()), len(by_seed))
-    if not cells:
-        raise ConfigError("runs", "the files hold no episodes")
-    return list(cells.values())
+    """Every (scenario, policy) in the runs' episode files, in the order first met
+    (:func:`agents.evaluation.episode_files.load_outcomes`)."""
+    return [
+        Cell(o.scenario, o.policy, o.source, o.successes, o.episodes) for o in load_outcomes(paths)
+    ]
 
 
 def parse_targets(items: Sequence[str]) -> dict[str, float]:
