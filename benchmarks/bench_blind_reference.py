@@ -27,6 +27,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -40,10 +42,13 @@ from landing_env.config import SENSORS_ENV
 SUFFIX = "+xy-truth"
 
 
-def aid_tracker(env: Any) -> None:
-    """Give the deck tracker of the guidance the true horizontal tag position whenever the
-    observation does not measure it (``env``: the unwrapped timing task; the look-ahead's
-    restored copies are read through it, as they replace its state in place)."""
+@contextmanager
+def aided_tracker(env: Any) -> Iterator[None]:
+    """While inside, the deck tracker of the guidance gets the true horizontal tag position
+    whenever the observation does not measure it (``env``: the unwrapped timing task; the
+    look-ahead's restored copies are read through it, as they replace its state in place).
+    The tracker's own ``measure`` is put back on leaving, so that each run aids only its own
+    environment."""
     from landing_env.envs.guidance import DeckTracker
 
     measure = DeckTracker.measure
@@ -55,6 +60,10 @@ def aid_tracker(env: Any) -> None:
         return measured
 
     DeckTracker.measure = staticmethod(aided)  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        DeckTracker.measure = staticmethod(measure)  # type: ignore[method-assign]
 
 
 def run(
@@ -68,18 +77,20 @@ def run(
     env, actor = make_env_and_policy(
         policy, scenario, SCENARIOS[scenario].estimator, allow_mismatch=allow_mismatch
     )
-    aid_tracker(env.unwrapped)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"landing_{scenario}_{policy}{SUFFIX}.jsonl"
-    landed = 0
-    with path.open("a") as sink:
-        bar = tqdm(range(seed, seed + episodes), desc=f"{policy}{SUFFIX} @ {scenario}")
-        for episode_seed in bar:
-            result: EpisodeResult = run_episode(env, actor, episode_seed, policy + SUFFIX, scenario)
-            sink.write(json.dumps(result.to_json()) + "\n")
-            sink.flush()
-            landed += int(result.success)
-            bar.set_postfix(success=f"{landed}/{episode_seed - seed + 1}")
+    with aided_tracker(env.unwrapped):
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / f"landing_{scenario}_{policy}{SUFFIX}.jsonl"
+        landed = 0
+        with path.open("a") as sink:
+            bar = tqdm(range(seed, seed + episodes), desc=f"{policy}{SUFFIX} @ {scenario}")
+            for episode_seed in bar:
+                result: EpisodeResult = run_episode(
+                    env, actor, episode_seed, policy + SUFFIX, scenario
+                )
+                sink.write(json.dumps(result.to_json()) + "\n")
+                sink.flush()
+                landed += int(result.success)
+                bar.set_postfix(success=f"{landed}/{episode_seed - seed + 1}")
     env.close()
     return path
 
