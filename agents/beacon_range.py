@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from agents.policies import normalise_setpoint
+from agents.align_descend import normalise_setpoint
 from agents.svgs_routine import AttitudeFilter, levelled_offset
 from landing_env.config import ActionConfig
-from landing_env.errors import require_range
+from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 
 
@@ -236,8 +236,6 @@ def make_beacon_range(env: Any, config: BeaconRangeConfig | None = None) -> Beac
     """The baseline for a ``DeckLanding-v0`` environment with ``estimation.observed: beacon``."""
     base = env.unwrapped
     if base.config.estimation.observed != "beacon":
-        from landing_env.errors import ConfigError
-
         raise ConfigError(
             "estimation.observed",
             f"{base.config.estimation.observed!r}: beacon-range needs 'beacon' (bearing + range)",

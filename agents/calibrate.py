@@ -33,6 +33,7 @@ from rich.table import Table
 from tqdm import tqdm
 
 from agents.cli_args import add_set_argument, parse_overrides, positive_int
+from agents.evaluation.runner import map_tasks
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
@@ -263,7 +264,6 @@ def run_calibration(
     rig = ChessboardRigConfig(views=views)
     if workers > 1 or address is not None:
         # the two calibrations side by side on Ray (the same generators: the same results)
-        from agents.evaluation.runner import map_tasks
 
         intrinsics, tof = map_tasks(
             _calibration_part,

@@ -12,12 +12,17 @@ import sys
 from pathlib import Path
 
 from agents.calibrate import add_calibrate_parser
+from agents.catalogue import add_list_parser, add_model_parser
 from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, positive_int
+from agents.demo import run_demo
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.approach import add_approach_parser
+from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.landing import add_landing_parser
-from agents.training import add_train_parser
-from agents.tune import add_tune_parser
+from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
+from agents.timing.training import add_train_parser
+from agents.timing.tune import add_tune_parser
+from landing_env.config import SENSOR_SETS, SENSORS_ENV
 
 
 class _Parser(argparse.ArgumentParser):
@@ -29,7 +34,6 @@ class _Parser(argparse.ArgumentParser):
 
 # ---------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
-    from agents.demo import run_demo
 
     log = run_demo(
         config=args.config,
@@ -62,7 +66,6 @@ def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
 
 # ------------------------------------------------------------------ evaluate estimators/sweep
 def _evaluate_estimators(args: argparse.Namespace) -> int:
-    from agents.evaluation.estimators import RunSettings, evaluate_estimators
 
     settings = RunSettings(
         scenario=args.scenario,
@@ -85,7 +88,6 @@ def _evaluate_estimators(args: argparse.Namespace) -> int:
 
 
 def _evaluate_sweep(args: argparse.Namespace) -> int:
-    from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
 
     settings = SweepSettings(
         scenario=args.scenario,
@@ -156,7 +158,8 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="deck-landing",
-        description="Quadrotor landing on a moving Stewart-platform deck.",
+        description="Quadrotor landing on a moving deck: a Stewart-platform bench or a ship's "
+        "helideck; camera+ToF deck-pose estimators and landing policies.",
     )
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -167,13 +170,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_parser(sub)
     add_tune_parser(sub)
     add_calibrate_parser(sub)
+    add_list_parser(sub)
+    add_model_parser(sub)
     _add_sensors_option(parser)
     return parser
 
 
 def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
     """``--sensors ideal|realistic`` on every command (the config key ``sensors``)."""
-    from landing_env.config import SENSOR_SETS
 
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     if not actions:
@@ -204,7 +208,6 @@ def main(argv: list[str] | None = None) -> int:
         if not getattr(args, "sensors", None):
             return int(args.func(args))
         # the default of the config key ``sensors`` here and in worker processes, for this run
-        from landing_env.config import SENSORS_ENV
 
         before = os.environ.get(SENSORS_ENV)
         os.environ[SENSORS_ENV] = args.sensors

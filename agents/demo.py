@@ -18,8 +18,13 @@ from rich.table import Table
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.policies import AlignDescendPolicy
+from agents.align_descend import AlignDescendPolicy
+from agents.evaluation.landing import HELD_OUT_SEED
+from agents.policy_registry import make_env_and_policy
+from agents.timing.policies import shipped_timing_model
+from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import SCENARIOS
 
 
 @dataclass
@@ -45,7 +50,10 @@ class EpisodeLog:
         self.pose_observed.append(observation["deck_pose"].astype(float))
         self.pose_valid.append(bool(observation["deck_pose_valid"][0]))
         for name, estimate in info["estimates"].items():
-            self.estimates.setdefault(name, []).append(np.asarray(estimate["pose"], dtype=float))
+            pose = np.asarray(estimate["pose"], dtype=float)
+            if not estimate["valid"]:
+                pose = np.full(6, np.nan)  # info holds zeros for an invalid estimate
+            self.estimates.setdefault(name, []).append(pose)
 
 
 def run_episode(
@@ -207,7 +215,7 @@ def run_demo(
 
 
 # ---------------------------------------------------------------------------------------------
-# Part 2: the trained landing-timing policy on a sea-state deck (see agents/policies.py)
+# Part 2: the trained landing-timing policy on a sea-state deck (see agents/timing/policies.py)
 @dataclass
 class TimingDemoLog:
     """Every control period of a DeckLandingTiming-v0 episode, and its end."""
@@ -261,9 +269,6 @@ def run_timing_demo(
     ``timing_camera.mp4`` and ``timing_trajectory.png``.  The seed is offset into the
     held-out range, so that the episode is not one the policy was trained on.
     """
-    from agents.evaluation.landing import HELD_OUT_SEED, SCENARIOS, make_env_and_policy
-    from agents.policies import shipped_timing_model
-    from landing_env.config import load_config
 
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)

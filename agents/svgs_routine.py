@@ -14,12 +14,12 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
   estimate, go back to the last position with a trusted estimate, horizontally first (at the
   current height), then in 3D; still nothing there: ``scan`` again from that position.
 * ``hold`` / ``land``: the final approach through the timing task's machinery
-  (:class:`~landing_env.envs.timing.DeckGuidance` holds at the timing task's hold height with
-  the same :class:`~landing_env.envs.timing.DeckMotionHistory`): if the trained timing model
+  (:class:`~landing_env.timing.env.DeckGuidance` holds at the timing task's hold height with
+  the same :class:`~landing_env.timing.env.DeckMotionHistory`): if the trained timing model
   ``agents/models/timing_dqn.zip`` is installed it chooses when to commit (observation built
-  by :class:`~landing_env.envs.timing.TimingObservationLayout`, one decision per
+  by :class:`~landing_env.timing.env.TimingObservationLayout`, one decision per
   ``steps_per_decision`` periods, forced at ``wait_limit_s``), otherwise the quiescent
-  heuristic (:func:`agents.policies.predict_calm`) does; ``land`` is
+  heuristic (:func:`agents.timing.policies.predict_calm`) does; ``land`` is
   ``DeckGuidance.descend`` to touchdown.  ``policy.timing_source`` says which.
 
 The SVGS offset manoeuvre (Algorithm 5) moves the drone off its beacon so as not to land on
@@ -43,24 +43,18 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from agents.policies import (
-    SHIPPED_TIMING_MODEL,
-    CalmConfig,
-    TrainedTimingPolicy,
-    normalise_setpoint,
-    predict_calm,
-)
+from agents.align_descend import normalise_setpoint
+from agents.calm_window import CalmConfig, predict_calm
+from agents.timing.cards import observation_signature
+from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
 from landing_env.config import ActionConfig
-from landing_env.envs.timing import (
-    DeckGuidance,
-    DeckMotionHistory,
-    GuidanceGains,
-    TimingConfig,
-    TimingObservationLayout,
-)
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.timing.config import TimingConfig
+from landing_env.timing.guidance import DeckGuidance, GuidanceGains
+from landing_env.timing.history import DeckMotionHistory
+from landing_env.timing.layout import TimingObservationLayout
 
 GRAVITY = 9.81
 
@@ -322,8 +316,6 @@ class SvgsRoutinePolicy:
         self.layout = TimingObservationLayout(n_history, t.hold_height_m)
         self.timing_model = _load_timing_model(c) if timing_model == "auto" else timing_model
         if isinstance(self.timing_model, TrainedTimingPolicy):
-            from agents.model_metadata import observation_signature
-
             self.timing_model.check_observation(observation_signature(t, 1.0 / dt))
         #: what chooses the moment of the final descent
         self.timing_source = self.timing_model.name if self.timing_model else "quiescent"

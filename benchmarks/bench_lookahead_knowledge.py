@@ -3,17 +3,17 @@
     python -m benchmarks.bench_lookahead_knowledge --data FILE.npz [--episodes N] [--draws D]
         [--variants deck-oracle forecast onboard] [--onboard KEY=VALUE ...] [--out FILE.npz]
 
-Replays recorded look-ahead episodes (``python -m agents.lookahead collect``; the drone waits
+Replays recorded look-ahead episodes (``python -m agents.timing.lookahead collect``; the drone waits
 through every check) and, at each recorded check, tries the commit now again in ``draws``
 futures of other look-aheads, the gusts' and the sensors' draws shared (the same seeds)
 with the recorded one (:data:`VARIANTS`):
 
 * ``deck-oracle``: the deck's true future and the true present (drone, gust, airframe), as
-  :class:`agents.oracle.DeckOracleTimingPolicy`;
+  :class:`agents.timing.oracle.DeckOracleTimingPolicy`;
 * ``forecast``: the ship's HMS forecast of the deck, the true present, as ``deck-forecast``
-  (:class:`agents.deck_forecast.DeckForecastTimingPolicy`);
+  (:class:`agents.timing.deck_forecast.DeckForecastTimingPolicy`);
 * ``onboard``: the drone's own look-ahead with ``--onboard``'s changes to its
-  :class:`~agents.deck_forecast.OnboardModelConfig` (none: the recorded one, again);
+  :class:`~agents.timing.deck_forecast.OnboardModelConfig` (none: the recorded one, again);
 * ``recorded``, always: the drone's own look-ahead as recorded (its first ``draws`` draws).
 
 For each it prints the ROC AUC of the share of draws landing with the margin and of the
@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.lookahead import LookaheadSettings, check_features, recorded_tries
-from agents.oracle import TriedCommit
+from agents.timing.lookahead import LookaheadSettings, check_features, recorded_tries
+from agents.timing.oracle import TriedCommit
 from benchmarks.bench_ship_forecast_labels import auc
 from landing_env.errors import ConfigError
 
@@ -64,10 +64,10 @@ def replay_episode(
     own future (to compare with the record).  ``forecast``: the helideck forecast the
     recording used (default: the scenario's); ``onboard``: the ``onboard`` variant's model
     (default: :class:`OnboardModelConfig`'s, the recorded look-ahead's)."""
-    from agents.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
     from agents.evaluation.landing import SCENARIOS, make_env_and_policy
-    from agents.lookahead import in_flight
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+    from agents.timing.lookahead import in_flight
+    from agents.timing.oracle import DeckOracleTimingPolicy
     from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     unknown = sorted(set(variants) - set(VARIANTS))
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     from agents.cli_args import parse_overrides
-    from agents.deck_forecast import OnboardModelConfig
+    from agents.timing.deck_forecast import OnboardModelConfig
     from landing_env.config_loading import build_dataclass
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

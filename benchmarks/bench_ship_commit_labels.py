@@ -5,21 +5,21 @@
         [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
         [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz] [--plot FILE.png]
 
-The oracle (:mod:`agents.oracle`) tries a commit at every decision (0.1 s apart) and knows the
+The oracle (:mod:`agents.timing.oracle`) tries a commit at every decision (0.1 s apart) and knows the
 gusts and the heave to come; its lead over a policy mixes what the observation could tell and
 what no observation tells.  This benchmark separates the two:
 
 1. Seeded waiting episodes of the timing task (not the evaluation's held-out seeds); at every
-   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.hindsight`), so each
+   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.timing.hindsight`), so each
    labelled decision has the touchdown committing then would have given.
 2. Printed: the success of a commit at a labelled decision; how failures cluster in time (the
    chance that the commit ``every`` decisions later lands after one that failed, against after
    one that landed: persistent causes are in principle visible, isolated ones are luck); the
    best any commit on the labels' grid could do (the oracle on that grid); committing at once
-   (``land-now``); and the ``quiescent`` rule (:func:`agents.policies.predict_calm`) replayed
-   with its defaults and with each of a grid of its settings (:func:`agents.hindsight.replay_rule`;
+   (``land-now``); and the ``quiescent`` rule (:func:`agents.timing.policies.predict_calm`) replayed
+   with its defaults and with each of a grid of its settings (:func:`agents.timing.hindsight.replay_rule`;
    an episode without a calm decision commits at its last label), all judged by the outcome.
-3. What the observation can tell: a commit-chance model (:mod:`estimation.commit_chance`, a
+3. What the observation can tell: a commit-chance model (:mod:`agents.timing.commit_chance`, a
    logistic regression on statistics of the observed deck motion over ``--windows``) fitted on
    the labels, its held-out AUC (episodes in 5 folds), and its held-out chances replayed
    against the optimal-stopping value of waiting on.
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.calm_window import CalmConfig, predict_calm
 from agents.cli_args import add_set_argument, parse_overrides
-from agents.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
-from agents.policies import CalmConfig, predict_calm
-from estimation.commit_chance import CommitChanceModel, commit_features
+from agents.timing.commit_chance import CommitChanceModel, commit_features
+from agents.timing.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
 from estimation.optimal_stopping import StoppingValues
 
 #: the grid of the ``quiescent`` rule's settings replayed
@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> None:
     model = learned_chance(labels, layout, dt, windows)
     weights = sorted(zip(model.names, model.weights[:-1], strict=True), key=lambda r: -abs(r[1]))
     print(
-        f"the learned commit chance (estimation.commit_chance, windows {list(windows)} s): "
+        f"the learned commit chance (agents.timing.commit_chance, windows {list(windows)} s): "
         f"held-out AUC {model.metadata['heldout_auc']:.3f}; largest standardised weights: "
         + ", ".join(f"{name} {w:+.2f}" for name, w in weights[:4])
     )

@@ -1,7 +1,7 @@
 """The files of fitted estimation models: named NumPy arrays and JSON metadata in one ``.npz``.
 
 One home for how :class:`~estimation.deck_prediction.LinearTiltPredictor` and
-:class:`~estimation.commit_chance.CommitChanceModel` are written and read: compressed, no
+:class:`~agents.timing.commit_chance.CommitChanceModel` are written and read: compressed, no
 pickles (``allow_pickle=False``: a model file cannot run code), the metadata as a JSON string,
 and a malformed file reported as a ``ValueError`` that names it and what it should have been.
 """

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from estimation.atda import ATDAConfig, JointAtdaEstimator
+from estimation.beacon import BeaconConfig, BeaconEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError
 from estimation.estimator import DeckPoseEstimator, RankedEstimator
@@ -30,11 +30,9 @@ from estimation.registry import (
     WANTS_TOF_CALIBRATION,
     make_estimator,
 )
+from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, TrackedEstimator
 from estimation.types import RangeReading
-
-if TYPE_CHECKING:
-    from estimation.tof_calibration import TofCameraCalibration
 
 #: Names the host supplies (nothing in estimation/ can build the ground truth).
 HOST_SUPPLIED = ("truth",)
@@ -168,7 +166,6 @@ def _for_tag(
 def _beacon(options: EstimationOptions) -> DeckPoseEstimator:
     """The IR-LOCK-style ``beacon`` estimator: tag-centre bearing + the downward rangefinder
     (position only; its orientation is reported level, ``orientation_known = False``)."""
-    from estimation.beacon import BeaconConfig, BeaconEstimator
 
     if options.range_down is None or options.intrinsics is None:
         raise ConfigError("estimation.observed", "beacon needs the intrinsics and a rangefinder")

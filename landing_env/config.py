@@ -7,6 +7,7 @@ keys and bad values raise :class:`~landing_env.errors.ConfigError` naming the do
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +36,7 @@ from landing_env.sensors.rangefinder import RangefinderConfig
 from landing_env.sensors.tof import TofConfig
 from landing_env.stewart.kinematics import StewartGeometry
 from landing_env.stewart.motion import MotionConfig
+from landing_env.timing.config import TimingConfig
 from landing_env.vision_link import VisionLinkConfig
 
 #: Scenario and training configs shipped with the project (found as package data in a
@@ -296,7 +298,7 @@ class DeckLandingConfig:
     lens: str = "standard"
     #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
     #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
-    #: ``python -m agents.deck_predictor fit``); ``timing.tilt_model: scenario`` reads it.
+    #: ``python -m agents.timing.tilt_fit fit``); ``timing.tilt_model: scenario`` reads it.
     #: Empty: none fitted
     deck_predictor: str = ""
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
@@ -324,6 +326,8 @@ class DeckLandingConfig:
     imu: ImuConfig = field(default_factory=ImuConfig)
     #: the downward long-range rangefinder (observation ``range_down``)
     rangefinder: RangefinderConfig = field(default_factory=RangefinderConfig)
+    #: the timing task's settings (``DeckLandingTiming``: hold, descent, wave-off, observation)
+    timing: TimingConfig = field(default_factory=TimingConfig)
 
     def __post_init__(self) -> None:
         if self.vehicle and not Path(self.vehicle).expanduser().is_file():
@@ -342,6 +346,20 @@ class DeckLandingConfig:
             )
         require_choice("sensors", self.sensors, SENSOR_SETS)
         require_choice("lens", self.lens, LENS_SETS)
+
+
+def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:
+    """The most steps an episode of this config can take (``max_episode_steps``).
+
+    ``DeckLanding-v0`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
+    task decides every ``steps_per_decision`` control periods until ``wait_limit_s`` forces
+    the commit (one step).
+    """
+    sim = config.simulation
+    if timing is None:
+        return round(sim.max_episode_s * sim.env_hz)
+    decision_s = timing.steps_per_decision / sim.env_hz
+    return math.ceil(timing.wait_limit_s / decision_s - 1e-9) + 1
 
 
 def available_configs() -> list[str]:

@@ -15,6 +15,7 @@ from typing import Any, Literal, TypeVar, get_args, get_origin
 
 import numpy as np
 
+from landing_env.config_limits import check_value
 from landing_env.errors import ConfigError
 
 T = TypeVar("T")
@@ -130,7 +131,6 @@ def build_dataclass(
     :data:`~landing_env.config_limits.LIMITS`).
     """
     if check is None:
-        from landing_env.config_limits import check_value
 
         def check(key: str, value: Any) -> None:
             check_value(key, value, {})

@@ -228,7 +228,7 @@ class World:
         innovations (the present gust kept) and every sensor's noise.  The deck's motion, a
         fixed function of time since the reset, and the present state stay: a look-ahead
         from a snapshot then knows the deck's future but not the wind's (the deck oracle,
-        :mod:`agents.oracle`)."""
+        :mod:`agents.timing.oracle`)."""
         streams = rng.spawn(5)
         self.wind.redraw(streams[0])
         self.camera.rng = streams[1]
@@ -263,7 +263,7 @@ class World:
     def shift_drone(self, shift_w: np.ndarray) -> None:
         """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
         without stepping time: a look-ahead's model of where the drone is
-        (:mod:`agents.deck_forecast`).  A non-finite or misshapen shift is refused by name."""
+        (:mod:`agents.timing.deck_forecast`).  A non-finite or misshapen shift is refused by name."""
         shift = np.asarray(shift_w, dtype=float).reshape(-1)
         if shift.shape != (3,) or not np.all(np.isfinite(shift)):
             raise ValueError(f"shift_w must be 3 finite metres, got {shift_w!r}")

@@ -21,8 +21,8 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 @pytest.fixture(scope="session")
 def small_forecast():
     """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
-    from agents.deck_forecast import fit_deck_forecast
     from agents.evaluation.landing import SCENARIOS
+    from agents.timing.deck_forecast import fit_deck_forecast
     from landing_env.config import load_config
 
     motion = load_config(SCENARIOS["ship-ss4"].config).motion

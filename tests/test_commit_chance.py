@@ -1,4 +1,4 @@
-"""A commit's chance of success learned from hindsight labels (estimation.commit_chance)."""
+"""A commit's chance of success learned from hindsight labels (agents.timing.commit_chance)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from estimation.commit_chance import (
+from agents.timing.commit_chance import (
     NOW_STATISTICS,
     WINDOW_STATISTICS,
     CommitChanceModel,

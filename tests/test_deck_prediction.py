@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.deck_predictor import CHANNELS, HORIZONS_S, futures
+from agents.timing.tilt_fit import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
@@ -337,7 +337,7 @@ def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):
 
 # ------------------------------------------------------------------ the environment
 def _env(**timing):
-    from agents.hindsight import make_timing_env
+    from agents.timing.hindsight import make_timing_env
 
     return make_timing_env(
         "bench-ss4", "ideal", "truth", {f"timing.{k}": v for k, v in timing.items()}
@@ -395,8 +395,8 @@ def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
 
 
 def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_contact():
-    from landing_env.envs.guidance import GuidanceGains
-    from landing_env.envs.timing import TimingConfig
+    from landing_env.timing.config import TimingConfig
+    from landing_env.timing.guidance import GuidanceGains
 
     timed = GuidanceGains(descent_profile="timed")
     config = TimingConfig(guidance=timed, contact_window_s=[1.2, 1.5])
@@ -418,7 +418,7 @@ def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_co
 )
 def test_a_bad_contact_window_is_refused_naming_the_key(window, extra, key):
     from landing_env.config_loading import build_dataclass
-    from landing_env.envs.timing import TimingConfig
+    from landing_env.timing.config import TimingConfig
 
     data = {"guidance": {"descent_profile": "timed"}, "contact_window_s": window}
     data.update(extra)
@@ -434,7 +434,7 @@ def test_a_contact_window_needs_a_predictor():
 
 
 def test_each_commit_times_its_descent_to_meet_the_deck_when_the_predictor_prefers():
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     env = _env(contact_window_s=[1.2, 1.5], history_s=8.0)
     try:
@@ -459,7 +459,7 @@ def test_each_commit_times_its_descent_to_meet_the_deck_when_the_predictor_prefe
 
 # ------------------------------------------------------------------ the policy
 def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window():
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     env = _env()
     try:
@@ -470,7 +470,7 @@ def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window()
 
 
 def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     env = _env(history_s=8.0)
     try:
@@ -488,8 +488,8 @@ def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
 
 
 def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
-    from agents.policies import make_policy
-    from landing_env.envs.history import HISTORY_FEATURES
+    from agents.policy_registry import make_policy
+    from landing_env.timing.history import HISTORY_FEATURES
 
     env = _env(history_s=8.0)
     try:
@@ -509,7 +509,7 @@ def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted
 
 
 def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_the_wait_runs_out():
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     env = _env(history_s=8.0)
     try:
@@ -528,7 +528,7 @@ def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_
 def test_a_predictor_without_held_out_predictions_is_refused_by_the_policy_and_the_value_wave_off(
     tmp_path,
 ):
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     bare = LinearTiltPredictor.load(tilt_predictor_path("bench-ss4"))
     bare.heldout_means = np.zeros((0, 0, 2))
@@ -578,7 +578,7 @@ def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_po
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     env = gym.make(f"DeckLandingTiming-BenchSS4-v{version}")
     try:
@@ -599,8 +599,8 @@ def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_po
 
 
 def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
-    from agents.model_metadata import descent_signature
-    from landing_env.envs.guidance import GuidanceGains
+    from agents.timing.cards import descent_signature
+    from landing_env.timing.guidance import GuidanceGains
 
     gains = GuidanceGains(descent_profile="timed")
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
@@ -655,7 +655,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
     from dataclasses import fields
 
     from landing_env.config_loading import build_dataclass
-    from landing_env.envs.timing import TimingConfig
+    from landing_env.timing.config import TimingConfig
 
     numeric = [
         f.name
@@ -699,7 +699,7 @@ def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_ov
 
 
 def test_the_prediction_layout_round_trips_its_values_in_place_of_the_history():
-    from landing_env.envs.timing import TimingObservationLayout
+    from landing_env.timing.layout import TimingObservationLayout
 
     layout = TimingObservationLayout(160, 0.7, n_prediction=6)
     assert not layout.history_observed and layout.size == 6 + 9
@@ -721,7 +721,7 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.envs.history import HISTORY_FEATURES
+    from landing_env.timing.history import HISTORY_FEATURES
 
     env = gym.make("DeckLandingTiming-BenchSS5-v5", overrides={"sensors": "realistic"})
     try:
@@ -753,7 +753,7 @@ def test_the_history_reading_policies_refuse_a_prediction_observation_naming_the
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
     from landing_env.errors import ConfigError
 
     env = gym.make("DeckLandingTiming-BenchSS4-v5")
@@ -770,8 +770,8 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.envs.timing import TimingConfig
     from landing_env.errors import ConfigError
+    from landing_env.timing.config import TimingConfig
 
     with pytest.raises(ConfigError, match="observation"):
         TimingConfig(observation="chances")
@@ -780,10 +780,10 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
 
 
 def test_a_model_card_tells_the_prediction_observation_from_the_history():
-    from agents.model_metadata import observation_signature
+    from agents.timing.cards import observation_signature
     from landing_env.config_loading import build_dataclass
-    from landing_env.envs.timing import TimingConfig
     from landing_env.scenarios import bench_predictive_timing
+    from landing_env.timing.config import TimingConfig
 
     v4 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(4), "t"), 20)
     v5 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(5), "t"), 20)
@@ -821,8 +821,8 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     v4 settings) is refused naming the key; on held-out seeds it lands at least as often as
     ``land-now``, and it runs at sea state 4 and on ideal sensing without a flag."""
     from agents.evaluation.landing import evaluate_policy, make_env_and_policy
-    from agents.model_metadata import read_metadata
-    from agents.policies import shipped_timing_model
+    from agents.timing.cards import read_metadata
+    from agents.timing.policies import shipped_timing_model
     from landing_env.errors import ConfigError
 
     card = read_metadata(shipped_timing_model("dqn-predictive"))
@@ -830,7 +830,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     assert card.observation["tilt_model"] == "scenario" and card.estimator == "tight"
     # the second stage's card names its config and where it started from: the first stage's
     # final model, on the same task
-    from agents.training import load_train_config
+    from agents.timing.training import load_train_config
 
     train = Path(__file__).resolve().parent.parent / "configs" / "train"
     first = load_train_config(train / "timing_dqn_predictive.yaml")
@@ -878,7 +878,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
 def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_none_is_fitted():
     """``timing.tilt_model: scenario`` reads the config's ``deck_predictor``; a scenario that
     names none (paper-stewart) is refused naming the key and what it reads."""
-    from landing_env.envs.timing import DeckLandingTimingEnv
+    from landing_env.timing.env import DeckLandingTimingEnv
 
     loaded = {}
     for n in (3, 5):

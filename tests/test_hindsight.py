@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.hindsight import MIN_MARGIN, LabelSet, collect_labels, make_timing_env, replay_rule
+from agents.timing.hindsight import (
+    MIN_MARGIN,
+    LabelSet,
+    collect_labels,
+    make_timing_env,
+    replay_rule,
+)
 
 
 def test_a_hindsight_label_is_the_touchdown_that_committing_then_gives(tmp_path) -> None:

@@ -122,7 +122,7 @@ def test_a_wide_lens_ship_episode_runs_to_an_outcome_with_every_observation_in_i
 
 
 def test_a_model_card_names_a_lens_other_than_the_standard_one_in_its_sensing() -> None:
-    from agents.model_metadata import sensing_profile
+    from agents.timing.cards import sensing_profile
 
     assert sensing_profile(load_config("bench-ss5", {"sensors": "realistic"})) == "realistic"
     ship = load_config("ship-ss5", {"sensors": "realistic"})
@@ -163,7 +163,7 @@ def test_any_camera_keeps_a_point_within_its_half_view_inside_the_image(
 def test_a_view_gate_from_a_camera_its_calibration_does_not_fit_is_refused_naming_the_file() -> (
     None
 ):
-    from landing_env.envs.timing import DeckLandingTimingEnv
+    from landing_env.timing.env import DeckLandingTimingEnv
 
     with pytest.raises(ConfigError, match=r"estimation\.intrinsics_file"):
         DeckLandingTimingEnv(

@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.lookahead import (
+from agents.timing.cards import card_for_training, env_signature, write_metadata
+from agents.timing.lookahead import (
     FAILED_SCORE,
     LOOKAHEAD_FEATURES,
     LookaheadSettings,
@@ -23,10 +24,9 @@ from agents.lookahead import (
     check_features,
     find_lookahead,
 )
-from agents.model_metadata import card_for_training, env_signature, write_metadata
-from agents.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
-from agents.policies import TrainedTimingPolicy
-from agents.training import TrainConfig, TrainSettings
+from agents.timing.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
+from agents.timing.policies import TrainedTimingPolicy
+from agents.timing.training import TrainConfig, TrainSettings
 from landing_env.errors import ConfigError
 
 SHIP_ID = "DeckLandingTiming-ShipSS4-v4"
@@ -283,7 +283,7 @@ def test_a_model_that_reads_the_hms_report_gets_it_in_the_bare_task_too(
         # a look-ahead without the report signs its card as before the report existed
         plain = LookaheadSettings(draws=1, check_every_s=0.3).signature()
         assert "hms_report_s" not in plain and "hms_report" not in plain
-        from agents.model_metadata import check_compatible, read_metadata
+        from agents.timing.cards import check_compatible, read_metadata
 
         with pytest.raises(ConfigError) as error:
             check_compatible(
@@ -323,7 +323,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
         gym.make(SHIP_ID), forecast=small_forecast, draws=2, check_every_s=0.3, min_margin=0.3
     )
     try:
-        from agents.model_metadata import check_compatible, read_metadata
+        from agents.timing.cards import check_compatible, read_metadata
 
         card = read_metadata(path)
         assert card.observation["lookahead"]["min_margin"] == 0.15  # the trained one
@@ -335,7 +335,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
 
 
 def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped_too() -> None:
-    from agents.training import load_train_config
+    from agents.timing.training import load_train_config
 
     config = load_train_config(
         Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead.yaml"

@@ -19,8 +19,9 @@ from agents.evaluation.landing import (
     run_episode,
     summarise,
 )
-from agents.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
-from agents.policies import POLICY_ENVS, make_policy
+from agents.policy_registry import make_policy
+from agents.timing.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
+from agents.timing.policies import POLICY_ENVS
 from landing_env.config import TouchdownConfig
 from landing_env.envs.snapshot import release_snapshot, restore_snapshot, save_snapshot
 
@@ -225,7 +226,7 @@ def test_redrawing_the_unknowable_future_keeps_the_deck_and_changes_the_wind() -
 
 
 def test_the_deck_oracle_looks_ahead_without_changing_the_episode() -> None:
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.oracle import DeckOracleTimingPolicy
 
     env, _ = make_env_and_policy("land-now", "bench-ss4")
     try:
@@ -246,7 +247,7 @@ def test_the_deck_oracle_looks_ahead_without_changing_the_episode() -> None:
 
 
 def test_the_deck_oracle_commits_at_its_first_check_whose_draws_land() -> None:
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.oracle import DeckOracleTimingPolicy
 
     env, oracle = make_env_and_policy("deck-oracle", "bench-ss4")
     try:
@@ -265,7 +266,7 @@ def test_the_deck_oracle_commits_at_its_first_check_whose_draws_land() -> None:
 
 
 def test_the_deck_oracle_names_a_bad_setting() -> None:
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.oracle import DeckOracleTimingPolicy
     from landing_env.errors import ConfigError
 
     env, _ = make_env_and_policy("land-now", "bench-ss4")
@@ -346,7 +347,7 @@ def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
 ) -> None:
     from types import SimpleNamespace
 
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.oracle import DeckOracleTimingPolicy
     from landing_env.errors import ConfigError
 
     timing = SimpleNamespace(steps_per_decision=2, wait_limit_s=15.0)
@@ -382,7 +383,7 @@ def test_the_deck_oracle_lowers_its_standard_towards_the_wait_limit(monkeypatch)
     of its moment."""
     from types import SimpleNamespace
 
-    from agents.oracle import DeckOracleTimingPolicy
+    from agents.timing.oracle import DeckOracleTimingPolicy
 
     timing = SimpleNamespace(steps_per_decision=2, wait_limit_s=15.0)
     env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))

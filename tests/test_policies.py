@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from agents.align_descend import AlignDescendPolicy, Phase
+from agents.calm_window import CalmConfig, predict_calm
 from agents.evaluation.landing import (
     EpisodeResult,
     make_env_and_policy,
@@ -16,17 +18,10 @@ from agents.evaluation.landing import (
     summarise,
     wilson_interval,
 )
-from agents.policies import (
-    AlignDescendPolicy,
-    CalmConfig,
-    LandNowPolicy,
-    Phase,
-    make_policy,
-    predict_calm,
-    tilt_deg,
-)
-from landing_env.envs.timing import HISTORY_FEATURES
+from agents.policy_registry import make_policy
+from agents.timing.policies import LandNowPolicy, tilt_deg
 from landing_env.errors import ConfigError
+from landing_env.timing.history import HISTORY_FEATURES
 
 DT = 0.05
 

@@ -12,7 +12,7 @@ import pytest
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
-from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
+from landing_env.timing.guidance import DeckGuidance, GuidanceGains, OwnState
 
 DT = 0.05
 
@@ -386,7 +386,7 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     ``info["hold_failed"]``; the first step, whatever its action, ends the episode with that
     outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
     from agents.evaluation.landing import make_env_and_policy, run_episode
-    from agents.hindsight import make_timing_env
+    from agents.timing.hindsight import make_timing_env
     from landing_env.scenarios import ship_flight_overrides
 
     # the v5 ids' start (level, the bench's controller limits): the deck meets the drone

@@ -9,17 +9,17 @@ import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
 from agents.evaluation.landing import RANGE_DESCENT, split_timing_overrides
-from agents.model_metadata import (
+from agents.timing.cards import (
     LEGACY_OBSERVATION,
     check_compatible,
     descent_signature,
     env_signature,
     read_metadata,
 )
-from agents.policies import SHIPPED_TIMING_MODEL
-from landing_env.envs.guidance import DeckGuidance, GuidanceGains, timed_descent_reference
+from agents.timing.policies import SHIPPED_TIMING_MODEL
 from landing_env.errors import ConfigError
 from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS
+from landing_env.timing.guidance import DeckGuidance, GuidanceGains, timed_descent_reference
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}
 
@@ -236,7 +236,7 @@ def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
 def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None:
     from pathlib import Path
 
-    from agents.training import load_train_config
+    from agents.timing.training import load_train_config
 
     train = Path(__file__).resolve().parent.parent / "configs" / "train"
     config = load_train_config(train / f"timing_dqn_{name}.yaml")
@@ -256,7 +256,7 @@ def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None
 
 def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> None:
     from agents.evaluation.landing import make_env_and_policy
-    from agents.policies import shipped_timing_model
+    from agents.timing.policies import shipped_timing_model
 
     timed = read_metadata(shipped_timing_model("dqn-timed"))
     waveoff = read_metadata(shipped_timing_model("dqn-waveoff"))

@@ -10,17 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.model_metadata import check_compatible, env_signature
+from agents.timing.cards import check_compatible, env_signature
 from estimation.frames import euler_zyx_from_matrix
-from landing_env.envs.history import HISTORY_FEATURES
-from landing_env.envs.timing import (
-    OWN_STATE_FEATURES,
-    TimingObservationLayout,
-)
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIO_IDS
 from landing_env.sea.hms_forecast import HORIZONS_S
 from landing_env.stewart.motion import sample_poses
+from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.timing.layout import OWN_STATE_FEATURES, TimingObservationLayout
 
 FORECAST_ID = "DeckLandingTiming-ShipSS5-v5"
 
@@ -131,7 +128,7 @@ def test_a_seeded_reset_repeats_the_forecast_observation(ship_env) -> None:
 
 
 def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) -> None:
-    from agents.model_metadata import ModelMetadata
+    from agents.timing.cards import ModelMetadata
 
     signature = env_signature(ship_env)
     assert signature["observation"]["observation"] == "forecast"
@@ -153,7 +150,7 @@ def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) 
 
 
 def test_the_history_rules_refuse_the_forecast_observation(ship_env) -> None:
-    from agents.policies import make_policy
+    from agents.policy_registry import make_policy
 
     for name in ("quiescent", "predictive"):
         with pytest.raises(ConfigError, match=r"timing\.observation: is 'forecast'"):

@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from agents.evaluation.landing import RANGE_DESCENT, evaluate_policy
-from agents.policies import TrainedTimingPolicy
-from agents.training import (
+from agents.timing.policies import TrainedTimingPolicy
+from agents.timing.training import (
     ENV_ID,
     SCENARIO_ENV_ID,
     ZOO_META_KEYS,
@@ -171,8 +171,8 @@ def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
     import torch
     from stable_baselines3 import DQN
 
-    from agents.policies import shipped_timing_model
-    from agents.training import _start_from
+    from agents.timing.policies import shipped_timing_model
+    from agents.timing.training import _start_from
 
     realistic = shipped_timing_model("dqn-realistic")
     trained = DQN.load(realistic, device="cpu")
@@ -215,8 +215,8 @@ def test_the_randomised_predictive_yaml_flies_v5_over_each_scenarios_own_predict
     YAML: it must stay the settings the v5 ids fly, and it draws both bench sea states, each
     reading its own predictor (``tilt_model: scenario``)."""
     from landing_env.config_loading import build_dataclass
-    from landing_env.envs.timing import TimingConfig
     from landing_env.scenarios import bench_predictive_timing
+    from landing_env.timing.config import TimingConfig
 
     config = load_train_config(CONFIG.with_name("timing_dqn_predictive_randomised.yaml"))
     written = build_dataclass(TimingConfig, config.settings.env_kwargs["timing"], "timing")

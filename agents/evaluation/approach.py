@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+import landing_env  # noqa: F401  (registers the environments)
+from agents.beacon_range import make_beacon_range
 from agents.cli_args import add_batch_arguments, positive_int
 from agents.cli_args import parse_overrides as _parse_overrides
 from agents.evaluation.landing import HELD_OUT_SEED
@@ -51,6 +53,9 @@ from agents.evaluation.summary import (
     write_summary_files,
 )
 from agents.evaluation.summary import markdown_table as summary_table
+from agents.svgs_routine import RoutineConfig, make_svgs_routine
+from estimation.registry import ESTIMATOR_NAMES
+from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_choice
 
 #: the policies of this evaluation and the estimator each reads by default
@@ -70,7 +75,6 @@ ROUTINE_TIMINGS = ("model", "quiescent")
 def routine_estimator(requested: str | None = None) -> str:
     """The estimator the SVGS routine flies with: ``requested``, else ``fused`` if the
     environment knows it, else ``atda``."""
-    from landing_env.config import ESTIMATOR_NAMES
 
     if requested:
         require_choice("routine_estimator", requested, ESTIMATOR_NAMES)
@@ -110,10 +114,6 @@ def make_env_and_policy(
     policy where it is installed, ``"quiescent"`` through the calm-window heuristic.
     """
     import gymnasium as gym
-
-    import landing_env  # noqa: F401  (registers the environments)
-    from agents.beacon_range import make_beacon_range
-    from agents.svgs_routine import RoutineConfig, make_svgs_routine
 
     require_choice("policy", policy_name, tuple(APPROACH_POLICIES))
     require_choice("routine_timing", routine_timing, ROUTINE_TIMINGS)
@@ -187,7 +187,6 @@ class _ApproachEvaluation:
     record_type = ApproachEpisode
 
     def validate(self, task: EpisodeTask) -> None:
-        from landing_env.config import load_config
 
         o = task.options
         require_choice("policy", task.policy, tuple(APPROACH_POLICIES))

@@ -25,6 +25,8 @@ import numpy as np
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
+from agents.evaluation.fusion_plot import plot_fusion_dropout
+from agents.evaluation.plots import plot_all
 from agents.evaluation.records import (  # noqa: F401  (re-exported: their home is records.py)
     AXES,
     AXIS_UNITS,
@@ -446,11 +448,7 @@ def evaluate_estimators(
     record.save(series)
     files = [table_md, table_csv, summary, series]
     if plots:
-        from agents.evaluation.plots import plot_all
-
         files += plot_all(record, out)
         if "fused" in record.estimates:
-            from agents.evaluation.fusion_plot import plot_fusion_dropout
-
             files.append(plot_fusion_dropout(record, out / "fusion_dropout.png"))
     return EvaluationResult(record, metrics, rows, out, files)

@@ -6,7 +6,7 @@ them) and writes, per scenario, a Markdown and CSV table (success rate with its 
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).  With a timing policy among
-them the ``oracle`` (:mod:`agents.oracle`, the best any timing could do on the same seeds) runs
+them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same seeds) runs
 too, unless ``--no-oracle``: each timing policy's row gives the oracle's success, the gap in
 points and how many of its failures the oracle failed as well (no timing could avoid them).
 The oracle foresees the wind's gusts and the sensors' noise as well as the deck; with
@@ -23,8 +23,9 @@ and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
 from __future__ import annotations
 
 import argparse
-import copy
 import math
+import shlex
+import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,117 +58,23 @@ from agents.evaluation.summary import (  # noqa: F401  (wilson_interval, failure
     write_summary_files,
 )
 from agents.evaluation.summary import markdown_table as summary_table
-from estimation.registry import ESTIMATOR_NAMES
-from landing_env.errors import ConfigError, require_choice
-from landing_env.scenarios import (  # noqa: F401  (FLYING_, START_OVERRIDES re-exported)
-    BENCH_TIMING,
-    FLYING_OVERRIDES,
-    PREDICTIVE_TIMING,
-    SCENARIO_TILT_MODEL,
-    SHIP_ESTIMATOR,
-    SHIP_TIMING,
-    START_OVERRIDES,
-    landing_overrides,
+from agents.policy_registry import (
+    POLICIES,
+    POLICY_NAMES,
+    default_policy,
+    env_settings,
+    make_env_and_policy,
 )
-from landing_env.stewart.motion import SeaStateConfig
-
-#: the dotted override that flies the bench's range-scheduled final descent (the descent of the
-#: ``-v0`` timing ids, which the models trained before the timed descent were trained on)
-RANGE_DESCENT: dict[str, Any] = {"timing.guidance.descent_profile": "range"}
-
-#: the timing settings a policy flies with on top of the scenario's, unless ``--set`` says
-#: otherwise: the ``predictive`` policy reads an 8 s history and flies with the wave-off by
-#: the scenario's deck-tilt predictor (landing_env.scenarios' ``PREDICTIVE_TIMING``, the
-#: settings of the v4 bench ids); ``timing-dqn-predictive`` the same, observing the
-#: predictor's chances instead of the history (the v5 bench ids)
-POLICY_TIMING: dict[str, dict[str, Any]] = {
-    "predictive": PREDICTIVE_TIMING,
-    "timing-dqn-predictive": {**PREDICTIVE_TIMING, "observation": "prediction"},
-}
+from estimation.registry import ESTIMATOR_NAMES
+from landing_env.config import TouchdownConfig, load_config
+from landing_env.errors import ConfigError
+from landing_env.scenarios import SCENARIO_IDS, SCENARIOS, TIMING_TASK
 
 #: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
 HELD_OUT_SEED = 1_000_000
 #: the estimators the observation can carry (the registry's names, ``tight`` and ``fused``
 #: included)
 ESTIMATORS = ESTIMATOR_NAMES
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A landing scenario: a shipped config and what it shows."""
-
-    config: str
-    description: str
-    #: settings of the timing task (DeckLandingTiming-v0's ``timing``) for this scenario
-    timing: dict[str, Any] = field(default_factory=dict)
-    #: the estimate in the observation unless ``--estimator`` says otherwise
-    estimator: str = "ihrcf"
-
-
-#: the bench's per-axis scale factors (SeaStateConfig.scale), printed with its scenarios
-BENCH_SCALE = ", ".join(
-    f"{axis} {factor:g}"
-    for axis, factor in zip(
-        ("surge", "sway", "heave", "roll", "pitch", "yaw"), SeaStateConfig().scale, strict=True
-    )
-)
-
-
-SCENARIOS: dict[str, Scenario] = {
-    "bench-ss3": Scenario(
-        "bench-ss3",
-        "Stewart bench, sea state 3 (Hs 0.88 m, Tp 7.5 s) scaled into the workspace: "
-        + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
-    ),
-    "bench-ss4": Scenario(
-        "bench-ss4",
-        "Stewart bench, sea state 4 (Hs 1.88 m, Tp 8.8 s) scaled into the workspace: "
-        + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
-    ),
-    "bench-ss5": Scenario(
-        "bench-ss5",
-        "Stewart bench, sea state 5 (Hs 3.25 m, Tp 9.7 s) scaled into the workspace: "
-        + BENCH_SCALE,
-        {**BENCH_TIMING, "tilt_model": SCENARIO_TILT_MODEL},
-    ),
-    "paper-stewart": Scenario("paper-stewart", "the papers' Stewart bench (sums of sinusoids)"),
-    "ship-ss3": Scenario(
-        "ship-ss3",
-        "30 m vessel's helideck, sea state 3 (Hs 0.88 m, Tp 7.5 s)",
-        SHIP_TIMING,
-        SHIP_ESTIMATOR,
-    ),
-    "ship-ss4": Scenario(
-        "ship-ss4",
-        "30 m vessel's helideck, sea state 4 (Hs 1.88 m, Tp 8.8 s)",
-        SHIP_TIMING,
-        SHIP_ESTIMATOR,
-    ),
-    "ship-ss5": Scenario(
-        "ship-ss5",
-        "30 m vessel's helideck, sea state 5 (Hs 3.25 m, Tp 9.7 s)",
-        SHIP_TIMING,
-        SHIP_ESTIMATOR,
-    ),
-    "ship-ss6": Scenario(
-        "ship-ss6",
-        "30 m vessel's helideck, sea state 6 (Hs 5.0 m, Tp 12.4 s)",
-        SHIP_TIMING,
-        SHIP_ESTIMATOR,
-    ),
-}
-
-
-def scenario_overrides(
-    scenario: str, env_id: str, estimator: str = "ihrcf", camera_mode: str = "project"
-) -> dict[str, Any]:
-    """The dotted overrides that make ``scenario``'s config a landing run of ``env_id``."""
-    require_choice("scenario", scenario, tuple(SCENARIOS))
-    require_choice("estimator", estimator, ESTIMATORS)
-    require_choice("mode", camera_mode, ("project", "render"))
-    return landing_overrides(env_id, estimator, camera_mode)
 
 
 # ------------------------------------------------------------------------------ episodes
@@ -180,72 +87,6 @@ class EpisodeResult(EpisodeRecord):
     wait_s: float = math.nan
     #: the timing task's waved-off descents (``timing.wave_off_tilt_deg``)
     wave_offs: int = 0
-
-
-def split_timing_overrides(
-    overrides: dict[str, Any], timing: dict[str, Any]
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Dotted overrides split into the world config's and the timing task's (the keys under
-    ``timing.``, e.g. ``timing.guidance.descent_profile=range``, laid over ``timing``, the
-    scenario's settings)."""
-    world: dict[str, Any] = {}
-    merged = copy.deepcopy(dict(timing))
-    for key, value in overrides.items():
-        if not key.startswith("timing."):
-            world[key] = value
-            continue
-        *parents, leaf = key.removeprefix("timing.").split(".")
-        node = merged
-        for part in parents:
-            child = node.setdefault(part, {})
-            if not isinstance(child, dict):
-                raise ConfigError(key, f"timing.{part} is a value, not a section")
-            node = child
-        node[leaf] = value
-    return world, merged
-
-
-def make_env_and_policy(
-    policy_name: str,
-    scenario: str,
-    estimator: str = "ihrcf",
-    camera_mode: str = "project",
-    model_path: str | None = None,
-    render_mode: str | None = None,
-    extra_overrides: dict[str, Any] | None = None,
-    allow_mismatch: tuple[str, ...] = (),
-) -> tuple[Any, Any]:
-    """The environment the policy acts in, configured for ``scenario``, and the policy.
-
-    ``extra_overrides`` (dotted keys) apply last, e.g. ``{"tof.noise": "vl53l1x"}``;
-    ``allow_mismatch``: fields of a trained model's card that may differ from the environment.
-    """
-    import gymnasium as gym
-
-    import landing_env  # noqa: F401  (registers the environments)
-    from agents.policies import POLICY_ENVS, make_policy
-
-    require_choice("policy", policy_name, tuple(POLICY_ENVS))
-    env_id = POLICY_ENVS[policy_name]
-    world, timing = split_timing_overrides(
-        extra_overrides or {},
-        {**SCENARIOS[scenario].timing, **POLICY_TIMING.get(policy_name, {})},
-    )
-    overrides = {**scenario_overrides(scenario, env_id, estimator, camera_mode), **world}
-    kwargs = {"timing": timing} if timing and env_id == "DeckLandingTiming-v0" else {}
-    env = gym.make(
-        env_id,
-        config=SCENARIOS[scenario].config,
-        overrides=overrides,
-        render_mode=render_mode,
-        **kwargs,
-    )
-    try:
-        policy = make_policy(policy_name, env, model_path, tuple(allow_mismatch))
-    except Exception:
-        env.close()
-        raise
-    return env, policy
 
 
 def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: str) -> EpisodeResult:
@@ -282,27 +123,16 @@ class _LandingEvaluation:
     record_type = EpisodeResult
 
     def validate(self, task: EpisodeTask) -> None:
-        from agents.policies import POLICY_ENVS
-        from landing_env.config import load_config
-        from landing_env.config_loading import build_dataclass
-        from landing_env.envs.timing import TimingConfig
-
-        require_choice("policy", task.policy, tuple(POLICY_ENVS))
         o = task.options
-        world, timing = split_timing_overrides(
-            o.get("extra_overrides") or {}, SCENARIOS[task.scenario].timing
+        env_id, overrides = env_settings(
+            task.policy,
+            task.scenario,
+            o.get("estimator"),
+            o.get("camera_mode", "project"),
+            extra_overrides=o.get("extra_overrides"),
         )
-        overrides = {
-            **scenario_overrides(
-                task.scenario,
-                POLICY_ENVS[task.policy],
-                o.get("estimator", "ihrcf"),
-                o.get("camera_mode", "project"),
-            ),
-            **world,
-        }
-        load_config(SCENARIOS[task.scenario].config, overrides)
-        build_dataclass(TimingConfig, timing, "timing")
+        scenario = SCENARIO_IDS[env_id]
+        load_config(scenario.config, {**scenario.overrides, **overrides})
 
     def make(self, task: EpisodeTask) -> tuple[Any, Any]:
         return make_env_and_policy(task.policy, task.scenario, **task.options)
@@ -318,7 +148,7 @@ LANDING_EVALUATION = _LandingEvaluation()
 def landing_task(
     policy_name: str,
     scenario: str,
-    estimator: str = "ihrcf",
+    estimator: str | None = None,
     camera_mode: str = "project",
     model_path: str | None = None,
     extra_overrides: dict[str, Any] | None = None,
@@ -350,7 +180,7 @@ def run_policy(
     scenario: str,
     episodes: int,
     first_seed: int = HELD_OUT_SEED,
-    estimator: str = "ihrcf",
+    estimator: str | None = None,
     camera_mode: str = "project",
     model_path: str | None = None,
     workers: int = 1,
@@ -409,7 +239,7 @@ class LandingSummary:
     #: this policy's failures on seeds where the oracle failed too: no timing avoids them
     unavoidable_failures: int = 0
     #: the deck oracle's success on the same seeds (it knows the deck's future, not the
-    #: wind's: :class:`agents.oracle.DeckOracleTimingPolicy`); NaN without it
+    #: wind's: :class:`agents.timing.oracle.DeckOracleTimingPolicy`); NaN without it
     deck_oracle_success_rate: float = math.nan
     #: deck oracle minus this policy, percentage points
     deck_gap_points: float = math.nan
@@ -420,13 +250,11 @@ def compare_with_oracle(
 ) -> None:
     """Fill in the oracles' columns of the timing policies' summaries (seed by seed): the
     full oracle's, and the deck oracle's where it ran."""
-    from agents.policies import POLICY_ENVS
-
     deck_oracle = results.get("deck-oracle")
     if deck_oracle:
         deck_rate = sum(r.success for r in deck_oracle) / len(deck_oracle)
         for summary in summaries:
-            if POLICY_ENVS.get(summary.policy) == POLICY_ENVS["deck-oracle"]:
+            if _is_timing(summary.policy):
                 summary.deck_oracle_success_rate = deck_rate
                 summary.deck_gap_points = 100.0 * (deck_rate - summary.success_rate)
     oracle = results.get("oracle")
@@ -435,7 +263,7 @@ def compare_with_oracle(
     oracle_success = {r.seed: r.success for r in oracle}
     rate = sum(oracle_success.values()) / len(oracle_success)
     for summary in summaries:
-        if POLICY_ENVS.get(summary.policy) != POLICY_ENVS["oracle"]:
+        if not _is_timing(summary.policy):
             continue
         summary.oracle_success_rate = rate
         summary.gap_points = 100.0 * (rate - summary.success_rate)
@@ -444,6 +272,10 @@ def compare_with_oracle(
             for r in results[summary.policy]
             if not r.success and oracle_success.get(r.seed) is False
         )
+
+
+def _is_timing(policy: str) -> bool:
+    return policy in POLICIES and POLICIES[policy].task == TIMING_TASK
 
 
 def summarise(results: list[EpisodeResult]) -> LandingSummary:
@@ -545,8 +377,6 @@ def plot_results(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from landing_env.config import TouchdownConfig
-
     limits = TouchdownConfig()
     speed_limit = limits.max_normal_speed if speed_limit is None else speed_limit
     tilt_limit_deg = limits.max_deck_tilt_deg if tilt_limit_deg is None else tilt_limit_deg
@@ -612,7 +442,7 @@ def evaluate_landing(
     episodes: int,
     out_dir: Path | None = Path("results/landing"),
     first_seed: int = HELD_OUT_SEED,
-    estimator: str = "ihrcf",
+    estimator: str | None = None,
     camera_mode: str = "project",
     model_path: str | None = None,
     workers: int = 2,
@@ -630,12 +460,9 @@ def evaluate_landing(
     With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last); with
     ``deck_oracle`` the deck oracle too (it knows the deck's future, not the wind's: costlier,
     a look-ahead of several descents at each check)."""
-    from agents.policies import POLICY_ENVS
-
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
-    timing_env = POLICY_ENVS["oracle"]
-    timing_policy = timing_env in {POLICY_ENVS[p] for p in policies}
+    timing_policy = any(_is_timing(p) for p in policies)
     for wanted, name in ((deck_oracle, "deck-oracle"), (oracle, "oracle")):
         if wanted and timing_policy and name not in policies:
             policies = [*policies, name]
@@ -668,8 +495,9 @@ def evaluate_landing(
     files: list[Path] = []
     if out_dir is not None:
         stem = f"landing_{scenario}"
+        observed = ", ".join(f"{name}: {_observed(name, scenario, estimator)}" for name in results)
         title = (
-            f"{SCENARIOS[scenario].description}; {estimator.upper()} in the observation; "
+            f"{SCENARIOS[scenario].description}; observed {observed}; "
             f"{episodes} held-out episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
         )
@@ -698,22 +526,28 @@ def evaluate_landing(
 
 
 # ------------------------------------------------------------------------------ command line
+def _observed(policy: str, scenario: str, estimator: str | None) -> str:
+    """The estimator ``policy`` observes on ``scenario`` (``estimator``, its own, the id's)."""
+    _, overrides = env_settings(policy, scenario, estimator)
+    return str(overrides.get("estimation.observed", SCENARIOS[scenario].estimator))
+
+
 def _evaluate_landing(args: argparse.Namespace) -> int:
-    import shlex
-    import sys
-
-    from agents.policies import POLICY_NAMES
-
-    policies = list(POLICY_NAMES) if args.policy == ["all"] else args.policy
     command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     for scenario in args.scenario:
+        if args.policy is None:
+            policies = [default_policy(scenario)]
+        elif args.policy == ["all"]:
+            policies = list(POLICY_NAMES)
+        else:
+            policies = args.policy
         evaluation = evaluate_landing(
             policies,
             scenario,
             args.episodes,
             Path(args.out),
             args.seed,
-            args.estimator or SCENARIOS[scenario].estimator,
+            args.estimator,
             args.mode,
             args.model,
             args.workers,
@@ -737,8 +571,6 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
 
 def add_landing_parser(evaluate_group: Any) -> None:
     """Add ``landing`` to the ``evaluate`` sub-command group."""
-    from agents.policies import POLICY_NAMES
-
     landing = evaluate_group.add_parser(
         "landing",
         help="landing policies over held-out seeds: success rate (95%% Wilson interval), "
@@ -747,9 +579,10 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument(
         "--policy",
         nargs="+",
-        required=True,
+        default=None,
         choices=[*POLICY_NAMES, "all"],
-        help="one or more policies, or all",
+        help="one or more policies, or all (default: the scenario's recommended policy, "
+        "`deck-landing list policies`)",
     )
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
     landing.add_argument("--episodes", type=positive_int, default=100)
@@ -758,11 +591,11 @@ def add_landing_parser(evaluate_group: Any) -> None:
         "--estimator",
         choices=ESTIMATORS,
         default=None,
-        help="the estimate in the observation (default: the scenario's: ihrcf on the bench, "
-        "tight on the ship decks, where a ToF ray can miss the pad)",
+        help="the estimate in the observation (default: the policy's own, else the "
+        "scenario's: ihrcf on the bench, tight on the ship decks)",
     )
     landing.add_argument("--mode", choices=("project", "render"), default="project")
-    landing.add_argument("--model", default=None, help="a trained timing model (timing-ppo)")
+    landing.add_argument("--model", default=None, help="a trained timing model (timing-model)")
     landing.add_argument("--out", default="results/landing", help="output directory")
     add_batch_arguments(landing)
     landing.add_argument(
@@ -791,6 +624,6 @@ def add_landing_parser(evaluate_group: Any) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="dotted config overrides applied last, e.g. tof.noise=vl53l1x; keys under timing. "
-        "set the timing task (e.g. timing.guidance.descent_profile=range: the v0 descent)",
+        "set the timing task (e.g. timing.guidance.descent_profile=range)",
     )
     landing.set_defaults(func=_evaluate_landing)

@@ -51,14 +51,20 @@ class EpisodeRecord:
         """Fill the touchdown metrics (or the crash contact) from the last step's ``info``."""
         touchdown = info.get("touchdown")
         if touchdown:
-            self.relative_normal_speed = float(touchdown["relative_normal_speed"])
-            self.deck_tilt_deg = float(touchdown["deck_tilt_deg"])
-            self.lateral_offset_m = float(touchdown["lateral_offset_m"])
-            self.relative_attitude_deg = float(touchdown["relative_attitude_deg"])
-            self.time_to_land_s = float(touchdown["time_s"])
-            self.bounce_height_m = float(touchdown.get("bounce_height_m", math.nan))
-            self.peak_load_g = float(touchdown.get("peak_load_g", math.nan))
-            self.deck_vertical_accel_g = float(touchdown.get("deck_vertical_accel_g", math.nan))
+
+            def number(key: str) -> float:
+                # info holds None where a metric does not exist (no NaN: Gymnasium's checks)
+                value = touchdown.get(key)
+                return math.nan if value is None else float(value)
+
+            self.relative_normal_speed = number("relative_normal_speed")
+            self.deck_tilt_deg = number("deck_tilt_deg")
+            self.lateral_offset_m = number("lateral_offset_m")
+            self.relative_attitude_deg = number("relative_attitude_deg")
+            self.time_to_land_s = number("time_s")
+            self.bounce_height_m = number("bounce_height_m")
+            self.peak_load_g = number("peak_load_g")
+            self.deck_vertical_accel_g = number("deck_vertical_accel_g")
             self.tipped_over = bool(touchdown.get("tipped_over", False))
             self.failed_checks = ";".join(touchdown["failed_checks"])
         elif "crash_contact" in info:

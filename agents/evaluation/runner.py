@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import landing_env  # noqa: F401  (registers the ids; PyBullet's banner silenced there)
 from agents.cli_args import USER_ERRORS
 from agents.evaluation.records import EpisodeRecord
+from estimation.errors import ConfigError
 
 #: calls queued per actor: the next seed waits in the actor while the current one runs, so a
 #: worker never idles for the round trip to the driver
@@ -76,8 +78,6 @@ def get_evaluation(name: str) -> Evaluation:
     target = EVALUATIONS.get(name, name)
     module, sep, attribute = target.partition(":")
     if not sep:
-        from estimation.errors import ConfigError
-
         raise ConfigError("evaluation", f"{name!r} is not one of {sorted(EVALUATIONS)}")
     return getattr(importlib.import_module(module), attribute)
 
@@ -179,8 +179,6 @@ def run_episodes(
     ``backend``: ``"auto"`` (serial for one local worker or one seed, else Ray), or force
     ``"serial"`` or ``"ray"`` (the benchmark compares them)."""
     if workers < 1:
-        from estimation.errors import ConfigError
-
         raise ConfigError("workers", f"{workers} is out of range; allowed [1, inf]")
     evaluation = get_evaluation(task.evaluation)
     evaluation.validate(task)  # fail fast, before a worker starts
@@ -248,10 +246,6 @@ class _EpisodeWorker:
     (built again only when the task changes), episodes one seed at a time."""
 
     def __init__(self) -> None:
-        from landing_env._quiet import quiet_stdout
-
-        with quiet_stdout():
-            import landing_env  # noqa: F401  (registers the ids, PyBullet silenced)
         self.task: EpisodeTask | None = None
         self.env: Any = None
         self.policy: Any = None

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation.episode_files import load_outcomes
+from agents.evaluation.plots import save_figure
 from agents.evaluation.summary import wilson_interval
 from landing_env.errors import ConfigError
 
@@ -80,7 +81,6 @@ def plot_success(
     """Grouped bars: scenarios along x, one bar per policy, the bounds hatched, the interval
     as error bars, each bar's successes/episodes on it; with ``targets``, a dashed line at
     the bound's success less the target's points over each scenario's group."""
-    from agents.evaluation.plots import save_figure  # noqa: I001 (it selects the Agg backend)
     import matplotlib.pyplot as plt
 
     targets = targets or {}

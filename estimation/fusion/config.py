@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 from estimation.errors import ConfigError, require_choice, require_range
+from estimation.fusion.model import deck_spectrum
 from estimation.noise import (
     VL53L1X_RESOLUTION_M,
     VL53L1X_SIGMA_0_M,
@@ -166,7 +167,6 @@ class FusionConfig:
         deck_spectrum`), or None when no wave periods are set."""
         if not self.deck_roll_periods_s:
             return None
-        from estimation.fusion.model import deck_spectrum
 
         return tuple(
             deck_spectrum(

@@ -17,13 +17,12 @@ from gymnasium.envs.registration import EnvSpec
 
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
-from landing_env.config import DeckLandingConfig, load_config
+from landing_env.config import DeckLandingConfig, episode_step_limit, load_config
 from landing_env.envs.actions import BOX_ACTION_FIELDS, setpoint_from_action, validate_action
 from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
 from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
-from landing_env.scenarios import episode_step_limit
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
 from landing_env.world import PhysicsReport, World
 
@@ -33,6 +32,23 @@ POSE_HIGH = -POSE_LOW
 #: full-scale range of the IMU (an ICM-20602-class part: ±16 g, ±2000 °/s); a mean reading
 #: beyond it is clipped to the range, as the part itself would, and flagged in info
 IMU_HIGH = np.array([16 * 9.81] * 3 + [math.radians(2000.0)] * 3, dtype=np.float32)
+
+
+def without_nan(value: Any) -> Any:
+    """``info`` without NaN, so that two runs of one seed compare equal (Gymnasium's
+    determinism check; NaN != NaN): a float array's NaN entries become 0 (every such array has
+    its validity beside it: ``tof_valid``, an estimate's ``valid``), a NaN scalar None."""
+    if isinstance(value, dict):
+        return {key: without_nan(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [without_nan(item) for item in value]
+    if isinstance(value, tuple):
+        return tuple(without_nan(item) for item in value)
+    if isinstance(value, np.ndarray) and value.dtype.kind == "f" and np.isnan(value).any():
+        return np.nan_to_num(value, nan=0.0)
+    if isinstance(value, float | np.floating) and math.isnan(value):
+        return None
+    return value
 
 
 def _has_display() -> bool:
@@ -383,6 +399,9 @@ class DeckLandingBaseEnv(gym.Env):
             "range_down": float(self._sensing.range_down.ranges[0])
             if self._sensing.range_down is not None
             else float("nan"),
+            "range_down_valid": bool(
+                self._sensing.range_down is not None and self._sensing.range_down.valid[0]
+            ),
             "drone": {
                 "position_w": state.position_w.copy(),
                 "velocity_w": state.velocity_w.copy(),
@@ -409,4 +428,4 @@ class DeckLandingBaseEnv(gym.Env):
             info["crash_contact"] = report.forbidden_contact
         if self._touchdown is not None:
             info["touchdown"] = self._touchdown.as_dict()
-        return info
+        return without_nan(info)

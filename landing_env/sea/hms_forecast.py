@@ -9,8 +9,8 @@ fitted on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with 
 (other days in the same sea state: a record of the episode's own sea would let a linear model
 lock onto the simulated sea's finitely many wave frequencies, which no real sea has).
 
-Read by the ``deck-forecast`` policies (:mod:`agents.deck_forecast`) and by the timing task's
-``forecast`` observation (:mod:`landing_env.envs.timing`).
+Read by the ``deck-forecast`` policies (:mod:`agents.timing.deck_forecast`) and by the timing task's
+``forecast`` observation (:mod:`landing_env.timing.env`).
 """
 
 from __future__ import annotations

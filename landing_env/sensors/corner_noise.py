@@ -29,6 +29,7 @@ from scipy.optimize import nnls
 from scipy.spatial.transform import Rotation
 
 from estimation.frames import matrix_from_euler_zyx
+from landing_env.sensors.camera_realism import RelativeMotion
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,6 @@ def sigma_px(
 
 def random_motion(world, rng: np.random.Generator):
     """A random camera and deck motion for :func:`measure_corner_errors`."""
-    from landing_env.sensors.camera_realism import RelativeMotion
 
     deck = world.deck_state()
     return RelativeMotion(

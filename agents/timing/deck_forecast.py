@@ -1,6 +1,6 @@
 """``deck-forecast``: timing by a forecast of the ship's helideck, tried in a look-ahead.
 
-The deck oracle (:class:`agents.oracle.DeckOracleTimingPolicy`) shows what knowing the deck's
+The deck oracle (:class:`agents.timing.oracle.DeckOracleTimingPolicy`) shows what knowing the deck's
 future is worth: at sea state 5 it lands 90 % where the best rule on the drone's own deck
 estimate lands 78.5 %.  A drone landing on a ship can know much of that future: the ship's
 helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
@@ -46,7 +46,7 @@ The guidance, the controller, the touchdown's physics and the estimators' softwa
 drone's own code and stay exact; so do its own attitude and velocity (its navigation).
 Registered as a policy, it also lowers its standard over the last 5 s of the wait, to half
 the look-aheads at the wait limit (``deadline_chance``,
-:meth:`~agents.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
+:meth:`~agents.timing.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
 land beats the blind one the limit would force.
 """
 
@@ -59,9 +59,11 @@ from typing import Any
 
 import numpy as np
 
-from agents.oracle import DeckOracleTimingPolicy
+from agents.timing.oracle import DeckOracleTimingPolicy
 from estimation.deck_prediction import LinearMotionPredictor
+from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_range
+from landing_env.scenarios import SCENARIOS
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
 from landing_env.sea.hms_forecast import (
     BLOCK,
@@ -386,12 +388,9 @@ def plot_forecasts(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.deck_forecast --scenario ship-ss5``: fit the scenario's forecast and
+    """``python -m agents.timing.deck_forecast --scenario ship-ss5``: fit the scenario's forecast and
     print its held-out error per horizon, against holding the present (persistence)."""
     import argparse
-
-    from agents.evaluation.landing import SCENARIOS
-    from landing_env.config import load_config
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--scenario", nargs="+", default=["ship-ss5"], choices=sorted(SCENARIOS))
@@ -424,3 +423,18 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def build_deck_forecast(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> DeckForecastTimingPolicy:
+    """``deck-forecast`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    return DeckForecastTimingPolicy(env)
+
+
+def build_deck_forecast_onboard(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> DeckForecastTimingPolicy:
+    """``deck-forecast-onboard``: the look-ahead as the drone's own model, its standard
+    falling to half the look-aheads over the wait's last 5 s."""
+    return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig(), deadline_chance=0.5)

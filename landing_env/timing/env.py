@@ -1,41 +1,20 @@
 """``DeckLandingTiming-v0``: hold over the moving deck and choose the moment to land.
 
-A scripted guidance (:class:`DeckGuidance`, which reads only the estimated deck pose and the
-ToF ranges) holds the drone aligned over the tag at a hold height.  Each step the agent
-chooses ``0`` (wait) or ``1`` (commit); on commit the same guidance flies a fixed final
-descent to touchdown **within that one step** (its control periods run inside ``step``), and
-the episode ends with the touchdown's outcome.  Running the descent inside the step keeps the
-decision problem a clean stopping problem: no steps with ignored actions reach the learner.
-
-Observation (a flat ``Box``, documented by :class:`TimingObservationLayout`): the last
-``history_s`` seconds of the configured estimator's deck pose (as a level camera would see
-it: the drone's roll and pitch removed with its attitude, ``level_history``) and of its rates
-(a least-squares slope over ``rate_window_s``), each with its validity, then the four ToF ranges
-with their validity and the fraction of the wait limit used.
-
-Versions: the id's version changes whenever what an observation value means changes (a trained
-model's card, :mod:`agents.model_metadata`, records the id it was trained on and refuses
-another):
-
-* ``v0``: the layout above, the deck pose levelled (``level_history``, the default), z and the
-  ranges relative to the hold height, scaled by ``HISTORY_SCALES`` and ``TOF_SCALE``.
-
-The scenario ids carry their own versions: ``DeckLandingTiming-BenchSS{3,4,5}-v1`` fly the
-**timed** final descent (``guidance.descent_profile``; ``-v0``: the range schedule), with the
-same observation layout; ``-v2`` and ``-v3`` add an 8 s history and the deck-tilt predictor's
-wave-off, and ``-v4`` the contact time each commit chooses (``contact_window_s``).  What the
-commit starts is part of the task a model learns, so a model's card records the descent (and
-the wave-off, ``wave_off_tilt_deg``, and the contact times) and refuses another.
-The ship ids ``DeckLandingTiming-ShipSS{3,4,5,6}-v5`` are their ``-v4`` observing
-``forecast`` (``TimingConfig.observation``): the history's newest row and, after the wait
-fraction, the ship's helideck forecast 0-8 s ahead (:mod:`landing_env.sea.hms_forecast`) and
-the drone's own velocity and lean (:class:`TimingObservationLayout`).
+A scripted guidance (:class:`~landing_env.timing.guidance.DeckGuidance`, which reads only the
+estimated deck pose and the ToF ranges) holds the drone aligned over the tag at a hold height.
+Each step the agent chooses ``0`` (wait) or ``1`` (commit); on commit the same guidance flies
+the final descent to touchdown **within that one step** (its control periods run inside
+``step``), and the episode ends with the touchdown's outcome.  Running the descent inside the
+step keeps the decision problem a clean stopping problem: no steps with ignored actions reach
+the learner.  The settings are the config's ``timing`` section
+(:class:`~landing_env.timing.config.TimingConfig`); the observation is laid out by
+:class:`~landing_env.timing.layout.TimingObservationLayout`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -49,425 +28,30 @@ from estimation.frames import (
     tilt_deg,
 )
 from estimation.optimal_stopping import StoppingValues
-from landing_env.config_loading import build_dataclass
+from landing_env.config import episode_step_limit
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
-from landing_env.envs.guidance import DeckGuidance, GuidanceGains, OwnState
-from landing_env.envs.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.envs.rewards import touchdown_terms, zero_terms
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError
 from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.scenarios import SCENARIO_TILT_MODEL, episode_step_limit
 from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import FORECAST_KINDS, HORIZONS_S, deck_forecast_for
+from landing_env.sea.hms_forecast import FORECAST_KINDS, deck_forecast_for
+from landing_env.timing.config import (
+    CAMERA_BELOW_COM_M,
+    SCENARIO_TILT_MODEL,
+    WAVE_OFF_CLIMB_S,
+    TimingConfig,
+)
+from landing_env.timing.guidance import DeckGuidance, GuidanceGains, OwnState
+from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.timing.layout import timing_layout
 from landing_env.touchdown import Outcome
-
-#: the guidance and the history live in their own modules; importing them from here still works
-__all__ = [
-    "HISTORY_FEATURES",
-    "DeckGuidance",
-    "DeckLandingTimingEnv",
-    "DeckMotionHistory",
-    "GuidanceGains",
-    "TimingConfig",
-    "TimingObservationLayout",
-    "TimingObservationParts",
-]
-
-#: the wave-off's predictors of the deck tilt at the contact (``TimingConfig.wave_off_predictor``)
-WAVE_OFF_PREDICTORS = ("linear", "quadratic", "model")
-#: what the model wave-off compares its chance with (``TimingConfig.wave_off_rule``)
-WAVE_OFF_RULES = ("fixed", "value")
-#: a wave-off climbs back to the hold for at most this long, seconds (it nearly always takes
-#: all of it: the last 5 cm to the hold are slow)
-WAVE_OFF_CLIMB_S = 1.5
-#: the shortest timed descent a contact window may ask for, seconds
-MIN_CHOSEN_DESCENT_S = 1.0
-#: what the observation holds (``TimingConfig.observation``)
-OBSERVATION_KINDS = ("history", "prediction", "forecast")
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
 )
-
-#: the camera sits this far below the drone's centre of mass (body z), metres; the start
-#: height puts the *camera* at the hold height
-CAMERA_BELOW_COM_M = 0.03
-
-
-# ------------------------------------------------------------------------------ observation
-#: scale from SI units (m, rad, m/s, rad/s) to the observation: decimetres, tenths of a
-#: radian, so that typical values are of order one
-HISTORY_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 10.0, 10.0, 10.0, 1.0])
-TOF_SCALE = 10.0
-#: bound of every scaled observation value; beyond it a value is clipped and flagged
-OBSERVATION_LIMIT = 50.0
-#: scale of the ``forecast`` observation's helideck forecast (surge, sway, heave in m, from
-#: the forecast's present; roll and pitch in rad): decimetres and tenths of a radian
-FORECAST_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0])
-#: the drone's own state in the ``forecast`` observation: its velocity in its heading frame
-#: (m/s) and its roll and pitch (rad), scaled to order one
-OWN_STATE_FEATURES: tuple[str, ...] = ("vx_h", "vy_h", "vz_h", "roll", "pitch")
-OWN_STATE_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 10.0])
-
-
-@dataclass
-class TimingObservationParts:
-    """The decoded observation of the timing task, in SI units."""
-
-    #: (n, features) history, oldest first: m, rad, m/s, rad/s, validity
-    history: np.ndarray
-    #: the four ToF ranges (m; NaN where invalid)
-    tof_range: np.ndarray
-    tof_valid: np.ndarray
-    #: waited time / wait limit
-    wait_fraction: float
-    #: the prediction layout's values (see :class:`TimingObservationLayout`); empty otherwise
-    prediction: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: the forecast layout's helideck forecast, (horizons, 5) of surge, sway, heave (m, from
-    #: the forecast's present) and roll, pitch (rad); empty otherwise
-    forecast: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
-    #: the forecast was made (False: no HMS record yet; its values are then 0)
-    forecast_valid: bool = False
-    #: the forecast layout's own state (:data:`OWN_STATE_FEATURES`, SI); empty otherwise
-    own_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-
-@dataclass(frozen=True)
-class TimingObservationLayout:
-    """Layout of the flat observation: ``n_history`` rows of :data:`HISTORY_FEATURES`
-    (scaled by :data:`HISTORY_SCALES`, z and the ToF ranges relative to the hold height),
-    then 4 ToF ranges, 4 ToF validities and the wait fraction.
-
-    With ``n_prediction`` > 0 (``TimingConfig.observation = "prediction"``) the history rows
-    are replaced by ``n_prediction`` values of the deck-tilt predictor, all in [0, 1]: the
-    chance of a deck within the touchdown limit at each of the ``n_prediction - 2`` contact
-    times, the value of waiting on (the chance a later commit is expected to get), and 1 when
-    the prediction is valid (0: too little seen; the chances are then 0).
-
-    With ``n_forecast`` > 0 (``TimingConfig.observation = "forecast"``) only the newest
-    history row is observed (the deck's motion is in the forecast) and ``n_forecast * 5 + 1 +
-    5`` values follow the wait fraction: the ship's helideck forecast
-    (:mod:`landing_env.sea.hms_forecast`) at its ``n_forecast`` horizons (surge, sway and
-    heave from the forecast's present, roll and pitch; :data:`FORECAST_SCALES`), 1 when it
-    was made, and the drone's own state (:data:`OWN_STATE_FEATURES`)."""
-
-    n_history: int
-    hold_height_m: float
-    n_prediction: int = 0
-    n_forecast: int = 0
-
-    @property
-    def history_observed(self) -> bool:
-        """The observation holds the history rows (not the prediction)."""
-        return self.n_prediction == 0
-
-    @property
-    def observed_rows(self) -> int:
-        """How many of the newest history rows the observation holds."""
-        if not self.history_observed:
-            return 0
-        return 1 if self.n_forecast else self.n_history
-
-    @property
-    def size(self) -> int:
-        head = (
-            self.observed_rows * len(HISTORY_FEATURES)
-            if self.history_observed
-            else self.n_prediction
-        )
-        tail = self.n_forecast * len(FORECAST_SCALES) + 1 + len(OWN_STATE_SCALES)
-        return head + 9 + (tail if self.n_forecast else 0)
-
-    @property
-    def space(self) -> spaces.Box:
-        return spaces.Box(-OBSERVATION_LIMIT, OBSERVATION_LIMIT, (self.size,), dtype=np.float32)
-
-    def encode(
-        self,
-        history: np.ndarray,
-        tof_range: np.ndarray,
-        tof_valid: np.ndarray,
-        wait_fraction: float,
-        prediction: np.ndarray | None = None,
-        forecast: np.ndarray | None = None,
-        own_state: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, bool]:
-        """The flat observation and whether any value had to be clipped to the bounds
-        (``prediction``: the prediction layout's values, needed by it; ``forecast``: the
-        forecast layout's (n_forecast, 5) forecast, None when none was made, and
-        ``own_state``, needed by it)."""
-        if self.history_observed:
-            rows = np.array(history, dtype=float)[-self.observed_rows :]
-            valid = rows[:, 9] > 0.5
-            rows[valid, 2] -= self.hold_height_m
-            rows *= HISTORY_SCALES
-            head = rows.ravel()
-        else:
-            head = np.nan_to_num(np.asarray(prediction, dtype=float).reshape(-1))
-            if head.size != self.n_prediction:
-                raise ValueError(
-                    f"{head.size} prediction values; the layout needs {self.n_prediction}"
-                )
-        tof_valid = np.asarray(tof_valid, dtype=bool)
-        tof = np.where(tof_valid, np.nan_to_num(tof_range) - self.hold_height_m, 0.0)
-        parts = [head, tof * TOF_SCALE, tof_valid.astype(float), [wait_fraction]]
-        if self.n_forecast:
-            parts.extend(self._forecast_values(forecast, own_state))
-        flat = np.concatenate(parts)
-        clipped = bool(np.any(np.abs(flat) > OBSERVATION_LIMIT))
-        flat = np.clip(flat, -OBSERVATION_LIMIT, OBSERVATION_LIMIT)
-        return flat.astype(np.float32), clipped
-
-    def _forecast_values(
-        self, forecast: np.ndarray | None, own_state: np.ndarray | None
-    ) -> list[np.ndarray]:
-        shape = (self.n_forecast, len(FORECAST_SCALES))
-        valid = forecast is not None
-        values = np.zeros(shape) if forecast is None else np.asarray(forecast, dtype=float)
-        if values.shape != shape:
-            raise ValueError(f"forecast has shape {values.shape}; the layout needs {shape}")
-        own = np.asarray(own_state if own_state is not None else [], dtype=float).reshape(-1)
-        if own.size != len(OWN_STATE_SCALES):
-            raise ValueError(
-                f"own_state has {own.size} values; the layout needs {len(OWN_STATE_FEATURES)} "
-                f"({', '.join(OWN_STATE_FEATURES)})"
-            )
-        scaled = np.nan_to_num(values * FORECAST_SCALES).ravel()
-        return [scaled, [float(valid)], np.nan_to_num(own * OWN_STATE_SCALES)]
-
-    def decode(self, observation: np.ndarray) -> TimingObservationParts:
-        """Undo :meth:`encode` (up to clipping and float32 rounding)."""
-        flat = np.asarray(observation, dtype=float).reshape(-1)
-        if flat.size != self.size:
-            raise ValueError(f"observation has {flat.size} values; the layout needs {self.size}")
-        prediction = np.zeros(0)
-        if self.history_observed:
-            n = self.observed_rows * len(HISTORY_FEATURES)
-            rows = flat[:n].reshape(self.observed_rows, len(HISTORY_FEATURES)) / HISTORY_SCALES
-            valid = rows[:, 9] > 0.5
-            rows[valid, 2] += self.hold_height_m
-        else:
-            n = self.n_prediction
-            rows = np.zeros((0, len(HISTORY_FEATURES)))
-            prediction = flat[:n].copy()
-        tof_valid = flat[n + 4 : n + 8] > 0.5
-        tof = np.where(tof_valid, flat[n : n + 4] / TOF_SCALE + self.hold_height_m, np.nan)
-        parts = TimingObservationParts(rows, tof, tof_valid, float(flat[n + 8]), prediction)
-        if self.n_forecast:
-            start = n + 9
-            size = self.n_forecast * len(FORECAST_SCALES)
-            block = flat[start : start + size].reshape(self.n_forecast, len(FORECAST_SCALES))
-            parts.forecast = block / FORECAST_SCALES
-            parts.forecast_valid = bool(flat[start + size] > 0.5)
-            parts.own_state = flat[start + size + 1 :] / OWN_STATE_SCALES
-        return parts
-
-
-# ------------------------------------------------------------------------------ the task
-@dataclass
-class TimingConfig:
-    """The timing task's settings (``gym.make("DeckLandingTiming-v0", timing={...})``)."""
-
-    #: camera height above the deck (along the tag's z / the ToF mean) while waiting, metres
-    hold_height_m: float = 0.7
-    #: length of the pose history in the observation, seconds
-    history_s: float = 2.0
-    #: window of the least-squares rates, seconds
-    rate_window_s: float = 0.5
-    #: control periods per decision (a wait lasts this many periods)
-    steps_per_decision: int = 2
-    #: the descent is committed regardless once the drone has waited this long, seconds
-    wait_limit_s: float = 15.0
-    #: a descent that has not touched down after this long ends the episode (timeout), seconds
-    descent_timeout_s: float = 6.0
-    #: the history holds the deck pose as a level camera sees it (the drone's roll and pitch,
-    #: from its attitude, removed), so that the deck's tilt relative to gravity, which the
-    #: touchdown judges, is not confused with the drone's own tilt in wind; False keeps the
-    #: camera-frame pose
-    level_history: bool = True
-    guidance: GuidanceGains = field(default_factory=GuidanceGains)
-    #: wave-off (the go-around of ship landing): during a chosen (not forced) timed descent,
-    #: from ``wave_off_from_s`` (at least one decision period) after the commit until
-    #: ``wave_off_until_s`` (the tag leaves the view at about 0.75 s), the deck tilt
-    #: predicted at the contact (the newest history row's roll and pitch carried along their
-    #: least-squares rates to ``expected_contact_s`` after the commit) above
-    #: ``wave_off_tilt_deg`` aborts the descent: the guidance climbs back to the hold (within
-    #: 5 cm, at most 1.5 s) in the same step, which ends without a touchdown, and the agent
-    #: decides again (``info["wave_offs"]``; the aborted descent and the climb count as
-    #: waiting).  0 turns it off
-    wave_off_tilt_deg: float = 0.0
-    wave_off_from_s: float = 0.4
-    wave_off_until_s: float = 0.7
-    #: how the wave-off predicts the deck: ``linear`` (the newest row carried along its 0.5 s
-    #: least-squares rates) or ``quadratic`` (a parabola fitted to roll and pitch over the last
-    #: ``wave_off_window_s``: the deck's curvature, at the price of a noisier acceleration)
-    #: or ``model``: the scenario's fitted linear (Wiener) predictor ``tilt_model``
-    #: (:class:`~estimation.deck_prediction.LinearTiltPredictor` on the history, which must be
-    #: at least its window long), which aborts when the chance that the tilt at the contact is
-    #: within ``wave_off_tilt_deg`` is below what ``wave_off_rule`` asks (its error measured
-    #: on held-out episodes: the chance is honest where a straight line's is not)
-    wave_off_predictor: str = "linear"
-    wave_off_window_s: float = 1.0
-    wave_off_probability: float = 0.8
-    #: what the ``model`` wave-off compares the chance with: ``fixed``
-    #: (``wave_off_probability``) or ``value``: the value of waiting on, i.e. the
-    #: optimal-stopping value (:mod:`estimation.optimal_stopping`) of the chance a commit
-    #: gets, over the wait that will be left once the climb back is done, with one
-    #: independent opportunity per ``opportunity_s``: it aborts a descent only when a retry
-    #: is expected to do better, so less and less often as the wait limit nears
-    wave_off_rule: str = "fixed"
-    #: the deck's chance of a good contact decorrelates over about this long: the wait left
-    #: holds one independent opportunity per ``opportunity_s`` (read by the ``value``
-    #: wave-off and the ``predictive`` policy; 1 s was chosen offline on the predictors'
-    #: fitting episodes at bench sea states 4 and 5 and checked on the tuning seeds, README
-    #: "Predicting the deck a descent ahead")
-    opportunity_s: float = 1.0
-    #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
-    #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
-    #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
-    #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
-    #: ``predictive`` policy; empty: none
-    tilt_model: str = ""
-    #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
-    expected_contact_s: float = 1.3
-    #: the contact time chosen at each commit: with a window ``[first, last]`` (seconds after
-    #: the commit) the deck-tilt predictor ``tilt_model`` predicts the deck at every
-    #: ``contact_step_s`` of it, and the timed descent is given the duration that meets the
-    #: deck where the chance of a tilt within the touchdown limit is best (its reference
-    #: ``guidance.descent_time_s`` shifted by the contact's shift from
-    #: ``expected_contact_s``): the commit picks *when* to touch as well as when to leave.
-    #: Empty: every descent takes ``guidance.descent_time_s`` (contact at
-    #: ``expected_contact_s``)
-    contact_window_s: list[float] = field(default_factory=list)
-    contact_step_s: float = 0.1
-    #: what the observation holds: ``history`` (the deck-pose history, as every id up to the
-    #: bench's v4) or ``prediction``: instead of the history, what the ``predictive`` rule
-    #: weighs, for a learned policy to weigh: the chance ``tilt_model`` gives of a deck within
-    #: the touchdown limit at each of ``contact_times_s``, the value of waiting on (the
-    #: optimal-stopping value of such chances over the wait left, one opportunity per
-    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`);
-    #: or ``forecast``: the history's newest row, and after it the ship's helideck forecast
-    #: (its HMS record 0-8 s ahead, :mod:`landing_env.sea.hms_forecast`; a sea scenario's)
-    #: and the drone's own velocity and lean, what the deck oracle weighs against each other
-    observation: str = "history"
-
-    def __post_init__(self) -> None:
-        require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
-        require_range("history_s", self.history_s, 0.1, 10.0)
-        require_range(
-            "rate_window_s",
-            self.rate_window_s,
-            0.1,
-            self.history_s,
-            bounds_from=f"history_s = {self.history_s}",
-        )
-        require_range("steps_per_decision", self.steps_per_decision, 1, 20)
-        require_range("wait_limit_s", self.wait_limit_s, 0.0, low_inclusive=False)
-        require_range("descent_timeout_s", self.descent_timeout_s, 0.5)
-        require_range("wave_off_tilt_deg", self.wave_off_tilt_deg, 0.0, 45.0)
-        require_range("wave_off_from_s", self.wave_off_from_s, 0.0, 10.0)
-        require_range(
-            "wave_off_until_s",
-            self.wave_off_until_s,
-            self.wave_off_from_s,
-            10.0,
-            bounds_from=f"wave_off_from_s = {self.wave_off_from_s}",
-        )
-        require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
-        require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
-        require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
-        require_range("wave_off_probability", self.wave_off_probability, 0.0, 1.0)
-        require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
-        require_choice("observation", self.observation, OBSERVATION_KINDS)
-        require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
-        if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
-            raise ConfigError(
-                "wave_off_rule",
-                "'value' weighs the model wave-off's chance: it needs wave_off_predictor = "
-                f"model (not {self.wave_off_predictor!r})",
-            )
-        if self.wave_off_predictor == "quadratic":
-            # the parabola is fitted to the history: the window must fit in it
-            require_range(
-                "wave_off_window_s",
-                self.wave_off_window_s,
-                0.2,
-                self.history_s,
-                bounds_from=f"history_s = {self.history_s}",
-            )
-        self._check_contact_window()
-        if self.wave_off_tilt_deg > 0.0 and self.guidance.descent_profile != "timed":
-            raise ConfigError(
-                "wave_off_tilt_deg",
-                f"{self.wave_off_tilt_deg} needs the timed descent (guidance.descent_profile "
-                f"= 'timed', not {self.guidance.descent_profile!r}): only it has a known "
-                "contact time to predict the deck at",
-            )
-
-    def _check_contact_window(self) -> None:
-        require_range("contact_step_s", self.contact_step_s, 0.05, 1.0)
-        window = list(self.contact_window_s)
-        if not window:
-            return
-        if len(window) != 2 or not all(isinstance(v, int | float) for v in window):
-            raise ConfigError(
-                "contact_window_s", f"{window!r} must be [first, last] seconds, or empty"
-            )
-        if self.guidance.descent_profile != "timed":
-            raise ConfigError(
-                "contact_window_s",
-                "needs the timed descent (guidance.descent_profile = 'timed', not "
-                f"{self.guidance.descent_profile!r}): only it can be given a contact time",
-            )
-        # the shortest descent must still meet the deck gently: below 1.0 s the touchdown
-        # speed grows (bench-ss5: 0.33 m/s mean at 1.0 s, 0.42 at 0.9, against 0.21 from 1.2 s)
-        lag_s = self.expected_contact_s - self.guidance.descent_time_s
-        require_range(
-            "contact_window_s",
-            window[0],
-            lag_s + MIN_CHOSEN_DESCENT_S,
-            window[1],
-            bounds_from=f"a descent of at least {MIN_CHOSEN_DESCENT_S} s and the window's last",
-        )
-        require_range("contact_window_s", window[1], window[0], 10.0)
-
-    @property
-    def contact_times_s(self) -> tuple[float, ...]:
-        """The contact times a commit chooses among (seconds after it): the window's grid,
-        or ``expected_contact_s`` alone."""
-        if not self.contact_window_s:
-            return (self.expected_contact_s,)
-        first, last = (float(v) for v in self.contact_window_s)
-        n = math.floor((last - first) / self.contact_step_s + 1e-9)
-        return tuple(round(first + i * self.contact_step_s, 9) for i in range(n + 1))
-
-    def descent_time_for(self, contact_s: float) -> float:
-        """The timed descent's duration whose contact comes ``contact_s`` after the commit."""
-        return self.guidance.descent_time_s + contact_s - self.expected_contact_s
-
-
-def observed_prediction_size(timing: TimingConfig) -> int:
-    """How many prediction values the observation holds (0: the history instead)."""
-    return len(timing.contact_times_s) + 2 if timing.observation == "prediction" else 0
-
-
-def observed_forecast_size(timing: TimingConfig) -> int:
-    """How many horizons of the helideck forecast the observation holds (0: none)."""
-    return len(HORIZONS_S) if timing.observation == "forecast" else 0
-
-
-def timing_layout(timing: TimingConfig, env_hz: float) -> TimingObservationLayout:
-    """The observation layout of ``timing`` at ``env_hz`` decisions' control rate."""
-    n_history = max(1, round(timing.history_s * env_hz))
-    return TimingObservationLayout(
-        n_history,
-        timing.hold_height_m,
-        observed_prediction_size(timing),
-        observed_forecast_size(timing),
-    )
 
 
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
@@ -486,13 +70,8 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         config: Any = "default",
         render_mode: str | None = None,
         overrides: dict[str, Any] | None = None,
-        timing: TimingConfig | dict[str, Any] | None = None,
         **sections: Any,
     ) -> None:
-        if isinstance(timing, TimingConfig):
-            self.timing = timing
-        else:
-            self.timing = build_dataclass(TimingConfig, timing or {}, "timing")
         super().__init__(config, render_mode, overrides, **sections)
         if self.config.simulation.drone_fixed:
             self.world.close()
@@ -527,6 +106,11 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.frames_of_last_step: list[np.ndarray] = []
         self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
+
+    @property
+    def timing(self) -> TimingConfig:
+        """The config's ``timing`` section."""
+        return self.config.timing
 
     def _guidance_gains(self) -> GuidanceGains:
         """The guidance's gains, the view gate's half field of view taken from the camera's

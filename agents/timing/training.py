@@ -34,10 +34,19 @@ import numpy as np
 import yaml
 
 from agents.cli_args import positive_int
-from agents.model_metadata import card_for_training, write_metadata
-from agents.policies import shipped_timing_model
+from agents.timing.cards import (
+    card_for_training,
+    check_compatible,
+    env_signature,
+    read_metadata,
+    write_metadata,
+)
+from agents.timing.lookahead import LookaheadSettings, LookaheadTimingWrapper
+from agents.timing.policies import shipped_timing_model
+from agents.timing.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.scenarios import SCENARIO_IDS
 
 ENV_ID = "DeckLandingTiming-v0"
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
@@ -72,7 +81,7 @@ class TrainSettings:
     #: in the shipped YAMLs, whose id has the scenario built in, so that rl-zoo3 trains the
     #: same task without ``--env-kwargs``
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-    #: domain randomisation per episode (:class:`agents.scenario_sampler.RandomiseSettings`:
+    #: domain randomisation per episode (:class:`agents.timing.sampler.RandomiseSettings`:
     #: scenarios, sensing profiles, estimator, wind, start heights); when set, the episodes
     #: come from it and ``env_kwargs`` keeps only ``timing``
     randomise: dict[str, Any] | None = None
@@ -92,7 +101,7 @@ class TrainSettings:
     #: start from this trained model's weights (same algorithm and network; its card must
     #: describe the same task, observation and estimator): training goes on from it
     init_model: str | None = None
-    #: decide on the onboard look-ahead's features (:class:`agents.lookahead.LookaheadSettings`:
+    #: decide on the onboard look-ahead's features (:class:`agents.timing.lookahead.LookaheadSettings`:
     #: draws, check_every_s, min_margin, checks, seed) instead of the task's observation
     lookahead: dict[str, Any] | None = None
 
@@ -104,12 +113,8 @@ class TrainSettings:
         require_range("max_minutes", self.max_minutes, 0.0, low_inclusive=False)
         require_range("torch_threads", self.torch_threads, 1)
         if self.randomise is not None:
-            from agents.scenario_sampler import RandomiseSettings
-
             build_dataclass(RandomiseSettings, self.randomise, "deck_landing.randomise")
         if self.lookahead is not None:
-            from agents.lookahead import LookaheadSettings
-
             if self.randomise is not None:
                 raise ConfigError(
                     "deck_landing.lookahead",
@@ -182,7 +187,6 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
 
 def _timing_ids() -> tuple[str, ...]:
     """The ids a training YAML can name: the timing task and its registered scenarios."""
-    from landing_env.scenarios import SCENARIO_IDS
 
     return (ENV_ID, *(k for k, v in SCENARIO_IDS.items() if v.task == ENV_ID))
 
@@ -318,8 +322,6 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     # make_vec_env asks for render_mode="rgb_array" unless told otherwise: nothing is rendered
     env_kwargs = {"render_mode": None, **s.env_kwargs}
     if s.randomise is not None:
-        from agents.scenario_sampler import make_randomised_env
-
         env_id = make_randomised_env
         env_kwargs = {
             "render_mode": None,
@@ -328,8 +330,6 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
         }
     wrapping: dict[str, Any] = {}
     if s.lookahead is not None:
-        from agents.lookahead import LookaheadTimingWrapper
-
         wrapping = {"wrapper_class": LookaheadTimingWrapper, "wrapper_kwargs": s.lookahead}
     train_env = make_vec_env(
         env_id,
@@ -346,7 +346,6 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
 def _start_from(model: Any, path: str, env: Any) -> None:
     """Load ``path``'s weights into ``model`` after checking its card against ``env`` (the
     sensing may differ: a randomised training draws several)."""
-    from agents.model_metadata import check_compatible, env_signature, read_metadata
 
     found = Path(path)
     if not found.is_absolute() and not found.is_file():
@@ -415,8 +414,6 @@ def train(
         # the model's card: what it was trained on (checked when it is loaded)
         sensing = None
         if settings.randomise is not None:
-            from agents.scenario_sampler import RandomiseSettings, sensing_signatures
-
             sensing = sensing_signatures(
                 build_dataclass(RandomiseSettings, settings.randomise, "deck_landing.randomise")
             )

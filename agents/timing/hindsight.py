@@ -2,8 +2,8 @@
 
 In simulation the touchdown of a commit *now* can be tried and undone: at every decision of a
 waiting episode, the commit is run in a snapshot of the environment
-(:mod:`landing_env.envs.snapshot`, as :mod:`agents.oracle` does), its touchdown's margin
-(:func:`agents.oracle.touchdown_margin`: the smallest relative slack of the normal speed, the
+(:mod:`landing_env.envs.snapshot`, as :mod:`agents.timing.oracle` does), its touchdown's margin
+(:func:`agents.timing.oracle.touchdown_margin`: the smallest relative slack of the normal speed, the
 deck tilt and the relative attitude) is recorded beside that decision's observation, and the
 episode goes on as if nothing had been tried.  A trained policy sees one commit per episode;
 these labels judge every decision, so a commit rule can be replayed offline on them
@@ -18,9 +18,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
-from landing_env.errors import require_range
+import landing_env  # noqa: F401  (registers the environments)
+from agents.timing.oracle import touchdown_margin
+from agents.timing.sampler import SENSING_PROFILES
+from landing_env.envs.snapshot import restore_snapshot, save_snapshot
+from landing_env.errors import require_choice, require_range
+from landing_env.scenarios import SCENARIOS, TIMING_TASK
 
 #: the label of a commit that did not touch down (crash, descent timeout); margins below it
 #: are clipped to it (a miss is a miss, however far)
@@ -32,7 +38,7 @@ class LabelSet:
     """Observations of the timing task and the touchdown of a commit at each."""
 
     observations: np.ndarray
-    #: :func:`agents.oracle.touchdown_margin`, clipped below at :data:`MIN_MARGIN`
+    #: :func:`agents.timing.oracle.touchdown_margin`, clipped below at :data:`MIN_MARGIN`
     margin: np.ndarray
     success: np.ndarray
     deck_tilt_deg: np.ndarray
@@ -72,25 +78,17 @@ def make_timing_env(
     overrides: dict[str, Any] | None = None,
 ) -> Any:
     """The timing environment of ``scenario`` under the sensing profile ``sensing``
-    (:data:`agents.scenario_sampler.SENSING_PROFILES`), built as the evaluation builds it
+    (:data:`agents.timing.sampler.SENSING_PROFILES`), built as the evaluation builds it
     (``overrides`` under ``timing.`` set the timing task, e.g. its descent)."""
-    import gymnasium as gym
-
-    import landing_env  # noqa: F401  (registers the environments)
-    from agents.evaluation.landing import SCENARIOS, scenario_overrides, split_timing_overrides
-    from agents.scenario_sampler import ENV_ID, SENSING_PROFILES
-    from landing_env.errors import require_choice
-
     require_choice("sensing", sensing, tuple(SENSING_PROFILES))
-    world, timing = split_timing_overrides(overrides or {}, SCENARIOS[scenario].timing)
+    require_choice("scenario", scenario, tuple(SCENARIOS))
     settings = {
-        **scenario_overrides(scenario, ENV_ID, estimator),
+        **SCENARIOS[scenario].overrides(TIMING_TASK, estimator),
         **SENSING_PROFILES[sensing],
-        **world,
+        **(overrides or {}),
     }
-    kwargs = {"timing": timing} if timing else {}
     return gym.make(
-        ENV_ID, config=SCENARIOS[scenario].config, overrides=settings, render_mode=None, **kwargs
+        TIMING_TASK, config=SCENARIOS[scenario].config, overrides=settings, render_mode=None
     )
 
 
@@ -100,9 +98,6 @@ def collect_labels(
     """Fly each seeded episode, waiting, and try the commit at every ``every``-th of its first
     ``max_decisions`` decisions in a snapshot (the episode continues as if it had not)."""
     from tqdm import tqdm
-
-    from agents.oracle import touchdown_margin
-    from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     require_range("max_decisions", max_decisions, 1)
     require_range("every", every, 1)

@@ -5,11 +5,13 @@ from __future__ import annotations
 import shutil
 import zipfile
 from pathlib import Path
+from typing import Any
 
+import gymnasium as gym
 import pytest
 
-from agents.evaluation.landing import RANGE_DESCENT, make_env_and_policy
-from agents.model_metadata import (
+from agents.policy_registry import make_env_and_policy, make_policy
+from agents.timing.cards import (
     LEGACY_OBSERVATION,
     METADATA_NAME,
     ModelMetadata,
@@ -21,21 +23,27 @@ from agents.model_metadata import (
     sensing_profile,
     write_metadata,
 )
-from agents.policies import (
-    SHIPPED_TIMING_MODEL,
-    TrainedTimingPolicy,
-    make_policy,
-    shipped_timing_model,
-)
+from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, shipped_timing_model
 from landing_env.config import load_config
-from landing_env.envs.timing import TimingConfig
 from landing_env.errors import ConfigError
+from landing_env.timing.config import TimingConfig
+
+#: the shipped model of the svgs-routine's commit was trained on the range-scheduled descent
+RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
+SHIPPED = str(SHIPPED_TIMING_MODEL)
+
+
+def _shipped_in(scenario: str = "bench-ss4", **kwargs: Any) -> tuple[Any, Any]:
+    extra = {**RANGE_DESCENT, **kwargs.pop("extra_overrides", {})}
+    return make_env_and_policy(
+        "timing-model", scenario, model_path=SHIPPED, extra_overrides=extra, **kwargs
+    )
 
 
 def test_the_shipped_model_says_what_it_was_trained_on() -> None:
     card = read_metadata(SHIPPED_TIMING_MODEL)
     assert card is not None
-    assert card.env_id == "DeckLandingTiming-v0"
+    assert card.env_id == "DeckLandingTiming-BenchSS4-v6"
     assert card.estimator == "ihrcf" and card.sensing == ["ideal"]
     assert card.camera_mode == "project" and card.algo == "dqn"
     assert card.training_config_source.endswith("configs/train/timing_dqn.yaml")
@@ -47,60 +55,43 @@ def test_the_shipped_model_says_what_it_was_trained_on() -> None:
 
 
 def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> None:
-    env, policy = make_env_and_policy("timing-dqn", "bench-ss4", extra_overrides=RANGE_DESCENT)
+    env, policy = _shipped_in()
     env.close()
     assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.estimator == "ihrcf"
 
 
-def test_the_realistic_model_was_trained_on_realistic_sensing_with_tight_observed() -> None:
-    card = read_metadata(shipped_timing_model("dqn-realistic"))
-    assert card is not None and card.algo == "dqn"
-    # trained on DeckLandingTiming-BenchSS4-v0: the card records its task's id
-    assert card.env_id == "DeckLandingTiming-v0"
-    assert card.estimator == "tight" and card.sensing == ["realistic"]
-    assert card.training_config_source.endswith("configs/train/timing_dqn_realistic.yaml")
-    env, policy = make_env_and_policy(
-        "timing-dqn-realistic",
-        "bench-ss4",
-        "tight",
-        extra_overrides={"sensors": "realistic", **RANGE_DESCENT},
-    )
-    env.close()
-    assert isinstance(policy, TrainedTimingPolicy) and policy.metadata.sensing == ["realistic"]
-    with pytest.raises(ConfigError, match=r"^sensing: .*realistic"):
-        make_env_and_policy(
-            "timing-dqn-realistic", "bench-ss4", "tight", extra_overrides=RANGE_DESCENT
-        )
+def test_every_shipped_model_belongs_to_a_registered_policy_and_id() -> None:
+    from agents.policy_registry import MODEL_DIR, POLICIES
+    from landing_env.scenarios import SCENARIO_IDS
+
+    registered = {spec.model for spec in POLICIES.values() if spec.model}
+    for path in MODEL_DIR.glob("*.zip"):
+        card = read_metadata(path)
+        assert card is not None, path.name
+        assert all(env_id in SCENARIO_IDS for env_id in card.env_ids()), path.name
+        assert path.name in registered or path == SHIPPED_TIMING_MODEL, path.name
 
 
-def test_the_randomised_model_serves_ideal_and_realistic_sensing_with_tight_observed() -> None:
-    card = read_metadata(shipped_timing_model("dqn-randomised"))
-    assert card is not None and card.algo == "dqn" and card.env_id == "DeckLandingTiming-v0"
-    assert card.estimator == "tight" and card.sensing == ["ideal", "realistic"]
-    settings = card.training_config["deck_landing"]
-    assert settings["init_model"].endswith("timing_dqn_realistic.zip")
-    assert set(settings["randomise"]["scenarios"]) == {"bench-ss4", "bench-ss5"}
-    for sensing in ({"sensors": "realistic"}, {}):
-        env, policy = make_env_and_policy(
-            "timing-dqn-randomised",
-            "bench-ss5",
-            "tight",
-            extra_overrides={**sensing, **RANGE_DESCENT},
-        )
+def test_the_predictive_dqn_runs_as_shipped_under_ideal_and_realistic_sensing() -> None:
+    card = read_metadata(shipped_timing_model("dqn-predictive"))
+    assert card is not None and card.estimator == "tight"
+    assert card.sensing == ["ideal", "realistic"]
+    assert card.env_ids() == ["DeckLandingTiming-BenchSS4-v6", "DeckLandingTiming-BenchSS5-v6"]
+    for sensing in ("realistic", None):
+        # the policy brings its estimator and its timing settings: no flag is needed
+        env, policy = make_env_and_policy("timing-dqn-predictive", "bench-ss5", sensing=sensing)
         env.close()
         assert isinstance(policy, TrainedTimingPolicy)
     with pytest.raises(ConfigError, match=r"^estimator: "):
-        make_env_and_policy(
-            "timing-dqn-randomised", "bench-ss4", "ihrcf", extra_overrides=RANGE_DESCENT
-        )
+        make_env_and_policy("timing-dqn-predictive", "bench-ss4", "ihrcf")
+    with pytest.raises(ConfigError, match=r"^env_id: .*BenchSS3-v6"):
+        make_env_and_policy("timing-dqn-predictive", "bench-ss3")
 
 
-def test_a_scenario_id_is_signed_as_its_task() -> None:
-    import gymnasium as gym
-
-    env = gym.make("DeckLandingTiming-BenchSS4-v0")
+def test_a_registered_id_is_signed_with_its_own_name_and_version() -> None:
+    env = gym.make("DeckLandingTiming-BenchSS4-v6")
     try:
-        assert env_signature(env)["env_id"] == "DeckLandingTiming-v0"
+        assert env_signature(env)["env_id"] == "DeckLandingTiming-BenchSS4-v6"
     finally:
         env.close()
 
@@ -109,47 +100,30 @@ def test_a_scenario_id_is_signed_as_its_task() -> None:
     ("kwargs", "field"),
     [
         ({"estimator": "crhf"}, r"^estimator: .*ihrcf.*crhf"),
-        (
-            {"extra_overrides": {"tof.noise": "vl53l1x", **RANGE_DESCENT}},
-            r"^sensing: .*tof\.noise=vl53l1x",
-        ),
+        ({"extra_overrides": {"tof.noise": "vl53l1x"}}, r"^sensing: .*tof\.noise=vl53l1x"),
     ],
 )
 def test_a_different_estimator_or_sensing_is_refused_by_name(kwargs: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
-        make_env_and_policy(
-            "timing-dqn", "bench-ss4", **{"extra_overrides": RANGE_DESCENT, **kwargs}
-        )
+        _shipped_in(**kwargs)
 
 
 def test_a_mismatch_can_be_allowed_on_purpose() -> None:
-    env, policy = make_env_and_policy(
-        "timing-dqn",
-        "bench-ss4",
-        extra_overrides={"tof.noise": "vl53l1x", **RANGE_DESCENT},
-        allow_mismatch=("sensing",),
-    )
+    env, policy = _shipped_in(extra_overrides={"tof.noise": "vl53l1x"}, allow_mismatch=("sensing",))
     env.close()
     assert isinstance(policy, TrainedTimingPolicy)
 
 
 def test_a_same_shape_observation_of_another_meaning_is_refused() -> None:
-    import gymnasium as gym
-
-    from agents.evaluation.landing import scenario_overrides
-
-    overrides = scenario_overrides("bench-ss4", "DeckLandingTiming-v0")
     # the same size (409) but z and the ranges relative to another hold height
     env = gym.make(
-        "DeckLandingTiming-v0",
-        config="bench-ss4",
-        overrides=overrides,
-        timing={"hold_height_m": 0.5},
+        "DeckLandingTiming-BenchSS4-v6",
+        overrides={**RANGE_DESCENT, "timing.hold_height_m": 0.5},
     )
     try:
         assert env.unwrapped.layout.size == 409
         with pytest.raises(ConfigError, match=r"observation\.hold_height_m: .*0\.7.*0\.5"):
-            make_policy("timing-dqn", env)
+            make_policy("timing-model", env, SHIPPED)
     finally:
         env.close()
 
@@ -157,8 +131,8 @@ def test_a_same_shape_observation_of_another_meaning_is_refused() -> None:
 def test_another_env_version_is_refused() -> None:
     card = read_metadata(SHIPPED_TIMING_MODEL)
     assert card is not None
-    signature = {"env_id": "DeckLandingTiming-v1", "observation": card.observation}
-    with pytest.raises(ConfigError, match=r"^env_id: .*DeckLandingTiming-v0.*-v1"):
+    signature = {"env_id": "DeckLandingTiming-BenchSS4-v5", "observation": card.observation}
+    with pytest.raises(ConfigError, match=r"^env_id: .*BenchSS4-v6.*BenchSS4-v5"):
         check_compatible(card, signature)
     with pytest.raises(ConfigError, match="allow_mismatch"):
         check_compatible(card, signature, allow=("colour",))
@@ -206,7 +180,7 @@ def test_a_model_without_a_card_is_refused(tmp_path: Path) -> None:
             if info.filename != METADATA_NAME:
                 out.writestr(info, source.read(info.filename))
     assert read_metadata(bare) is None
-    with pytest.raises(ConfigError, match=r"no card.*stamp"):
+    with pytest.raises(ConfigError, match=r"no card.*deck-landing train timing"):
         TrainedTimingPolicy(bare)
 
 
@@ -241,5 +215,5 @@ def test_env_signature_reads_the_environment() -> None:
         signature = env_signature(env)
     finally:
         env.close()
-    assert signature["env_id"] == "DeckLandingTiming-v0"
+    assert signature["env_id"] == "DeckLandingTiming-BenchSS5-v6"
     assert signature["estimator"] == "crhf" and signature["sensing"] == "ideal"

@@ -31,8 +31,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agents.timing.cards import sensing_profile
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
-from landing_env.errors import ConfigError, require_range
+from estimation.registry import ESTIMATOR_NAMES
+from landing_env.config import load_config
+from landing_env.config_loading import build_dataclass
+from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.scenarios import SCENARIOS, dotted, landing_overrides
+from landing_env.timing.config import CAMERA_BELOW_COM_M
 
 ENV_ID = "DeckLandingTiming-v0"
 
@@ -89,8 +95,6 @@ class RandomiseSettings:
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        from agents.evaluation.landing import SCENARIOS
-        from landing_env.config import ESTIMATOR_NAMES
 
         if not self.scenarios:
             raise ConfigError("scenarios", "needs at least one scenario")
@@ -147,8 +151,6 @@ class RandomisedTimingEnv(gym.Env):
         if isinstance(randomise, RandomiseSettings):
             self.settings = randomise
         else:
-            from landing_env.config_loading import build_dataclass
-
             self.settings = build_dataclass(RandomiseSettings, randomise or {}, "randomise")
         if render_mode is not None:
             raise ValueError("render_mode: the randomised training env renders nothing")
@@ -169,15 +171,15 @@ class RandomisedTimingEnv(gym.Env):
     def _world(self, scenario: str, sensing: str) -> gym.Env:
         key = (scenario, sensing)
         if key not in self._worlds:
-            from agents.evaluation.landing import SCENARIOS
-
             if len(self._worlds) >= self.max_worlds:
                 oldest = next(iter(self._worlds))
                 self._worlds.pop(oldest).close()
                 self._wind.pop(oldest)
             overrides = variant_overrides(self.settings, scenario, sensing)
             env = gym.make(
-                ENV_ID, config=SCENARIOS[scenario].config, overrides=overrides, timing=self.timing
+                ENV_ID,
+                config=SCENARIOS[scenario].config,
+                overrides={**overrides, **dotted("timing", self.timing or {})},
             )
             if self._space is not None and env.observation_space != self._space:
                 env.close()
@@ -224,8 +226,6 @@ class RandomisedTimingEnv(gym.Env):
             )
         options = dict(options or {})
         if math.isfinite(variant.start_height_m):
-            from landing_env.envs.timing import CAMERA_BELOW_COM_M
-
             options.setdefault("height_m", variant.start_height_m + CAMERA_BELOW_COM_M)
         self._current = env
         # the inner episode's seed comes from this generator: reproducible, distinct per worker
@@ -248,10 +248,9 @@ class RandomisedTimingEnv(gym.Env):
 
 def variant_overrides(settings: RandomiseSettings, scenario: str, sensing: str) -> dict[str, Any]:
     """The dotted overrides of one (scenario, sensing) world."""
-    from agents.evaluation.landing import scenario_overrides
-
+    require_choice("scenario", scenario, tuple(SCENARIOS))
     return {
-        **scenario_overrides(scenario, ENV_ID),
+        **landing_overrides(ENV_ID),
         "estimation.observed": settings.estimator,
         **SENSING_PROFILES[sensing],
         **settings.overrides,
@@ -260,10 +259,7 @@ def variant_overrides(settings: RandomiseSettings, scenario: str, sensing: str) 
 
 def sensing_signatures(settings: RandomiseSettings) -> list[str]:
     """The sensing profiles of every world the settings can draw, as a model card names them
-    (:func:`agents.model_metadata.sensing_profile`)."""
-    from agents.evaluation.landing import SCENARIOS
-    from agents.model_metadata import sensing_profile
-    from landing_env.config import load_config
+    (:func:`agents.timing.cards.sensing_profile`)."""
 
     return sorted(
         {
@@ -281,5 +277,5 @@ def make_randomised_env(
     timing: dict[str, Any] | None = None,
     render_mode: str | None = None,
 ) -> RandomisedTimingEnv:
-    """The factory :func:`agents.training.make_envs` hands to SB3 (top level: it pickles)."""
+    """The factory :func:`agents.timing.training.make_envs` hands to SB3 (top level: it pickles)."""
     return RandomisedTimingEnv(randomise, timing, render_mode)

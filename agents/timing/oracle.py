@@ -334,3 +334,15 @@ class DeckOracleTimingPolicy:
         return touchdown_margin(info.get("touchdown"), self.env.config.touchdown) >= (
             self.min_margin - 1e-12
         )
+
+
+def build_oracle(env: Any, model_path: str | None, allow: tuple[str, ...]) -> OracleTimingPolicy:
+    """``oracle`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    return OracleTimingPolicy(env)
+
+
+def build_deck_oracle(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> DeckOracleTimingPolicy:
+    """``deck-oracle`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    return DeckOracleTimingPolicy(env)

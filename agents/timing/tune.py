@@ -3,7 +3,7 @@
 The search YAML (``configs/train/tune_timing.yaml``) names a base training YAML, a budget
 (trials, timesteps per trial, evaluation episodes, concurrent trials) and a small search space
 over the zoo section's hyper-parameters (``choice``, ``uniform``, ``loguniform``).  Each trial
-is one :func:`agents.training.train` run with the sampled values; it reports the success rate
+is one :func:`agents.timing.training.train` run with the sampled values; it reports the success rate
 of the evaluation at its end (``EvalCallback`` on held-out seeds), and Ray Tune keeps the best.
 Ray runs on this machine by default, or on a cluster with ``--address``.
 """
@@ -18,6 +18,9 @@ from typing import Any
 import yaml
 
 from agents.cli_args import positive_int
+from agents.evaluation.runner import ensure_ray
+from agents.timing.training import load_train_config, train
+from landing_env.config import _calibration_path
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_range
 
@@ -58,7 +61,6 @@ class TuneSettings:
 
 def load_tune_settings(path: str | Path) -> TuneSettings:
     """Read a search YAML; errors name the key."""
-    from landing_env.config import _calibration_path
 
     path = _calibration_path(str(path), Path(path))  # "configs/..." works from anywhere
     if not path.is_file():
@@ -83,8 +85,6 @@ def search_space(settings: TuneSettings) -> dict[str, Any]:
 def _trial(params: dict[str, Any], settings: TuneSettings, root: str) -> dict[str, float]:
     """One trial: train with the sampled values, return the final evaluation's success rate."""
     import os
-
-    from agents.training import load_train_config, train
 
     os.chdir(root)  # Ray Tune runs a trial in its own directory
     config = load_train_config(_resolve(settings.base))
@@ -113,7 +113,6 @@ def _trial(params: dict[str, Any], settings: TuneSettings, root: str) -> dict[st
 
 
 def _resolve(name: str) -> str:
-    from landing_env.config import _calibration_path
 
     return str(_calibration_path(name, Path(name)))
 
@@ -133,8 +132,6 @@ def tune_timing(settings: TuneSettings, address: str | None = None) -> TuneResul
 
     import ray
     from ray import tune
-
-    from agents.evaluation.runner import ensure_ray
 
     out_dir = Path(settings.out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
 """The onboard look-ahead as an observation: a learned timing that weighs what it foresees.
 
-``deck-forecast-onboard`` (:mod:`agents.deck_forecast`) tries a commit now in a handful of
+``deck-forecast-onboard`` (:mod:`agents.timing.deck_forecast`) tries a commit now in a handful of
 futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
 and wind estimate with their errors, its airframe's uncertain drag and thrust) and commits
 by a fixed rule: all of them land with 15 % slack, the standard falling over the last 5 s.
@@ -17,7 +17,7 @@ evaluation through :class:`LookaheadTimingPolicy`, which acts on the bare task a
 between its checks: the features of a given episode and check are the same in both (the
 look-ahead's draws are seeded by the episode and the decision).
 
-The look-ahead is the onboard model's (:class:`~agents.deck_forecast.OnboardModelConfig`):
+The look-ahead is the onboard model's (:class:`~agents.timing.deck_forecast.OnboardModelConfig`):
 what the drone knows of the present, the HMS forecast of the deck; the drone's own code
 (guidance, controller, estimators) flies it.
 """
@@ -33,8 +33,23 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.oracle import TriedCommit
+from agents.policy_registry import make_env_and_policy
+from agents.timing.cards import check_compatible, env_signature, sensing_profile
+from agents.timing.deck_forecast import (
+    DeckForecastTimingPolicy,
+    OnboardModelConfig,
+    episode_monitor,
+)
+from agents.timing.oracle import TriedCommit
+from agents.timing.policies import TrainedTimingPolicy
+from agents.timing.sampler import SENSING_PROFILES
+from landing_env.config_loading import build_dataclass
+from landing_env.envs.actions import validate_action
+from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.scenarios import SCENARIOS
+from landing_env.sea.hms import REPORT_FIELDS
+from landing_env.touchdown import Outcome
 
 #: per check, in order: whether a look-ahead was made (a deck-pose estimate and a forecast
 #: were there), the share of draws that land with the slack, the share that succeed at all,
@@ -63,14 +78,14 @@ class LookaheadSettings:
       this machine's CPU at ``ship-ss5``);
     * ``check_every_s``: the wait between checks (a multiple of the task's decision);
     * ``min_margin``: the slack a draw needs to count in ``chance``
-      (:func:`agents.oracle.touchdown_margin`);
+      (:func:`agents.timing.oracle.touchdown_margin`);
     * ``checks``: how many checks the observation holds (this one first);
     * ``seed``: the look-ahead's own streams (with the episode's seed and the decision);
     * ``hms_report_s``: with a window (CAP 437's is 600 s), the observation also carries the
       ship's HMS report over it (:data:`HMS_REPORT_FEATURES`, before the wait used): how
       hard the sea moves the deck, which the look-ahead's draws do not say; 0: no report.
     * ``airframe_in_trim``: the onboard model's drawn airframes start in their own trim
-      (:attr:`~agents.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
+      (:attr:`~agents.timing.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
       shipped look-ahead's draws.
     """
 
@@ -128,7 +143,6 @@ class LookaheadSettings:
 
     def onboard(self) -> Any:
         """The onboard model the look-ahead plays (:class:`OnboardModelConfig`)."""
-        from agents.deck_forecast import OnboardModelConfig
 
         return OnboardModelConfig(airframe_in_trim=self.airframe_in_trim)
 
@@ -136,7 +150,6 @@ class LookaheadSettings:
 def hms_report_features(monitor: Any, t_s: float, window_s: float) -> np.ndarray:
     """:data:`HMS_REPORT_FEATURES` of ``monitor``'s standard report over ``window_s`` up to
     ``t_s``, each scaled to its reading of 1 and clipped to [0, 1]."""
-    from landing_env.sea.hms import REPORT_FIELDS
 
     report = monitor.standard_report(t_s, window_s)
     values = [report[REPORT_FIELDS.index(k)] / scale for k, scale in HMS_REPORT_FEATURES.items()]
@@ -146,7 +159,6 @@ def hms_report_features(monitor: Any, t_s: float, window_s: float) -> np.ndarray
 def in_flight(env: Any) -> bool:
     """Whether a commit can be tried now: the episode goes on and its warm-up hold did not
     end it (``env``: the unwrapped timing task)."""
-    from landing_env.touchdown import Outcome
 
     return not getattr(env, "_hold_failed", False) and env._outcome is Outcome.IN_FLIGHT
 
@@ -184,7 +196,6 @@ class LookaheadObserver:
     def __init__(
         self, env: Any, settings: LookaheadSettings | None = None, forecast: Any = None
     ) -> None:
-        from agents.deck_forecast import DeckForecastTimingPolicy
 
         self.settings = settings or LookaheadSettings()
         base = env.unwrapped
@@ -259,9 +270,10 @@ class LookaheadTimingWrapper(gym.Wrapper):
 
     def __init__(self, env: gym.Env, forecast: Any = None, **settings: Any) -> None:
         super().__init__(env)
-        from landing_env.config_loading import build_dataclass
 
         self.settings = build_dataclass(LookaheadSettings, settings, "lookahead")
+        #: what a model card records of this observation (:func:`agents.timing.cards.env_signature`)
+        self.lookahead_settings = self.settings
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.observation_space = self.observer.observation_space
         self.action_space = gym.spaces.Discrete(2)
@@ -274,7 +286,6 @@ class LookaheadTimingWrapper(gym.Wrapper):
         return self.observer.observe(0), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        from landing_env.envs.actions import validate_action
 
         choice = validate_action(action, self.action_space, "0 = wait, 1 = commit")
         total = 0.0
@@ -295,7 +306,7 @@ class LookaheadTimingPolicy:
     """A model trained on :class:`LookaheadTimingWrapper`, acting in the bare timing task.
 
     Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
-    waits.  The card is checked as :class:`~agents.policies.TrainedTimingPolicy` checks
+    waits.  The card is checked as :class:`~agents.timing.policies.TrainedTimingPolicy` checks
     one, the look-ahead's settings included.
     """
 
@@ -306,7 +317,6 @@ class LookaheadTimingPolicy:
         allow_mismatch: tuple[str, ...] = (),
         forecast: Any = None,
     ) -> None:
-        from agents.policies import TrainedTimingPolicy
 
         self.trained = TrainedTimingPolicy(path)
         card = self.trained.metadata.observation.get("lookahead")
@@ -320,7 +330,6 @@ class LookaheadTimingPolicy:
         self.settings = LookaheadSettings(**fields)
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.trained.check_layout(self.settings.size)
-        from agents.model_metadata import check_compatible, env_signature
 
         check_compatible(
             self.trained.metadata,
@@ -397,25 +406,20 @@ def collect_transitions(
 
     Each episode holds to its wait limit; at every check the look-ahead's observation is
     recorded with the reward of a commit now, tried with the episode's own future in a saved
-    copy (as :class:`agents.oracle.OracleTimingPolicy` tries it), and with the wait's reward
+    copy (as :class:`agents.timing.oracle.OracleTimingPolicy` tries it), and with the wait's reward
     and the next check's observation.  The episode then goes on as if it waited, so any policy
     of the wrapper can be replayed exactly on the file (:func:`replay_success`): the states on
     its path and their observations are the ones recorded.  Each check's draws are kept
     (:data:`DRAW_KEYS`), so the file also serves a look-ahead of fewer draws.  The file is
     rewritten after every episode (an interrupted run keeps what it has).
 
-    ``sensing`` names a profile of :data:`agents.scenario_sampler.SENSING_PROFILES`
+    ``sensing`` names a profile of :data:`agents.timing.sampler.SENSING_PROFILES`
     (``realistic-2x``: twice the realistic noise); the file records that name (with the
     scenario's lens where it is not the standard one: ``realistic-2x,lens=wide``).  Without it
     the ``sensors`` default applies (``DECK_LANDING_SENSORS``); the file records
-    :func:`agents.model_metadata.sensing_profile` either way.
+    :func:`agents.timing.cards.sensing_profile` either way.
     """
     from tqdm import tqdm
-
-    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
-    from agents.model_metadata import sensing_profile
-    from agents.scenario_sampler import SENSING_PROFILES
-    from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     settings = settings or LookaheadSettings()
     overrides: dict[str, Any] = {}
@@ -568,9 +572,6 @@ def with_hms_report(
     the episode gives its one check the report at the time the warm-up ended)."""
     from tqdm import tqdm
 
-    from agents.deck_forecast import episode_monitor
-    from agents.evaluation.landing import SCENARIOS, make_env_and_policy
-
     if not settings.hms_report_s:
         raise ConfigError("lookahead.hms_report_s", "no report asked: 0 s")
     tail_from = settings.checks * len(LOOKAHEAD_FEATURES)
@@ -616,11 +617,10 @@ def load_transitions(
     """The transitions of several files, concatenated; they must share their look-ahead, and
     an episode (its seed) may be in one file only, whatever its scenario.  Each record also
     gets its file's ``scenario``, the ``estimator`` observed (a file without one: the
-    scenario's own) and the ``sensing`` profile (:func:`agents.model_metadata.sensing_profile`;
+    scenario's own) and the ``sensing`` profile (:func:`agents.timing.cards.sensing_profile`;
     a file without one: ``unknown``).  ``settings``: the look-ahead to see them with, the
     files' or the same with fewer draws (:func:`with_draws`), or with the HMS report where
     the files have none (:func:`with_hms_report`)."""
-    from agents.evaluation.landing import SCENARIOS
 
     parts: list[dict[str, np.ndarray]] = []
     signature = None
@@ -706,11 +706,13 @@ def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.lookahead collect``: record transitions (:func:`collect_transitions`);
-    ``train``: fit a DQN on them offline (:func:`agents.lookahead_training.train_offline`)."""
+    """``python -m agents.timing.lookahead collect``: record transitions (:func:`collect_transitions`);
+    ``train``: fit a DQN on them offline (:func:`agents.timing.lookahead_training.train_offline`)."""
     import argparse
 
-    parser = argparse.ArgumentParser(prog="python -m agents.lookahead", description=main.__doc__)
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.timing.lookahead", description=main.__doc__
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     collect = sub.add_parser("collect", help="both actions' outcomes at every check")
     collect.add_argument("--scenario", default="ship-ss5")
@@ -753,3 +755,14 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def build_lookahead_policy(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> LookaheadTimingPolicy:
+    """``timing-dqn-lookahead`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    if model_path is None:
+        raise ConfigError(
+            "model", "timing-dqn-lookahead needs a model (the shipped one by default)"
+        )
+    return LookaheadTimingPolicy(model_path, env, tuple(allow))

@@ -19,7 +19,7 @@ and of the deck's horizontal position in the levelled camera frame, the mean hei
 estimate's validity, over each window; the newest tilt, offset and height; the ToF rays on
 the deck; the fraction of the wait used).  Its labels are *hindsight* labels: in simulation a
 commit at each decision of a waiting episode is tried in a snapshot and undone
-(:mod:`agents.hindsight`), so every decision gets the touchdown a commit then would have
+(:mod:`agents.timing.hindsight`), so every decision gets the touchdown a commit then would have
 given, the whole descent included.  The labels need the simulator; the model reads only what
 the drone observes.  Its held-out chances (fitted on the other folds of episodes) are kept so
 that a policy can weigh a chance against the optimal-stopping value of waiting on
@@ -63,7 +63,7 @@ NOW_STATISTICS: tuple[str, ...] = (
     "tof_on_deck",
     "wait_fraction",
 )
-#: the history's columns the features read (``landing_env.envs.history.HISTORY_FEATURES``'s
+#: the history's columns the features read (``landing_env.timing.history.HISTORY_FEATURES``'s
 #: order: x, y, z, roll, pitch, yaw, z_rate, roll_rate, pitch_rate, valid)
 _X, _Y, _Z, _ROLL, _PITCH, _Z_RATE, _ROLL_RATE, _PITCH_RATE, _VALID = 0, 1, 2, 3, 4, 6, 7, 8, 9
 #: the fewest valid samples a window needs for its statistics

@@ -9,21 +9,33 @@ with a :class:`~landing_env.errors.ConfigError` that names the field; a caller m
 named mismatches on purpose (``allow``), e.g. ``sensing`` to test an ideal-trained model
 under realistic noise.
 
-``python -m agents.model_metadata show MODEL.zip`` prints a card; ``stamp`` writes one into a
-model trained before cards existed (see ``--help``).
+``deck-landing model show MODEL.zip`` prints a card.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from landing_env.config_loading import build_dataclass
+import gymnasium as gym
+
 from landing_env.errors import ConfigError
+from landing_env.scenarios import TIMING_TASK
+from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
+from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
+from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.timing.layout import (
+    FORECAST_SCALES,
+    HISTORY_SCALES,
+    OBSERVATION_LIMIT,
+    OWN_STATE_FEATURES,
+    OWN_STATE_SCALES,
+    TOF_SCALE,
+    timing_layout,
+)
 
 #: the card's name inside the SB3 zip
 METADATA_NAME = "deck_landing_metadata.json"
@@ -37,7 +49,7 @@ CHECKED_FIELDS: tuple[str, ...] = ("env_id", "observation", "estimator", "sensin
 class ModelMetadata:
     """A trained timing model's card (see the module docstring)."""
 
-    #: e.g. ``DeckLandingTiming-v0``: the name and the version of the observation's meaning
+    #: the registered id it was trained on, with its version (``DeckLandingTiming-BenchSS4-v6``)
     env_id: str
     #: :func:`observation_signature` of the environment it was trained in
     observation: dict[str, Any]
@@ -57,6 +69,13 @@ class ModelMetadata:
     #: fit spans several (the look-ahead's features on the ship's and the bench's descents):
     #: an environment matches ``observation`` or one of these
     other_observations: list[dict[str, Any]] = field(default_factory=list)
+
+    #: the other registered ids it was trained on, where a fit spans several scenarios
+    other_env_ids: list[str] = field(default_factory=list)
+
+    def env_ids(self) -> list[str]:
+        """Every registered id it was trained on, ``env_id`` first."""
+        return [self.env_id, *self.other_env_ids]
 
     def observations(self) -> list[dict[str, Any]]:
         """Every observation signature it was trained on, ``observation`` first."""
@@ -90,7 +109,7 @@ def sensing_profile(config: Any, profile: str | None = None) -> str:
     ``sensors: ideal``, ``ideal`` when no sensor noise is configured, else the settings that
     depart from ideal (``tof.noise=vl53l1x``, ...).  ``profile`` names the profile the config
     was built from where it has a name of its own (``realistic-2x``, a bundle with its noise
-    doubled: :data:`agents.scenario_sampler.SENSING_PROFILES`).  A lens other than the
+    doubled: :data:`agents.timing.sampler.SENSING_PROFILES`).  A lens other than the
     standard one is named after it (``realistic,lens=wide``): the camera sees another field
     at another resolution.
     """
@@ -130,7 +149,7 @@ def descent_signature(
     opportunity_s: float = 1.0,
     contact_times_s: tuple[float, ...] = (),
 ) -> dict[str, Any]:
-    """The final descent a commit starts (:class:`~landing_env.envs.guidance.GuidanceGains`,
+    """The final descent a commit starts (:class:`~landing_env.timing.guidance.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
     and whether a bad commit is waved off, so another descent is another task even where the
     observation's layout is the same.  ``contact_times_s``: the contact times a commit
@@ -173,19 +192,9 @@ def descent_signature(
 def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     """Every setting that changes what a timing observation's values mean.
 
-    ``timing`` is a :class:`~landing_env.envs.timing.TimingConfig`; the layout's own constants
+    ``timing`` is a :class:`~landing_env.timing.env.TimingConfig`; the layout's own constants
     (features, scales, bounds) are included so that a change to them is caught too.
     """
-    from landing_env.envs.history import HISTORY_FEATURES
-    from landing_env.envs.timing import (
-        FORECAST_SCALES,
-        HISTORY_SCALES,
-        OBSERVATION_LIMIT,
-        OWN_STATE_FEATURES,
-        OWN_STATE_SCALES,
-        TOF_SCALE,
-        timing_layout,
-    )
 
     layout = timing_layout(timing, env_hz)
     n_history = layout.n_history
@@ -200,17 +209,12 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
         }
     elif timing.observation == "forecast":
         # the forecast's horizons, window and record, and the own state's features
-        import dataclasses
-
-        from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
-        from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
-
         prediction = {
             "observation": timing.observation,
             "forecast": {
                 "channels": list(HMS_CHANNELS),
                 # the HMS's rate and errors: what the forecast reads
-                "hms": dataclasses.asdict(HelideckMonitorConfig()),
+                "hms": asdict(HelideckMonitorConfig()),
                 "horizons_s": [float(h) for h in HORIZONS_S],
                 "window_s": float(WINDOW_S),
                 "fitted_on": f"{REALIZATIONS} records of {RECORD_S:g} s",
@@ -247,31 +251,34 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     }
 
 
+def _observing_wrapper(env: Any) -> Any:
+    """The wrapper in ``env``'s chain that observes for the policy (one with a
+    ``lookahead_settings``, :class:`agents.timing.lookahead.LookaheadTimingWrapper`), if any."""
+    while isinstance(env, gym.Wrapper):
+        if getattr(env, "lookahead_settings", None) is not None:
+            return env
+        env = env.env
+    return None
+
+
 def env_signature(env: Any, lookahead: Any = None) -> dict[str, Any]:
     """The checked fields of a ``DeckLandingTiming`` environment (wrapped or not).
 
-    Observed through the look-ahead (:class:`agents.lookahead.LookaheadTimingWrapper` in
-    ``env``'s wrappers, or its ``lookahead`` settings given), the observation's size and
-    meaning are the look-ahead's."""
-    from agents.lookahead import find_lookahead
-
+    ``env_id`` is the registered id it was made from, with its version (the bare task's where
+    it was built directly).  Observed through the look-ahead (a wrapper with
+    ``lookahead_settings`` in ``env``'s chain, or its ``lookahead`` settings given), the
+    observation's size and meaning are the look-ahead's."""
     if lookahead is None:
-        wrapper = find_lookahead(env)
-        lookahead = wrapper.settings if wrapper is not None else None
+        wrapper = _observing_wrapper(env)
+        lookahead = wrapper.lookahead_settings if wrapper is not None else None
     base = env.unwrapped
     spec = getattr(base, "spec", None)
-    from agents.training import ENV_ID
-    from landing_env.scenarios import SCENARIO_IDS
-
-    env_id = spec.id if spec is not None else ENV_ID
-    # a scenario id (DeckLandingTiming-BenchSS4-v0) is its task on a config: the task's id and
-    # version say what the observation means
-    scenario = SCENARIO_IDS.get(env_id)
+    env_id = spec.id if spec is not None else TIMING_TASK
     observation = observation_signature(base.timing, base.config.simulation.env_hz)
     if lookahead is not None:
         observation = {**observation, "size": lookahead.size, "lookahead": lookahead.signature()}
     return {
-        "env_id": scenario.task if scenario is not None else env_id,
+        "env_id": env_id,
         "observation": observation,
         "estimator": base.config.estimation.observed,
         "sensing": sensing_profile(base.config),
@@ -310,6 +317,14 @@ def check_compatible(
                     first.key,
                     f"{first.detail} (nor does it match the {more} other observation"
                     f"{'s' if more > 1 else ''} on its card)",
+                )
+            continue
+        if name == "env_id":
+            if have not in card.env_ids():
+                raise ConfigError(
+                    "env_id",
+                    f"{model} was trained on {card.env_ids()}, the environment is {have!r}"
+                    + hint.format(field="env_id"),
                 )
             continue
         if name == "sensing":
@@ -415,16 +430,12 @@ def write_metadata(path: str | Path, card: ModelMetadata) -> None:
     tmp.replace(path)
 
 
-def card_for_training(env: Any, config: Any, sensing: list[str] | None = None) -> ModelMetadata:
-    """The card of a model trained by :func:`agents.training.train` with ``config`` in
-    environments like ``env`` (``sensing``: every profile the training sampled); a training
-    with ``deck_landing.lookahead`` is signed with its look-ahead, the env wrapped or not."""
-    lookahead = None
-    settings = getattr(config, "settings", None)
-    if getattr(settings, "lookahead", None) is not None:
-        from agents.lookahead import LookaheadSettings
-
-        lookahead = build_dataclass(LookaheadSettings, settings.lookahead, "deck_landing.lookahead")
+def card_for_training(
+    env: Any, config: Any, sensing: list[str] | None = None, lookahead: Any = None
+) -> ModelMetadata:
+    """The card of a model trained with ``config`` (:mod:`agents.timing.training`) in environments
+    like ``env`` (``sensing``: every profile the training sampled; ``lookahead``: the
+    look-ahead settings it observed through, the env wrapped or not)."""
     signature = env_signature(env, lookahead)
     return ModelMetadata(
         env_id=signature["env_id"],
@@ -439,45 +450,3 @@ def card_for_training(env: Any, config: Any, sensing: list[str] | None = None) -
         },
         training_config_source=str(config.source),
     )
-
-
-# ------------------------------------------------------------------------------ command line
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.model_metadata", description="Show or write a timing model's card."
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    show = sub.add_parser("show", help="print the card of a model zip")
-    show.add_argument("model")
-    stamp = sub.add_parser(
-        "stamp", help="write a card into a model zip, from the training YAML and the env it used"
-    )
-    stamp.add_argument("model")
-    stamp.add_argument("--config", required=True, help="the training YAML it was trained with")
-    stamp.add_argument("--note", default="")
-    args = parser.parse_args(argv)
-    if args.command == "show":
-        card = read_metadata(args.model)
-        print(card.to_json() if card else f"{args.model} has no card ({METADATA_NAME})")
-        return 0 if card else 1
-    import gymnasium as gym
-
-    import landing_env  # noqa: F401  (registers the environments)
-    from agents.training import ENV_ID, load_train_config
-
-    config = load_train_config(args.config)
-    # the id it was trained on (a scenario id builds its scenario's timing settings, the
-    # descent included)
-    env = gym.make(config.env_id or ENV_ID, **{"render_mode": None, **config.settings.env_kwargs})
-    try:
-        card = card_for_training(env, config)
-    finally:
-        env.close()
-    card.note = args.note
-    write_metadata(args.model, card)
-    print(card.to_json())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -10,7 +10,7 @@ read from the simulator.  Seeds start at 5000 (the evaluations hold out 1 000 00
 
 ::
 
-    python -m agents.deck_predictor fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
+    python -m agents.timing.tilt_fit fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
         --sensors realistic --episodes 60 --out landing_env/assets/predictors/deck_tilt_bench.npz
 
 The shipped ``bench`` predictor was made by exactly that command (9 min on 2 cores); the
@@ -27,8 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from agents.timing.hindsight import make_timing_env
+from agents.timing.sampler import SENSING_PROFILES
 from estimation.deck_prediction import LinearTiltPredictor
-from landing_env.errors import require_range
+from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
+from landing_env.errors import require_choice, require_range
+from landing_env.resources import tilt_predictor_path
+from landing_env.scenarios import SCENARIOS
+from landing_env.timing.history import HISTORY_FEATURES
 
 #: the horizons the predictor is fitted at: every decision period (0.1 s) up to 2 s
 HORIZONS_S = np.round(np.arange(0.0, 2.0 + 1e-9, 0.1), 2)
@@ -61,10 +67,6 @@ def collect(
     the ``channels`` and the validity (N, n, C + 1), the true levelled (roll, pitch) (N, 2),
     the episode number (N,), and the decision period (s)."""
     from tqdm import tqdm
-
-    from agents.hindsight import make_timing_env
-    from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
-    from landing_env.envs.history import HISTORY_FEATURES
 
     require_range("episodes", episodes, 1)
     require_range("wait_s", wait_s, 1.0)
@@ -136,8 +138,6 @@ def fit_family(
 ) -> LinearTiltPredictor:
     """Collect ``episodes`` per scenario and fit one predictor on all of them (held-out
     episodes drawn from every scenario)."""
-    from agents.evaluation.landing import SCENARIOS
-    from landing_env.errors import require_choice
 
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     dt = decision_s = 0.0
@@ -188,10 +188,8 @@ def describe(predictor: LinearTiltPredictor) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from agents.evaluation.landing import SCENARIOS
-    from agents.scenario_sampler import SENSING_PROFILES
 
-    parser = argparse.ArgumentParser(prog="python -m agents.deck_predictor", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m agents.timing.tilt_fit", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     fit = commands.add_parser("fit", help="collect waiting episodes and fit a predictor")
     fit.add_argument("--scenario", nargs="+", required=True, choices=sorted(SCENARIOS))
@@ -213,8 +211,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     show.add_argument("path")
     args = parser.parse_args(argv)
     if args.command == "show":
-        from landing_env.resources import tilt_predictor_path
-
         predictor = LinearTiltPredictor.load(tilt_predictor_path(args.path))
         shown: dict[str, Any] = {
             k: v for k, v in predictor.metadata.items() if k != "heldout_rms_deg"
@@ -233,7 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.estimator,
         args.window,
         progress=not args.no_progress,
-        command="python -m agents.deck_predictor "
+        command="python -m agents.timing.tilt_fit "
         + " ".join(list(argv) if argv is not None else sys.argv[1:]),
         channels=tuple(args.channels),
     )
