@@ -20,11 +20,8 @@ from tqdm import tqdm
 import landing_env  # noqa: F401  (registers the environments)
 from agents.align_descend import AlignDescendPolicy
 from agents.evaluation.landing import HELD_OUT_SEED
-from agents.policy_registry import make_env_and_policy
-from agents.timing.policies import shipped_timing_model
-from landing_env.config import load_config
+from agents.policy_registry import default_policy, make_env_and_policy
 from landing_env.errors import ConfigError, require_choice
-from landing_env.scenarios import SCENARIOS
 
 
 @dataclass
@@ -260,38 +257,23 @@ def run_timing_demo(
     scenario: str = "bench-ss4",
     policy_name: str | None = None,
 ) -> TimingDemoLog | None:
-    """`make demo`, part 2: the shipped timing policy waits over a sea-state deck and lands.
+    """`make demo`, part 2: the scenario's recommended timing policy waits over a sea-state
+    deck and lands.
 
-    The camera is rendered and the tag detected for real (the policy was trained with the
-    projected camera).  ``policy_name`` None picks ``timing-dqn-timed`` with ``tight``'s
-    estimate observed (trained under ``sensors: realistic``, ``deck-landing demo --sensors
-    realistic``; under ideal sensing its card's sensing is allowed to differ).  Writes
-    ``timing_camera.mp4`` and ``timing_trajectory.png``.  The seed is offset into the
-    held-out range, so that the episode is not one the policy was trained on.
+    The camera is rendered and the tag detected for real.  ``policy_name`` None picks the
+    scenario's recommended policy (:func:`agents.policy_registry.default_policy`: ``predictive``
+    on the bench) with its own estimator and settings; ``deck-landing demo --sensors
+    realistic`` flies it under realistic sensing.  Writes ``timing_camera.mp4`` and
+    ``timing_trajectory.png``.  The seed is offset into the held-out range, so that the
+    episode is not one a policy was fitted on.
     """
 
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
-    estimator = "ihrcf"
-    allow: tuple[str, ...] = ()
     if policy_name is None:
-        # the policy trained on the timed descent the bench scenarios fly, with tight observed
-        # under realistic sensing; under ideal sensing it lands as well (the README's tables:
-        # on this bench the deck's motion, not the estimate's noise, limits the timing)
-        realistic = load_config(SCENARIOS[scenario].config).sensors == "realistic"
-        policy_name, estimator = "timing-dqn-timed", "tight"
-        allow = () if realistic else ("sensing",)
-    model = shipped_timing_model(policy_name.removeprefix("timing-"))
-    if not model.is_file():
-        console.print(f"[yellow]no trained timing policy at {model}: part 2 skipped[/yellow]")
-        return None
+        policy_name = default_policy(scenario)
     env, policy = make_env_and_policy(
-        policy_name,
-        scenario,
-        estimator,
-        camera_mode="render",
-        render_mode="rgb_array",
-        allow_mismatch=allow,
+        policy_name, scenario, camera_mode="render", render_mode="rgb_array"
     )
     base = env.unwrapped
     base.record_periods = True
@@ -315,7 +297,7 @@ def run_timing_demo(
     finally:
         env.close()
     log.final_info = info
-    table = Table(title=f"DeckLandingTiming-v0 on {scenario}: {policy_name}")
+    table = Table(title=f"{env.spec.id if env.spec else scenario}: {policy_name}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("outcome", info["outcome"])

@@ -50,7 +50,7 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]
         (["train", "timing", "--config", "configs/bench-ss4.yaml"], "DeckLandingTiming-v0"),
         (["train", "timing", "--config", "no/such/file.yaml"], "does not exist"),
         (
-            ["evaluate", "landing", "--policy", "timing-ppo", "--model", "no-such.zip",
+            ["evaluate", "landing", "--policy", "timing-model", "--model", "no-such.zip",
              "--scenario", "bench-ss4", "--episodes", "1", "--workers", "1", "--no-progress"],
             "no-such.zip",
         ),
@@ -113,7 +113,7 @@ def test_demo_timing_part_flies_the_realistic_policy_under_realistic_sensing(
     monkeypatch.setenv(SENSORS_ENV, "realistic")
     log = run_timing_demo(seed=4, out_dir=tmp_path)
     assert log is not None and log.final_info["outcome"] == "success"
-    assert "timing-dqn-timed" in capsys.readouterr().out
+    assert "predictive" in capsys.readouterr().out
     assert (tmp_path / "timing_camera.mp4").stat().st_size > 0
 
 

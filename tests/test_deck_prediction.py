@@ -16,9 +16,15 @@ from agents.timing.tilt_fit import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
+from landing_env.scenarios import PREDICTIVE_TIMING, dotted
 
 DT = 0.05
 WINDOW_S = 4.0
+
+#: the ``predictive`` policy's timing settings over the bench ids', and with the prediction
+#: observation (``timing-dqn-predictive``'s)
+PREDICTIVE = dotted("timing", PREDICTIVE_TIMING)
+PREDICTION = {**PREDICTIVE, "timing.observation": "prediction"}
 
 
 def _deck_series(seed: int, seconds: float, noise_rad: float) -> tuple[np.ndarray, np.ndarray]:
@@ -631,7 +637,9 @@ def test_random_decisions_on_a_v4_id_under_realistic_sensing_never_leave_the_spa
 
     import landing_env  # noqa: F401
 
-    env = gym.make("DeckLandingTiming-BenchSS5-v4", overrides={"sensors": "realistic"})
+    env = gym.make(
+        "DeckLandingTiming-BenchSS5-v6", overrides={"sensors": "realistic", **PREDICTIVE}
+    )
     rng = np.random.default_rng(7)
     try:
         for episode in range(3):
@@ -723,7 +731,9 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
     import landing_env  # noqa: F401
     from landing_env.timing.history import HISTORY_FEATURES
 
-    env = gym.make("DeckLandingTiming-BenchSS5-v5", overrides={"sensors": "realistic"})
+    env = gym.make(
+        "DeckLandingTiming-BenchSS5-v6", overrides={"sensors": "realistic", **PREDICTION}
+    )
     try:
         base = env.unwrapped
         assert env.observation_space.shape == (4 + 2 + 9,)
@@ -756,7 +766,7 @@ def test_the_history_reading_policies_refuse_a_prediction_observation_naming_the
     from agents.policy_registry import make_policy
     from landing_env.errors import ConfigError
 
-    env = gym.make("DeckLandingTiming-BenchSS4-v5")
+    env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=PREDICTION)
     try:
         for name in ("quiescent", "predictive"):
             with pytest.raises(ConfigError, match=r"timing\.observation"):
@@ -776,17 +786,23 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
     with pytest.raises(ConfigError, match="observation"):
         TimingConfig(observation="chances")
     with pytest.raises(ConfigError, match=r"timing\.tilt_model"):
-        gym.make("DeckLandingTiming-v0", config="bench-ss4", timing={"observation": "prediction"})
+        gym.make(
+            "DeckLandingTiming-v0",
+            config="bench-ss4",
+            overrides={"timing.observation": "prediction"},
+        )
 
 
 def test_a_model_card_tells_the_prediction_observation_from_the_history():
     from agents.timing.cards import observation_signature
     from landing_env.config_loading import build_dataclass
-    from landing_env.scenarios import bench_predictive_timing
+    from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
     from landing_env.timing.config import TimingConfig
 
-    v4 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(4), "t"), 20)
-    v5 = observation_signature(build_dataclass(TimingConfig, bench_predictive_timing(5), "t"), 20)
+    history = {**BENCH_TIMING, **PREDICTIVE_TIMING}
+    prediction = {**history, "observation": "prediction"}
+    v4 = observation_signature(build_dataclass(TimingConfig, history, "t"), 20)
+    v5 = observation_signature(build_dataclass(TimingConfig, prediction, "t"), 20)
     assert "observation" not in v4 and v4["size"] == 160 * 10 + 9
     assert v5["observation"] == "prediction" and v5["tilt_model"] == "scenario"
     assert v5["contact_times_s"] == [1.2, 1.3, 1.4, 1.5] and v5["size"] == 15
@@ -797,7 +813,9 @@ def test_random_decisions_on_a_v5_id_under_realistic_sensing_never_leave_the_spa
 
     import landing_env  # noqa: F401
 
-    env = gym.make("DeckLandingTiming-BenchSS4-v5", overrides={"sensors": "realistic"})
+    env = gym.make(
+        "DeckLandingTiming-BenchSS4-v6", overrides={"sensors": "realistic", **PREDICTION}
+    )
     rng = np.random.default_rng(8)
     try:
         for episode in range(2):
@@ -820,7 +838,8 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     prediction observation read from the scenario's own predictor; a history observation (the
     v4 settings) is refused naming the key; on held-out seeds it lands at least as often as
     ``land-now``, and it runs at sea state 4 and on ideal sensing without a flag."""
-    from agents.evaluation.landing import evaluate_policy, make_env_and_policy
+    from agents.evaluation.landing import evaluate_policy
+    from agents.policy_registry import make_env_and_policy
     from agents.timing.cards import read_metadata
     from agents.timing.policies import shipped_timing_model
     from landing_env.errors import ConfigError
@@ -835,10 +854,10 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     train = Path(__file__).resolve().parent.parent / "configs" / "train"
     first = load_train_config(train / "timing_dqn_predictive.yaml")
     second = load_train_config(train / "timing_dqn_predictive_finetune.yaml")
-    assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v5"
+    assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v6"
     assert second.settings.env_kwargs == first.settings.env_kwargs
     assert second.settings.init_model == f"{first.settings.out_dir}/timing_dqn_final.zip"
-    # the third stage (session 11) went on from the second's final weights, randomised over
+    # the third stage went on from the second's final weights, randomised over
     # both bench sea states (each its own predictor) and the sensing: one card serves them all
     third = load_train_config(train / "timing_dqn_predictive_randomised.yaml")
     assert third.settings.init_model == f"{second.settings.out_dir}/timing_dqn_final.zip"
@@ -884,12 +903,15 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
     for n in (3, 5):
         env = DeckLandingTimingEnv(
             f"bench-ss{n}",
-            timing={
-                "history_s": 8.0,
-                "observation": "prediction",
-                "tilt_model": "scenario",
-                "guidance": {"descent_profile": "timed"},
-            },
+            overrides=dotted(
+                "timing",
+                {
+                    "history_s": 8.0,
+                    "observation": "prediction",
+                    "tilt_model": "scenario",
+                    "guidance": {"descent_profile": "timed"},
+                },
+            ),
         )
         try:
             assert env.resolved_tilt_model() == f"bench-ss{n}"
@@ -904,6 +926,11 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
     with pytest.raises(ConfigError, match=r"timing\.tilt_model.*deck_predictor"):
         DeckLandingTimingEnv(
             "paper-stewart",
-            overrides={"simulation.drone_fixed": False},
-            timing={"history_s": 8.0, "observation": "prediction", "tilt_model": "scenario"},
+            overrides={
+                "simulation.drone_fixed": False,
+                **dotted(
+                    "timing",
+                    {"history_s": 8.0, "observation": "prediction", "tilt_model": "scenario"},
+                ),
+            },
         )

@@ -282,8 +282,8 @@ def test_fuzzed_timing_decisions_keep_every_observation_in_its_space(
 def wave_off_env() -> gym.Env:
     # the timed descent with a wave-off that often fires: commits climb back and decide again
     environment = gym.make(
-        "DeckLandingTiming-BenchSS4-v1",
-        timing={"guidance": {"descent_profile": "timed"}, "wave_off_tilt_deg": 2.0},
+        "DeckLandingTiming-BenchSS4-v6",
+        overrides={"timing.wave_off_tilt_deg": 2.0},
     )
     yield environment
     environment.close()

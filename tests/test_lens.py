@@ -97,15 +97,15 @@ def test_ship_ids_from_v4_see_through_the_wide_lens_and_gate_on_its_view() -> No
                 assert gate == half_tan
         finally:
             env.close()
-    assert SCENARIO_IDS["DeckLanding-ShipSS5-v1"].overrides["lens"] == "standard"
-    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v2"].overrides
+    # the ship ids fly their scenario's own lens
+    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v3"].overrides
     assert load_config("ship-ss6").lens == "wide"
     # at sea state 4 the standard lens's finer pixels win (README "A wider lens for the ship")
     assert load_config("ship-ss4").lens == load_config("ship-ss3").lens == "standard"
 
 
 def test_a_wide_lens_ship_episode_runs_to_an_outcome_with_every_observation_in_its_space() -> None:
-    env = gym.make("DeckLandingTiming-ShipSS5-v4", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-ShipSS5-v7", overrides={"sensors": "realistic"})
     try:
         observation, _ = env.reset(seed=3)
         assert env.observation_space.contains(observation)
@@ -168,6 +168,10 @@ def test_a_view_gate_from_a_camera_its_calibration_does_not_fit_is_refused_namin
     with pytest.raises(ConfigError, match=r"estimation\.intrinsics_file"):
         DeckLandingTimingEnv(
             "ship-ss5",
-            overrides={"camera.fx": 300.0, "estimation.observed": "truth"},
-            timing={"hold_height_m": 2.0, "guidance": {"view_from_camera": True}},
+            overrides={
+                "camera.fx": 300.0,
+                "estimation.observed": "truth",
+                "timing.hold_height_m": 2.0,
+                "timing.guidance.view_from_camera": True,
+            },
         )

@@ -29,7 +29,7 @@ from agents.timing.policies import TrainedTimingPolicy
 from agents.timing.training import TrainConfig, TrainSettings
 from landing_env.errors import ConfigError
 
-SHIP_ID = "DeckLandingTiming-ShipSS4-v4"
+SHIP_ID = "DeckLandingTiming-ShipSS4-v7"
 #: v4 is the ship ids' history observation, which the look-ahead replaces: v5 adds only the forecast
 pytestmark = pytest.mark.filterwarnings("ignore:.*is out of date")
 
@@ -193,7 +193,7 @@ def test_the_lookahead_leaves_the_episode_as_it_found_it(small_forecast) -> None
 @pytest.mark.parametrize("hms_report_s", [0.0, 600.0])
 def test_random_decisions_stay_in_the_space_to_the_wait_limit(small_forecast, hms_report_s) -> None:
     env = LookaheadTimingWrapper(
-        gym.make(SHIP_ID, timing={"wait_limit_s": 1.2}),
+        gym.make(SHIP_ID, overrides={"timing.wait_limit_s": 1.2}),
         forecast=small_forecast,
         draws=1,
         check_every_s=0.4,

@@ -135,7 +135,9 @@ def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None
 
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and card.observation["lookahead"] == settings.signature()
-    assert card.env_id == "DeckLandingTiming-v0" and card.sensing[0].startswith("realistic")
+    assert card.env_id.startswith("DeckLandingTiming-ShipSS") and card.sensing[0].startswith(
+        "realistic"
+    )
 
 
 def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path) -> None:

@@ -162,13 +162,13 @@ def test_a_card_fitted_over_two_timing_tasks_accepts_either_and_refuses_a_third(
     assert again.observations() == [ship.observation, bench.observation]
 
 
-def test_cards_of_another_estimator_or_env_are_not_merged() -> None:
+def test_cards_of_another_estimator_are_not_merged_and_the_ids_are_joined() -> None:
     with pytest.raises(ConfigError, match=r"^estimator: .*'tight'.*'ihrcf'"):
         merge_cards([_card("realistic"), _card("realistic", estimator="ihrcf")])
     other = _card("realistic")
-    other.env_id = "DeckLandingTiming-v1"
-    with pytest.raises(ConfigError, match=r"^env_id"):
-        merge_cards([_card("realistic"), other])
+    other.env_id = "DeckLandingTiming-ShipSS5-v7"
+    merged = merge_cards([_card("realistic"), other])
+    assert merged.env_ids() == ["DeckLandingTiming-v0", "DeckLandingTiming-ShipSS5-v7"]
     with pytest.raises(ConfigError, match=r"^cards"):
         merge_cards([])
 

@@ -11,15 +11,14 @@ from agents.align_descend import AlignDescendPolicy, Phase
 from agents.calm_window import CalmConfig, predict_calm
 from agents.evaluation.landing import (
     EpisodeResult,
-    make_env_and_policy,
     markdown_table,
     run_episode,
-    scenario_overrides,
     summarise,
     wilson_interval,
 )
-from agents.policy_registry import make_policy
-from agents.timing.policies import LandNowPolicy, tilt_deg
+from agents.policy_registry import make_env_and_policy, make_policy
+from agents.timing.policies import LandNowPolicy
+from estimation.frames import tilt_deg
 from landing_env.errors import ConfigError
 from landing_env.timing.history import HISTORY_FEATURES
 
@@ -141,7 +140,7 @@ def test_unknown_policy_and_scenario_name_the_choices() -> None:
     with pytest.raises(ConfigError, match=r"policy.*align-descend"):
         make_env_and_policy("hover", "bench-ss4")
     with pytest.raises(ConfigError, match=r"scenario.*bench-ss3"):
-        scenario_overrides("bench-ss9", "DeckLanding-v0")
+        make_env_and_policy("land-now", "bench-ss9")
 
 
 def test_wilson_interval_and_summary() -> None:

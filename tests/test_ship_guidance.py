@@ -12,6 +12,7 @@ import pytest
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
+from landing_env.physics.controller import ControllerGains
 from landing_env.timing.guidance import DeckGuidance, GuidanceGains, OwnState
 
 DT = 0.05
@@ -94,18 +95,17 @@ def test_a_bad_tracker_setting_is_refused_naming_its_key() -> None:
         GuidanceGains(tracker_jerk_psd=0.0)
 
 
-def test_the_ship_timing_ids_v2_track_and_lead_the_deck_s_acceleration_and_v1_do_not() -> None:
+def test_the_ship_timing_ids_track_lead_and_go_around_the_deck() -> None:
     from landing_env.scenarios import SCENARIO_IDS
 
     for n in (3, 4, 5, 6):
-        old = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v1"].task_kwargs["timing"]["guidance"]
-        new = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v2"].task_kwargs["timing"]["guidance"]
-        assert "tracker_model" not in old and "deck_lead_s" not in old
-        assert new["tracker_model"] == "acceleration" and new["deck_lead_s"] == 0.2
-        assert {k: v for k, v in new.items() if k in old} == old
-        v3 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v3"].task_kwargs["timing"]["guidance"]
-        assert v3 == {**new, "lost_deck": "search", "flare_range_m": 0.0}
-        assert "lost_deck" not in new and new["flare_range_m"] == 0.5
+        overrides = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v7"].overrides
+        assert overrides["timing.guidance.track_deck"] is True
+        assert overrides["timing.guidance.tracker_model"] == "acceleration"
+        assert overrides["timing.guidance.deck_lead_s"] == 0.2
+        assert overrides["timing.guidance.lost_deck"] == "search"
+        assert overrides["timing.guidance.flare_range_m"] == 0.0
+        assert overrides["estimation.observed"] == "tight"
 
 
 def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it() -> None:
@@ -220,20 +220,47 @@ def test_the_ship_decks_judge_the_drone_to_deck_attitude_by_the_gear_clearance_a
     assert load_config("bench-ss4").touchdown.max_relative_attitude_deg == 10.0
 
 
+#: the ship's first deck-frame guidance (v1 of the ship timing ids), and with the deck's
+#: acceleration tracked and led (v2); the level start with the bench's controller limits
+_SHIP_GUIDANCE = {
+    1: {"k_xy": 1.5, "blind_range_m": 0.8, "view_half_tan": 0.558, "flare_range_m": 0.5},
+    2: {
+        "k_xy": 1.5,
+        "blind_range_m": 0.8,
+        "view_half_tan": 0.558,
+        "flare_range_m": 0.5,
+        "tracker_model": "acceleration",
+        "deck_lead_s": 0.2,
+    },
+}
+LEVEL_START = {
+    "start.trim_to_wind": False,
+    "controller.vel_i_limit_xy": ControllerGains().vel_i_limit_xy,
+    "controller.max_tilt": ControllerGains().max_tilt,
+}
+
+
 def _land_now(track: bool, seeds: range, version: int = 1) -> list[dict]:
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.scenarios import SCENARIO_IDS
+    from landing_env.scenarios import SCENARIOS, TIMING_TASK, dotted
 
-    scenario = SCENARIO_IDS[f"DeckLandingTiming-ShipSS4-v{version}"]
-    timing = dict(scenario.task_kwargs["timing"])
-    timing["guidance"] = {**timing["guidance"], "track_deck": track}
+    timing = {
+        "hold_height_m": 2.0,
+        "descent_timeout_s": 15.0,
+        "guidance": {**_SHIP_GUIDANCE[version], "track_deck": track},
+    }
+    overrides = {
+        **SCENARIOS["ship-ss4"].overrides(TIMING_TASK, "truth"),
+        **LEVEL_START,
+        "lens": "standard",
+    }
+    overrides = {k: v for k, v in overrides.items() if not k.startswith("timing.")}
     env = gym.make(
         "DeckLandingTiming-v0",
         config="ship-ss4",
-        overrides={**scenario.overrides, "estimation.observed": "truth"},
-        timing=timing,
+        overrides={**overrides, **dotted("timing", timing)},
     )
     touchdowns = []
     try:
@@ -354,8 +381,8 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
     a gust leans the drone 25 deg at the 2 m hold, the tag and all four rays leave the 2 m
     pad; v2's guidance flies on down blind, past the pad's edge, until the descent times out;
     v3's climbs back over the deck's last track, finds it again and lands."""
-    from agents.evaluation.landing import make_env_and_policy, run_episode
-    from landing_env.scenarios import ship_flight_overrides
+    from agents.evaluation.landing import run_episode
+    from agents.policy_registry import make_env_and_policy
 
     outcomes = {}
     for lost_deck in ("descend", "search"):
@@ -365,7 +392,7 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
             "tight",
             extra_overrides={
                 # the v3 ids' start: level, the bench's controller limits
-                **ship_flight_overrides("DeckLandingTiming-v0", 3),
+                **LEVEL_START,
                 "sensors": "realistic",
                 "lens": "standard",
                 "timing.guidance.lost_deck": lost_deck,
@@ -385,12 +412,12 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     drone during the warm-up hold.  reset returns an observation inside the space with
     ``info["hold_failed"]``; the first step, whatever its action, ends the episode with that
     outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
-    from agents.evaluation.landing import make_env_and_policy, run_episode
+    from agents.evaluation.landing import run_episode
+    from agents.policy_registry import make_env_and_policy
     from agents.timing.hindsight import make_timing_env
-    from landing_env.scenarios import ship_flight_overrides
 
     # the v5 ids' start (level, the bench's controller limits): the deck meets the drone
-    start = ship_flight_overrides("DeckLandingTiming-v0", 5)
+    start = LEVEL_START
     env = make_timing_env("ship-ss5", "realistic", "tight", {"timing.history_s": 10.0, **start})
     try:
         observation, info = env.reset(seed=6010)

@@ -1,5 +1,5 @@
 """The timed final descent: its reference, the fixed commit-to-contact time it gives on the
-bench, the v1 ids that fly it, and the model cards that tell it from the range schedule."""
+bench, the bench ids that fly it, and the model cards that tell it from the range schedule."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.evaluation.landing import RANGE_DESCENT, split_timing_overrides
 from agents.timing.cards import (
     LEGACY_OBSERVATION,
     check_compatible,
@@ -17,11 +16,13 @@ from agents.timing.cards import (
     read_metadata,
 )
 from agents.timing.policies import SHIPPED_TIMING_MODEL
+from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS
+from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS, dotted
 from landing_env.timing.guidance import DeckGuidance, GuidanceGains, timed_descent_reference
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}
+RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
 
 
 def test_the_reference_leaves_the_hold_at_rest_and_meets_the_deck_at_the_touchdown_speed() -> None:
@@ -42,8 +43,11 @@ def test_the_reference_leaves_the_hold_at_rest_and_meets_the_deck_at_the_touchdo
     np.testing.assert_allclose(np.gradient(heights, t)[1:-1], rates[1:-1], atol=2e-3)
 
 
-def _contact_times(env_id: str, seeds: range, waits: tuple[int, ...]) -> tuple[list, list]:
-    env = gym.make(env_id, overrides={**REALISTIC, "touchdown.settle_time_s": 0.3})
+def _contact_times(
+    seeds: range, waits: tuple[int, ...], extra: dict | None = None
+) -> tuple[list, list]:
+    overrides = {**REALISTIC, "touchdown.settle_time_s": 0.3, **(extra or {})}
+    env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=overrides)
     descents, speeds = [], []
     for seed in seeds:
         for wait in waits:
@@ -62,8 +66,8 @@ def test_the_timed_descent_touches_down_a_fixed_time_after_commit_unlike_the_ran
     None
 ):
     seeds, waits = range(4), (0, 12, 25)
-    timed, timed_speeds = _contact_times("DeckLandingTiming-BenchSS4-v1", seeds, waits)
-    ranged, _ = _contact_times("DeckLandingTiming-BenchSS4-v0", seeds, waits)
+    timed, timed_speeds = _contact_times(seeds, waits)
+    ranged, _ = _contact_times(seeds, waits, RANGE_DESCENT)
     # the 1.2 s reference plus the velocity loop's lag: 1.30 +- 0.06 s measured over 24 commits
     assert 1.15 < np.mean(timed) < 1.45
     assert np.std(timed) < 0.1
@@ -103,21 +107,22 @@ def test_bad_descent_settings_are_refused_with_their_key() -> None:
         GuidanceGains(contact_range_m=-0.1)
 
 
-def test_the_v1_bench_ids_fly_the_timed_descent_and_v0_the_range_schedule() -> None:
+def test_the_bench_ids_fly_the_timed_descent_unless_told_the_range_schedule() -> None:
     for n in (3, 4, 5):
-        assert SCENARIO_IDS[f"DeckLandingTiming-BenchSS{n}-v1"].task_kwargs == {
-            "timing": BENCH_TIMING
-        }
-        assert SCENARIO_IDS[f"DeckLandingTiming-BenchSS{n}-v0"].task_kwargs == {}
-    env = gym.make("DeckLandingTiming-BenchSS4-v1")
+        overrides = SCENARIO_IDS[f"DeckLandingTiming-BenchSS{n}-v6"].overrides
+        assert overrides["timing.guidance.descent_profile"] == "timed"
+    env = gym.make("DeckLandingTiming-BenchSS4-v6")
     assert env.unwrapped.timing.guidance.descent_profile == "timed"
+    env.close()
+    env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=RANGE_DESCENT)
+    assert env.unwrapped.timing.guidance.descent_profile == "range"
     env.close()
 
 
 def test_a_model_trained_on_the_range_schedule_is_refused_on_the_timed_descent() -> None:
     card = read_metadata(SHIPPED_TIMING_MODEL)
     assert card is not None and "descent" not in card.observation
-    env = gym.make("DeckLandingTiming-BenchSS4-v1")
+    env = gym.make("DeckLandingTiming-BenchSS4-v6")
     signature = env_signature(env)
     env.close()
     assert signature["observation"]["descent"] == descent_signature(
@@ -126,26 +131,27 @@ def test_a_model_trained_on_the_range_schedule_is_refused_on_the_timed_descent()
     with pytest.raises(ConfigError, match=r"observation\.descent"):
         check_compatible(card, signature, allow=("sensing", "estimator"))
     # on the range schedule it describes (a card written before the descent was recorded)
-    env = gym.make("DeckLandingTiming-BenchSS4-v0")
+    env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=RANGE_DESCENT)
     legacy = env_signature(env)
     env.close()
     assert legacy["observation"]["descent"] == LEGACY_OBSERVATION["descent"]
     check_compatible(card, legacy, allow=("sensing", "estimator"))
 
 
-def test_timing_keys_of_the_evaluation_overrides_go_to_the_timing_task() -> None:
-    world, timing = split_timing_overrides(
-        {"tof.noise": "vl53l1x", "timing.guidance.descent_profile": "range"}, BENCH_TIMING
+def test_timing_keys_of_the_overrides_set_the_configs_timing_section() -> None:
+    config = load_config(
+        "bench-ss4", {"tof.noise": "vl53l1x", "timing.guidance.descent_profile": "range"}
     )
-    assert world == {"tof.noise": "vl53l1x"}
-    assert timing == {"guidance": {"descent_profile": "range"}}
+    assert config.tof.noise == "vl53l1x"
+    assert config.timing.guidance.descent_profile == "range"
     # the scenario's own settings are not changed in place
-    assert BENCH_TIMING == {"guidance": {"descent_profile": "timed"}}
-    with pytest.raises(ConfigError, match=r"timing\.hold_height_m\.x"):
-        split_timing_overrides({"timing.hold_height_m.x": 1}, {"hold_height_m": 0.7})
+    assert BENCH_TIMING["guidance"] == {"descent_profile": "timed"}
+    with pytest.raises(ConfigError, match=r"timing\.hold_height_m"):
+        load_config("bench-ss4", {"timing.hold_height_m.x": 1})
 
 
 def _bench_timing(**timing) -> gym.Env:
+    settings = {"guidance": {"descent_profile": "timed"}, **timing}
     return gym.make(
         "DeckLandingTiming-v0",
         config="bench-ss4",
@@ -155,8 +161,8 @@ def _bench_timing(**timing) -> gym.Env:
             "estimation.observed": "tight",
             "estimation.compare": [],
             "touchdown.settle_time_s": 0.3,
+            **dotted("timing", settings),
         },
-        timing={"guidance": {"descent_profile": "timed"}, **timing},
     )
 
 
@@ -193,8 +199,7 @@ def test_no_wave_off_without_the_threshold_and_none_on_the_range_schedule() -> N
         gym.make(
             "DeckLandingTiming-v0",
             config="bench-ss4",
-            overrides={"simulation.drone_fixed": False},
-            timing={"wave_off_tilt_deg": 4.0},
+            overrides={"simulation.drone_fixed": False, "timing.wave_off_tilt_deg": 4.0},
         )
     with pytest.raises(ConfigError, match="wave_off_until_s"):
         _bench_timing(wave_off_from_s=0.6, wave_off_until_s=0.5)
@@ -232,63 +237,12 @@ def test_the_evaluation_checks_timing_overrides_before_it_starts() -> None:
         )
 
 
-@pytest.mark.parametrize("name", ["timed", "waveoff", "waveoff30"])
-def test_the_timed_yamls_train_the_realistic_dqn_on_the_v1_id(name: str) -> None:
-    from pathlib import Path
-
-    from agents.timing.training import load_train_config
-
-    train = Path(__file__).resolve().parent.parent / "configs" / "train"
-    config = load_train_config(train / f"timing_dqn_{name}.yaml")
-    realistic = load_train_config(train / "timing_dqn_realistic.yaml")
-    assert config.env_id == "DeckLandingTiming-BenchSS4-v1"
-    for key in set(realistic.hyperparams) - {"env_kwargs"}:
-        assert config.hyperparams[key] == realistic.hyperparams[key], key
-    assert config.settings.env_kwargs["overrides"]["sensors"] == "realistic"
-    env = gym.make(config.env_id, **config.settings.env_kwargs)
-    timing = env.unwrapped.timing
-    env.close()
-    # the task keyword replaces the id's timing settings: the descent must still be the timed one
-    assert timing.guidance.descent_profile == "timed"
-    assert timing.wave_off_tilt_deg == (0.0 if name == "timed" else 4.5)
-    assert timing.wait_limit_s == (30.0 if name == "waveoff30" else 15.0)
-
-
-def test_the_shipped_timed_models_record_their_descent_and_refuse_another() -> None:
-    from agents.evaluation.landing import make_env_and_policy
-    from agents.timing.policies import shipped_timing_model
-
-    timed = read_metadata(shipped_timing_model("dqn-timed"))
-    waveoff = read_metadata(shipped_timing_model("dqn-waveoff"))
-    assert timed is not None and waveoff is not None
-    assert timed.observation["descent"] == descent_signature(GuidanceGains(descent_profile="timed"))
-    assert waveoff.observation["descent"]["wave_off_tilt_deg"] == 4.5
-    patient = read_metadata(shipped_timing_model("dqn-waveoff30"))
-    assert patient is not None and patient.observation["wait_limit_s"] == 30.0
-    assert patient.observation["descent"] == waveoff.observation["descent"]
-    assert timed.estimator == waveoff.estimator == "tight"
-    realistic = {"sensors": "realistic"}
-    env, _ = make_env_and_policy(
-        "timing-dqn-waveoff",
-        "bench-ss4",
-        "tight",
-        extra_overrides={**realistic, "timing.wave_off_tilt_deg": 4.5},
-    )
-    env.close()
-    with pytest.raises(ConfigError, match=r"observation\.descent"):
-        make_env_and_policy("timing-dqn-waveoff", "bench-ss4", "tight", extra_overrides=realistic)
-    with pytest.raises(ConfigError, match=r"observation\.descent"):
-        make_env_and_policy(
-            "timing-dqn-timed", "bench-ss4", "tight", extra_overrides={**realistic, **RANGE_DESCENT}
-        )
-
-
-def test_the_timed_policy_beats_land_now_on_held_out_seeds_under_realistic_sensing() -> None:
+def test_the_predictive_timing_beats_land_now_on_held_out_seeds_under_realistic_sensing() -> None:
     from agents.evaluation.landing import evaluate_policy
 
     episodes, first, realistic = 24, 2_000_000, {"sensors": "realistic"}
     learned = evaluate_policy(
-        "timing-dqn-timed", "bench-ss4", episodes, first, "tight", extra_overrides=realistic
+        "predictive", "bench-ss4", episodes, first, "tight", extra_overrides=realistic
     )
     now = evaluate_policy(
         "land-now", "bench-ss4", episodes, first, "tight", extra_overrides=realistic

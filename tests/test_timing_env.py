@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 import landing_env  # noqa: F401  (registers the environments)
 from estimation.frames import level_from_body, levelled_deck_pose, matrix_from_euler_zyx
 from landing_env.errors import ConfigError
+from landing_env.scenarios import dotted
 from landing_env.timing.guidance import DeckGuidance
 from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.timing.layout import TimingObservationLayout
@@ -30,8 +31,12 @@ def make(timing: dict | None = None, config: str = "bench-ss4", **overrides) -> 
     return gym.make(
         "DeckLandingTiming-v0",
         config=config,
-        overrides={**FLYING, "touchdown.settle_time_s": 0.3, **overrides},
-        timing=timing if timing is not None else QUICK,
+        overrides={
+            **FLYING,
+            "touchdown.settle_time_s": 0.3,
+            **dotted("timing", timing if timing is not None else QUICK),
+            **overrides,
+        },
     )
 
 

@@ -19,23 +19,28 @@ from landing_env.stewart.motion import sample_poses
 from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import OWN_STATE_FEATURES, TimingObservationLayout
 
-FORECAST_ID = "DeckLandingTiming-ShipSS5-v5"
+FORECAST_ID = "DeckLandingTiming-ShipSS5-v7"
+#: the forecast observation, a setting of the ship timing ids
+FORECAST = {"timing.observation": "forecast"}
 
 
 @pytest.fixture(scope="module")
 def ship_env():
-    env = gym.make(FORECAST_ID, overrides={"sensors": "realistic"})
+    env = gym.make(FORECAST_ID, overrides={"sensors": "realistic", **FORECAST})
     yield env
     env.close()
 
 
-def test_the_ship_ids_v5_observe_the_v4_history_then_the_forecast_and_own_state() -> None:
+def test_the_ship_ids_observe_the_history_and_the_forecast_on_request() -> None:
     for n in (3, 4, 5, 6):
-        v4 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v4"]
-        v5 = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v5"]
-        assert v5.config == v4.config and v5.overrides == v4.overrides
-        timing_v4, timing_v5 = v4.task_kwargs["timing"], v5.task_kwargs["timing"]
-        assert timing_v5 == {**timing_v4, "observation": "forecast"}
+        env_id = f"DeckLandingTiming-ShipSS{n}-v7"
+        assert "timing.observation" not in SCENARIO_IDS[env_id].overrides
+    env = gym.make(FORECAST_ID, overrides=FORECAST)
+    try:
+        layout = env.unwrapped.layout
+        assert layout.n_forecast == len(HORIZONS_S) and layout.observed_rows == 1
+    finally:
+        env.close()
 
 
 def test_the_layout_round_trips_the_forecast_and_own_state() -> None:
@@ -141,7 +146,7 @@ def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) 
         sensing=[signature["sensing"]],
     )
     check_compatible(card, signature)
-    history = gym.make("DeckLandingTiming-ShipSS5-v4", overrides={"sensors": "realistic"})
+    history = gym.make(FORECAST_ID, overrides={"sensors": "realistic"})
     try:
         with pytest.raises(ConfigError, match=r"observation\.observation: .*'forecast'"):
             check_compatible(card, env_signature(history))
@@ -162,8 +167,11 @@ def test_the_forecast_observation_needs_a_sea() -> None:
         gym.make(
             "DeckLandingTiming-v0",
             config="paper-stewart",
-            overrides={"simulation.drone_fixed": False, "camera.mode": "project"},
-            timing={"observation": "forecast"},
+            overrides={
+                "simulation.drone_fixed": False,
+                "camera.mode": "project",
+                "timing.observation": "forecast",
+            },
         )
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.evaluation.landing import RANGE_DESCENT, evaluate_policy
-from agents.timing.policies import TrainedTimingPolicy
+from agents.evaluation.landing import evaluate_policy
+from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from agents.timing.training import (
     ENV_ID,
     SCENARIO_ENV_ID,
@@ -22,10 +22,12 @@ from agents.timing.training import (
 )
 from landing_env.errors import ConfigError
 
+#: the range-scheduled descent the shipped timing_dqn.zip was trained on
+RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "timing_ppo.yaml"
 
 
-@pytest.mark.parametrize("name", ["ppo", "dqn", "dqn_realistic"])
+@pytest.mark.parametrize("name", ["ppo", "dqn"])
 def test_the_yamls_are_rl_zoo_style_and_complete(name: str) -> None:
     from stable_baselines3 import DQN, PPO
 
@@ -47,14 +49,6 @@ def test_the_yamls_are_rl_zoo_style_and_complete(name: str) -> None:
     # PPO: separate actor and critic networks; DQN: one Q-network
     net_arch = kwargs["policy_kwargs"]["net_arch"]
     assert isinstance(net_arch, dict if algo == "ppo" else list)
-    if name == "dqn_realistic":
-        # the same DQN as the shipped one, under realistic sensing with the tight estimate
-        shipped = load_train_config(CONFIG.with_name("timing_dqn.yaml"))
-        for key in set(shipped.hyperparams) - {"env_kwargs"}:
-            assert config.hyperparams[key] == shipped.hyperparams[key], key
-        overrides = config.settings.env_kwargs["overrides"]
-        assert overrides["sensors"] == "realistic"
-        assert overrides["estimation.observed"] == "tight"
 
 
 def test_zoo_policy_kwargs_strings_are_parsed_without_eval() -> None:
@@ -128,7 +122,12 @@ def test_the_shipped_policy_beats_land_now_on_held_out_seeds() -> None:
     episodes, first = 24, 2_000_000
     # both on the range-scheduled descent the shipped policy was trained on
     learned = evaluate_policy(
-        "timing-dqn", "bench-ss4", episodes, first, extra_overrides=RANGE_DESCENT
+        "timing-model",
+        "bench-ss4",
+        episodes,
+        first,
+        model_path=str(SHIPPED_TIMING_MODEL),
+        extra_overrides=RANGE_DESCENT,
     )
     now = evaluate_policy("land-now", "bench-ss4", episodes, first, extra_overrides=RANGE_DESCENT)
     learned_rate = np.mean([r.success for r in learned])
@@ -171,15 +170,14 @@ def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
     import torch
     from stable_baselines3 import DQN
 
-    from agents.timing.policies import shipped_timing_model
     from agents.timing.training import _start_from
 
-    realistic = shipped_timing_model("dqn-realistic")
+    realistic = SHIPPED_TIMING_MODEL
     trained = DQN.load(realistic, device="cpu")
-    for estimator, refused in (("tight", False), ("ihrcf", True)):
+    for estimator, refused in (("ihrcf", False), ("tight", True)):
         env = gym.make(
             SCENARIO_ENV_ID,
-            overrides={"sensors": "realistic", "estimation.observed": estimator},
+            overrides={**RANGE_DESCENT, "estimation.observed": estimator},
         )
         try:
             model = DQN("MlpPolicy", env, policy_kwargs={"net_arch": [64, 64]}, device="cpu")
@@ -196,31 +194,20 @@ def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
         _start_from(model, "no/such/model.zip", env)
 
 
-def test_the_randomised_dqn_yaml_fine_tunes_the_realistic_model() -> None:
-    from stable_baselines3 import DQN
-
-    path = CONFIG.with_name("timing_dqn_randomised.yaml")
-    data = yaml.safe_load(path.read_text())
-    algo_args = set(inspect.signature(DQN.__init__).parameters)
-    assert set(data["DeckLandingTiming-v0"]) <= set(ZOO_META_KEYS) | algo_args
-    config = load_train_config(path)
-    assert config.settings.algo == "dqn"
-    assert Path(config.settings.init_model).name == "timing_dqn_realistic.zip"
-    assert config.settings.randomise["estimator"] == "tight"
-    assert set(config.settings.randomise["sensing"]) == {"ideal", "realistic", "realistic-2x"}
-
-
-def test_the_randomised_predictive_yaml_flies_v5_over_each_scenarios_own_predictor() -> None:
-    """The third stage of ``timing-dqn-predictive`` writes the bench's v5 timing out in its
-    YAML: it must stay the settings the v5 ids fly, and it draws both bench sea states, each
-    reading its own predictor (``tilt_model: scenario``)."""
+def test_the_randomised_predictive_yaml_flies_the_policys_settings_over_each_own_predictor() -> (
+    None
+):
+    """The third stage of ``timing-dqn-predictive`` writes the policy's timing settings out in
+    its YAML: they must stay what the registry flies it with, and it draws both bench sea
+    states, each reading its own predictor (``tilt_model: scenario``)."""
     from landing_env.config_loading import build_dataclass
-    from landing_env.scenarios import bench_predictive_timing
+    from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
     from landing_env.timing.config import TimingConfig
 
     config = load_train_config(CONFIG.with_name("timing_dqn_predictive_randomised.yaml"))
     written = build_dataclass(TimingConfig, config.settings.env_kwargs["timing"], "timing")
-    assert written == build_dataclass(TimingConfig, bench_predictive_timing(5), "timing")
+    flown = {**BENCH_TIMING, **PREDICTIVE_TIMING, "observation": "prediction"}
+    assert written == build_dataclass(TimingConfig, flown, "timing")
     assert written.tilt_model == "scenario"
     assert set(config.settings.randomise["scenarios"]) == {"bench-ss4", "bench-ss5"}
     second_stage = "timing_dqn_predictive_finetune/timing_dqn_final.zip"

@@ -28,7 +28,7 @@ def test_a_bad_search_space_names_the_key() -> None:
 @pytest.mark.slow
 def test_a_tiny_search_runs_its_trials_and_keeps_the_best(tmp_path: Path) -> None:
     base = yaml.safe_load((ROOT / "configs" / "train" / "timing_dqn.yaml").read_text())
-    zoo = base["DeckLandingTiming-BenchSS4-v0"]
+    zoo = base["DeckLandingTiming-BenchSS4-v6"]
     zoo.update(learning_starts=8, batch_size=8, buffer_size=1000, train_freq=4, gradient_steps=1)
     zoo["policy_kwargs"] = "dict(net_arch=[16])"
     base_path = tmp_path / "base.yaml"
@@ -43,9 +43,9 @@ def test_a_tiny_search_runs_its_trials_and_keeps_the_best(tmp_path: Path) -> Non
         space={"gamma": {"choice": [0.99, 0.998]}, "learning_rate": {"loguniform": [1e-4, 1e-3]}},
         # a quick variant of the task: short history, low hold, short settle
         env_kwargs={
-            "timing": {"history_s": 0.25, "rate_window_s": 0.2, "hold_height_m": 0.45,
-                       "wait_limit_s": 2.0},
-            "overrides": {"touchdown.settle_time_s": 0.1},
+            "overrides": {"touchdown.settle_time_s": 0.1, "timing.history_s": 0.25,
+                          "timing.rate_window_s": 0.2, "timing.hold_height_m": 0.45,
+                          "timing.wait_limit_s": 2.0},
         },
     )  # fmt: skip
     result = tune_timing(settings)

@@ -166,25 +166,17 @@ def test_a_trim_start_in_a_gale_stays_within_the_rotors_and_finite() -> None:
         world.close()
 
 
-def test_the_ship_ids_start_in_trim_with_stock_limits_from_their_version_on() -> None:
+def test_the_ship_ids_start_in_trim_with_the_autopilots_limits() -> None:
     from landing_env.scenarios import SCENARIO_IDS
 
     for n in (3, 4, 5, 6):
-        for task, trimmed in (("DeckLandingTiming", 6), ("DeckLanding", 3)):
-            for version in range(1, trimmed + 1):
-                scenario = SCENARIO_IDS[f"{task}-ShipSS{n}-v{version}"]
-                config = load_config(scenario.config, scenario.overrides)
-                at_sea = version == trimmed
-                assert config.start.trim_to_wind is at_sea, (n, task, version)
-                limit = 10.0 if at_sea else 3.0
-                assert config.controller.vel_i_limit_xy == limit, (n, task, version)
+        for env_id in (f"DeckLandingTiming-ShipSS{n}-v7", f"DeckLanding-ShipSS{n}-v3"):
+            scenario = SCENARIO_IDS[env_id]
+            config = load_config(scenario.config, scenario.overrides)
+            assert config.start.trim_to_wind is True, env_id
+            assert config.controller.vel_i_limit_xy == 10.0, env_id
         # the ship configs themselves start in trim (what ``evaluate landing`` flies)
         assert load_config(f"ship-ss{n}").start.trim_to_wind is True
-    from landing_env.scenarios import ship_flight_overrides
-
-    with pytest.raises(ConfigError) as error:
-        ship_flight_overrides("DeckLanding-v9", 3)
-    assert error.value.key == "task"
 
 
 def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() -> None:
@@ -195,7 +187,7 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
 
     import landing_env  # noqa: F401  (registers the environments)
 
-    env = gym.make("DeckLandingTiming-ShipSS6-v6", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-ShipSS6-v7", overrides={"sensors": "realistic"})
     rng = np.random.default_rng(11)
     try:
         for episode in range(3):

@@ -373,13 +373,14 @@ def _observation_mismatch(
 def merge_cards(cards: list[ModelMetadata]) -> ModelMetadata:
     """One card for a model fitted on the data of several environments (``cards``: each one's
     card of the same training, the first the primary): their sensing profiles together and
-    each distinct observation once.  Cards that differ in the env id, the estimator or the
-    look-ahead's settings are refused: no one observation means the same in both."""
+    each distinct observation once, each registered id once.  Cards that differ in the
+    estimator or the look-ahead's settings are refused: no one observation means the same in
+    both."""
     if not cards:
         raise ConfigError("cards", "at least one card is needed")
     first = cards[0]
     for other in cards[1:]:
-        for name in ("env_id", "estimator", "camera_mode"):
+        for name in ("estimator", "camera_mode"):
             if getattr(other, name) != getattr(first, name):
                 raise ConfigError(
                     name,
@@ -397,8 +398,12 @@ def merge_cards(cards: list[ModelMetadata]) -> ModelMetadata:
             if signature not in observations:
                 observations.append(signature)
     sensing = sorted({profile for card in cards for profile in card.sensing})
+    env_ids: list[str] = []
+    for card in cards:
+        env_ids += [env_id for env_id in card.env_ids() if env_id not in env_ids]
     merged = ModelMetadata(**{**asdict(first), "sensing": sensing})
     merged.observation, merged.other_observations = observations[0], observations[1:]
+    merged.env_id, merged.other_env_ids = env_ids[0], env_ids[1:]
     return merged
 
 

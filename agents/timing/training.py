@@ -50,7 +50,7 @@ from landing_env.scenarios import SCENARIO_IDS
 
 ENV_ID = "DeckLandingTiming-v0"
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
-SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v0"
+SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v6"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
 ALGOS = ("ppo", "dqn", "recurrentppo")
