@@ -16,6 +16,7 @@ from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, posi
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.approach import add_approach_parser
 from agents.evaluation.landing import add_landing_parser
+from agents.io.bridge_cli import add_bridge_parser
 from agents.training import add_train_parser
 from agents.tune import add_tune_parser
 
@@ -167,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_parser(sub)
     add_tune_parser(sub)
     add_calibrate_parser(sub)
+    add_bridge_parser(sub)
     _add_sensors_option(parser)
     return parser
 
