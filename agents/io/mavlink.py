@@ -234,8 +234,12 @@ class LandingTargetBridge:
             return "malformed pose"
         if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
             return "non-finite pose"
-        if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6):
+        with np.errstate(all="ignore"):  # a huge entry overflows: then not orthonormal
+            orthonormal = np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6)
+        if not orthonormal:
             return "rotation not orthonormal"
+        if np.linalg.det(rotation) <= 0.0:
+            return "rotation is a reflection"
         if translation[2] <= 0.0:
             return "target not in front of the camera"
         return ""
