@@ -302,6 +302,20 @@ def test_the_simulator_bridged_to_px4_puts_the_true_tag_at_its_ned_position(
         assert (message.x, message.y, message.z) == pytest.approx(tuple(expected), abs=1e-5)
 
 
+def test_the_simulators_stamps_run_on_across_episodes() -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    with SimulatorSource(
+        estimator="truth", episodes=2, speed=0.0, overrides={"simulation.max_episode_s": 0.2}
+    ) as source:
+        stamps = [stamp for stamp, _ in source]
+        assert source.vehicle_pose(stamps[-1]) is not None
+    assert len(stamps) == 10 and len(source.outcomes) == 2
+    assert np.all(np.diff(stamps) > 0.0)
+    # the second episode starts one control period after the first one's end
+    assert stamps[5] == pytest.approx(0.2 + 0.05)
+
+
 def test_the_bridge_command_flies_an_episode_and_sends_it(listener: socket.socket, capsys) -> None:
     port = listener.getsockname()[1]
     argv = ["bridge", "--to", f"udpout:127.0.0.1:{port}", "--autopilot", "ardupilot"]

@@ -21,11 +21,12 @@ What each autopilot reads (the public sources, read to learn the conventions):
   ``position_valid = 1`` with ``frame = MAV_FRAME_LOCAL_NED`` is used; x, y, z become the
   target's *absolute* position in the local NED frame (``landing_target_pose.x_abs`` ...,
   "relative to origin", docs.px4.io/main/en/msg_docs/LandingTargetPose), stamped with
-  ``time_usec`` mapped through the TIMESYNC offset.  Another frame with ``position_valid = 1``
-  is refused ("coordinate frame unsupported"); ``position_valid = 0`` is read as an IR-LOCK
-  report of angles.  q is not read.  So PX4 needs the vehicle's attitude and local position at
-  the measurement's time (:class:`VehiclePose`) to place the target.  PX4 "assumes that the
-  target is visible when it is receiving MAVLink LANDING_TARGET messages"
+  ``time_usec`` mapped through the TIMESYNC offset once that has converged, else on receipt
+  (``Timesync::sync_stamp``, ``src/lib/timesync/Timesync.cpp``).  Another frame with
+  ``position_valid = 1`` is refused ("coordinate frame unsupported"); ``position_valid = 0`` is
+  read as an IR-LOCK report of angles.  q is not read.  So PX4 needs the vehicle's attitude and
+  local position at the measurement's time (:class:`VehiclePose`) to place the target.  PX4
+  "assumes that the target is visible when it is receiving MAVLink LANDING_TARGET messages"
   (docs.px4.io/main/en/advanced_features/precland).
 * **ArduPilot** (``libraries/AC_PrecLand/AC_PrecLand_MAVLink.cpp``,
   ``AC_PrecLand_MAVLink::handle_msg``, and ``AC_PrecLand.cpp`` in github.com/ArduPilot/ardupilot;

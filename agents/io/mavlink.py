@@ -235,7 +235,7 @@ class LandingTargetBridge:
         if not (np.all(np.isfinite(rotation)) and np.all(np.isfinite(translation))):
             return "non-finite pose"
         with np.errstate(all="ignore"):  # a huge entry overflows: then not orthonormal
-            orthonormal = np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6)
+            orthonormal = float(np.max(np.abs(rotation.T @ rotation - np.eye(3)))) <= 1e-6
         if not orthonormal:
             return "rotation not orthonormal"
         if np.linalg.det(rotation) <= 0.0:
