@@ -20,6 +20,7 @@ from agents.evaluation.approach import add_approach_parser
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.landing import add_landing_parser
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
+from agents.io.bridge_cli import add_bridge_parser
 from agents.timing.training import add_train_parser
 from agents.timing.tune import add_tune_parser
 from landing_env.config import SENSOR_SETS, SENSORS_ENV
@@ -172,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_calibrate_parser(sub)
     add_list_parser(sub)
     add_model_parser(sub)
+    add_bridge_parser(sub)
     _add_sensors_option(parser)
     return parser
 

@@ -1,0 +1,1 @@
+"""Input and output off the simulator: bridges to autopilots (MAVLink) and recordings."""

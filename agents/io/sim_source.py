@@ -1,0 +1,139 @@
+"""The live simulator as a source of ``(stamp_s, estimate)`` pairs for the MAVLink bridge.
+
+:class:`SimulatorSource` flies ``DeckLanding-v0`` episodes under the align-descend policy
+(:class:`agents.timing.policies.AlignDescendPolicy`, as ``deck-landing demo``) with the chosen
+estimator observed, and yields the observed estimate of every control step: after the reset
+and after each step.  The stamp is the estimate's own (the camera frame's capture time in
+simulated seconds; with the vision link, its capture time, not its delivery), continued across
+episodes so that it never runs backwards: episode k's stamps are offset by the simulated
+length of the episodes before it plus one control period.
+
+It also keeps the drone's pose at each capture, for the autopilots that need the vehicle's
+pose at the measurement's time (PX4): :meth:`vehicle_pose` looks it up by stamp, in the local
+NED frame whose origin is the simulator's world origin (x north, the world's y left → east
+is -y, z down).  ``speed`` paces the simulation against the wall clock (1: real time, 2: twice
+as fast); 0 runs it as fast as it goes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Iterator
+from typing import Any
+
+import gymnasium as gym
+
+import landing_env  # noqa: F401  (registers the environments)
+from agents.align_descend import AlignDescendPolicy
+from agents.io.landing_target import CameraMount, VehiclePose
+from estimation.errors import ConfigError, require_choice
+from estimation.registry import ESTIMATOR_NAMES
+from estimation.types import DeckPoseEstimate
+from landing_env.scenarios import landing_overrides
+
+#: how many captures' vehicle poses are kept (the vision link delivers up to ~1 s late)
+POSE_HISTORY = 256
+
+
+class SimulatorSource:
+    """Seeded ``DeckLanding-v0`` episodes as a stream of observed estimates.
+
+    ``config``: a config name or path, flown as it is; ``scenario``: a shipped config made a
+    landing run (the drone flying, as the landing evaluations do); give one of the two.
+    ``overrides`` (dotted keys) apply last.
+    """
+
+    def __init__(
+        self,
+        config: str | None = "default",
+        scenario: str | None = None,
+        estimator: str = "tight",
+        camera_mode: str = "project",
+        episodes: int = 1,
+        seed: int = 0,
+        speed: float = 1.0,
+        overrides: dict[str, Any] | None = None,
+    ) -> None:
+        require_choice("estimator", estimator, ESTIMATOR_NAMES)
+        require_choice("mode", camera_mode, ("project", "render"))
+        if episodes < 1:
+            raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+        if not speed >= 0.0:
+            raise ConfigError("speed", f"{speed} is out of range; allowed [0, inf), 0: unpaced")
+        if scenario is not None:
+            chosen = dict(landing_overrides("DeckLanding-v0", estimator, camera_mode))
+            config = scenario
+        else:
+            chosen = {"estimation.observed": estimator, "camera.mode": camera_mode}
+        chosen.update(overrides or {})
+        self.env = gym.make("DeckLanding-v0", config=config, overrides=chosen)
+        base = self.env.unwrapped
+        self.base = base
+        self.estimator = estimator
+        self.episodes = episodes
+        self.seed = seed
+        self.speed = float(speed)
+        self.mount = CameraMount(t_bc=base.world.t_bc)
+        self.policy = AlignDescendPolicy(
+            base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c
+        )
+        self.outcomes: list[str] = []
+        self._poses: OrderedDict[float, VehiclePose] = OrderedDict()
+        self._offset_s = 0.0
+
+    # ----------------------------------------------------------------- vehicle poses
+    def vehicle_pose(self, stamp_s: float) -> VehiclePose | None:
+        """The drone's pose at the capture stamped ``stamp_s`` (None when not kept)."""
+        return self._poses.get(stamp_s)
+
+    def _keep_pose(self) -> None:
+        state = self.base.world.drone_state()
+        stamp = self._offset_s + float(self.base.world.time)
+        self._poses[stamp] = VehiclePose.from_world(state.position_w, state.rotation_wb)
+        while len(self._poses) > POSE_HISTORY:
+            self._poses.popitem(last=False)
+
+    def _observed(self) -> DeckPoseEstimate:
+        sensing = self.base._sensing  # the step's sensor data (DeckLandingBaseEnv)
+        return sensing.estimates[self.base.config.estimation.observed]
+
+    # ----------------------------------------------------------------- the stream
+    def __iter__(self) -> Iterator[tuple[float, DeckPoseEstimate]]:
+        env, base = self.env, self.base
+        wall0 = time.perf_counter()
+        for episode in range(self.episodes):
+            observation, _ = env.reset(seed=self.seed + episode)
+            self.policy.reset()
+            self._keep_pose()
+            estimate = self._observed()
+            yield self._offset_s + estimate.timestamp, estimate
+            info: dict[str, Any] = {}
+            while True:
+                if self.speed > 0.0:
+                    # the next capture happens at its simulated time on the wall clock
+                    due = wall0 + (self._offset_s + base.world.time + base.env_dt) / self.speed
+                    wait = due - time.perf_counter()
+                    if wait > 0.0:
+                        time.sleep(wait)
+                action = self.policy(observation)
+                observation, _, terminated, truncated, info = env.step(action)
+                self._keep_pose()
+                estimate = self._observed()
+                yield self._offset_s + estimate.timestamp, estimate
+                if terminated or truncated:
+                    break
+            self.outcomes.append(str(info.get("outcome", "")))
+            self._offset_s += float(base.world.time) + base.env_dt
+
+    def close(self) -> None:
+        self.env.close()
+
+    def __enter__(self) -> SimulatorSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+__all__ = ["POSE_HISTORY", "SimulatorSource"]
