@@ -176,7 +176,7 @@ def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
     from landing_env.config import SENSOR_SETS
 
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    if not actions:
+    if not actions or parser.get_default("func") is not None:
         if "--sensors" in parser._option_string_actions:
             return
         parser.add_argument(
@@ -185,7 +185,8 @@ def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
             default=None,
             help="sensor set for every environment of the run (default: the scenario's)",
         )
-        return
+        if not actions:
+            return
     for child in {id(p): p for p in actions[0].choices.values()}.values():
         _add_sensors_option(child)
 
