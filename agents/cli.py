@@ -16,6 +16,7 @@ from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, posi
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.approach import add_approach_parser
 from agents.evaluation.landing import add_landing_parser
+from agents.io.estimate_cli import add_estimate_parser
 from agents.training import add_train_parser
 from agents.tune import add_tune_parser
 
@@ -166,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_approach_parser(which)
     add_train_parser(sub)
     add_tune_parser(sub)
+    add_estimate_parser(sub)
     add_calibrate_parser(sub)
     _add_sensors_option(parser)
     return parser
