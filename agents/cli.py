@@ -39,6 +39,7 @@ def _demo(args: argparse.Namespace) -> int:
         timing=not args.no_timing,
         episodes=args.episodes,
         camera_mode=args.mode,
+        record=Path(args.record) if args.record else None,
     )
     return 0 if log.final_info.get("outcome") else 1
 
@@ -58,6 +59,7 @@ def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
         "--no-timing", action="store_true", help="skip the trained timing policy's episode"
     )
     demo.add_argument("--out", default="results/demo", help="output directory")
+    demo.add_argument("--record", default=None, help="record the first episode to FILE.mcap")
     demo.set_defaults(func=_demo)
 
 

@@ -9,21 +9,20 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mcap_ros2")
-from mcap.reader import make_reader  # noqa: E402
-from mcap_ros2.decoder import DecoderFactory  # noqa: E402
-from rosbags.highlevel import AnyReader  # noqa: E402
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
 
-import landing_env  # noqa: E402, F401
-from agents.cli import main  # noqa: E402
-from agents.io.record import McapRecorder  # noqa: E402
+import landing_env  # noqa: F401
+from agents.cli import main
+from agents.io.record import McapRecorder
 
 STEPS = 12
 COMPARED = ["atda", "crhf", "tight"]
 
 
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("rec") / "episode.mcap"
+def record_episode(path: Path) -> Path:
+    """A short project-mode episode, hovering, recorded to ``path``."""
     overrides = {"camera.mode": "project", "estimation.compare": COMPARED}
     env = McapRecorder(gym.make("DeckLanding-v0", config="default", overrides=overrides), path)
     env.reset(seed=3)
@@ -31,6 +30,11 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
         env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     env.close()
     return path
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return record_episode(tmp_path_factory.mktemp("rec") / "episode.mcap")
 
 
 def _poses(path: Path, topic: str) -> dict[int, tuple]:
@@ -78,9 +82,7 @@ def test_estimate_on_the_recording_reproduces_the_simulator_exactly(
     recording: Path, tmp_path: Path, method: str
 ) -> None:
     out = tmp_path / f"{method}.mcap"
-    code = main(
-        ["estimate", "--input", str(recording), "--estimator", method, "--out", str(out)]
-    )
+    code = main(["estimate", "--input", str(recording), "--estimator", method, "--out", str(out)])
     assert code == 0
     in_sim = _poses(recording, f"/estimates/{method}")
     replayed = _poses(out, "/deck_pose/camera")

@@ -31,8 +31,7 @@ import numpy as np
 from agents.cli_args import UserError, parse_overrides
 from agents.io import messages as m
 from agents.io.bag import read_bag
-from agents.io.estimate_cli import ESTIMATORS
-from agents.io.recording import Recording, RecordingError, Topics, read_folder
+from agents.io.recording import ESTIMATORS, Recording, RecordingError, Topics, read_folder
 from estimation.detection import AprilTagDetector
 from estimation.frames import R_BC
 from estimation.fusion import METHOD as FUSED

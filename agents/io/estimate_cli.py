@@ -7,11 +7,8 @@ import argparse
 import math
 
 from agents.cli_args import add_set_argument
-from agents.io.recording import ALIGN_MODES, Topics
-from estimation.fusion import METHOD as FUSED
-from estimation.registry import FRAME_ESTIMATOR_NAMES
+from agents.io.recording import ALIGN_MODES, ESTIMATORS, Topics
 
-ESTIMATORS = (*FRAME_ESTIMATOR_NAMES, FUSED)
 #: a frame with no ToF sample within this of its stamp gets no ranges (seconds)
 DEFAULT_TOLERANCE_S = 0.02
 

@@ -30,8 +30,12 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from estimation.fusion import METHOD as FUSED
+from estimation.registry import FRAME_ESTIMATOR_NAMES
 from estimation.types import ImuSample, RangeReading, TagDetection
 
+#: the estimators a recording can be run through
+ESTIMATORS = (*FRAME_ESTIMATOR_NAMES, FUSED)
 N_SENSORS = 4
 ALIGN_MODES = ("nearest", "interpolate")
 
@@ -107,7 +111,10 @@ class Recording:
 
     def imu_between(self, after_s: float, until_s: float) -> list[ImuSample]:
         """The IMU samples stamped in (after_s, until_s] (compared in whole nanoseconds)."""
-        lo, hi = round(after_s * 1e9), round(until_s * 1e9)
+        hi = round(until_s * 1e9)
+        if not math.isfinite(after_s):
+            return [s for s in self.imu if round(s.timestamp * 1e9) <= hi]
+        lo = round(after_s * 1e9)
         return [s for s in self.imu if lo < round(s.timestamp * 1e9) <= hi]
 
     def attitude_at(self, t_s: float) -> np.ndarray | None:
