@@ -32,6 +32,7 @@ from rich.console import Console
 from rich.table import Table
 from tqdm import tqdm
 
+from agents.calibrate_photos import add_photo_parsers
 from agents.cli_args import add_set_argument, parse_overrides, positive_int
 from agents.evaluation.runner import map_tasks
 from estimation.tof_calibration import PAD_COLOURS
@@ -371,3 +372,5 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_set_argument(parser)
     parser.set_defaults(func=_calibrate)
+    # real rigs: `calibrate intrinsics` (photos); without a kind, the simulated rigs above
+    add_photo_parsers(parser.add_subparsers(dest="calibration", required=False))

@@ -21,6 +21,7 @@ from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.landing import add_landing_parser
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
 from agents.io.bridge_cli import add_bridge_parser
+from agents.io.estimate_cli import add_estimate_parser
 from agents.timing.training import add_train_parser
 from agents.timing.tune import add_tune_parser
 from landing_env.config import SENSOR_SETS, SENSORS_ENV
@@ -43,6 +44,7 @@ def _demo(args: argparse.Namespace) -> int:
         timing=not args.no_timing,
         episodes=args.episodes,
         camera_mode=args.mode,
+        record=Path(args.record) if args.record else None,
     )
     return 0 if log.final_info.get("outcome") else 1
 
@@ -62,6 +64,7 @@ def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
         "--no-timing", action="store_true", help="skip the trained timing policy's episode"
     )
     demo.add_argument("--out", default="results/demo", help="output directory")
+    demo.add_argument("--record", default=None, help="record the first episode to FILE.mcap")
     demo.set_defaults(func=_demo)
 
 
@@ -170,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_approach_parser(which)
     add_train_parser(sub)
     add_tune_parser(sub)
+    add_estimate_parser(sub)
     add_calibrate_parser(sub)
     add_list_parser(sub)
     add_model_parser(sub)
@@ -182,7 +186,7 @@ def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
     """``--sensors ideal|realistic`` on every command (the config key ``sensors``)."""
 
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    if not actions:
+    if not actions or parser.get_default("func") is not None:
         if "--sensors" in parser._option_string_actions:
             return
         parser.add_argument(
@@ -191,7 +195,8 @@ def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
             default=None,
             help="sensor set for every environment of the run (default: the scenario's)",
         )
-        return
+        if not actions:
+            return
     for child in {id(p): p for p in actions[0].choices.values()}.values():
         _add_sensors_option(child)
 

@@ -164,6 +164,7 @@ def run_demo(
     timing_seed: int = 4,
     episodes: int = 1,
     camera_mode: str = "render",
+    record: Path | None = None,
     **kw,
 ) -> EpisodeLog:
     """The `make demo` job: ``episodes`` seeded episodes (seeds ``seed``, ``seed + 1``, ...)
@@ -173,6 +174,7 @@ def run_demo(
 
     ``timing_seed`` 4 (held-out seed 1 000 004) is an episode on which committing at once meets
     a 6.7° deck tilt (a hard landing): the one that shows the policy waiting.
+    ``record``: an MCAP file for the first episode (:class:`agents.io.record.McapRecorder`).
     """
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
@@ -185,6 +187,11 @@ def run_demo(
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
     env = gym.make("DeckLanding-v0", config=config, render_mode="rgb_array", **kw)
+    if record is not None:
+        # mcap and rosbags: the optional extra ``io``
+        from agents.io.record import McapRecorder
+
+        env = McapRecorder(env, record)
     base = env.unwrapped
     policy = AlignDescendPolicy(
         base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c

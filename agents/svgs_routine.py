@@ -19,7 +19,7 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
   ``agents/models/timing_dqn.zip`` is installed it chooses when to commit (observation built
   by :class:`~landing_env.timing.env.TimingObservationLayout`, one decision per
   ``steps_per_decision`` periods, forced at ``wait_limit_s``), otherwise the quiescent
-  heuristic (:func:`agents.timing.policies.predict_calm`) does; ``land`` is
+  heuristic (:func:`agents.calm_window.predict_calm`) does; ``land`` is
   ``DeckGuidance.descend`` to touchdown.  ``policy.timing_source`` says which.
 
 The SVGS offset manoeuvre (Algorithm 5) moves the drone off its beacon so as not to land on

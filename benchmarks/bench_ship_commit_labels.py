@@ -16,7 +16,7 @@ what no observation tells.  This benchmark separates the two:
    chance that the commit ``every`` decisions later lands after one that failed, against after
    one that landed: persistent causes are in principle visible, isolated ones are luck); the
    best any commit on the labels' grid could do (the oracle on that grid); committing at once
-   (``land-now``); and the ``quiescent`` rule (:func:`agents.timing.policies.predict_calm`) replayed
+   (``land-now``); and the ``quiescent`` rule (:func:`agents.calm_window.predict_calm`) replayed
    with its defaults and with each of a grid of its settings (:func:`agents.timing.hindsight.replay_rule`;
    an episode without a calm decision commits at its last label), all judged by the outcome.
 3. What the observation can tell: a commit-chance model (:mod:`agents.timing.commit_chance`, a

@@ -12,7 +12,7 @@ These rules read the deck's **true** motion, as a perfect ship-motion link and a
 forecast would give it (privileged: the motion source of the simulated ship), and fly the
 timing task of the scenario (realistic sensing, ``tight`` observed, as the evaluation):
 
-* ``calm``: ``quiescent``'s calm rule (:func:`agents.timing.policies.predict_calm`) on the true deck
+* ``calm``: ``quiescent``'s calm rule (:func:`agents.calm_window.predict_calm`) on the true deck
   motion over the last 2 s instead of its estimate.
 * ``tilt-window``: commit once the true deck tilt stays below ``--max-tilt-deg`` over the whole
   contact window (``--window``, seconds after the commit: the ship's descent meets the deck

@@ -2,6 +2,17 @@
 
 ``pattern`` is OpenCV's ``patternSize``: inner corners per row, inner corners per column
 (CRHF uses a 7 x 10-corner board).  Corners are in OpenCV pixels (pixel centres at integers).
+
+The intrinsics file (JSON, ``format: deck-landing/camera-intrinsics``, ``format_version: 2``):
+
+* ``camera_model``: ``pinhole-radtan`` (OpenCV's pinhole with k1 k2 p1 p2 k3), the only one;
+* ``image_size``: [width, height] in pixels of the images it was made from;
+* ``camera_matrix``: K (3x3); ``dist``: (k1, k2, p1, p2, k3);
+* ``rms_reprojection_error_px`` and ``per_view_errors_px``;
+* ``metadata``: provenance (e.g. the photos used and rejected); ``tag_corners``: optional.
+
+Version 1 files (``version: 1``, no ``camera_model``) are read as ``pinhole-radtan``.
+:meth:`IntrinsicsCalibrationResult.require_camera` refuses a file made for another camera.
 """
 
 from __future__ import annotations
@@ -17,7 +28,14 @@ import numpy as np
 from estimation.camera_model import CameraIntrinsics
 
 _FORMAT = "deck-landing/camera-intrinsics"
-_VERSION = 1
+#: the version :meth:`IntrinsicsCalibrationResult.save` writes, and those it reads
+FORMAT_VERSION = 2
+_READABLE_VERSIONS = (1, 2)
+#: OpenCV's pinhole camera with radial-tangential distortion (k1, k2, p1, p2, k3)
+CAMERA_MODEL = "pinhole-radtan"
+
+#: image files ``calibrate_from_images`` reads from a folder
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
 
 
 def find_chessboard(
@@ -69,6 +87,27 @@ class IntrinsicsCalibrationResult:
     image_size: tuple[int, int]
     metadata: dict = field(default_factory=dict)
     tag_corners: dict | None = None
+    camera_model: str = CAMERA_MODEL
+
+    def require_camera(
+        self,
+        image_size: tuple[int, int],
+        camera_model: str = CAMERA_MODEL,
+        source: str = "the calibration",
+        images: str = "the images",
+    ) -> None:
+        """Raise ``ValueError`` naming the mismatch when this calibration was made for
+        another camera: another image size (width x height) or camera model."""
+        problems = []
+        if self.camera_model != camera_model:
+            problems.append(f"camera model {self.camera_model!r}, not {camera_model!r}")
+        if tuple(int(v) for v in image_size) != tuple(self.image_size):
+            w, h = self.image_size
+            problems.append(
+                f"image size {w}x{h}, but {images} are {int(image_size[0])}x{int(image_size[1])}"
+            )
+        if problems:
+            raise ValueError(f"{source} is for another camera: {'; '.join(problems)}")
 
     def to_intrinsics(self) -> CameraIntrinsics:
         """The result as the project's :class:`CameraIntrinsics`."""
@@ -89,7 +128,8 @@ class IntrinsicsCalibrationResult:
         """Write the result as JSON."""
         doc = {
             "format": _FORMAT,
-            "version": _VERSION,
+            "format_version": FORMAT_VERSION,
+            "camera_model": self.camera_model,
             "image_size": list(self.image_size),
             "camera_matrix": self.K.tolist(),
             "dist": self.dist.tolist(),
@@ -107,8 +147,14 @@ class IntrinsicsCalibrationResult:
         doc = json.loads(Path(path).read_text())
         if doc.get("format") != _FORMAT:
             raise ValueError(f"{path}: not a camera-intrinsics file")
-        if doc.get("version") != _VERSION:
-            raise ValueError(f"{path}: unsupported version {doc.get('version')!r}")
+        version = doc.get("format_version", doc.get("version"))
+        if version not in _READABLE_VERSIONS:
+            raise ValueError(
+                f"{path}: unsupported format_version {version!r}; readable: {_READABLE_VERSIONS}"
+            )
+        model = doc.get("camera_model", CAMERA_MODEL)
+        if model != CAMERA_MODEL:
+            raise ValueError(f"{path}: camera_model {model!r} is unknown; known: {CAMERA_MODEL}")
         return cls(
             K=np.asarray(doc["camera_matrix"], dtype=float),
             dist=np.asarray(doc["dist"], dtype=float),
@@ -117,6 +163,7 @@ class IntrinsicsCalibrationResult:
             image_size=(int(doc["image_size"][0]), int(doc["image_size"][1])),
             metadata=dict(doc.get("metadata", {})),
             tag_corners=dict(doc["tag_corners"]) if "tag_corners" in doc else None,
+            camera_model=model,
         )
 
 
@@ -151,3 +198,78 @@ def calibrate(
         per_view_errors=np.asarray(per_view, dtype=float).reshape(-1),
         image_size=(int(image_size[0]), int(image_size[1])),
     )
+
+
+@dataclass(frozen=True)
+class PhotoCalibration:
+    """A calibration from photos: the result, the photos used and those rejected with why."""
+
+    result: IntrinsicsCalibrationResult
+    used: tuple[str, ...]
+    rejected: tuple[tuple[str, str], ...]
+
+
+def image_files(folder: str | Path) -> list[Path]:
+    """The image files of a folder (by :data:`IMAGE_SUFFIXES`), sorted by name."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"--images {folder}: not a folder")
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def calibrate_from_images(
+    paths: Sequence[str | Path],
+    pattern: tuple[int, int],
+    square_size: float,
+    flags: int = 0,
+) -> PhotoCalibration:
+    """Calibrate from chessboard photos: every photo is read in grey, its board found and
+    refined (:func:`find_chessboard`); a photo that cannot be read, whose size differs from
+    the first readable photo's or whose board is not found is rejected with the reason.
+    ``ValueError`` when fewer than 3 photos remain."""
+    if not square_size > 0.0 or not np.isfinite(square_size):
+        raise ValueError(f"square size must be a positive number of metres, got {square_size}")
+    if len(pattern) != 2 or min(pattern) < 2:
+        raise ValueError(f"pattern must be COLSxROWS inner corners, each >= 2, got {pattern}")
+    corners, used, rejected = [], [], []
+    size: tuple[int, int] | None = None
+    for path in paths:
+        name = Path(path).name
+        grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if grey is None:
+            rejected.append((name, "cannot be read as an image"))
+            continue
+        this_size = (int(grey.shape[1]), int(grey.shape[0]))
+        if size is None:
+            size = this_size
+        elif this_size != size:
+            rejected.append(
+                (name, f"size {this_size[0]}x{this_size[1]} differs from {size[0]}x{size[1]}")
+            )
+            continue
+        found = find_chessboard(grey, pattern)
+        if found is None:
+            rejected.append((name, f"no {pattern[0]}x{pattern[1]} chessboard found"))
+            continue
+        corners.append(found)
+        used.append(name)
+    if len(corners) < 3 or size is None:
+        reasons = "; ".join(f"{n}: {r}" for n, r in rejected) or "no image files"
+        raise ValueError(f"need at least 3 usable photos, got {len(corners)} ({reasons})")
+    result = calibrate(corners, size, square_size, pattern, flags)
+    metadata = {
+        "source": "photos",
+        "pattern": list(pattern),
+        "square_size_m": float(square_size),
+        "photos_used": used,
+        "photos_rejected": [{"photo": n, "reason": r} for n, r in rejected],
+    }
+    result = IntrinsicsCalibrationResult(
+        K=result.K,
+        dist=result.dist,
+        rms_reprojection_error=result.rms_reprojection_error,
+        per_view_errors=result.per_view_errors,
+        image_size=result.image_size,
+        metadata=metadata,
+    )
+    return PhotoCalibration(result=result, used=tuple(used), rejected=tuple(rejected))

@@ -263,7 +263,8 @@ class World:
     def shift_drone(self, shift_w: np.ndarray) -> None:
         """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
         without stepping time: a look-ahead's model of where the drone is
-        (:mod:`agents.timing.deck_forecast`).  A non-finite or misshapen shift is refused by name."""
+        (:mod:`agents.timing.deck_forecast`).  A non-finite or misshapen shift is refused by
+        name."""
         shift = np.asarray(shift_w, dtype=float).reshape(-1)
         if shift.shape != (3,) or not np.all(np.isfinite(shift)):
             raise ValueError(f"shift_w must be 3 finite metres, got {shift_w!r}")

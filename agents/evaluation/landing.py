@@ -6,9 +6,9 @@ them) and writes, per scenario, a Markdown and CSV table (success rate with its 
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).  With a timing policy among
-them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same seeds) runs
-too, unless ``--no-oracle``: each timing policy's row gives the oracle's success, the gap in
-points and how many of its failures the oracle failed as well (no timing could avoid them).
+them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same
+seeds) runs too, unless ``--no-oracle``: each timing policy's row gives the oracle's
+success, the gap in points and how many of its failures the oracle failed as well (no timing could avoid them).
 The oracle foresees the wind's gusts and the sensors' noise as well as the deck; with
 ``--deck-oracle`` the deck oracle runs too, which foresees the deck alone (the wind and the
 noise to come drawn anew in its look-ahead), and each row gives the gap to it as well: the

@@ -1,1 +1,10 @@
-"""Input and output off the simulator: bridges to autopilots (MAVLink) and recordings."""
+"""Off the simulator: recorded data in and out, and bridges to autopilots.
+
+* the plain-folder and ROS 2 (MCAP, rosbag2) readers and the ``deck-landing estimate`` command
+  (``docs/howto/recorded-data.md``), and the simulator's MCAP recorder;
+* ``deck-landing bridge``: the estimate to PX4 or ArduPilot as MAVLink ``LANDING_TARGET``
+  (``docs/howto/mavlink.md``).
+
+Needs the optional extra ``io`` (``pip install deck-landing[io]``: ``mcap``,
+``mcap-ros2-support``, ``rosbags``, ``pymavlink``).
+"""

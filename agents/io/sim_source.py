@@ -1,7 +1,7 @@
 """The live simulator as a source of ``(stamp_s, estimate)`` pairs for the MAVLink bridge.
 
 :class:`SimulatorSource` flies ``DeckLanding-v0`` episodes under the align-descend policy
-(:class:`agents.timing.policies.AlignDescendPolicy`, as ``deck-landing demo``) with the chosen
+(:class:`agents.align_descend.AlignDescendPolicy`, as ``deck-landing demo``) with the chosen
 estimator observed, and yields the observed estimate of every control step: after the reset
 and after each step.  The stamp is the estimate's own (the camera frame's capture time in
 simulated seconds; with the vision link, its capture time, not its delivery), continued across

@@ -388,8 +388,8 @@ def plot_forecasts(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.timing.deck_forecast --scenario ship-ss5``: fit the scenario's forecast and
-    print its held-out error per horizon, against holding the present (persistence)."""
+    """``python -m agents.timing.deck_forecast --scenario ship-ss5``: fit the scenario's
+    forecast and print its held-out error per horizon, against holding the present (persistence)."""
     import argparse
 
     parser = argparse.ArgumentParser(description=main.__doc__)

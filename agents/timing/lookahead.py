@@ -706,8 +706,9 @@ def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.timing.lookahead collect``: record transitions (:func:`collect_transitions`);
-    ``train``: fit a DQN on them offline (:func:`agents.timing.lookahead_training.train_offline`)."""
+    """``python -m agents.timing.lookahead collect``: record transitions
+    (:func:`collect_transitions`); ``train``: fit a DQN on them offline
+    (:func:`agents.timing.lookahead_training.train_offline`)."""
     import argparse
 
     parser = argparse.ArgumentParser(

@@ -3,8 +3,9 @@
 Online, a DQN on :class:`~agents.timing.lookahead.LookaheadTimingWrapper` learns from the one action
 it took at each check, and each check costs four descents of look-ahead (~0.7 s of CPU): in
 50 minutes on this machine it saw some 5 000 checks and still committed at the first or
-second (73 % at its 30-episode evaluations, README).  :func:`agents.timing.lookahead.collect_transitions`
-records **both** actions' outcomes at every check of whole episodes instead (the commit tried
+second (73 % at its 30-episode evaluations, README).
+:func:`agents.timing.lookahead.collect_transitions` records **both** actions' outcomes at
+every check of whole episodes instead (the commit tried
 in a saved copy with the episode's own future, the wait played on), so every check labels
 the commit, and the DQN is fitted on that fixed replay buffer: SB3's own Q-learning update
 (:meth:`stable_baselines3.DQN.train`, its loss, optimiser and target network), run for as many
@@ -15,8 +16,9 @@ of consecutive seeds are fitted side by side and scored, and decide, by their me
 the model shipped is one SB3 DQN distilled from that mean (:func:`distil`), so the policy
 that loads it is unchanged.
 
-``python -m agents.timing.lookahead_training --config configs/train/timing_dqn_lookahead_offline.yaml
---data results/lookahead/*.npz --out results/train/timing_dqn_lookahead_offline``
+``python -m agents.timing.lookahead_training
+--config configs/train/timing_dqn_lookahead_offline.yaml --data results/lookahead/*.npz
+--out results/train/timing_dqn_lookahead_offline``
 """
 
 from __future__ import annotations

@@ -101,8 +101,9 @@ class TrainSettings:
     #: start from this trained model's weights (same algorithm and network; its card must
     #: describe the same task, observation and estimator): training goes on from it
     init_model: str | None = None
-    #: decide on the onboard look-ahead's features (:class:`agents.timing.lookahead.LookaheadSettings`:
-    #: draws, check_every_s, min_margin, checks, seed) instead of the task's observation
+    #: decide on the onboard look-ahead's features
+    #: (:class:`agents.timing.lookahead.LookaheadSettings`: draws, check_every_s, min_margin,
+    #: checks, seed) instead of the task's observation
     lookahead: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
