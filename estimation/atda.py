@@ -14,6 +14,16 @@ Lens distortion is removed from the corners before IPPE with a tight iterative s
 ``solvePnP``'s own undistortion stops after 5 iterations, which left errors of ~3e-5 m and
 ~3e-3° on noise-free data with k1 = -0.25 (measured); the reprojection errors in ``extras``
 are therefore in undistorted pixels.
+
+``pose_method="homography"`` is the papers' ATDA pose as an option: their ATDA is MATLAB's
+``readAprilTag``, which is built on the AprilTag library.  That library's homography pose
+(Olson 2011; ``estimate_pose_for_tag_homography``) scales the first two columns of
+``K⁻¹ H`` to unit length, takes their cross product as the third and makes the result a
+rotation by SVD: one pose straight from the four-point homography, with no refinement and no
+choice between the two poses a planar square admits (IPPE's second solution is never
+looked at).  MATLAB's documentation does not state readAprilTag's pose algorithm, so this
+option is the closest published candidate, not a confirmed copy; see
+docs/papers-reproduction.md for what it changes.
 """
 
 from __future__ import annotations
@@ -26,7 +36,7 @@ import numpy as np
 
 from estimation import geometry
 from estimation.camera_model import CameraIntrinsics
-from estimation.errors import require_range
+from estimation.errors import require_choice, require_range
 from estimation.estimator import (
     BAD_CORNERS,
     DEGENERATE_CORNERS,
@@ -43,6 +53,52 @@ from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 REPROJECTION_ERROR = "reprojection_error"
 _NO_DISTORTION = np.zeros(5)
+#: ATDA's pose from the corners: OpenCV's IPPE with disambiguation, or the AprilTag library's
+#: homography decomposition (one pose, no disambiguation; the papers' MATLAB readAprilTag)
+POSE_METHODS = ("ippe", "homography")
+
+
+def homography_pose(
+    object_points: np.ndarray, corners: np.ndarray, k: np.ndarray
+) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """The AprilTag library's homography pose of a planar tag: ``[(RMS error px, R_CD, t_CD)]``
+    (empty when the homography is degenerate).
+
+    ``H`` maps the tag-plane points (x, y) of ``object_points`` (four) to the undistorted
+    corner pixels, exactly.  With ``M = K⁻¹ H = s [r1 r2 t]``, ``s`` is the
+    geometric mean of the norms of M's first two columns, its sign puts the tag in front of
+    the camera, ``r3 = r1 × r2``, and the nearest rotation to ``[r1 r2 r3]`` (SVD) is R.
+    """
+    # the four-point DLT in double precision (OpenCV's homography routines lose ~1e-5 px)
+    xy = np.asarray(object_points[:, :2], dtype=float)
+    uv = np.asarray(corners, dtype=float)
+    design = np.zeros((8, 8))
+    rhs = uv.reshape(-1)
+    for i, ((x, y), (u, v)) in enumerate(zip(xy, uv, strict=True)):
+        design[2 * i] = (x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y)
+        design[2 * i + 1] = (0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y)
+    try:
+        homography = np.append(np.linalg.solve(design, rhs), 1.0).reshape(3, 3)
+    except np.linalg.LinAlgError:
+        return []
+    m = np.linalg.solve(k, homography)
+    norms = np.linalg.norm(m[:, :2], axis=0)
+    if not (np.all(np.isfinite(m)) and np.all(norms > 0.0)):
+        return []
+    scale = math.sqrt(float(norms[0] * norms[1]))
+    if m[2, 2] < 0.0:
+        scale = -scale
+    r1, r2, translation = m[:, 0] / scale, m[:, 1] / scale, m[:, 2] / scale
+    u, _, vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    rotation = u @ vt
+    if np.linalg.det(rotation) < 0.0:
+        rotation = u @ np.diag([1.0, 1.0, -1.0]) @ vt
+    if not (np.all(np.isfinite(rotation)) and translation[2] > 0.0):
+        return []
+    rvec, _ = cv2.Rodrigues(rotation)
+    projected, _ = cv2.projectPoints(object_points, rvec, translation, k, _NO_DISTORTION)
+    rms = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - corners) ** 2, axis=1))))
+    return [(rms, rotation, translation)]
 
 
 def _solve_pnp(
@@ -127,6 +183,9 @@ class ATDAConfig:
     are not a square's image (invalid).
     ``joint_landmarks``: on a deck with nested landmarks, estimate from all detected tags
     at once (:class:`JointAtdaEstimator`) rather than from the chosen one alone.
+    ``pose_method``: ``"ippe"`` (both planar poses, the better or the one nearer the last
+    estimate) or ``"homography"`` (the AprilTag library's single homography pose, as the
+    papers' MATLAB readAprilTag; single tags only, the joint PnP keeps IPPE).
     """
 
     ambiguity_ratio_threshold: float = 0.6
@@ -134,8 +193,10 @@ class ATDAConfig:
     max_reprojection_error_px: float = 10.0
     min_corner_area_px: float = 4.0
     joint_landmarks: bool = True
+    pose_method: str = "ippe"
 
     def __post_init__(self) -> None:
+        require_choice("pose_method", self.pose_method, POSE_METHODS)
         require_range(
             "ambiguity_ratio_threshold",
             self.ambiguity_ratio_threshold,
@@ -178,6 +239,8 @@ class AtdaEstimator(GuardedEstimator):
         self._previous = None
 
     def _solutions(self, corners: np.ndarray) -> tuple[str, list]:
+        if self.config.pose_method == "homography":
+            return "homography", homography_pose(self._object_points, corners, self._k)
         return ippe_solutions(self._object_points, corners, self._k)
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:

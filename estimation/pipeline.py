@@ -69,7 +69,9 @@ class EstimationOptions:
     :func:`needs_intrinsics`).  ``tof_positions_c``: the ToF sensors' origins in C.
     ``layout``: the deck's landmarks.  ``configs``: per registered name, its config
     dataclass (defaults where absent).  ``tracking``: wrap each estimator in the corner
-    Kalman tracker, frames ``tracking_dt_s`` apart, bridging up to ``max_bridged_frames``.
+    Kalman tracker, frames ``tracking_dt_s`` apart, bridging up to ``max_bridged_frames``
+    (only the names in ``tracking_names`` when it is not empty; ``tracking_smooth``: the
+    filtered corners on every frame, CRHF Sec. 2.6).
     ``range_down`` / ``range_offset_m``: the downward rangefinder's latest reading and its
     origin below the camera along the optical axis (``beacon`` only).
     """
@@ -81,6 +83,8 @@ class EstimationOptions:
     tof_positions_c: np.ndarray | None = None
     configs: Mapping[str, object] = field(default_factory=dict)
     tracking: bool = False
+    tracking_names: tuple[str, ...] = ()
+    tracking_smooth: bool = False
     tracking_dt_s: float = 0.05
     max_bridged_frames: int = 3
     range_down: Callable[[], RangeReading] | None = None
@@ -155,9 +159,11 @@ def _for_tag(
         )
     except ConfigError as exc:
         raise exc.under(f"estimation.{name}") from None
-    if options.tracking:
+    if options.tracking and (not options.tracking_names or name in options.tracking_names):
         tracker = CornerTracker(
-            dt=options.tracking_dt_s, max_bridged_frames=options.max_bridged_frames
+            dt=options.tracking_dt_s,
+            max_bridged_frames=options.max_bridged_frames,
+            smooth=options.tracking_smooth,
         )
         estimator = TrackedEstimator(estimator, tracker, name=name)
     return estimator

@@ -204,7 +204,11 @@ class EstimationConfig:
     the analytic map.  An empty file name means the file shipped in
     ``configs/calibration/`` for the default camera and sensor layout.  ``tracking``: bridge
     up to ``max_bridged_frames`` missed tag detections with the corner Kalman filter (CRHF
-    Sec. 2.6); bridged estimates are flagged as predicted.
+    Sec. 2.6); bridged estimates are flagged as predicted.  ``tracking_estimators``: the
+    names tracked (empty: all); ``tracking_smooth``: the filter's corners on every frame, as
+    CRHF Sec. 2.6 publishes it (off: detected corners pass through, only dropouts bridged).
+    ``tof_positions_c``: the ToF layout the estimators are told (empty: the true
+    ``tof.mount_offsets_c``); a different one models an estimator whose layout is wrong.
     """
 
     observed: str = "truth"
@@ -215,7 +219,10 @@ class EstimationConfig:
     tof_calibration_file: str = ""
     tof_lookup: str = "pchip"
     tracking: bool = False
+    tracking_estimators: tuple[str, ...] = ()
+    tracking_smooth: bool = False
     max_bridged_frames: int = 3
+    tof_positions_c: tuple[tuple[float, float, float], ...] = ()
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
     crhf: CRHFConfig = field(default_factory=CRHFConfig)
@@ -235,6 +242,10 @@ class EstimationConfig:
         require_choice("tof_calibration", self.tof_calibration, CALIBRATION_SOURCES)
         require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
         require_range("max_bridged_frames", self.max_bridged_frames, 0)
+        for name in self.tracking_estimators:
+            require_choice("tracking_estimators", name, ESTIMATOR_NAMES)
+        if any(len(row) != 3 for row in self.tof_positions_c):
+            raise ConfigError("tof_positions_c", "need (x, y, z) per sensor, or none")
         names = [self.observed, *self.compare]
         if "fused" in names:
             names += list(self.fusion.sources)

@@ -75,8 +75,11 @@ class TofRigConfig:
     pad_radius_m: float = 0.06
     min_pad_area_px: float = 12.0
     floor_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    ranges_m: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        if any(not (math.isfinite(r) and r > 0.0) for r in self.ranges_m):
+            raise ConfigError("ranges_m", f"{self.ranges_m!r}: need finite ranges > 0 m")
         require_range("stages", self.stages, 2)
         require_range("min_range_m", self.min_range_m, 0.0, low_inclusive=False)
         require_range("max_range_fraction", self.max_range_fraction, 0.0, 1.0, low_inclusive=False)
@@ -89,6 +92,13 @@ class TofRigConfig:
 
     def stage_ranges(self, max_range: float) -> np.ndarray:
         """The sensor-to-deck ranges of the stages, metres."""
+        if self.ranges_m:
+            too_far = [r for r in self.ranges_m if r >= max_range]
+            if too_far:
+                raise ConfigError(
+                    "ranges_m", f"{too_far} reach the ToF maximum range {max_range} m"
+                )
+            return np.asarray(self.ranges_m, dtype=float)
         top = self.max_range_fraction * max_range
         if not self.min_range_m < top:
             raise ConfigError(

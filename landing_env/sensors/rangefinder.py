@@ -78,7 +78,7 @@ class Rangefinder:
             mount_offsets_c=((0.0, 0.0, 0.0),),
         )
         self._ray = TofArray(client, ray, rng, np.asarray(config.mount_offset_b, dtype=float))
-        assert np.allclose(self._ray.direction_b, R_BC[:, 2])
+        assert np.allclose(self._ray.directions_b[0], R_BC[:, 2])
 
     def measure(
         self, timestamp: float, t_wb: np.ndarray, r_wb: np.ndarray, exclude_body: int

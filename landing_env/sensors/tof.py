@@ -72,6 +72,9 @@ class TofConfig:
     invalid_prob: float = 0.0
     #: sensor origins in the camera frame C, metres (sensor order ps1..ps4)
     mount_offsets_c: tuple[tuple[float, float, float], ...] = _default_mounts()
+    #: beam misalignment: per sensor, its beam turned about the camera's x then y axis from
+    #: the optical axis, degrees (empty: every beam along +z_C, as the estimators assume)
+    beam_tilts_deg: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         require_range("max_range", self.max_range, 0.0, low_inclusive=False)
@@ -87,6 +90,30 @@ class TofConfig:
         require_range("invalid_prob", self.invalid_prob, 0.0, 1.0)
         if len(self.mount_offsets_c) == 0 or any(len(m) != 3 for m in self.mount_offsets_c):
             raise ConfigError("mount_offsets_c", "need one or more (x, y, z) sensor origins")
+        if self.beam_tilts_deg and (
+            len(self.beam_tilts_deg) != len(self.mount_offsets_c)
+            or any(len(t) != 2 or not all(abs(a) < 45.0 for a in t) for t in self.beam_tilts_deg)
+        ):
+            raise ConfigError(
+                "beam_tilts_deg",
+                f"{self.beam_tilts_deg!r}: need one (about x, about y) pair per sensor, "
+                "each angle within +-45 deg, or none",
+            )
+
+    def beam_directions_c(self) -> np.ndarray:
+        """Each sensor's unit beam direction in the camera frame C."""
+        count = len(self.mount_offsets_c)
+        if not self.beam_tilts_deg:
+            return np.tile([0.0, 0.0, 1.0], (count, 1))
+        directions = np.empty((count, 3))
+        for i, (about_x, about_y) in enumerate(np.radians(self.beam_tilts_deg)):
+            # R_y(about_y) R_x(about_x) applied to +z
+            directions[i] = (
+                np.cos(about_x) * np.sin(about_y),
+                -np.sin(about_x),
+                np.cos(about_x) * np.cos(about_y),
+            )
+        return directions
 
     def sigma(self, ranges: np.ndarray) -> np.ndarray:
         """Noise standard deviation at the given ranges, metres (zero without noise)."""
@@ -111,8 +138,9 @@ class TofArray:
         mounts_c = np.asarray(config.mount_offsets_c, dtype=float)
         #: sensor origins in the body frame B
         self.origins_b = np.asarray(t_bc, dtype=float) + (R_BC @ mounts_c.T).T
-        #: common measuring direction in B: the camera's optical axis, the body's down axis
-        self.direction_b = R_BC[:, 2].copy()
+        #: measuring directions in B: the camera's optical axis, the body's down axis, unless
+        #: the beams are misaligned (``beam_tilts_deg``)
+        self.directions_b = (R_BC @ config.beam_directions_c().T).T
 
     @property
     def count(self) -> int:
@@ -124,7 +152,7 @@ class TofArray:
         """Noise-free ranges (NaN where nothing within ``max_range``) and hit points in W."""
         r_wb = np.asarray(r_wb, dtype=float)
         origins = np.asarray(t_wb, dtype=float) + (r_wb @ self.origins_b.T).T
-        direction = r_wb @ self.direction_b
+        directions = (r_wb @ self.directions_b.T).T
         max_range = self.config.max_range
         ranges = np.full(self.count, np.nan)
         points = np.full((self.count, 3), np.nan)
@@ -133,8 +161,8 @@ class TofArray:
         step = np.full(self.count, _SELF_HIT_STEP)
         pending = np.arange(self.count)
         for _ in range(MAX_SELF_HITS + 1):
-            froms = origins[pending] + start[pending, None] * direction
-            tos = origins[pending] + max_range * direction
+            froms = origins[pending] + start[pending, None] * directions[pending]
+            tos = origins[pending] + max_range * directions[pending]
             results = p.rayTestBatch(froms.tolist(), tos.tolist(), physicsClientId=self.client)
             again: list[int] = []
             for index, result in zip(pending, results, strict=True):
