@@ -128,7 +128,7 @@ def ippe_solutions(
 
     OpenCV 5.0 returns rotation vectors, and its conversion loses precision for
     rotations near 180° (measured: 0.03° error 1e-6 rad from a yaw of 180°, a wrong pose
-    at exactly 180°).  When the tag's x axis points left in the image (|yaw| > 90°) the
+    at exactly 180°).  When the tag's x axis points left in the image (``|yaw|`` > 90°) the
     corners are therefore relabelled by half a turn, which is the same square turned
     by 180° about its normal, and the result is turned back.
 

@@ -136,7 +136,7 @@ class LandmarkLayout:
         return None
 
     def extent(self) -> float:
-        """The largest |x| or |y| in D reached by a tag's quiet zone, metres."""
+        """The largest ``|x|`` or ``|y|`` in D reached by a tag's quiet zone, metres."""
         return max(
             max(abs(lm.x), abs(lm.y)) + lm.outer_half_extent(self.quiet_zone_cells)
             for lm in self.landmarks

@@ -24,11 +24,10 @@ from estimation.landmarks import LandmarkChoiceConfig, LandmarkEstimator, Landma
 from estimation.registry import (
     AUTO_RANKING,
     ESTIMATOR_NAMES,
-    NEEDS_INTRINSICS,
-    NEEDS_TOF_CALIBRATION,
     REGISTRY,
-    WANTS_TOF_CALIBRATION,
     make_estimator,
+    needs_intrinsics_names,
+    needs_tof_calibration_names,
 )
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, TrackedEstimator
@@ -51,13 +50,13 @@ def names_to_build(
 
 def needs_intrinsics(names: tuple[str, ...] | list[str]) -> bool:
     expanded = set(names) | (set(AUTO_RANKING) if "auto" in names else set())
-    return bool(expanded & NEEDS_INTRINSICS)
+    return bool(expanded & needs_intrinsics_names())
 
 
 def needs_tof_calibration(names: tuple[str, ...] | list[str], *, optional: bool = False) -> bool:
     """Whether the names need the ToF–camera calibration (``optional``: or can use one)."""
     expanded = set(names) | (set(AUTO_RANKING) if "auto" in names else set())
-    return bool(expanded & (WANTS_TOF_CALIBRATION if optional else NEEDS_TOF_CALIBRATION))
+    return bool(expanded & needs_tof_calibration_names(optional=optional))
 
 
 @dataclass(frozen=True)

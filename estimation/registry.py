@@ -109,26 +109,100 @@ REGISTRY: dict[str, EstimatorSpec] = {
     )
 }
 
-#: Names of the single-frame estimators (the ones ``fused`` can take poses from).
-FRAME_ESTIMATOR_NAMES: tuple[str, ...] = tuple(REGISTRY)
+#: the estimators shipped with the package (the others came through :func:`register_estimator`)
+BUILT_IN: frozenset[str] = frozenset(REGISTRY)
 
-#: Every name ``estimation.observed`` / ``estimation.compare`` accept.
-ESTIMATOR_NAMES: tuple[str, ...] = ("truth", *FRAME_ESTIMATOR_NAMES, "beacon", "auto", "fused")
+#: Names of the single-frame estimators (the ones ``fused`` can take poses from).  A list,
+#: extended in place by :func:`register_estimator`, so that every module holding it sees a
+#: registered name.
+FRAME_ESTIMATOR_NAMES: list[str] = list(REGISTRY)
+
+#: Every name ``estimation.observed`` / ``estimation.compare`` accept (extended in place).
+ESTIMATOR_NAMES: list[str] = ["truth", *FRAME_ESTIMATOR_NAMES, "beacon", "auto", "fused"]
 
 #: ``auto``: the first valid of these (IHRCF within ToF range, ATDA above it)
 AUTO_RANKING: tuple[str, ...] = ("ihrcf", "atda")
 
-#: Names that need the camera intrinsics / the ToF–camera calibration.  Every camera
-#: estimator gets the intrinsics: those that do not solve with K (IHRCF, CRHF) still undistort
-#: the corners with its lens model, so a changed lens must come with its calibration.
-NEEDS_INTRINSICS: frozenset[str] = frozenset(set(REGISTRY) | {"beacon"})
-NEEDS_TOF_CALIBRATION: frozenset[str] = frozenset(
-    n for n, s in REGISTRY.items() if s.needs_tof_calibration
-)
-#: Names that use the ToF–camera calibration when it is available (a superset of the above).
-WANTS_TOF_CALIBRATION: frozenset[str] = frozenset(
-    n for n, s in REGISTRY.items() if s.needs_tof_calibration or s.wants_tof_calibration
-)
+
+def needs_intrinsics_names() -> frozenset[str]:
+    """Names that get the camera intrinsics.  Every camera estimator gets them: those that do
+    not solve with K (IHRCF, CRHF) still undistort the corners with its lens model, so a
+    changed lens must come with its calibration."""
+    return frozenset(set(REGISTRY) | {"beacon"})
+
+
+def needs_tof_calibration_names(*, optional: bool = False) -> frozenset[str]:
+    """Names that need the ToF–camera calibration (``optional``: or use it when there is
+    one, a superset)."""
+    return frozenset(
+        n
+        for n, s in REGISTRY.items()
+        if s.needs_tof_calibration or (optional and s.wants_tof_calibration)
+    )
+
+
+def register_estimator(
+    name: str,
+    build: Callable[[BuildInputs], DeckPoseEstimator],
+    config_type: type,
+    *,
+    needs_intrinsics: bool = True,
+    needs_tof_calibration: bool = False,
+    uses_ranges: bool = False,
+    wants_tof_calibration: bool = False,
+) -> EstimatorSpec:
+    """Make a single-frame estimator usable by name everywhere an estimator name is taken
+    (``estimation.observed``, ``estimation.compare``, the pipeline, the command line's
+    ``--estimator``), without editing this module.  ``fused`` keeps the shipped estimators as
+    its sources (each has its measurement sigmas in :class:`~estimation.fusion.FusionConfig`).
+
+    ``build`` gets the :class:`BuildInputs` of one tag (its ``config`` an instance of
+    ``config_type``, the defaults unless the host passes one) and returns a
+    :class:`~estimation.estimator.DeckPoseEstimator`.  The flags say which calibrations it
+    cannot run without and whether it takes the ToF ranges (see :class:`EstimatorSpec`).
+    Register before an environment or a command is built from the name.  A name already taken
+    or not a lower-case identifier is refused with a ``ValueError``; ``config_type`` must be a
+    class that builds with no arguments.
+    """
+    if not isinstance(name, str) or not name.isidentifier() or name != name.lower():
+        raise ValueError(f"estimator name {name!r}: give a lower-case identifier, e.g. 'mine'")
+    if name in ESTIMATOR_NAMES:
+        raise ValueError(f"estimator name {name!r} is taken; taken: {', '.join(ESTIMATOR_NAMES)}")
+    if not callable(build):
+        raise ValueError(f"build of {name!r} must be callable (BuildInputs -> estimator)")
+    if not isinstance(config_type, type):
+        raise ValueError(f"config_type of {name!r} must be a class, not {config_type!r}")
+    try:
+        config_type()
+    except Exception as exc:
+        raise ValueError(
+            f"config_type {config_type.__name__} of {name!r} must build with no arguments "
+            f"(its defaults): {exc}"
+        ) from None
+    spec = EstimatorSpec(
+        name,
+        config_type,
+        build,
+        needs_intrinsics,
+        needs_tof_calibration,
+        uses_ranges,
+        wants_tof_calibration,
+    )
+    REGISTRY[name] = spec
+    FRAME_ESTIMATOR_NAMES.append(name)
+    ESTIMATOR_NAMES.insert(ESTIMATOR_NAMES.index("beacon"), name)
+    return spec
+
+
+def unregister_estimator(name: str) -> None:
+    """Remove an estimator added by :func:`register_estimator` (the shipped ones stay)."""
+    if name in BUILT_IN:
+        raise ValueError(f"{name!r} is shipped with the package and cannot be removed")
+    if name not in REGISTRY:
+        raise ValueError(f"{name!r} is not registered")
+    del REGISTRY[name]
+    FRAME_ESTIMATOR_NAMES.remove(name)
+    ESTIMATOR_NAMES.remove(name)
 
 
 def make_estimator(

@@ -2,7 +2,7 @@
 
 IHRCF and CRHF take the deck's tilt from the four ToF ranges alone and ATDA from the four
 corners alone; under realistic noise each throws away what the other sensor knows.  Here the
-deck pose ``T_CD`` minimises one cost
+deck pose ``T_CD`` minimises one cost::
 
     sum_i |pi(R X_i + t) - u_i|² / sigma_px²  +  sum_j (rho_j(R, t) - r_j)² / sigma_r(r_j)²
 

@@ -122,7 +122,7 @@ class StartConfig:
     #: minimum horizontal offset, metres (equal to max_offset_m: a fixed distance at a
     #: random bearing, e.g. the high approach's 5 m)
     min_offset_m: float = 0.0
-    #: maximum |yaw| at the start, degrees
+    #: maximum ``|yaw|`` at the start, degrees
     max_yaw_deg: float = 10.0
     #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
     #: is at t = 0 (a ship deck can be metres away from home), so the drone starts above it

@@ -297,7 +297,12 @@ def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOpt
         intrinsics=load_intrinsics(config) if needs_intrinsics(names) else None,
         tof_calibration=_tof_calibration_for(config, names),
         tof_positions_c=np.asarray(est.tof_positions_c or config.tof.mount_offsets_c, dtype=float),
-        configs={name: _with_sensor_noise(getattr(est, name), config) for name in REGISTRY},
+        # a registered estimator without a section in the config runs with its defaults
+        configs={
+            name: _with_sensor_noise(getattr(est, name), config)
+            for name in REGISTRY
+            if hasattr(est, name)
+        },
         tracking=est.tracking,
         tracking_names=tuple(est.tracking_estimators),
         tracking_smooth=est.tracking_smooth,

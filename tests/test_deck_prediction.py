@@ -857,8 +857,9 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v6"
     assert second.settings.env_kwargs == first.settings.env_kwargs
     assert second.settings.init_model == f"{first.settings.out_dir}/timing_dqn_final.zip"
-    # the third stage went on from the second's final weights, randomised over
-    # both bench sea states (each its own predictor) and the sensing: one card serves them all
+    # the third stage (2026-11-24, commit 62044bd) went on from the second's final weights,
+    # randomised over both bench sea states (each its own predictor) and the sensing: one
+    # card serves them all
     third = load_train_config(train / "timing_dqn_predictive_randomised.yaml")
     assert third.settings.init_model == f"{second.settings.out_dir}/timing_dqn_final.zip"
     assert card.training_config_source.endswith(

@@ -33,7 +33,7 @@ CAL = TofCameraCalibration.exact(K, tof_positions_in_camera_frame(), 0.04, 4.0)
 
 def test_there_is_one_list_of_names() -> None:
     assert env_config.ESTIMATOR_NAMES is ESTIMATOR_NAMES
-    assert POSE_SOURCES == FRAME_ESTIMATOR_NAMES == tuple(REGISTRY)
+    assert list(POSE_SOURCES) == FRAME_ESTIMATOR_NAMES == list(REGISTRY)
     assert "tight" in FRAME_ESTIMATOR_NAMES
     assert set(FRAME_ESTIMATOR_NAMES) < set(ESTIMATOR_NAMES)
 

@@ -91,7 +91,7 @@ def test_tasks_after_episodes_in_one_session_get_the_idle_workers_cpus(
     from tests.runner_toy import square
 
     run_episodes(EpisodeTask(TOY, "p", "s", {}), list(range(4)), workers=2)
-    # the two idle actors hold both CPUs of the session: the tasks must not wait for them
+    # the two idle actors hold both CPUs of the batch: the tasks must not wait for them
     assert map_tasks(square, [1, 2, 3], workers=2) == [1, 4, 9]
 
 

@@ -285,20 +285,20 @@ def ensure_ray(address: str | None, workers: int) -> bool:
         kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": pythonpath}}
         # Ray runs its workers at nice 15 (a cluster keeps its control plane responsive so);
         # here they are the job the user asked for, at the user's priority as the former
-        # process pool's were, not behind every other process of the session
+        # process pool's were, not behind every other process of the batch
         kwargs["_system_config"] = {"worker_niceness": 0}
     ray.init(address=address, **kwargs)
     return True
 
 
-#: the idle actors of the current :func:`batch_session` (None outside one): a session's
+#: the idle actors of the current :func:`batch_session` (None outside one): a batch's
 #: later runs (the next policy) take them instead of starting worker processes again
 _IDLE_ACTORS: list[Any] | None = None
 
 
 @contextlib.contextmanager
 def batch_session(workers: int, address: str | None) -> Iterator[None]:
-    """Keep one Ray session, and its workers, over several :func:`run_episodes` calls
+    """Keep one Ray runtime, and its workers, over several :func:`run_episodes` calls
     (several policies) when the job uses Ray; shut it down at the end if this started it."""
     global _IDLE_ACTORS
     started = False
@@ -321,7 +321,7 @@ def batch_session(workers: int, address: str | None) -> Iterator[None]:
 
 
 def _release_idle_actors() -> None:
-    """Kill the session's idle actors (they hold a CPU each that a task may need)."""
+    """Kill the batch's idle actors (they hold a CPU each that a task may need)."""
     if not _IDLE_ACTORS:
         return
     import ray
@@ -430,7 +430,7 @@ def _run_ray(
     finally:
         for actor in inflight:
             if finished and _IDLE_ACTORS is not None and not started:
-                _IDLE_ACTORS.append(actor)  # idle now: the session's next run takes it
+                _IDLE_ACTORS.append(actor)  # idle now: the batch's next run takes it
             else:
                 ray.kill(actor)
         if started:

@@ -15,8 +15,10 @@ from estimation.noise import (
 )
 from estimation.registry import FRAME_ESTIMATOR_NAMES
 
-#: Estimators whose deck pose (T_CD) the fusion can take as a measurement.
-POSE_SOURCES: tuple[str, ...] = FRAME_ESTIMATOR_NAMES
+#: Estimators whose deck pose (T_CD) the fusion can take as a measurement: the shipped
+#: single-frame ones, each with its measurement sigmas below (an estimator registered later
+#: by ``estimation.registry.register_estimator`` is not a source: it has no sigmas here)
+POSE_SOURCES: tuple[str, ...] = tuple(FRAME_ESTIMATOR_NAMES)
 
 
 def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:

@@ -2,13 +2,13 @@
 
 State (15), all in the world frame's axes W (gravity-aligned, z up):
 
-====  ======  ==============================================================================
-0:3   ``p``   the tag centre (deck-frame origin) relative to the drone's centre of mass, m
-3:6   ``v``   its rate of change, m/s
-6:9   ``th``  the deck's attitude R_WP as ZYX Euler angles (roll, pitch, yaw), rad
-9:12  ``w``   their rates, rad/s
-12:15 ``ba``  the accelerometer bias, body frame, m/s^2
-====  ======  ==============================================================================
+=====  ======  ==============================================================================
+0:3    ``p``   the tag centre (deck-frame origin) relative to the drone's centre of mass, m
+3:6    ``v``   its rate of change, m/s
+6:9    ``th``  the deck's attitude R_WP as ZYX Euler angles (roll, pitch, yaw), rad
+9:12   ``w``   their rates, rad/s
+12:15  ``ba``  the accelerometer bias, body frame, m/s^2
+=====  ======  ==============================================================================
 
 The drone's attitude R_WB is an *input* (the autopilot's attitude estimate), never a state:
 the filter estimates only the relative state.  The IMU's specific force gives the drone's

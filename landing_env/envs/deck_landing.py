@@ -6,10 +6,138 @@ from landing_env.envs.base import DeckLandingBaseEnv
 
 
 class DeckLandingEnv(DeckLandingBaseEnv):
-    """Land on the Stewart-platform deck, steering by velocity set-points.
+    """Land a quadrotor on a moving deck, steering by velocity set-points.
 
-    Action: Box(4) in [-1, 1] scaled to (vx, vy, vz, yaw rate) of the heading frame.
-    Observation: the configured estimator's deck pose (tag in the camera frame) with its
-    validity, the four ToF ranges with their validity, and the mean IMU reading of the step.
-    The reward and termination rules are those of the base class (see the README).
+    .. rubric:: Description
+
+    A quadrotor starts in a hover above a moving deck: a 6-DOF Stewart platform (the papers'
+    bench, sea states 3-5 scaled into its workspace) or a 30 m vessel's helideck at sea
+    (``deck_mount: ship``).  A downward camera sees an AprilTag on the deck and four
+    time-of-flight (ToF) range sensors on the arms measure it; a camera+ToF estimator
+    (``estimation.observed``: IHRCF in ``configs/default.yaml``; CRHF, ATDA, ``tight``,
+    ``fused`` or ``truth``) turns them into the deck pose, and that estimate, not the ground
+    truth, is what the agent observes.  Physics run at 240 Hz; one ``step`` is one control
+    period of 50 ms (20 Hz, ``simulation.env_hz``), 12 physics sub-steps in which a PX4-style
+    cascade controller (velocity, attitude, body rates, motor mixing) tracks the action.
+
+    .. rubric:: Action space
+
+    ``Box(-1, 1, (4,), float32)``: velocity set-points in the heading frame (the world frame
+    turned by the drone's yaw: x forward, y left, z up), scaled by
+    ``action.max_horizontal_speed`` (1.5 m/s), ``action.max_vertical_speed`` (1.0 m/s) and
+    ``action.max_yaw_rate_deg`` (60 °/s) for (vx, vy, vz, yaw rate).  An action outside
+    [-1, 1] is clipped and flagged in ``info["action_clipped"]``; one that is not a real,
+    finite array of shape (4,) is refused with a ``ValueError``.
+
+    .. rubric:: Observation space
+
+    A ``Dict``:
+
+    .. list-table::
+       :header-rows: 1
+       :widths: 18 14 46 22
+
+       * - key
+         - shape, dtype
+         - meaning
+         - frame, unit
+       * - ``deck_pose``
+         - (6,) float32
+         - the deck (tag) pose as estimated: x, y, z, roll, pitch, yaw; zeros when invalid
+         - camera frame C; m, rad (ZYX)
+       * - ``deck_pose_valid``
+         - (1,) int8
+         - 1 when the estimate is valid (not: no tag, out of view, degenerate)
+         -
+       * - ``deck_pose_predicted``
+         - (1,) int8
+         - 1 when the corner tracker bridged a missed detection
+         -
+       * - ``tof_range``
+         - (4,) float32
+         - the four ToF ranges along the sensors' axes; 0 when invalid
+         - m
+       * - ``tof_valid``
+         - (4,) int8
+         - 1 when the reading is valid (a return within ``tof.max_range``)
+         -
+       * - ``imu``
+         - (6,) float32
+         - mean specific force (3) and angular rate (3) over the step, clipped to ±16 g and
+           ±2000 °/s (``info["imu_saturated"]``)
+         - body frame B; m/s², rad/s
+       * - ``range_down``
+         - (1,) float32
+         - the downward rangefinder's range (to the deck, or the sea beside it); 0 when
+           invalid
+         - m
+       * - ``range_down_valid``
+         - (1,) int8
+         - 1 when the rangefinder's reading is valid
+         -
+
+    The observation never holds NaN.  ``info`` carries the ground truth and diagnostics:
+    ``deck_pose_true``, ``estimates`` (every configured estimator), ``drone``, ``deck``,
+    ``imu_samples``, ``tof_ranges``, ``outcome`` and, after a touchdown, ``touchdown`` (its
+    metrics).
+
+    .. rubric:: Rewards
+
+    With ``d = |Δxy| + w_v |Δz|`` the distance from the drone's centre to the tag centre
+    (``reward.vertical_weight`` w_v = 0.5) and the potential ``Φ = -shaping_weight · d``,
+    each step gives ``Φ(s') - Φ(s) - time_cost · Δt``; a crash subtracts ``crash_penalty``
+    (10); a touchdown subtracts ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
+    offset_penalty · offset_m`` (4 per m/s, 0.2 per degree, 5 per metre) and a successful one
+    adds ``success_bonus`` (10).  ``time_cost`` is 0.1 per second.  The shaping is
+    potential-based, so it does not change the optimal policy.  Each term is in ``info``
+    (``reward_shaping``, ``reward_time``, ``reward_success``, ``reward_crash``,
+    ``reward_normal_speed``, ``reward_tilt``, ``reward_offset``) and they sum to the reward.
+
+    .. rubric:: Starting state
+
+    The drone hovers ``start.height_m`` above the deck's home surface (1.8-2.2 m by default;
+    the landing scenario ids 1.5-4 m), up to ``start.max_offset_m`` off its centre (0.3 m;
+    the scenario ids 1 m) with ``|yaw|`` up to ``start.max_yaw_deg`` (10°; the scenario ids
+    30°), drawn from the episode's seed.  The deck motion starts at a seeded phase.  The ship
+    scenario ids from ``-v3`` start in trim with the mean wind (``start.trim_to_wind``).
+
+    .. rubric:: Episode end
+
+    * **Touchdown** (terminated): at the first contact of a foot with the deck the metrics are
+      taken (relative normal speed, deck tilt, drone-to-deck attitude, lateral offset), the
+      motors idle and the simulation runs on for ``touchdown.settle_time_s`` (1 s).  Success
+      when the relative normal speed is at most 0.5 m/s, the deck tilt at most 5°, the
+      drone-to-deck attitude at most 10°, all four feet touched and the drone still stands on
+      the deck after the settle without a bounce above 1 cm or a tip-over; otherwise the
+      outcome is ``hard_landing`` with the failed checks listed.  Every threshold is a
+      ``touchdown.*`` key.
+    * **Crash** (terminated): any other contact (the body on anything, a foot off the deck), a
+      flip beyond ``simulation.flip_tilt_deg``, or leaving the arena.
+    * **Time-out** (truncated) after ``simulation.max_episode_s`` (30 s; the scenario ids
+      40 s).
+
+    .. rubric:: Arguments
+
+    ``gym.make("DeckLanding-v0", config="default", render_mode=None, overrides=None,
+    **sections)``: ``config`` is a shipped config name (``configs/*.yaml``) or a path;
+    ``overrides`` sets dotted keys (``{"tof.noise": "vl53l1x"}``); a section keyword replaces
+    keys of one section (``camera={"mode": "render"}``).  An unknown key or a bad value fails
+    at construction with a ``ConfigError`` naming the key and what is allowed.
+    ``render_mode="rgb_array"`` returns the camera image with the detections drawn;
+    ``"human"`` opens the PyBullet window.  The scenario ids (``DeckLanding-BenchSS4-v0``,
+    ``DeckLanding-ShipSS5-v3``, ...) build a shipped config with its landing overrides and
+    take the same ``overrides``.
+
+    .. rubric:: Version History
+
+    * ``DeckLanding-v0``: the task, any config.
+    * ``DeckLanding-BenchSS{3,4,5}-v0``, ``DeckLanding-PaperStewart-v0``: the bench configs
+      made a landing run (the drone flying, the tag projected, IHRCF observed).
+    * ``DeckLanding-HighApproach-v0``: from 20 m up and 5 m off, in gusty wind, over a sea
+      state 3 deck with nested tags.
+    * ``DeckLanding-ShipSS{3,4,5,6}-v1``: the ship decks, ``tight`` observed, the standard lens,
+      started level and at rest with the bench's controller limits.
+    * ``-v2``: the scenario's own lens (the wide 80° lens at sea states 5 and 6).
+    * ``-v3``: started in trim with the mean wind, flying with the autopilots' stock limits
+      (a 10 m/s² velocity integrator, 45° of tilt).
     """

@@ -10,7 +10,7 @@ travel towards, counter-clockwise from the bow: 0 following, 180 head seas):
 * **Heave and pitch**: the closed-form transfer functions of Jensen, Mansour & Olsen (2004),
   *Estimation of ship motions using closed-form expressions*, Ocean Eng. 31:61-85, for a
   homogeneously loaded box of length L, breadth B = Cb * B0 and draught T, at zero speed.
-  With k_e = |k cos mu|, x = k_e L / 2, kappa = exp(-k_e T),
+  With ``k_e = |k cos mu|``, x = k_e L / 2, kappa = exp(-k_e T),
   A = 2 sin(k B / 2) exp(-k T), f = sqrt((1 - k T)^2 + (A^2 / (k B))^2) and the dynamic
   factor eta = 1 / ((1 - 2 k T) + i A^2 / (k B)) (its modulus is the paper's eta; the phase
   is that of the same second-order form):
@@ -268,7 +268,7 @@ class ShipMotion:
 
         #: the deck's tilt stays below this (rad; six standard deviations)
         self.tilt_reach_rad = reach(tilt)
-        #: |deck vertical displacement| stays below this (m; six standard deviations plus the
+        #: ``|deck vertical displacement|`` stays below this (m; six standard deviations plus the
         #: lever arm's second-order drop)
         self.vertical_reach_m = reach(vertical) + abs(lz) * (
             1.0 - math.cos(min(self.tilt_reach_rad, 1.5))

@@ -274,12 +274,12 @@ class StewartKinematics:
     def surely_reachable(self, translation_norm: float, sin_half_angle: float) -> bool:
         """A cheap sufficient test of reachability, for the per-physics-step path.
 
-        ``translation_norm``: |(x, y, z)| of the pose (m); ``sin_half_angle``: sin(theta / 2)
+        ``translation_norm``: ``|(x, y, z)|`` of the pose (m); ``sin_half_angle``: sin(theta / 2)
         of its rotation angle theta (the norm of its unit quaternion's vector part).  True
         guarantees that every leg is within its stroke; False says nothing (run the full
         check).  Leg i's vector changes from home by t + (R - I) p_i, and
-        |(R - I) p| <= 2 sin(theta / 2) |p|, so no length moves from home by more than
-        |t| + 2 sin(theta / 2) max|p_i|.  Joint-angle limits are not bounded this way: when
+        ``|(R - I) p| <= 2 sin(theta / 2) |p|``, so no length moves from home by more than
+        ``|t| + 2 sin(theta / 2) max|p_i|``.  Joint-angle limits are not bounded this way: when
         either is configured this always returns False.
         """
         deviation = translation_norm + 2.0 * sin_half_angle * self._top_anchor_reach

@@ -55,14 +55,114 @@ _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
 
 
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
-    """Wait or commit over the moving deck (see the module docstring).
+    """Hold over the moving deck and choose the moment to land.
 
-    Action: ``Discrete(2)``, 0 = wait one decision period, 1 = commit to the final descent.
-    Reward: ``-reward.time_cost`` per second waited; at the end ``+reward.success_bonus`` on a
-    successful touchdown, minus ``normal_speed_penalty * v_n + tilt_penalty * tilt_deg +
-    offset_penalty * offset_m`` on any touchdown, minus ``crash_penalty`` on a crash or a
-    descent that does not touch down.  The episode starts after a warm-up of ``history_s``
-    (the guidance holds, the history fills), so ``time_s`` at touchdown includes it.
+    .. rubric:: Description
+
+    A scripted guidance (:class:`DeckGuidance`, which reads only the estimated deck pose and
+    the ToF ranges) holds the drone aligned over the tag at a hold height.  At each decision
+    the agent waits or commits; on a commit the same guidance flies the final descent to
+    touchdown **within that one step**, and the episode ends with the touchdown's outcome.
+    The decision is a clean stopping problem: no steps with ignored actions reach a learner.
+    The touchdown is judged as in ``DeckLanding-v0`` (at most 0.5 m/s relative normal speed,
+    5° deck tilt, 10° drone-to-deck attitude, the drone still on the deck after 1 s), so the
+    policy's task is to meet the deck when it is level and slow.
+
+    .. rubric:: Action space
+
+    ``Discrete(2)``: 0 waits one decision period (``steps_per_decision`` control periods,
+    0.1 s), 1 commits to the final descent.  Anything but the integer 0 or 1 is refused with
+    a ``ValueError``.
+
+    .. rubric:: Observation space
+
+    A flat ``Box(-50, 50, (n,), float32)`` laid out by :class:`TimingObservationLayout`; what
+    its head holds is ``timing.observation``:
+
+    .. list-table::
+       :header-rows: 1
+       :widths: 18 30 52
+
+       * - ``observation``
+         - head
+         - then
+       * - ``history`` (default)
+         - the last ``history_s`` seconds of the estimated deck pose as a level camera sees
+           it (x, y, z, roll, pitch), its least-squares rates and validity, 10 values a row,
+           in decimetres and tenths of a radian, z relative to the hold height
+         - the four ToF ranges (relative to the hold height) and their validity, the fraction
+           of the wait limit used
+       * - ``prediction``
+         - the scenario's deck-tilt predictor's chance of a deck within 5° at each contact
+           time, the value of waiting on, and the prediction's validity, all in [0, 1]
+         - as above
+       * - ``forecast``
+         - the history's newest row only
+         - as above, then the ship's helideck forecast 0-8 s ahead (surge, sway, heave,
+           roll, pitch at each horizon), 1 when it was made, and the drone's own velocity
+           and lean
+
+    A value beyond ±50 is clipped and flagged; :meth:`TimingObservationLayout.decode` undoes
+    the scaling.
+
+    .. rubric:: Rewards
+
+    ``-reward.time_cost`` per second waited (0.1); at the end ``+reward.success_bonus`` (10)
+    on a successful touchdown, minus ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
+    offset_penalty · offset_m`` on any touchdown, minus ``crash_penalty`` (10) on a crash or
+    a descent that does not touch down.  The terms are those of ``DeckLanding-v0``, from one
+    function, and each is in ``info``.
+
+    .. rubric:: Starting state
+
+    The drone starts aligned over the tag at the hold height (``hold_height_m``, 0.7 m over
+    the bench; 2.0 m over a ship deck), at most 0.1 m off and 10° of yaw, and a warm-up of
+    ``history_s`` (the guidance holds, the history fills) runs before the first decision, so
+    ``time_s`` at touchdown includes it.  The ship ids from ``-v6`` start in trim with the
+    mean wind.
+
+    .. rubric:: Episode end
+
+    * **Touchdown** (terminated) after a commit, with the outcome and metrics of
+      ``DeckLanding-v0``.
+    * **Wave-off**: with ``wave_off_tilt_deg`` set, a chosen descent whose predicted deck at
+      the contact is too tilted climbs back to the hold inside the step, and the episode
+      goes on (``info["wave_offs"]``).
+    * **Forced commit**: the wait that reaches ``wait_limit_s`` (15 s) descends in the same
+      step.
+    * **Crash** (terminated), or a descent that has not touched down after
+      ``descent_timeout_s`` (6 s; 15 s over a ship deck).
+
+    .. rubric:: Arguments
+
+    ``gym.make("DeckLandingTiming-v0", config="default", render_mode=None, overrides=None,
+    timing=None, **sections)``: ``config``, ``overrides`` and the section keywords as in
+    ``DeckLanding-v0``; ``timing`` is a :class:`TimingConfig` or a dict of its keys (hold
+    height, history length, wait limit, the descent profile in ``guidance``, the wave-off,
+    the contact window, the observation).  A pinned drone (``simulation.drone_fixed``) is
+    refused with a ``ConfigError``.  A trained model's card records the id, observation and
+    descent it was trained on and refuses another.
+
+    .. rubric:: Version History
+
+    * ``DeckLandingTiming-v0``: the task, any config; the history observation, levelled.
+    * ``DeckLandingTiming-BenchSS{3,4,5}-v0``, ``DeckLandingTiming-PaperStewart-v0``: the bench
+      configs made a landing run, the range-scheduled final descent (1.85 ± 0.35 s).
+    * ``-v1``: the timed final descent (the feet touch 1.30 ± 0.06 s after the commit).
+    * ``-v2``: an 8 s history and the wave-off by the scenario's deck-tilt predictor below a
+      fixed chance of 0.8.
+    * ``-v3``: the wave-off below the value of waiting on.
+    * ``-v4``: the contact time each commit chooses in 1.2-1.5 s (what ``predictive`` flies).
+    * ``-v5``: v4 observing the predictor's chances and the value of waiting instead of the
+      history (what ``timing-dqn-predictive`` was trained on).
+    * ``DeckLandingTiming-ShipSS{3,4,5,6}-v1``: the ship decks, ``tight`` observed, a 2 m
+      hold, the guidance in the deck's frame.
+    * ``-v2``: the deck's acceleration tracked and led 0.2 s.
+    * ``-v3``: a go-around when the deck is lost, no flare.
+    * ``-v4``: the scenario's lens (wide at sea states 5 and 6) and the view gate from the
+      camera's calibration.
+    * ``-v5``: v4 observing the ship's helideck forecast and the drone's own state.
+    * ``-v6``: v5 started in trim with the mean wind, with the autopilots' stock limits.
     """
 
     def __init__(
@@ -141,7 +241,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
                 "does not hold: refit it "
-                "with `python -m agents.deck_predictor fit`",
+                "with `python -m agents.timing.tilt_fit fit`",
             )
         return values
 
@@ -179,7 +279,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.deck_predictor fit`",
+                "does not hold: refit it with `python -m agents.timing.tilt_fit fit`",
             )
         return values
 
@@ -215,7 +315,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise ConfigError(
                 "timing.tilt_model",
                 f"{what}; {user} needs the scenario's deck-tilt predictor "
-                "(e.g. bench-ss4, or a file written by `python -m agents.deck_predictor fit`)",
+                "(e.g. bench-ss4, or a file written by `python -m agents.timing.tilt_fit fit`)",
             )
         path = tilt_predictor_path(name)
         try:
@@ -226,7 +326,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise ConfigError(
                 "timing.tilt_model",
                 f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.deck_predictor fit`",
+                "or a file written by `python -m agents.timing.tilt_fit fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:

@@ -11,6 +11,7 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
 * off (the bench default): proportional servoing on the camera-frame tag offset and range,
   as the papers' bench needs (a deck that heaves centimetres, no wind);
 * on (the ship scenarios): the guidance flies **in the deck's frame**.
+
   - A constant-velocity (or constant-acceleration, ``tracker_model``) Kalman filter per
     world axis (:class:`DeckTracker`) tracks where the deck is and how fast it moves, from
     the tag seen by a *level* camera (the drone's lean removed) and, with the tag lost, the
@@ -30,6 +31,7 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
     (``view_half_tan``) and climbs back while the tag is lost above ``blind_range_m``; with
     ``lost_deck = "search"`` it goes around when the deck itself is lost (neither tag nor
     range for the tracker's coast): a climb over the deck's last height and track.
+
   This is the structure of ship-landing guidance that tracks the deck rather than the sea
   (Marconi, Isidori & Serrani 2002, *Automatica* 38:21-32: vertical landing on an
   oscillating platform with an internal model of its motion; Herissé et al. 2012, *IEEE

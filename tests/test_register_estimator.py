@@ -1,0 +1,152 @@
+"""An estimator of one's own, registered by a public call, is usable by name everywhere."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from estimation.atda import ATDAConfig, AtdaEstimator
+from estimation.camera_model import CameraIntrinsics
+from estimation.fusion.config import FusionConfig
+from estimation.landmarks import Landmark, LandmarkLayout
+from estimation.pipeline import EstimationOptions, build_estimators
+from estimation.registry import (
+    ESTIMATOR_NAMES,
+    FRAME_ESTIMATOR_NAMES,
+    REGISTRY,
+    BuildInputs,
+    register_estimator,
+    unregister_estimator,
+)
+from estimation.synthetic import SyntheticScene
+from landing_env.config import EstimationConfig
+from landing_env.errors import ConfigError
+
+
+@dataclasses.dataclass
+class TagOnlyConfig:
+    """The settings of the example estimator: ATDA's, under its own name."""
+
+    atda: ATDAConfig = dataclasses.field(default_factory=ATDAConfig)
+
+
+class TagOnlyEstimator:
+    """A user's estimator: the tag-only pose, reported under its own name."""
+
+    name = "tag_only"
+
+    def __init__(self, inputs: BuildInputs) -> None:
+        assert inputs.intrinsics is not None
+        self.inner = AtdaEstimator(
+            intrinsics=inputs.intrinsics,
+            tag_size=inputs.tag_size,
+            tag_id=inputs.tag_id,
+            config=inputs.config.atda,
+        )
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def estimate(self, frame, ranges):
+        return dataclasses.replace(self.inner.estimate(frame, ranges), method=self.name)
+
+
+@pytest.fixture
+def tag_only() -> Iterator[str]:
+    register_estimator("tag_only", TagOnlyEstimator, TagOnlyConfig)
+    try:
+        yield "tag_only"
+    finally:
+        unregister_estimator("tag_only")
+
+
+def test_a_registered_estimator_is_built_by_name_through_the_pipeline(tag_only: str) -> None:
+    intrinsics = CameraIntrinsics()
+    options = EstimationOptions(
+        names=(tag_only,),
+        layout=LandmarkLayout((Landmark(tag_id=0, size=0.15),)),
+        intrinsics=intrinsics,
+    )
+    estimator = build_estimators(options)[tag_only]
+    scene = SyntheticScene(intrinsics=intrinsics, tag_size=0.15)
+    rotation = np.eye(3)
+    translation = np.array([0.02, -0.01, 1.5])
+    measurement = scene.measure(rotation, translation)
+    estimate = estimator.estimate(measurement.frame, measurement.ranges)
+    assert estimate.valid, estimate.reason
+    assert estimate.method == tag_only
+    assert np.allclose(estimate.translation, translation, atol=1e-3)
+
+
+def test_a_registered_name_is_accepted_by_the_config_but_not_as_a_fusion_source(
+    tag_only: str,
+) -> None:
+    assert tag_only in ESTIMATOR_NAMES and tag_only in FRAME_ESTIMATOR_NAMES
+    assert EstimationConfig(observed=tag_only, compare=("atda",)).observed == tag_only
+    # the EKF weighs each source by its own sigmas, which a registered estimator lacks
+    with pytest.raises(ConfigError, match="sources"):
+        FusionConfig(sources=(tag_only,))
+
+
+def test_an_unregistered_name_is_refused_again_afterwards() -> None:
+    register_estimator("tag_only", TagOnlyEstimator, TagOnlyConfig)
+    unregister_estimator("tag_only")
+    assert "tag_only" not in REGISTRY and "tag_only" not in ESTIMATOR_NAMES
+    with pytest.raises(ConfigError, match="tag_only"):
+        EstimationConfig(observed="tag_only")
+
+
+@pytest.mark.parametrize(
+    ("name", "build", "config_type", "message"),
+    [
+        ("atda", TagOnlyEstimator, TagOnlyConfig, "taken"),
+        ("fused", TagOnlyEstimator, TagOnlyConfig, "taken"),
+        ("Mine", TagOnlyEstimator, TagOnlyConfig, "lower-case identifier"),
+        ("my-estimator", TagOnlyEstimator, TagOnlyConfig, "lower-case identifier"),
+        ("", TagOnlyEstimator, TagOnlyConfig, "lower-case identifier"),
+        (None, TagOnlyEstimator, TagOnlyConfig, "lower-case identifier"),
+        ("mine", "not callable", TagOnlyConfig, "callable"),
+        ("mine", TagOnlyEstimator, TagOnlyConfig(), "must be a class"),
+        ("mine", TagOnlyEstimator, len, "must be a class"),
+        ("mine", TagOnlyEstimator, Landmark, "no arguments"),
+    ],
+)
+def test_a_bad_registration_is_refused_naming_what_is_wrong(
+    name, build, config_type, message
+) -> None:
+    before = (dict(REGISTRY), list(ESTIMATOR_NAMES), list(FRAME_ESTIMATOR_NAMES))
+    with pytest.raises(ValueError, match=message):
+        register_estimator(name, build, config_type)
+    assert (dict(REGISTRY), list(ESTIMATOR_NAMES), list(FRAME_ESTIMATOR_NAMES)) == before
+
+
+def test_the_shipped_estimators_cannot_be_unregistered() -> None:
+    for name in ("atda", "ihrcf", "crhf", "tight"):
+        with pytest.raises(ValueError, match="shipped"):
+            unregister_estimator(name)
+    with pytest.raises(ValueError, match="not registered"):
+        unregister_estimator("never_registered")
+
+
+def test_the_environment_observes_a_registered_estimator(tag_only: str) -> None:
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401  (registers the ids)
+
+    env = gym.make(
+        "DeckLanding-v0",
+        overrides={"estimation.observed": tag_only, "motion.kind": "static"},
+    )
+    try:
+        observation, info = env.reset(seed=1)
+        for _ in range(3):
+            observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        mine = info["estimates"][tag_only]
+        assert mine["valid"], mine["reason"]
+        assert observation["deck_pose_valid"][0] == 1
+        assert np.all(np.abs(observation["deck_pose"][:3] - info["deck_pose_true"][:3]) < 0.02)
+    finally:
+        env.close()
