@@ -135,9 +135,9 @@ class DeckLandingEnv(DeckLandingBaseEnv):
       made a landing run (the drone flying, the tag projected, IHRCF observed).
     * ``DeckLanding-HighApproach-v0``: from 20 m up and 5 m off, in gusty wind, over a sea
       state 3 deck with nested tags.
-    * ``DeckLanding-ShipSS{3,4,5,6}-v1``: the ship decks, ``tight`` observed, the standard lens,
-      started level and at rest with the bench's controller limits.
-    * ``-v2``: the scenario's own lens (the wide 80° lens at sea states 5 and 6).
-    * ``-v3``: started in trim with the mean wind, flying with the autopilots' stock limits
-      (a 10 m/s² velocity integrator, 45° of tilt).
+    * ``DeckLanding-ShipSS{3,4,5,6}``: ``v1`` the ship decks, ``tight`` observed, the
+      standard lens, started level and at rest with the bench's controller limits; ``v2`` the
+      scenario's own lens (the wide 80° lens at sea states 5 and 6).  **v3** (current):
+      started in trim with the mean wind, flying with the autopilots' stock limits (a
+      10 m/s² velocity integrator, 45° of tilt).  v1 and v2 are no longer registered (1.0.0).
     """

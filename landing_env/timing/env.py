@@ -135,34 +135,42 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
 
     .. rubric:: Arguments
 
-    ``gym.make("DeckLandingTiming-v0", config="default", render_mode=None, overrides=None,
-    timing=None, **sections)``: ``config``, ``overrides`` and the section keywords as in
-    ``DeckLanding-v0``; ``timing`` is a :class:`TimingConfig` or a dict of its keys (hold
-    height, history length, wait limit, the descent profile in ``guidance``, the wave-off,
-    the contact window, the observation).  A pinned drone (``simulation.drone_fixed``) is
-    refused with a ``ConfigError``.  A trained model's card records the id, observation and
-    descent it was trained on and refuses another.
+    ``gym.make(id, render_mode=None, overrides=None, **sections)``: ``config``, ``overrides``
+    and the section keywords as in ``DeckLanding-v0``.  The task's settings are the config's
+    ``timing`` section (:class:`~landing_env.timing.config.TimingConfig`), set by the same
+    dotted overrides: ``overrides={"timing.observation": "prediction",
+    "timing.wave_off_tilt_deg": 5.0}`` (hold height, history length, wait limit, the descent
+    profile in ``timing.guidance``, the wave-off, the contact window, the observation).  A
+    registered id lays its scenario's settings under the user's; a policy of
+    :mod:`agents.policy_registry` lays its own (``predictive``: the 8 s history, the wave-off
+    and the contact window).  A pinned drone (``simulation.drone_fixed``) is refused with a
+    ``ConfigError``.  A trained model's card records the id, observation and descent it was
+    trained on and refuses another.
 
     .. rubric:: Version History
 
     * ``DeckLandingTiming-v0``: the task, any config; the history observation, levelled.
-    * ``DeckLandingTiming-BenchSS{3,4,5}-v0``, ``DeckLandingTiming-PaperStewart-v0``: the bench
-      configs made a landing run, the range-scheduled final descent (1.85 ± 0.35 s).
-    * ``-v1``: the timed final descent (the feet touch 1.30 ± 0.06 s after the commit).
-    * ``-v2``: an 8 s history and the wave-off by the scenario's deck-tilt predictor below a
-      fixed chance of 0.8.
-    * ``-v3``: the wave-off below the value of waiting on.
-    * ``-v4``: the contact time each commit chooses in 1.2-1.5 s (what ``predictive`` flies).
-    * ``-v5``: v4 observing the predictor's chances and the value of waiting instead of the
-      history (what ``timing-dqn-predictive`` was trained on).
-    * ``DeckLandingTiming-ShipSS{3,4,5,6}-v1``: the ship decks, ``tight`` observed, a 2 m
-      hold, the guidance in the deck's frame.
-    * ``-v2``: the deck's acceleration tracked and led 0.2 s.
-    * ``-v3``: a go-around when the deck is lost, no flare.
-    * ``-v4``: the scenario's lens (wide at sea states 5 and 6) and the view gate from the
-      camera's calibration.
-    * ``-v5``: v4 observing the ship's helideck forecast and the drone's own state.
-    * ``-v6``: v5 started in trim with the mean wind, with the autopilots' stock limits.
+    * ``DeckLandingTiming-PaperStewart-v0``: the papers' bench made a landing run, the
+      range-scheduled final descent (1.85 ± 0.35 s).
+    * ``DeckLandingTiming-BenchSS{3,4,5}``: ``v0`` the range-scheduled descent; ``v1`` the timed
+      final descent (the feet touch 1.30 ± 0.06 s after the commit); ``v2``-``v4`` an 8 s
+      history, the wave-off by the scenario's deck-tilt predictor (``v3``: below the value of
+      waiting on) and (``v4``) the contact window, fixed in the id; ``v5`` v4 observing the
+      predictor's chances.  **v6** (current, 1.0.0): the timed descent and the scenario's
+      predictor; the wave-off, contact window and observation are ``timing`` settings, so v4
+      is v6 with the ``predictive`` policy's settings and v5 adds
+      ``timing.observation: prediction``.
+    * ``DeckLandingTiming-ShipSS{3,4,5,6}``: ``v1`` the ship decks, ``tight`` observed, a 2 m
+      hold, the guidance in the deck's frame; ``v2`` the deck's acceleration tracked and led
+      0.2 s; ``v3`` a go-around when the deck is lost, no flare; ``v4`` the scenario's lens and
+      the view gate from the camera's calibration; ``v5`` v4 observing the helideck forecast
+      and the drone's own state; ``v6`` v5 started in trim with the mean wind, with the
+      autopilots' stock limits.  **v7** (current, 1.0.0): v6 observing the deck-pose history by
+      default (what ``evaluate landing --scenario ship-ssN`` flies); the forecast is the
+      setting ``timing.observation: forecast``.
+
+    The ids before the current ones are no longer registered; their settings are reached
+    through the current id's ``overrides`` (``timing.guidance.descent_profile: range`` for v0).
     """
 
     def __init__(
