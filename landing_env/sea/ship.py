@@ -215,6 +215,18 @@ def _rotations_zyx(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.n
     )
 
 
+def helideck_poses(vessel: np.ndarray, lever_arm: np.ndarray) -> np.ndarray:
+    """Helideck poses (N, 6) from the vessel's (surge, sway, heave, roll, pitch, yaw) (N, 6)
+    at its centre of motion: the deck at ``lever_arm`` (x forward, y port, z up; m) moves
+    with the hull as a rigid body, by the rotation R(roll, pitch, yaw) and the translation
+    (surge, sway, heave) + R r - r; its attitude is the vessel's."""
+    vessel = np.asarray(vessel, dtype=float).reshape(-1, 6)
+    arm = np.asarray(lever_arm, dtype=float).reshape(3)
+    rotations = _rotations_zyx(vessel[:, 3], vessel[:, 4], vessel[:, 5])
+    moved = rotations @ arm - arm
+    return np.concatenate([vessel[:, :3] + moved, vessel[:, 3:]], axis=1)
+
+
 class ShipMotion:
     """Helideck pose relative to its home (6,): m and rad (Euler ZYX), as every motion source.
 
@@ -292,10 +304,9 @@ class ShipMotion:
         return np.real(phasors @ self._rate_coefficients.T)
 
     def poses(self, times: np.ndarray) -> np.ndarray:
-        vessel = self.vessel_poses(np.asarray(times, dtype=float).reshape(-1))
-        rotations = _rotations_zyx(vessel[:, 3], vessel[:, 4], vessel[:, 5])
-        moved = rotations @ self.lever_arm - self.lever_arm
-        return np.concatenate([vessel[:, :3] + moved, vessel[:, 3:]], axis=1)
+        return helideck_poses(
+            self.vessel_poses(np.asarray(times, dtype=float).reshape(-1)), self.lever_arm
+        )
 
     def pose(self, t: float) -> np.ndarray:
         return self.poses(np.array([t]))[0]
