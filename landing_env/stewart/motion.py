@@ -24,13 +24,14 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sea.generator import SeaGeneratorConfig, make_sea, require_generator
 from landing_env.sea.recording import CsvMotion as CsvMotion
 from landing_env.sea.recording import CsvMotionConfig as CsvMotionConfig
 from landing_env.sea.recording import CsvMotionError as CsvMotionError
 from landing_env.sea.recording import csv_motion_from_config
 from landing_env.sea.recording import write_motion_csv as write_motion_csv
 from landing_env.sea.ship import ShipMotion, ShipMotionConfig
-from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
+from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields
 
 MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
 AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -266,8 +267,12 @@ class SeaStateConfig(JonswapSeaFields):
     #: platform motion = scale * vessel motion, per axis (x, y, z, roll, pitch, yaw); the
     #: defaults make sea state 4 use most of the default workspace (occasional clamping)
     scale: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.06, 0.7, 1.0, 3.5)
+    #: other seas than the JONSWAP above: bimodal spectra, vessel speed, a changing sea state
+    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
+    generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "generator", require_generator(self.generator))
         if self.sea_state is not None:
             require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
         elif self.significant_height_m is None or self.peak_period_s is None:
@@ -296,6 +301,7 @@ class SeaStateConfig(JonswapSeaFields):
         for axis, value in zip(AXES, scale, strict=True):
             require_range(f"scale[{axis}]", value, 0.0)
         object.__setattr__(self, "scale", scale)
+        self.generator.check_sea(self.hs, self.tp)
 
 
 def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:
@@ -326,25 +332,18 @@ class SeaStateMotion:
 
     def __init__(self, config: SeaStateConfig, rng: np.random.Generator) -> None:
         self.config = config
-        waves = WaveComponents(
-            config.hs,
-            config.tp,
-            config.gamma_in_use,
-            config.n_components,
-            (config.band_low, config.band_high),
-            math.radians(config.wave_direction_deg),
-            math.radians(config.direction_spread_deg),
-            rng,
-        )
+        waves = make_sea(config, rng)
         self.waves = waves
         self.frequencies_hz = waves.frequencies_hz
         self.amplitudes_m = waves.amplitudes_m
         self.directions = direction = waves.directions
         self.m0 = waves.m0
-        omega = waves.omega
+        wavenumber = waves.omega**2 / GRAVITY  # deep-water dispersion
+        # the responses oscillate at the frequency met (the vessel's speed, generator)
+        omega = waves.encounter_omega
         self._omega = omega
-        wavenumber = omega**2 / GRAVITY  # deep-water dispersion
-        elevation = waves.elevation_phasors
+        # a changing sea: per unit amplitude, the amplitudes applied in time (see poses)
+        elevation = waves.elevation_phasors if waves.steady else waves.unit_phasors
         self._elevation = elevation
         slope = -1j * wavenumber * elevation  # d/dx of the travelling wave at the origin
         orbital = -1j * elevation  # horizontal surface displacement along the direction
@@ -375,17 +374,25 @@ class SeaStateMotion:
 
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
         """Unscaled sea-surface elevation (m) at the vessel for a time or an array of times."""
+        if not self.waves.steady:
+            return self.waves.elevation(t)
         t = np.asarray(t, dtype=float)
         return np.real(np.exp(1j * np.multiply.outer(t, self._omega)) @ self._elevation)
 
     def pose(self, t: float) -> np.ndarray:
+        if not self.waves.steady:
+            return self.poses(np.array([t]))[0]
         return np.real(self._coefficients @ np.exp(1j * self._omega * t))
 
     def poses(self, times: np.ndarray) -> np.ndarray:
+        if not self.waves.steady:
+            return np.real(self.waves.phasors(times) @ self._coefficients.T)
         phasors = np.exp(1j * np.multiply.outer(times, self._omega))
         return np.real(phasors @ self._coefficients.T)
 
     def velocity(self, t: float) -> np.ndarray:
+        if not self.waves.steady:
+            return np.real(self.waves.phasor_rates(np.array([t])) @ self._coefficients.T)[0]
         return np.real(self._rate_coefficients @ np.exp(1j * self._omega * t))
 
 
