@@ -8,7 +8,7 @@ formats hold it:
 * **CSV** with exactly that header (``write_motion_csv``), parsed by numpy's C reader
   (``np.loadtxt``); a malformed file is scanned again row by row, only to name the line;
 * **.npy**, the same seven columns as an (N, 7) float array (``write_motion_npy``), read
-  memory-mapped: a long log converted once loads at once.
+  as it is stored, without parsing: a long log converted once loads at once.
 
 A loaded recording is kept per process (keyed by the file's path, size and modification
 time), so the episodes after the first do not read it again, and its PCHIP interpolant is
@@ -146,7 +146,7 @@ def _read_csv(path: Path) -> np.ndarray:
 
 def _read_npy(path: Path) -> np.ndarray:
     try:
-        values = np.load(path, mmap_mode="r", allow_pickle=False)
+        values = np.load(path, allow_pickle=False)
     except ValueError as exc:
         raise CsvMotionError(f"{path}: not a numpy array file ({exc})") from exc
     if values.ndim != 2 or values.shape[1] != 7 or not np.issubdtype(values.dtype, np.number):
@@ -154,7 +154,7 @@ def _read_npy(path: Path) -> np.ndarray:
             f"{path}: holds a {values.dtype} array of shape {values.shape}; expected (N, 7) "
             f"numbers, columns {','.join(CSV_HEADER)} (seconds, metres, degrees)"
         )
-    return np.array(values, dtype=float)
+    return np.asarray(values, dtype=float)
 
 
 def read_recording(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -174,9 +174,9 @@ def read_recording(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             f"{path}, line {bad[0] + 3}: time {values[bad[0] + 1, 0]} does not increase "
             f"(previous {values[bad[0], 0]})"
         )
-    poses = values[:, 1:].copy()
-    poses[:, 3:] = np.deg2rad(poses[:, 3:])
-    return values[:, 0].copy(), poses
+    # in place: the table is this function's own (no copies of a long recording)
+    np.deg2rad(values[:, 4:], out=values[:, 4:])
+    return values[:, 0], values[:, 1:]
 
 
 def write_motion_csv(path: str | Path, times: np.ndarray, poses: np.ndarray) -> None:
