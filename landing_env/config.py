@@ -355,6 +355,13 @@ class DeckLandingConfig:
                 "'ship' moves a full-scale helideck (metres of heave) and needs deck_mount: "
                 "ship; the Stewart bench takes static, sinusoids, sea_state or csv",
             )
+        if self.motion.kind == "csv" and self.motion.csv.frame == "vessel":
+            if self.deck_mount != "ship":
+                raise ConfigError(
+                    "motion.csv.frame",
+                    "'vessel' replays a ship's motion at its centre through the helideck's "
+                    "lever arm and needs deck_mount: ship; the bench takes frame: deck",
+                )
         require_choice("sensors", self.sensors, SENSOR_SETS)
         require_choice("lens", self.lens, LENS_SETS)
 

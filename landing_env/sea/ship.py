@@ -45,11 +45,17 @@ episode from the seeded generator.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sea.generator import (
+    GeneratedSea,
+    SeaGeneratorConfig,
+    make_sea,
+    require_generator,
+)
 from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
 
 GRAVITY = 9.80665
@@ -88,8 +94,12 @@ class ShipMotionConfig(JonswapSeaFields):
     #: helideck centre from the centre of rotation (x forward, y port, z up), metres: aft
     #: helideck 10 m behind the CoG, 3 m above it
     helideck_position_m: tuple[float, float, float] = (-10.0, 0.0, 3.0)
+    #: other seas than the JONSWAP above: bimodal spectra, ship speed, a changing sea state
+    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
+    generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "generator", require_generator(self.generator))
         if self.sea_state is not None:
             require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
         elif self.significant_height_m is None or self.peak_period_s is None:
@@ -139,6 +149,7 @@ class ShipMotionConfig(JonswapSeaFields):
                 bounds_from=f"half of length_m = {self.length_m} and of beam_m = {self.beam_m}",
             )
         object.__setattr__(self, "helideck_position_m", position)
+        self.generator.check_sea(self.hs, self.tp)
 
     @property
     def roll_period_in_use_s(self) -> float:
@@ -169,10 +180,20 @@ def _pitch_filter(x: np.ndarray) -> np.ndarray:
 
 
 def vessel_raos(
-    config: ShipMotionConfig, omega: np.ndarray, direction: np.ndarray
+    config: ShipMotionConfig,
+    omega: np.ndarray,
+    direction: np.ndarray,
+    encounter_omega: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Complex RAOs per component: heave and surge/sway per metre of elevation; roll and
-    pitch per unit wave slope along y and (minus) along x (see the module docstring)."""
+    pitch per unit wave slope along y and (minus) along x (see the module docstring).
+
+    ``encounter_omega`` (rad/s, signed; None: ``omega``, a ship at rest): the frequency the
+    moving ship meets each component at.  The excitation keeps the wave's geometry (its
+    wave number k = w^2/g: the Smith factor, the length filters, f); the oscillators (the
+    dynamic factor eta and the roll response) take the encounter frequency, their damping
+    odd in it (a negative w_e is the same oscillation seen with time reversed).  This
+    speed dependence is this project's extension of the zero-speed expressions."""
     k = omega**2 / GRAVITY
     length, draught = config.length_m, config.draught_m
     breadth = config.block_coefficient * config.beam_m
@@ -182,12 +203,20 @@ def vessel_raos(
     a = 2.0 * np.sin(0.5 * k * breadth) * np.exp(-k * draught)
     damping = a**2 / (k * breadth)
     f = np.sqrt((1.0 - k * draught) ** 2 + damping**2)
-    eta = 1.0 / ((1.0 - 2.0 * k * draught) + 1j * damping)
+    if encounter_omega is None:
+        eta = 1.0 / ((1.0 - 2.0 * k * draught) + 1j * damping)
+        oscillation = omega
+    else:
+        oscillation = np.asarray(encounter_omega, dtype=float)
+        ke = np.maximum(oscillation**2 / GRAVITY, 1e-12)
+        ae = 2.0 * np.sin(0.5 * ke * breadth) * np.exp(-ke * draught)
+        damping_e = np.sign(oscillation) * ae**2 / (ke * breadth)
+        eta = 1.0 / ((1.0 - 2.0 * ke * draught) + 1j * damping_e)
     length_filter = _sinc(x)
     heave = eta * kappa * f * length_filter
     pitch = eta * kappa * f * _pitch_filter(x)
     wr = 2.0 * math.pi / config.roll_period_in_use_s
-    ratio = omega / wr
+    ratio = oscillation / wr
     roll_dynamics = 1.0 / (1.0 - ratio**2 + 2j * config.roll_damping_ratio * ratio)
     roll = config.roll_slope_factor * np.exp(-0.5 * k * draught) * length_filter * roll_dynamics
     planar = kappa * length_filter
@@ -215,6 +244,18 @@ def _rotations_zyx(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.n
     )
 
 
+def helideck_poses(vessel: np.ndarray, lever_arm: np.ndarray) -> np.ndarray:
+    """Helideck poses (N, 6) from the vessel's (surge, sway, heave, roll, pitch, yaw) (N, 6)
+    at its centre of motion: the deck at ``lever_arm`` (x forward, y port, z up; m) moves
+    with the hull as a rigid body, by the rotation R(roll, pitch, yaw) and the translation
+    (surge, sway, heave) + R r - r; its attitude is the vessel's."""
+    vessel = np.asarray(vessel, dtype=float).reshape(-1, 6)
+    arm = np.asarray(lever_arm, dtype=float).reshape(3)
+    rotations = _rotations_zyx(vessel[:, 3], vessel[:, 4], vessel[:, 5])
+    moved = rotations @ arm - arm
+    return np.concatenate([vessel[:, :3] + moved, vessel[:, 3:]], axis=1)
+
+
 class ShipMotion:
     """Helideck pose relative to its home (6,): m and rad (Euler ZYX), as every motion source.
 
@@ -224,26 +265,19 @@ class ShipMotion:
 
     def __init__(self, config: ShipMotionConfig, rng: np.random.Generator) -> None:
         self.config = config
-        waves = WaveComponents(
-            config.hs,
-            config.tp,
-            config.gamma_in_use,
-            config.n_components,
-            (config.band_low, config.band_high),
-            math.radians(config.wave_direction_deg),
-            math.radians(config.direction_spread_deg),
-            rng,
-        )
+        waves = make_sea(config, rng)
         self.waves = waves
         omega = waves.omega
-        self._omega = omega
-        elevation = waves.elevation_phasors
+        self._omega = waves.encounter_omega
+        # a changing sea: per unit amplitude, the amplitudes applied in time (see _phasors)
+        elevation = waves.elevation_phasors if waves.steady else waves.unit_phasors
         k = omega**2 / GRAVITY
         direction = waves.directions
         slope_x = -1j * k * np.cos(direction) * elevation
         slope_y = -1j * k * np.sin(direction) * elevation
         orbital = -1j * elevation
-        rao = vessel_raos(config, omega, direction)
+        moving = config.generator.speed_m_s != 0.0
+        rao = vessel_raos(config, omega, direction, waves.encounter_omega if moving else None)
         self._coefficients = np.array(
             [
                 rao["surge"] * orbital,
@@ -258,8 +292,10 @@ class ShipMotion:
         self.lever_arm = np.asarray(config.helideck_position_m, dtype=float)
         # the deck's vertical displacement, linearised (heave + y roll - x pitch), and tilt
         lx, ly, lz = self.lever_arm
-        vertical = self._coefficients[2] + ly * self._coefficients[3] - lx * self._coefficients[4]
-        tilt = np.abs(self._coefficients[3]) + np.abs(self._coefficients[4])
+        peak = 1.0 if waves.steady else waves.peak_amplitudes_m
+        largest = self._coefficients * peak
+        vertical = largest[2] + ly * largest[3] - lx * largest[4]
+        tilt = np.abs(largest[3]) + np.abs(largest[4])
 
         def reach(amplitudes: np.ndarray) -> float:
             # six standard deviations, or the sum of amplitudes when that is smaller
@@ -275,7 +311,7 @@ class ShipMotion:
         )
 
     @property
-    def elevation_spectrum(self) -> WaveComponents:
+    def elevation_spectrum(self) -> WaveComponents | GeneratedSea:
         return self.waves
 
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
@@ -283,19 +319,24 @@ class ShipMotion:
 
     def vessel_poses(self, times: np.ndarray) -> np.ndarray:
         """Vessel (surge, sway, heave, roll, pitch, yaw) at its centre of rotation, (N, 6)."""
-        phasors = np.exp(1j * np.multiply.outer(np.asarray(times, dtype=float), self._omega))
+        times = np.asarray(times, dtype=float)
+        if not self.waves.steady:
+            return np.real(self.waves.phasors(times) @ self._coefficients.T)
+        phasors = np.exp(1j * np.multiply.outer(times, self._omega))
         return np.real(phasors @ self._coefficients.T)
 
     def vessel_rates(self, times: np.ndarray) -> np.ndarray:
         """Time derivative of :meth:`vessel_poses`, (N, 6)."""
-        phasors = np.exp(1j * np.multiply.outer(np.asarray(times, dtype=float), self._omega))
+        times = np.asarray(times, dtype=float)
+        if not self.waves.steady:
+            return np.real(self.waves.phasor_rates(times) @ self._coefficients.T)
+        phasors = np.exp(1j * np.multiply.outer(times, self._omega))
         return np.real(phasors @ self._rate_coefficients.T)
 
     def poses(self, times: np.ndarray) -> np.ndarray:
-        vessel = self.vessel_poses(np.asarray(times, dtype=float).reshape(-1))
-        rotations = _rotations_zyx(vessel[:, 3], vessel[:, 4], vessel[:, 5])
-        moved = rotations @ self.lever_arm - self.lever_arm
-        return np.concatenate([vessel[:, :3] + moved, vessel[:, 3:]], axis=1)
+        return helideck_poses(
+            self.vessel_poses(np.asarray(times, dtype=float).reshape(-1)), self.lever_arm
+        )
 
     def pose(self, t: float) -> np.ndarray:
         return self.poses(np.array([t]))[0]

@@ -1,5 +1,8 @@
 """Motion sources for the Stewart platform: static, sums of sinusoids, a JONSWAP sea, CSV replay.
 
+The replay of recordings (CSV or .npy, deck or vessel frame, random start per seeded episode)
+lives in :mod:`landing_env.sea.recording`; its names are re-exported here.
+
 Every source gives the commanded top-plate pose relative to the home frame as the 6-vector
 ``(x, y, z, roll, pitch, yaw)`` in metres and radians (Euler ZYX, see
 :mod:`estimation.frames`) and its time derivative (m/s and Euler rates in rad/s).  Sources are
@@ -12,7 +15,6 @@ Unit convention of the *configs* and of CSV files: translations in metres, angle
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
@@ -20,14 +22,18 @@ from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sea.generator import SeaGeneratorConfig, make_sea, require_generator
+from landing_env.sea.recording import CsvMotion as CsvMotion
+from landing_env.sea.recording import CsvMotionConfig as CsvMotionConfig
+from landing_env.sea.recording import CsvMotionError as CsvMotionError
+from landing_env.sea.recording import csv_motion_from_config
+from landing_env.sea.recording import write_motion_csv as write_motion_csv
 from landing_env.sea.ship import ShipMotion, ShipMotionConfig
-from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
+from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields
 
 MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
-CSV_HEADER: tuple[str, ...] = ("t", "x", "y", "z", "roll", "pitch", "yaw")
 AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
 GRAVITY = 9.80665
 
@@ -261,8 +267,12 @@ class SeaStateConfig(JonswapSeaFields):
     #: platform motion = scale * vessel motion, per axis (x, y, z, roll, pitch, yaw); the
     #: defaults make sea state 4 use most of the default workspace (occasional clamping)
     scale: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.06, 0.7, 1.0, 3.5)
+    #: other seas than the JONSWAP above: bimodal spectra, vessel speed, a changing sea state
+    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
+    generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "generator", require_generator(self.generator))
         if self.sea_state is not None:
             require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
         elif self.significant_height_m is None or self.peak_period_s is None:
@@ -291,6 +301,7 @@ class SeaStateConfig(JonswapSeaFields):
         for axis, value in zip(AXES, scale, strict=True):
             require_range(f"scale[{axis}]", value, 0.0)
         object.__setattr__(self, "scale", scale)
+        self.generator.check_sea(self.hs, self.tp)
 
 
 def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:
@@ -321,25 +332,18 @@ class SeaStateMotion:
 
     def __init__(self, config: SeaStateConfig, rng: np.random.Generator) -> None:
         self.config = config
-        waves = WaveComponents(
-            config.hs,
-            config.tp,
-            config.gamma_in_use,
-            config.n_components,
-            (config.band_low, config.band_high),
-            math.radians(config.wave_direction_deg),
-            math.radians(config.direction_spread_deg),
-            rng,
-        )
+        waves = make_sea(config, rng)
         self.waves = waves
         self.frequencies_hz = waves.frequencies_hz
         self.amplitudes_m = waves.amplitudes_m
         self.directions = direction = waves.directions
         self.m0 = waves.m0
-        omega = waves.omega
+        wavenumber = waves.omega**2 / GRAVITY  # deep-water dispersion
+        # the responses oscillate at the frequency met (the vessel's speed, generator)
+        omega = waves.encounter_omega
         self._omega = omega
-        wavenumber = omega**2 / GRAVITY  # deep-water dispersion
-        elevation = waves.elevation_phasors
+        # a changing sea: per unit amplitude, the amplitudes applied in time (see poses)
+        elevation = waves.elevation_phasors if waves.steady else waves.unit_phasors
         self._elevation = elevation
         slope = -1j * wavenumber * elevation  # d/dx of the travelling wave at the origin
         orbital = -1j * elevation  # horizontal surface displacement along the direction
@@ -370,17 +374,25 @@ class SeaStateMotion:
 
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
         """Unscaled sea-surface elevation (m) at the vessel for a time or an array of times."""
+        if not self.waves.steady:
+            return self.waves.elevation(t)
         t = np.asarray(t, dtype=float)
         return np.real(np.exp(1j * np.multiply.outer(t, self._omega)) @ self._elevation)
 
     def pose(self, t: float) -> np.ndarray:
+        if not self.waves.steady:
+            return self.poses(np.array([t]))[0]
         return np.real(self._coefficients @ np.exp(1j * self._omega * t))
 
     def poses(self, times: np.ndarray) -> np.ndarray:
+        if not self.waves.steady:
+            return np.real(self.waves.phasors(times) @ self._coefficients.T)
         phasors = np.exp(1j * np.multiply.outer(times, self._omega))
         return np.real(phasors @ self._coefficients.T)
 
     def velocity(self, t: float) -> np.ndarray:
+        if not self.waves.steady:
+            return np.real(self.waves.phasor_rates(np.array([t])) @ self._coefficients.T)[0]
         return np.real(self._rate_coefficients @ np.exp(1j * self._omega * t))
 
 
@@ -452,135 +464,6 @@ class ForecastMotion:
         return np.asarray(self._rate(t), dtype=float)
 
 
-# ------------------------------------------------------------------------------- csv
-class CsvMotionError(ValueError):
-    """A motion CSV file is malformed; the message names the file and the row."""
-
-
-@dataclass(frozen=True)
-class CsvMotionConfig:
-    """Replay of a recorded motion file.
-
-    The file has the header ``t,x,y,z,roll,pitch,yaw``: time in seconds (strictly
-    increasing), translations in metres, angles in DEGREES.  Between samples the pose is
-    PCHIP-interpolated (no overshoot).  Before the first sample the first pose is held.
-    """
-
-    #: path of the CSV file (required when the motion kind is "csv")
-    path: str = ""
-    #: after the last sample: "hold" the last pose, or "loop" back to the first sample
-    end: Literal["hold", "loop"] = "hold"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "path", str(self.path))
-        require_choice("end", self.end, ("hold", "loop"))
-
-
-class CsvMotion:
-    """PCHIP replay of samples ``(t, pose)`` with angles already in radians."""
-
-    def __init__(
-        self, times: np.ndarray, poses: np.ndarray, end: Literal["hold", "loop"] = "hold"
-    ) -> None:
-        times = np.asarray(times, dtype=float)
-        poses = np.asarray(poses, dtype=float)
-        if times.ndim != 1 or len(times) < 2 or poses.shape != (len(times), 6):
-            raise CsvMotionError("need at least two samples of (t, x, y, z, roll, pitch, yaw)")
-        bad = np.flatnonzero(np.diff(times) <= 0.0)
-        if len(bad):
-            raise CsvMotionError(f"time must increase strictly; it does not at sample {bad[0] + 1}")
-        require_choice("end", end, ("hold", "loop"))
-        self.times = times
-        self.samples = poses
-        self.end = end
-        self._start, self._stop = float(times[0]), float(times[-1])
-        self._interp = PchipInterpolator(times, poses, axis=0, extrapolate=False)
-        self._rate = self._interp.derivative()
-
-    @classmethod
-    def from_file(cls, path: str | Path, end: Literal["hold", "loop"] = "hold") -> CsvMotion:
-        """Load a CSV (header ``t,x,y,z,roll,pitch,yaw``; s, m, degrees)."""
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"motion CSV {str(path)!r} does not exist")
-        with path.open(newline="") as handle:
-            rows = [row for row in csv.reader(handle) if row and any(c.strip() for c in row)]
-        if not rows:
-            raise CsvMotionError(f"{path}: empty file; expected header {','.join(CSV_HEADER)}")
-        header = tuple(c.strip().lower() for c in rows[0])
-        if header != CSV_HEADER:
-            raise CsvMotionError(
-                f"{path}: header is {','.join(header)!r}; expected {','.join(CSV_HEADER)!r} "
-                "(seconds, metres, degrees)"
-            )
-        values = np.empty((len(rows) - 1, 7))
-        for i, row in enumerate(rows[1:]):
-            line = i + 2
-            if len(row) != 7:
-                raise CsvMotionError(f"{path}, line {line}: expected 7 columns, got {len(row)}")
-            try:
-                values[i] = [float(c) for c in row]
-            except ValueError as exc:
-                raise CsvMotionError(f"{path}, line {line}: not a number ({exc})") from exc
-        if not np.all(np.isfinite(values)):
-            raise CsvMotionError(f"{path}: contains non-finite values")
-        if len(values) < 2:
-            raise CsvMotionError(f"{path}: needs at least two samples")
-        bad = np.flatnonzero(np.diff(values[:, 0]) <= 0.0)
-        if len(bad):
-            raise CsvMotionError(
-                f"{path}, line {bad[0] + 3}: time {values[bad[0] + 1, 0]} does not increase "
-                f"(previous {values[bad[0], 0]})"
-            )
-        poses = values[:, 1:].copy()
-        poses[:, 3:] = np.deg2rad(poses[:, 3:])
-        return cls(values[:, 0], poses, end)
-
-    @property
-    def duration(self) -> float:
-        """Time span of the samples (s)."""
-        return self._stop - self._start
-
-    def _local_time(self, t: float) -> tuple[float, bool]:
-        """Map ``t`` into the sample span; the flag says the pose is being held (no motion)."""
-        if t <= self._start:
-            return self._start, True
-        if t >= self._stop:
-            if self.end == "hold":
-                return self._stop, True
-            return self._start + math.fmod(t - self._start, self.duration), False
-        return t, False
-
-    def pose(self, t: float) -> np.ndarray:
-        local, _ = self._local_time(t)
-        return self._interp(local)
-
-    def poses(self, times: np.ndarray) -> np.ndarray:
-        times = np.asarray(times, dtype=float)
-        local = np.maximum(times, self._start)
-        after = times >= self._stop
-        if self.end == "hold":
-            local[after] = self._stop
-        else:
-            local[after] = self._start + np.fmod(times[after] - self._start, self.duration)
-        return self._interp(local).reshape(-1, 6)
-
-    def velocity(self, t: float) -> np.ndarray:
-        local, held = self._local_time(t)
-        return np.zeros(6) if held else self._rate(local)
-
-
-def write_motion_csv(path: str | Path, times: np.ndarray, poses: np.ndarray) -> None:
-    """Write poses (N, 6; metres and radians) as a motion CSV (angles converted to degrees)."""
-    poses = np.asarray(poses, dtype=float).copy()
-    poses[:, 3:] = np.rad2deg(poses[:, 3:])
-    with Path(path).open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(CSV_HEADER)
-        for t, row in zip(np.asarray(times, dtype=float), poses, strict=True):
-            writer.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
-
-
 # ------------------------------------------------------------------------------- factory
 _NESTED: dict[str, type] = {
     "static": StaticMotionConfig,
@@ -635,4 +518,4 @@ def make_motion_source(config: MotionConfig, rng: np.random.Generator) -> Motion
         return SeaStateMotion(config.sea_state, rng)
     if config.kind == "ship":
         return ShipMotion(config.ship, rng)
-    return CsvMotion.from_file(config.csv.path, config.csv.end)
+    return csv_motion_from_config(config.csv, rng)
