@@ -118,7 +118,7 @@ POLICIES: dict[str, PolicySpec] = {
             "contact time and waves off by the same predictor",
             estimator="tight",
             overrides=dotted("timing", PREDICTIVE_TIMING),
-            scenarios=("bench-ss3", "bench-ss4", "bench-ss5"),
+            scenarios=("bench-ss3", "bench-ss4", "bench-ss5", "bench-unseen"),
         ),
         _timing(
             "timing-dqn-predictive",
@@ -235,6 +235,9 @@ DEFAULT_POLICY: dict[str, str] = {
     "ship-ss4": "quiescent",
     "ship-ss5": "quiescent",
     "ship-ss6": "timing-dqn-lookahead",
+    "bench-unseen": "predictive",
+    "ship-unseen-4": "quiescent",
+    "ship-unseen-5": "quiescent",
 }
 
 
@@ -272,7 +275,8 @@ def env_settings(
     extra_overrides: dict[str, Any] | None = None,
 ) -> tuple[str, dict[str, Any]]:
     """The registered id ``policy`` flies on ``scenario`` and the overrides it lays over the
-    id's: its own settings, its estimator and sensing (unless given), then ``extra_overrides``."""
+    id's: its own settings, its estimator and sensing (unless given), then ``extra_overrides``
+    (the scenario's config is :func:`scenario_config`'s)."""
     spec = policy_spec(policy)
     table = {**SCENARIOS, **APPROACH_SCENARIOS}
     require_choice("scenario", scenario, tuple(table))
@@ -294,6 +298,13 @@ def env_settings(
     return env_id, overrides
 
 
+def scenario_config(scenario: str) -> str:
+    """The config ``scenario`` flies: its id's, or a held-out sea's own on its sibling's id."""
+    table = {**SCENARIOS, **APPROACH_SCENARIOS}
+    require_choice("scenario", scenario, tuple(table))
+    return table[scenario].config
+
+
 def make_env_and_policy(
     policy_name: str,
     scenario: str,
@@ -310,7 +321,9 @@ def make_env_and_policy(
     env_id, overrides = env_settings(
         policy_name, scenario, estimator, camera_mode, sensing, extra_overrides
     )
-    env = gym.make(env_id, overrides=overrides, render_mode=render_mode)
+    env = gym.make(
+        env_id, config=scenario_config(scenario), overrides=overrides, render_mode=render_mode
+    )
     try:
         policy = make_policy(policy_name, env, model_path, tuple(allow_mismatch))
     except Exception:
@@ -342,4 +355,5 @@ __all__ = [
     "make_env_and_policy",
     "make_policy",
     "policy_spec",
+    "scenario_config",
 ]

@@ -27,6 +27,7 @@ from gymnasium.envs.registration import load_env_creator, register, registry
 from landing_env.config import SimulationConfig, episode_step_limit, read_config_data
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice
+from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.timing.config import SCENARIO_TILT_MODEL, TimingConfig
 
 #: the task environments: id -> entry point
@@ -147,6 +148,9 @@ class Scenario:
     timing: dict[str, Any] = field(default_factory=dict)
     #: further dotted overrides of the config
     extra: dict[str, Any] = field(default_factory=dict)
+    #: a held-out sea (:mod:`landing_env.sea.heldout`): it registers no id of its own but
+    #: flies its sibling's ids on its own config (``gym.make(id, config=...)``)
+    held_out: bool = False
 
     def overrides(
         self, task: str, estimator: str | None = None, camera_mode: str = "project"
@@ -209,6 +213,26 @@ SCENARIOS: dict[str, Scenario] = {
         for n, sea in _SHIP_SEAS.items()
     },
 }
+
+#: the held-out seas (never fitted, trained or tuned on): each flies the ids of the scenario
+#: whose task it shares, on its own config
+HELD_OUT_SCENARIOS: dict[str, Scenario] = {
+    name: Scenario(
+        name,
+        name,
+        f"held-out sea: {HELD_OUT_SEAS[name]}",
+        SCENARIOS[sibling].ids,
+        estimator=SCENARIOS[sibling].estimator,
+        timing=SCENARIOS[sibling].timing,
+        held_out=True,
+    )
+    for name, sibling in (
+        ("bench-unseen", "bench-ss4"),
+        ("ship-unseen-4", "ship-ss4"),
+        ("ship-unseen-5", "ship-ss5"),
+    )
+}
+SCENARIOS.update(HELD_OUT_SCENARIOS)
 
 #: the scenarios of the approach from altitude (``DeckLanding-v0`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
@@ -286,6 +310,8 @@ def _task_phrase(task: str) -> str:
 def _ids() -> dict[str, ScenarioId]:
     ids: dict[str, ScenarioId] = {}
     for scenario in (*SCENARIOS.values(), *APPROACH_SCENARIOS.values()):
+        if scenario.held_out:
+            continue
         for task, env_id in scenario.ids.items():
             ids[env_id] = ScenarioId(
                 task,
@@ -356,6 +382,7 @@ __all__ = [
     "BENCH_TIMING",
     "CONTACT_WINDOW_S",
     "FLYING_OVERRIDES",
+    "HELD_OUT_SCENARIOS",
     "LANDING_TASK",
     "PREDICTIVE_TIMING",
     "SCENARIOS",

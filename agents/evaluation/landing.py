@@ -8,7 +8,8 @@ offset at touchdown, time to land), every episode's record and a figure (histogr
 touchdown speeds per policy, success rates with their intervals).  With a timing policy among
 them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same
 seeds) runs too, unless ``--no-oracle``: each timing policy's row gives the oracle's
-success, the gap in points and how many of its failures the oracle failed as well (no timing could avoid them).
+success, the gap in points and how many of its failures the oracle failed as well (no timing
+could avoid them).
 The oracle foresees the wind's gusts and the sensors' noise as well as the deck; with
 ``--deck-oracle`` the deck oracle runs too, which foresees the deck alone (the wind and the
 noise to come drawn anew in its look-ahead), and each row gives the gap to it as well: the
@@ -64,6 +65,7 @@ from agents.policy_registry import (
     default_policy,
     env_settings,
     make_env_and_policy,
+    scenario_config,
 )
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import TouchdownConfig, load_config
@@ -132,7 +134,7 @@ class _LandingEvaluation:
             extra_overrides=o.get("extra_overrides"),
         )
         scenario = SCENARIO_IDS[env_id]
-        load_config(scenario.config, {**scenario.overrides, **overrides})
+        load_config(scenario_config(task.scenario), {**scenario.overrides, **overrides})
 
     def make(self, task: EpisodeTask) -> tuple[Any, Any]:
         return make_env_and_policy(task.policy, task.scenario, **task.options)
