@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from landing_env.errors import ConfigError
+from landing_env.sea.spectrum import SEA_STATE_TABLE
 from landing_env.stewart.kinematics import StewartGeometry, StewartKinematics
 from landing_env.stewart.motion import (
-    SEA_STATE_TABLE,
     BatchMotionSource,
     CsvMotion,
     CsvMotionConfig,

@@ -45,41 +45,34 @@ episode from the seeded generator.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError, require_range
 from landing_env.sea.generator import (
     GeneratedSea,
-    SeaGeneratorConfig,
     make_sea,
-    require_generator,
 )
-from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields, WaveComponents
+from landing_env.sea.sea_config import SeaConfig
+from landing_env.sea.spectrum import WaveComponents
 
 GRAVITY = 9.80665
 
 
 @dataclass(frozen=True)
-class ShipMotionConfig(JonswapSeaFields):
-    """A JONSWAP sea, a 10-40 m vessel in it, and where its helideck is (see the module)."""
+class ShipMotionConfig(SeaConfig):
+    """A sea (:class:`~landing_env.sea.sea_config.SeaConfig`), a 10-40 m vessel in it, and
+    where its helideck is (see the module)."""
 
-    #: WMO sea-state code (typical Hs and Tp from SEA_STATE_TABLE), or None with both below
-    sea_state: int | None = 4
-    significant_height_m: float | None = None
-    peak_period_s: float | None = None
-    #: JONSWAP peak factor; None: the DNV-RP-C205 rule (1 for the tabled states 3-6)
-    gamma: float | None = None
+    HS_RANGE_M: ClassVar[tuple[float, float]] = (0.0, 16.0)
+    TP_RANGE_S: ClassVar[tuple[float, float]] = (2.0, 25.0)
+
     n_components: int = 200
-    #: spectrum band as multiples of the peak frequency
-    band_low: float = 0.5
     band_high: float = 4.0
-    #: direction the waves travel towards, from the bow, counter-clockwise (deg): 180 head
-    #: seas; 150 = bow seas 30 deg off the starboard bow, a usual heading for deck landings
+    #: 150 = bow seas 30 deg off the starboard bow, a usual heading for deck landings
     wave_direction_deg: float = 150.0
-    #: half-width of the uniform random spread of component directions (short-crested sea)
-    direction_spread_deg: float = 30.0
     #: hull: length, moulded breadth, draught (m), block coefficient, metacentric height (m)
     length_m: float = 30.0
     beam_m: float = 7.0
@@ -94,26 +87,9 @@ class ShipMotionConfig(JonswapSeaFields):
     #: helideck centre from the centre of rotation (x forward, y port, z up), metres: aft
     #: helideck 10 m behind the CoG, 3 m above it
     helideck_position_m: tuple[float, float, float] = (-10.0, 0.0, 3.0)
-    #: other seas than the JONSWAP above: bimodal spectra, ship speed, a changing sea state
-    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
-    generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "generator", require_generator(self.generator))
-        if self.sea_state is not None:
-            require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
-        elif self.significant_height_m is None or self.peak_period_s is None:
-            raise ConfigError("sea_state", "None needs both significant_height_m and peak_period_s")
-        if self.significant_height_m is not None:
-            require_range("significant_height_m", self.significant_height_m, 0.0, 16.0)
-        if self.peak_period_s is not None:
-            require_range("peak_period_s", self.peak_period_s, 2.0, 25.0)
-        if self.gamma is not None:
-            require_range("gamma", self.gamma, 1.0, 10.0)
-        require_range("n_components", self.n_components, 1, 10_000)
-        require_range("band_low", self.band_low, 0.0, 1.0, low_inclusive=False)
-        require_range("band_high", self.band_high, 1.0, 20.0, low_inclusive=False)
-        require_range("direction_spread_deg", self.direction_spread_deg, 0.0, 180.0)
+        self.check_sea()
         # a 10-40 m class, with proportions a monohull can have
         require_range("length_m", self.length_m, 10.0, 40.0)
         require_range(
@@ -149,7 +125,6 @@ class ShipMotionConfig(JonswapSeaFields):
                 bounds_from=f"half of length_m = {self.length_m} and of beam_m = {self.beam_m}",
             )
         object.__setattr__(self, "helideck_position_m", position)
-        self.generator.check_sea(self.hs, self.tp)
 
     @property
     def roll_period_in_use_s(self) -> float:

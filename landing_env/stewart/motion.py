@@ -24,14 +24,14 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.generator import SeaGeneratorConfig, make_sea, require_generator
+from landing_env.sea.generator import make_sea
 from landing_env.sea.recording import CsvMotion as CsvMotion
 from landing_env.sea.recording import CsvMotionConfig as CsvMotionConfig
 from landing_env.sea.recording import CsvMotionError as CsvMotionError
 from landing_env.sea.recording import csv_motion_from_config
 from landing_env.sea.recording import write_motion_csv as write_motion_csv
+from landing_env.sea.sea_config import SeaConfig
 from landing_env.sea.ship import ShipMotion, ShipMotionConfig
-from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields
 
 MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
 AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -229,30 +229,10 @@ class SinusoidMotion:
 
 # ------------------------------------------------------------------------------- sea state
 @dataclass(frozen=True)
-class SeaStateConfig(JonswapSeaFields):
-    """A JONSWAP sea, a small vessel's response to it and its scaling onto the platform.
+class SeaStateConfig(SeaConfig):
+    """A sea (:class:`~landing_env.sea.sea_config.SeaConfig`), a small vessel's response to it
+    and its scaling onto the platform."""
 
-    Give ``sea_state`` (WMO code 0-6, typical Hs and Tp from :data:`SEA_STATE_TABLE`) and/or
-    explicit ``significant_height_m`` and ``peak_period_s``, which take precedence.
-    """
-
-    sea_state: int | None = 4
-    significant_height_m: float | None = None
-    peak_period_s: float | None = None
-    #: JONSWAP peak enhancement factor (1 gives Pierson-Moskowitz); None: by the DNV-RP-C205
-    #: rule from Hs and Tp (:func:`~landing_env.sea.spectrum.dnv_gamma`: 1 for the tabled
-    #: sea states 3-6, whose Tp/sqrt(Hs) >= 5)
-    gamma: float | None = None
-    #: number of wave components (one per frequency bin)
-    n_components: int = 150
-    #: spectrum band as multiples of the peak frequency
-    band_low: float = 0.5
-    band_high: float = 5.0
-    #: direction the waves travel towards, from the platform's bow (x) counter-clockwise;
-    #: 0 following seas, 180 head seas, 90 beam seas from starboard
-    wave_direction_deg: float = 135.0
-    #: half-width of the uniform random spread of component directions
-    direction_spread_deg: float = 30.0
     #: vessel natural periods (s) and damping ratios of its second-order responses
     heave_period_s: float = 3.0
     heave_damping: float = 0.3
@@ -267,30 +247,9 @@ class SeaStateConfig(JonswapSeaFields):
     #: platform motion = scale * vessel motion, per axis (x, y, z, roll, pitch, yaw); the
     #: defaults make sea state 4 use most of the default workspace (occasional clamping)
     scale: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.06, 0.7, 1.0, 3.5)
-    #: other seas than the JONSWAP above: bimodal spectra, vessel speed, a changing sea state
-    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
-    generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "generator", require_generator(self.generator))
-        if self.sea_state is not None:
-            require_choice("sea_state", self.sea_state, tuple(SEA_STATE_TABLE))
-        elif self.significant_height_m is None or self.peak_period_s is None:
-            raise ConfigError(
-                "sea_state",
-                "None needs both significant_height_m and peak_period_s; "
-                f"or choose one of {', '.join(str(k) for k in SEA_STATE_TABLE)}",
-            )
-        if self.significant_height_m is not None:
-            require_range("significant_height_m", self.significant_height_m, 0.0, 20.0)
-        if self.peak_period_s is not None:
-            require_range("peak_period_s", self.peak_period_s, 0.5, 30.0)
-        if self.gamma is not None:
-            require_range("gamma", self.gamma, 1.0, 10.0)
-        require_range("n_components", self.n_components, 1, 10_000)
-        require_range("band_low", self.band_low, 0.0, 1.0, low_inclusive=False)
-        require_range("band_high", self.band_high, 1.0, 20.0, low_inclusive=False)
-        require_range("direction_spread_deg", self.direction_spread_deg, 0.0, 180.0)
+        self.check_sea()
         for name in ("heave", "roll", "pitch", "surge_sway", "yaw"):
             for suffix in ("period_s", "damping"):
                 key = f"{name}_{suffix}"
@@ -301,7 +260,6 @@ class SeaStateConfig(JonswapSeaFields):
         for axis, value in zip(AXES, scale, strict=True):
             require_range(f"scale[{axis}]", value, 0.0)
         object.__setattr__(self, "scale", scale)
-        self.generator.check_sea(self.hs, self.tp)
 
 
 def second_order_response(omega: np.ndarray, period_s: float, damping: float) -> np.ndarray:

@@ -134,8 +134,8 @@ class TimingConfig:
             bounds_from=f"history_s = {self.history_s}",
         )
         require_range("steps_per_decision", self.steps_per_decision, 1, 20)
-        require_range("wait_limit_s", self.wait_limit_s, 0.0, low_inclusive=False)
-        require_range("descent_timeout_s", self.descent_timeout_s, 0.5)
+        require_range("wait_limit_s", self.wait_limit_s, 0.0, 600.0, low_inclusive=False)
+        require_range("descent_timeout_s", self.descent_timeout_s, 0.5, 120.0)
         require_range("wave_off_tilt_deg", self.wave_off_tilt_deg, 0.0, 45.0)
         require_range("wave_off_from_s", self.wave_off_from_s, 0.0, 10.0)
         require_range(
