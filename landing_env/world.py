@@ -23,7 +23,9 @@ from estimation.types import CameraFrame, ImuSample, RangeReading
 from landing_env._quiet import quiet_stdout
 from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
-from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
+from landing_env.physics.drone_state import DroneState
+from landing_env.physics.quadrotor import Quadrotor
+from landing_env.physics.quadrotor_params import QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sea.deck_mount import ShipDeck
