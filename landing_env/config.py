@@ -30,7 +30,7 @@ from landing_env.physics.wind import WindConfig
 from landing_env.resources import config_dir
 from landing_env.scene.deck import DeckSurfaceConfig
 from landing_env.sea.deck_mount import DECK_MOUNTS
-from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.imu import ImuConfig
 from landing_env.sensors.rangefinder import RangefinderConfig
 from landing_env.sensors.tof import TofConfig

@@ -29,7 +29,7 @@ from landing_env.calibration.tof_camera_sim import (
 )
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.camera_config import CameraConfig
 
 
 def test_rendered_chessboard_corners_land_on_the_projected_ones() -> None:
