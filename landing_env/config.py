@@ -21,7 +21,7 @@ from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES
-from estimation.tight import TightConfig
+from estimation.tight_config import TightConfig
 from landing_env.config_limits import check_value
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
