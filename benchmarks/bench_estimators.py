@@ -32,7 +32,7 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import matrix_from_euler_zyx
 from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticMeasurement, SyntheticScene
-from estimation.tight import TightConfig
+from estimation.tight_config import TightConfig
 from estimation.tracking import CornerTracker, TrackedEstimator
 from landing_env.config import load_config
 from landing_env.estimators import load_intrinsics, load_tag_corner_fit, load_tof_calibration
@@ -130,7 +130,8 @@ def refinement_rows(frames_n: int, rng: np.random.Generator) -> list[tuple[str, 
     (method "lm") on the same residuals and analytic Jacobian, from the same perturbed start."""
     from scipy.optimize import least_squares
 
-    from estimation.tight import TightEstimator, TightProblem, rotation_exp
+    from estimation.tight import TightEstimator
+    from estimation.tight_problem import TightProblem, rotation_exp
 
     config = load_config("default")
     intrinsics = load_intrinsics(config)

@@ -21,7 +21,8 @@ from estimation.camera_model import CameraIntrinsics
 from estimation.crhf import CRHFConfig, CrhfEstimator
 from estimation.estimator import DeckPoseEstimator
 from estimation.ihrcf import IHRCFConfig, IhrcfEstimator
-from estimation.tight import TightConfig, TightEstimator
+from estimation.tight import TightEstimator
+from estimation.tight_config import TightConfig
 
 if TYPE_CHECKING:
     from estimation.tof_calibration import TofCameraCalibration

@@ -23,7 +23,7 @@ from estimation.frames import euler_zyx_from_matrix, tof_positions_in_camera_fra
 from estimation.noise import TofNoiseModel
 from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticScene
-from estimation.tight import TightConfig
+from estimation.tight_config import TightConfig
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, RangeReading, TagDetection
 

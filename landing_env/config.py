@@ -21,7 +21,7 @@ from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES
-from estimation.tight import TightConfig
+from estimation.tight_config import TightConfig
 from landing_env.config_limits import check_value
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -30,7 +30,7 @@ from landing_env.physics.wind import WindConfig
 from landing_env.resources import config_dir
 from landing_env.scene.deck import DeckSurfaceConfig
 from landing_env.sea.deck_mount import DECK_MOUNTS
-from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.imu import ImuConfig
 from landing_env.sensors.rangefinder import RangefinderConfig
 from landing_env.sensors.tof import TofConfig

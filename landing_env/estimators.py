@@ -33,7 +33,7 @@ from estimation.pipeline import (
     needs_tof_calibration,
 )
 from estimation.registry import REGISTRY
-from estimation.tight import TightConfig
+from estimation.tight_config import TightConfig
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig

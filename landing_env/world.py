@@ -23,15 +23,18 @@ from estimation.types import CameraFrame, ImuSample, RangeReading
 from landing_env._quiet import quiet_stdout
 from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
-from landing_env.physics.quadrotor import DroneState, Quadrotor, QuadrotorParams
+from landing_env.physics.drone_state import DroneState
+from landing_env.physics.quadrotor import Quadrotor
+from landing_env.physics.quadrotor_params import QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sea.deck_mount import ShipDeck
-from landing_env.sensors.camera import CameraSensor, TagPlacement
+from landing_env.sensors.camera import CameraSensor
 from landing_env.sensors.camera_realism import RelativeMotion
 from landing_env.sensors.imu import ImuModel
 from landing_env.sensors.planar_renderer import planar_scene_or_none
 from landing_env.sensors.rangefinder import Rangefinder
+from landing_env.sensors.tag_view import TagPlacement
 from landing_env.sensors.tof import TofArray
 from landing_env.stewart.motion import CsvMotion, make_motion_source
 from landing_env.stewart.platform import StewartPlatform, StewartStatus

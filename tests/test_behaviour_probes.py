@@ -176,7 +176,7 @@ def test_a_drone_that_slides_off_during_the_settle_is_not_a_success(tmp_path) ->
     off within the second after contact; on the level deck it stays."""
     import yaml
 
-    from landing_env.physics.quadrotor import DEFAULT_PARAMS_PATH
+    from landing_env.physics.quadrotor_params import DEFAULT_PARAMS_PATH
 
     vehicle = yaml.safe_load(DEFAULT_PARAMS_PATH.read_text())
     vehicle["landing_gear"]["friction"] = 0.2

@@ -29,7 +29,7 @@ from landing_env.calibration.tof_camera_sim import (
 )
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.camera_config import CameraConfig
 
 
 def test_rendered_chessboard_corners_land_on_the_projected_ones() -> None:
@@ -149,7 +149,7 @@ def test_the_tag_rig_measures_the_realistic_cameras_shrunken_tag() -> None:
 def test_the_realistic_intrinsics_file_gives_tight_its_corner_offset_and_noise() -> None:
     """Rendering with the realistic calibration: tight gets the file's measured offset and
     corner noise; project mode's analytic corners have no offset."""
-    from estimation.tight import TightConfig
+    from estimation.tight_config import TightConfig
     from landing_env.estimators import _with_sensor_noise, load_tag_corner_fit
 
     config = load_config("realistic")

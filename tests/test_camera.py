@@ -16,16 +16,16 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import R_BC, TAG_CORNER_SIGNS, matrix_from_euler_zyx
 from landing_env.errors import ConfigError
 from landing_env.scene.deck import DeckSurfaceConfig, create_deck_body, tag_pose_w
-from landing_env.sensors.camera import (
+from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.camera_config import CameraConfig
+from landing_env.sensors.camera_render import opengl_projection
+from landing_env.sensors.detection_overlay import draw_detections
+from landing_env.sensors.tag_view import (
     MISS_BEHIND,
     MISS_DROPOUT,
     MISS_OBLIQUE,
     MISS_OUT_OF_VIEW,
     MISS_SMALL,
-    CameraConfig,
-    CameraSensor,
-    draw_detections,
-    opengl_projection,
 )
 
 TAG_SIZE = 0.30

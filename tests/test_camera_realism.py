@@ -11,7 +11,7 @@ import pytest
 from estimation.camera_model import CameraIntrinsics
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sensors.camera import CameraConfig
+from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.camera_profiles import PROFILES, camera_profile
 from landing_env.sensors.camera_realism import ImageFormation, RelativeMotion, bayer_mosaic
 from landing_env.sensors.renderer_agreement import Pose, place

@@ -18,7 +18,9 @@ from landing_env.physics.controller import (
     ControllerStatus,
     VelocitySetpoint,
 )
-from landing_env.physics.quadrotor import GRAVITY, DroneState, Quadrotor, QuadrotorParams
+from landing_env.physics.drone_state import DroneState
+from landing_env.physics.quadrotor import Quadrotor
+from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
 from landing_env.physics.wind import WindConfig, WindModel
 
 DT = 1.0 / 240.0

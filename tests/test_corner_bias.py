@@ -21,7 +21,8 @@ from estimation.corner_bias import (
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
 from estimation.synthetic import SyntheticScene
-from estimation.tight import TightConfig, TightEstimator
+from estimation.tight import TightEstimator
+from estimation.tight_config import TightConfig
 from estimation.types import CameraFrame, RangeReading, TagDetection
 
 CAMERA = CameraIntrinsics()

@@ -23,7 +23,8 @@ from landing_env.scene.deck import (
     tag_corners_w,
     tag_pose_w,
 )
-from landing_env.sensors.camera import CameraConfig, CameraSensor
+from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.camera_config import CameraConfig
 
 #: IHRCF Table 1: (Y, Cb, Cr) inclusive ranges of each pad colour.
 TABLE_1 = {

@@ -15,13 +15,9 @@ from scipy.spatial.transform import Rotation
 
 from estimation.frames import R_BC, euler_zyx_from_matrix, tof_positions_in_camera_frame
 from landing_env.errors import ConfigError
-from landing_env.physics.quadrotor import (
-    DEFAULT_PARAMS_PATH,
-    GRAVITY,
-    DroneState,
-    Quadrotor,
-    QuadrotorParams,
-)
+from landing_env.physics.drone_state import DroneState
+from landing_env.physics.quadrotor import Quadrotor
+from landing_env.physics.quadrotor_params import DEFAULT_PARAMS_PATH, GRAVITY, QuadrotorParams
 from landing_env.physics.wind import WindConfig, WindModel
 
 DT = 1.0 / 240.0

@@ -21,7 +21,8 @@ from estimation.registry import (
     REGISTRY,
     make_estimator,
 )
-from estimation.tight import TightConfig, TightEstimator
+from estimation.tight import TightEstimator
+from estimation.tight_config import TightConfig
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import TrackedEstimator
 from landing_env import config as env_config

@@ -19,7 +19,9 @@ from estimation.frames import euler_zyx_from_matrix, tof_positions_in_camera_fra
 from estimation.ihrcf import IhrcfEstimator
 from estimation.noise import TofNoiseModel
 from estimation.synthetic import SyntheticScene
-from estimation.tight import TightConfig, TightEstimator, TightProblem, rotation_exp
+from estimation.tight import TightEstimator
+from estimation.tight_config import TightConfig
+from estimation.tight_problem import TightProblem, rotation_exp
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tracking import CornerTracker, TrackedEstimator
 from estimation.types import CameraFrame, RangeReading, TagDetection

@@ -258,7 +258,7 @@ def test_a_drawn_airframe_started_in_its_own_trim_holds_where_the_nominal_trim_d
     nominal_sink = abs(_hold_after_airframe_change(1.0, 0.95, False)[2] - unchanged[2])
     assert nominal_sink > 0.04 and sink < 0.005
     from landing_env.physics.controller import CascadeController
-    from landing_env.physics.quadrotor import QuadrotorParams
+    from landing_env.physics.quadrotor_params import QuadrotorParams
 
     with pytest.raises(ValueError, match="factor"):
         CascadeController(QuadrotorParams.from_yaml()).scale_thrust_model(0.0)

@@ -53,7 +53,7 @@ from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.physics.quadrotor import QuadrotorParams
+from landing_env.physics.quadrotor_params import QuadrotorParams
 
 #: axis labels of the sweep figures
 PARAMETER_LABELS: dict[str, str] = {

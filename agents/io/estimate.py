@@ -42,7 +42,7 @@ from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.estimators import estimation_options, fusion_settings
-from landing_env.physics.quadrotor import QuadrotorParams
+from landing_env.physics.quadrotor_params import QuadrotorParams
 from landing_env.vision_link import VisionLinkConfig, VisionStage
 
 EXTRINSICS_FORMAT = "deck-landing/camera-extrinsics"

@@ -38,7 +38,8 @@ from estimation.intrinsics_calibration import (
 )
 from landing_env._quiet import quiet_stdout
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sensors.camera import CameraConfig, CameraSensor
+from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.camera_config import CameraConfig
 
 #: OpenCV calibration flags of each distortion model.
 DISTORTION_FLAGS: dict[str, int] = {

@@ -29,7 +29,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from landing_env.errors import ConfigError, require_range
-from landing_env.physics.quadrotor import GRAVITY, DroneState, QuadrotorParams
+from landing_env.physics.drone_state import DroneState
+from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
 
 
 @dataclass(frozen=True)

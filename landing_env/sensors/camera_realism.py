@@ -1,7 +1,7 @@
 """A real camera's image from the rendered one: exposure, rolling shutter, noise, response.
 
-Two stages, applied by :class:`~landing_env.sensors.camera.CameraSensor` when its profile is
-not ``ideal`` (:mod:`landing_env.sensors.camera_profiles`):
+Two stages, applied by :class:`~landing_env.sensors.camera_render.CameraRenderer` when its
+profile is not ``ideal`` (:mod:`landing_env.sensors.camera_profiles`):
 
 The rendered image is taken as display-referred (gamma 2.2): it is linearised first, and
 blur, glare and noise act on linear radiance.

@@ -19,9 +19,9 @@ from the camera, which is exact for this scene of disjoint convex bodies seen fr
 
 Shading follows TinyRenderer's (``int(albedo * (ambient + diffuse * max(n.l, 0)))``, its
 default light direction for a z-up world), so the images agree with the reference to a grey
-level or so; :mod:`landing_env.sensors.camera` keeps TinyRenderer (or EGL) as the reference
-renderer, and tests compare the two (tag corners and images).  Mesh bodies other than the
-registered plates cannot be drawn; the camera then falls back to the reference renderer.
+level or so; :mod:`landing_env.sensors.camera_render` keeps TinyRenderer (or EGL) as the
+reference renderer, and tests compare the two (tag corners and images).  Mesh bodies other than
+the registered plates cannot be drawn; the camera then falls back to the reference renderer.
 """
 
 from __future__ import annotations
