@@ -37,7 +37,7 @@ from estimation.frames import R_BC
 from estimation.fusion import METHOD as FUSED
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
 from estimation.pipeline import build_estimators, names_to_build
-from estimation.registry import NEEDS_TOF_CALIBRATION
+from estimation.registry import needs_tof_calibration_names
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate
 from landing_env.config import DeckLandingConfig, load_config
@@ -162,7 +162,7 @@ class RecordingEstimator:
             mounts = tof.metadata.get("tof_mount_offsets_c")
             if mounts is not None:
                 changes["tof_positions_c"] = np.asarray(mounts, dtype=float)
-        elif set(options.names) & NEEDS_TOF_CALIBRATION:
+        elif set(options.names) & needs_tof_calibration_names():
             raise RecordingError(f"--calibration {folder}: {self.name} needs tof_camera.json")
         else:
             changes["tof_calibration"] = None
@@ -327,7 +327,7 @@ def run_estimate(args: argparse.Namespace) -> EstimateSummary:
         if not rec.frames:
             skipped = "; ".join(f"{n} x {r}" for r, n in rec.skipped.items()) or "none"
             raise RecordingError(f"{args.input}: no usable camera frame (skipped: {skipped})")
-        needs_ranges = args.estimator in NEEDS_TOF_CALIBRATION
+        needs_ranges = args.estimator in needs_tof_calibration_names()
         if needs_ranges and not rec.has_ranges:
             missing = ", ".join(rec.missing_topics) or "ranges.csv"
             raise RecordingError(f"{args.input}: {args.estimator} needs ranges; missing: {missing}")

@@ -195,26 +195,13 @@ POLICY_REGISTRY = "agents.policy_registry"
 STATUS_ORDER = ("recommended", "supported", "research", "legacy")
 
 
-def load_policies() -> dict[str, Any] | None:
-    """``POLICIES`` of the policy registry, or None where the module does not exist."""
-    try:
-        module = importlib.import_module(POLICY_REGISTRY)
-    except ModuleNotFoundError as exc:
-        if exc.name != POLICY_REGISTRY:
-            raise
-        return None
-    return dict(module.POLICIES)
-
-
 class PoliciesDirective(GeneratedDirective):
-    """``deck-policies``: every registered policy, by status."""
+    """``deck-policies``: every registered policy, by status, then what to use where."""
 
     def lines(self) -> list[str]:
-        policies = load_policies()
-        if policies is None:
-            return [f"The policy registry ``{POLICY_REGISTRY}`` is not available.", ""]
+        registry = importlib.import_module(POLICY_REGISTRY)
         order = {status: i for i, status in enumerate(STATUS_ORDER)}
-        specs = sorted(policies.values(), key=lambda s: (order.get(s.status, 99), s.name))
+        specs = sorted(registry.POLICIES.values(), key=lambda s: (order[s.status], s.name))
         rows = [
             [
                 f"``{spec.name}``",
@@ -229,7 +216,32 @@ class PoliciesDirective(GeneratedDirective):
             for spec in specs
         ]
         header = ["name", "status", "kind", "runs on", "estimator", "sensing", "model", "what"]
-        return list_table(header, rows, "14 10 9 17 9 9 14 18")
+        lines = list_table(header, rows, "14 10 9 17 9 9 14 18")
+        recommended = [
+            [
+                rec.setting,
+                f"``{rec.policy}``",
+                f"{rec.success_pct:.1f} % ({rec.ci95_pct[0]:.1f}-{rec.ci95_pct[1]:.1f})",
+                f"{rec.episodes} from {rec.first_seed}",
+                rec.chosen_by,
+                f"``{rec.command}``",
+            ]
+            for rec in registry.RECOMMENDED
+        ]
+        lines += [
+            "",
+            "**What to use**, setting by setting: the recommended policy's success with its 95 %",
+            "Wilson interval on held-out seeds that did not choose it, and how it was chosen.",
+            "",
+        ]
+        lines += list_table(
+            ["setting", "policy", "success", "seeds", "chosen by", "how to replicate"],
+            recommended,
+            "12 14 14 12 24 24",
+        )
+        defaults = ", ".join(f"``{s}``: ``{p}``" for s, p in registry.DEFAULT_POLICY.items())
+        lines += ["", f"Without ``--policy``, ``evaluate landing --scenario S`` flies {defaults}.", ""]
+        return lines
 
 
 def setup(app: Any) -> dict[str, Any]:
