@@ -584,7 +584,7 @@ def add_landing_parser(evaluate_group: Any) -> None:
         default=None,
         choices=[*POLICY_NAMES, "all"],
         help="one or more policies, or all (default: the scenario's recommended policy, "
-        "`deck-landing list policies`)",
+        "deck-landing list policies)",
     )
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
     landing.add_argument("--episodes", type=positive_int, default=100)

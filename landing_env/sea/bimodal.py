@@ -10,8 +10,8 @@ References
 * DNV-RP-C205 (2010), *Environmental conditions and environmental loads*, Sec. 3.5.7
   (two-peak spectra): the Ochi-Hubble spectrum and the Torsethaugen spectrum.
 * Ochi & Hubble (1976), *Six-parameter wave spectra*, Proc. 15th Coastal Eng. Conf.:
-  S(w) = 1/4 sum_j ((4 l_j + 1)/4 w_pj^4)^l_j / Gamma(l_j) * Hs_j^2 / w^(4 l_j + 1)
-  * exp(-(4 l_j + 1)/4 (w_pj / w)^4), each part integrating exactly to Hs_j^2 / 16 and
+  S(w) = 1/4 sum_j ((4 l_j + 1)/4 w_pj^4)^l_j / Gamma(l_j) Hs_j^2 / w^(4 l_j + 1)
+  exp(-(4 l_j + 1)/4 (w_pj / w)^4), each part integrating exactly to Hs_j^2 / 16 and
   peaking at w_pj.  l_j is the shape: 1 is Pierson-Moskowitz's, larger is narrower.
 * Torsethaugen (1996), *Model for a doubly peaked wave spectrum*, SINTEF STF22 A96204, as
   DNV-RP-C205 gives it.  With Tf = 6.6 Hs^(1/3) (the peak period of a fully developed sea):
