@@ -344,7 +344,10 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "calibrate",
         help="run the chessboard and ToF–camera calibrations in the simulator",
-        description=__doc__.split("\n\n")[0] if __doc__ else None,
+        description=(
+            "Both of the papers' calibrations (camera intrinsics and ToF-camera), "
+            "run in the simulator."
+        ),
     )
     parser.add_argument("--config", default="default", help="a config name in configs/ or a path")
     parser.add_argument("--out", default="results/calibration", help="output directory")

@@ -104,7 +104,10 @@ def add_photo_parsers(kinds: argparse._SubParsersAction) -> None:
     parser = kinds.add_parser(
         "intrinsics",
         help="a real camera's intrinsics from chessboard photos",
-        description=__doc__.split("\n\n")[0] if __doc__ else None,
+        description=(
+            "A real camera's intrinsics from chessboard photos: RMS and per-photo "
+            "errors, rejected photos with their reasons."
+        ),
     )
     parser.add_argument("--images", required=True, help="a folder of chessboard photos")
     parser.add_argument(

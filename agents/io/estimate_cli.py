@@ -36,7 +36,10 @@ def add_estimate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "estimate",
         help="run a deck-pose estimator on a recording (folder, MCAP, rosbag2)",
-        description=__doc__.split("\n\n")[0] if __doc__ else None,
+        description=(
+            "Run an estimator on a recording (MCAP, rosbag2 or a plain folder) and "
+            "write its deck poses (CSV and MCAP)."
+        ),
     )
     p.add_argument("--input", required=True, help="a recording: folder, .mcap or rosbag2 folder")
     p.add_argument("--estimator", required=True, choices=ESTIMATORS)

@@ -5,36 +5,36 @@ the swell), each with its own significant height and peak period, so that the se
 (:mod:`landing_env.sea.generator`) can give each system its own direction.  Densities are
 one-sided, per hertz: S(f) in m^2/Hz, with m0 = integral S(f) df = Hs^2 / 16.
 
-References
-----------
-* DNV-RP-C205 (2010), *Environmental conditions and environmental loads*, Sec. 3.5.7
-  (two-peak spectra): the Ochi-Hubble spectrum and the Torsethaugen spectrum.
-* Ochi & Hubble (1976), *Six-parameter wave spectra*, Proc. 15th Coastal Eng. Conf.:
-  S(w) = 1/4 sum_j ((4 l_j + 1)/4 w_pj^4)^l_j / Gamma(l_j) Hs_j^2 / w^(4 l_j + 1)
-  exp(-(4 l_j + 1)/4 (w_pj / w)^4), each part integrating exactly to Hs_j^2 / 16 and
-  peaking at w_pj.  l_j is the shape: 1 is Pierson-Moskowitz's, larger is narrower.
-* Torsethaugen (1996), *Model for a doubly peaked wave spectrum*, SINTEF STF22 A96204, as
-  DNV-RP-C205 gives it.  With Tf = 6.6 Hs^(1/3) (the peak period of a fully developed sea):
-  - wind dominated (Tp <= Tf): the wind sea (primary) has Hs1 = r Hs, Tp1 = Tp with
-    r = 0.7 + 0.3 exp(-(2 (Tf - Tp) / (Tf - 2 sqrt(Hs)))^2) and
-    gamma = 35 (1 + 3.5 exp(-Hs)) (2 pi Hs1 / (g Tp^2))^0.857; the swell (secondary) has
-    Hs2 = sqrt(1 - r^2) Hs, Tp2 = Tf + 2 s, gamma 1;
-  - swell dominated (Tp > Tf): with eps = (Tp - Tf) / (25 - Tf), the swell (primary) has
-    Hs1 = r Hs, Tp1 = Tp, r = 0.6 + 0.4 exp(-(eps / 0.3)^2),
-    gamma = 35 (1 + 3.5 exp(-Hs)) (2 pi Hs / (g Tf^2))^0.857 (1 + 6 eps); the wind sea
-    (secondary) has Hs2 = sqrt(1 - r^2) Hs, gamma 1, M = 4 (1 - 0.7 exp(-Hs / 3)) and
-    Tp2 = max(2.5, (16 s4 0.4^N / (G0 Hs2^2))^(-1/(N - 1))), s4 = max(0.01, 0.08 (1 -
-    exp(-Hs / 3)));
-  - each part S_j(f) = Hs_j^2 Tp_j / 16 * G0 A_gamma fn^-N exp(-(N/M) fn^-M)
-    gamma^exp(-(fn - 1)^2 / (2 sigma^2)), fn = f Tp_j, N = 0.5 sqrt(Hs) + 3.2, M = 4
-    unless stated, sigma 0.07 below and 0.09 above the peak,
-    G0 = [M^-1 (N/M)^(-(N-1)/M) Gamma((N-1)/M)]^-1 (which makes the gamma = 1 shape
-    integrate to one) and A_gamma = (1 + f1 (ln gamma)^f2) / gamma with
-    f1 = 4.1 (N - 2 M^0.28 + 5.3)^(0.96 - 1.45 M^0.1),
-    f2 = (2.2 M^-3.3 + 0.57) N^(0.53 - 0.58 M^0.37) + 0.94 - 1.04 M^-1.9
-    (a fit: the parts integrate to Hs_j^2 / 16 within 5 %; the generator normalises its
-    discrete components exactly).
-  A peak factor below 1 from these fits is taken as 1 (this project's guard).
+References::
+
+    * DNV-RP-C205 (2010), *Environmental conditions and environmental loads*, Sec. 3.5.7
+      (two-peak spectra): the Ochi-Hubble spectrum and the Torsethaugen spectrum.
+    * Ochi & Hubble (1976), *Six-parameter wave spectra*, Proc. 15th Coastal Eng. Conf.:
+      S(w) = 1/4 sum_j ((4 l_j + 1)/4 w_pj^4)^l_j / Gamma(l_j) Hs_j^2 / w^(4 l_j + 1)
+      exp(-(4 l_j + 1)/4 (w_pj / w)^4), each part integrating exactly to Hs_j^2 / 16 and
+      peaking at w_pj.  l_j is the shape: 1 is Pierson-Moskowitz's, larger is narrower.
+    * Torsethaugen (1996), *Model for a doubly peaked wave spectrum*, SINTEF STF22 A96204, as
+      DNV-RP-C205 gives it.  With Tf = 6.6 Hs^(1/3) (the peak period of a fully developed sea):
+      - wind dominated (Tp <= Tf): the wind sea (primary) has Hs1 = r Hs, Tp1 = Tp with
+        r = 0.7 + 0.3 exp(-(2 (Tf - Tp) / (Tf - 2 sqrt(Hs)))^2) and
+        gamma = 35 (1 + 3.5 exp(-Hs)) (2 pi Hs1 / (g Tp^2))^0.857; the swell (secondary) has
+        Hs2 = sqrt(1 - r^2) Hs, Tp2 = Tf + 2 s, gamma 1;
+      - swell dominated (Tp > Tf): with eps = (Tp - Tf) / (25 - Tf), the swell (primary) has
+        Hs1 = r Hs, Tp1 = Tp, r = 0.6 + 0.4 exp(-(eps / 0.3)^2),
+        gamma = 35 (1 + 3.5 exp(-Hs)) (2 pi Hs / (g Tf^2))^0.857 (1 + 6 eps); the wind sea
+        (secondary) has Hs2 = sqrt(1 - r^2) Hs, gamma 1, M = 4 (1 - 0.7 exp(-Hs / 3)) and
+        Tp2 = max(2.5, (16 s4 0.4^N / (G0 Hs2^2))^(-1/(N - 1))), s4 = max(0.01, 0.08 (1 -
+        exp(-Hs / 3)));
+      - each part S_j(f) = Hs_j^2 Tp_j / 16 * G0 A_gamma fn^-N exp(-(N/M) fn^-M)
+        gamma^exp(-(fn - 1)^2 / (2 sigma^2)), fn = f Tp_j, N = 0.5 sqrt(Hs) + 3.2, M = 4
+        unless stated, sigma 0.07 below and 0.09 above the peak,
+        G0 = [M^-1 (N/M)^(-(N-1)/M) Gamma((N-1)/M)]^-1 (which makes the gamma = 1 shape
+        integrate to one) and A_gamma = (1 + f1 (ln gamma)^f2) / gamma with
+        f1 = 4.1 (N - 2 M^0.28 + 5.3)^(0.96 - 1.45 M^0.1),
+        f2 = (2.2 M^-3.3 + 0.57) N^(0.53 - 0.58 M^0.37) + 0.94 - 1.04 M^-1.9
+        (a fit: the parts integrate to Hs_j^2 / 16 within 5 %; the generator normalises its
+        discrete components exactly).
+      A peak factor below 1 from these fits is taken as 1 (this project's guard).
 """
 
 from __future__ import annotations
