@@ -89,7 +89,7 @@ POLICIES: dict[str, PolicySpec] = {
             "heuristic",
             "supported",
             LANDING_TASK,
-            "agents.timing.policies:build_align_descend",
+            "agents.align_descend:build_align_descend",
             "visual servoing on the estimated deck pose: centre, descend, flare for a calm "
             "window, land",
         ),

@@ -21,9 +21,9 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 @pytest.fixture(scope="session")
 def small_forecast():
     """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
-    from agents.evaluation.landing import SCENARIOS
     from agents.timing.deck_forecast import fit_deck_forecast
     from landing_env.config import load_config
+    from landing_env.scenarios import SCENARIOS
 
     motion = load_config(SCENARIOS["ship-ss4"].config).motion
     return fit_deck_forecast(motion, realizations=3, record_s=400.0)

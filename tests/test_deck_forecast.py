@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.evaluation.landing import SCENARIOS, make_env_and_policy
+from agents.policy_registry import make_env_and_policy
 from agents.timing.deck_forecast import (
     HORIZONS_S,
     DeckForecastTimingPolicy,
@@ -22,6 +22,7 @@ from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredicto
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.physics.wind import WindConfig, WindModel
+from landing_env.scenarios import SCENARIOS
 from landing_env.sea.hms import (
     HMS_CHANNELS,
     REPORT_FIELDS,

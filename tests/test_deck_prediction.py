@@ -577,8 +577,17 @@ def test_the_value_wave_off_demands_less_as_the_wait_runs_out_and_nothing_at_the
         env.close()
 
 
+#: the settings of the bench timing ids up to v4, now settings of v6: v2 the wave-off below a
+#: fixed chance, v3 below the value of waiting on, v4 with the contact window
+_WAVE_OFF_VERSIONS = {
+    2: {**PREDICTIVE, "timing.wave_off_rule": "fixed", "timing.contact_window_s": []},
+    3: {**PREDICTIVE, "timing.contact_window_s": []},
+    4: PREDICTIVE,
+}
+
+
 @pytest.mark.parametrize("version", [2, 3, 4])
-def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_policy_needs(
+def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_off_it_needs(
     version,
 ):
     import gymnasium as gym
@@ -586,7 +595,7 @@ def test_the_v2_to_v4_bench_ids_carry_the_history_and_wave_off_the_predictive_po
     import landing_env  # noqa: F401
     from agents.policy_registry import make_policy
 
-    env = gym.make(f"DeckLandingTiming-BenchSS4-v{version}")
+    env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=_WAVE_OFF_VERSIONS[version])
     try:
         base = env.unwrapped
         assert base.layout.n_history == 160 and base.tilt_predictor is not None
@@ -682,7 +691,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
 
 
 def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_overrides_win():
-    from agents.evaluation.landing import make_env_and_policy
+    from agents.policy_registry import make_env_and_policy
 
     env, policy = make_env_and_policy("predictive", "bench-ss4", "tight")
     try:

@@ -103,11 +103,6 @@ def test_sb3_vec_env_workers_play_distinct_episodes_without_a_seed(vec: str) -> 
         envs.close()
 
 
-#: the configs whose first step after reset(seed=123) carries NaN in ``info`` (missing values:
-#: no ToF return at 20 m; estimates dropped by the vision link): the one documented exception
-NAN_IN_FIRST_INFO = {"high-approach", "realistic-degraded"}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("config", available_configs())
 def test_gymnasium_check_env_with_default_arguments_on_every_shipped_config(config: str) -> None:
@@ -115,11 +110,9 @@ def test_gymnasium_check_env_with_default_arguments_on_every_shipped_config(conf
         warnings.simplefilter("ignore", PinnedDroneWarning)
         env = gym.make("DeckLanding-v0", config=config)
         try:
-            if config in NAN_IN_FIRST_INFO:
-                with pytest.raises(AssertionError, match="step info are not equivalent"):
-                    check_env(env.unwrapped)
-            else:
-                check_env(env.unwrapped)
+            # info holds no NaN (missing values are 0 beside their validity, or None): the
+            # determinism check passes where a ToF ray or the vision link gives no value too
+            check_env(env.unwrapped)
         finally:
             env.close()
 

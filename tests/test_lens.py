@@ -82,9 +82,13 @@ def test_the_half_view_widens_with_barrel_distortion_and_narrows_off_centre() ->
         assert outside[1] > camera.height - 1
 
 
-def test_ship_ids_from_v4_see_through_the_wide_lens_and_gate_on_its_view() -> None:
-    for version, lens, half_tan in ((3, "standard", 0.558), (4, "wide", None)):
-        env = gym.make(f"DeckLandingTiming-ShipSS5-v{version}", overrides={"sensors": "realistic"})
+def test_the_ship_ids_see_through_the_scenarios_lens_and_gate_on_its_view() -> None:
+    # the standard lens with the fixed gate of the ids before v4, and the scenario's own
+    standard = {"lens": "standard", "timing.guidance.view_from_camera": False}
+    for overrides, lens, half_tan in ((standard, "standard", 0.558), ({}, "wide", None)):
+        env = gym.make(
+            "DeckLandingTiming-ShipSS5-v7", overrides={"sensors": "realistic", **overrides}
+        )
         try:
             unwrapped = env.unwrapped
             assert unwrapped.config.lens == lens

@@ -336,14 +336,16 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
 
 def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped_too() -> None:
     from agents.timing.training import load_train_config
+    from landing_env.config_loading import build_dataclass
 
     config = load_train_config(
-        Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead.yaml"
+        Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
     )
     assert config.settings.lookahead is not None
-    env = gym.make(config.env_id)
+    env = gym.make("DeckLandingTiming-ShipSS5-v7")
     try:
-        card = card_for_training(env, config)
+        given = build_dataclass(LookaheadSettings, config.settings.lookahead, "lookahead")
+        card = card_for_training(env, config, lookahead=given)
     finally:
         env.close()
     lookahead = card.observation["lookahead"]
@@ -353,7 +355,7 @@ def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped
 
 
 def test_the_shipped_lookahead_model_decides_at_ship_ss5_with_realistic_sensing() -> None:
-    from agents.evaluation.landing import make_env_and_policy
+    from agents.policy_registry import make_env_and_policy
 
     env, policy = make_env_and_policy(
         "timing-dqn-lookahead", "ship-ss5", "tight", extra_overrides={"sensors": "realistic"}

@@ -36,6 +36,7 @@ from agents.policy_registry import make_env_and_policy
 from agents.timing.cards import card_for_training, merge_cards, write_metadata
 from agents.timing.lookahead import LookaheadSettings, load_transitions, replay_success
 from agents.timing.training import algorithm_kwargs, load_train_config
+from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS
 
@@ -458,11 +459,16 @@ def sign_card(config: Any, data: dict[str, np.ndarray], scenario: str | None = N
                 "data", f"records of unknown scenarios {unknown}: set offline.scenario to sign"
             )
     overrides = dict(config.settings.env_kwargs.get("overrides", {}))
+    lookahead = None
+    if config.settings.lookahead is not None:
+        lookahead = build_dataclass(
+            LookaheadSettings, config.settings.lookahead, "deck_landing.lookahead"
+        )
     cards = []
     for name, estimator in signers:
         env, _ = make_env_and_policy("land-now", name, estimator, extra_overrides=overrides)
         try:
-            card = card_for_training(env, config)
+            card = card_for_training(env, config, lookahead=lookahead)
         finally:
             env.close()
         if scenario is None:

@@ -418,7 +418,12 @@ def train(
             sensing = sensing_signatures(
                 build_dataclass(RandomiseSettings, settings.randomise, "deck_landing.randomise")
             )
-        card = card_for_training(eval_env.envs[0], config, sensing=sensing)
+        lookahead = None
+        if settings.lookahead is not None:
+            lookahead = build_dataclass(
+                LookaheadSettings, settings.lookahead, "deck_landing.lookahead"
+            )
+        card = card_for_training(eval_env.envs[0], config, sensing=sensing, lookahead=lookahead)
     finally:
         train_env.close()
         eval_env.close()
