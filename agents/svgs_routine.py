@@ -297,6 +297,9 @@ class SvgsRoutinePolicy:
     """The SVGS routine as a ``DeckLanding-v0`` policy (see the module docstring)."""
 
     name = "svgs-routine"
+    #: the commanded landing point, x and y in the deck frame D, metres: the landing point
+    #: itself (the paper's final offset off the beacon is not flown)
+    landing_point_d: tuple[float, float] = (0.0, 0.0)
 
     def __init__(
         self,

@@ -41,6 +41,12 @@ from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 #: Reason of an invalid estimate whose bearing misses the range plane (beyond the horizon).
 BEARING_MISSES_PLANE = "bearing_misses_plane"
+#: Reason of an invalid estimate of a beacon farther than it can be tracked (``max_range_m``).
+BEYOND_BEACON_RANGE = "beyond_beacon_range"
+
+#: How far the COTS IR-LOCK beacon (MarkOne) is tracked, metres: "COTS beacons are designed
+#: for a maximum tracking altitude of 40 m" (SVGS paper 003, Sec. 2.5.1)
+IR_LOCK_MAX_RANGE_M = 40.0
 
 
 def tag_centre_pixel(corners_px: np.ndarray) -> np.ndarray:
@@ -101,19 +107,25 @@ class BeaconConfig:
 
     #: the tag's quadrilateral must have at least this area to give a bearing, pixels²
     min_corner_area_px: float = 4.0
-    #: rangefinder origin below the camera along the optical axis, metres
+    #: rangefinder origin below the camera along the optical axis, metres (a simulator sets
+    #: it from its geometry)
     range_offset_m: float = 0.0
+    #: the beacon is seen only within this distance from the camera, metres (the IR-LOCK
+    #: beacon's tracking range, IR_LOCK_MAX_RANGE_M); farther fixes are invalid
+    max_range_m: float = IR_LOCK_MAX_RANGE_M
 
     def __post_init__(self) -> None:
         require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
         require_range("range_offset_m", self.range_offset_m, -1.0, 1.0)
+        require_range("max_range_m", self.max_range_m, 0.0, low_inclusive=False)
 
 
 class BeaconEstimator(GuardedEstimator):
     """Position-only deck estimate from the tag centre's bearing and the downward range.
 
     ``range_source`` returns the latest rangefinder reading (shape (1,)); the ToF reading
-    passed to :meth:`estimate` is not used.  Valid estimates carry ``R_CD = I`` and
+    passed to :meth:`estimate` is not used.  A beacon farther than ``max_range_m`` is not seen
+    (:data:`BEYOND_BEACON_RANGE`).  Valid estimates carry ``R_CD = I`` and
     ``extras["orientation_known"] = False``.
     """
 
@@ -153,5 +165,7 @@ class BeaconEstimator(GuardedEstimator):
         )
         if position is None:
             return DeckPoseEstimate.invalid(self.name, timestamp, BEARING_MISSES_PLANE)
+        if not float(np.linalg.norm(position)) <= self.config.max_range_m:
+            return DeckPoseEstimate.invalid(self.name, timestamp, BEYOND_BEACON_RANGE)
         extras = {"orientation_known": False, "centre_px": centre}
         return finish_pose(self.name, timestamp, np.eye(3), position, extras)

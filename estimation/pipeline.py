@@ -11,7 +11,7 @@ vision link and the ``fused`` EKF) takes their output.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -176,10 +176,12 @@ def _beacon(options: EstimationOptions) -> DeckPoseEstimator:
         raise ConfigError("estimation.observed", "beacon needs the intrinsics and a rangefinder")
     intrinsics, range_down = options.intrinsics, options.range_down
 
+    configured = options.configs.get("beacon") or BeaconConfig()
+    assert isinstance(configured, BeaconConfig)
+    config = replace(configured, range_offset_m=options.range_offset_m)
+
     def one(tag_id: int) -> BeaconEstimator:
-        return BeaconEstimator(
-            intrinsics, tag_id, range_down, BeaconConfig(range_offset_m=options.range_offset_m)
-        )
+        return BeaconEstimator(intrinsics, tag_id, range_down, config)
 
     layout = options.layout
     if layout.is_single_centred:

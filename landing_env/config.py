@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from estimation.atda import ATDAConfig
+from estimation.beacon import BeaconConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
@@ -231,6 +232,8 @@ class EstimationConfig:
     #: the ``fused`` estimator: EKF of the IMU with the (delayed) poses of ``fusion.sources``
     #: and the ToF ranges (estimation/fusion/)
     fusion: FusionConfig = field(default_factory=FusionConfig)
+    #: the IR-LOCK-style ``beacon`` (bearing + rangefinder): its tracking range, max_range_m
+    beacon: BeaconConfig = field(default_factory=BeaconConfig)
     #: latency, irregular rate and dropouts of the camera-based estimates (off by default)
     vision_link: VisionLinkConfig = field(default_factory=VisionLinkConfig)
 

@@ -300,7 +300,7 @@ def estimation_options(config: DeckLandingConfig, world: World) -> EstimationOpt
         # a registered estimator without a section in the config runs with its defaults
         configs={
             name: _with_sensor_noise(getattr(est, name), config)
-            for name in REGISTRY
+            for name in (*REGISTRY, "beacon")
             if hasattr(est, name)
         },
         tracking=est.tracking,

@@ -35,9 +35,10 @@ class VisionLinkConfig:
     #: off by default: the existing scenarios see every estimate at once
     enabled: bool = False
     #: mean delay from image capture to delivery, seconds
-    latency_s: float = 0.2
-    #: the delay is uniform in latency_s ± latency_jitter_s (175–225 ms by default)
-    latency_jitter_s: float = 0.025
+    latency_s: float = 0.2025
+    #: the delay is uniform in latency_s ± latency_jitter_s (175–230 ms by default, the SVGS
+    #: paper's measurement-to-flight-controller latency, Sec. 2.4)
+    latency_jitter_s: float = 0.0275
     #: the pipeline's rate, drawn uniformly in [min, max] for each frame it takes, Hz
     rate_hz: tuple[float, float] = (6.0, 15.0)
     #: probability that a taken frame never arrives

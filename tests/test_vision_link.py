@@ -48,7 +48,8 @@ def test_fixed_latency_delays_every_frame_by_it() -> None:
 
 
 def test_latency_jitter_rate_and_dropouts_statistically() -> None:
-    """At 1 kHz steps: latency uniform in 175-225 ms, 6-15 Hz captures, 30% dropped."""
+    """At 1 kHz steps: latency uniform in 175-230 ms (the SVGS paper's), 6-15 Hz captures,
+    30% dropped."""
     config = VisionLinkConfig(enabled=True, dropout_prob=0.3)
     outputs = _run(config, 0.001, 300_000, seed=3)
     link_ages = [
@@ -57,8 +58,9 @@ def test_latency_jitter_rate_and_dropouts_statistically() -> None:
         if out.delivered  # the step it arrived: its age is the latency (to 1 ms)
     ]
     ages = np.array(link_ages)
-    assert ages.min() >= 0.175 - 1e-9 and ages.max() <= 0.226
-    assert abs(ages.mean() - 0.2) < 0.002
+    assert ages.min() >= 0.175 - 1e-9 and ages.max() <= 0.231
+    assert ages.max() > 0.226  # the paper's upper end, 230 ms, not 225
+    assert abs(ages.mean() - 0.2025) < 0.002
     captured = sum(out.captured for _, out in outputs)
     dropped = sum(out.dropped for _, out in outputs)
     # mean period of a rate uniform in [6, 15] Hz is ln(15/6)/9 s: 9.82 captures per second

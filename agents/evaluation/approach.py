@@ -5,13 +5,22 @@
 the scenario's start (``configs/high-approach.yaml``: 20 m up, 5 m off, sea state 3, gusty
 wind) and writes to ``--out`` (``results/approach/``): a Markdown table per policy (success
 rate with its 95% Wilson interval, offset from the deck centre at touchdown mean and 95th
-percentile, time to land, touchdown speed, outcomes), a CSV of the episodes, a JSON summary
-and a PNG of trajectories (top view and height against time, truth, for the reader only).
+percentile, the SVGS paper's landing error, time to land, touchdown speed, outcomes), a CSV
+of the episodes, a JSON summary and a PNG of trajectories (top view and height against time,
+truth, for the reader only).
 
 Each policy flies with its own estimator in the observation: ``svgs-routine`` with
 ``fused`` when the environment offers it (else ``atda``; ``--routine-estimator``),
 ``beacon-range`` with ``beacon`` (bearing + range).  Episodes run over ``--workers``
 processes.
+
+The landing error is the SVGS paper's (003, Sec. 3, Figure 16): the commanded landing point
+minus the actual one, in the deck plate's frame P (x, y), at the first touchdown.  The
+commanded point is the policy's ``landing_point_d`` (x, y in the deck frame D; the origin of
+D, the landing point, where the policy has none).
+
+``--scenario svgs-100m`` (``svgs-100m-irlock``: the IR-LOCK flights' starts) flies the paper's
+100 m approach onto a static pad (``configs/svgs-100m.yaml``).
 """
 
 from __future__ import annotations
@@ -54,6 +63,7 @@ from agents.evaluation.summary import (
 )
 from agents.evaluation.summary import markdown_table as summary_table
 from agents.svgs_routine import RoutineConfig, make_svgs_routine
+from estimation.frames import R_PD, matrix_from_euler_zyx
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_choice
@@ -97,6 +107,11 @@ class ApproachEpisode(EpisodeRecord):
     relocations: int = 0
     searches: int = 0
     wall_time_s: float = math.nan
+    #: the SVGS paper's landing error: commanded minus actual landing point at the first
+    #: touchdown, x and y in the deck plate's frame P and its length, metres
+    landing_error_x_m: float = math.nan
+    landing_error_y_m: float = math.nan
+    landing_error_m: float = math.nan
     #: (t, x, y, z) of the drone relative to the deck's home, every TRAJECTORY_STRIDE periods
     trajectory: list[tuple[float, float, float, float]] = field(default_factory=list, repr=False)
 
@@ -139,6 +154,21 @@ def _count(transitions: list[tuple[float, str, str]], states: tuple[str, ...]) -
     return sum(1 for _, state, _ in transitions if state in states)
 
 
+def landing_error_p(
+    commanded_d: np.ndarray,
+    drone_position_w: np.ndarray,
+    deck_position_w: np.ndarray,
+    deck_euler_w: np.ndarray,
+) -> np.ndarray:
+    """The SVGS paper's landing error: the commanded landing point (x, y in the deck frame D)
+    minus the drone's position, as x, y in the deck plate's frame P (metres)."""
+    r_wp = matrix_from_euler_zyx(*(float(v) for v in deck_euler_w))
+    commanded = np.array([float(commanded_d[0]), float(commanded_d[1]), 0.0])
+    commanded_p = R_PD @ commanded
+    actual_p = r_wp.T @ (np.asarray(drone_position_w, float) - np.asarray(deck_position_w, float))
+    return (commanded_p - actual_p)[:2]
+
+
 def run_episode(
     env: Any, policy: Any, seed: int, policy_name: str, estimator: str, scenario: str
 ) -> ApproachEpisode:
@@ -151,10 +181,19 @@ def run_episode(
     home = np.asarray(env.unwrapped.world.deck_home_w, dtype=float)
     start = np.asarray(info["drone"]["position_w"], dtype=float) - home
     trajectory = [(0.0, *(float(v) for v in start))]
+    commanded_d = np.asarray(getattr(policy, "landing_point_d", (0.0, 0.0)), dtype=float)
+    error = np.full(2, math.nan)
     step = 0
     while True:
         observation, _, terminated, truncated, info = env.step(policy(observation))
         step += 1
+        if "touchdown" in info and not np.isfinite(error).all():
+            error = landing_error_p(
+                commanded_d,
+                info["drone"]["position_w"],
+                info["deck"]["position_w"],
+                info["deck"]["euler_w"],
+            )
         if step % TRAJECTORY_STRIDE == 0 or terminated or truncated:
             rel = np.asarray(info["drone"]["position_w"], dtype=float) - home
             trajectory.append((float(info["time_s"]), *(float(v) for v in rel)))
@@ -175,6 +214,9 @@ def run_episode(
         # the baseline counts its PX4 searches; the routine's re-entered scans are transitions
         searches=int(getattr(policy, "searches", _count(transitions, ("scan",)))),
         trajectory=trajectory,
+        landing_error_x_m=float(error[0]),
+        landing_error_y_m=float(error[1]),
+        landing_error_m=float(np.hypot(*error)),
     )
     episode.record_end(info)
     episode.wall_time_s = time.perf_counter() - start_wall
@@ -265,6 +307,8 @@ class ApproachSummary:
     success_ci_high: float
     offset_mean_m: float
     offset_p95_m: float
+    landing_error_mean_m: float
+    landing_error_p95_m: float
     time_to_land_mean_s: float
     time_to_land_p95_s: float
     normal_speed_mean: float
@@ -286,6 +330,8 @@ def summarise(episodes: list[ApproachEpisode]) -> ApproachSummary:
         **success_fields(episodes),
         offset_mean_m=finite_mean(column("lateral_offset_m")),
         offset_p95_m=finite_p95(column("lateral_offset_m")),
+        landing_error_mean_m=finite_mean(column("landing_error_m")),
+        landing_error_p95_m=finite_p95(column("landing_error_m")),
         time_to_land_mean_s=finite_mean(column("time_to_land_s")),
         time_to_land_p95_s=finite_p95(column("time_to_land_s")),
         normal_speed_mean=finite_mean(column("relative_normal_speed")),
@@ -303,6 +349,10 @@ COLUMNS: tuple[Column, ...] = (
     Column("episodes", lambda s: str(s.episodes)),
     Column("success (95% CI)", success_cell),
     Column("offset mean / p95 (m)", lambda s: f"{s.offset_mean_m:.3f} / {s.offset_p95_m:.3f}"),
+    Column(
+        "landing error mean / p95 (m)",
+        lambda s: f"{s.landing_error_mean_m:.3f} / {s.landing_error_p95_m:.3f}",
+    ),
     Column(
         "time to land mean / p95 (s)",
         lambda s: f"{s.time_to_land_mean_s:.1f} / {s.time_to_land_p95_s:.1f}",

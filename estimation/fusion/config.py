@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from scipy.stats import chi2
+
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.fusion.model import deck_spectrum
 from estimation.noise import (
@@ -19,6 +21,21 @@ from estimation.registry import FRAME_ESTIMATOR_NAMES
 #: single-frame ones, each with its measurement sigmas below (an estimator registered later
 #: by ``estimation.registry.register_estimator`` is not a source: it has no sigmas here)
 POSE_SOURCES: tuple[str, ...] = tuple(FRAME_ESTIMATOR_NAMES)
+
+#: The SVGS paper's innovation gate for SVGS and for the IR beacon with its rangefinder:
+#: 10 standard deviations (paper 003, Table 1), deliberately relaxed so that intermittent
+#: vision measurements are fused rather than rejected.
+PAPER_GATE_SD = 10.0
+
+
+def nis_gate(dof: int, gate_probability: float, gate_sd: float | None) -> float:
+    """The largest accepted normalised innovation squared (NIS) of a ``dof``-dimensional
+    update: ``gate_sd`` squared when a gate in standard deviations is set (a Mahalanobis
+    distance of ``gate_sd``, as PX4 EKF2 states its gates), else the chi-square quantile
+    ``gate_probability`` with ``dof`` degrees of freedom (0.9995 is 3.5 SD for one)."""
+    if gate_sd is not None:
+        return float(gate_sd) ** 2
+    return float(chi2.ppf(gate_probability, dof))
 
 
 def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:
@@ -48,6 +65,9 @@ class FusionConfig:
     horizon_s: float = 0.5
     #: chi-square innovation gate: a measurement whose NIS exceeds this quantile is rejected
     gate_probability: float = 0.9995
+    #: the gate as a Mahalanobis distance in standard deviations (replaces gate_probability
+    #: when set; PAPER_GATE_SD = 10 is the SVGS paper's); None: the chi-square gate above
+    gate_sd: float | None = None
     #: no accepted pose update for this long: the estimate is invalid and the filter
     #: re-initialises from the next pose measurement, seconds
     reset_timeout_s: float = 1.0
@@ -116,6 +136,8 @@ class FusionConfig:
             low_inclusive=False,
             high_inclusive=False,
         )
+        if self.gate_sd is not None:
+            require_range("gate_sd", self.gate_sd, 0.0, 1e3, low_inclusive=False)
         require_range("reset_timeout_s", self.reset_timeout_s, 0.0, low_inclusive=False)
         for name in (
             "deck_accel_psd",
@@ -187,6 +209,10 @@ class FusionConfig:
     @property
     def tof_noise(self) -> TofNoiseModel:
         return TofNoiseModel(self.tof_sigma_m, self.tof_sigma_per_m, self.tof_resolution_m)
+
+    def gate(self, dof: int) -> float:
+        """The largest accepted NIS of a ``dof``-dimensional update (:func:`nis_gate`)."""
+        return nis_gate(dof, self.gate_probability, self.gate_sd)
 
     def pose_sigma(self, source: str) -> tuple[float, ...]:
         """The 1-sigma of a source's pose: metres and degrees."""

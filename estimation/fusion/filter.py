@@ -6,9 +6,10 @@ Delayed fusion (the idea of PX4 EKF2's buffer, implemented as re-propagation): e
 late (the vision link's latency) is inserted at its own timestamp, the filter restarts from
 the state just before it and re-applies every later event, so it gives exactly what fusing it
 on time would have.  A measurement older than the horizon is rejected and counted
-(``too_old``).  Each update passes a chi-square gate on its normalised innovation squared
-(NIS); after ``reset_timeout_s`` without an accepted pose update the filter resets and
-re-initialises from the next pose measurement (the accelerometer bias estimate survives).
+(``too_old``).  Each update passes a gate on its normalised innovation squared (NIS): a
+chi-square quantile, or a Mahalanobis distance in standard deviations (``gate_sd``, as PX4
+EKF2 states its gates); after ``reset_timeout_s`` without an accepted pose update the filter
+resets and re-initialises from the next pose measurement (the accelerometer bias estimate survives).
 
 Counts in the diagnostics cover every event ever applied, with the decisions of the events
 still in the buffer as of their latest replay.
@@ -25,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
 
 from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix, matrix_from_euler_zyx
 from estimation.fusion.config import FusionConfig
@@ -132,7 +132,7 @@ class DeckFusion:
         self.t_bc = np.asarray(t_bc, dtype=float)
         mounts = np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
         self.tof_origins_b = self.t_bc + mounts @ R_BC.T
-        self._gates = {dof: float(chi2.ppf(config.gate_probability, dof)) for dof in range(1, 7)}
+        self._gates = {dof: config.gate(dof) for dof in range(1, 7)}
         self._tof_noise = config.tof_noise
         self._deck4 = config.deck4
         self._n = N_STATE_4 if self._deck4 is not None else N_STATE

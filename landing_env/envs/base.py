@@ -29,6 +29,16 @@ from landing_env.world import PhysicsReport, World
 #: bounds of the deck-pose observation: metres for x, y, z and radians for the angles
 POSE_LOW = np.array([-50.0, -50.0, -50.0, -math.pi, -math.pi / 2, -math.pi], dtype=np.float32)
 POSE_HIGH = -POSE_LOW
+
+
+def pose_bounds(arena_max_height_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The deck pose's observation bounds: POSE_LOW/POSE_HIGH, the positions widened to
+    20 m beyond the arena's ceiling where that is higher (an approach from 100 m)."""
+    low = POSE_LOW.copy()
+    low[:3] = -max(float(-POSE_LOW[0]), float(arena_max_height_m) + 20.0)
+    return low, -low
+
+
 #: full-scale range of the IMU (an ICM-20602-class part: ±16 g, ±2000 °/s); a mean reading
 #: beyond it is clipped to the range, as the part itself would, and flagged in info
 IMU_HIGH = np.array([16 * 9.81] * 3 + [math.radians(2000.0)] * 3, dtype=np.float32)
@@ -133,7 +143,8 @@ class DeckLandingBaseEnv(gym.Env):
             gui = False
         self._slot = _claim_slot(self)
         self.world = World(self.config, gui=gui)
-        self.bank = EstimatorBank(self.config, self.world, (POSE_LOW, POSE_HIGH))
+        pose_low, pose_high = pose_bounds(sim.arena_max_height_m)
+        self.bank = EstimatorBank(self.config, self.world, (pose_low, pose_high))
         self.max_steps = round(sim.max_episode_s * sim.env_hz)
         self.env_dt = 1.0 / sim.env_hz
 
@@ -141,7 +152,7 @@ class DeckLandingBaseEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         self.observation_space = spaces.Dict(
             {
-                "deck_pose": spaces.Box(POSE_LOW, POSE_HIGH, dtype=np.float32),
+                "deck_pose": spaces.Box(pose_low, pose_high, dtype=np.float32),
                 "deck_pose_valid": spaces.MultiBinary(1),
                 "deck_pose_predicted": spaces.MultiBinary(1),
                 "tof_range": spaces.Box(0.0, tof_max, shape=(4,), dtype=np.float32),
@@ -155,7 +166,7 @@ class DeckLandingBaseEnv(gym.Env):
         )
         if self.config.estimation.observed == "fused":
             # the fused estimate's 1-sigma (x, y, z, roll, pitch, yaw); zeros when invalid
-            std_space = spaces.Box(0.0, POSE_HIGH, dtype=np.float32)
+            std_space = spaces.Box(0.0, pose_high, dtype=np.float32)
             self.observation_space = spaces.Dict(
                 {**self.observation_space.spaces, "deck_pose_std": std_space}
             )
