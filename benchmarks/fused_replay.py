@@ -8,6 +8,7 @@ lets any number of filter settings be scored on exactly the same data, in second
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import warnings
 from dataclasses import dataclass, field
@@ -123,6 +124,23 @@ class Replay:
     cov_tilt: np.ndarray
     nis: np.ndarray
     fusion: DeckFusion
+
+
+#: the settings a replay takes from the code's defaults (or its overrides), never from the
+#: recording: how the filter identifies the motion and models its sources' errors
+_FILTER_OWN = ("identify_", "tilt_error_")
+
+
+def settings(rec: Recording, **overrides: object) -> FusionConfig:
+    """The filter's settings for a replay: the recorded run's (its sources, its sensors'
+    noise, its prior, when the scenario gave one), with the identification and coloured-
+    error settings at the code's defaults, then ``overrides``."""
+    kept = {
+        item.name: getattr(rec.fusion, item.name)
+        for item in dataclasses.fields(FusionConfig)
+        if not item.name.startswith(_FILTER_OWN)
+    }
+    return FusionConfig(**{**kept, **overrides})
 
 
 def replay(rec: Recording, config: FusionConfig) -> Replay:
