@@ -177,8 +177,6 @@ class DeckFusion:
         self._last_r_wb: np.ndarray | None = None
         self._attitudes: list[tuple[float, np.ndarray]] = []
         self._last_nis: dict[str, float] = {}
-        #: the capture time of each source's latest pose (the correlated-error inflation)
-        self._last_capture: dict[str, float] = {}
         self._deck4 = self._deck4_initial
         if self.identifier is not None:
             self.identifier.reset()

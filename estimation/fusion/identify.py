@@ -1,9 +1,9 @@
-"""Online identification of the deck's roll and pitch motion (the fusion's fourth-order model).
+"""Online identification of the deck's roll and pitch motion (the fusion's deck model).
 
-The filter's deck model (:mod:`estimation.fusion.model`) makes roll and pitch each the
-output of a fourth-order linear system driven by white noise: two damped second-order
-factors, the two wave components a deck shows.  Rather than being told the sea's periods
-and RMS, the filter fits that system to its own recent roll and pitch estimates:
+Without a prior (given wave periods), the filter models roll and pitch each as the sum of
+two damped oscillators driven by white noise (:class:`~estimation.fusion.model.TwoWaves`):
+the two wave components a deck shows, a swell and a wind sea.  Rather than being told the
+sea's periods and RMS, the filter fits them to its own recent roll and pitch estimates:
 
 1. the estimates are block-averaged into samples ``sample_s`` apart over a sliding window
    of ``window_s`` (the latest seconds of the deck's motion);
@@ -276,8 +276,9 @@ class DeckMotionIdentifier:
 
     def add(self, time: float, roll: float, pitch: float) -> bool:
         """One estimate of the deck's roll and pitch (rad) at ``time``; True when the model
-        was refitted.  Estimates arrive in time order; a gap longer than a sample restarts
-        the window (the motion before it no longer joins on)."""
+        was refitted.  Estimates arrive in time order; a gap longer than two samples restarts
+        the window (the motion before it no longer joins on); the model fitted before the gap
+        stays until the new window is long enough to refit."""
         if not (math.isfinite(time) and abs(roll) <= math.pi and abs(pitch) <= math.pi):
             return False  # not an angle (also NaN)
         index = math.floor(time / self.sample_s)
