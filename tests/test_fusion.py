@@ -104,6 +104,11 @@ def make_config(**kwargs: object) -> FusionConfig:
         "deck_accel_psd": 0.01,
         "deck_angular_accel_psd": 0.002,
         "initial_rate_sigma": 0.05,
+        # these tests' data follow the given deck models with independent pose errors (the
+        # identification and the coloured errors: tests/test_fusion_identify.py)
+        "identify_deck_motion": False,
+        "tilt_error_correlation_s": 0.0,
+        "tilt_error_sigma_scale": 1.0,
     }
     base.update(kwargs)
     return FusionConfig(**base)  # type: ignore[arg-type]

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from scipy.stats import chi2
 
 from estimation.errors import ConfigError, require_choice, require_range
-from estimation.fusion.model import deck_spectrum
+from estimation.fusion.model import TwoWaves, deck_spectrum
 from estimation.noise import (
     VL53L1X_RESOLUTION_M,
     VL53L1X_SIGMA_0_M,
@@ -91,6 +91,46 @@ class FusionConfig:
     #: a simulator (or any host that knows the sea) replaces the three above by the sea's own
     #: (landing_env: the two largest roll and pitch components of a `sinusoids` motion)
     deck_waves_from_motion: bool = False
+    #: identify roll's and pitch's model online from the filter's own estimates (estimation/
+    #: fusion/identify.py: a sliding-window AR fit, two wave components).  Until the first
+    #: fit the model is a broad initial one (the identify_initial_* keys).  Given wave
+    #: periods above (a prior: the scenario's spectrum, an HMS report) are the model instead
+    identify_deck_motion: bool = True
+    #: the window of the latest motion the fit uses, the minimum before the first fit, the
+    #: interval between fits and the spacing of the (block-averaged) samples, s
+    identify_window_s: float = 90.0
+    identify_min_window_s: float = 15.0
+    identify_refit_s: float = 1.0
+    identify_sample_s: float = 0.5
+    #: the order of the autoregressive fit (even: pole pairs; 4 is the two components alone)
+    identify_ar_order: int = 8
+    #: the identified factors are held inside these periods (s) and damping ratios
+    identify_period_range_s: tuple[float, ...] = (2.0, 30.0)
+    identify_damping_range: tuple[float, ...] = (0.05, 2.0)
+    #: the driving noise of the identified model, as a multiple of the one that gives it the
+    #: window's RMS: room for what a 90 s window leaves uncertain.  On the tuning motions
+    #: (4 runs of 120 s) gain 1 gave roll/pitch NEES 2.47 and MAE 0.62 / 0.55 deg, gain 2
+    #: NEES 2.15 (chi-square mean 2) and 0.61 / 0.57
+    identify_noise_gain: float = 2.0
+    #: the broad model before the first fit without a prior: both axes two factors at these
+    #: periods (s) with this damping ratio, at deck_attitude_rms_deg
+    identify_initial_periods_s: tuple[float, ...] = (10.0, 5.0)
+    identify_initial_damping: float = 0.5
+    #: the pose sources' roll and pitch errors are not independent from frame to frame
+    #: (tight's on realistic sensing: autocorrelation 0.5-0.75 at a lag of one frame, still
+    #: 0.07-0.34 at five, and 1.25-1.6 times its own sigma).  They are modelled as a white
+    #: part plus a first-order (Gauss-Markov) part of this correlation time (s) and share of
+    #: the variance, two more states the filter estimates (estimation/fusion/model.py),
+    #: rather than averaged as independent; and the sources' roll/pitch sigma is multiplied
+    #: by tilt_error_sigma_scale.  Fitted to tight's errors on the tuning motions (the bench's
+    #: JONSWAP seas, benchmarks/fused_motions.py): at sea state 4 a share of 0.8 with rho
+    #: 0.67 per 50 ms frame (0.8 rho = 0.54, 0.8 rho² = 0.36) and 1.25-1.44 times its
+    #: sigma, at sea state 3 (slower, so longer-lived pose-dependent errors) 0.93 with rho
+    #: 0.8 and 1.6 times; pooled: 0.85, 170 ms (rho 0.75), 1.45.  0: independent errors,
+    #: no extra states
+    tilt_error_correlation_s: float = 0.17
+    tilt_error_coloured_share: float = 0.85
+    tilt_error_sigma_scale: float = 1.45
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
     accel_noise_density: float = 1.0e-3
     accel_bias_random_walk: float = 4.0e-4
@@ -168,6 +208,7 @@ class FusionConfig:
         if self.deck_roll_periods_s and not self.deck_damping_ratio >= 0.005:
             # undamped, the model has no stationary spread to derive its driving noise from
             raise ConfigError("deck_damping_ratio", "must be >= 0.005 with the wave periods")
+        self._check_identification()
         for name in (
             "initial_accel_bias_sigma",
             "initial_velocity_sigma",
@@ -178,6 +219,46 @@ class FusionConfig:
             key = f"{name}_sigma"
             setattr(self, key, tuple(float(v) for v in getattr(self, key)))
             _check_sigmas(key, getattr(self, key))
+
+    def _check_identification(self) -> None:
+        for name in ("identify_window_s", "identify_min_window_s", "identify_refit_s"):
+            require_range(name, getattr(self, name), 0.0, 1e4, low_inclusive=False)
+        require_range("identify_sample_s", self.identify_sample_s, 0.01, 5.0)
+        if self.identify_ar_order not in range(4, 17, 2):
+            raise ConfigError("identify_ar_order", f"{self.identify_ar_order!r}: 4, 6, ..., 16")
+        if self.identify_min_window_s > self.identify_window_s:
+            raise ConfigError("identify_min_window_s", "must be <= identify_window_s")
+        if self.identify_min_window_s < 3 * self.identify_ar_order * self.identify_sample_s:
+            raise ConfigError(
+                "identify_min_window_s",
+                "needs 3 * identify_ar_order samples (identify_sample_s apart) or more",
+            )
+        require_range(
+            "identify_noise_gain", self.identify_noise_gain, 0.0, 1e3, low_inclusive=False
+        )
+        require_range("identify_initial_damping", self.identify_initial_damping, 0.005, 10.0)
+        require_range("tilt_error_correlation_s", self.tilt_error_correlation_s, 0.0, 10.0)
+        require_range(
+            "tilt_error_coloured_share",
+            self.tilt_error_coloured_share,
+            0.0,
+            1.0,
+            high_inclusive=False,
+        )
+        require_range(
+            "tilt_error_sigma_scale", self.tilt_error_sigma_scale, 0.0, 100.0, low_inclusive=False
+        )
+        for key, low, high in (
+            ("identify_period_range_s", 0.5, 1e3),
+            ("identify_initial_periods_s", 0.5, 1e3),
+            ("identify_damping_range", 0.005, 10.0),
+        ):
+            values = tuple(float(v) for v in getattr(self, key))
+            setattr(self, key, values)
+            if len(values) != 2 or not all(low <= v <= high for v in values):
+                raise ConfigError(key, f"{values!r}: two values in [{low:g}, {high:g}]")
+            if key != "identify_initial_periods_s" and not values[0] < values[1]:
+                raise ConfigError(key, f"{values!r}: the low end first, below the high end")
 
     @property
     def deck_w0(self) -> float:
@@ -191,7 +272,6 @@ class FusionConfig:
         deck_spectrum`), or None when no wave periods are set."""
         if not self.deck_roll_periods_s:
             return None
-
         return tuple(
             deck_spectrum(
                 2.0 * math.pi / periods[0],
@@ -205,6 +285,25 @@ class FusionConfig:
                 strict=True,
             )
         )
+
+    @property
+    def deck4_initial(self) -> tuple | None:
+        """The deck model the filter starts from: the prior (:attr:`deck4`), else, when it
+        identifies the motion, the broad initial model; None: neither."""
+        if not self.identifies:
+            return self.deck4
+        w1, w2 = (2.0 * math.pi / p for p in self.identify_initial_periods_s)
+        zeta = self.identify_initial_damping
+        return tuple(
+            TwoWaves.matched(w1, zeta, w2, zeta, *(0.5 * math.radians(rms) ** 2,) * 2)
+            for rms in self.deck_attitude_rms_deg
+        )
+
+    @property
+    def identifies(self) -> bool:
+        """Whether the filter identifies the deck's motion: asked to, and no prior given
+        (given wave periods are the model, as before)."""
+        return self.identify_deck_motion and not self.deck_roll_periods_s
 
     @property
     def tof_noise(self) -> TofNoiseModel:

@@ -29,12 +29,15 @@ from scipy.spatial.transform import Rotation
 
 from estimation.frames import R_BC, R_PD, euler_zyx_from_matrix, matrix_from_euler_zyx
 from estimation.fusion.config import FusionConfig
+from estimation.fusion.identify import DeckMotionIdentifier
 from estimation.fusion.model import (
     BA,
+    N_COLOURED,
     N_STATE,
     N_STATE_4,
     TH,
     P,
+    TwoWaves,
     V,
     W,
     ekf_update,
@@ -82,6 +85,8 @@ class _Event:
     superseded: bool = False
     outcome: Counter = field(default_factory=Counter)
     nis: float = float("nan")
+    #: pose: the NIS of its roll and pitch alone
+    nis_tilt: float = float("nan")
 
     @property
     def key(self) -> tuple[float, int, int]:
@@ -134,8 +139,27 @@ class DeckFusion:
         self.tof_origins_b = self.t_bc + mounts @ R_BC.T
         self._gates = {dof: config.gate(dof) for dof in range(1, 7)}
         self._tof_noise = config.tof_noise
-        self._deck4 = config.deck4
-        self._n = N_STATE_4 if self._deck4 is not None else N_STATE
+        self._deck4_initial = config.deck4_initial
+        self._n = N_STATE_4 if self._deck4_initial is not None else N_STATE
+        #: the coloured roll/pitch pose errors, the state's last entries (None: not modelled)
+        self._coloured: slice | None = None
+        if config.tilt_error_correlation_s > 0.0 and config.tilt_error_coloured_share > 0.0:
+            self._coloured = slice(self._n, self._n + N_COLOURED)
+            self._n += N_COLOURED
+        self.identifier = (
+            DeckMotionIdentifier(
+                config.identify_window_s,
+                config.identify_sample_s,
+                config.identify_min_window_s,
+                config.identify_refit_s,
+                config.identify_period_range_s,
+                config.identify_damping_range,
+                config.identify_noise_gain,
+                config.identify_ar_order,
+            )
+            if config.identifies
+            else None
+        )
         self.reset()
 
     # ------------------------------------------------------------------ lifecycle
@@ -153,6 +177,9 @@ class DeckFusion:
         self._last_r_wb: np.ndarray | None = None
         self._attitudes: list[tuple[float, np.ndarray]] = []
         self._last_nis: dict[str, float] = {}
+        self._deck4 = self._deck4_initial
+        if self.identifier is not None:
+            self.identifier.reset()
 
     # ------------------------------------------------------------------ inputs
     def step(
@@ -261,6 +288,10 @@ class DeckFusion:
             # the translation noise is given in the camera frame: rotate it into W
             noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
             noise[3:, 3:] = np.diag(sigma[3:] ** 2)
+        if self.config.tilt_error_sigma_scale != 1.0:
+            scale = np.ones(6)
+            scale[3:5] = self.config.tilt_error_sigma_scale
+            noise = noise * np.outer(scale, scale)
         event = self._event(time, "pose", source, r_wb, z)
         event.noise, event.mask = noise, mask
         event.includes_ranges = bool(estimate.extras.get("ranges_used", 0))
@@ -305,15 +336,25 @@ class DeckFusion:
             self._final.update(event.outcome)
             assert event.after is not None
             self._base = event.after
+            if self.identifier is not None and event.kind == "pose" and event.after.initialised:
+                self._identify(event)
         del self._events[:n], self._keys[:n]
         while len(self._attitudes) > 1 and self._attitudes[1][0] < cutoff:
             self._attitudes.pop(0)
+
+    def _identify(self, event: _Event) -> None:
+        """Feed the identifier the deck's roll and pitch after a pose update that has left the
+        buffer (final: no late measurement can change it), and take its refitted model."""
+        assert self.identifier is not None and event.after is not None
+        roll, pitch = event.after.x[6], event.after.x[7]
+        if self.identifier.add(event.time, float(roll), float(pitch)):
+            self._deck4 = self.identifier.deck4
 
     # ------------------------------------------------------------------ one event
     def _apply(self, event: _Event, snap: _Snapshot) -> _Snapshot:
         cfg = self.config
         event.outcome = Counter()
-        event.nis = float("nan")
+        event.nis = event.nis_tilt = float("nan")
         x, cov, initialised, last_pose = snap.x, snap.cov, snap.initialised, snap.last_pose_time
         if initialised and event.time - last_pose > cfg.reset_timeout_s:
             initialised = False
@@ -334,6 +375,7 @@ class DeckFusion:
                     cfg.deck_w0,
                     cfg.deck_damping_ratio,
                     self._deck4,
+                    cfg.tilt_error_correlation_s if self._coloured is not None else 0.0,
                 )
             time = max(time, event.time)
         elif event.kind == "tof":
@@ -372,11 +414,19 @@ class DeckFusion:
         new_cov[V, V] = np.eye(3) * cfg.initial_velocity_sigma**2
         new_cov[W, W] = np.eye(3) * cfg.initial_rate_sigma**2
         new_cov[BA, BA] = cov[BA, BA]
-        if self._deck4 is not None:
-            # the deck's angular acceleration and jerk start at the sea's stationary spread
-            for i, (_, _, (sigma_accel, sigma_jerk)) in enumerate(self._deck4):
-                new_cov[15 + i, 15 + i] = sigma_accel**2
-                new_cov[17 + i, 17 + i] = sigma_jerk**2
+        if self._coloured is not None and event.mask[3] and event.mask[4]:
+            # the pose's tilt is the deck's plus its coloured error: they start anticorrelated
+            new_cov[self._coloured, self._coloured] = np.eye(N_COLOURED)
+            new_cov[6:8, self._coloured] = -self._coloured_gain(event.noise)
+            new_cov[self._coloured, 6:8] = new_cov[6:8, self._coloured].T
+        elif self._coloured is not None:
+            new_cov[self._coloured, self._coloured] = np.eye(N_COLOURED)
+        for i, model in enumerate(self._deck4 or ()):
+            # the deck's angular acceleration and jerk (or second wave component's angle and
+            # rate) start at the sea's stationary spread
+            sigmas = model.second_sigmas if isinstance(model, TwoWaves) else model[2]
+            new_cov[15 + i, 15 + i] = sigmas[0] ** 2
+            new_cov[17 + i, 17 + i] = sigmas[1] ** 2
         return new_x, new_cov
 
     def _update_pose(
@@ -389,14 +439,37 @@ class DeckFusion:
         h_full[3:6, TH] = np.eye(3)
         innovation = event.data - np.concatenate([x[P], x[TH]])
         innovation[3:] = wrap_angle(innovation[3:])
+        noise = event.noise
+        if self._coloured is not None and mask[3] and mask[4]:
+            # the tilt = the deck's + the coloured error (its share of the variance) + white
+            innovation[3:5] -= self._coloured_gain(noise) @ x[self._coloured]
+            h_full[3:5, self._coloured] = self._coloured_gain(noise)
+            white = np.sqrt(1.0 - self.config.tilt_error_coloured_share)
+            scale = np.ones(6)
+            scale[3:5] = white
+            noise = noise * np.outer(scale, scale)
+        if mask[3] and mask[4]:
+            # the roll/pitch part of the NIS (chi-square with 2 degrees of freedom)
+            tilt = h_full[3:5] @ cov @ h_full[3:5].T + noise[3:5, 3:5]
+            event.nis_tilt = float(innovation[3:5] @ np.linalg.solve(tilt, innovation[3:5]))
         h = h_full[mask]
-        noise = event.noise[np.ix_(mask, mask)]
+        noise = noise[np.ix_(mask, mask)]
         gate = self._gates[int(mask.sum())]
         x, cov, nis, accepted = ekf_update(x, cov, innovation[mask], h, noise, gate)
         x[TH] = wrap_angle(x[TH])
         event.nis = nis
         event.outcome[f"{event.source}_{'accepted' if accepted else 'rejected'}"] += 1
         return x, cov, accepted
+
+    def _coloured_gain(self, noise: np.ndarray) -> np.ndarray:
+        """How the unit coloured-error states enter a pose's roll and pitch: the Cholesky
+        factor of that pose's tilt noise, scaled to the coloured share of its variance."""
+        tilt = noise[3:5, 3:5]
+        try:
+            factor = np.linalg.cholesky(0.5 * (tilt + tilt.T))
+        except np.linalg.LinAlgError:
+            factor = np.diag(np.sqrt(np.clip(np.diag(tilt), 0.0, None)))
+        return math.sqrt(self.config.tilt_error_coloured_share) * factor
 
     def _update_tof(
         self, event: _Event, x: np.ndarray, cov: np.ndarray
@@ -452,6 +525,8 @@ class DeckFusion:
                 counts.update(event.outcome)
             if event.kind != "imu" and math.isfinite(event.nis):
                 nis[event.source] = event.nis
+            if math.isfinite(event.nis_tilt):
+                nis[f"tilt_{event.source}"] = event.nis_tilt
         self._last_nis.update(nis)
         out: dict[str, float | int | bool] = {
             key: int(value) for key, value in sorted(counts.items())

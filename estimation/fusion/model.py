@@ -26,11 +26,18 @@ phase-variable form (a fourth-order wave spectrum with a peak at each component)
 state then has four more entries (``AJ``: the roll and pitch angular accelerations 15:17 and
 jerks 17:19), the white noise drives the jerk's rate, and its PSD is set so that the model's
 stationary roll/pitch spread is the sea's (:func:`deck_spectrum`): no tuned constant.
+
+Identified online (estimation/fusion/identify.py), roll and pitch are instead each the SUM
+of two damped oscillators (:class:`TwoWaves`), the same four entries holding the second
+component's angle (15:17) and rate (17:19).  With the pose sources' coloured tilt errors
+modelled (``tilt_error_correlation_s``), the state ends with :data:`N_COLOURED` more: their
+roll and pitch errors, unit-variance first-order processes.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -41,6 +48,8 @@ N_STATE_4 = 19
 P, V, TH, W, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 #: roll and pitch angular accelerations and jerks (fourth-order deck model only)
 AJ = slice(15, 19)
+#: the pose sources' coloured roll and pitch errors, the state's last entries when modelled
+N_COLOURED = 2
 GRAVITY_W = np.array([0.0, 0.0, -9.81])
 _I3 = np.eye(3)
 
@@ -81,32 +90,76 @@ def deck_normal(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normal, jacobian
 
 
-def deck_polynomial(w1: float, w2: float, zeta: float) -> tuple[float, float, float, float]:
+def deck_polynomial(
+    w1: float, w2: float, zeta: float, zeta2: float | None = None
+) -> tuple[float, float, float, float]:
     """``(a0, a1, a2, a3)`` of ``s⁴ + a3 s³ + a2 s² + a1 s + a0``, the product of the two
-    second-order factors ``s² + 2 zeta w s + w²``."""
-    b1, c1, b2, c2 = 2.0 * zeta * w1, w1 * w1, 2.0 * zeta * w2, w2 * w2
+    second-order factors ``s² + 2 zeta w1 s + w1²`` and ``s² + 2 zeta2 w2 s + w2²`` (``zeta2``
+    None: ``zeta``)."""
+    zeta2 = zeta if zeta2 is None else zeta2
+    b1, c1, b2, c2 = 2.0 * zeta * w1, w1 * w1, 2.0 * zeta2 * w2, w2 * w2
     return (c1 * c2, b1 * c2 + b2 * c1, c1 + c2 + b1 * b2, b1 + b2)
 
 
-@lru_cache(maxsize=16)
-def deck_spectrum(
-    w1: float, w2: float, zeta: float, sigma_rad: float
+def deck_spectrum_of(
+    w1: float, zeta1: float, w2: float, zeta2: float, sigma_rad: float, noise_gain: float = 1.0
 ) -> tuple[tuple[float, float, float, float], float, tuple[float, float]]:
-    """The fourth-order deck model matched to a sea whose roll/pitch spread is ``sigma_rad``:
-    its polynomial, the driving PSD ``q`` (rad²/s⁷) that gives it that stationary variance
-    (continuous Lyapunov equation of the phase-variable form) and the stationary sigmas of the
-    angular acceleration and jerk (the priors of those states)."""
+    """The fourth-order deck model of the factors ``(w1, zeta1)`` and ``(w2, zeta2)`` matched
+    to a roll/pitch spread ``sigma_rad``: its polynomial, the driving PSD ``q`` (rad²/s⁷) that
+    gives it that stationary variance (continuous Lyapunov equation of the phase-variable
+    form), times ``noise_gain``, and the stationary sigmas of the angular acceleration and
+    jerk (the priors of those states)."""
     from scipy.linalg import solve_continuous_lyapunov
 
-    a0, a1, a2, a3 = deck_polynomial(w1, w2, zeta)
+    a0, a1, a2, a3 = deck_polynomial(w1, w2, zeta1, zeta2)
     a = np.zeros((4, 4))
     a[0, 1] = a[1, 2] = a[2, 3] = 1.0
     a[3] = (-a0, -a1, -a2, -a3)
     g = np.zeros((4, 4))
     g[3, 3] = 1.0
     unit = solve_continuous_lyapunov(a, -g)  # stationary covariance for q = 1
-    q = sigma_rad * sigma_rad / float(unit[0, 0])
+    q = noise_gain * sigma_rad * sigma_rad / float(unit[0, 0])
     return (a0, a1, a2, a3), q, (math.sqrt(q * unit[2, 2]), math.sqrt(q * unit[3, 3]))
+
+
+@lru_cache(maxsize=16)
+def deck_spectrum(
+    w1: float, w2: float, zeta: float, sigma_rad: float
+) -> tuple[tuple[float, float, float, float], float, tuple[float, float]]:
+    """:func:`deck_spectrum_of` with one damping ratio for both factors (a given sea)."""
+    return deck_spectrum_of(w1, zeta, w2, zeta, sigma_rad)
+
+
+@dataclass(frozen=True)
+class TwoWaves:
+    """Roll or pitch as the SUM of two damped oscillators, each driven by its own white
+    noise (the parallel form; the identified model, estimation/fusion/identify.py):
+    ``theta = theta_1 + theta_2``, ``theta_k'' = -w_k² theta_k - 2 zeta_k w_k theta_k' +
+    n_k``, PSD ``q_k``.  Unlike the product form (:func:`deck_spectrum_of`), each
+    component's variance is free: a swell and a wind sea of any relative size.  The state
+    keeps the total angle and rate (th, w) and holds the second component's angle and rate
+    in the fourth-order model's entries 15:17 and 17:19."""
+
+    w1: float
+    zeta1: float
+    w2: float
+    zeta2: float
+    q1: float
+    q2: float
+
+    @classmethod
+    def matched(
+        cls, w1: float, zeta1: float, w2: float, zeta2: float, var1: float, var2: float
+    ) -> TwoWaves:
+        """The components' driving PSDs that give them these stationary variances (rad²):
+        ``q = 4 zeta w³ var``."""
+        return cls(w1, zeta1, w2, zeta2, 4.0 * zeta1 * w1**3 * var1, 4.0 * zeta2 * w2**3 * var2)
+
+    @property
+    def second_sigmas(self) -> tuple[float, float]:
+        """The stationary sigmas of the second component's angle and rate (its priors)."""
+        sigma = math.sqrt(self.q2 / (4.0 * self.zeta2 * self.w2**3))
+        return sigma, self.w2 * sigma
 
 
 @lru_cache(maxsize=64)
@@ -116,13 +169,19 @@ def _process_noise(
     q_angular: float,
     accel_noise_density: float,
     bias_walk: float,
-    q_deck4: tuple[float, float] | None = None,
+    q_deck4: tuple[float, ...] | None = None,
+    tilt_correlation_s: float = 0.0,
+    parallel: bool = False,
 ) -> np.ndarray:
     """The discrete process noise over ``dt`` (cached: it does not depend on the state).
 
     ``q_deck4``: the fourth-order deck model's jerk-rate PSDs of roll and pitch, whose noise
-    then enters through the jerk alone (yaw keeps the white angular acceleration)."""
-    n = N_STATE_4 if q_deck4 is not None else N_STATE
+    then enters through the jerk alone (yaw keeps the white angular acceleration).
+    ``tilt_correlation_s`` > 0: the state ends with the two unit-variance first-order
+    (Gauss-Markov) errors of the pose sources' roll and pitch (:data:`N_COLOURED`)."""
+    n = (N_STATE_4 if q_deck4 is not None else N_STATE) + (
+        N_COLOURED if tilt_correlation_s > 0.0 else 0
+    )
     q = np.zeros((n, n))
     d1, d2, d3 = dt, dt * dt / 2.0, dt * dt * dt / 3.0
     # white-acceleration (continuous) noise integrated over dt, per axis
@@ -136,7 +195,22 @@ def _process_noise(
         for i in (6, 7, 9, 10):  # roll and pitch: angle and rate rows and columns
             q[i, :] = 0.0
             q[:, i] = 0.0
-        q[17, 17], q[18, 18] = q_deck4[0] * d1, q_deck4[1] * d1
+        if not parallel:
+            q[17, 17], q[18, 18] = q_deck4[0] * d1, q_deck4[1] * d1
+        for i in range(2) if parallel else ():
+            # white accelerations: n1 drives the total rate, n2 the total and the second
+            # component's rate (q_deck4: q1, q2 of roll, then of pitch), integrated over dt
+            q1, q2 = q_deck4[2 * i], q_deck4[2 * i + 1]
+            for channel, psd in (((6 + i, 9 + i),), q1), (((6 + i, 9 + i), (15 + i, 17 + i)), q2):
+                for pos_a, vel_a in channel:
+                    for pos_b, vel_b in channel:
+                        q[pos_a, pos_b] += psd * d3
+                        q[pos_a, vel_b] += psd * d2
+                        q[vel_a, pos_b] += psd * d2
+                        q[vel_a, vel_b] += psd * d1
+    if tilt_correlation_s > 0.0:
+        # unit stationary variance: exp(-dt/tau) b + w, var(w) = 1 - exp(-2 dt/tau)
+        q[n - 2, n - 2] = q[n - 1, n - 1] = -math.expm1(-2.0 * dt / tilt_correlation_s)
     q.setflags(write=False)
     return q
 
@@ -154,8 +228,12 @@ def predict(
     deck_w0: float = 0.0,
     deck_zeta: float = 0.0,
     deck4: tuple | None = None,
+    tilt_correlation_s: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One IMU sample of prediction over ``dt`` (the sample's specific force, body frame).
+
+    ``tilt_correlation_s`` > 0: the last :data:`N_COLOURED` states are the pose sources'
+    roll and pitch errors, first-order processes of that correlation time.
 
     ``deck_w0`` (rad/s, 0: constant Euler rates) and ``deck_zeta``: the deck's roll and pitch
     oscillate about level with this natural frequency and damping ratio.  ``deck4``: the
@@ -170,7 +248,24 @@ def predict(
     rates = x[W].copy()
     x[TH] += rates * dt
     f = np.eye(n)
-    if deck4 is not None:
+    parallel = deck4 is not None and isinstance(deck4[0], TwoWaves)
+    if parallel:
+        # roll and pitch: the sum of two oscillators (TwoWaves), explicit Euler
+        angles, second, second_rate = x[TH][:2] - rates[:2] * dt, x[15:17].copy(), x[17:19].copy()
+        q_deck4 = (deck4[0].q1, deck4[0].q2, deck4[1].q1, deck4[1].q2)
+        for i in range(2):
+            m = deck4[i]
+            c1, d1, c2, d2 = m.w1 * m.w1, 2.0 * m.zeta1 * m.w1, m.w2 * m.w2, 2.0 * m.zeta2 * m.w2
+            accel2 = -c2 * second[i] - d2 * second_rate[i]
+            accel1 = -c1 * (angles[i] - second[i]) - d1 * (rates[i] - second_rate[i])
+            x[9 + i] += (accel1 + accel2) * dt
+            x[15 + i] += second_rate[i] * dt
+            x[17 + i] += accel2 * dt
+            f[9 + i, 6 + i], f[9 + i, 9 + i] = -c1 * dt, 1.0 - d1 * dt
+            f[9 + i, 15 + i], f[9 + i, 17 + i] = (c1 - c2) * dt, (d1 - d2) * dt
+            f[15 + i, 17 + i] = dt
+            f[17 + i, 15 + i], f[17 + i, 17 + i] = -c2 * dt, 1.0 - d2 * dt
+    elif deck4 is not None:
         # roll and pitch: angle <- rate <- acceleration <- jerk <- the polynomial, explicit Euler
         angles, accel, jerk = x[TH][:2] - rates[:2] * dt, x[15:17].copy(), x[17:19].copy()
         x[9:11] += accel * dt
@@ -182,7 +277,6 @@ def predict(
             f[17 + i, 6 + i], f[17 + i, 9 + i] = -a0 * dt, -a1 * dt
             f[17 + i, 15 + i], f[17 + i, 17 + i] = -a2 * dt, 1.0 - a3 * dt
         q_deck4 = (deck4[0][1], deck4[1][1])
-        noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk, q_deck4)
     elif deck_w0 > 0.0:
         # roll and pitch (not yaw): restoring towards level and damping, explicit Euler
         stiffness, damping = deck_w0 * deck_w0 * dt, 2.0 * deck_zeta * deck_w0 * dt
@@ -194,8 +288,20 @@ def predict(
     f[P, BA] = 0.5 * dt * dt * r_wb
     f[V, BA] = dt * r_wb
     f[TH, W] = dt * _I3
-    if deck4 is None:
-        noise = _process_noise(dt, q_accel, q_angular, accel_noise_density, bias_walk)
+    if tilt_correlation_s > 0.0:
+        decay = math.exp(-dt / tilt_correlation_s)
+        x[n - N_COLOURED :] *= decay
+        f[n - 2, n - 2] = f[n - 1, n - 1] = decay
+    noise = _process_noise(
+        dt,
+        q_accel,
+        q_angular,
+        accel_noise_density,
+        bias_walk,
+        None if deck4 is None else q_deck4,
+        tilt_correlation_s,
+        parallel,
+    )
     return x, f @ cov @ f.T + noise
 
 
