@@ -120,3 +120,19 @@ def test_unknown_policies_and_scenarios_are_refused_naming_the_choices() -> None
         env_settings("quiescent", "bench-ss9")
     with pytest.raises(ConfigError, match=r"scenario.*DeckLanding"):
         env_settings("quiescent", "high-approach")
+
+
+def test_the_readmes_which_to_use_table_is_the_registrys_recommendation() -> None:
+    from pathlib import Path
+
+    from agents.policy_registry import RECOMMENDED
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    rows = [line for line in readme.splitlines() if line.startswith("| ") and "% (" in line]
+    assert len(rows) == len(RECOMMENDED)
+    for rec, row in zip(RECOMMENDED, rows, strict=True):
+        env_id, _ = env_settings(rec.policy, rec.scenario)
+        assert rec.setting in row and f"`{rec.policy}`" in row and f"`{env_id}`" in row
+        low, high = rec.ci95_pct
+        assert f"{rec.success_pct:.1f} % ({low:.1f}-{high:.1f})" in row
+        assert f"--seed {rec.first_seed}" in row and f"--scenario {rec.scenario}" in row
