@@ -5,8 +5,9 @@
         [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
         [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz] [--plot FILE.png]
 
-The oracle (:mod:`agents.timing.oracle`) tries a commit at every decision (0.1 s apart) and knows the
-gusts and the heave to come; its lead over a policy mixes what the observation could tell and
+The oracle (:mod:`agents.timing.oracle`) tries a commit at every decision (0.1 s apart) and
+knows the gusts and the heave to come; its lead over a policy mixes what the observation
+could tell and
 what no observation tells.  This benchmark separates the two:
 
 1. Seeded waiting episodes of the timing task (not the evaluation's held-out seeds); at every
@@ -17,8 +18,9 @@ what no observation tells.  This benchmark separates the two:
    one that landed: persistent causes are in principle visible, isolated ones are luck); the
    best any commit on the labels' grid could do (the oracle on that grid); committing at once
    (``land-now``); and the ``quiescent`` rule (:func:`agents.calm_window.predict_calm`) replayed
-   with its defaults and with each of a grid of its settings (:func:`agents.timing.hindsight.replay_rule`;
-   an episode without a calm decision commits at its last label), all judged by the outcome.
+   with its defaults and with each of a grid of its settings
+   (:func:`agents.timing.hindsight.replay_rule`; an episode without a calm decision commits at
+   its last label), all judged by the outcome.
 3. What the observation can tell: a commit-chance model (:mod:`agents.timing.commit_chance`, a
    logistic regression on statistics of the observed deck motion over ``--windows``) fitted on
    the labels, its held-out AUC (episodes in 5 folds), and its held-out chances replayed

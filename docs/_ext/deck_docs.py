@@ -240,7 +240,11 @@ class PoliciesDirective(GeneratedDirective):
             "12 14 14 12 24 24",
         )
         defaults = ", ".join(f"``{s}``: ``{p}``" for s, p in registry.DEFAULT_POLICY.items())
-        lines += ["", f"Without ``--policy``, ``evaluate landing --scenario S`` flies {defaults}.", ""]
+        lines += [
+            "",
+            f"Without ``--policy``, ``evaluate landing --scenario S`` flies {defaults}.",
+            "",
+        ]
         return lines
 
 

@@ -152,8 +152,8 @@ class DeckFusion:
                 config.identify_sample_s,
                 config.identify_min_window_s,
                 config.identify_refit_s,
-                config.identify_period_range_s,
-                config.identify_damping_range,
+                (config.identify_period_range_s[0], config.identify_period_range_s[1]),
+                (config.identify_damping_range[0], config.identify_damping_range[1]),
                 config.identify_noise_gain,
                 config.identify_ar_order,
             )

@@ -40,6 +40,8 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
+from typing import Any
+
 import numpy as np
 
 N_STATE = 15
@@ -249,7 +251,9 @@ def predict(
     x[TH] += rates * dt
     f = np.eye(n)
     parallel = deck4 is not None and isinstance(deck4[0], TwoWaves)
+    q_deck4: tuple[Any, ...]
     if parallel:
+        assert deck4 is not None
         # roll and pitch: the sum of two oscillators (TwoWaves), explicit Euler
         angles, second, second_rate = x[TH][:2] - rates[:2] * dt, x[15:17].copy(), x[17:19].copy()
         q_deck4 = (deck4[0].q1, deck4[0].q2, deck4[1].q1, deck4[1].q2)
