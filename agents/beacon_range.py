@@ -275,3 +275,8 @@ def make_beacon_range(env: Any, config: BeaconRangeConfig | None = None) -> Beac
             f"{base.config.estimation.observed!r}: beacon-range needs 'beacon' (bearing + range)",
         )
     return BeaconRangePolicy(base.config.action, config, dt=base.env_dt)
+
+
+def build_beacon_range(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``beacon-range`` (:mod:`agents.policy_registry`'s builder)."""
+    return make_beacon_range(env)

@@ -93,6 +93,28 @@ POLICIES: dict[str, PolicySpec] = {
             "visual servoing on the estimated deck pose: centre, descend, flare for a calm "
             "window, land",
         ),
+        PolicySpec(
+            "svgs-routine",
+            "heuristic",
+            "supported",
+            LANDING_TASK,
+            "agents.svgs_routine:build_svgs_routine",
+            "the SVGS paper's landing routine from altitude (search, align, descend, relocate, "
+            "land) on the fused estimate, committing through the timing model",
+            estimator="fused",
+            scenarios=("high-approach", "svgs-100m"),
+        ),
+        PolicySpec(
+            "beacon-range",
+            "baseline",
+            "supported",
+            LANDING_TASK,
+            "agents.beacon_range:build_beacon_range",
+            "the IR-LOCK-style baseline: a beacon's bearing and the rangefinder through a "
+            "landing-target filter, PX4's precision-landing search",
+            estimator="beacon",
+            scenarios=("high-approach", "svgs-100m-irlock"),
+        ),
         _timing(
             "land-now",
             kind="baseline",

@@ -597,3 +597,10 @@ def make_svgs_routine(env: Any, config: RoutineConfig | None = None) -> SvgsRout
     """The routine for a ``DeckLanding-v0`` environment (its action scaling and step)."""
     base = env.unwrapped
     return SvgsRoutinePolicy(base.config.action, config, dt=base.env_dt)
+
+
+def build_svgs_routine(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``svgs-routine`` (:mod:`agents.policy_registry`'s builder): commits through the
+    shipped timing model, or the one at ``model_path``."""
+    config = RoutineConfig(timing_model_path=model_path) if model_path else None
+    return make_svgs_routine(env, config)

@@ -151,6 +151,13 @@ class Scenario:
     #: a held-out sea (:mod:`landing_env.sea.heldout`): it registers no id of its own but
     #: flies its sibling's ids on its own config (``gym.make(id, config=...)``)
     held_out: bool = False
+    #: registers its own ids (False: it flies the ids it names on its own config, as the
+    #: held-out seas do)
+    own_id: bool = True
+
+    def __post_init__(self) -> None:
+        if self.held_out and self.own_id:
+            object.__setattr__(self, "own_id", False)
 
     def overrides(
         self, task: str, estimator: str | None = None, camera_mode: str = "project"
@@ -242,6 +249,22 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
         "from 20 m up and 5 m off, gusty wind, sea state 3",
         {LANDING_TASK: "DeckLanding-HighApproach-v0"},
     ),
+    # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
+    # on another config (``gym.make("DeckLanding-HighApproach-v0", config="svgs-100m")``)
+    "svgs-100m": Scenario(
+        "svgs-100m",
+        "svgs-100m",
+        "the SVGS paper's flights: from 101.7-106.7 m over a static pad, three landmarks",
+        {LANDING_TASK: "DeckLanding-HighApproach-v0"},
+        own_id=False,
+    ),
+    "svgs-100m-irlock": Scenario(
+        "svgs-100m-irlock",
+        "svgs-100m-irlock",
+        "the SVGS paper's IR-LOCK flights: from 53.1-55.0 m over a static pad",
+        {LANDING_TASK: "DeckLanding-HighApproach-v0"},
+        own_id=False,
+    ),
 }
 
 #: what each id family's versions were (the ids before the current ones are not registered)
@@ -310,7 +333,7 @@ def _task_phrase(task: str) -> str:
 def _ids() -> dict[str, ScenarioId]:
     ids: dict[str, ScenarioId] = {}
     for scenario in (*SCENARIOS.values(), *APPROACH_SCENARIOS.values()):
-        if scenario.held_out:
+        if not scenario.own_id:
             continue
         for task, env_id in scenario.ids.items():
             ids[env_id] = ScenarioId(

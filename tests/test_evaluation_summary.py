@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.evaluation import approach, landing
+from agents.evaluation import approach
+from agents.evaluation import landing_summary as landing
 from agents.evaluation.approach import ApproachEpisode
 from agents.evaluation.landing import EpisodeResult
 from agents.evaluation.runner import SeedFailure

@@ -10,14 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.evaluation.landing import (
-    EpisodeResult,
-    compare_with_oracle,
-    evaluate_landing,
-    markdown_table,
-    run_episode,
-    summarise,
-)
+from agents.evaluation.landing import EpisodeResult, evaluate_landing, run_episode
+from agents.evaluation.landing_summary import compare_with_oracle, markdown_table, summarise
 from agents.policy_registry import make_env_and_policy, make_policy
 from agents.timing.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
 from landing_env.config import TouchdownConfig

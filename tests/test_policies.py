@@ -9,13 +9,9 @@ import pytest
 
 from agents.align_descend import AlignDescendPolicy, Phase
 from agents.calm_window import CalmConfig, predict_calm
-from agents.evaluation.landing import (
-    EpisodeResult,
-    markdown_table,
-    run_episode,
-    summarise,
-    wilson_interval,
-)
+from agents.evaluation.landing import EpisodeResult, run_episode
+from agents.evaluation.landing_summary import markdown_table, summarise
+from agents.evaluation.summary import wilson_interval
 from agents.policy_registry import make_env_and_policy, make_policy
 from agents.timing.policies import LandNowPolicy
 from estimation.frames import tilt_deg

@@ -62,6 +62,7 @@ from agents.evaluation.summary import (
     write_summary_files,
 )
 from agents.evaluation.summary import markdown_table as summary_table
+from agents.policy_registry import POLICIES
 from agents.svgs_routine import RoutineConfig, make_svgs_routine
 from estimation.frames import R_PD, matrix_from_euler_zyx
 from estimation.registry import ESTIMATOR_NAMES
@@ -69,7 +70,9 @@ from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_choice
 
 #: the policies of this evaluation and the estimator each reads by default
-APPROACH_POLICIES: dict[str, str] = {"svgs-routine": "fused", "beacon-range": "beacon"}
+APPROACH_POLICIES: dict[str, str] = {
+    name: str(POLICIES[name].estimator) for name in ("svgs-routine", "beacon-range")
+}
 #: the routine's estimator when ``fused`` is not (yet) available
 ROUTINE_FALLBACK_ESTIMATOR = "atda"
 #: a trajectory point every this many control periods (plots only)
