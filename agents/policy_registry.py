@@ -35,6 +35,7 @@ from landing_env.scenarios import (
     TIMING_TASK,
     dotted,
     scenario_id,
+    step_limit_on,
 )
 
 #: where the shipped models are installed (package data of ``agents``)
@@ -434,8 +435,14 @@ def make_env_and_policy(
     env_id, overrides = env_settings(
         policy_name, scenario, estimator, camera_mode, sensing, extra_overrides
     )
+    config = scenario_config(scenario)
     env = gym.make(
-        env_id, config=scenario_config(scenario), overrides=overrides, render_mode=render_mode
+        env_id,
+        config=config,
+        overrides=overrides,
+        render_mode=render_mode,
+        # a scenario flying another's id on its own config ends where its own config says
+        max_episode_steps=step_limit_on(env_id, config, overrides),
     )
     try:
         policy = make_policy(policy_name, env, model_path, tuple(allow_mismatch))

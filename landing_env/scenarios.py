@@ -389,6 +389,18 @@ def register_all() -> None:
         )
 
 
+def step_limit_on(env_id: str, config: str, overrides: dict[str, Any] | None = None) -> int:
+    """The ``max_episode_steps`` of ``env_id`` flown on another ``config`` (a held-out sea, the
+    SVGS flights on the high approach's id): ``gym.make(env_id, config=config,
+    max_episode_steps=...)`` then truncates where that config's episode ends."""
+    scenario = SCENARIO_IDS[env_id]
+    return _step_limit(
+        ScenarioId(
+            scenario.task, config, scenario.description, {**scenario.overrides, **(overrides or {})}
+        )
+    )
+
+
 def _step_limit(scenario: ScenarioId) -> int:
     """``episode_step_limit`` from the scenario's simulation and timing sections alone:
     registration reads no calibration file and builds no sensor (importing stays cheap)."""
@@ -422,4 +434,5 @@ __all__ = [
     "landing_overrides",
     "register_all",
     "scenario_id",
+    "step_limit_on",
 ]

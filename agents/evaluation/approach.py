@@ -68,6 +68,7 @@ from estimation.frames import R_PD, matrix_from_euler_zyx
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import APPROACH_SCENARIOS, LANDING_TASK, scenario_id, step_limit_on
 
 #: the policies of this evaluation and the estimator each reads by default
 APPROACH_POLICIES: dict[str, str] = {
@@ -119,6 +120,15 @@ class ApproachEpisode(EpisodeRecord):
     trajectory: list[tuple[float, float, float, float]] = field(default_factory=list, repr=False)
 
 
+def approach_id(scenario: str) -> str:
+    """The registered id a scenario of the approach flies: its own (``high-approach``), the
+    one it shares (``svgs-100m``: the high approach on the paper's config), or the bare task
+    for a config given by path."""
+    if scenario in APPROACH_SCENARIOS:
+        return scenario_id(scenario, LANDING_TASK)
+    return LANDING_TASK
+
+
 def make_env_and_policy(
     policy_name: str,
     scenario: str,
@@ -140,7 +150,9 @@ def make_env_and_policy(
         "estimation.compare": [],
         **(overrides or {}),
     }
-    env = gym.make("DeckLanding-v0", config=scenario, overrides=settings)
+    env_id = approach_id(scenario)
+    limit = step_limit_on(env_id, scenario, settings) if env_id != LANDING_TASK else None
+    env = gym.make(env_id, config=scenario, overrides=settings, max_episode_steps=limit)
     try:
         if policy_name == "svgs-routine":
             config = RoutineConfig(use_timing_model=routine_timing == "model")
