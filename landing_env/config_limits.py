@@ -223,6 +223,9 @@ LIMITS: dict[str, Limit] = {
     "timing.guidance.lean_filter_s": _nonneg(60.0, "s"),
     "timing.guidance.lost_tag_pause_s": _nonneg(600.0, "s"),
     "timing.guidance.max_flare_wait_s": _nonneg(600.0, "s"),
+    # the IR-LOCK-style beacon (estimation/beacon.py)
+    "estimation.beacon.min_corner_area_px": _nonneg(1e7, "px^2; a 4 K frame has 8.3e6"),
+    "estimation.beacon.max_range_m": _positive(1e4, "m; the paper's COTS beacon: 40 m"),
 }
 for _source in ("ihrcf", "crhf"):
     # inf disables these two checks (RangeFusionConfig)
