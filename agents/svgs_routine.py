@@ -14,10 +14,10 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
   estimate, go back to the last position with a trusted estimate, horizontally first (at the
   current height), then in 3D; still nothing there: ``scan`` again from that position.
 * ``hold`` / ``land``: the final approach through the timing task's machinery
-  (:class:`~landing_env.timing.env.DeckGuidance` holds at the timing task's hold height with
-  the same :class:`~landing_env.timing.env.DeckMotionHistory`): if the trained timing model
+  (:class:`~landing_env.timing.guidance.DeckGuidance` holds at the timing task's hold height with
+  the same :class:`~landing_env.timing.history.DeckMotionHistory`): if the trained timing model
   ``agents/models/timing_dqn.zip`` is installed it chooses when to commit (observation built
-  by :class:`~landing_env.timing.env.TimingObservationLayout`, one decision per
+  by :class:`~landing_env.timing.layout.TimingObservationLayout`, one decision per
   ``steps_per_decision`` periods, forced at ``wait_limit_s``), otherwise the quiescent
   heuristic (:func:`agents.calm_window.predict_calm`) does; ``land`` is
   ``DeckGuidance.descend`` to touchdown.  ``policy.timing_source`` says which.
@@ -52,7 +52,8 @@ from landing_env.config import ActionConfig
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.timing.config import TimingConfig
-from landing_env.timing.guidance import DeckGuidance, GuidanceGains
+from landing_env.timing.guidance import DeckGuidance
+from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import TimingObservationLayout
 

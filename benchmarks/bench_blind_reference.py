@@ -49,7 +49,7 @@ def aided_tracker(env: Any) -> Iterator[None]:
     look-ahead's restored copies are read through it, as they replace its state in place).
     The tracker's own ``measure`` is put back on leaving, so that each run aids only its own
     environment."""
-    from landing_env.timing.guidance import DeckTracker
+    from landing_env.timing.deck_tracker import DeckTracker
 
     measure = DeckTracker.measure
 

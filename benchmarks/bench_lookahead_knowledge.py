@@ -3,9 +3,9 @@
     python -m benchmarks.bench_lookahead_knowledge --data FILE.npz [--episodes N] [--draws D]
         [--variants deck-oracle forecast onboard] [--onboard KEY=VALUE ...] [--out FILE.npz]
 
-Replays recorded look-ahead episodes (``python -m agents.timing.lookahead collect``; the drone waits
-through every check) and, at each recorded check, tries the commit now again in ``draws``
-futures of other look-aheads, the gusts' and the sensors' draws shared (the same seeds)
+Replays recorded look-ahead episodes (``python -m agents.timing.lookahead_data collect``; the
+drone waits through every check) and, at each recorded check, tries the commit now again in
+``draws`` futures of other look-aheads, the gusts' and the sensors' draws shared (the same seeds)
 with the recorded one (:data:`VARIANTS`):
 
 * ``deck-oracle``: the deck's true future and the true present (drone, gust, airframe), as
@@ -36,7 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.timing.lookahead import LookaheadSettings, check_features, recorded_tries
+from agents.timing.lookahead import LookaheadSettings, check_features
+from agents.timing.lookahead_data import recorded_tries
 from agents.timing.oracle import TriedCommit
 from benchmarks.bench_ship_forecast_labels import auc
 from landing_env.errors import ConfigError

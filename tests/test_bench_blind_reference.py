@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from benchmarks.bench_blind_reference import aided_tracker
-from landing_env.timing.guidance import DeckTracker
+from landing_env.timing.deck_tracker import DeckTracker
 
 
 def _fake_env(x: float, y: float) -> SimpleNamespace:

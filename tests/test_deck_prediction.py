@@ -402,7 +402,7 @@ def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
 
 def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_contact():
     from landing_env.timing.config import TimingConfig
-    from landing_env.timing.guidance import GuidanceGains
+    from landing_env.timing.guidance_gains import GuidanceGains
 
     timed = GuidanceGains(descent_profile="timed")
     config = TimingConfig(guidance=timed, contact_window_s=[1.2, 1.5])
@@ -569,8 +569,7 @@ def test_the_value_wave_off_demands_less_as_the_wait_runs_out_and_nothing_at_the
         env.reset(seed=3)
         demanded = []
         for wait_s in (0.0, 5.0, 10.0, 13.0, 14.0):
-            base._wait_s = wait_s
-            demanded.append(base._wave_off_chance(0.5))
+            demanded.append(base.deck_ahead.wave_off_chance(0.5, wait_s))
         assert demanded == sorted(demanded, reverse=True) and demanded[0] > 0.95
         assert demanded[-1] == 0.0  # after the climb back nothing is left: never abort
     finally:
@@ -598,11 +597,12 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
     env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=_WAVE_OFF_VERSIONS[version])
     try:
         base = env.unwrapped
-        assert base.layout.n_history == 160 and base.tilt_predictor is not None
+        assert base.layout.n_history == 160 and base.deck_ahead.tilt_predictor is not None
         # the scenario's own predictor: bench-ss4.yaml's deck_predictor
-        assert base.timing.tilt_model == "scenario" and base.resolved_tilt_model() == "bench-ss4"
+        resolved = base.deck_ahead.resolved_tilt_model()
+        assert base.timing.tilt_model == "scenario" and resolved == "bench-ss4"
         assert base.timing.wave_off_rule == ("fixed" if version == 2 else "value")
-        assert (base.wave_off_values is None) == (version == 2)
+        assert (base.deck_ahead.wave_off_values is None) == (version == 2)
         assert len(base.timing.contact_times_s) == (4 if version == 4 else 1)
         policy = make_policy("predictive", env)
         assert policy.contact_times_s == base.timing.contact_times_s
@@ -615,7 +615,7 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
 
 def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     from agents.timing.cards import descent_signature
-    from landing_env.timing.guidance import GuidanceGains
+    from landing_env.timing.guidance_gains import GuidanceGains
 
     gains = GuidanceGains(descent_profile="timed")
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
@@ -710,7 +710,8 @@ def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_ov
     # the other policies fly the scenario as it is
     env, _ = make_env_and_policy("quiescent", "bench-ss4", "tight")
     try:
-        assert env.unwrapped.timing.history_s == 2.0 and env.unwrapped.tilt_predictor is None
+        base = env.unwrapped
+        assert base.timing.history_s == 2.0 and base.deck_ahead.tilt_predictor is None
     finally:
         env.close()
 
@@ -752,16 +753,17 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
             assert not terminated
         parts = base.layout.decode(observation)
         rows = base.history.rows()
-        columns = [HISTORY_FEATURES.index(n) for n in base.tilt_predictor.channels]
+        predictor = base.deck_ahead.tilt_predictor
+        columns = [HISTORY_FEATURES.index(n) for n in predictor.channels]
         valid = rows[:, HISTORY_FEATURES.index("valid")] > 0.5
         expected = [
-            base.tilt_predictor.predict(rows[:, columns], valid, h).probability_within(5.0)
+            predictor.predict(rows[:, columns], valid, h).probability_within(5.0)
             for h in base.timing.contact_times_s
         ]
         assert parts.prediction[5] == 1.0
         assert np.allclose(parts.prediction[:4], expected, atol=1e-6)
         left = base.timing.wait_limit_s - info["wait_s"]
-        value = base.observed_values.threshold(left, base.timing.opportunity_s)
+        value = base.deck_ahead.observed_values.threshold(left, base.timing.opportunity_s)
         assert parts.prediction[4] == pytest.approx(value, abs=1e-6)
         assert 0.0 < value < 1.0
     finally:
@@ -898,7 +900,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     # the card accepts bench-ss4 (its own predictor) under ideal sensing as it is
     env, policy = make_env_and_policy("timing-dqn-predictive", "bench-ss4", "tight")
     try:
-        assert env.unwrapped.resolved_tilt_model() == "bench-ss4"
+        assert env.unwrapped.deck_ahead.resolved_tilt_model() == "bench-ss4"
         assert policy is not None
     finally:
         env.close()
@@ -924,8 +926,8 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
             ),
         )
         try:
-            assert env.resolved_tilt_model() == f"bench-ss{n}"
-            loaded[n] = env.tilt_predictor
+            assert env.deck_ahead.resolved_tilt_model() == f"bench-ss{n}"
+            loaded[n] = env.deck_ahead.tilt_predictor
         finally:
             env.close()
     # two fitted predictors, not one file read twice

@@ -10,10 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.timing.lookahead import (
+from agents.timing.lookahead import LookaheadSettings, check_features
+from agents.timing.lookahead_data import (
     TRANSITION_KEYS,
-    LookaheadSettings,
-    check_features,
     collect_transitions,
     load_transitions,
     replay_success,
@@ -200,7 +199,7 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_
     tried = np.flatnonzero(recorded["check_tried"])
     assert len(tried) >= 5 and recorded["draw_lands"].shape[1] == 3
     # every observation rebuilt from the draws equals the recorded one, the next ones too
-    from agents.timing.lookahead import with_draws
+    from agents.timing.lookahead_data import with_draws
 
     same = with_draws(recorded, settings)
     assert np.array_equal(same["observation"], recorded["observation"])
@@ -448,7 +447,7 @@ def test_the_discrimination_benchmark_scores_a_feature_that_orders_the_outcomes_
 def test_the_knowledge_benchmark_replays_a_recorded_episode_and_tries_each_check_again(
     small_forecast, tmp_path
 ) -> None:
-    from agents.timing.lookahead import recorded_tries
+    from agents.timing.lookahead_data import recorded_tries
     from benchmarks.bench_lookahead_knowledge import VARIANTS, replay_episode
 
     settings = LookaheadSettings(draws=2, check_every_s=1.0)

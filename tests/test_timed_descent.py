@@ -19,7 +19,9 @@ from agents.timing.policies import SHIPPED_TIMING_MODEL
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS, dotted
-from landing_env.timing.guidance import DeckGuidance, GuidanceGains, timed_descent_reference
+from landing_env.timing.guidance import DeckGuidance
+from landing_env.timing.guidance_gains import GuidanceGains
+from landing_env.timing.timed_descent import timed_descent_reference
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}
 RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
@@ -268,9 +270,9 @@ def test_the_quadratic_wave_off_predictor_follows_a_curving_deck() -> None:
     rows = base.history.rows()
     assert rows[-1, 9] == 1.0
     base.timing.wave_off_predictor = "linear"
-    linear = base._wave_off_due(0.5)
+    linear = base.deck_ahead.wave_off_due(0.5, base._contact_s, base._wait_s)
     base.timing.wave_off_predictor = "quadratic"
-    quadratic = base._wave_off_due(0.5)
+    quadratic = base.deck_ahead.wave_off_due(0.5, base._contact_s, base._wait_s)
     env.close()
     # 0.8 s ahead the parabola is at 4 - 4 * 1.0^2 = 0 deg: no wave-off; the straight line
     # carries the newest 3.84 deg along the rate window's slope (+0.2 deg/s, the parabola's

@@ -214,7 +214,7 @@ def test_fuzzed_decisions_on_the_forecast_ids_keep_every_observation_in_its_spac
 def test_a_forecast_that_cannot_be_made_is_flagged_not_raised(ship_env, monkeypatch) -> None:
     base = ship_env.unwrapped
     ship_env.reset(seed=5030)
-    forecast = base.deck_forecast
+    forecast = base.forecast_observation.deck_forecast
     monkeypatch.setattr(forecast, "predict_targets", lambda *_: "too few HMS samples")
     observation, _, _, _, _ = ship_env.step(0)
     parts = base.layout.decode(observation)

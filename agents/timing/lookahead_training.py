@@ -4,15 +4,16 @@ Online, a DQN on :class:`~agents.timing.lookahead.LookaheadTimingWrapper` learns
 it took at each check, and each check costs four descents of look-ahead (~0.7 s of CPU): in
 50 minutes on this machine it saw some 5 000 checks and still committed at the first or
 second (73 % at its 30-episode evaluations, README).
-:func:`agents.timing.lookahead.collect_transitions` records **both** actions' outcomes at
+:func:`agents.timing.lookahead_data.collect_transitions` records **both** actions' outcomes at
 every check of whole episodes instead (the commit tried
 in a saved copy with the episode's own future, the wait played on), so every check labels
 the commit, and the DQN is fitted on that fixed replay buffer: SB3's own Q-learning update
 (:meth:`stable_baselines3.DQN.train`, its loss, optimiser and target network), run for as many
 gradient steps as it takes, with no further simulation.  Recorded episodes held out by seed
-score each model exactly (:func:`agents.timing.lookahead.replay_success`: a policy's path through a
-recorded episode is the recorded one up to its commit).  With ``offline.ensemble: K``, K DQNs
-of consecutive seeds are fitted side by side and scored, and decide, by their mean Q-values;
+score each model exactly (:func:`agents.timing.lookahead_data.replay_success`: a policy's path
+through a recorded episode is the recorded one up to its commit).  With
+``offline.ensemble: K``, K DQNs of consecutive seeds are fitted side by side and scored, and
+decide, by their mean Q-values;
 the model shipped is one SB3 DQN distilled from that mean (:func:`distil`), so the policy
 that loads it is unchanged.
 
@@ -34,7 +35,8 @@ import yaml
 
 from agents.policy_registry import make_env_and_policy
 from agents.timing.cards import card_for_training, merge_cards, write_metadata
-from agents.timing.lookahead import LookaheadSettings, load_transitions, replay_success
+from agents.timing.lookahead import LookaheadSettings
+from agents.timing.lookahead_data import load_transitions, replay_success
 from agents.timing.training import algorithm_kwargs, load_train_config
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range

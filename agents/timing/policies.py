@@ -346,7 +346,7 @@ def build_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -
     return PredictivePolicy(
         base.layout,
         base.env_dt,
-        _tilt_model(model_path, base.resolved_tilt_model()),
+        _tilt_model(model_path, base.deck_ahead.resolved_tilt_model()),
         base.config.touchdown.max_deck_tilt_deg,
         base.timing.wait_limit_s,
         base.timing.opportunity_s,

@@ -205,14 +205,7 @@ class DeckLandingBaseEnv(gym.Env):
             raise RuntimeError("the episode has ended; call reset()")
         action = validate_action(action, self.action_space, ", ".join(BOX_ACTION_FIELDS))
         self._action_clipped = bool(np.any(np.abs(action) > 1.0))
-        setpoint = self._action_to_setpoint(np.clip(action, -1.0, 1.0))
-        self._report = self.world.step(setpoint)
-        if self.render_mode is not None or self.config.camera.mode == "render":
-            # the legs are visual only: move them when someone (or the camera) looks
-            self.world.stewart.update_leg_visuals()
-        self._steps += 1
-        self._outcome = self._outcome_after(self._report)
-        self._sensing = self._sense()
+        self._control_period(self._action_to_setpoint(np.clip(action, -1.0, 1.0)))
         reward = self._reward()
         terminated = self._terminated()
         truncated = not terminated and self._truncated()
@@ -229,6 +222,17 @@ class DeckLandingBaseEnv(gym.Env):
     def close(self) -> None:
         _release_slot(self)
         self.world.close()
+
+    def _control_period(self, setpoint: VelocitySetpoint) -> None:
+        """One control period of the world under ``setpoint``: step the world, count the
+        step, judge the outcome and sense (each task builds its reward and observation)."""
+        self._report = self.world.step(setpoint)
+        if self.render_mode is not None or self.config.camera.mode == "render":
+            # the legs are visual only: move them when someone (or the camera) looks
+            self.world.stewart.update_leg_visuals()
+        self._steps += 1
+        self._outcome = self._outcome_after(self._report)
+        self._sensing = self._sense()
 
     # ------------------------------------------------------------------ spec
     @property

@@ -8,26 +8,21 @@ the final descent to touchdown **within that one step** (its control periods run
 step keeps the decision problem a clean stopping problem: no steps with ignored actions reach
 the learner.  The settings are the config's ``timing`` section
 (:class:`~landing_env.timing.config.TimingConfig`); the observation is laid out by
-:class:`~landing_env.timing.layout.TimingObservationLayout`.
+:class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
+(the wave-off, the contact window, the prediction observation) is read through
+:class:`~landing_env.timing.deck_ahead.DeckAhead`, the helideck forecast of the ``forecast``
+observation through :class:`~landing_env.timing.forecast_observation.ForecastObservation`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
-from estimation.frames import (
-    euler_zyx_from_matrix,
-    level_from_body,
-    levelled_deck_pose,
-    tilt_deg,
-)
-from estimation.optimal_stopping import StoppingValues
+from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config import episode_step_limit
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
@@ -35,23 +30,15 @@ from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError
 from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
-from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import FORECAST_KINDS, deck_forecast_for
-from landing_env.timing.config import (
-    CAMERA_BELOW_COM_M,
-    SCENARIO_TILT_MODEL,
-    WAVE_OFF_CLIMB_S,
-    TimingConfig,
-)
-from landing_env.timing.guidance import DeckGuidance, GuidanceGains, OwnState
-from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.timing.config import CAMERA_BELOW_COM_M, WAVE_OFF_CLIMB_S, TimingConfig
+from landing_env.timing.deck_ahead import DeckAhead
+from landing_env.timing.deck_tracker import OwnState
+from landing_env.timing.forecast_observation import ForecastObservation
+from landing_env.timing.guidance import DeckGuidance
+from landing_env.timing.guidance_gains import GuidanceGains
+from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import timing_layout
 from landing_env.touchdown import Outcome
-
-_ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
-    HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
-)
 
 
 class DeckLandingTimingEnv(DeckLandingBaseEnv):
@@ -193,16 +180,18 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         n_history = self.layout.n_history
         self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
         self.guidance = DeckGuidance(self._guidance_gains(), self.env_dt)
-        #: the scenario's deck-tilt predictor, read by the model wave-off, the contact
-        #: window and the prediction observation (None when none is on)
-        self.tilt_predictor = self._load_tilt_predictor()
-        self.wave_off_values = self._wave_off_values()
-        #: the value of waiting on that the prediction observation holds
-        self.observed_values = self._observed_values()
-        #: the ship's helideck forecast the forecast observation holds (None when not on),
-        #: and this episode's HMS record
-        self.deck_forecast = self._load_deck_forecast()
-        self._monitor: HelideckMonitor | None = None
+        try:
+            #: the scenario's deck-tilt predictor and what it foresees (the model wave-off,
+            #: the contact window, the prediction observation)
+            self.deck_ahead = DeckAhead(self.config, self.history, self.env_dt)
+            #: the helideck forecast and own state of the forecast observation (None when
+            #: the observation holds none)
+            self.forecast_observation = (
+                ForecastObservation(self.config) if self.timing.observation == "forecast" else None
+            )
+        except ConfigError:
+            self.world.close()
+            raise
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         #: set True to keep a record of every control period of a step (a commit step holds
@@ -233,133 +222,6 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise
         return replace(gains, view_half_tan=half_view_tan)
 
-    def _wave_off_values(self) -> StoppingValues | None:
-        """The value of waiting on for the ``value`` wave-off: from the chances the
-        predictor gave held-out examples at the contact."""
-        t = self.timing
-        if self.tilt_predictor is None or t.wave_off_rule != "value":
-            return None
-        if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
-            return None
-        values = self.tilt_predictor.stopping_values(t.contact_times_s, t.wave_off_tilt_deg)
-        if values is None:
-            self.world.close()
-            raise ConfigError(
-                "timing.wave_off_rule",
-                f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
-                f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it "
-                "with `python -m agents.timing.tilt_fit fit`",
-            )
-        return values
-
-    def _load_deck_forecast(self) -> LinearMotionPredictor | None:
-        """The helideck forecast of this scenario's sea, fitted once per process (the
-        ``forecast`` observation's; None otherwise)."""
-        if self.timing.observation != "forecast":
-            return None
-        kind = self.config.motion.kind
-        if kind not in FORECAST_KINDS:
-            self.world.close()
-            raise ConfigError(
-                "timing.observation",
-                f"'forecast' needs a sea to forecast (motion.kind one of {FORECAST_KINDS}), "
-                f"not {kind!r}",
-            )
-        return deck_forecast_for(self.config.motion, HelideckMonitorConfig())
-
-    def _predictor_columns(self) -> list[int]:
-        """The history's columns the deck-tilt predictor reads."""
-        assert self.tilt_predictor is not None
-        return [HISTORY_FEATURES.index(name) for name in self.tilt_predictor.channels]
-
-    def _observed_values(self) -> StoppingValues | None:
-        """The value of waiting on for the prediction observation: from the chances the
-        predictor gave held-out examples at the contact times, within the touchdown limit."""
-        t = self.timing
-        if t.observation != "prediction" or self.tilt_predictor is None:
-            return None
-        limit = self.config.touchdown.max_deck_tilt_deg
-        values = self.tilt_predictor.stopping_values(t.contact_times_s, limit)
-        if values is None:
-            self.world.close()
-            raise ConfigError(
-                "timing.observation",
-                f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
-                f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.timing.tilt_fit fit`",
-            )
-        return values
-
-    def resolved_tilt_model(self) -> str:
-        """``timing.tilt_model``, ``scenario`` resolved to the config's ``deck_predictor``
-        (the predictor fitted to this scenario's deck; empty when it names none)."""
-        name = self.timing.tilt_model
-        return self.config.deck_predictor if name == SCENARIO_TILT_MODEL else name
-
-    def _load_tilt_predictor(self) -> LinearTiltPredictor | None:
-        """The fitted deck-tilt predictor (read by the ``model`` wave-off, the contact
-        window and the prediction observation), checked against the history it will read."""
-        t = self.timing
-        wave_off = t.wave_off_predictor == "model" and t.wave_off_tilt_deg > 0.0
-        observed = t.observation == "prediction"
-        if not (wave_off or t.contact_window_s or observed):
-            return None
-        user = (
-            "the model wave-off"
-            if wave_off
-            else "timing.contact_window_s"
-            if t.contact_window_s
-            else "timing.observation = 'prediction'"
-        )
-        name = self.resolved_tilt_model()
-        if not name:
-            self.world.close()
-            what = (
-                "'scenario' reads the scenario's deck_predictor, which this config does not name"
-                if t.tilt_model == SCENARIO_TILT_MODEL
-                else "is empty"
-            )
-            raise ConfigError(
-                "timing.tilt_model",
-                f"{what}; {user} needs the scenario's deck-tilt predictor "
-                "(e.g. bench-ss4, or a file written by `python -m agents.timing.tilt_fit fit`)",
-            )
-        path = tilt_predictor_path(name)
-        try:
-            model = LinearTiltPredictor.load(path)
-        except (OSError, ValueError) as error:
-            self.world.close()
-            shipped = sorted(p.stem.removeprefix("deck_tilt_") for p in PREDICTOR_DIR.glob("*.npz"))
-            raise ConfigError(
-                "timing.tilt_model",
-                f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.timing.tilt_fit fit`",
-            ) from None
-        unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
-        if unknown:
-            self.world.close()
-            raise ConfigError(
-                "timing.tilt_model",
-                f"{path.name} reads {unknown}, which the history does not hold "
-                f"({', '.join(HISTORY_FEATURES)})",
-            )
-        if abs(model.dt_s - self.env_dt) > 1e-9:
-            self.world.close()
-            raise ConfigError(
-                "timing.tilt_model",
-                f"{path.name} was fitted at {1 / model.dt_s:g} Hz; simulation.env_hz is "
-                f"{1 / self.env_dt:g}",
-            )
-        if self.history.length < model.n_window:
-            self.world.close()
-            raise ConfigError(
-                "timing.history_s",
-                f"{t.history_s:g} s is shorter than the deck-tilt predictor's {model.window_s:g} s "
-                f"window: set timing.history_s={model.window_s:g}",
-            )
-        return model
-
     @property
     def episode_step_limit(self) -> int:
         """The most decisions an episode can take: ``wait_limit_s`` forces the commit."""
@@ -388,12 +250,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self.guidance.reset()
         self.history.reset()
         self._base_observation = base_observation
-        if self.deck_forecast is not None:
+        if self.forecast_observation is not None:
             # the ship's HMS record of this episode (its errors drawn from the episode's seed)
             hms_seed = int(self.np_random.integers(2**31))
-            self._monitor = HelideckMonitor(
-                self.world.stewart.motion, HelideckMonitorConfig(), hms_seed
-            )
+            self.forecast_observation.reset(self.world.stewart.motion, hms_seed)
         self.guidance.observe(base_observation, self._own_state())
         self._record()
         self.frames_of_last_step = []
@@ -451,12 +311,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     # ------------------------------------------------------------------ internals
     def _advance(self, setpoint: VelocitySetpoint) -> None:
         """One control period of the world under ``setpoint``, then sense and record."""
-        self._report = self.world.step(setpoint)
-        if self.render_mode is not None or self.config.camera.mode == "render":
-            self.world.stewart.update_leg_visuals()
-        self._steps += 1
-        self._outcome = self._outcome_after(self._report)
-        self._sensing = self._sense()
+        self._control_period(setpoint)
         self._base_observation = self._observation()
         self.guidance.observe(self._base_observation, self._own_state())
         self._record()
@@ -512,7 +367,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         """The final descent, run to touchdown (or crash, or the descent timeout), or until a
         wave-off (``wave_off`` allows it); returns the seconds a wave-off cost (else 0)."""
         self._committed = True
-        self._plan_contact()
+        # the contact time of the descent starting now (the contact window's choice), and the
+        # timed descent's duration that meets the deck then
+        self._contact_s = self.deck_ahead.plan_contact()
+        self.guidance.plan_descent(self.timing.descent_time_for(self._contact_s))
         start = self.world.time
         while self._outcome is Outcome.IN_FLIGHT:
             if self.world.time - start >= self.timing.descent_timeout_s:
@@ -522,7 +380,11 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             assert self._base_observation is not None
             self._advance(self.guidance.descend(self._base_observation, self._own_state()))
             elapsed = self.world.time - start
-            if wave_off and self._outcome is Outcome.IN_FLIGHT and self._wave_off_due(elapsed):
+            if (
+                wave_off
+                and self._outcome is Outcome.IN_FLIGHT
+                and self.deck_ahead.wave_off_due(elapsed, self._contact_s, self._wait_s)
+            ):
                 # go around: climb back to the hold (within 5 cm, or for at most 1.5 s) before
                 # the agent decides again, so that the next descent starts where they all do
                 self._committed = False
@@ -542,68 +404,6 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._descent_s = end - start
         return 0.0
 
-    def _plan_contact(self) -> None:
-        """The contact time of the descent starting now: with ``contact_window_s``, the one in
-        it where the predictor gives the best chance of a deck within the touchdown limit
-        (``expected_contact_s`` when it cannot predict); the guidance's timed descent is given
-        the duration that meets the deck then."""
-        t = self.timing
-        self._contact_s = t.expected_contact_s
-        if t.contact_window_s and self.tilt_predictor is not None:
-            rows = self.history.rows()
-            columns = self._predictor_columns()
-            best = self.tilt_predictor.best_within(
-                rows[:, columns],
-                rows[:, _VALID] > 0.5,
-                t.contact_times_s,
-                self.config.touchdown.max_deck_tilt_deg,
-            )
-            if best.valid:
-                self._contact_s = best.horizon_s
-        self.guidance.plan_descent(t.descent_time_for(self._contact_s))
-
-    def _wave_off_chance(self, elapsed_s: float) -> float:
-        """The chance of a deck within the limit below which the model wave-off aborts,
-        ``elapsed_s`` into the descent: ``wave_off_probability``, or with the ``value`` rule
-        the value of waiting on after the climb back."""
-        t = self.timing
-        if self.wave_off_values is None:
-            return t.wave_off_probability
-        remaining_s = t.wait_limit_s - self._wait_s - elapsed_s - WAVE_OFF_CLIMB_S
-        return self.wave_off_values.threshold(remaining_s, t.opportunity_s)
-
-    def _wave_off_due(self, elapsed_s: float) -> bool:
-        """The deck tilt predicted at the contact is beyond ``wave_off_tilt_deg`` while a
-        wave-off is still possible (see :class:`TimingConfig`)."""
-        t = self.timing
-        decision_s = t.steps_per_decision * self.env_dt
-        first = max(decision_s, t.wave_off_from_s) - 1e-9
-        if t.wave_off_tilt_deg <= 0.0 or not first <= elapsed_s <= t.wave_off_until_s:
-            return False
-        rows = self.history.rows()
-        row = rows[-1]
-        if row[_VALID] < 0.5:
-            return False  # nothing to predict with: the descent goes on
-        ahead = max(self._contact_s - elapsed_s, 0.0)
-        if t.wave_off_predictor == "model" and self.tilt_predictor is not None:
-            columns = self._predictor_columns()
-            prediction = self.tilt_predictor.predict(rows[:, columns], rows[:, _VALID] > 0.5, ahead)
-            if not prediction.valid:
-                return False  # nothing to predict with: the descent goes on
-            return prediction.probability_within(t.wave_off_tilt_deg) < self._wave_off_chance(
-                elapsed_s
-            )
-        roll = row[_ROLL] + row[_ROLL_RATE] * ahead
-        pitch = row[_PITCH] + row[_PITCH_RATE] * ahead
-        if t.wave_off_predictor == "quadratic":
-            recent = rows[-max(3, round(t.wave_off_window_s / self.env_dt)) :]
-            times = (np.arange(len(recent)) - (len(recent) - 1)) * self.env_dt
-            valid = recent[:, _VALID] > 0.5
-            if valid.sum() >= 5:
-                fit = np.polyfit(times[valid], recent[valid][:, [_ROLL, _PITCH]], 2)
-                roll, pitch = (float(np.polyval(fit[:, k], ahead)) for k in range(2))
-        return float(tilt_deg(roll, pitch)) > t.wave_off_tilt_deg
-
     def _flat_observation(self) -> np.ndarray:
         assert self._base_observation is not None
         tof_valid = self._base_observation["tof_valid"].astype(bool)
@@ -612,7 +412,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             self._base_observation["tof_range"].astype(float),
             tof_valid,
             min(self._wait_s / self.timing.wait_limit_s, 1.0),
-            None if self.layout.history_observed else self._prediction_values(),
+            None
+            if self.layout.history_observed
+            else self.deck_ahead.prediction_values(self._wait_s),
             *self._forecast_observation(),
         )
         return observation
@@ -620,46 +422,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     def _forecast_observation(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The forecast observation's helideck forecast (None: none could be made) and the
         drone's own state; (None, None) when the observation holds none."""
-        if self.deck_forecast is None:
+        if self.forecast_observation is None:
             return None, None
         state = self.world.drone_state()
-        roll, pitch, yaw = euler_zyx_from_matrix(state.rotation_wb)
-        c, s = math.cos(yaw), math.sin(yaw)
-        v = np.asarray(state.velocity_w, dtype=float)
-        own = np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2], roll, pitch])
-        if self._monitor is None:
-            return None, own
-        _, measured = self._monitor.window(float(self.world.time), self.deck_forecast.window_s)
-        poses = self.deck_forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
-        if isinstance(poses, str) or not np.all(np.isfinite(poses)):
-            return None, own
-        poses = np.array(poses, dtype=float)
-        poses[:, :3] -= poses[0, :3]
-        return poses, own
-
-    def _prediction_values(self) -> np.ndarray:
-        """The prediction observation's values (:class:`TimingObservationLayout`): the chance
-        at each contact time, the value of waiting on, the validity."""
-        t = self.timing
-        assert self.tilt_predictor is not None and self.observed_values is not None
-        rows = self.history.rows()
-        columns = self._predictor_columns()
-        limit = self.config.touchdown.max_deck_tilt_deg
-        chances = np.zeros(len(t.contact_times_s))
-        valid = True
-        for k, horizon in enumerate(t.contact_times_s):
-            prediction = self.tilt_predictor.predict(
-                rows[:, columns], rows[:, _VALID] > 0.5, horizon
-            )
-            if prediction.valid:
-                chances[k] = prediction.probability_within(limit)
-            else:
-                valid = False
-        if not valid:
-            chances[:] = 0.0
-        remaining_s = max(t.wait_limit_s - self._wait_s, 0.0)
-        value = self.observed_values.threshold(remaining_s, t.opportunity_s)
-        return np.concatenate([chances, [float(np.clip(value, 0.0, 1.0)), float(valid)]])
+        return self.forecast_observation.values(
+            float(self.world.time), state.velocity_w, state.rotation_wb
+        )
 
     def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
         """At the hold height over the deck, offset and yawed within ``start``'s limits."""
