@@ -13,14 +13,12 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
 * ``relocate_xy`` / ``relocate_xyz`` (Algorithm 4): after ``lost_sight_s`` without an
   estimate, go back to the last position with a trusted estimate, horizontally first (at the
   current height), then in 3D; still nothing there: ``scan`` again from that position.
-* ``hold`` / ``land``: the final approach through the timing task's machinery
-  (:class:`~landing_env.timing.guidance.DeckGuidance` holds at the timing task's hold height with
-  the same :class:`~landing_env.timing.history.DeckMotionHistory`): if the trained timing model
-  ``agents/models/timing_dqn.zip`` is installed it chooses when to commit (observation built
-  by :class:`~landing_env.timing.layout.TimingObservationLayout`, one decision per
-  ``steps_per_decision`` periods, forced at ``wait_limit_s``), otherwise the quiescent
-  heuristic (:func:`agents.calm_window.predict_calm`) does; ``land`` is
-  ``DeckGuidance.descend`` to touchdown.  ``policy.timing_source`` says which.
+* ``hold`` / ``land``: the timing task's final approach (its guidance holds at its hold height
+  with its deck-motion history): the trained timing model ``agents/models/timing_dqn.zip``
+  chooses when to commit where it is installed (one decision per ``steps_per_decision``
+  periods, forced at ``wait_limit_s``), else the quiescent heuristic
+  (:func:`agents.calm_window.predict_calm`); ``land`` descends to touchdown.
+  ``policy.timing_source`` says which.
 
 The SVGS offset manoeuvre (Algorithm 5) moves the drone off its beacon so as not to land on
 the lights; here the tag is the landing spot, so there is none.
@@ -596,12 +594,9 @@ class SvgsRoutinePolicy:
 
 def make_svgs_routine(env: Any, config: RoutineConfig | None = None) -> SvgsRoutinePolicy:
     """The routine for a ``DeckLanding-v0`` environment (its action scaling and step)."""
-    base = env.unwrapped
-    return SvgsRoutinePolicy(base.config.action, config, dt=base.env_dt)
+    return SvgsRoutinePolicy(env.unwrapped.config.action, config, dt=env.unwrapped.env_dt)
 
 
 def build_svgs_routine(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
-    """``svgs-routine`` (:mod:`agents.policy_registry`'s builder): commits through the
-    shipped timing model, or the one at ``model_path``."""
-    config = RoutineConfig(timing_model_path=model_path) if model_path else None
-    return make_svgs_routine(env, config)
+    """The registry's builder: commits through the shipped timing model or ``model_path``'s."""
+    return make_svgs_routine(env, RoutineConfig(timing_model_path=model_path or ""))
