@@ -20,8 +20,7 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
   (:func:`agents.calm_window.predict_calm`); ``land`` descends to touchdown.
   ``policy.timing_source`` says which.
 
-The SVGS offset manoeuvre (Algorithm 5) moves the drone off its beacon so as not to land on
-the lights; here the tag is the landing spot, so there is none.
+The SVGS offset manoeuvre (Algorithm 5) is not flown: the tag is the landing spot.
 
 Position without truth: the routine dead-reckons its own position in the *local frame* L (the
 heading frame at the start: x forward, y left, z up) from the velocity set-points it sends
@@ -49,13 +48,12 @@ from estimation.frames import R_BC, levelled_deck_pose
 from landing_env.config import ActionConfig
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.physics.quadrotor_params import GRAVITY
 from landing_env.timing.config import TimingConfig
 from landing_env.timing.guidance import DeckGuidance
 from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import TimingObservationLayout
-
-GRAVITY = 9.81
 
 
 class RoutineState(str, Enum):

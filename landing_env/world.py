@@ -25,7 +25,7 @@ from landing_env.config import DeckLandingConfig
 from landing_env.physics.controller import CascadeController, VelocitySetpoint
 from landing_env.physics.drone_state import DroneState
 from landing_env.physics.quadrotor import Quadrotor
-from landing_env.physics.quadrotor_params import QuadrotorParams
+from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
 from landing_env.physics.wind import WindModel
 from landing_env.scene.deck import create_deck_body, make_deck_texture
 from landing_env.sea.deck_mount import ShipDeck
@@ -46,7 +46,6 @@ from landing_env.touchdown import (
     summarise_contacts,
 )
 
-GRAVITY = 9.81
 #: mass of the top plate: heavy against the drone so that touchdowns do not deflect it
 TOP_PLATE_MASS_KG = 15.0
 #: below this height of the drone above the deck's home surface, contacts are checked every

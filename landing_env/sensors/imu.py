@@ -19,9 +19,9 @@ import numpy as np
 
 from estimation.types import ImuSample
 from landing_env.errors import require_range
+from landing_env.physics.quadrotor_params import GRAVITY
 
 #: Gravity's magnitude (m/s^2) and the gravity vector in the world frame (z up).
-GRAVITY = 9.81
 GRAVITY_W = np.array([0.0, 0.0, -GRAVITY])
 
 
