@@ -312,8 +312,8 @@ class DeckLandingConfig:
     lens: str = "standard"
     #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
     #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
-    #: ``python -m agents.timing.tilt_fit fit``); ``timing.tilt_model: scenario`` reads it.
-    #: Empty: none fitted
+    #: ``python -m agents.timing.deck_prediction_fit fit``); ``timing.tilt_model: scenario``
+    #: reads it.  Empty: none fitted
     deck_predictor: str = ""
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     action: ActionConfig = field(default_factory=ActionConfig)

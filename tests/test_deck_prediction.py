@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.timing.tilt_fit import CHANNELS, HORIZONS_S, futures
+from agents.timing.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
@@ -569,7 +569,7 @@ def test_the_value_wave_off_demands_less_as_the_wait_runs_out_and_nothing_at_the
         env.reset(seed=3)
         demanded = []
         for wait_s in (0.0, 5.0, 10.0, 13.0, 14.0):
-            demanded.append(base.deck_ahead.wave_off_chance(0.5, wait_s))
+            demanded.append(base.deck_prediction.wave_off_chance(0.5, wait_s))
         assert demanded == sorted(demanded, reverse=True) and demanded[0] > 0.95
         assert demanded[-1] == 0.0  # after the climb back nothing is left: never abort
     finally:
@@ -597,12 +597,12 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
     env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=_WAVE_OFF_VERSIONS[version])
     try:
         base = env.unwrapped
-        assert base.layout.n_history == 160 and base.deck_ahead.tilt_predictor is not None
+        assert base.layout.n_history == 160 and base.deck_prediction.tilt_predictor is not None
         # the scenario's own predictor: bench-ss4.yaml's deck_predictor
-        resolved = base.deck_ahead.resolved_tilt_model()
+        resolved = base.deck_prediction.resolved_tilt_model()
         assert base.timing.tilt_model == "scenario" and resolved == "bench-ss4"
         assert base.timing.wave_off_rule == ("fixed" if version == 2 else "value")
-        assert (base.deck_ahead.wave_off_values is None) == (version == 2)
+        assert (base.deck_prediction.wave_off_values is None) == (version == 2)
         assert len(base.timing.contact_times_s) == (4 if version == 4 else 1)
         policy = make_policy("predictive", env)
         assert policy.contact_times_s == base.timing.contact_times_s
@@ -711,7 +711,7 @@ def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_ov
     env, _ = make_env_and_policy("quiescent", "bench-ss4", "tight")
     try:
         base = env.unwrapped
-        assert base.timing.history_s == 2.0 and base.deck_ahead.tilt_predictor is None
+        assert base.timing.history_s == 2.0 and base.deck_prediction.tilt_predictor is None
     finally:
         env.close()
 
@@ -753,7 +753,7 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
             assert not terminated
         parts = base.layout.decode(observation)
         rows = base.history.rows()
-        predictor = base.deck_ahead.tilt_predictor
+        predictor = base.deck_prediction.tilt_predictor
         columns = [HISTORY_FEATURES.index(n) for n in predictor.channels]
         valid = rows[:, HISTORY_FEATURES.index("valid")] > 0.5
         expected = [
@@ -763,7 +763,7 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
         assert parts.prediction[5] == 1.0
         assert np.allclose(parts.prediction[:4], expected, atol=1e-6)
         left = base.timing.wait_limit_s - info["wait_s"]
-        value = base.deck_ahead.observed_values.threshold(left, base.timing.opportunity_s)
+        value = base.deck_prediction.observed_values.threshold(left, base.timing.opportunity_s)
         assert parts.prediction[4] == pytest.approx(value, abs=1e-6)
         assert 0.0 < value < 1.0
     finally:
@@ -900,7 +900,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     # the card accepts bench-ss4 (its own predictor) under ideal sensing as it is
     env, policy = make_env_and_policy("timing-dqn-predictive", "bench-ss4", "tight")
     try:
-        assert env.unwrapped.deck_ahead.resolved_tilt_model() == "bench-ss4"
+        assert env.unwrapped.deck_prediction.resolved_tilt_model() == "bench-ss4"
         assert policy is not None
     finally:
         env.close()
@@ -926,8 +926,8 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
             ),
         )
         try:
-            assert env.deck_ahead.resolved_tilt_model() == f"bench-ss{n}"
-            loaded[n] = env.deck_ahead.tilt_predictor
+            assert env.deck_prediction.resolved_tilt_model() == f"bench-ss{n}"
+            loaded[n] = env.deck_prediction.tilt_predictor
         finally:
             env.close()
     # two fitted predictors, not one file read twice

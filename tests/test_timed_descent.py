@@ -270,9 +270,9 @@ def test_the_quadratic_wave_off_predictor_follows_a_curving_deck() -> None:
     rows = base.history.rows()
     assert rows[-1, 9] == 1.0
     base.timing.wave_off_predictor = "linear"
-    linear = base.deck_ahead.wave_off_due(0.5, base._contact_s, base._wait_s)
+    linear = base.deck_prediction.wave_off_due(0.5, base._contact_s, base._wait_s)
     base.timing.wave_off_predictor = "quadratic"
-    quadratic = base.deck_ahead.wave_off_due(0.5, base._contact_s, base._wait_s)
+    quadratic = base.deck_prediction.wave_off_due(0.5, base._contact_s, base._wait_s)
     env.close()
     # 0.8 s ahead the parabola is at 4 - 4 * 1.0^2 = 0 deg: no wave-off; the straight line
     # carries the newest 3.84 deg along the rate window's slope (+0.2 deg/s, the parabola's

@@ -96,8 +96,8 @@ class PredictivePolicy:
 
     The chance: that the deck's tilt at the contact is within the limit, by a
     :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
-    the estimated deck motion, :mod:`agents.timing.tilt_fit`) on the observation's history,
-    with the Gaussian error measured on held-out episodes; the contact comes at one of
+    the estimated deck motion, :mod:`agents.timing.deck_prediction_fit`) on the observation's
+    history, with the Gaussian error measured on held-out episodes; the contact comes at one of
     ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
     1.3 s, or a window the environment's descent chooses the best of, the same way), and the
     chance is that of the best.  What
@@ -153,7 +153,7 @@ class PredictivePolicy:
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
                 f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
-                "refit it with `python -m agents.timing.tilt_fit fit`",
+                "refit it with `python -m agents.timing.deck_prediction_fit fit`",
             )
         self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
@@ -302,7 +302,7 @@ def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
             "timing.tilt_model",
             "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
             "timing.tilt_model=NAME or pass --model FILE; fit one with "
-            "`python -m agents.timing.tilt_fit fit`)",
+            "`python -m agents.timing.deck_prediction_fit fit`)",
         )
     path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
     try:
@@ -346,7 +346,7 @@ def build_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -
     return PredictivePolicy(
         base.layout,
         base.env_dt,
-        _tilt_model(model_path, base.deck_ahead.resolved_tilt_model()),
+        _tilt_model(model_path, base.deck_prediction.resolved_tilt_model()),
         base.config.touchdown.max_deck_tilt_deg,
         base.timing.wait_limit_s,
         base.timing.opportunity_s,

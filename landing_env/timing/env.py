@@ -10,8 +10,8 @@ the learner.  The settings are the config's ``timing`` section
 (:class:`~landing_env.timing.config.TimingConfig`); the observation is laid out by
 :class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
 (the wave-off, the contact window, the prediction observation) is read through
-:class:`~landing_env.timing.deck_ahead.DeckAhead`, the helideck forecast of the ``forecast``
-observation through :class:`~landing_env.timing.forecast_observation.ForecastObservation`.
+:class:`~landing_env.timing.deck_prediction.DeckPrediction`, the helideck forecast of the
+``forecast`` observation through :class:`~landing_env.timing.forecast_observation.ForecastObservation`.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from landing_env.errors import ConfigError
 from landing_env.estimators import load_intrinsics
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.timing.config import CAMERA_BELOW_COM_M, WAVE_OFF_CLIMB_S, TimingConfig
-from landing_env.timing.deck_ahead import DeckAhead
+from landing_env.timing.deck_prediction import DeckPrediction
 from landing_env.timing.deck_tracker import OwnState
 from landing_env.timing.forecast_observation import ForecastObservation
 from landing_env.timing.guidance import DeckGuidance
@@ -183,7 +183,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         try:
             #: the scenario's deck-tilt predictor and what it foresees (the model wave-off,
             #: the contact window, the prediction observation)
-            self.deck_ahead = DeckAhead(self.config, self.history, self.env_dt)
+            self.deck_prediction = DeckPrediction(self.config, self.history, self.env_dt)
             #: the helideck forecast and own state of the forecast observation (None when
             #: the observation holds none)
             self.forecast_observation = (
@@ -369,7 +369,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._committed = True
         # the contact time of the descent starting now (the contact window's choice), and the
         # timed descent's duration that meets the deck then
-        self._contact_s = self.deck_ahead.plan_contact()
+        self._contact_s = self.deck_prediction.plan_contact()
         self.guidance.plan_descent(self.timing.descent_time_for(self._contact_s))
         start = self.world.time
         while self._outcome is Outcome.IN_FLIGHT:
@@ -383,7 +383,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             if (
                 wave_off
                 and self._outcome is Outcome.IN_FLIGHT
-                and self.deck_ahead.wave_off_due(elapsed, self._contact_s, self._wait_s)
+                and self.deck_prediction.wave_off_due(elapsed, self._contact_s, self._wait_s)
             ):
                 # go around: climb back to the hold (within 5 cm, or for at most 1.5 s) before
                 # the agent decides again, so that the next descent starts where they all do
@@ -414,7 +414,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             min(self._wait_s / self.timing.wait_limit_s, 1.0),
             None
             if self.layout.history_observed
-            else self.deck_ahead.prediction_values(self._wait_s),
+            else self.deck_prediction.prediction_values(self._wait_s),
             *self._forecast_observation(),
         )
         return observation

@@ -1,4 +1,4 @@
-"""The deck-foresight benchmark's rules read the true deck motion as its docstring says."""
+"""The ship deck-prediction benchmark's rules read the true deck motion as its docstring says."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.bench_ship_deck_foresight import _window, commits, true_history, true_tilt_deg
+from benchmarks.bench_ship_deck_prediction import _window, commits, true_history, true_tilt_deg
 from landing_env.errors import ConfigError
 
 

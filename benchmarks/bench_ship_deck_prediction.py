@@ -1,9 +1,9 @@
 """What a perfect forecast of the deck is worth to simple timing rules on a ship deck.
 
-    python -m benchmarks.bench_ship_deck_foresight --rule calm [--max-tilt-deg 4]
+    python -m benchmarks.bench_ship_deck_prediction --rule calm [--max-tilt-deg 4]
         [--max-heave-rate 0.15] [--scenario ship-ss5] [--episodes 200] [--seed 1000000]
-        [--workers 2] [--out results/deck_foresight]
-    python -m benchmarks.bench_ship_deck_foresight --rule tilt-window [--window 2.5,5.0]
+        [--workers 2] [--out results/deck_prediction]
+    python -m benchmarks.bench_ship_deck_prediction --rule tilt-window [--window 2.5,5.0]
         [--max-tilt-deg 4.5] [--min-wait-s 3] ...
 
 The deck oracle (:class:`agents.timing.oracle.DeckOracleTimingPolicy`) knows the deck's future and
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-heave-rate", type=float, default=0.15)
     parser.add_argument("--window", type=_window, default=(2.5, 5.0))
     parser.add_argument("--min-wait-s", type=float, default=0.0)
-    parser.add_argument("--out", default="results/deck_foresight")
+    parser.add_argument("--out", default="results/deck_prediction")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     require_choice("rule", args.rule, RULES)

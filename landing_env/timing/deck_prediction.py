@@ -1,6 +1,6 @@
 """The deck ahead: the timing task's use of the scenario's deck-tilt predictor.
 
-:class:`DeckAhead` loads the fitted predictor
+:class:`DeckPrediction` loads the fitted predictor
 (:class:`~estimation.deck_prediction.LinearTiltPredictor`) that the config's ``timing`` section
 asks for, checks it against the deck-motion history it will read
 (:class:`~landing_env.timing.history.DeckMotionHistory`), and answers the three questions the
@@ -28,7 +28,7 @@ _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
 )
 
 
-class DeckAhead:
+class DeckPrediction:
     """The deck-tilt predictor of a timing task and what it foresees.
 
     ``config``: the task's config (its ``timing`` section is read as it stands at each call);
@@ -87,7 +87,8 @@ class DeckAhead:
             raise ConfigError(
                 "timing.tilt_model",
                 f"{what}; {user} needs the scenario's deck-tilt predictor "
-                "(e.g. bench-ss4, or a file written by `python -m agents.timing.tilt_fit fit`)",
+                "(e.g. bench-ss4, or a file written by "
+                "`python -m agents.timing.deck_prediction_fit fit`)",
             )
         path = tilt_predictor_path(name)
         try:
@@ -97,7 +98,7 @@ class DeckAhead:
             raise ConfigError(
                 "timing.tilt_model",
                 f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.timing.tilt_fit fit`",
+                "or a file written by `python -m agents.timing.deck_prediction_fit fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:
@@ -135,7 +136,7 @@ class DeckAhead:
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
                 "does not hold: refit it "
-                "with `python -m agents.timing.tilt_fit fit`",
+                "with `python -m agents.timing.deck_prediction_fit fit`",
             )
         return values
 
@@ -152,7 +153,7 @@ class DeckAhead:
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.timing.tilt_fit fit`",
+                "does not hold: refit it with `python -m agents.timing.deck_prediction_fit fit`",
             )
         return values
 
