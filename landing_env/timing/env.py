@@ -11,7 +11,8 @@ the learner.  The settings are the config's ``timing`` section
 :class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
 (the wave-off, the contact window, the prediction observation) is read through
 :class:`~landing_env.timing.deck_prediction.DeckPrediction`, the helideck forecast of the
-``forecast`` observation through :class:`~landing_env.timing.forecast_observation.ForecastObservation`.
+``forecast`` observation through
+:class:`~landing_env.timing.forecast_observation.ForecastObservation`.
 """
 
 from __future__ import annotations
