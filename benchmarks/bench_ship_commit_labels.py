@@ -42,7 +42,7 @@ from agents.calm_window import CalmConfig, predict_calm
 from agents.cli_args import add_set_argument, parse_overrides
 from agents.timing.commit_chance import CommitChanceModel, commit_features
 from agents.timing.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
-from estimation.optimal_stopping import StoppingValues
+from landing_env.timing.stopping import StoppingValues
 
 #: the grid of the ``quiescent`` rule's settings replayed
 CALM_GRID = {

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from agents.timing.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
-from estimation.optimal_stopping import StoppingValues
 from landing_env.timing.layout import timing_layout
+from landing_env.timing.stopping import StoppingValues
 
 #: the subsets of the observation compared (names of :func:`observation_columns`' groups)
 SUBSETS = {

@@ -40,7 +40,6 @@ import numpy as np
 
 from estimation.array_files import load_arrays, save_arrays
 from estimation.frames import tilt_deg
-from estimation.optimal_stopping import StoppingValues
 
 _P = TypeVar("_P", bound="LinearMotionPredictor")
 
@@ -504,11 +503,3 @@ class LinearTiltPredictor(LinearMotionPredictor):
             covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
             best = np.maximum(best, _probabilities_within(means, covariance, limit_deg))
         return best
-
-    def stopping_values(
-        self, horizons_s: float | Sequence[float], limit_deg: float
-    ) -> StoppingValues | None:
-        """The value of waiting for a better chance (:mod:`estimation.optimal_stopping`) when
-        the chances are distributed as :meth:`chances`; None when none were recorded."""
-        chances = self.chances(horizons_s, limit_deg)
-        return StoppingValues.from_samples(chances) if chances.size else None

@@ -17,6 +17,7 @@ from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import PREDICTIVE_TIMING, dotted
+from landing_env.timing.stopping import predictor_stopping_values
 
 DT = 0.05
 WINDOW_S = 4.0
@@ -245,8 +246,10 @@ def test_the_held_out_chances_match_how_often_the_deck_is_within_the_limit(predi
     assert chances.mean() == pytest.approx(within, abs=0.06)
     assert predictor.chances(9.0, limit).size == 0
     # the value of waiting with nothing left is the forced commit's: the mean chance
-    assert predictor.stopping_values(1.0, limit).value(0) == pytest.approx(chances.mean())
-    assert predictor.stopping_values(9.0, limit) is None
+    assert predictor_stopping_values(predictor, 1.0, limit).value(0) == pytest.approx(
+        chances.mean()
+    )
+    assert predictor_stopping_values(predictor, 9.0, limit) is None
 
 
 def test_the_best_of_several_contact_times_is_the_one_with_the_best_chance(predictor):
@@ -275,8 +278,8 @@ def test_a_window_s_held_out_chances_are_the_best_of_its_contact_times_and_worth
     best = predictor.chances(window, 2.0)
     each = np.stack([predictor.chances(h, 2.0) for h in window])
     np.testing.assert_allclose(best, each.max(axis=0))
-    one = predictor.stopping_values(1.2, 2.0)
-    several = predictor.stopping_values(window, 2.0)
+    one = predictor_stopping_values(predictor, 1.2, 2.0)
+    several = predictor_stopping_values(predictor, window, 2.0)
     assert one is not None and several is not None
     assert several.value(0) > one.value(0) and several.value(10) >= one.value(10)
     assert predictor.chances((1.0, 99.0), 2.0).size == 0

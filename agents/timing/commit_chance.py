@@ -23,7 +23,7 @@ commit at each decision of a waiting episode is tried in a snapshot and undone
 given, the whole descent included.  The labels need the simulator; the model reads only what
 the drone observes.  Its held-out chances (fitted on the other folds of episodes) are kept so
 that a policy can weigh a chance against the optimal-stopping value of waiting on
-(:mod:`estimation.optimal_stopping`).
+(:mod:`landing_env.timing.stopping`).
 
 Pure NumPy and SciPy; :meth:`CommitChanceModel.chance` never raises on data (too few valid
 samples: an invalid chance with its reason).
@@ -41,7 +41,7 @@ import numpy as np
 
 from estimation.array_files import load_arrays, save_arrays
 from estimation.frames import tilt_deg
-from estimation.optimal_stopping import StoppingValues
+from landing_env.timing.stopping import StoppingValues
 
 #: the per-window statistics of :func:`commit_features`, in order
 WINDOW_STATISTICS: tuple[str, ...] = (

@@ -25,6 +25,7 @@ from landing_env.resources import tilt_predictor_path
 from landing_env.timing.config import TimingConfig
 from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import TimingObservationLayout
+from landing_env.timing.stopping import predictor_stopping_values
 
 
 def shipped_timing_model(algo: str) -> Path:
@@ -102,7 +103,7 @@ class PredictivePolicy:
     1.3 s, or a window the environment's descent chooses the best of, the same way), and the
     chance is that of the best.  What
     waiting is worth: the optimal-stopping value
-    (:class:`~estimation.optimal_stopping.StoppingValues`) of the chances the predictor gave
+    (:class:`~landing_env.timing.stopping.StoppingValues`) of the chances the predictor gave
     held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
     independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
     history at least as long as the predictor's window (``timing.history_s``)."""
@@ -147,7 +148,7 @@ class PredictivePolicy:
         self.contact_times_s = tuple(float(c) for c in contact_times_s)
         if not self.contact_times_s:
             raise ConfigError("timing.contact_window_s", "gives no contact time")
-        values = predictor.stopping_values(self.contact_times_s, max_tilt_deg)
+        values = predictor_stopping_values(predictor, self.contact_times_s, max_tilt_deg)
         if values is None:
             raise ConfigError(
                 "timing.tilt_model",

@@ -83,7 +83,7 @@ class TimingConfig:
     wave_off_probability: float = 0.8
     #: what the ``model`` wave-off compares the chance with: ``fixed``
     #: (``wave_off_probability``) or ``value``: the value of waiting on, i.e. the
-    #: optimal-stopping value (:mod:`estimation.optimal_stopping`) of the chance a commit
+    #: optimal-stopping value (:mod:`landing_env.timing.stopping`) of the chance a commit
     #: gets, over the wait that will be left once the climb back is done, with one
     #: independent opportunity per ``opportunity_s``: it aborts a descent only when a retry
     #: is expected to do better, so less and less often as the wait limit nears

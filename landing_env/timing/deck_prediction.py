@@ -16,12 +16,12 @@ import numpy as np
 
 from estimation.deck_prediction import LinearTiltPredictor
 from estimation.frames import tilt_deg
-from estimation.optimal_stopping import StoppingValues
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.timing.config import SCENARIO_TILT_MODEL, WAVE_OFF_CLIMB_S, TimingConfig
 from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.timing.stopping import StoppingValues, predictor_stopping_values
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -129,7 +129,9 @@ class DeckPrediction:
             return None
         if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
             return None
-        values = self.tilt_predictor.stopping_values(t.contact_times_s, t.wave_off_tilt_deg)
+        values = predictor_stopping_values(
+            self.tilt_predictor, t.contact_times_s, t.wave_off_tilt_deg
+        )
         if values is None:
             raise ConfigError(
                 "timing.wave_off_rule",
@@ -147,7 +149,7 @@ class DeckPrediction:
         if t.observation != "prediction" or self.tilt_predictor is None:
             return None
         limit = self.config.touchdown.max_deck_tilt_deg
-        values = self.tilt_predictor.stopping_values(t.contact_times_s, limit)
+        values = predictor_stopping_values(self.tilt_predictor, t.contact_times_s, limit)
         if values is None:
             raise ConfigError(
                 "timing.observation",

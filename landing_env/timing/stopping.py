@@ -24,7 +24,9 @@ Pure NumPy; never raises on data (no samples: a value of 0, which takes any chan
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -71,3 +73,14 @@ class StoppingValues:
         if not (math.isfinite(remaining_s) and opportunity_s > 0.0) or remaining_s <= 0.0:
             return 0.0
         return self.value(remaining_s / opportunity_s)
+
+
+def predictor_stopping_values(
+    predictor: Any, horizons_s: float | Sequence[float], limit_deg: float
+) -> StoppingValues | None:
+    """The value of waiting for a better chance when the chances are distributed as the
+    deck-tilt ``predictor`` gave them to held-out examples
+    (:meth:`~estimation.deck_prediction.LinearTiltPredictor.chances`); None when none were
+    recorded."""
+    chances = predictor.chances(horizons_s, limit_deg)
+    return StoppingValues.from_samples(chances) if chances.size else None
