@@ -7,8 +7,6 @@ with what the code runs.
 
 from __future__ import annotations
 
-import argparse
-
 from agents.policy_registry import (
     DEFAULT_POLICY,
     MODEL_DIR,
@@ -98,36 +96,4 @@ def models_table() -> str:
     return _table(("model", "policy", "trained on", "estimator", "sensing"), rows)
 
 
-def run_list(args: argparse.Namespace) -> int:
-    print({"ids": ids_table, "policies": policies_table, "models": models_table}[args.what]())
-    return 0
-
-
-def add_list_parser(sub: argparse._SubParsersAction) -> None:
-    """``deck-landing list ids|policies|models``."""
-    listing = sub.add_parser(
-        "list", help="the registered ids, the policies (with what to use) or the shipped models"
-    )
-    listing.add_argument("what", choices=WHAT)
-    listing.set_defaults(func=run_list)
-
-
-def run_model_show(args: argparse.Namespace) -> int:
-    card = read_metadata(args.model)
-    if card is None:
-        print(f"{args.model} has no card (it was not trained by deck-landing)")
-        return 1
-    print(card.to_json())
-    return 0
-
-
-def add_model_parser(sub: argparse._SubParsersAction) -> None:
-    """``deck-landing model show MODEL.zip``: a trained model's card."""
-    model = sub.add_parser("model", help="a trained model's card (what it was trained on)")
-    which = model.add_subparsers(dest="model_command", required=True)
-    show = which.add_parser("show", help="print the card of a model zip")
-    show.add_argument("model", help="the SB3 zip")
-    show.set_defaults(func=run_model_show)
-
-
-__all__ = ["add_list_parser", "add_model_parser", "ids_table", "models_table", "policies_table"]
+__all__ = ["ids_table", "models_table", "policies_table", "recommendation_cell"]

@@ -25,10 +25,7 @@ D, the landing point, where the policy has none).
 
 from __future__ import annotations
 
-import argparse
 import math
-import shlex
-import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,8 +35,6 @@ import numpy as np
 
 import landing_env  # noqa: F401  (registers the environments)
 from agents.beacon_range import make_beacon_range
-from agents.cli_args import add_batch_arguments, positive_int
-from agents.cli_args import parse_overrides as _parse_overrides
 from agents.evaluation.landing import HELD_OUT_SEED
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import (
@@ -56,7 +51,6 @@ from agents.evaluation.summary import (
     counts_cell,
     finite_mean,
     finite_p95,
-    print_summary,
     success_cell,
     success_fields,
     write_summary_files,
@@ -520,60 +514,3 @@ def evaluate_approach(
         plot_trajectories(results, figure, title)
         files.append(figure)
     return ApproachEvaluation(scenario, summaries, results, files, failures)
-
-
-# ------------------------------------------------------------------------------ command line
-def _evaluate_approach(args: argparse.Namespace) -> int:
-    command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    evaluation = evaluate_approach(
-        list(args.policy),
-        args.scenario,
-        args.episodes,
-        Path(args.out),
-        args.seed,
-        args.routine_estimator,
-        args.workers,
-        progress=not args.no_progress,
-        overrides=_parse_overrides(args.set),
-        command=command,
-        routine_timing=args.routine_timing,
-        address=args.address,
-        resume=args.resume,
-    )
-    print_summary(
-        args.scenario, markdown_table(evaluation.summaries), evaluation.failures, evaluation.files
-    )
-    return 0
-
-
-def add_approach_parser(evaluate_group: Any) -> None:
-    """Add ``approach`` to the ``evaluate`` sub-command group."""
-    approach = evaluate_group.add_parser(
-        "approach",
-        help="the high approach (20 m up, 5 m off): svgs-routine against beacon-range; "
-        "success (95%% Wilson interval), touchdown offset, time to land; table, CSV, figure",
-    )
-    approach.add_argument(
-        "--policy", nargs="+", choices=list(APPROACH_POLICIES), default=list(APPROACH_POLICIES)
-    )
-    approach.add_argument(
-        "--scenario", default="high-approach", help="a config in configs/ or a path"
-    )
-    approach.add_argument("--episodes", type=positive_int, default=20)
-    approach.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first seed")
-    approach.add_argument(
-        "--routine-estimator",
-        default=None,
-        help="the routine's estimator (default: fused if available, else atda)",
-    )
-    approach.add_argument(
-        "--routine-timing",
-        choices=ROUTINE_TIMINGS,
-        default="model",
-        help="svgs-routine's commit: the shipped timing policy (where installed) or the "
-        "quiescent heuristic",
-    )
-    approach.add_argument("--out", default="results/approach", help="output directory")
-    add_batch_arguments(approach)
-    approach.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
-    approach.set_defaults(func=_evaluate_approach)

@@ -11,19 +11,19 @@ import os
 import sys
 from pathlib import Path
 
-from agents.calibrate import add_calibrate_parser
-from agents.catalogue import add_list_parser, add_model_parser
+from agents.cli.approach import add_approach_parser
+from agents.cli.bridge import add_bridge_parser
+from agents.cli.calibrate import add_calibrate_parser
+from agents.cli.catalogue import add_list_parser, add_model_parser
+from agents.cli.estimate import add_estimate_parser
+from agents.cli.landing import add_landing_parser
+from agents.cli.train import add_train_parser
+from agents.cli.tune import add_tune_parser
 from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, positive_int
 from agents.demo import run_demo
 from agents.evaluation import SWEEP_PARAMETERS
-from agents.evaluation.approach import add_approach_parser
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
-from agents.evaluation.landing import add_landing_parser
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
-from agents.io.bridge_cli import add_bridge_parser
-from agents.io.estimate_cli import add_estimate_parser
-from agents.timing.training import add_train_parser
-from agents.timing.tune import add_tune_parser
 from landing_env.config import SENSOR_SETS, SENSORS_ENV
 
 

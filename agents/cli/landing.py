@@ -1,0 +1,122 @@
+"""``deck-landing evaluate landing``: its arguments and what it runs
+(:mod:`agents.evaluation.landing`)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+from agents.cli_args import add_batch_arguments, positive_int
+from agents.cli_args import parse_overrides as _parse_overrides
+from agents.evaluation.landing import ESTIMATORS, HELD_OUT_SEED, evaluate_landing
+from agents.evaluation.landing_summary import (
+    markdown_table,
+)
+from agents.evaluation.summary import (
+    print_summary,
+)
+from agents.policy_registry import (
+    POLICY_NAMES,
+    default_policy,
+)
+from landing_env.scenarios import SCENARIOS
+
+
+def _evaluate_landing(args: argparse.Namespace) -> int:
+    command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    for scenario in args.scenario:
+        if args.policy is None:
+            policies = [default_policy(scenario)]
+        elif args.policy == ["all"]:
+            policies = list(POLICY_NAMES)
+        else:
+            policies = args.policy
+        evaluation = evaluate_landing(
+            policies,
+            scenario,
+            args.episodes,
+            Path(args.out),
+            args.seed,
+            args.estimator,
+            args.mode,
+            args.model,
+            args.workers,
+            progress=not args.no_progress,
+            command=command,
+            extra_overrides=_parse_overrides(args.set),
+            address=args.address,
+            resume=args.resume,
+            oracle=not args.no_oracle,
+            allow_mismatch=tuple(args.allow_mismatch),
+            deck_oracle=args.deck_oracle,
+        )
+        print_summary(
+            f"{scenario}: {SCENARIOS[scenario].description}",
+            markdown_table(evaluation.summaries),
+            evaluation.failures,
+            evaluation.files,
+        )
+    return 0
+
+
+def add_landing_parser(evaluate_group: Any) -> None:
+    """Add ``landing`` to the ``evaluate`` sub-command group."""
+    landing = evaluate_group.add_parser(
+        "landing",
+        help="landing policies over held-out seeds: success rate (95%% Wilson interval), "
+        "touchdown speed, tilt, offset, time to land; table and figures",
+    )
+    landing.add_argument(
+        "--policy",
+        nargs="+",
+        default=None,
+        choices=[*POLICY_NAMES, "all"],
+        help="one or more policies, or all (default: the scenario's recommended policy, "
+        "deck-landing list policies)",
+    )
+    landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
+    landing.add_argument("--episodes", type=positive_int, default=100)
+    landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
+    landing.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default=None,
+        help="the estimate in the observation (default: the policy's own, else the "
+        "scenario's: ihrcf on the bench, tight on the ship decks)",
+    )
+    landing.add_argument("--mode", choices=("project", "render"), default="project")
+    landing.add_argument("--model", default=None, help="a trained timing model (timing-model)")
+    landing.add_argument("--out", default="results/landing", help="output directory")
+    add_batch_arguments(landing)
+    landing.add_argument(
+        "--allow-mismatch",
+        nargs="*",
+        default=[],
+        choices=["env_id", "observation", "estimator", "sensing"],
+        help="evaluate a trained model although its card differs in these fields (e.g. sensing: "
+        "an ideal-trained model under realistic noise)",
+    )
+    landing.add_argument(
+        "--no-oracle",
+        action="store_true",
+        help="do not run the oracle timing (the best any timing could do) beside timing policies",
+    )
+    landing.add_argument(
+        "--deck-oracle",
+        action="store_true",
+        help="also run the deck oracle beside timing policies: it knows the deck's future "
+        "motion but not the wind's or the sensors' noise (several look-ahead descents at each "
+        "check: a few times the oracle's cost)",
+    )
+    landing.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="dotted config overrides applied last, e.g. tof.noise=vl53l1x; keys under timing. "
+        "set the timing task (e.g. timing.guidance.descent_profile=range)",
+    )
+    landing.set_defaults(func=_evaluate_landing)
