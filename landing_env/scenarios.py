@@ -18,17 +18,25 @@ Gymnasium with the latest version named.  To add a scenario, add a row to :data:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from types import SimpleNamespace
 from typing import Any
 
 from gymnasium.envs.registration import load_env_creator, register, registry
 
-from landing_env.config import SimulationConfig, episode_step_limit, read_config_data
+from landing_env.config import (
+    DeckLandingConfig,
+    SimulationConfig,
+    episode_step_limit,
+    read_config_data,
+)
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.timing.config import SCENARIO_TILT_MODEL, TimingConfig
+
+#: the top-level keys of the environment config (a keyword of ``gym.make`` for a section)
+CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
 TASKS: dict[str, str] = {
@@ -323,7 +331,20 @@ class ScenarioId:
         of the scenario's (``gym.make(id, overrides={...})``), other keywords go to the task."""
         task = load_env_creator(TASKS[self.task])
         config = kwargs.pop("config", self.config)
-        return task(config=config, overrides={**self.overrides, **(overrides or {})}, **kwargs)
+        # a config section given as a keyword (``timing={...}``, ``camera={...}``) is laid over
+        # the scenario's settings like any override, never under them
+        sections = {key: kwargs.pop(key) for key in list(kwargs) if key in CONFIG_SECTIONS}
+        given = {
+            **{
+                k: v
+                for key, value in sections.items()
+                for k, v in (
+                    dotted(key, value) if isinstance(value, dict) else {key: value}
+                ).items()
+            },
+            **(overrides or {}),
+        }
+        return task(config=config, overrides={**self.overrides, **given}, **kwargs)
 
 
 def _task_phrase(task: str) -> str:

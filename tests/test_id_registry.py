@@ -136,3 +136,22 @@ def test_the_readmes_which_to_use_table_is_the_registrys_recommendation() -> Non
         low, high = rec.ci95_pct
         assert f"{rec.success_pct:.1f} % ({low:.1f}-{high:.1f})" in row
         assert f"--seed {rec.first_seed}" in row and f"--scenario {rec.scenario}" in row
+
+
+def test_a_section_keyword_is_laid_over_the_ids_settings_and_overrides_over_both() -> None:
+    env = gym.make(
+        "DeckLandingTiming-BenchSS4-v6",
+        timing={"guidance": {"descent_profile": "range"}, "wait_limit_s": 20.0},
+    )
+    timing = env.unwrapped.timing
+    # the section wins over the id's timed descent; the id's other settings stay
+    assert timing.guidance.descent_profile == "range" and timing.wait_limit_s == 20.0
+    assert timing.tilt_model == "scenario"
+    env.close()
+    env = gym.make(
+        "DeckLandingTiming-BenchSS4-v6",
+        timing={"wait_limit_s": 20.0},
+        overrides={"timing.wait_limit_s": 12.0},
+    )
+    assert env.unwrapped.timing.wait_limit_s == 12.0
+    env.close()
