@@ -167,8 +167,18 @@ POLICIES: dict[str, PolicySpec] = {
             model="timing_dqn_lookahead.zip",
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
         ),
+        PolicySpec(
+            "lander-model",
+            "trained",
+            "research",
+            LANDING_TASK,
+            "agents.lander:build_lander",
+            "your own SB3 lander of DeckLanding-v1 (--model PATH; deck-landing train "
+            "landing), checked against its card",
+        ),
         _timing(
             "timing-model",
+
             kind="trained",
             status="supported",
             builder="agents.timing.policies:build_trained",

@@ -36,7 +36,7 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(
-        "DeckLanding-v0",
+        "DeckLanding-v1",
         config="high-approach",
         render_mode="rgb_array",
         overrides={

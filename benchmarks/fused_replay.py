@@ -71,7 +71,7 @@ def record(
     config = load_config(scenario, {**overrides, **forced})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make("DeckLanding-v0", config=config)
+        env = gym.make("DeckLanding-v1", config=config)
     base = env.unwrapped
     stage = base.bank.vision
     rec = Recording(

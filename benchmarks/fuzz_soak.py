@@ -1,4 +1,4 @@
-"""Fuzz soak of DeckLanding-v0: crashes, observations outside the space, NaN rewards, memory.
+"""Fuzz soak of DeckLanding-v1: crashes, observations outside the space, NaN rewards, memory.
 
     python -m benchmarks.fuzz_soak                       # 1e5 project + 1e4 render steps
     python -m benchmarks.fuzz_soak --project-steps 20000 --render-steps 2000   # shorter
@@ -156,7 +156,7 @@ def soak_configs(mode: str, total_steps: int, seed: int) -> dict:
     with tqdm(total=per_config * len(configs), desc=f"{mode} soak", unit="step") as bar:
         for index, (name, config, overrides) in enumerate(configs):
             overrides = {**overrides, "camera.mode": mode}
-            env = gym.make("DeckLanding-v0", config=config, overrides=overrides)
+            env = gym.make("DeckLanding-v1", config=config, overrides=overrides)
             try:
                 tally = soak(env, per_config, rng, bar)
             finally:
@@ -202,7 +202,7 @@ def config_fuzz(steps: int, seed: int) -> dict:
     problems: list[str] = []
     for key, value in tqdm(cases, desc="config fuzz", unit="case"):
         try:
-            env = gym.make("DeckLanding-v0", overrides={key: value})
+            env = gym.make("DeckLanding-v1", overrides={key: value})
         except ConfigError as error:
             named = error.key.split("[", 1)[0] == key or key.rsplit(".", 1)[-1] in str(error)
             counts["refused_naming_key" if named else "refused_naming_other"] += 1

@@ -1,6 +1,6 @@
 """deck-landing simulation: a quadrotor over a moving Stewart-platform deck (PyBullet).
 
-Importing the package registers ``DeckLanding-v0``, ``DeckLandingTiming-v0`` and the scenario
+Importing the package registers ``DeckLanding-v1``, ``DeckLandingTiming-v0`` and the scenario
 ids of :data:`landing_env.scenarios.SCENARIO_IDS` (e.g. ``DeckLandingTiming-BenchSS4-v0``)
 with Gymnasium.
 """

@@ -298,7 +298,7 @@ def _require_file(key: str, path: Path) -> None:
 
 @dataclass
 class DeckLandingConfig:
-    """Everything DeckLanding-v0 needs; each section is documented by its dataclass."""
+    """Everything DeckLanding-v1 needs; each section is documented by its dataclass."""
 
     seed: int | None = None
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
@@ -372,7 +372,7 @@ class DeckLandingConfig:
 def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:
     """The most steps an episode of this config can take (``max_episode_steps``).
 
-    ``DeckLanding-v0`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
+    ``DeckLanding-v1`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
     task decides every ``steps_per_decision`` control periods until ``wait_limit_s`` forces
     the commit (one step).
     """

@@ -54,7 +54,7 @@ _DAMPING = _nonneg(10.0, "damping ratio")
 _WEIGHT = _nonneg(1e4, "reward weight: non-negative (the formula carries the signs)")
 _NOISE_DENSITY = _nonneg(10.0, "IMU noise densities: MEMS datasheets give 1e-5..1e-2")
 
-#: Dotted key -> physical range, for the DeckLanding-v0 config tree.
+#: Dotted key -> physical range, for the DeckLanding-v1 config tree.
 LIMITS: dict[str, Limit] = {
     "seed": Limit(0, 2**63 - 1),
     # simulation: PyBullet is stepped at 240 Hz by default; above 4 kHz a step costs more

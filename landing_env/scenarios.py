@@ -3,7 +3,7 @@
 A :class:`Scenario` (``bench-ss4``, ``ship-ss5``, ...) is a shipped config made a landing run:
 the drone flying, the tag projected analytically, an estimator observed and, for the timing
 task, the scenario's timing settings.  It registers one id per task it serves
-(``DeckLanding-BenchSS4-v0``, ``DeckLandingTiming-BenchSS4-v6``), so that
+(``DeckLanding-BenchSS4-v1``, ``DeckLandingTiming-BenchSS4-v6``), so that
 ``deck-landing evaluate landing --scenario bench-ss4`` and
 ``gym.make("DeckLandingTiming-BenchSS4-v6")`` build the same environment; a policy lays its own
 settings (its estimator, its timing options) over the id's with the same dotted overrides
@@ -40,10 +40,10 @@ CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
 TASKS: dict[str, str] = {
-    "DeckLanding-v0": "landing_env.envs.deck_landing:DeckLandingEnv",
+    "DeckLanding-v1": "landing_env.envs.deck_landing:DeckLandingEnv",
     "DeckLandingTiming-v0": "landing_env.timing.env:DeckLandingTimingEnv",
 }
-LANDING_TASK = "DeckLanding-v0"
+LANDING_TASK = "DeckLanding-v1"
 TIMING_TASK = "DeckLandingTiming-v0"
 
 #: what turns a bench config (a pinned drone over the moving deck) into a landing run
@@ -148,7 +148,7 @@ class Scenario:
     name: str
     config: str
     description: str
-    #: registered id per task it serves (``DeckLanding-v0`` / ``DeckLandingTiming-v0``)
+    #: registered id per task it serves (``DeckLanding-v1`` / ``DeckLandingTiming-v0``)
     ids: dict[str, str]
     #: the estimate in the observation
     estimator: str = "ihrcf"
@@ -197,7 +197,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"bench-ss{n}",
             f"Stewart bench, {sea} scaled into the platform's workspace",
             {
-                LANDING_TASK: f"DeckLanding-BenchSS{n}-v0",
+                LANDING_TASK: f"DeckLanding-BenchSS{n}-v1",
                 TIMING_TASK: f"DeckLandingTiming-BenchSS{n}-v6",
             },
             timing=BENCH_TIMING,
@@ -209,7 +209,7 @@ SCENARIOS: dict[str, Scenario] = {
         "paper-stewart",
         "the papers' Stewart bench (sums of sinusoids)",
         {
-            LANDING_TASK: "DeckLanding-PaperStewart-v0",
+            LANDING_TASK: "DeckLanding-PaperStewart-v1",
             TIMING_TASK: "DeckLandingTiming-PaperStewart-v0",
         },
     ),
@@ -219,7 +219,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"ship-ss{n}",
             f"30 m vessel's helideck, {sea}, wind and gusts; the drone starts in trim",
             {
-                LANDING_TASK: f"DeckLanding-ShipSS{n}-v3",
+                LANDING_TASK: f"DeckLanding-ShipSS{n}-v4",
                 TIMING_TASK: f"DeckLandingTiming-ShipSS{n}-v7",
             },
             estimator=SHIP_ESTIMATOR,
@@ -249,28 +249,28 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
 }
 SCENARIOS.update(HELD_OUT_SCENARIOS)
 
-#: the scenarios of the approach from altitude (``DeckLanding-v0`` only)
+#: the scenarios of the approach from altitude (``DeckLanding-v1`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
     "high-approach": Scenario(
         "high-approach",
         "high-approach",
         "from 20 m up and 5 m off, gusty wind, sea state 3",
-        {LANDING_TASK: "DeckLanding-HighApproach-v0"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
     ),
     # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
-    # on another config (``gym.make("DeckLanding-HighApproach-v0", config="svgs-100m")``)
+    # on another config (``gym.make("DeckLanding-HighApproach-v1", config="svgs-100m")``)
     "svgs-100m": Scenario(
         "svgs-100m",
         "svgs-100m",
         "the SVGS paper's flights: from 101.7-106.7 m over a static pad, three landmarks",
-        {LANDING_TASK: "DeckLanding-HighApproach-v0"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
         own_id=False,
     ),
     "svgs-100m-irlock": Scenario(
         "svgs-100m-irlock",
         "svgs-100m-irlock",
         "the SVGS paper's IR-LOCK flights: from 53.1-55.0 m over a static pad",
-        {LANDING_TASK: "DeckLanding-HighApproach-v0"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
         own_id=False,
     ),
 }
@@ -279,12 +279,16 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
 VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-<Scenario>": [
         "v0: the scenario's config made a landing run, IHRCF observed on the bench.",
+        "v1: every observation key a float32 Box, the drone's velocity and attitude observed "
+        "(current).",
     ],
     "DeckLanding-ShipSS<n>": [
         "v0: the bench's settings over the ship deck.",
         "v1: ``tight`` observed, the ship configs' touchdown envelope, the standard lens.",
         "v2: the scenario's lens (wide at sea states 5 and 6).",
-        "v3: started in trim with the mean wind, the autopilots' limits (current).",
+        "v3: started in trim with the mean wind, the autopilots' limits.",
+        "v4: every observation key a float32 Box, the drone's velocity and attitude observed "
+        "(current).",
     ],
     "DeckLandingTiming-BenchSS<n>": [
         "v0: the range-scheduled final descent.",
@@ -309,7 +313,11 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "setting ``timing.observation: forecast`` (current).",
     ],
     "DeckLandingTiming-PaperStewart": ["v0: the range-scheduled descent (current)."],
-    "DeckLanding-HighApproach": ["v0: from 20 m up and 5 m off (current)."],
+    "DeckLanding-HighApproach": [
+        "v0: from 20 m up and 5 m off.",
+        "v1: every observation key a float32 Box, the drone's velocity and attitude observed "
+        "(current).",
+    ],
 }
 
 

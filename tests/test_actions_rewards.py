@@ -77,7 +77,7 @@ def test_both_environments_refuse_bad_actions_before_moving() -> None:
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )
-    landing = gym.make("DeckLanding-v0")
+    landing = gym.make("DeckLanding-v1")
     try:
         timing.reset(seed=0)
         landing.reset(seed=0)
@@ -137,7 +137,7 @@ def test_the_reward_is_the_sum_of_its_terms_in_info_in_both_tasks() -> None:
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )
-    landing = gym.make("DeckLanding-v0")
+    landing = gym.make("DeckLanding-v1")
     try:
         _, info = timing.reset(seed=1)
         assert sum(_terms(info).values()) == 0.0

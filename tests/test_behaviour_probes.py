@@ -23,7 +23,7 @@ TRUTH = {"estimation.observed": "truth", "start.max_offset_m": 0.0}
 
 
 def make(**overrides: object) -> gym.Env:
-    return gym.make("DeckLanding-v0", overrides={**TRUTH, **overrides})
+    return gym.make("DeckLanding-v1", overrides={**TRUTH, **overrides})
 
 
 def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict]:

@@ -207,7 +207,7 @@ def test_tags_still_decode_at_the_default_heights(name: str, height: float) -> N
     }
     import gymnasium as gym
 
-    env = gym.make("DeckLanding-v0", overrides=overrides)
+    env = gym.make("DeckLanding-v1", overrides=overrides)
     env.reset(seed=4)
     seen = 0
     for _ in range(10):
@@ -223,7 +223,7 @@ def test_realistic_images_are_seeded_and_deterministic() -> None:
     frames = []
     for _ in range(2):
         env = gym.make(
-            "DeckLanding-v0",
+            "DeckLanding-v1",
             overrides={
                 "camera.mode": "render",
                 "camera.profile": "imx219",

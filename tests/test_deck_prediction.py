@@ -863,7 +863,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     assert card.observation["tilt_model"] == "scenario" and card.estimator == "tight"
     # the second stage's card names its config and where it started from: the first stage's
     # final model, on the same task
-    from agents.timing.training import load_train_config
+    from agents.training import load_train_config
 
     train = Path(__file__).resolve().parent.parent / "configs" / "train"
     first = load_train_config(train / "timing_dqn_predictive.yaml")

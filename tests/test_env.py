@@ -1,4 +1,4 @@
-"""DeckLanding-v0 against the Gymnasium and SB3 API checks, seeding, vec envs, episodes."""
+"""DeckLanding-v1 against the Gymnasium and SB3 API checks, seeding, vec envs, episodes."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from landing_env.errors import ConfigError
 
 
 def make(**kwargs) -> gym.Env:
-    return gym.make("DeckLanding-v0", **kwargs)
+    return gym.make("DeckLanding-v1", **kwargs)
 
 
 def test_both_ids_make_the_env() -> None:
-    for env_id in ("DeckLanding-v0", "landing_env:DeckLanding-v0"):
+    for env_id in ("DeckLanding-v1", "landing_env:DeckLanding-v1"):
         env = gym.make(env_id)
         observation, _ = env.reset(seed=1)
         assert env.observation_space.contains(observation)
@@ -76,7 +76,7 @@ def test_runs_under_subproc_vec_env() -> None:
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     # the "module:id" form makes the worker processes import and register the package
-    vec = make_vec_env("landing_env:DeckLanding-v0", n_envs=2, seed=3, vec_env_cls=SubprocVecEnv)
+    vec = make_vec_env("landing_env:DeckLanding-v1", n_envs=2, seed=3, vec_env_cls=SubprocVecEnv)
     try:
         observations = vec.reset()
         assert observations["deck_pose"].shape == (2, 6)
@@ -239,7 +239,7 @@ def test_info_with_missing_readings_is_deterministic() -> None:
     # cannot compare; the episode is deterministic all the same
     infos = []
     for _ in range(2):
-        env = gym.make("DeckLanding-v0", config="high-approach")
+        env = gym.make("DeckLanding-v1", config="high-approach")
         try:
             _, first = env.reset(seed=5)
             steps = [env.step(np.zeros(4, dtype=np.float32))[4] for _ in range(3)]

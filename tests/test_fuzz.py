@@ -156,7 +156,7 @@ def test_fuzzed_estimator_inputs_never_raise_nor_give_nonsense(
 # ------------------------------------------------------------------------------ actions
 @pytest.fixture(scope="module")
 def env() -> gym.Env:
-    environment = gym.make("DeckLanding-v0", overrides={"tof.noise": "vl53l1x"})
+    environment = gym.make("DeckLanding-v1", overrides={"tof.noise": "vl53l1x"})
     yield environment
     environment.close()
 
@@ -222,7 +222,7 @@ def test_a_fuzzed_override_runs_or_is_refused_naming_its_key(
     base = float(numbers[np.isfinite(numbers)][0]) if np.isfinite(numbers).any() else 1.0
     value = _shaped(default, (base if base != 0.0 else 1.0) * factor)
     try:
-        environment = gym.make("DeckLanding-v0", overrides={key: value})
+        environment = gym.make("DeckLanding-v1", overrides={key: value})
     except ConfigError as error:
         assert error.key.split("[", 1)[0] == key or key.rsplit(".", 1)[-1] in str(error), (
             key,

@@ -61,7 +61,7 @@ def test_no_training_config_and_no_fit_names_a_held_out_sea() -> None:
 
 @pytest.mark.parametrize("name", sorted(HELD_OUT_SEAS))
 def test_a_deck_landing_env_runs_a_held_out_sea(name: str) -> None:
-    env = gym.make("DeckLanding-v0", config=name)
+    env = gym.make("DeckLanding-v1", config=name)
     try:
         flat = lambda o: gym.spaces.flatten(env.observation_space, o)  # noqa: E731
         first = flat(env.reset(seed=1_000_000)[0])

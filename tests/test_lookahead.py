@@ -26,7 +26,7 @@ from agents.timing.lookahead import (
 )
 from agents.timing.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
 from agents.timing.policies import TrainedTimingPolicy
-from agents.timing.training import TrainConfig, TrainSettings
+from agents.training import TrainConfig, TrainSettings
 from landing_env.errors import ConfigError
 
 SHIP_ID = "DeckLandingTiming-ShipSS4-v7"
@@ -335,7 +335,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
 
 
 def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped_too() -> None:
-    from agents.timing.training import load_train_config
+    from agents.training import load_train_config
     from landing_env.config_loading import build_dataclass
 
     config = load_train_config(

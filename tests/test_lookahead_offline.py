@@ -151,7 +151,7 @@ def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path
     assert set(data["estimator"].tolist()) == {"tight"}
     config_path = tmp_path / "offline.yaml"
     config_path.write_text(yaml.safe_dump(_config(draws=settings.draws)))
-    from agents.timing.training import load_train_config
+    from agents.training import load_train_config
 
     card = sign_card(load_train_config(config_path), data)
     assert card.sensing == ["realistic", "realistic,lens=wide"]

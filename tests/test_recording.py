@@ -208,7 +208,7 @@ def test_a_ship_deck_env_plays_a_random_stretch_of_a_vessel_log_per_seed(tmp_pat
         "motion.csv.start": "random",
         "wind.enabled": False,
     }
-    env = gym.make("DeckLanding-v0", config="ship-ss4", overrides=overrides)
+    env = gym.make("DeckLanding-v1", config="ship-ss4", overrides=overrides)
     try:
         world = env.unwrapped.world
         first = {}

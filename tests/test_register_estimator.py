@@ -137,7 +137,7 @@ def test_the_environment_observes_a_registered_estimator(tag_only: str) -> None:
     import landing_env  # noqa: F401  (registers the ids)
 
     env = gym.make(
-        "DeckLanding-v0",
+        "DeckLanding-v1",
         overrides={"estimation.observed": tag_only, "motion.kind": "static"},
     )
     try:

@@ -105,7 +105,7 @@ def test_the_env_observes_tight_and_fuses_it(tmp_path) -> None:
     import landing_env  # noqa: F401
 
     env = gym.make(
-        "DeckLanding-v0",
+        "DeckLanding-v1",
         overrides={
             "estimation.observed": "tight",
             "estimation.compare": ["fused", "truth"],

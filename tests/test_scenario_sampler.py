@@ -16,7 +16,7 @@ from agents.timing.sampler import (
     register_sensing_profile,
     sensing_signatures,
 )
-from agents.timing.training import ENV_ID, ZOO_META_KEYS, load_train_config, train
+from agents.training import ENV_ID, ZOO_META_KEYS, load_train_config, train
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError
 

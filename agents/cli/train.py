@@ -1,19 +1,32 @@
-"""``deck-landing train timing``: its arguments and what it runs (:mod:`agents.timing.training`)."""
+"""``deck-landing train timing|landing``: the arguments and what they run."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from agents.cli_args import positive_int
+from agents.lander import shipped_lander_model
 from agents.timing.policies import shipped_timing_model
-from agents.timing.training import ALGOS, load_train_config, train
+from agents.training import ENV_ID, TASK_ALGOS, load_train_config, train
+from landing_env.errors import ConfigError
+from landing_env.scenarios import LANDING_TASK
+
+#: the subcommand of each task
+TASK_OF = {"timing": ENV_ID, "landing": LANDING_TASK}
 
 
-def _train_timing(args: Any) -> int:
+def _train(args: Any) -> int:
     from rich.console import Console
 
     console = Console()
     config = load_train_config(args.config, algo=args.algo)
+    task = TASK_OF[args.training]
+    if config.task != task:
+        raise ConfigError(
+            "config",
+            f"{args.config} trains {config.task} ({config.env_id}); use `deck-landing train "
+            f"{'landing' if config.task == LANDING_TASK else 'timing'}`",
+        )
     if args.seed is not None:
         config.settings.seed = args.seed
     if args.n_envs is not None:
@@ -33,29 +46,49 @@ def _train_timing(args: Any) -> int:
         console.print(f"  evaluation at {steps:>8d} steps: success rate {rate:.3f}")
     console.print(f"final model: {result.model_path}\nbest model: {result.best_model_path}")
     if args.install:
-        console.print(f"installed as {shipped_timing_model(config.settings.algo)}")
+        algo = config.settings.algo
+        installed = (
+            shipped_lander_model(algo) if task == LANDING_TASK else shipped_timing_model(algo)
+        )
+        console.print(f"installed as {installed}")
     return 0
 
 
-def add_train_parser(subparsers: Any) -> None:
-    """Add ``train timing`` to the ``deck-landing`` command."""
-    train_parser = subparsers.add_parser("train", help="train a landing policy with SB3")
-    which = train_parser.add_subparsers(dest="training", required=True)
-    timing = which.add_parser(
-        "timing", help="the landing-timing policy of DeckLandingTiming-v0 (PPO or DQN)"
-    )
-    timing.add_argument("--config", default="configs/train/timing_ppo.yaml", help="training YAML")
-    timing.add_argument("--algo", choices=ALGOS, default=None, help="default: the YAML's")
-    timing.add_argument("--timesteps", type=positive_int, default=None, help="default: n_timesteps")
-    timing.add_argument("--seed", type=int, default=None, help="default: the YAML's")
-    timing.add_argument(
+def _add_task(which: Any, name: str, help_text: str, default_config: str, model: str) -> None:
+    parser = which.add_parser(name, help=help_text)
+    algos = TASK_ALGOS[TASK_OF[name]]
+    parser.add_argument("--config", default=default_config, help="training YAML")
+    parser.add_argument("--algo", choices=algos, default=None, help="default: the YAML's")
+    parser.add_argument("--timesteps", type=positive_int, default=None, help="default: n_timesteps")
+    parser.add_argument("--seed", type=int, default=None, help="default: the YAML's")
+    parser.add_argument(
         "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"
     )
-    timing.add_argument("--out", default=None, help="output directory (default: the YAML's)")
-    timing.add_argument("--no-progress", action="store_true", help="no progress bar")
-    timing.add_argument(
+    parser.add_argument("--out", default=None, help="output directory (default: the YAML's)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
         "--install",
         action="store_true",
-        help="copy the best model to agents/models/timing_<algo>.zip (the shipped policy)",
+        help=f"copy the best model to agents/models/{model}_<algo>.zip (the shipped policy)",
     )
-    timing.set_defaults(func=_train_timing)
+    parser.set_defaults(func=_train)
+
+
+def add_train_parser(subparsers: Any) -> None:
+    """Add ``train timing`` and ``train landing`` to the ``deck-landing`` command."""
+    train_parser = subparsers.add_parser("train", help="train a landing policy with SB3")
+    which = train_parser.add_subparsers(dest="training", required=True)
+    _add_task(
+        which,
+        "timing",
+        "the landing-timing policy of DeckLandingTiming-v0 (PPO, DQN or RecurrentPPO)",
+        "configs/train/timing_ppo.yaml",
+        "timing",
+    )
+    _add_task(
+        which,
+        "landing",
+        "a lander of DeckLanding-v1, end to end (SAC, TQC or PPO)",
+        "configs/train/lander_sac.yaml",
+        "lander",
+    )

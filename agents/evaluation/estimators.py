@@ -161,7 +161,7 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
         )
     with warnings.catch_warnings():  # the pinned drone is this bench's point
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make("DeckLanding-v0", config=config)
+        env = gym.make("DeckLanding-v1", config=config)
     base = env.unwrapped
     steps = base.max_steps
     times: list[float] = []

@@ -1,4 +1,4 @@
-"""What a trained timing model was trained on, shipped inside its SB3 zip and checked on load.
+"""What a trained model (timing or lander) was trained on, in its SB3 zip, checked on load.
 
 SB3's zip holds the network; :data:`METADATA_NAME` beside it in the same archive (SB3 ignores
 it) holds the model's card: the environment id with its version, the observation layout
@@ -23,7 +23,7 @@ from typing import Any
 import gymnasium as gym
 
 from landing_env.errors import ConfigError
-from landing_env.scenarios import TIMING_TASK
+from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
 from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
 from landing_env.timing.history import HISTORY_FEATURES
@@ -261,8 +261,41 @@ def _observing_wrapper(env: Any) -> Any:
     return None
 
 
-def env_signature(env: Any, lookahead: Any = None) -> dict[str, Any]:
-    """The checked fields of a ``DeckLandingTiming`` environment (wrapped or not).
+def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str, Any]:
+    """What a ``DeckLanding`` observation is to a model: its keys with their shapes and
+    bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``)."""
+    keys = {
+        key: {
+            "shape": list(box.shape),
+            "low": [float(v) for v in box.low.reshape(-1)[:1]],
+            "high": [float(v) for v in box.high.reshape(-1)[:1]],
+        }
+        for key, box in sorted(space.spaces.items())
+    }
+    return {"task": "DeckLanding", "keys": keys, "frame_stack": int(frame_stack)}
+
+
+def model_class(path: Path) -> Any:
+    """The SB3 algorithm that saved ``path`` (PPO, DQN, SAC; RecurrentPPO or TQC of
+    sb3-contrib), read from the saved model's data without loading it."""
+    from stable_baselines3 import DQN, PPO, SAC
+
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read("data"))
+    module = str(data.get("policy_class", {}).get("__module__", ""))
+    if module.startswith("sb3_contrib"):
+        from sb3_contrib import TQC, RecurrentPPO
+
+        return RecurrentPPO if "recurrent" in module else TQC
+    for marker, algo in ((".dqn.", DQN), (".sac.", SAC)):
+        if marker in module:
+            return algo
+    return PPO
+
+
+def env_signature(env: Any, lookahead: Any = None, frame_stack: int = 1) -> dict[str, Any]:
+    """The checked fields of a ``DeckLandingTiming`` or ``DeckLanding`` environment (wrapped
+    or not; a ``DeckLanding`` model's observation is its keys and ``frame_stack``).
 
     ``env_id`` is the registered id it was made from, with its version (the bare task's where
     it was built directly).  Observed through the look-ahead (a wrapper with
@@ -273,6 +306,14 @@ def env_signature(env: Any, lookahead: Any = None) -> dict[str, Any]:
         lookahead = wrapper.lookahead_settings if wrapper is not None else None
     base = env.unwrapped
     spec = getattr(base, "spec", None)
+    if getattr(base, "timing", None) is None:  # the landing task
+        return {
+            "env_id": spec.id if spec is not None else LANDING_TASK,
+            "observation": landing_observation_signature(base.observation_space, frame_stack),
+            "estimator": base.config.estimation.observed,
+            "sensing": sensing_profile(base.config),
+            "camera_mode": base.config.camera.mode,
+        }
     env_id = spec.id if spec is not None else TIMING_TASK
     observation = observation_signature(base.timing, base.config.simulation.env_hz)
     if lookahead is not None:
@@ -349,7 +390,19 @@ def _observation_mismatch(
 ) -> ConfigError | None:
     """How the environment's observation ``have`` differs from a ``trained`` one (None: it
     does not)."""
+    if trained.get("task") == "DeckLanding":  # a lander's: keys, shapes, stacking
+        if trained != have:
+            changed = sorted(
+                key for key in set(trained) | set(have) if trained.get(key) != have.get(key)
+            )
+            return ConfigError(
+                f"observation.{changed[0]}",
+                f"{model} was trained on another observation ({', '.join(changed)} differ: "
+                f"{trained.get(changed[0])!r} against {have.get(changed[0])!r})",
+            )
+        return None
     described = {**LEGACY_OBSERVATION, **trained}
+
     for key, value in described.items():
         if have.get(key) != value:
             return ConfigError(
@@ -436,12 +489,16 @@ def write_metadata(path: str | Path, card: ModelMetadata) -> None:
 
 
 def card_for_training(
-    env: Any, config: Any, sensing: list[str] | None = None, lookahead: Any = None
+    env: Any,
+    config: Any,
+    sensing: list[str] | None = None,
+    lookahead: Any = None,
+    frame_stack: int = 1,
 ) -> ModelMetadata:
-    """The card of a model trained with ``config`` (:mod:`agents.timing.training`) in environments
+    """The card of a model trained with ``config`` (:mod:`agents.training`) in environments
     like ``env`` (``sensing``: every profile the training sampled; ``lookahead``: the
     look-ahead settings it observed through, the env wrapped or not)."""
-    signature = env_signature(env, lookahead)
+    signature = env_signature(env, lookahead, frame_stack)
     return ModelMetadata(
         env_id=signature["env_id"],
         observation=signature["observation"],

@@ -37,7 +37,7 @@ from agents.policy_registry import make_env_and_policy
 from agents.timing.cards import card_for_training, merge_cards, write_metadata
 from agents.timing.lookahead import LookaheadSettings
 from agents.timing.lookahead_data import load_transitions, replay_success
-from agents.timing.training import algorithm_kwargs, load_train_config
+from agents.training import algorithm_kwargs, load_train_config
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS

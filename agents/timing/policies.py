@@ -9,8 +9,6 @@ functions here are its builders.
 
 from __future__ import annotations
 
-import json
-import zipfile
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -18,7 +16,13 @@ import numpy as np
 
 from agents.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policy_registry import MODEL_DIR
-from agents.timing.cards import METADATA_NAME, check_compatible, env_signature, read_metadata
+from agents.timing.cards import (
+    METADATA_NAME,
+    check_compatible,
+    env_signature,
+    model_class,
+    read_metadata,
+)
 from estimation.deck_prediction import LinearTiltPredictor
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
@@ -197,20 +201,6 @@ class PredictivePolicy:
         return self.act(observation)
 
 
-def _model_class(path: Path) -> Any:
-    """PPO, DQN or RecurrentPPO, read from the saved model's data (no trial loading)."""
-    from stable_baselines3 import DQN, PPO
-
-    with zipfile.ZipFile(path) as archive:
-        data = json.loads(archive.read("data"))
-    module = str(data.get("policy_class", {}).get("__module__", ""))
-    if "recurrent" in module:
-        from sb3_contrib import RecurrentPPO
-
-        return RecurrentPPO
-    return DQN if ".dqn." in module else PPO
-
-
 class TrainedTimingPolicy:
     """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
 
@@ -235,7 +225,7 @@ class TrainedTimingPolicy:
                 "it by training it with `deck-landing train timing`",
             )
         self.metadata = metadata
-        self.model = _model_class(self.path).load(self.path, device=device)
+        self.model = model_class(self.path).load(self.path, device=device)
         self.name = f"timing-{type(self.model).__name__.lower()}"
         #: a recurrent policy's memory (RecurrentPPO), cleared by :meth:`reset`
         self.recurrent = self.name == "timing-recurrentppo"

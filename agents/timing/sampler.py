@@ -277,5 +277,5 @@ def make_randomised_env(
     timing: dict[str, Any] | None = None,
     render_mode: str | None = None,
 ) -> RandomisedTimingEnv:
-    """The factory :func:`agents.timing.training.make_envs` hands to SB3 (top level: it pickles)."""
+    """The factory :func:`agents.training.make_envs` hands to SB3 (top level: it pickles)."""
     return RandomisedTimingEnv(randomise, timing, render_mode)

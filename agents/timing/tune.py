@@ -3,7 +3,7 @@
 The search YAML (``configs/train/tune_timing.yaml``) names a base training YAML, a budget
 (trials, timesteps per trial, evaluation episodes, concurrent trials) and a small search space
 over the zoo section's hyper-parameters (``choice``, ``uniform``, ``loguniform``).  Each trial
-is one :func:`agents.timing.training.train` run with the sampled values; it reports the success rate
+is one :func:`agents.training.train` run with the sampled values; it reports the success rate
 of the evaluation at its end (``EvalCallback`` on held-out seeds), and Ray Tune keeps the best.
 Ray runs on this machine by default, or on a cluster with ``--address``.
 """
@@ -18,7 +18,7 @@ from typing import Any
 import yaml
 
 from agents.evaluation.runner import ensure_ray
-from agents.timing.training import load_train_config, train
+from agents.training import load_train_config, train
 from landing_env.config import _calibration_path
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_range

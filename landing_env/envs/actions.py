@@ -1,7 +1,7 @@
 """Actions of the landing tasks: validation against the action space, encoding and decoding.
 
 Both environments check an action with :func:`validate_action` against their own action
-space before anything moves: ``DeckLanding-v0``'s ``Box(4)`` velocity set-point and
+space before anything moves: ``DeckLanding-v1``'s ``Box(4)`` velocity set-point and
 ``DeckLandingTiming-v0``'s ``Discrete(2)`` wait/commit.  A bad action is refused with a
 ``ValueError`` that says what was given and what is allowed (never an ``OverflowError``,
 ``IndexError`` or ``TypeError`` from deeper down, and never silently flattened or cut).

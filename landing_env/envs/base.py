@@ -42,6 +42,21 @@ def pose_bounds(arena_max_height_m: float) -> tuple[np.ndarray, np.ndarray]:
 #: full-scale range of the IMU (an ICM-20602-class part: ±16 g, ±2000 °/s); a mean reading
 #: beyond it is clipped to the range, as the part itself would, and flagged in info
 IMU_HIGH = np.array([16 * 9.81] * 3 + [math.radians(2000.0)] * 3, dtype=np.float32)
+#: bound of the drone's velocity observation, m/s (beyond any set-point's reach; clipped)
+VELOCITY_HIGH = 30.0
+#: bounds of the drone's attitude observation (roll, pitch), radians
+ATTITUDE_HIGH = np.array([math.pi, math.pi / 2], dtype=np.float32)
+
+
+def flag_space(n: int) -> spaces.Box:
+    """A validity flag observation: 0 or 1 as float32 in a ``Box(0, 1)``, so that the standard
+    wrappers (SB3's ``VecNormalize``, Gymnasium's ``FlattenObservation``) take every key."""
+    return spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
+
+
+def flags(values: Any) -> np.ndarray:
+    """Validity flags as the observation carries them (float32 0/1)."""
+    return np.asarray(values, dtype=bool).astype(np.float32).reshape(-1)
 
 
 def without_nan(value: Any) -> Any:
@@ -153,15 +168,17 @@ class DeckLandingBaseEnv(gym.Env):
         self.observation_space = spaces.Dict(
             {
                 "deck_pose": spaces.Box(pose_low, pose_high, dtype=np.float32),
-                "deck_pose_valid": spaces.MultiBinary(1),
-                "deck_pose_predicted": spaces.MultiBinary(1),
+                "deck_pose_valid": flag_space(1),
+                "deck_pose_predicted": flag_space(1),
                 "tof_range": spaces.Box(0.0, tof_max, shape=(4,), dtype=np.float32),
-                "tof_valid": spaces.MultiBinary(4),
+                "tof_valid": flag_space(4),
                 "imu": spaces.Box(-IMU_HIGH, IMU_HIGH, dtype=np.float32),
                 "range_down": spaces.Box(
                     0.0, float(self.config.rangefinder.max_range), shape=(1,), dtype=np.float32
                 ),
-                "range_down_valid": spaces.MultiBinary(1),
+                "range_down_valid": flag_space(1),
+                "velocity": spaces.Box(-VELOCITY_HIGH, VELOCITY_HIGH, (3,), dtype=np.float32),
+                "attitude": spaces.Box(-ATTITUDE_HIGH, ATTITUDE_HIGH, dtype=np.float32),
             }
         )
         if self.config.estimation.observed == "fused":
@@ -238,7 +255,7 @@ class DeckLandingBaseEnv(gym.Env):
     @property
     def spec(self) -> EnvSpec | None:  # type: ignore[override]
         """The registration spec, with ``max_episode_steps`` of this env's config where the id
-        leaves it open (``DeckLanding-v0``, ``DeckLandingTiming-v0``)."""
+        leaves it open (``DeckLanding-v1``, ``DeckLandingTiming-v0``)."""
         return self.__dict__.get("_spec")
 
     @spec.setter
@@ -373,16 +390,34 @@ class DeckLandingBaseEnv(gym.Env):
         assert down is not None
         return {
             "deck_pose": pose,
-            "deck_pose_valid": np.array([int(estimate.valid)], dtype=np.int8),
+            "deck_pose_valid": flags([estimate.valid]),
             # bridged by the corner tracker rather than measured (estimation.tracking)
-            "deck_pose_predicted": np.array([int(estimate.predicted)], dtype=np.int8),
+            "deck_pose_predicted": flags([estimate.predicted]),
             "tof_range": tof.astype(np.float32),
-            "tof_valid": ranges.valid.astype(np.int8),
+            "tof_valid": flags(ranges.valid),
             "imu": imu,
             # the downward rangefinder (rangefinder.*): 0 when invalid (no return in range)
             "range_down": np.nan_to_num(down.ranges, nan=0.0).astype(np.float32),
-            "range_down_valid": down.valid.astype(np.int8),
+            "range_down_valid": flags(down.valid),
+            **self._autopilot_state(),
             **self._pose_std(estimate),
+        }
+
+    def _autopilot_state(self) -> dict[str, np.ndarray]:
+        """The drone's own state as its autopilot estimates it (PX4's ``vehicle_local_position``
+        and ``vehicle_attitude``): the velocity in the heading frame and the roll and pitch.
+        The simulated cascade controller flies on the true state, so these are the truth."""
+        state = self.world.drone_state()
+        yaw = state.yaw
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy, vz = (float(v) for v in state.velocity_w)
+        velocity_h = np.array([c * vx + s * vy, -s * vx + c * vy, vz], dtype=np.float32)
+        euler = euler_zyx_from_matrix(state.rotation_wb)
+        return {
+            "velocity": np.clip(velocity_h, -VELOCITY_HIGH, VELOCITY_HIGH),
+            "attitude": np.clip(
+                np.asarray(euler[:2], dtype=np.float32), -ATTITUDE_HIGH, ATTITUDE_HIGH
+            ),
         }
 
     def _pose_std(self, estimate: DeckPoseEstimate) -> dict[str, np.ndarray]:
@@ -436,6 +471,8 @@ class DeckLandingBaseEnv(gym.Env):
             "motor_saturated": report.motor_saturated,
             "action_clipped": getattr(self, "_action_clipped", False),
             "imu_saturated": getattr(self, "_imu_saturated", False),
+            # read by SB3's EvalCallback for its success rate (a task may judge it further)
+            "is_success": self._outcome is Outcome.SUCCESS,
             # the step's reward, term by term (they sum to it)
             **reward_info(self._reward_terms),
         }

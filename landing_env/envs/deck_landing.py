@@ -1,4 +1,4 @@
-"""``DeckLanding-v0``: fly from a hover above the moving deck to a touchdown on it."""
+"""``DeckLanding-v1``: fly from a hover above the moving deck to a touchdown on it."""
 
 from __future__ import annotations
 
@@ -46,11 +46,11 @@ class DeckLandingEnv(DeckLandingBaseEnv):
          - the deck (tag) pose as estimated: x, y, z, roll, pitch, yaw; zeros when invalid
          - camera frame C; m, rad (ZYX)
        * - ``deck_pose_valid``
-         - (1,) int8
+         - (1,) float32
          - 1 when the estimate is valid (not: no tag, out of view, degenerate)
          -
        * - ``deck_pose_predicted``
-         - (1,) int8
+         - (1,) float32
          - 1 when the corner tracker bridged a missed detection
          -
        * - ``tof_range``
@@ -58,7 +58,7 @@ class DeckLandingEnv(DeckLandingBaseEnv):
          - the four ToF ranges along the sensors' axes; 0 when invalid
          - m
        * - ``tof_valid``
-         - (4,) int8
+         - (4,) float32
          - 1 when the reading is valid (a return within ``tof.max_range``)
          -
        * - ``imu``
@@ -72,10 +72,22 @@ class DeckLandingEnv(DeckLandingBaseEnv):
            invalid
          - m
        * - ``range_down_valid``
-         - (1,) int8
+         - (1,) float32
          - 1 when the rangefinder's reading is valid
          -
+       * - ``velocity``
+         - (3,) float32
+         - the drone's velocity as its autopilot estimates it (PX4's
+           ``vehicle_local_position``); the simulated controller flies on the true state, so
+           it is the truth; clipped to ±30 m/s
+         - heading frame H (x forward, y left, z up); m/s
+       * - ``attitude``
+         - (2,) float32
+         - the drone's roll and pitch as its autopilot estimates them (``vehicle_attitude``)
+         - world frame, ZYX; rad
 
+    Every key is a float32 ``Box`` (the flags are 0 or 1), so SB3's ``VecNormalize`` and
+    Gymnasium's ``FlattenObservation`` take the observation with their default arguments.
     The observation never holds NaN.  ``info`` carries the ground truth and diagnostics:
     ``deck_pose_true``, ``estimates`` (every configured estimator), ``drone``, ``deck``,
     ``imu_samples``, ``tof_ranges``, ``outcome`` and, after a touchdown, ``touchdown`` (its
@@ -89,7 +101,10 @@ class DeckLandingEnv(DeckLandingBaseEnv):
     (10); a touchdown subtracts ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
     offset_penalty · offset_m`` (4 per m/s, 0.2 per degree, 5 per metre) and a successful one
     adds ``success_bonus`` (10).  ``time_cost`` is 0.1 per second.  The shaping is
-    potential-based, so it does not change the optimal policy.  Each term is in ``info``
+    potential-based, so it does not change the optimal policy.  A time-out is a truncation
+    and carries no terminal term (the time cost has priced the hover), so that a learner
+    bootstraps through it: 40 s of hovering (-4) is worth less than a successful touchdown
+    (+10, less at most 2 for the normal speed and 1 for the tilt).  Each term is in ``info``
     (``reward_shaping``, ``reward_time``, ``reward_success``, ``reward_crash``,
     ``reward_normal_speed``, ``reward_tilt``, ``reward_offset``) and they sum to the reward.
 
@@ -99,7 +114,7 @@ class DeckLandingEnv(DeckLandingBaseEnv):
     the landing scenario ids 1.5-4 m), up to ``start.max_offset_m`` off its centre (0.3 m;
     the scenario ids 1 m) with ``|yaw|`` up to ``start.max_yaw_deg`` (10°; the scenario ids
     30°), drawn from the episode's seed.  The deck motion starts at a seeded phase.  The ship
-    scenario ids from ``-v3`` start in trim with the mean wind (``start.trim_to_wind``).
+    scenario ids (from ``-v3``) start in trim with the mean wind (``start.trim_to_wind``).
 
     .. rubric:: Episode end
 
@@ -118,26 +133,30 @@ class DeckLandingEnv(DeckLandingBaseEnv):
 
     .. rubric:: Arguments
 
-    ``gym.make("DeckLanding-v0", config="default", render_mode=None, overrides=None,
+    ``gym.make("DeckLanding-v1", config="default", render_mode=None, overrides=None,
     **sections)``: ``config`` is a shipped config name (``configs/*.yaml``) or a path;
     ``overrides`` sets dotted keys (``{"tof.noise": "vl53l1x"}``); a section keyword replaces
     keys of one section (``camera={"mode": "render"}``).  An unknown key or a bad value fails
     at construction with a ``ConfigError`` naming the key and what is allowed.
     ``render_mode="rgb_array"`` returns the camera image with the detections drawn;
-    ``"human"`` opens the PyBullet window.  The scenario ids (``DeckLanding-BenchSS4-v0``,
-    ``DeckLanding-ShipSS5-v3``, ...) build a shipped config with its landing overrides and
+    ``"human"`` opens the PyBullet window.  The scenario ids (``DeckLanding-BenchSS4-v1``,
+    ``DeckLanding-ShipSS5-v4``, ...) build a shipped config with its landing overrides and
     take the same ``overrides``.
 
     .. rubric:: Version History
 
-    * ``DeckLanding-v0``: the task, any config.
-    * ``DeckLanding-BenchSS{3,4,5}-v0``, ``DeckLanding-PaperStewart-v0``: the bench configs
-      made a landing run (the drone flying, the tag projected, IHRCF observed).
-    * ``DeckLanding-HighApproach-v0``: from 20 m up and 5 m off, in gusty wind, over a sea
-      state 3 deck with nested tags.
+    * ``DeckLanding-v1`` (current): every observation key a float32 ``Box`` (the flags were
+      ``MultiBinary``), and the drone's own ``velocity`` and ``attitude`` observed.  ``v0``:
+      the task, any config; no longer registered (1.0.0).
+    * ``DeckLanding-BenchSS{3,4,5}``, ``DeckLanding-PaperStewart``: the bench configs made a
+      landing run (the drone flying, the tag projected, IHRCF observed); ``v1`` (current) has
+      ``DeckLanding-v1``'s observation.
+    * ``DeckLanding-HighApproach``: from 20 m up and 5 m off, in gusty wind, over a sea state
+      3 deck with nested tags; ``v1`` (current) has ``DeckLanding-v1``'s observation.
     * ``DeckLanding-ShipSS{3,4,5,6}``: ``v1`` the ship decks, ``tight`` observed, the
       standard lens, started level and at rest with the bench's controller limits; ``v2`` the
-      scenario's own lens (the wide 80° lens at sea states 5 and 6).  **v3** (current):
-      started in trim with the mean wind, flying with the autopilots' stock limits (a
-      10 m/s² velocity integrator, 45° of tilt).  v1 and v2 are no longer registered (1.0.0).
+      scenario's own lens (the wide 80° lens at sea states 5 and 6); ``v3`` started in trim
+      with the mean wind, flying with the autopilots' stock limits (a 10 m/s² velocity
+      integrator, 45° of tilt).  **v4** (current): ``DeckLanding-v1``'s observation.  v1-v3
+      are no longer registered (1.0.0).
     """

@@ -2,7 +2,7 @@
 
 Each term is reported in ``info`` as ``reward_<term>`` (as Gymnasium's MuJoCo environments
 do), and the step's reward is their sum.  The touchdown terms (:func:`touchdown_terms`) are
-the same in ``DeckLanding-v0`` and ``DeckLandingTiming-v0``; the first adds potential-based
+the same in ``DeckLanding-v1`` and ``DeckLandingTiming-v0``; the first adds potential-based
 shaping, both charge the time flown.
 """
 

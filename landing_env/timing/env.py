@@ -52,7 +52,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     the agent waits or commits; on a commit the same guidance flies the final descent to
     touchdown **within that one step**, and the episode ends with the touchdown's outcome.
     The decision is a clean stopping problem: no steps with ignored actions reach a learner.
-    The touchdown is judged as in ``DeckLanding-v0`` (at most 0.5 m/s relative normal speed,
+    The touchdown is judged as in ``DeckLanding-v1`` (at most 0.5 m/s relative normal speed,
     5° deck tilt, 10° drone-to-deck attitude, the drone still on the deck after 1 s), so the
     policy's task is to meet the deck when it is level and slow.
 
@@ -98,7 +98,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     ``-reward.time_cost`` per second waited (0.1); at the end ``+reward.success_bonus`` (10)
     on a successful touchdown, minus ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
     offset_penalty · offset_m`` on any touchdown, minus ``crash_penalty`` (10) on a crash or
-    a descent that does not touch down.  The terms are those of ``DeckLanding-v0``, from one
+    a descent that does not touch down.  The terms are those of ``DeckLanding-v1``, from one
     function, and each is in ``info``.
 
     .. rubric:: Starting state
@@ -112,7 +112,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     .. rubric:: Episode end
 
     * **Touchdown** (terminated) after a commit, with the outcome and metrics of
-      ``DeckLanding-v0``.
+      ``DeckLanding-v1``.
     * **Wave-off**: with ``wave_off_tilt_deg`` set, a chosen descent whose predicted deck at
       the contact is too tilted climbs back to the hold inside the step, and the episode
       goes on (``info["wave_offs"]``).
@@ -124,7 +124,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     .. rubric:: Arguments
 
     ``gym.make(id, render_mode=None, overrides=None, **sections)``: ``config``, ``overrides``
-    and the section keywords as in ``DeckLanding-v0``.  The task's settings are the config's
+    and the section keywords as in ``DeckLanding-v1``.  The task's settings are the config's
     ``timing`` section (:class:`~landing_env.timing.config.TimingConfig`), set by the same
     dotted overrides: ``overrides={"timing.observation": "prediction",
     "timing.wave_off_tilt_deg": 5.0}`` (hold height, history length, wait limit, the descent

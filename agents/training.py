@@ -1,12 +1,14 @@
-"""Training the landing-timing policy with stable-baselines3 (PPO by default, DQN as an option).
+"""Training a landing policy with stable-baselines3: the timing task's (PPO, DQN,
+RecurrentPPO) or a lander of ``DeckLanding`` (SAC, TQC, PPO).
 
-``deck-landing train timing --config configs/train/timing_ppo.yaml`` reads a YAML with two
-top-level keys:
+``deck-landing train timing --config configs/train/timing_ppo.yaml`` and ``deck-landing train
+landing --config configs/train/lander_sac.yaml`` read a YAML with two top-level keys:
 
-* a registered id (``DeckLandingTiming-BenchSS4-v0``: the scenario is built in, see
+* a registered id (``DeckLandingTiming-BenchSS4-v6``: the scenario is built in, see
   :mod:`landing_env.scenarios`) holding the hyper-parameters in rl-zoo3's
   format (``n_envs``, ``n_timesteps``, ``policy``, ``policy_kwargs`` as a ``"dict(...)"``
-  string, ``learning_rate`` as a number or ``"lin_<x>"``, and the algorithm's own keyword
+  string, ``learning_rate`` as a number or ``"lin_<x>"``, ``frame_stack`` (SB3's
+  ``VecFrameStack``, as rl-zoo3 applies it), and the algorithm's own keyword
   arguments), so that ``python -m rl_zoo3.train --env <id> --gym-packages landing_env
   --conf-file <yaml>`` trains the same task from the same file, unmodified;
 * ``deck_landing``, which rl-zoo3 ignores: the algorithm, the seed, optional extra keyword
@@ -33,6 +35,7 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
+from agents.lander import shipped_lander_model
 from agents.timing.cards import (
     card_for_training,
     check_compatible,
@@ -45,14 +48,19 @@ from agents.timing.policies import shipped_timing_model
 from agents.timing.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import SCENARIO_IDS
+from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS
 
 ENV_ID = "DeckLandingTiming-v0"
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
 SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v6"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
-ALGOS = ("ppo", "dqn", "recurrentppo")
+ALGOS = ("ppo", "dqn", "recurrentppo", "sac", "tqc")
+#: the algorithms of each task (Discrete actions for the timing task, Box for the lander)
+TASK_ALGOS: dict[str, tuple[str, ...]] = {
+    ENV_ID: ("ppo", "dqn", "recurrentppo"),
+    LANDING_TASK: ("sac", "tqc", "ppo"),
+}
 
 
 @dataclass
@@ -74,7 +82,7 @@ class EvalSettings:
 class TrainSettings:
     """The ``deck_landing`` section of a training YAML."""
 
-    algo: Literal["ppo", "dqn", "recurrentppo"] = "ppo"
+    algo: Literal["ppo", "dqn", "recurrentppo", "sac", "tqc"] = "ppo"
     seed: int = 0
     #: extra keyword arguments of ``gym.make(id, ...)`` (config, overrides, timing); empty
     #: in the shipped YAMLs, whose id has the scenario built in, so that rl-zoo3 trains the
@@ -134,6 +142,16 @@ class TrainConfig:
     env_id: str = ENV_ID
 
     @property
+    def task(self) -> str:
+        """The task its id builds (``DeckLandingTiming-v0`` or ``DeckLanding-v1``)."""
+        return self.env_id if self.env_id in TASKS else SCENARIO_IDS[self.env_id].task
+
+    @property
+    def frame_stack(self) -> int:
+        """Steps stacked in the observation (rl-zoo3's ``frame_stack``; 1: none)."""
+        return int(self.hyperparams.get("frame_stack", 1) or 1)
+
+    @property
     def n_envs(self) -> int:
         return int(self.hyperparams.get("n_envs", 1))
 
@@ -164,13 +182,13 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as exc:
         raise ConfigError("config", f"{path} is not YAML: {exc}") from None
-    ids = _timing_ids()
+    ids = _trainable_ids()
     keys = [key for key in data if key in ids] if isinstance(data, dict) else []
     if len(keys) != 1:
         raise ConfigError(
             "config",
-            f"{path} needs one top-level section named by a registered timing id (rl-zoo3 "
-            f"style), e.g. {SCENARIO_ENV_ID!r} or {ENV_ID!r}",
+            f"{path} needs one top-level section named by a registered id (rl-zoo3 style), "
+            f"e.g. {SCENARIO_ENV_ID!r} or 'DeckLanding-BenchSS4-v1'",
         )
     section = dict(data.get("deck_landing") or {})
     if algo is not None:
@@ -182,13 +200,27 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
         raise ConfigError(f"{keys[0]}.env_kwargs", f"{zoo_kwargs!r} is not a mapping")
     # rl-zoo3 reads env_kwargs from the hyper-parameters: the same keywords here
     settings.env_kwargs = {**zoo_kwargs, **settings.env_kwargs}
-    return TrainConfig(hyperparams, settings, str(path), keys[0])
+    config = TrainConfig(hyperparams, settings, str(path), keys[0])
+    allowed = TASK_ALGOS[config.task]
+    if settings.algo not in allowed:
+        raise ConfigError(
+            "deck_landing.algo",
+            f"{settings.algo!r} does not train {config.task} ({keys[0]}); choose one of "
+            f"{', '.join(allowed)}",
+        )
+    frame_stack = hyperparams.get("frame_stack", 1)
+    if not isinstance(frame_stack, int) or isinstance(frame_stack, bool) or frame_stack < 1:
+        raise ConfigError(f"{keys[0]}.frame_stack", f"{frame_stack!r} is not an integer >= 1")
+    if config.task == ENV_ID and frame_stack != 1:
+        raise ConfigError(
+            f"{keys[0]}.frame_stack", "the timing task's observation has its own history"
+        )
+    return config
 
 
-def _timing_ids() -> tuple[str, ...]:
-    """The ids a training YAML can name: the timing task and its registered scenarios."""
-
-    return (ENV_ID, *(k for k, v in SCENARIO_IDS.items() if v.task == ENV_ID))
+def _trainable_ids() -> tuple[str, ...]:
+    """The ids a training YAML can name: both tasks and their registered scenarios."""
+    return (*TASKS, *SCENARIO_IDS)
 
 
 # ------------------------------------------------------------------------------ zoo syntax
@@ -196,6 +228,12 @@ def _literal(node: ast.AST, names: dict[str, Any]) -> Any:
     """Evaluate the small subset of Python rl-zoo3 uses in ``policy_kwargs`` strings."""
     if isinstance(node, ast.Constant):
         return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
+        value = _literal(node.operand, names)
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            raise ValueError(f"a sign before {value!r}")
+        return -value if isinstance(node.op, ast.USub) else value
+
     if isinstance(node, (ast.List, ast.Tuple)):
         values = [_literal(v, names) for v in node.elts]
         return values if isinstance(node, ast.List) else tuple(values)
@@ -305,9 +343,14 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
     checkpoints = CheckpointCallback(
         save_freq=max(settings.checkpoint_freq // n_envs, 1),
         save_path=str(out / "checkpoints"),
-        name_prefix=f"timing_{settings.algo}",
+        name_prefix=_model_name(config),
     )
     return CallbackList([checkpoints, evaluation, WallClockBudget()]), evaluation
+
+
+def _model_name(config: TrainConfig) -> str:
+    task = "lander" if config.task == LANDING_TASK else "timing"
+    return f"{task}_{config.settings.algo}"
 
 
 def make_envs(config: TrainConfig) -> tuple[Any, Any]:
@@ -340,7 +383,19 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
         **wrapping,
     )
     eval_env = make_vec_env(env_id, n_envs=1, seed=s.eval.seed, env_kwargs=env_kwargs, **wrapping)
+    if config.frame_stack > 1:
+        from stable_baselines3.common.vec_env import VecFrameStack
+
+        train_env = VecFrameStack(train_env, config.frame_stack)
+        eval_env = VecFrameStack(eval_env, config.frame_stack)
     return train_env, eval_env
+
+
+def _base_env(vec_env: Any) -> Any:
+    """The first environment of a (possibly wrapped) ``DummyVecEnv``."""
+    while not hasattr(vec_env, "envs"):
+        vec_env = vec_env.venv
+    return vec_env.envs[0]
 
 
 def _start_from(model: Any, path: str, env: Any) -> None:
@@ -369,8 +424,8 @@ def train(
 ) -> TrainResult:
     """Train, evaluate and save; with ``install`` copy the best model to the shipped path."""
     import torch
-    from sb3_contrib import RecurrentPPO
-    from stable_baselines3 import DQN, PPO
+    from sb3_contrib import TQC, RecurrentPPO
+    from stable_baselines3 import DQN, PPO, SAC
 
     settings = config.settings
     torch.set_num_threads(settings.torch_threads)
@@ -381,8 +436,11 @@ def train(
             {"hyperparams": config.hyperparams, "source": config.source}, sort_keys=False
         )
     )
-    algo_cls = {"ppo": PPO, "dqn": DQN, "recurrentppo": RecurrentPPO}[settings.algo]
+    algorithms = {"ppo": PPO, "dqn": DQN, "recurrentppo": RecurrentPPO, "sac": SAC, "tqc": TQC}
+    algo_cls = algorithms[settings.algo]
     default_policy = "MlpLstmPolicy" if settings.algo == "recurrentppo" else "MlpPolicy"
+    if config.task == LANDING_TASK:
+        default_policy = "MultiInputPolicy"  # the landing task observes a Dict
     steps = int(total_timesteps if total_timesteps is not None else config.n_timesteps)
     started = time.perf_counter()
     train_env, eval_env = make_envs(config)
@@ -397,7 +455,7 @@ def train(
             **algorithm_kwargs(config.hyperparams),
         )
         if settings.init_model:
-            _start_from(model, settings.init_model, eval_env.envs[0])
+            _start_from(model, settings.init_model, _base_env(eval_env))
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():
@@ -407,9 +465,9 @@ def train(
                 total_timesteps=steps,
                 callback=callbacks,
                 progress_bar=progress_bar,
-                tb_log_name=f"timing_{settings.algo}",
+                tb_log_name=_model_name(config),
             )
-        model_path = out / f"timing_{settings.algo}_final.zip"
+        model_path = out / f"{_model_name(config)}_final.zip"
         model.save(model_path)
         # the model's card: what it was trained on (checked when it is loaded)
         sensing = None
@@ -422,7 +480,13 @@ def train(
             lookahead = build_dataclass(
                 LookaheadSettings, settings.lookahead, "deck_landing.lookahead"
             )
-        card = card_for_training(eval_env.envs[0], config, sensing=sensing, lookahead=lookahead)
+        card = card_for_training(
+            _base_env(eval_env),
+            config,
+            sensing=sensing,
+            lookahead=lookahead,
+            frame_stack=config.frame_stack,
+        )
     finally:
         train_env.close()
         eval_env.close()
@@ -458,7 +522,12 @@ def train(
     )
     if install:
         source = result.best_model_path or model_path
-        target = shipped_timing_model(settings.algo)
+        target = (
+            shipped_lander_model(settings.algo)
+            if config.task == LANDING_TASK
+            else shipped_timing_model(settings.algo)
+        )
+
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(source, target)
     return result

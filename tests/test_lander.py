@@ -1,0 +1,122 @@
+"""The SB3 lander: trained through ``deck-landing train landing``, its card checked on load, and
+its observation stacked at inference exactly as ``VecFrameStack`` stacks it in training."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
+
+import landing_env  # noqa: F401
+from agents.lander import TrainedLanderPolicy, build_lander
+from agents.training import load_train_config, train
+from landing_env.errors import ConfigError
+
+SHORT = {
+    "sensors": "realistic",
+    "estimation.observed": "tight",
+    "simulation.max_episode_s": 2.0,
+}
+
+
+def _yaml(tmp_path: Path, algo: str = "sac", **zoo: object) -> Path:
+    section = {
+        "n_envs": 1,
+        "n_timesteps": 160,
+        "policy": "MultiInputPolicy",
+        "frame_stack": 3,
+        "learning_starts": 60,
+        "batch_size": 32,
+        "train_freq": 4,
+        "gradient_steps": 1,
+        "policy_kwargs": "dict(net_arch=[16, 16], log_std_init=-3)",
+        "env_kwargs": {"overrides": SHORT},
+        **zoo,
+    }
+    data = {
+        "DeckLanding-BenchSS4-v1": section,
+        "deck_landing": {
+            "algo": algo,
+            "vec_env": "dummy",
+            "eval": {"freq": 1000, "episodes": 1},
+            "out_dir": str(tmp_path / "run"),
+        },
+    }
+    path = tmp_path / "lander.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp_path = tmp_path_factory.mktemp("lander")
+    result = train(load_train_config(_yaml(tmp_path)), progress_bar=False)
+    assert result.timesteps >= 160
+    return result.model_path
+
+
+def test_a_trained_lander_carries_a_card_of_its_id_observation_and_sensing(trained: Path) -> None:
+    policy = TrainedLanderPolicy(trained)
+    assert policy.card.env_id == "DeckLanding-BenchSS4-v1"
+    assert policy.card.algo == "sac"
+    assert policy.card.estimator == "tight"
+    assert policy.card.sensing == ["realistic"]
+    assert policy.frame_stack == 3
+    assert set(policy.card.observation["keys"]) >= {"deck_pose", "velocity", "attitude"}
+
+
+def test_the_lander_refuses_another_estimator_naming_it(trained: Path) -> None:
+    env = gym.make("DeckLanding-BenchSS4-v1", overrides={**SHORT, "estimation.observed": "ihrcf"})
+    try:
+        with pytest.raises(ConfigError, match="estimator"):
+            build_lander(env, str(trained), ())
+        build_lander(env, str(trained), ("estimator",))  # allowed on purpose
+    finally:
+        env.close()
+
+
+def test_the_stacked_observation_at_inference_is_vecframestacks(trained: Path) -> None:
+    policy = build_lander(gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT), str(trained), ())
+    vec = VecFrameStack(
+        DummyVecEnv([lambda: gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT)]), 3
+    )
+    env = gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT)
+    try:
+        vec.seed(5)
+        stacked = vec.reset()
+        observation, _ = env.reset(seed=5)
+        policy.reset()
+        for _ in range(25):
+            mine = policy.stacked(observation)
+            for key, value in mine.items():
+                np.testing.assert_array_equal(value, stacked[key][0], err_msg=key)
+            action = np.asarray(policy.model.predict(mine, deterministic=True)[0])
+            stacked, _, done, _ = vec.step(action[None])
+            observation, _, terminated, truncated, _ = env.step(action)
+            assert bool(done[0]) == (terminated or truncated)
+            if done[0]:
+                break
+    finally:
+        vec.close()
+        env.close()
+
+
+def test_a_lander_yaml_with_a_timing_algorithm_or_a_bad_stack_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"deck_landing.algo.*sac, tqc, ppo"):
+        load_train_config(_yaml(tmp_path, algo="dqn"))
+    with pytest.raises(ConfigError, match="frame_stack"):
+        load_train_config(_yaml(tmp_path, frame_stack=0))
+
+
+def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing() -> None:
+    config = load_train_config("configs/train/lander_sac.yaml")
+    assert config.env_id == "DeckLanding-BenchSS4-v1"
+    assert config.task == "DeckLanding-v1"
+    assert config.settings.env_kwargs["overrides"] == {
+        "sensors": "realistic",
+        "estimation.observed": "tight",
+    }
