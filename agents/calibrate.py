@@ -7,6 +7,9 @@ their figures, and writes to ``--out`` (default ``results/calibration/``):
 * ``intrinsics.json``: K, distortion, reprojection errors, the camera it was made for, and
   the tag detector's corner offset and noise on that camera (a third rig, after K:
   ``landing_env/calibration/tag_corner_sim.py``, :mod:`estimation.corner_bias`);
+* ``tof_rig/``: the pad rig's session as a recording folder (frames, ranges and the rig file
+  ``tof_rig.json``, :mod:`agents.io.tof_rig`), from which the ToF–camera calibration is made
+  as ``deck-landing calibrate tof --recording`` makes a real rig's;
 * ``tof_camera.json``: the range → pixel samples of each sensor (the PCHIP look-up's data);
 * ``tof_camera_curves.png``: pixel against range per sensor with the PCHIP and hyperbola
   fits, and their error against the analytic touch-point pixel;
@@ -32,6 +35,7 @@ from rich.table import Table
 from tqdm import tqdm
 
 from agents.evaluation.runner import map_tasks
+from agents.io.tof_rig import INTRINSICS_NAME, calibrate_tof_recording, write_rig_recording
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (
     ChessboardRigConfig,
@@ -46,7 +50,8 @@ from landing_env.calibration.tag_corner_sim import (
 from landing_env.calibration.tof_camera_sim import (
     TofRigConfig,
     TofSimReport,
-    calibrate_tof_camera_in_sim,
+    record_tof_rig_in_sim,
+    tof_sim_report,
 )
 from landing_env.config import (
     CALIBRATION_DIR,
@@ -55,10 +60,10 @@ from landing_env.config import (
 )
 from landing_env.errors import ConfigError
 
-INTRINSICS_NAME = "intrinsics.json"
 TOF_NAME = "tof_camera.json"
 PLOT_NAME = "tof_camera_curves.png"
 SUMMARY_NAME = "summary.json"
+RIG_RECORDING_NAME = "tof_rig"
 
 
 @dataclass(frozen=True)
@@ -228,7 +233,7 @@ def _calibration_part(job: tuple) -> Any:
     kind, cfg, rig, rng = job
     if kind == "intrinsics":
         return calibrate_intrinsics_in_sim(cfg.camera, rig, rng)
-    return calibrate_tof_camera_in_sim(cfg, rig, rng)
+    return record_tof_rig_in_sim(cfg, rig, rng)
 
 
 def run_calibration(
@@ -263,7 +268,7 @@ def run_calibration(
     if workers > 1 or address is not None:
         # the two calibrations side by side on Ray (the same generators: the same results)
 
-        intrinsics, tof = map_tasks(
+        intrinsics, session = map_tasks(
             _calibration_part,
             [
                 ("intrinsics", cfg, rig, intrinsics_rng),
@@ -280,7 +285,7 @@ def run_calibration(
         with tqdm(
             total=stages, desc="ToF–camera stages", unit="stage", disable=not progress
         ) as bar:
-            tof = calibrate_tof_camera_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
+            session = record_tof_rig_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
     # the tag detector's corner offset, against the corners projected through the new K
     with tqdm(
         total=TagRigConfig().stages, desc="tag-corner stages", unit="stage", disable=not progress
@@ -293,11 +298,15 @@ def run_calibration(
     )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    # the rig's session as a recording, calibrated as a real rig's is
+    rig_dir = write_rig_recording(out_dir / RIG_RECORDING_NAME, session.stages, session.description)
+    tof = tof_sim_report(calibrate_tof_recording(rig_dir)[0], session.description)
     files = {
         "intrinsics": out_dir / INTRINSICS_NAME,
         "tof_camera": out_dir / TOF_NAME,
         "plot": out_dir / PLOT_NAME,
         "summary": out_dir / SUMMARY_NAME,
+        "tof_rig": rig_dir,
     }
     intrinsics.result.save(files["intrinsics"])
     tof.calibration.save(files["tof_camera"])

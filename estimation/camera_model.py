@@ -20,6 +20,43 @@ class CameraIntrinsics:
     cy: float = 255.5
     dist: tuple[float, float, float, float, float] = field(default=(0.0, 0.0, 0.0, 0.0, 0.0))
 
+    def as_dict(self) -> dict:
+        """The model as plain data (the ``camera`` entry of the calibration files)."""
+        return {
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "dist": list(self.dist),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "camera") -> CameraIntrinsics:
+        """The model from :meth:`as_dict`'s data; ``ValueError`` naming ``where`` and the key
+        when one is missing or not a number."""
+        try:
+            dist = tuple(float(d) for d in data.get("dist", (0.0,) * 5))
+            camera = cls(
+                width=int(data["width"]),
+                height=int(data["height"]),
+                fx=float(data["fx"]),
+                fy=float(data["fy"]),
+                cx=float(data["cx"]),
+                cy=float(data["cy"]),
+                dist=(*dist, 0.0, 0.0, 0.0, 0.0, 0.0)[:5],  # type: ignore[arg-type]
+            )
+        except KeyError as exc:
+            raise ValueError(f"{where}: missing key {exc.args[0]!r}") from None
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"{where}: not a camera model ({exc})") from None
+        if len(dist) > 5:
+            raise ValueError(f"{where}.dist: {len(dist)} values; at most 5 (k1 k2 p1 p2 k3)")
+        if camera.width < 1 or camera.height < 1 or not camera.fx > 0.0 or not camera.fy > 0.0:
+            raise ValueError(f"{where}: need width, height >= 1 px and fx, fy > 0")
+        return camera
+
     @property
     def matrix(self) -> np.ndarray:
         """The 3x3 camera matrix K."""

@@ -11,6 +11,21 @@ touch point is ``(s_ix, s_iy, r_i)`` whatever the deck's tilt, and its ideal pix
 ``u = fx s_ix / r + cx``, ``v = fy s_iy / r + cy``: exactly the hyperbola, with ``a = f s``
 and ``c`` the principal point.  :meth:`TofCameraCalibration.exact` builds that analytic map
 (through the lens distortion, if any) for tests and simulation.
+
+The calibration file (JSON, ``format: deck-landing/tof-camera-calibration``,
+``format_version: 2``):
+
+* ``image_size``: [width, height] of the images the pads were found in (null when unknown);
+* ``method`` (``pchip``, ``hyperbola`` or ``exact``) and ``out_of_range`` (``hyperbola`` or
+  ``nan``): how the samples are looked up;
+* ``sensors``: per sensor (in the order of the ranges, pads blue, green, yellow, red), its
+  samples ``range_m``, ``u_px``, ``v_px`` (raw, distorted image pixels, OpenCV convention);
+* ``metadata``: provenance: ``camera`` (the model the images came from), ``tof_mount_offsets_c``
+  (the sensors in the camera frame), ``skipped`` (sensor-stages left out, by reason), ...;
+* ``exact_model``: only for :meth:`TofCameraCalibration.exact` calibrations.
+
+Version 1 files (``version: 1``, no ``image_size``) are still read.
+:meth:`TofCameraCalibration.require_camera` refuses a file made for another image size.
 """
 
 from __future__ import annotations
@@ -44,7 +59,9 @@ YCBCR_THRESHOLDS: dict[str, tuple[tuple[float, float], ...]] = {
 LOOKUP_METHODS = ("pchip", "hyperbola", "exact")
 OUT_OF_RANGE_POLICIES = ("hyperbola", "nan")
 _FORMAT = "deck-landing/tof-camera-calibration"
-_VERSION = 1
+#: the version :meth:`TofCameraCalibration.save` writes, and those it reads
+FORMAT_VERSION = 2
+_READABLE_VERSIONS = (1, 2)
 
 
 def ycbcr_studio(image_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -91,18 +108,27 @@ def pad_centroid(mask: np.ndarray) -> tuple[float, float] | None:
     Returns ``None`` for an empty mask.  The hull closes holes and notches (IHRCF Eq. 3–6);
     its centroid comes from the polygon's moments (the filled-hull mean of Eq. 7).
     """
+    found = largest_blob_hull(mask)
+    if found is None:
+        return None
+    largest, _, moments = found
+    if moments["m00"] > 0.0:
+        return moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]
+    # a one-pixel-wide blob has a zero-area hull: fall back to its points' mean
+    points = largest.reshape(-1, 2).astype(float)
+    return float(points[:, 0].mean()), float(points[:, 1].mean())
+
+
+def largest_blob_hull(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict] | None:
+    """The mask's largest blob (its outer contour), that blob's convex hull and the hull's
+    moments; ``None`` for an empty mask."""
     mask8 = (np.asarray(mask) > 0).astype(np.uint8)
     contours, _ = cv2.findContours(mask8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return None
     largest = max(contours, key=lambda c: (cv2.contourArea(c), len(c)))
     hull = cv2.convexHull(largest)
-    moments = cv2.moments(hull)
-    if moments["m00"] > 0.0:
-        return moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]
-    # a one-pixel-wide blob has a zero-area hull: fall back to its points' mean
-    points = largest.reshape(-1, 2).astype(float)
-    return float(points[:, 0].mean()), float(points[:, 1].mean())
+    return largest, hull, cv2.moments(hull)
 
 
 @dataclass(frozen=True)
@@ -192,7 +218,8 @@ class TofCameraCalibration:
     ``"pchip"`` (papers), ``"hyperbola"`` (CRHF Table 4 fit) or ``"exact"`` (the analytic
     map, only for calibrations built by :meth:`exact`).  ``out_of_range`` says what PCHIP
     does outside a sensor's calibrated span: ``"hyperbola"`` extrapolates with the fit and
-    flags it, ``"nan"`` returns NaN.
+    flags it, ``"nan"`` returns NaN.  ``image_size``: (width, height) of the images the
+    pads were found in (``None`` when unknown).
     """
 
     def __init__(
@@ -203,6 +230,7 @@ class TofCameraCalibration:
         out_of_range: str = "hyperbola",
         metadata: dict | None = None,
         exact_model: _ExactModel | None = None,
+        image_size: tuple[int, int] | None = None,
     ) -> None:
         require_choice("method", method, LOOKUP_METHODS)
         require_choice("out_of_range", out_of_range, OUT_OF_RANGE_POLICIES)
@@ -219,6 +247,9 @@ class TofCameraCalibration:
         self.out_of_range = out_of_range
         self.metadata: dict = dict(metadata or {})
         self._exact = exact_model
+        if image_size is None and exact_model is not None:
+            image_size = (exact_model.intrinsics.width, exact_model.intrinsics.height)
+        self.image_size = None if image_size is None else (int(image_size[0]), int(image_size[1]))
         self._pchip = [
             _PiecewiseCubic(PchipInterpolator(s[:, 0], s[:, 1:], axis=0)) for s in cleaned
         ]
@@ -244,7 +275,25 @@ class TofCameraCalibration:
             out_of_range=self.out_of_range if out_of_range is None else out_of_range,
             metadata=self.metadata,
             exact_model=self._exact,
+            image_size=self.image_size,
         )
+
+    def require_camera(
+        self,
+        image_size: tuple[int, int],
+        source: str = "the ToF-camera calibration",
+        images: str = "the images",
+    ) -> None:
+        """Raise ``ValueError`` naming the mismatch when this calibration's pixels are of
+        another image size (width x height); a file that does not say passes."""
+        if self.image_size is None:
+            return
+        w, h = (int(v) for v in image_size)
+        if (w, h) != self.image_size:
+            cw, ch = self.image_size
+            raise ValueError(
+                f"{source} is for another camera: image size {cw}x{ch}, but {images} are {w}x{h}"
+            )
 
     def lookup(self, ranges: np.ndarray) -> TouchPointLookup:
         """Touch-point pixels (n_sensors x 2, raw image pixels) for the sensors' ranges."""
@@ -328,7 +377,8 @@ class TofCameraCalibration:
         """Write the samples, look-up settings and metadata as JSON."""
         doc: dict = {
             "format": _FORMAT,
-            "version": _VERSION,
+            "format_version": FORMAT_VERSION,
+            "image_size": None if self.image_size is None else list(self.image_size),
             "method": self.method,
             "out_of_range": self.out_of_range,
             "metadata": self.metadata,
@@ -338,17 +388,8 @@ class TofCameraCalibration:
             ],
         }
         if self._exact is not None:
-            k = self._exact.intrinsics
             doc["exact_model"] = {
-                "intrinsics": {
-                    "width": k.width,
-                    "height": k.height,
-                    "fx": k.fx,
-                    "fy": k.fy,
-                    "cx": k.cx,
-                    "cy": k.cy,
-                    "dist": list(k.dist),
-                },
+                "intrinsics": self._exact.intrinsics.as_dict(),
                 "tof_positions_c": self._exact.tof_positions_c.tolist(),
             }
         Path(path).write_text(json.dumps(doc, indent=1))
@@ -359,23 +400,19 @@ class TofCameraCalibration:
         doc = json.loads(Path(path).read_text())
         if doc.get("format") != _FORMAT:
             raise ValueError(f"{path}: not a ToF–camera calibration file")
-        if doc.get("version") != _VERSION:
-            raise ValueError(f"{path}: unsupported version {doc.get('version')!r}")
+        version = doc.get("format_version", doc.get("version"))
+        if version not in _READABLE_VERSIONS:
+            raise ValueError(
+                f"{path}: unsupported format_version {version!r}; readable: {_READABLE_VERSIONS}"
+            )
         samples = [
             np.column_stack([s["range_m"], s["u_px"], s["v_px"]]).astype(float)
             for s in doc["sensors"]
         ]
         exact_model = None
         if "exact_model" in doc:
-            k = doc["exact_model"]["intrinsics"]
-            intrinsics = CameraIntrinsics(
-                width=int(k["width"]),
-                height=int(k["height"]),
-                fx=float(k["fx"]),
-                fy=float(k["fy"]),
-                cx=float(k["cx"]),
-                cy=float(k["cy"]),
-                dist=tuple(float(d) for d in k["dist"]),  # type: ignore[arg-type]
+            intrinsics = CameraIntrinsics.from_dict(
+                doc["exact_model"]["intrinsics"], f"{path}: exact_model.intrinsics"
             )
             positions = np.asarray(doc["exact_model"]["tof_positions_c"], dtype=float)
             exact_model = _ExactModel(intrinsics, positions)
@@ -385,4 +422,17 @@ class TofCameraCalibration:
             out_of_range=doc["out_of_range"],
             metadata=doc.get("metadata", {}),
             exact_model=exact_model,
+            image_size=_image_size(doc.get("image_size"), path),
         )
+
+
+def _image_size(value: object, path: str | Path) -> tuple[int, int] | None:
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or not all(isinstance(v, int) and v > 0 for v in value)
+    ):
+        raise ValueError(f"{path}: image_size {value!r} must be [width, height] in pixels")
+    return int(value[0]), int(value[1])

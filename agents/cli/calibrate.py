@@ -7,6 +7,7 @@ from pathlib import Path
 
 from agents.calibrate import run_calibration
 from agents.cli.calibrate_photos import add_photo_parsers
+from agents.cli.calibrate_tof import add_tof_parser
 from agents.cli_args import add_set_argument, parse_overrides, positive_int
 
 
@@ -61,5 +62,8 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_set_argument(parser)
     parser.set_defaults(func=_calibrate)
-    # real rigs: `calibrate intrinsics` (photos); without a kind, the simulated rigs above
-    add_photo_parsers(parser.add_subparsers(dest="calibration", required=False))
+    # real rigs: `calibrate intrinsics` (photos), `calibrate tof` (a recorded pad rig);
+    # without a kind, the simulated rigs above
+    kinds = parser.add_subparsers(dest="calibration", required=False)
+    add_photo_parsers(kinds)
+    add_tof_parser(kinds)

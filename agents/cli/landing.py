@@ -27,7 +27,7 @@ from landing_env.scenarios import SCENARIOS
 
 def _evaluate_landing(args: argparse.Namespace) -> int:
     command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    for scenario in args.scenario:
+    for n, scenario in enumerate(args.scenario):
         if args.policy is None:
             policies = [default_policy(scenario)]
         elif args.policy == ["all"]:
@@ -52,6 +52,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             oracle=not args.no_oracle,
             allow_mismatch=tuple(args.allow_mismatch),
             deck_oracle=args.deck_oracle,
+            record=Path(args.record) if args.record and n == 0 else None,
         )
         print_summary(
             f"{scenario}: {SCENARIOS[scenario].description}",
@@ -90,6 +91,13 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--mode", choices=("project", "render"), default="project")
     landing.add_argument("--model", default=None, help="a trained timing model (timing-model)")
     landing.add_argument("--out", default="results/landing", help="output directory")
+    landing.add_argument(
+        "--record",
+        default=None,
+        metavar="FILE.mcap",
+        help="record the first episode (first scenario, first policy, first seed) as ROS 2 "
+        "messages (needs the extra io)",
+    )
     add_batch_arguments(landing)
     landing.add_argument(
         "--allow-mismatch",

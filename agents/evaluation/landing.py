@@ -19,6 +19,12 @@ Scenarios are the shipped bench (``bench-ss*``, ``paper-stewart``) and full-scal
 (``ship-ss*``) configs with the drone flying instead of pinned, the tag
 projected analytically (``camera.mode: project``; ``--mode render`` renders and detects it)
 and the chosen estimator (``--estimator``, IHRCF by default) in the observation.
+
+``--record FILE.mcap`` records the first policy's first seed on the first scenario (ROS 2
+messages, :class:`agents.io.record.McapRecorder`): the worker that runs that seed wraps its
+environment for that one episode, so the recording is the episode in the results, whatever
+``--workers`` (with ``--address``, the file is written on that worker's machine).  With
+``--resume`` that seed runs again even when its result is kept.
 """
 
 from __future__ import annotations
@@ -124,10 +130,21 @@ class _LandingEvaluation:
         load_config(scenario_config(task.scenario), {**scenario.overrides, **overrides})
 
     def make(self, task: EpisodeTask) -> tuple[Any, Any]:
-        return make_env_and_policy(task.policy, task.scenario, **task.options)
+        options = {k: v for k, v in task.options.items() if k != "record"}
+        return make_env_and_policy(task.policy, task.scenario, **options)
 
     def run_episode(self, env: Any, policy: Any, seed: int, task: EpisodeTask) -> EpisodeResult:
-        return run_episode(env, policy, seed, task.policy, task.scenario)
+        record = task.options.get("record")
+        if record is None or seed != record[1]:
+            return run_episode(env, policy, seed, task.policy, task.scenario)
+        # mcap and rosbags: the optional extra ``io``, imported for the one recorded episode
+        from agents.io.record import McapRecorder
+
+        recorder = McapRecorder(env, record[0])
+        try:
+            return run_episode(recorder, policy, seed, task.policy, task.scenario)
+        finally:
+            recorder.finish()  # the file closed, the environment kept for the next seed
 
 
 #: the runner's handle on this evaluation (``EVALUATIONS["landing"]``)
@@ -142,20 +159,20 @@ def landing_task(
     model_path: str | None = None,
     extra_overrides: dict[str, Any] | None = None,
     allow_mismatch: tuple[str, ...] = (),
+    record: tuple[str, int] | None = None,
 ) -> EpisodeTask:
-    """The runner's task for one policy on one scenario."""
-    return EpisodeTask(
-        "landing",
-        policy_name,
-        scenario,
-        {
-            "estimator": estimator,
-            "camera_mode": camera_mode,
-            "model_path": model_path,
-            "extra_overrides": extra_overrides,
-            "allow_mismatch": tuple(allow_mismatch),
-        },
-    )
+    """The runner's task for one policy on one scenario; ``record``: (an MCAP file's
+    absolute path, the seed whose episode it records)."""
+    options: dict[str, Any] = {
+        "estimator": estimator,
+        "camera_mode": camera_mode,
+        "model_path": model_path,
+        "extra_overrides": extra_overrides,
+        "allow_mismatch": tuple(allow_mismatch),
+    }
+    if record is not None:
+        options["record"] = (str(record[0]), int(record[1]))
+    return EpisodeTask("landing", policy_name, scenario, options)
 
 
 def evaluate_policy(*args: Any, **kwargs: Any) -> list[EpisodeResult]:
@@ -179,10 +196,20 @@ def run_policy(
     results_path: Path | None = None,
     resume: bool = False,
     allow_mismatch: tuple[str, ...] = (),
+    record: Path | None = None,
 ) -> RunResult:
-    """As :func:`evaluate_policy`, with the failed seeds and how the run went."""
+    """As :func:`evaluate_policy`, with the failed seeds and how the run went; ``record``:
+    an MCAP file for the episode of ``first_seed`` (module doc)."""
+    recorded = None if record is None else (str(Path(record).resolve()), first_seed)
     task = landing_task(
-        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides, allow_mismatch
+        policy_name,
+        scenario,
+        estimator,
+        camera_mode,
+        model_path,
+        extra_overrides,
+        allow_mismatch,
+        recorded,
     )
     return run_episodes(
         task,
@@ -193,6 +220,7 @@ def run_policy(
         resume=resume,
         progress=progress,
         desc=f"{policy_name} @ {scenario}",
+        rerun=() if record is None else (first_seed,),
     )
 
 
@@ -226,12 +254,14 @@ def evaluate_landing(
     oracle: bool = True,
     allow_mismatch: tuple[str, ...] = (),
     deck_oracle: bool = False,
+    record: Path | None = None,
 ) -> LandingEvaluation:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
 
     With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last); with
     ``deck_oracle`` the deck oracle too (it knows the deck's future, not the wind's: costlier,
-    a look-ahead of several descents at each check)."""
+    a look-ahead of several descents at each check).  ``record``: an MCAP file for the first
+    policy's episode of ``first_seed`` (module doc)."""
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     timing_policy = any(is_timing(p) for p in policies)
@@ -259,6 +289,7 @@ def evaluate_landing(
                 out_dir / f"landing_{scenario}_{name}.jsonl" if out_dir is not None else None,
                 resume,
                 allow_mismatch,
+                record if name == policies[0] else None,
             )
             runs[name] = run
     results, failures = split_runs(runs)

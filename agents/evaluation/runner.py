@@ -173,11 +173,13 @@ def run_episodes(
     progress: bool = False,
     desc: str = "",
     backend: str = "auto",
+    rerun: tuple[int, ...] = (),
 ) -> RunResult:
     """Run ``task`` for every seed (see the module docstring); records come back in seed order.
 
     ``backend``: ``"auto"`` (serial for one local worker or one seed, else Ray), or force
-    ``"serial"`` or ``"ray"`` (the benchmark compares them)."""
+    ``"serial"`` or ``"ray"`` (the benchmark compares them).  ``rerun``: seeds that run even
+    when ``resume`` finds them done (an episode to be recorded)."""
     if workers < 1:
         raise ConfigError("workers", f"{workers} is out of range; allowed [1, inf]")
     evaluation = get_evaluation(task.evaluation)
@@ -186,7 +188,7 @@ def run_episodes(
     done: dict[int, Any] = {}
     if results_path is not None:
         if resume:
-            done = _read_done(results_path, evaluation.record_type, set(wanted))
+            done = _read_done(results_path, evaluation.record_type, set(wanted) - set(rerun))
         elif results_path.exists():
             results_path.unlink()
     todo = [s for s in wanted if s not in done]

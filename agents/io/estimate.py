@@ -158,6 +158,8 @@ class RecordingEstimator:
         tof_file = folder / "tof_camera.json"
         if tof_file.is_file():
             tof = TofCameraCalibration.load(tof_file).with_method(tof_lookup)
+            if image_size is not None:
+                tof.require_camera(image_size, source=str(tof_file))
             changes["tof_calibration"] = tof
             mounts = tof.metadata.get("tof_mount_offsets_c")
             if mounts is not None:

@@ -2,10 +2,11 @@
 
 A :class:`Recording` holds camera frames (an image, or the tag detections the simulator
 projected), each ToF sensor's time series, and the IMU samples, all stamped in seconds.
-:func:`read_folder` reads the plain folder format; :mod:`agents.io.bag` reads MCAP and
-rosbag2.  :meth:`Recording.ranges_at` gives each frame the ranges nearest to its stamp (or
-interpolated) within a tolerance; a sensor without a sample inside it is invalid for that
-frame (an estimator then falls back to the camera alone, or says why it cannot).
+:func:`read_folder` reads the plain folder format (:func:`write_folder` writes it);
+:mod:`agents.io.bag` reads MCAP and rosbag2.  :meth:`Recording.ranges_at` gives each frame
+the ranges nearest to its stamp (or interpolated) within a tolerance; a sensor without a
+sample inside it is invalid for that frame (an estimator then falls back to the camera
+alone, or says why it cannot).
 
 Plain folder (for users without ROS)::
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 import csv
 import math
 from collections import Counter
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -250,6 +252,41 @@ def read_folder(folder: str | Path) -> Recording:
             rec.imu.append(ImuSample(values[0], np.array(values[1:4]), np.array(values[4:7])))
             rec.attitude.append(_attitude(quat))
     return rec
+
+
+def _csv_number(value: float) -> str:
+    """A float as its shortest exact text (read back bit for bit); empty for no value."""
+    return repr(float(value)) if math.isfinite(value) else ""
+
+
+def write_folder(
+    folder: str | Path,
+    frames: Iterable[tuple[float, str, np.ndarray]],
+    ranges: Iterable[tuple[float, Sequence[float]]],
+) -> Path:
+    """Write a plain folder (module doc) that :func:`read_folder` reads back exactly:
+    ``frames`` as (stamp s, file name, 8-bit grey or RGB image; written losslessly, so use
+    ``.png``), ``ranges`` as (stamp s, the four ranges in m, NaN for no return)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / "frames.csv").open("w", newline="") as stream:
+        table = csv.writer(stream)
+        table.writerow(["t_s", "image"])
+        for t_s, name, image in frames:
+            image = np.asarray(image)
+            if image.ndim == 3:
+                image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+            if not cv2.imwrite(str(folder / name), image):
+                raise RecordingError(f"{folder / name}: OpenCV cannot write this image")
+            table.writerow([_csv_number(t_s), name])
+    with (folder / "ranges.csv").open("w", newline="") as stream:
+        table = csv.writer(stream)
+        table.writerow(["t_s", *(f"range_{i + 1}_m" for i in range(N_SENSORS))])
+        for t_s, values in ranges:
+            if len(values) != N_SENSORS:
+                raise RecordingError(f"{len(values)} ranges at {t_s} s; need {N_SENSORS}")
+            table.writerow([_csv_number(t_s), *(_csv_number(v) for v in values)])
+    return folder
 
 
 def _attitude(quat_xyzw: list[float]) -> np.ndarray | None:

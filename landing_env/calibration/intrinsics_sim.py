@@ -309,16 +309,7 @@ def sample_board_poses(
 
 def camera_metadata(intrinsics: CameraIntrinsics) -> dict:
     """The true camera model, saved with a calibration so a user can tell what it fits."""
-    k = intrinsics
-    return {
-        "width": k.width,
-        "height": k.height,
-        "fx": k.fx,
-        "fy": k.fy,
-        "cx": k.cx,
-        "cy": k.cy,
-        "dist": list(k.dist),
-    }
+    return intrinsics.as_dict()
 
 
 def calibrate_intrinsics_in_sim(

@@ -15,6 +15,12 @@ the closely spaced near stages).  The range → pixel pairs give the PCHIP look-
 (:class:`~estimation.tof_calibration.TofCameraCalibration`) and the hyperbola fits of CRHF
 Table 4.
 
+The same :func:`estimation.tof_rig.calibrate_rig` that calibrates a real rig's recording
+calibrates the stages: :func:`record_tof_rig_in_sim` returns them with the rig file
+(:class:`TofRigSession`), which ``agents.io.tof_rig`` writes as a recording folder (the
+simulated rig's clock: stage k starts at ``k (n + 1) 20 ms`` with its image, its ``n``
+readings follow every 20 ms).
+
 Stages are spaced evenly in log-range (the pixel offset of a touch point falls as 1/r, so
 this keeps the pixel steps between stages similar instead of crowding the far end).
 The floor round the deck is made neutral grey in the rig: the scene's sea blue passes
@@ -29,27 +35,27 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
 from estimation.frames import R_BC, R_PD
-from estimation.tof_calibration import (
-    PAD_COLOURS,
-    HyperbolaFit,
-    TofCameraCalibration,
-    segment_pad,
+from estimation.tof_calibration import PAD_COLOURS, HyperbolaFit, TofCameraCalibration
+from estimation.tof_rig import (
+    PAD_NOT_FOUND,
+    SKIP_REASONS,
+    RigCalibration,
+    RigFrame,
+    RigStage,
+    StageWindow,
+    TofRigDescription,
+    calibrate_rig,
 )
-from landing_env.calibration.intrinsics_sim import camera_metadata
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.world import World
 
-#: Skip reasons counted per sensor.
-PAD_NOT_FOUND = "pad_not_found"
-PAD_CLIPPED = "pad_clipped"
-RANGE_INVALID = "range_invalid"
-SKIP_REASONS = (PAD_NOT_FOUND, PAD_CLIPPED, RANGE_INVALID)
+#: the simulated rig's ToF reading period (its clock: module doc)
+READING_PERIOD_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -164,27 +170,6 @@ def rig_config(config: DeckLandingConfig, rig: TofRigConfig) -> DeckLandingConfi
     )
 
 
-def pad_centroid_in_image(mask: np.ndarray, min_area_px: float) -> tuple[np.ndarray | None, str]:
-    """Centroid (u, v) of the convex hull of the mask's largest blob, or None and a reason.
-
-    A blob touching the image border is refused: the part outside would pull the centroid.
-    """
-    mask8 = mask.astype(np.uint8)
-    contours, _ = cv2.findContours(mask8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    if not contours:
-        return None, PAD_NOT_FOUND
-    largest = max(contours, key=cv2.contourArea)
-    hull = cv2.convexHull(largest)
-    moments = cv2.moments(hull)
-    if moments["m00"] < min_area_px:
-        return None, PAD_NOT_FOUND
-    x, y, w, h = cv2.boundingRect(hull)
-    height, width = mask.shape
-    if x <= 0 or y <= 0 or x + w >= width or y + h >= height:
-        return None, PAD_CLIPPED
-    return np.array([moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]]), ""
-
-
 def _touch_point_error(
     calibration: TofCameraCalibration, exact: TofCameraCalibration, n: int = 400
 ) -> np.ndarray:
@@ -198,24 +183,34 @@ def _touch_point_error(
     return worst
 
 
-def calibrate_tof_camera_in_sim(
+@dataclass(frozen=True)
+class TofRigSession:
+    """The simulated rig's stages and its rig file (a recording's content, in memory)."""
+
+    stages: tuple[RigStage, ...]
+    description: TofRigDescription
+
+
+def record_tof_rig_in_sim(
     config: DeckLandingConfig | None = None,
     rig: TofRigConfig | None = None,
     rng: np.random.Generator | None = None,
     progress: Callable[[], None] | None = None,
-) -> TofSimReport:
-    """Climb through the stages over the pad deck and build the ToF–camera calibration.
+) -> TofRigSession:
+    """Climb through the stages over the pad deck: each stage's image and readings.
 
     ``config``: the environment config whose camera, ToF sensors and drone are calibrated
     (default: ``configs/default.yaml``); its ToF noise model applies.  ``rng`` seeds the
-    sensor noise.  ``progress`` is called once per stage.  Raises ``RuntimeError`` when a
-    sensor has fewer than two usable stages.
+    sensor noise.  ``progress`` is called once per stage.  A reading without a return is NaN.
     """
     config = config if config is not None else load_config("default")
     rig = rig or TofRigConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     rig_cfg = rig_config(config, rig)
+    n_readings = rig.readings_per_stage
     world = World(rig_cfg)
+    stages: list[RigStage] = []
+    windows: list[StageWindow] = []
     try:
         world.client.changeVisualShape(world.ground_id, -1, rgbaColor=[*rig.floor_rgb, 1.0])
         # the deck at home, still; the drone placed anywhere for now
@@ -224,75 +219,85 @@ def calibrate_tof_camera_in_sim(
         mounts_c = np.asarray(rig_cfg.tof.mount_offsets_c, dtype=float)
         # sensor origins in B: their common height decides where the body goes for a range
         sensors_b = world.t_bc + (R_BC @ mounts_c.T).T
-        n_sensors = len(mounts_c)
         stage_ranges = rig.stage_ranges(rig_cfg.tof.max_range)
-        ranges = np.full((len(stage_ranges), n_sensors), np.nan)
-        pixels = np.full((len(stage_ranges), n_sensors, 2), np.nan)
-        skipped: dict[str, list[int]] = {reason: [0] * n_sensors for reason in SKIP_REASONS}
         for stage, target in enumerate(stage_ranges):
             position = deck.position_w.copy()
             position[:2] -= world.t_bc[:2]  # camera above the deck centre
             position[2] += target - float(np.mean(sensors_b[:, 2]))
             world.place_drone(position, 0.0)
-            image = world.render_camera_image()
-            readings = [world.measure_ranges() for _ in range(rig.readings_per_stage)]
-            valid = np.array([r.valid for r in readings])
-            valid_count = valid.sum(axis=0)
-            summed = np.where(valid, np.array([r.ranges for r in readings]), 0.0).sum(axis=0)
-            mean_range = summed / np.maximum(valid_count, 1)
-            for i, colour in enumerate(PAD_COLOURS[:n_sensors]):
-                if 2 * valid_count[i] < len(readings):
-                    skipped[RANGE_INVALID][i] += 1
-                    continue
-                centroid, reason = pad_centroid_in_image(
-                    segment_pad(image, colour), rig.min_pad_area_px
+            t0 = round(stage * (n_readings + 1) * READING_PERIOD_S, 9)
+            frame = RigFrame(t0, f"stage_{stage:04d}.png", world.render_camera_image())
+            readings = [world.measure_ranges() for _ in range(n_readings)]
+            values = np.array([np.where(r.valid, r.ranges, np.nan) for r in readings])
+            stamps = np.array(
+                [round(t0 + (j + 1) * READING_PERIOD_S, 9) for j in range(n_readings)]
+            )
+            stages.append(
+                RigStage(
+                    (frame,),
+                    tuple(stamps.copy() for _ in PAD_COLOURS),
+                    tuple(values[:, i].copy() for i in range(len(PAD_COLOURS))),
                 )
-                if centroid is None:
-                    skipped[reason][i] += 1
-                    continue
-                ranges[stage, i] = mean_range[i]
-                pixels[stage, i] = centroid
+            )
+            end = round(t0 + (n_readings + 0.5) * READING_PERIOD_S, 9)
+            windows.append(StageWindow(t0, end, float(target)))
             if progress is not None:
                 progress()
     finally:
         world.close()
-    camera = rig_cfg.camera.intrinsics
-    metadata = {
-        "source": "simulator",
-        "camera": camera_metadata(camera),
-        "tof_mount_offsets_c": mounts_c.tolist(),
-        "tof_max_range_m": rig_cfg.tof.max_range,
-        "tof_noise": rig_cfg.tof.noise,
-        "readings_per_stage": rig.readings_per_stage,
-        "stages": len(stage_ranges),
-        "stage_spacing": rig.spacing,
-        "pad_radius_m": rig.pad_radius_m,
-        "skipped": skipped,
-    }
-    usable = np.isfinite(ranges).sum(axis=0)
-    if np.any(usable < 2):
-        raise RuntimeError(
-            f"usable stages per sensor {usable.tolist()}: at least 2 are needed "
-            f"(skipped: {skipped})"
-        )
-    calibration = TofCameraCalibration.from_measurements(
-        ranges, pixels, method="pchip", out_of_range="hyperbola", metadata=metadata
+    description = TofRigDescription(
+        stages=tuple(windows),
+        min_pad_area_px=rig.min_pad_area_px,
+        camera=rig_cfg.camera.intrinsics,
+        tof_mount_offsets_c=tuple(tuple(row) for row in mounts_c.tolist()),
+        tof_max_range_m=rig_cfg.tof.max_range,
+        metadata={
+            "source": "simulator",
+            "tof_noise": rig_cfg.tof.noise,
+            "readings_per_stage": n_readings,
+            "stage_spacing": rig.spacing,
+            "pad_radius_m": rig.pad_radius_m,
+        },
     )
+    return TofRigSession(tuple(stages), description)
+
+
+def tof_sim_report(result: RigCalibration, description: TofRigDescription) -> TofSimReport:
+    """The simulated rig's calibration with its error against the analytic touch points
+    (the rig file's camera and sensor layout are the truth)."""
+    camera, mounts = description.camera, description.tof_mount_offsets_c
+    if camera is None or mounts is None:
+        raise ValueError("the simulated rig's file names its camera and sensor layout")
+    mounts_c = np.asarray(mounts, dtype=float)
+    calibration = result.calibration
     exact = _exact_calibration(camera, mounts_c, calibration)
-    sample_error = np.zeros(n_sensors)
+    sample_error = np.zeros(calibration.n_sensors)
     for i, samples in enumerate(calibration.samples):
         truth = _project_touch_points(camera, mounts_c[i], samples[:, 0])
         sample_error[i] = math.sqrt(float(np.mean(np.sum((samples[:, 1:] - truth) ** 2, axis=1))))
     return TofSimReport(
         calibration=calibration,
-        ranges=ranges,
-        pixels=pixels,
-        skipped=skipped,
+        ranges=result.ranges,
+        pixels=result.pixels,
+        skipped=result.skipped,
         exact=exact,
         exact_error_px=_touch_point_error(calibration, exact),
         sample_error_px=sample_error,
-        metadata=metadata,
+        metadata=calibration.metadata,
     )
+
+
+def calibrate_tof_camera_in_sim(
+    config: DeckLandingConfig | None = None,
+    rig: TofRigConfig | None = None,
+    rng: np.random.Generator | None = None,
+    progress: Callable[[], None] | None = None,
+) -> TofSimReport:
+    """Climb through the stages over the pad deck and build the ToF–camera calibration
+    (:func:`record_tof_rig_in_sim`'s arguments).  Raises
+    :class:`~estimation.tof_rig.TofRigError` when a sensor has fewer than two usable stages."""
+    session = record_tof_rig_in_sim(config, rig, rng, progress)
+    return tof_sim_report(calibrate_rig(session.stages, session.description), session.description)
 
 
 def _project_touch_points(
@@ -314,10 +319,13 @@ def _exact_calibration(
 
 
 __all__ = [
+    "PAD_NOT_FOUND",
     "SKIP_REASONS",
     "TofRigConfig",
+    "TofRigSession",
     "TofSimReport",
     "calibrate_tof_camera_in_sim",
-    "pad_centroid_in_image",
+    "record_tof_rig_in_sim",
     "rig_config",
+    "tof_sim_report",
 ]

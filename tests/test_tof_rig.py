@@ -1,0 +1,350 @@
+"""``deck-landing calibrate tof --recording``: a rig's recording folder to the ToF–camera
+calibration, the simulated rig through the same function, and bad input named."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from agents.cli import main
+from agents.io.tof_rig import write_rig_recording
+from estimation.camera_model import CameraIntrinsics
+from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
+from estimation.tof_calibration import PAD_COLOURS, TofCameraCalibration
+from estimation.tof_rig import (
+    RIG_FILE,
+    RigFrame,
+    RigStage,
+    StageWindow,
+    TofRigDescription,
+    TofRigError,
+    calibrate_rig,
+)
+from landing_env.calibration.tof_camera_sim import (
+    TofRigConfig,
+    calibrate_tof_camera_in_sim,
+    record_tof_rig_in_sim,
+)
+from landing_env.config import load_config
+
+# a small synthetic rig: 160x120 pinhole, sensors 5 cm off the optical axis
+CAMERA = CameraIntrinsics(width=160, height=120, fx=100.0, fy=100.0, cx=79.5, cy=59.5)
+MOUNTS_C = np.array(
+    [[-0.05, -0.05, 0.0], [0.05, -0.05, 0.0], [0.05, 0.05, 0.0], [-0.05, 0.05, 0.0]]
+)
+RGB = {"blue": (0, 0, 255), "green": (0, 255, 0), "yellow": (255, 255, 0), "red": (255, 0, 0)}
+RANGES_M = (0.4, 0.6, 0.9, 1.3)
+READINGS = 4
+
+
+def _pad_image(range_m: float, camera: CameraIntrinsics = CAMERA) -> np.ndarray:
+    """Grey floor, a disc of each pad colour centred on its sensor's touch-point pixel."""
+    image = np.full((camera.height, camera.width, 3), 128, np.uint8)
+    points = np.column_stack([MOUNTS_C[:, :2], np.full(4, range_m)])
+    radius = 0.02 * camera.fx / range_m
+    for (u, v), colour in zip(camera.project(points), PAD_COLOURS, strict=True):
+        # 4 fractional bits: the disc's centre to 1/16 px
+        centre = (round(u * 16), round(v * 16))
+        cv2.circle(image, centre, round(radius * 16), RGB[colour], -1, cv2.LINE_8, 4)
+    return image
+
+
+def _synthetic_rig(camera: CameraIntrinsics = CAMERA) -> tuple[list[RigStage], TofRigDescription]:
+    stages, windows = [], []
+    for k, r in enumerate(RANGES_M):
+        t0 = float(k)
+        stamps = np.array([t0 + 0.1 * (j + 1) for j in range(READINGS)])
+        readings = np.full(READINGS, r)
+        readings[0] = np.nan  # one reading without a return: the other three are averaged
+        frame = RigFrame(t0, f"pads_{k}.png", _pad_image(r, camera))
+        stages.append(RigStage((frame,), (stamps,) * 4, (readings,) * 4))
+        windows.append(StageWindow(t0, t0 + 0.5, r))
+    description = TofRigDescription(
+        stages=tuple(windows),
+        min_pad_area_px=4.0,
+        camera=camera,
+        tof_mount_offsets_c=tuple(tuple(row) for row in MOUNTS_C.tolist()),
+        metadata={"source": "test"},
+    )
+    return stages, description
+
+
+@pytest.fixture
+def rig_folder(tmp_path: Path) -> Path:
+    stages, description = _synthetic_rig()
+    return write_rig_recording(tmp_path / "rig", stages, description)
+
+
+def _calibrate(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str]:
+    code = main(["calibrate", "tof", *args])
+    return code, capsys.readouterr().err
+
+
+def test_pads_drawn_at_the_touch_points_give_those_pixels_back(
+    rig_folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "out"
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", str(out))
+    assert code == 0, err
+    cal = TofCameraCalibration.load(out / "tof_camera.json")
+    assert cal.image_size == (CAMERA.width, CAMERA.height)
+    assert cal.metadata["camera"] == CAMERA.as_dict()
+    assert np.allclose(cal.metadata["tof_mount_offsets_c"], MOUNTS_C)
+    exact = TofCameraCalibration.exact(CAMERA, MOUNTS_C, 0.3, 1.5)
+    for i, samples in enumerate(cal.samples):
+        # every stage kept, the range the mean of the three valid readings
+        np.testing.assert_allclose(samples[:, 0], RANGES_M, rtol=1e-15)
+        truth = np.array([exact.lookup(np.full(4, r)).pixels[i] for r in RANGES_M])
+        # the centroid of the hull of a rasterised disc's border pixels: within a fifth of a
+        # pixel of the disc's centre (measured: up to 0.13 px, the small near-stage discs)
+        assert np.abs(samples[:, 1:] - truth).max() < 0.2
+    summary = json.loads((out / "summary.json").read_text())
+    assert [s["samples"] for s in summary["sensors"]] == [4, 4, 4, 4]
+
+
+def test_the_simulated_rig_gives_the_same_calibration_through_its_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """In the simulator, and written as a recording folder then `calibrate tof --recording`:
+    the same file, byte for byte (images are PNG, stamps and ranges exact decimal text).
+    The sensors are noisy and miss returns, so the averaging goes through the CSV too."""
+    config = load_config("default", overrides={"tof.noise": "vl53l1x"})
+    rig = TofRigConfig(stages=8, readings_per_stage=5)
+    in_sim = calibrate_tof_camera_in_sim(config, rig, np.random.default_rng(7))
+    session = record_tof_rig_in_sim(config, rig, np.random.default_rng(7))
+    folder = write_rig_recording(tmp_path / "rig", session.stages, session.description)
+    out = tmp_path / "out"
+    code, err = _calibrate(capsys, "--recording", str(folder), "--out", str(out))
+    assert code == 0, err
+    in_sim.calibration.save(tmp_path / "in_sim.json")
+    assert (out / "tof_camera.json").read_text() == (tmp_path / "in_sim.json").read_text()
+    # the readings were noisy: averaging mattered
+    readings = np.concatenate([s.readings_m[0] for s in session.stages])
+    assert np.nanstd(readings[:5]) > 0.0
+
+
+def test_calibrate_command_records_the_rig_and_calibrates_from_the_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    from agents.calibrate import run_calibration
+
+    run = run_calibration(out_dir=tmp_path, views=4, stages=4, progress=False)
+    folder = run.files["tof_rig"]
+    assert (folder / RIG_FILE).is_file() and (folder / "ranges.csv").is_file()
+    code, err = _calibrate(capsys, "--recording", str(folder), "--out", str(tmp_path / "again"))
+    assert code == 0, err
+    again = (tmp_path / "again" / "tof_camera.json").read_text()
+    assert again == run.files["tof_camera"].read_text()
+
+
+def test_a_missing_folder_is_named(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    code, err = _calibrate(capsys, "--recording", str(tmp_path / "nowhere"), "--out", "x")
+    assert code == 2
+    assert "nowhere: not a folder" in err
+
+
+def test_a_missing_rig_file_or_ranges_file_is_named(
+    rig_folder: Path, capsys: pytest.CaptureFixture
+) -> None:
+    (rig_folder / "ranges.csv").unlink()
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2 and "no ranges.csv" in err
+    (rig_folder / RIG_FILE).unlink()
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2 and f"no {RIG_FILE}" in err
+
+
+def test_a_missing_csv_column_is_named(rig_folder: Path, capsys: pytest.CaptureFixture) -> None:
+    lines = (rig_folder / "ranges.csv").read_text().splitlines()
+    cut = [",".join(line.split(",")[:4]) for line in lines]
+    (rig_folder / "ranges.csv").write_text("\n".join(cut) + "\n")
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2
+    assert "ranges.csv: missing column(s) range_4_m" in err
+
+
+def test_images_of_another_size_than_the_intrinsics_are_refused(
+    rig_folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    intrinsics = tmp_path / "intrinsics.json"
+    IntrinsicsCalibrationResult(
+        K=np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]),
+        dist=np.zeros(5),
+        rms_reprojection_error=0.1,
+        per_view_errors=np.zeros(3),
+        image_size=(640, 480),
+    ).save(intrinsics)
+    args = ("--recording", str(rig_folder), "--calibration", str(intrinsics), "--out", "x")
+    code, err = _calibrate(capsys, *args)
+    assert code == 2
+    assert f"{intrinsics} is for another camera: image size 640x480" in err
+    assert "pads_0.png" in err and "160x120" in err
+
+
+def test_an_image_of_another_size_than_the_rig_files_camera_is_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    stages, description = _synthetic_rig()
+    small = CameraIntrinsics(width=80, height=60, fx=50.0, fy=50.0, cx=39.5, cy=29.5)
+    frame = RigFrame(3.0, "pads_3.png", _pad_image(RANGES_M[3], small))
+    stages[3] = RigStage((frame,), stages[3].reading_t_s, stages[3].readings_m)
+    folder = write_rig_recording(tmp_path / "rig", stages, description)
+    code, err = _calibrate(capsys, "--recording", str(folder), "--out", "x")
+    assert code == 2
+    assert "pads_3.png: image is 80x60, the camera model is 160x120" in err
+
+
+def test_too_few_stages_are_refused_naming_the_rig_file(
+    rig_folder: Path, capsys: pytest.CaptureFixture
+) -> None:
+    doc = json.loads((rig_folder / RIG_FILE).read_text())
+    doc["stages"] = doc["stages"][:1]
+    (rig_folder / RIG_FILE).write_text(json.dumps(doc))
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2
+    assert f"{RIG_FILE}: stages: 1 given; at least 2 are needed" in err
+
+
+def test_a_stage_without_a_frame_is_named(rig_folder: Path, capsys: pytest.CaptureFixture) -> None:
+    (rig_folder / "pads_2.png").unlink()  # its frame is skipped by the reader
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2
+    assert "stages[2] (2.0 to 2.5 s): no frame of frames.csv in it" in err
+    assert "image missing or unreadable" in err
+
+
+def test_overlapping_or_malformed_windows_are_named(
+    rig_folder: Path, capsys: pytest.CaptureFixture
+) -> None:
+    doc = json.loads((rig_folder / RIG_FILE).read_text())
+    doc["stages"][1]["t_start_s"] = 0.2
+    (rig_folder / RIG_FILE).write_text(json.dumps(doc))
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2 and "stages[1] starts at 0.2 s, not after stages[0] ends" in err
+    doc["stages"][1] = {"t_start_s": 1.0}
+    (rig_folder / RIG_FILE).write_text(json.dumps(doc))
+    code, err = _calibrate(capsys, "--recording", str(rig_folder), "--out", "x")
+    assert code == 2 and "stages[1]: need an object with t_start_s and t_end_s" in err
+
+
+def test_too_few_usable_stages_name_the_sensor_and_why(tmp_path: Path) -> None:
+    stages, description = _synthetic_rig()
+    # the red pad painted over in all but one stage
+    for k in range(1, len(stages)):
+        image = stages[k].frames[0].image.copy()
+        image[np.all(image == RGB["red"], axis=2)] = 128
+        frame = RigFrame(stages[k].frames[0].t_s, "grey.png", image)
+        stages[k] = RigStage((frame,), stages[k].reading_t_s, stages[k].readings_m)
+    with pytest.raises(ValueError, match=r"sensor 4 \(red pad\): 1; at least 2") as error:
+        calibrate_rig(stages, description)
+    assert "'pad_not_found': [0, 0, 0, 3]" in str(error.value)
+
+
+def test_sensors_with_too_few_returns_are_skipped_and_counted() -> None:
+    stages, description = _synthetic_rig()
+    k = 1
+    half_missing = stages[k].readings_m[0].copy()
+    half_missing[1] = np.nan  # two of four left: still kept (at least half)
+    most_missing = half_missing.copy()
+    most_missing[2] = np.nan  # one of four: skipped
+    readings = (half_missing, most_missing, *stages[k].readings_m[2:])
+    stages[k] = RigStage(stages[k].frames, stages[k].reading_t_s, readings)
+    result = calibrate_rig(stages, description)
+    assert result.skipped["range_invalid"] == [0, 1, 0, 0]
+    assert result.ranges[k, 0] == pytest.approx(RANGES_M[k]) and np.isnan(result.ranges[k, 1])
+
+
+def test_grey_images_are_refused_naming_the_file(tmp_path: Path) -> None:
+    stages, description = _synthetic_rig()
+    grey = cv2.cvtColor(stages[0].frames[0].image, cv2.COLOR_RGB2GRAY)
+    stages[0] = RigStage(
+        (RigFrame(0.0, "grey.png", grey),), stages[0].reading_t_s, stages[0].readings_m
+    )
+    with pytest.raises(ValueError, match=r"grey\.png: the pads are found by colour"):
+        calibrate_rig(stages, description)
+
+
+def test_the_calibration_file_is_versioned_and_version_1_still_reads(tmp_path: Path) -> None:
+    stages, description = _synthetic_rig()
+    cal = calibrate_rig(stages, description).calibration
+    cal.save(tmp_path / "v2.json")
+    doc = json.loads((tmp_path / "v2.json").read_text())
+    assert doc["format_version"] == 2 and doc["image_size"] == [160, 120]
+    old = {k: v for k, v in doc.items() if k not in ("format_version", "image_size")}
+    (tmp_path / "v1.json").write_text(json.dumps({**old, "version": 1}))
+    v1 = TofCameraCalibration.load(tmp_path / "v1.json")
+    assert v1.image_size is None
+    for a, b in zip(v1.samples, cal.samples, strict=True):
+        np.testing.assert_array_equal(a, b)
+    (tmp_path / "v3.json").write_text(json.dumps({**doc, "format_version": 3}))
+    with pytest.raises(ValueError, match="unsupported format_version 3"):
+        TofCameraCalibration.load(tmp_path / "v3.json")
+    with pytest.raises(ValueError, match="image size 160x120, but the images are 640x480"):
+        cal.require_camera((640, 480))
+
+
+def test_estimate_refuses_a_tof_calibration_made_for_another_image_size(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    pytest.importorskip("mcap_ros2")
+    stages, description = _synthetic_rig()
+    calibration = tmp_path / "cal"
+    calibration.mkdir()
+    calibrate_rig(stages, description).calibration.save(calibration / "tof_camera.json")
+    # a recording of 80x60 frames, with intrinsics that fit them
+    small = CameraIntrinsics(width=80, height=60, fx=50.0, fy=50.0, cx=39.5, cy=29.5)
+    IntrinsicsCalibrationResult(
+        K=small.matrix,
+        dist=np.zeros(5),
+        rms_reprojection_error=0.1,
+        per_view_errors=np.zeros(3),
+        image_size=(80, 60),
+    ).save(calibration / "intrinsics.json")
+    frames = [RigFrame(0.0, "f0.png", _pad_image(0.5, small))]
+    recording = write_rig_recording(
+        tmp_path / "rec",
+        [RigStage(tuple(frames), (np.array([0.0]),) * 4, (np.array([0.5]),) * 4)],
+        description,
+    )
+    code = main(
+        ["estimate", "--input", str(recording), "--estimator", "ihrcf",
+         "--calibration", str(calibration), "--out", str(tmp_path / "o.csv")]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "tof_camera.json is for another camera: image size 160x120" in err
+    assert "the images are 80x60" in err
+
+
+def test_fuzzed_rig_files_give_a_named_error_or_load(rig_folder: Path) -> None:
+    """Random values put in each field of a valid rig file: it loads, or a TofRigError
+    names the file; nothing else is raised."""
+    doc = json.loads((rig_folder / RIG_FILE).read_text())
+    junk = [None, "x", -1, 0, 1e308, float("nan"), [], {}, [1, 2], [[1, 2, 3]] * 4, True]
+    rng = np.random.default_rng(0)
+    path = rig_folder / RIG_FILE
+    fields = ["stages", "min_pad_area_px", "camera", "tof_mount_offsets_c", "tof_max_range_m",
+              "metadata", "format_version", "stages.0", "stages.1.t_end_s",
+              "camera.fx"]  # fmt: skip
+    for _ in range(200):
+        mutated = json.loads(json.dumps(doc))
+        key = fields[rng.integers(len(fields))]
+        value = junk[rng.integers(len(junk))]
+        parts = key.split(".")
+        target = mutated
+        for part in parts[:-1]:
+            target = target[int(part)] if isinstance(target, list) else target.setdefault(part, {})
+        last = parts[-1]
+        if isinstance(target, list):
+            target[int(last)] = value
+        else:
+            target[last] = value
+        path.write_text(json.dumps(mutated))
+        try:
+            TofRigDescription.load(path)
+        except TofRigError as exc:
+            assert str(path) in str(exc)
