@@ -179,7 +179,12 @@ class RewardConfig:
     """Weights of the reward; see the README for the formula."""
 
     success_bonus: float = 10.0
+    #: ``DeckLanding`` only: any touchdown on the deck (a success or a hard landing) earns it,
+    #: so that trying to land pays more than hovering to the time-out; the timing task, whose
+    #: every commit ends in a touchdown, leaves it out
+    touchdown_bonus: float = 5.0
     crash_penalty: float = 10.0
+
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
     shaping_weight: float = 1.0
     vertical_weight: float = 0.5

@@ -73,6 +73,7 @@ LIMITS: dict[str, Limit] = {
     "touchdown.max_normal_speed": _positive(20.0),
     "touchdown.settle_time_s": _nonneg(60.0),
     "reward.success_bonus": _WEIGHT,
+    "reward.touchdown_bonus": _WEIGHT,
     "reward.crash_penalty": _WEIGHT,
     "reward.shaping_weight": _WEIGHT,
     "reward.vertical_weight": _WEIGHT,

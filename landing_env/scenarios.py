@@ -279,16 +279,16 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
 VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-<Scenario>": [
         "v0: the scenario's config made a landing run, IHRCF observed on the bench.",
-        "v1: every observation key a float32 Box, the drone's velocity and attitude observed "
-        "(current).",
+        "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
+        "a touchdown bonus (current).",
     ],
     "DeckLanding-ShipSS<n>": [
         "v0: the bench's settings over the ship deck.",
         "v1: ``tight`` observed, the ship configs' touchdown envelope, the standard lens.",
         "v2: the scenario's lens (wide at sea states 5 and 6).",
         "v3: started in trim with the mean wind, the autopilots' limits.",
-        "v4: every observation key a float32 Box, the drone's velocity and attitude observed "
-        "(current).",
+        "v4: every observation key a float32 Box, the drone's velocity and attitude observed, "
+        "a touchdown bonus (current).",
     ],
     "DeckLandingTiming-BenchSS<n>": [
         "v0: the range-scheduled final descent.",
@@ -315,8 +315,8 @@ VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLandingTiming-PaperStewart": ["v0: the range-scheduled descent (current)."],
     "DeckLanding-HighApproach": [
         "v0: from 20 m up and 5 m off.",
-        "v1: every observation key a float32 Box, the drone's velocity and attitude observed "
-        "(current).",
+        "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
+        "a touchdown bonus (current).",
     ],
 }
 

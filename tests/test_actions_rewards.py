@@ -117,6 +117,16 @@ def test_touchdown_terms_penalise_speed_tilt_offset_and_reward_success() -> None
     assert terms["offset"] == pytest.approx(-r.offset_penalty * 0.04)
     hard = touchdown_terms(Outcome.HARD_LANDING, metrics, r)
     assert hard["success"] == 0.0 and hard["tilt"] == terms["tilt"]
+    # the touchdown bonus only where the task pays it (DeckLanding), on any touchdown
+    assert terms["touchdown"] == hard["touchdown"] == 0.0
+    paid = touchdown_terms(Outcome.HARD_LANDING, metrics, r, touchdown_bonus=True)
+    assert paid["touchdown"] == r.touchdown_bonus and paid["success"] == 0.0
+    assert touchdown_terms(Outcome.CRASH, None, r, touchdown_bonus=True)["touchdown"] == 0.0
+    # a failed touchdown within about 1 m/s and 5 degrees is worth more than a 40 s hover
+    rough = TouchdownMetrics(relative_normal_speed=1.0, deck_tilt_deg=5.0, lateral_offset_m=0.1)
+    failed = touchdown_terms(Outcome.HARD_LANDING, rough, r, touchdown_bonus=True)
+    assert sum(failed.values()) > -r.time_cost * 40.0
+
     # moving away from the deck at contact is not penalised as speed
     metrics.relative_normal_speed = -0.1
     assert touchdown_terms(Outcome.SUCCESS, metrics, r)["normal_speed"] == 0.0

@@ -341,7 +341,7 @@ class DeckLandingBaseEnv(gym.Env):
         terms = {
             "shaping": potential - self._potential,
             "time": -r.time_cost * self.env_dt,
-            **touchdown_terms(self._outcome, self._touchdown, r),
+            **touchdown_terms(self._outcome, self._touchdown, r, touchdown_bonus=True),
         }
         self._potential = potential
         self._reward_terms = terms

@@ -99,14 +99,18 @@ class DeckLandingEnv(DeckLandingBaseEnv):
     (``reward.vertical_weight`` w_v = 0.5) and the potential ``Φ = -shaping_weight · d``,
     each step gives ``Φ(s') - Φ(s) - time_cost · Δt``; a crash subtracts ``crash_penalty``
     (10); a touchdown subtracts ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
-    offset_penalty · offset_m`` (4 per m/s, 0.2 per degree, 5 per metre) and a successful one
-    adds ``success_bonus`` (10).  ``time_cost`` is 0.1 per second.  The shaping is
+    offset_penalty · offset_m`` (4 per m/s, 0.2 per degree, 5 per metre), adds
+    ``touchdown_bonus`` (5) for being on the deck, and a successful one adds
+    ``success_bonus`` (10) more.  ``time_cost`` is 0.1 per second.  The shaping is
     potential-based, so it does not change the optimal policy.  A time-out is a truncation
     and carries no terminal term (the time cost has priced the hover), so that a learner
     bootstraps through it: 40 s of hovering (-4) is worth less than a successful touchdown
-    (+10, less at most 2 for the normal speed and 1 for the tilt).  Each term is in ``info``
-    (``reward_shaping``, ``reward_time``, ``reward_success``, ``reward_crash``,
-    ``reward_normal_speed``, ``reward_tilt``, ``reward_offset``) and they sum to the reward.
+    (+15, less at most 2 for the normal speed and 1 for the tilt) and less than a touchdown
+    up to about 1 m/s and 5° that fails (the touchdown bonus makes trying to land pay while
+    a learner cannot land well yet; the success bonus then rewards landing well).  Each
+    term is in ``info`` (``reward_shaping``, ``reward_time``, ``reward_success``,
+    ``reward_touchdown``, ``reward_crash``, ``reward_normal_speed``, ``reward_tilt``,
+    ``reward_offset``) and they sum to the reward.
 
     .. rubric:: Starting state
 
@@ -146,7 +150,8 @@ class DeckLandingEnv(DeckLandingBaseEnv):
     .. rubric:: Version History
 
     * ``DeckLanding-v1`` (current): every observation key a float32 ``Box`` (the flags were
-      ``MultiBinary``), and the drone's own ``velocity`` and ``attitude`` observed.  ``v0``:
+      ``MultiBinary``), the drone's own ``velocity`` and ``attitude`` observed, and a
+      ``touchdown_bonus`` for any touchdown on the deck.  ``v0``:
       the task, any config; no longer registered (1.0.0).
     * ``DeckLanding-BenchSS{3,4,5}``, ``DeckLanding-PaperStewart``: the bench configs made a
       landing run (the drone flying, the tag projected, IHRCF observed); ``v1`` (current) has

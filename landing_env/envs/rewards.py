@@ -16,6 +16,7 @@ REWARD_TERMS: tuple[str, ...] = (
     "shaping",
     "time",
     "success",
+    "touchdown",
     "crash",
     "normal_speed",
     "tilt",
@@ -29,13 +30,24 @@ def zero_terms() -> dict[str, float]:
 
 
 def touchdown_terms(
-    outcome: Outcome, touchdown: TouchdownMetrics | None, reward: RewardConfig
+    outcome: Outcome,
+    touchdown: TouchdownMetrics | None,
+    reward: RewardConfig,
+    touchdown_bonus: bool = False,
 ) -> dict[str, float]:
     """The end-of-episode terms: ``-crash_penalty`` on a crash or a descent that never touched
     down (``TIMEOUT``); on any touchdown ``-(normal_speed_penalty * v_n + tilt_penalty * tilt_deg
-    + offset_penalty * offset_m)`` (the normal speed counted only towards the deck) and
-    ``+success_bonus`` on success; zero while in flight."""
-    terms = {"success": 0.0, "crash": 0.0, "normal_speed": 0.0, "tilt": 0.0, "offset": 0.0}
+    + offset_penalty * offset_m)`` (the normal speed counted only towards the deck),
+    ``+touchdown_bonus`` where the task pays it (``DeckLanding``) and ``+success_bonus`` on
+    success; zero while in flight."""
+    terms = {
+        "success": 0.0,
+        "touchdown": 0.0,
+        "crash": 0.0,
+        "normal_speed": 0.0,
+        "tilt": 0.0,
+        "offset": 0.0,
+    }
     if outcome in (Outcome.CRASH, Outcome.TIMEOUT):
         terms["crash"] = -reward.crash_penalty
         return terms
@@ -44,6 +56,9 @@ def touchdown_terms(
     terms["normal_speed"] = -reward.normal_speed_penalty * max(touchdown.relative_normal_speed, 0.0)
     terms["tilt"] = -reward.tilt_penalty * touchdown.deck_tilt_deg
     terms["offset"] = -reward.offset_penalty * touchdown.lateral_offset_m
+    if touchdown_bonus:
+        terms["touchdown"] = reward.touchdown_bonus
+
     if outcome is Outcome.SUCCESS:
         terms["success"] = reward.success_bonus
     return terms
