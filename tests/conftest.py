@@ -9,6 +9,8 @@ is the long search.
 from __future__ import annotations
 
 import os
+import socket
+from collections.abc import Iterator
 
 import pytest
 from hypothesis import settings
@@ -27,3 +29,15 @@ def small_forecast():
 
     motion = load_config(SCENARIOS["ship-ss4"].config).motion
     return fit_deck_forecast(motion, realizations=3, record_s=400.0)
+
+
+@pytest.fixture
+def listener() -> Iterator[socket.socket]:
+    """A UDP socket on loopback that the MAVLink bridge sends to (udpout), with a short timeout."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(2.0)
+    try:
+        yield sock
+    finally:
+        sock.close()

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import socket
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -37,18 +36,6 @@ from estimation.frames import deck_pose_in_camera, matrix_from_euler_zyx
 from estimation.types import DeckPoseEstimate
 
 F32 = np.float32
-
-
-@pytest.fixture
-def listener() -> Iterator[socket.socket]:
-    """A UDP socket on loopback that the bridge sends to (udpout), with a short timeout."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    sock.settimeout(2.0)
-    try:
-        yield sock
-    finally:
-        sock.close()
 
 
 def receive(sock: socket.socket, count: int, max_datagrams: int = 2000) -> list:

@@ -1,5 +1,10 @@
 """``deck-landing bridge``: the live simulator's estimates to an autopilot over MAVLink.
 
+A paced run (``--speed`` > 0) also listens to the autopilot on the same connection: it
+answers and sends TIMESYNC (the stamps' clock is the simulator's, read on the wall clock) and,
+with ``--vehicle-pose mavlink``, takes the vehicle's pose from the autopilot's telemetry
+instead of the simulator's truth.
+
 This module imports no pymavlink at import time, so that the command line works without the
 ``io`` extra; the bridge itself needs it (``pip install deck-landing[io]``).
 """
@@ -7,9 +12,11 @@ This module imports no pymavlink at import time, so that the command line works 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 
 from agents.cli_args import UserError, add_set_argument, parse_overrides, positive_int
+from agents.io.autopilot_listener import AutopilotListener
 from agents.io.landing_target import AUTOPILOTS, ardupilot_parameters
 from agents.io.sim_source import SimulatorSource
 
@@ -35,6 +42,17 @@ def _bridge(args: argparse.Namespace) -> int:
         ) from None
 
     url = parse_connection_url(args.to)  # a bad --to fails before the simulator starts
+    if args.vehicle_pose == "mavlink":
+        if args.autopilot != "px4":
+            raise UserError(
+                "--vehicle-pose mavlink: only px4 needs the vehicle's pose (ardupilot reads "
+                "LANDING_TARGET in MAV_FRAME_BODY_FRD)"
+            )
+        if args.speed != 1.0:
+            raise UserError(
+                f"--vehicle-pose mavlink: --speed {args.speed:g} is not allowed; the "
+                "simulator's stamps must run on the wall clock (--speed 1)"
+            )
     with (
         SimulatorSource(
             config=None if args.scenario else args.config,
@@ -47,10 +65,13 @@ def _bridge(args: argparse.Namespace) -> int:
             overrides=parse_overrides(args.set),
         ) as source,
         MavlinkLink(url, args.system_id, args.component_id) as link,
+        contextlib.ExitStack() as stack,
     ):
-        bridge = LandingTargetBridge(
-            link, args.autopilot, source.mount, vehicle_pose=source.vehicle_pose
-        )
+        listener = None
+        if args.speed > 0.0:  # the stamps follow the wall clock: TIMESYNC means something
+            listener = stack.enter_context(AutopilotListener(link, source.clock_s))
+        poses = listener.poses if args.vehicle_pose == "mavlink" else source.vehicle_pose
+        bridge = LandingTargetBridge(link, args.autopilot, source.mount, vehicle_pose=poses)
         stats = bridge.run(source)
     print(
         f"LANDING_TARGET to {url.text} ({args.autopilot}): {stats.sent} sent in "
@@ -59,6 +80,10 @@ def _bridge(args: argparse.Namespace) -> int:
     )
     for reason, count in sorted(stats.skipped.items()):
         print(f"  not sent, {reason}: {count}")
+    if listener is not None:
+        print(listener.summary())
+        for reason, count in sorted((listener.skipped + listener.poses.skipped).items()):
+            print(f"  from the autopilot, skipped ({reason}): {count}")
     if args.autopilot == "ardupilot":
         params = ", ".join(f"{k}={v:g}" for k, v in ardupilot_parameters(source.mount).items())
         print(f"ArduPilot parameters for this camera: {params}")
@@ -100,6 +125,14 @@ def add_bridge_parser(sub: argparse._SubParsersAction) -> None:
         type=_non_negative_float,
         default=1.0,
         help="simulated seconds per wall second (1: real time; 0: as fast as it goes)",
+    )
+    bridge.add_argument(
+        "--vehicle-pose",
+        choices=("truth", "mavlink"),
+        default="truth",
+        help="px4's vehicle pose at each measurement: the simulator's truth (default), or "
+        "the autopilot's LOCAL_POSITION_NED + ATTITUDE_QUATERNION (or ODOMETRY) mapped "
+        "through TIMESYNC (needs --speed 1)",
     )
     bridge.add_argument("--system-id", type=int, default=1, help="MAVLink system id (1..255)")
     bridge.add_argument(

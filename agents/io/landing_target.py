@@ -22,7 +22,8 @@ What each autopilot reads (the public sources, read to learn the conventions):
   target's *absolute* position in the local NED frame (``landing_target_pose.x_abs`` ...,
   "relative to origin", docs.px4.io/main/en/msg_docs/LandingTargetPose), stamped with
   ``time_usec`` mapped through the TIMESYNC offset once that has converged, else on receipt
-  (``Timesync::sync_stamp``, ``src/lib/timesync/Timesync.cpp``).  Another frame with
+  (``Timesync::sync_stamp``, ``src/lib/timesync/Timesync.cpp``): ``time_usec`` stays on the
+  companion's clock and PX4 converts it (:mod:`agents.io.timesync`).  Another frame with
   ``position_valid = 1`` is refused ("coordinate frame unsupported"); ``position_valid = 0`` is
   read as an IR-LOCK report of angles.  q is not read.  So PX4 needs the vehicle's attitude and
   local position at the measurement's time (:class:`VehiclePose`) to place the target.  PX4

@@ -14,15 +14,18 @@ An estimate is not sent, and is counted by reason in :class:`BridgeStats`, when 
 invalid (PX4 and ArduPilot both read ``position_valid = 0`` as an angle *measurement*, so
 an invalid estimate is skipped, never flagged), not newer than the last one sent (a held,
 stale estimate), not finite, behind the camera, or (PX4) without the vehicle's pose at its
-stamp.  Messages are MAVLink 2 (LANDING_TARGET's x, y, z, q, type and position_valid are
-MAVLink 2 extension fields), encoded by pymavlink's ``common`` dialect; the link is
-pymavlink's ``mavutil`` connection (``udpout:HOST:PORT`` and friends).
+stamp (with the reason the pose source gives).  Messages are MAVLink 2 (LANDING_TARGET's
+x, y, z, q, type and position_valid are MAVLink 2 extension fields), encoded by pymavlink's
+``common`` dialect; the link is pymavlink's ``mavutil`` connection (``udpout:HOST:PORT`` and
+friends).  The link also receives: :class:`agents.io.autopilot_listener.AutopilotListener`
+answers and sends TIMESYNC on it and collects the vehicle's pose from the autopilot.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
@@ -50,6 +53,12 @@ DEFAULT_COMPONENT_ID = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER
 DEFAULT_SYSTEM_ID = 1
 #: seconds between HEARTBEATs (MAVLink's microservices expect about 1 Hz)
 HEARTBEAT_PERIOD_S = 1.0
+
+#: whether pymavlink's TIMESYNC has the MAVLink 2 target fields (newer message definitions)
+TIMESYNC_HAS_TARGETS = "target_system" in mavlink2.MAVLink_timesync_message.fieldnames
+
+#: the vehicle's pose at a measurement's stamp: a VehiclePose, or None / the reason it has none
+VehiclePoseSource = Callable[[float], VehiclePose | str | None]
 
 _NETWORK = re.compile(r"^(udpout|udpin|udp|udpbcast|tcp|tcpin):([^:\s]+):(\d+)$")
 _SERIAL = re.compile(r"^((?:/dev/\S+?)|(?:COM\d+))(?::(\d+))?$")
@@ -87,7 +96,11 @@ def parse_connection_url(text: str) -> ConnectionUrl:
 
 
 class MavlinkLink:
-    """A MAVLink 2 sender over a pymavlink connection, as one system/component."""
+    """A MAVLink 2 sender and receiver over a pymavlink connection, as one system/component.
+
+    Sending is thread-safe (a listener's thread answers TIMESYNC while the bridge sends);
+    :meth:`receive` decodes with the v2 ``common`` dialect, which also reads MAVLink 1.
+    """
 
     def __init__(
         self,
@@ -112,37 +125,60 @@ class MavlinkLink:
         self._mav = mavlink2.MAVLink(
             self._connection, srcSystem=system_id, srcComponent=component_id
         )
+        # and its decoder, in place of mavutil's (which switches pymavlink's dialect globally)
+        decoder = mavlink2.MAVLink(self._connection, srcSystem=system_id, srcComponent=component_id)
+        decoder.robust_parsing = True  # a corrupt frame comes back as BAD_DATA, not raised
+        self._connection.mav = decoder
+        self._connection.first_byte = False
+        self._send_lock = threading.Lock()
         self.system_id = system_id
         self.component_id = component_id
 
     def send_heartbeat(self) -> None:
         """A companion computer's HEARTBEAT: onboard controller, no autopilot, active."""
-        self._mav.heartbeat_send(
-            mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
-            mavlink2.MAV_AUTOPILOT_INVALID,
-            0,
-            0,
-            mavlink2.MAV_STATE_ACTIVE,
-        )
+        with self._send_lock:
+            self._mav.heartbeat_send(
+                mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
+                mavlink2.MAV_AUTOPILOT_INVALID,
+                0,
+                0,
+                mavlink2.MAV_STATE_ACTIVE,
+            )
 
     def send_landing_target(self, time_usec: int, fields: LandingTargetFields) -> None:
         """One LANDING_TARGET with ``position_valid = 1`` (sizes unknown: 0)."""
-        self._mav.landing_target_send(
-            time_usec,
-            0,
-            fields.frame,
-            fields.angle_x,
-            fields.angle_y,
-            fields.distance,
-            0.0,
-            0.0,
-            fields.x,
-            fields.y,
-            fields.z,
-            list(fields.q),
-            LANDING_TARGET_TYPE_VISION_FIDUCIAL,
-            1,
-        )
+        with self._send_lock:
+            self._mav.landing_target_send(
+                time_usec,
+                0,
+                fields.frame,
+                fields.angle_x,
+                fields.angle_y,
+                fields.distance,
+                0.0,
+                0.0,
+                fields.x,
+                fields.y,
+                fields.z,
+                list(fields.q),
+                LANDING_TARGET_TYPE_VISION_FIDUCIAL,
+                1,
+            )
+
+    def send_timesync(
+        self, tc1: int, ts1: int, target_system: int = 0, target_component: int = 0
+    ) -> None:
+        """One TIMESYNC (a request: ``tc1 = 0``); the target fields are filled where
+        pymavlink's message has them (:data:`TIMESYNC_HAS_TARGETS`)."""
+        targets = (target_system, target_component) if TIMESYNC_HAS_TARGETS else ()
+        with self._send_lock:
+            self._mav.timesync_send(tc1, ts1, *targets)
+
+    def receive(self, timeout_s: float = 0.0):
+        """The next decoded message, waiting up to ``timeout_s``; None when none came."""
+        if timeout_s <= 0.0:
+            return self._connection.recv_match(blocking=False)
+        return self._connection.recv_match(blocking=True, timeout=timeout_s)
 
     def close(self) -> None:
         self._connection.close()
@@ -180,7 +216,9 @@ class LandingTargetBridge:
     """Sends each usable estimate of a ``(stamp_s, estimate)`` stream as LANDING_TARGET.
 
     ``vehicle_pose(stamp_s)``: the vehicle's pose in the local NED frame at a measurement's
-    stamp, or None when unknown; PX4 needs it (its frame is MAV_FRAME_LOCAL_NED).
+    stamp, or None (or the reason, a string) when unknown; PX4 needs it (its frame is
+    MAV_FRAME_LOCAL_NED).  The simulator's truth (``SimulatorSource.vehicle_pose``) or the
+    autopilot's telemetry (:class:`agents.io.autopilot_pose.AutopilotPoses`).
     ``on_sent(stamp_s)`` is called right after each LANDING_TARGET leaves (benchmarks time
     the latency with it).  ``clock``: the wall clock of the heartbeat period.
     """
@@ -190,7 +228,7 @@ class LandingTargetBridge:
         link: MavlinkLink,
         autopilot: str,
         mount: CameraMount | None = None,
-        vehicle_pose: Callable[[float], VehiclePose | None] | None = None,
+        vehicle_pose: VehiclePoseSource | None = None,
         on_sent: Callable[[float], None] | None = None,
         clock: Callable[[], float] = time.monotonic,
         heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
@@ -252,8 +290,9 @@ class LandingTargetBridge:
         if not reason and self.autopilot == "px4":
             assert self.vehicle_pose is not None
             vehicle = self.vehicle_pose(stamp_s)
-            if vehicle is None:
-                reason = "no vehicle pose at the stamp"
+            if not isinstance(vehicle, VehiclePose):
+                why = vehicle if isinstance(vehicle, str) and vehicle else "unknown"
+                reason = f"no vehicle pose at the stamp: {why}"
         if not reason:
             fields = landing_target_fields(
                 self.autopilot, estimate.rotation, estimate.translation, self.mount, vehicle
@@ -289,10 +328,12 @@ __all__ = [
     "CONNECTION_HELP",
     "DEFAULT_COMPONENT_ID",
     "DEFAULT_SYSTEM_ID",
+    "TIMESYNC_HAS_TARGETS",
     "BridgeStats",
     "ConnectionUrl",
     "LandingTargetBridge",
     "MavlinkLink",
+    "VehiclePoseSource",
     "parse_connection_url",
     "time_usec_of",
 ]

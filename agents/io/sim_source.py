@@ -13,6 +13,11 @@ pose at the measurement's time (PX4): :meth:`vehicle_pose` looks it up by stamp,
 NED frame whose origin is the simulator's world origin (x north, the world's y left → east
 is -y, z down).  ``speed`` paces the simulation against the wall clock (1: real time, 2: twice
 as fast); 0 runs it as fast as it goes.
+
+:meth:`clock_s` is the clock of the stamps read on the wall clock (paced runs only): the
+companion's clock for TIMESYNC when the autopilot maps ``time_usec`` or gives the vehicle's
+pose (:class:`agents.io.autopilot_listener.AutopilotListener`).  It starts at the first call
+of it or of the stream, whichever comes first.
 """
 
 from __future__ import annotations
@@ -81,6 +86,21 @@ class SimulatorSource:
         self.outcomes: list[str] = []
         self._poses: OrderedDict[float, VehiclePose] = OrderedDict()
         self._offset_s = 0.0
+        self._wall0: float | None = None
+
+    # ----------------------------------------------------------------- the stamps' clock
+    def _start_wall(self) -> float:
+        if self._wall0 is None:
+            self._wall0 = time.perf_counter()
+        return self._wall0
+
+    def clock_s(self) -> float:
+        """Now, on the clock of the stamps (simulated seconds as paced on the wall clock)."""
+        if self.speed == 0.0:
+            raise ConfigError(
+                "speed", "0 (unpaced): the stamps follow no clock; pace the simulation (> 0)"
+            )
+        return (time.perf_counter() - self._start_wall()) * self.speed
 
     # ----------------------------------------------------------------- vehicle poses
     def vehicle_pose(self, stamp_s: float) -> VehiclePose | None:
@@ -101,7 +121,7 @@ class SimulatorSource:
     # ----------------------------------------------------------------- the stream
     def __iter__(self) -> Iterator[tuple[float, DeckPoseEstimate]]:
         env, base = self.env, self.base
-        wall0 = time.perf_counter()
+        wall0 = self._start_wall()
         for episode in range(self.episodes):
             observation, _ = env.reset(seed=self.seed + episode)
             self.policy.reset()
