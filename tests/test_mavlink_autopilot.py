@@ -383,8 +383,10 @@ def test_px4_landing_target_places_the_deck_with_the_autopilots_pose_at_the_stam
         drift = float(np.max(np.abs(wanted[1] - wanted[0])))
         errors.append(float(np.max(np.abs(got - wanted[1]))) - drift)
         assert np.asarray(message.q, F32) == pytest.approx(np.asarray(expected.q, F32), abs=1e-5)
-    # float32 positions and quaternions on the wire (telemetry and target): a few ulps of 6 m
-    assert max(errors) < 5e-6, errors
+    # float32 positions and quaternions on the wire (telemetry and target): a few ulps of 6 m,
+    # plus 50 us of timing at the target's speed in NED (about 1.1 m/s: the line and the yaw
+    # swinging the 2.5 m camera offset) for the threads' scheduling on a busy machine
+    assert max(errors) < 5e-6 + 1.1 * 50e-6, errors
 
     print(f"max position error {max(errors):.2e} m")
 
