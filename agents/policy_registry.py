@@ -178,7 +178,6 @@ POLICIES: dict[str, PolicySpec] = {
         ),
         _timing(
             "timing-model",
-
             kind="trained",
             status="supported",
             builder="agents.timing.policies:build_trained",
