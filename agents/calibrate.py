@@ -7,7 +7,7 @@ their figures, and writes to ``--out`` (default ``results/calibration/``):
 * ``intrinsics.json``: K, distortion, reprojection errors, the camera it was made for, and
   the tag detector's corner offset and noise on that camera (a third rig, after K:
   ``landing_env/calibration/tag_corner_sim.py``, :mod:`estimation.corner_bias`);
-* ``tof_rig/``: the pad rig's session as a recording folder (frames, ranges and the rig file
+* ``tof_rig/``: the pad rig's stages as a recording folder (frames, ranges and the rig file
   ``tof_rig.json``, :mod:`agents.io.tof_rig`), from which the ToF–camera calibration is made
   as ``deck-landing calibrate tof --recording`` makes a real rig's;
 * ``tof_camera.json``: the range → pixel samples of each sensor (the PCHIP look-up's data);
@@ -268,7 +268,7 @@ def run_calibration(
     if workers > 1 or address is not None:
         # the two calibrations side by side on Ray (the same generators: the same results)
 
-        intrinsics, session = map_tasks(
+        intrinsics, recorded = map_tasks(
             _calibration_part,
             [
                 ("intrinsics", cfg, rig, intrinsics_rng),
@@ -285,7 +285,7 @@ def run_calibration(
         with tqdm(
             total=stages, desc="ToF–camera stages", unit="stage", disable=not progress
         ) as bar:
-            session = record_tof_rig_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
+            recorded = record_tof_rig_in_sim(cfg, TofRigConfig(stages=stages), tof_rng, bar.update)
     # the tag detector's corner offset, against the corners projected through the new K
     with tqdm(
         total=TagRigConfig().stages, desc="tag-corner stages", unit="stage", disable=not progress
@@ -298,9 +298,11 @@ def run_calibration(
     )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    # the rig's session as a recording, calibrated as a real rig's is
-    rig_dir = write_rig_recording(out_dir / RIG_RECORDING_NAME, session.stages, session.description)
-    tof = tof_sim_report(calibrate_tof_recording(rig_dir)[0], session.description)
+    # the rig's stages written as a recording folder, calibrated as a real rig's is
+    rig_dir = write_rig_recording(
+        out_dir / RIG_RECORDING_NAME, recorded.stages, recorded.description
+    )
+    tof = tof_sim_report(calibrate_tof_recording(rig_dir)[0], recorded.description)
     files = {
         "intrinsics": out_dir / INTRINSICS_NAME,
         "tof_camera": out_dir / TOF_NAME,

@@ -67,7 +67,7 @@ SKIP_REASONS = (PAD_NOT_FOUND, PAD_CLIPPED, RANGE_INVALID)
 
 
 class TofRigError(ValueError):
-    """A rig session that cannot be calibrated, naming the file, stage or field."""
+    """A rig recording that cannot be calibrated, naming the file, stage or field."""
 
 
 @dataclass(frozen=True)

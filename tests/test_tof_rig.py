@@ -115,15 +115,15 @@ def test_the_simulated_rig_gives_the_same_calibration_through_its_recording(
     config = load_config("default", overrides={"tof.noise": "vl53l1x"})
     rig = TofRigConfig(stages=8, readings_per_stage=5)
     in_sim = calibrate_tof_camera_in_sim(config, rig, np.random.default_rng(7))
-    session = record_tof_rig_in_sim(config, rig, np.random.default_rng(7))
-    folder = write_rig_recording(tmp_path / "rig", session.stages, session.description)
+    rig = record_tof_rig_in_sim(config, rig, np.random.default_rng(7))
+    folder = write_rig_recording(tmp_path / "rig", rig.stages, rig.description)
     out = tmp_path / "out"
     code, err = _calibrate(capsys, "--recording", str(folder), "--out", str(out))
     assert code == 0, err
     in_sim.calibration.save(tmp_path / "in_sim.json")
     assert (out / "tof_camera.json").read_text() == (tmp_path / "in_sim.json").read_text()
     # the readings were noisy: averaging mattered
-    readings = np.concatenate([s.readings_m[0] for s in session.stages])
+    readings = np.concatenate([s.readings_m[0] for s in rig.stages])
     assert np.nanstd(readings[:5]) > 0.0
 
 

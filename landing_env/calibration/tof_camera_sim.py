@@ -17,7 +17,7 @@ Table 4.
 
 The same :func:`estimation.tof_rig.calibrate_rig` that calibrates a real rig's recording
 calibrates the stages: :func:`record_tof_rig_in_sim` returns them with the rig file
-(:class:`TofRigSession`), which ``agents.io.tof_rig`` writes as a recording folder (the
+(:class:`TofRigRecording`), which ``agents.io.tof_rig`` writes as a recording folder (the
 simulated rig's clock: stage k starts at ``k (n + 1) 20 ms`` with its image, its ``n``
 readings follow every 20 ms).
 
@@ -184,7 +184,7 @@ def _touch_point_error(
 
 
 @dataclass(frozen=True)
-class TofRigSession:
+class TofRigRecording:
     """The simulated rig's stages and its rig file (a recording's content, in memory)."""
 
     stages: tuple[RigStage, ...]
@@ -196,7 +196,7 @@ def record_tof_rig_in_sim(
     rig: TofRigConfig | None = None,
     rng: np.random.Generator | None = None,
     progress: Callable[[], None] | None = None,
-) -> TofRigSession:
+) -> TofRigRecording:
     """Climb through the stages over the pad deck: each stage's image and readings.
 
     ``config``: the environment config whose camera, ToF sensors and drone are calibrated
@@ -259,7 +259,7 @@ def record_tof_rig_in_sim(
             "pad_radius_m": rig.pad_radius_m,
         },
     )
-    return TofRigSession(tuple(stages), description)
+    return TofRigRecording(tuple(stages), description)
 
 
 def tof_sim_report(result: RigCalibration, description: TofRigDescription) -> TofSimReport:
@@ -296,8 +296,10 @@ def calibrate_tof_camera_in_sim(
     """Climb through the stages over the pad deck and build the ToF–camera calibration
     (:func:`record_tof_rig_in_sim`'s arguments).  Raises
     :class:`~estimation.tof_rig.TofRigError` when a sensor has fewer than two usable stages."""
-    session = record_tof_rig_in_sim(config, rig, rng, progress)
-    return tof_sim_report(calibrate_rig(session.stages, session.description), session.description)
+    recorded = record_tof_rig_in_sim(config, rig, rng, progress)
+    return tof_sim_report(
+        calibrate_rig(recorded.stages, recorded.description), recorded.description
+    )
 
 
 def _project_touch_points(
@@ -322,7 +324,7 @@ __all__ = [
     "PAD_NOT_FOUND",
     "SKIP_REASONS",
     "TofRigConfig",
-    "TofRigSession",
+    "TofRigRecording",
     "TofSimReport",
     "calibrate_tof_camera_in_sim",
     "record_tof_rig_in_sim",
