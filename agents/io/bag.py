@@ -11,7 +11,11 @@ Topics (:class:`Topics`, every name configurable):
   REP 117) is no return.  ``deck_landing_msgs/TofRanges`` (float64), when present, is used
   instead;
 * IMU: ``sensor_msgs/Imu`` (body FLU); its orientation, unless ``orientation_covariance[0]``
-  is -1 (REP 145: unknown), is the body's attitude in the world (``fused`` uses it).
+  is -1 (REP 145: unknown), is the body's attitude in the world (``fused`` uses it);
+* the vehicle's pose: ``tf2_msgs/TFMessage`` (``/tf``), the transforms from the world frame
+  to the body frame (``world`` -> ``body``, as the simulator's recorder writes them: W with
+  x north, y west, z up; B FLU), each at its own stamp (``deck-landing bridge`` gives it to
+  PX4).  Other transforms are not read.
 
 Stamps are the messages' ``header.stamp``.  A message that cannot be decoded, an image of
 an unknown encoding, or a range from an unknown frame id is skipped and counted by reason;
@@ -96,6 +100,8 @@ def read_bag(path: str | Path, topics: Topics | None = None) -> Recording:
             exact = topics.exact_ranges in present
             wanted = {*camera, topics.imu, *([topics.exact_ranges] if exact else topics.ranges)}
             rec.missing_topics = sorted(t for t in wanted if t not in present)
+            if topics.tf:
+                wanted.add(topics.tf)  # optional: no vehicle pose when missing
             connections = [c for c in reader.connections if c.topic in wanted]
             for connection, _, raw in reader.messages(connections=connections):
                 _one(rec, topics, camera, connection.topic, connection.msgtype, raw, reader, exact)
@@ -123,6 +129,9 @@ def _one(
         message = reader.deserialize(raw, typename)
     except Exception:  # one damaged message: skip and count it
         rec.skipped[f"{topic}: message cannot be decoded"] += 1
+        return
+    if topic == topics.tf and topic not in camera:
+        _vehicle(rec, topics, message)
         return
     t = m.stamp_s(message.header)
     if topic in camera:
@@ -154,6 +163,22 @@ def _one(
         rec.imu.append(ImuSample(t, values[:3], values[3:]))
         known = float(message.orientation_covariance[0]) != -1.0
         rec.attitude.append(m.rotation_of(message.orientation) if known else None)
+
+
+def _vehicle(rec: Recording, topics: Topics, message: Any) -> None:
+    """The world -> body transforms of a ``tf2_msgs/TFMessage`` as the vehicle's poses."""
+    parent, child = topics.tf_frames
+    for transform in getattr(message, "transforms", ()):
+        names = (transform.header.frame_id.lstrip("/"), transform.child_frame_id.lstrip("/"))
+        if names != (parent, child):
+            continue
+        q, p = transform.transform.rotation, transform.transform.translation
+        values = np.array([q.x, q.y, q.z, q.w, p.x, p.y, p.z], dtype=float)
+        norm = float(np.linalg.norm(values[:4]))
+        if not (np.all(np.isfinite(values)) and 0.5 < norm < 1.5):
+            rec.skipped[f"{topics.tf}: {parent} -> {child} not finite or not a rotation"] += 1
+            continue
+        rec.vehicle.add(m.stamp_s(transform.header), m.rotation_of(q), values[4:])
 
 
 def _frame(rec: Recording, topic: str, typename: str, message: Any, t: float) -> None:

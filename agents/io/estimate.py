@@ -5,6 +5,8 @@ build_estimators` from :func:`landing_env.estimators.estimation_options` of a co
 ``fused`` runs after them in the same :class:`landing_env.vision_link.VisionStage` (the
 vision link's simulated latency is off: a recording has its own).  Each frame gets the
 ranges aligned to its stamp (:meth:`agents.io.recording.Recording.ranges_at`).
+:func:`read_checked` and :func:`recording_estimator` are the command's reading and building;
+``deck-landing bridge --input`` (:mod:`agents.io.recording_source`) runs the same.
 
 Outputs: a CSV with one row per frame (every frame, valid or not, with the reason), and an
 MCAP file with, per valid frame, ``geometry_msgs/PoseWithCovarianceStamped`` on
@@ -18,11 +20,12 @@ The covariance (x, y, z, rotations about x, y, z) is the method's where it gives
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import dataclasses
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,10 +99,15 @@ class _Host:
         self.last_range_down = None
 
 
+def is_folder_recording(path: str | Path) -> bool:
+    """Whether ``path`` is a plain folder recording (it has ``frames.csv``)."""
+    path = Path(path)
+    return path.is_dir() and (path / "frames.csv").is_file()
+
+
 def read_recording(path: str | Path, topics: Topics | None = None) -> Recording:
     """A plain folder (it has ``frames.csv``) or an MCAP / rosbag2 recording."""
-    path = Path(path)
-    if path.is_dir() and (path / "frames.csv").is_file():
+    if is_folder_recording(path):
         return read_folder(path)
     return read_bag(path, topics)
 
@@ -190,14 +198,22 @@ class RecordingEstimator:
         )
 
     def run(
-        self, rec: Recording, tolerance_s: float, mode: str
+        self,
+        rec: Recording,
+        tolerance_s: float,
+        mode: str,
+        pace: Callable[[float], object] | None = None,
     ) -> Iterator[tuple[DeckPoseEstimate, bool]]:
-        """Per frame: the estimate and whether ranges were found within the tolerance."""
+        """Per frame of ``rec.frames``, in order: the estimate and whether ranges were found
+        within the tolerance.  ``pace(stamp_s)``, when given, is called with each frame's stamp
+        before the frame is estimated (a replay waits there for the frame's time)."""
         for est in self.estimators.values():
             est.reset()
         self.stage.reset(None)
         previous = -math.inf
         for recorded in rec.frames:
+            if pace is not None:
+                pace(recorded.timestamp)
             frame = self._frame(recorded)
             ranges = rec.ranges_at(frame.timestamp, tolerance_s, mode)
             results = {n: e.estimate(frame, ranges) for n, e in self.estimators.items()}
@@ -307,53 +323,64 @@ def write_estimates(
     return summary, csv_path, mcap_path
 
 
-def _topics(args: argparse.Namespace) -> Topics:
-    ranges = tuple(t for t in args.range_topics.split(",") if t)
-    frames = tuple(f for f in args.range_frames.split(",") if f)
-    return Topics(
-        image=args.image_topic,
-        detections=args.detections_topic,
-        ranges=ranges,
-        range_frames=frames,
-        exact_ranges=args.exact_ranges_topic,
-        imu=args.imu_topic,
+@contextlib.contextmanager
+def user_errors() -> Iterator[None]:
+    """A bad recording, calibration or config as the command's one-line error."""
+    try:
+        yield
+    except (RecordingError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+
+
+def read_checked(args: argparse.Namespace) -> Recording:
+    """``--input`` read with the command's topics (:meth:`Topics.from_arguments`) and checked
+    for ``--estimator``: a frame to estimate, the ranges and the IMU it needs."""
+    if args.estimator not in ESTIMATORS:
+        raise UserError(f"--estimator {args.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
+    rec = read_recording(args.input, Topics.from_arguments(args))
+    if not rec.frames:
+        skipped = "; ".join(f"{n} x {r}" for r, n in rec.skipped.items()) or "none"
+        raise RecordingError(f"{args.input}: no usable camera frame (skipped: {skipped})")
+    needs_ranges = args.estimator in needs_tof_calibration_names()
+    if needs_ranges and not rec.has_ranges:
+        missing = ", ".join(rec.missing_topics) or "ranges.csv"
+        raise RecordingError(f"{args.input}: {args.estimator} needs ranges; missing: {missing}")
+    if args.estimator == FUSED and not rec.imu:
+        raise RecordingError(f"{args.input}: fused needs the IMU; none read")
+    return rec
+
+
+def recording_estimator(args: argparse.Namespace, rec: Recording) -> RecordingEstimator:
+    """``--estimator`` built for ``rec`` from ``--config`` and ``--set`` (the estimator
+    observed, none compared) and ``--calibration``."""
+    overrides = {**parse_overrides(args.set or []), "estimation.observed": args.estimator}
+    overrides["estimation.compare"] = []
+    config = load_config(args.config, overrides)
+    calibration = Path(args.calibration) if args.calibration else None
+    return RecordingEstimator(args.estimator, config, calibration, rec.image_size())
+
+
+def skipped_report(rec: Recording) -> str:
+    """The bad messages left out of ``rec``, by reason."""
+    skipped = sum(rec.skipped.values())
+    return f"skipped {skipped} bad messages" + "".join(
+        f"\n  {n} x {r}" for r, n in rec.skipped.items()
     )
 
 
 def run_estimate(args: argparse.Namespace) -> EstimateSummary:
     """The command's work (also called by the tests)."""
-    if args.estimator not in ESTIMATORS:
-        raise UserError(f"--estimator {args.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
-    try:
-        rec = read_recording(args.input, _topics(args))
-        if not rec.frames:
-            skipped = "; ".join(f"{n} x {r}" for r, n in rec.skipped.items()) or "none"
-            raise RecordingError(f"{args.input}: no usable camera frame (skipped: {skipped})")
-        needs_ranges = args.estimator in needs_tof_calibration_names()
-        if needs_ranges and not rec.has_ranges:
-            missing = ", ".join(rec.missing_topics) or "ranges.csv"
-            raise RecordingError(f"{args.input}: {args.estimator} needs ranges; missing: {missing}")
-        if args.estimator == FUSED and not rec.imu:
-            raise RecordingError(f"{args.input}: fused needs the IMU; none read")
-        overrides = {**parse_overrides(args.set or []), "estimation.observed": args.estimator}
-        overrides["estimation.compare"] = []
-        config = load_config(args.config, overrides)
-        calibration = Path(args.calibration) if args.calibration else None
-        runner = RecordingEstimator(args.estimator, config, calibration, rec.image_size())
+    with user_errors():
+        rec = read_checked(args)
+        runner = recording_estimator(args, rec)
         summary, csv_path, mcap_path = write_estimates(
             runner, rec, Path(args.out), args.tolerance, args.align
         )
-    except (RecordingError, ValueError) as exc:
-        raise UserError(str(exc)) from None
     print(
         f"{summary.frames} frames, {summary.valid} valid, {summary.without_ranges} without "
         f"ranges within {args.tolerance} s; invalid by reason: {summary.reasons or 'none'}"
     )
-    skipped = sum(rec.skipped.values())
-    print(
-        f"skipped {skipped} bad messages"
-        + "".join(f"\n  {n} x {r}" for r, n in rec.skipped.items())
-    )
+    print(skipped_report(rec))
     print(f"wrote {csv_path} and {mcap_path}")
     summary.skipped = dict(rec.skipped)  # type: ignore[attr-defined]
     return summary

@@ -1,12 +1,13 @@
 """A recording in memory, the plain-folder reader and the time alignment of the ranges.
 
 A :class:`Recording` holds camera frames (an image, or the tag detections the simulator
-projected), each ToF sensor's time series, and the IMU samples, all stamped in seconds.
+projected), each ToF sensor's time series, the IMU samples and, where a ROS 2 recording has
+them on ``/tf``, the vehicle's poses (the body in the world), all stamped in seconds.
 :func:`read_folder` reads the plain folder format (:func:`write_folder` writes it);
 :mod:`agents.io.bag` reads MCAP and rosbag2.  :meth:`Recording.ranges_at` gives each frame
 the ranges nearest to its stamp (or interpolated) within a tolerance; a sensor without a
 sample inside it is invalid for that frame (an estimator then falls back to the camera
-alone, or says why it cannot).
+alone, or says why it cannot); :meth:`PoseSeries.at` aligns the vehicle's pose the same way.
 
 Plain folder (for users without ROS)::
 
@@ -27,10 +28,11 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from estimation.fusion import METHOD as FUSED
 from estimation.registry import FRAME_ESTIMATOR_NAMES
@@ -77,6 +79,54 @@ class SensorSeries:
 
 
 @dataclass
+class PoseSeries:
+    """The vehicle's poses: the body B in the world W (``r_wb``, ``t_wb`` metres), stamped in
+    seconds (any order while read; :meth:`at` sorts them)."""
+
+    t_s: list[float] = field(default_factory=list)
+    r_wb: list[np.ndarray] = field(default_factory=list)
+    t_wb: list[np.ndarray] = field(default_factory=list)
+    _sorted: bool = field(default=True, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    def add(self, t_s: float, r_wb: np.ndarray, t_wb: np.ndarray) -> None:
+        if self.t_s and t_s < self.t_s[-1]:
+            self._sorted = False
+        self.t_s.append(float(t_s))
+        self.r_wb.append(np.asarray(r_wb, dtype=float))
+        self.t_wb.append(np.asarray(t_wb, dtype=float))
+
+    def _sort(self) -> None:
+        if not self._sorted:
+            order = sorted(range(len(self.t_s)), key=self.t_s.__getitem__)
+            self.t_s = [self.t_s[k] for k in order]
+            self.r_wb = [self.r_wb[k] for k in order]
+            self.t_wb = [self.t_wb[k] for k in order]
+            self._sorted = True
+
+    def at(
+        self, t_s: float, tolerance_s: float, mode: str = "nearest"
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(r_wb, t_wb)`` at ``t_s``: the nearest pose within ``tolerance_s``, or with
+        ``interpolate`` the position interpolated linearly and the attitude by slerp between
+        the poses on either side (both within the tolerance); None when there is none."""
+        self._sort()
+        near = _near(self.t_s, t_s, tolerance_s)
+        if not near:
+            return None
+        if mode == "interpolate" and len(near) == 2 and self.t_s[near[1]] > self.t_s[near[0]]:
+            j0, j1 = near
+            w = (t_s - self.t_s[j0]) / (self.t_s[j1] - self.t_s[j0])
+            turn = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([self.r_wb[j0], self.r_wb[j1]])))
+            r_wb = turn([w]).as_matrix()[0]
+            return r_wb, (1.0 - w) * self.t_wb[j0] + w * self.t_wb[j1]
+        best = min(near, key=lambda j: abs(self.t_s[j] - t_s))
+        return self.r_wb[best].copy(), self.t_wb[best].copy()
+
+
+@dataclass
 class Recording:
     """Everything read from a recording; ``skipped``: bad messages left out, by reason."""
 
@@ -85,6 +135,8 @@ class Recording:
     imu: list[ImuSample] = field(default_factory=list)
     #: per IMU sample, the body's attitude R_WB when the sample carries one
     attitude: list[np.ndarray | None] = field(default_factory=list)
+    #: the vehicle's poses (``/tf``'s world -> body, :attr:`Topics.tf_frames`), if recorded
+    vehicle: PoseSeries = field(default_factory=PoseSeries)
     skipped: Counter = field(default_factory=Counter)
     #: topics asked for that the file does not have
     missing_topics: list[str] = field(default_factory=list)
@@ -142,6 +194,39 @@ class Topics:
     range_frames: tuple[str, ...] = ("tof_1", "tof_2", "tof_3", "tof_4")
     exact_ranges: str = "/tof/ranges"
     imu: str = "/imu/data"
+    #: ``tf2_msgs/TFMessage``: the vehicle's pose is the transform ``tf_frames`` (parent
+    #: world W, child body B); an empty name reads none
+    tf: str = "/tf"
+    tf_frames: tuple[str, str] = ("world", "body")
+
+    @classmethod
+    def from_arguments(cls, args: Any) -> Topics:
+        """From a command's options (``--image-topic``, ``--range-topics a,b,c,d``, ...,
+        ``--tf-frames PARENT,CHILD``); an option the command lacks, or left at None, keeps
+        its default."""
+        default = cls()
+
+        def given(name: str, value: Any) -> Any:
+            chosen = getattr(args, name, None)
+            return value if chosen is None else chosen
+
+        def names(name: str, value: tuple[str, ...]) -> tuple[str, ...]:
+            text = given(name, ",".join(value))
+            return tuple(t.strip() for t in text.split(",") if t.strip())
+
+        frames = names("tf_frames", default.tf_frames)
+        if len(frames) != 2:
+            raise RecordingError(f"--tf-frames: give PARENT,CHILD (e.g. world,body), got {frames}")
+        return cls(
+            image=given("image_topic", default.image),
+            detections=given("detections_topic", default.detections),
+            ranges=names("range_topics", default.ranges),
+            range_frames=names("range_frames", default.range_frames),
+            exact_ranges=given("exact_ranges_topic", default.exact_ranges),
+            imu=given("imu_topic", default.imu),
+            tf=given("tf_topic", default.tf),
+            tf_frames=(frames[0], frames[1]),
+        )
 
     def __post_init__(self) -> None:
         if len(self.ranges) not in (1, N_SENSORS):
@@ -152,15 +237,21 @@ class Topics:
             raise RecordingError(f"range frame ids: give {N_SENSORS}, got {self.range_frames}")
 
 
-def _aligned(series: SensorSeries, t_s: float, tolerance_s: float, mode: str) -> float | None:
-    if not series.t_s:
-        return None
-    times = np.asarray(series.t_s)
+def _near(times: Sequence[float], t_s: float, tolerance_s: float) -> list[int]:
+    """The indices of the samples either side of ``t_s`` (increasing stamps) within the
+    tolerance."""
+    if not len(times):
+        return []
     k = int(np.searchsorted(times, t_s))
     candidates = [j for j in (k - 1, k) if 0 <= j < len(times)]
-    near = [j for j in candidates if abs(times[j] - t_s) <= tolerance_s + 1e-12]
+    return [j for j in candidates if abs(times[j] - t_s) <= tolerance_s + 1e-12]
+
+
+def _aligned(series: SensorSeries, t_s: float, tolerance_s: float, mode: str) -> float | None:
+    near = _near(series.t_s, t_s, tolerance_s)
     if not near:
         return None
+    times = np.asarray(series.t_s)
     if mode == "interpolate" and len(near) == 2 and all(series.valid[j] for j in near):
         j0, j1 = near
         if times[j1] > times[j0]:

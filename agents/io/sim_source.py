@@ -14,15 +14,15 @@ NED frame whose origin is the simulator's world origin (x north, the world's y l
 is -y, z down).  ``speed`` paces the simulation against the wall clock (1: real time, 2: twice
 as fast); 0 runs it as fast as it goes.
 
-:meth:`clock_s` is the clock of the stamps read on the wall clock (paced runs only): the
-companion's clock for TIMESYNC when the autopilot maps ``time_usec`` or gives the vehicle's
-pose (:class:`agents.io.autopilot_listener.AutopilotListener`).  It starts at the first call
-of it or of the stream, whichever comes first.
+:meth:`clock_s` is the clock of the stamps read on the wall clock (paced runs only,
+:class:`agents.io.pacing.StampPacer`): the companion's clock for TIMESYNC when the autopilot
+maps ``time_usec`` or gives the vehicle's pose
+(:class:`agents.io.autopilot_listener.AutopilotListener`).  It starts at the first call of it
+or of the stream, whichever comes first.
 """
 
 from __future__ import annotations
 
-import time
 from collections import OrderedDict
 from collections.abc import Iterator
 from typing import Any
@@ -32,6 +32,7 @@ import gymnasium as gym
 import landing_env  # noqa: F401  (registers the environments)
 from agents.align_descend import AlignDescendPolicy
 from agents.io.landing_target import CameraMount, VehiclePose
+from agents.io.pacing import StampPacer
 from estimation.errors import ConfigError, require_choice
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.types import DeckPoseEstimate
@@ -64,8 +65,7 @@ class SimulatorSource:
         require_choice("mode", camera_mode, ("project", "render"))
         if episodes < 1:
             raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
-        if not speed >= 0.0:
-            raise ConfigError("speed", f"{speed} is out of range; allowed [0, inf), 0: unpaced")
+        self.pacer = StampPacer(speed)
         if scenario is not None:
             chosen = dict(landing_overrides("DeckLanding-v1", estimator, camera_mode))
             config = scenario
@@ -86,21 +86,10 @@ class SimulatorSource:
         self.outcomes: list[str] = []
         self._poses: OrderedDict[float, VehiclePose] = OrderedDict()
         self._offset_s = 0.0
-        self._wall0: float | None = None
-
-    # ----------------------------------------------------------------- the stamps' clock
-    def _start_wall(self) -> float:
-        if self._wall0 is None:
-            self._wall0 = time.perf_counter()
-        return self._wall0
 
     def clock_s(self) -> float:
         """Now, on the clock of the stamps (simulated seconds as paced on the wall clock)."""
-        if self.speed == 0.0:
-            raise ConfigError(
-                "speed", "0 (unpaced): the stamps follow no clock; pace the simulation (> 0)"
-            )
-        return (time.perf_counter() - self._start_wall()) * self.speed
+        return self.pacer.clock_s()
 
     # ----------------------------------------------------------------- vehicle poses
     def vehicle_pose(self, stamp_s: float) -> VehiclePose | None:
@@ -121,7 +110,7 @@ class SimulatorSource:
     # ----------------------------------------------------------------- the stream
     def __iter__(self) -> Iterator[tuple[float, DeckPoseEstimate]]:
         env, base = self.env, self.base
-        wall0 = self._start_wall()
+        self.pacer.start()
         for episode in range(self.episodes):
             observation, _ = env.reset(seed=self.seed + episode)
             self.policy.reset()
@@ -130,12 +119,8 @@ class SimulatorSource:
             yield self._offset_s + estimate.timestamp, estimate
             info: dict[str, Any] = {}
             while True:
-                if self.speed > 0.0:
-                    # the next capture happens at its simulated time on the wall clock
-                    due = wall0 + (self._offset_s + base.world.time + base.env_dt) / self.speed
-                    wait = due - time.perf_counter()
-                    if wait > 0.0:
-                        time.sleep(wait)
+                # the next capture happens at its simulated time on the wall clock
+                self.pacer.wait_until(self._offset_s + base.world.time + base.env_dt)
                 action = self.policy(observation)
                 observation, _, terminated, truncated, info = env.step(action)
                 self._keep_pose()
@@ -154,6 +139,10 @@ class SimulatorSource:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def summary(self) -> str:
+        """What was flown, for the command's report."""
+        return f"episodes: {', '.join(self.outcomes)}"
 
 
 __all__ = ["POSE_HISTORY", "SimulatorSource"]
