@@ -1,7 +1,8 @@
 """``deck-landing calibrate tof``: the ToF–camera calibration of a recorded rig.
 
-Reads a rig's recording folder (:mod:`agents.io.tof_rig`: ``frames.csv`` and the images,
-``ranges.csv``, the rig file ``tof_rig.json``), calibrates it with
+Reads a rig's recording (:mod:`agents.io.tof_rig`: a folder of ``frames.csv``, the images
+and ``ranges.csv``, or an MCAP file or rosbag2 folder of images and ranges; the rig file
+``tof_rig.json`` or ``--stages``), calibrates it with
 :func:`estimation.tof_rig.calibrate_rig` (IHRCF Sec. 2.2: pads, YCbCr thresholds, hull,
 centroids, PCHIP), prints each sensor's samples, skips and hyperbola fit (CRHF Table 4), and
 writes ``tof_camera.json`` (its format: :mod:`estimation.tof_calibration`) and
@@ -18,6 +19,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agents.calibrate import SUMMARY_NAME, TOF_NAME
+from agents.io.recording import Topics
 from agents.io.tof_rig import calibrate_tof_recording
 from estimation.tof_calibration import PAD_COLOURS
 from estimation.tof_rig import RigCalibration
@@ -81,10 +83,12 @@ def run_tof_calibration(
     out_dir: str | Path,
     intrinsics: str | Path | None = None,
     console: Console | None = None,
+    stages_file: str | Path | None = None,
+    topics: Topics | None = None,
 ) -> TofRecordingRun:
     """Calibrate ``recording``, print the figures, write the files (module doc)."""
     console = console or Console()
-    result, left_out = calibrate_tof_recording(recording, intrinsics)
+    result, left_out = calibrate_tof_recording(recording, intrinsics, stages_file, topics)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {"tof_camera": out / TOF_NAME, "summary": out / SUMMARY_NAME}

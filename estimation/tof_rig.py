@@ -226,6 +226,23 @@ class RigStage:
     readings_m: tuple[np.ndarray, ...]
 
 
+def reading_rows(stages: Sequence[RigStage]) -> list[tuple[float, list[float]]]:
+    """The stages' readings as rows ``(stamp s, [range m per sensor])`` in stage order, as
+    a recording holds them (one row: every sensor at one stamp).  :class:`TofRigError` when
+    a stage's sensors are not stamped together."""
+    rows = []
+    for k, stage in enumerate(stages):
+        stamps = np.asarray(stage.reading_t_s[0])
+        if any(not np.array_equal(t, stamps) for t in stage.reading_t_s):
+            raise TofRigError(
+                f"stage {k}: the sensors' readings are not stamped together; a recording's "
+                "row of ranges holds the four sensors at one stamp"
+            )
+        for j, t_s in enumerate(stamps.tolist()):
+            rows.append((t_s, [float(r[j]) for r in stage.readings_m]))
+    return rows
+
+
 @dataclass(frozen=True)
 class RigCalibration:
     """The calibration, its raw pairs and what was skipped.
@@ -387,4 +404,5 @@ __all__ = [
     "TofRigError",
     "calibrate_rig",
     "pad_centroid_in_image",
+    "reading_rows",
 ]

@@ -123,7 +123,7 @@ def test_project_modules_are_imported_at_the_top_of_a_module_not_inside_function
         "agents.io.estimate",
         "agents.io.record",
         "agents.io.recording_source",
-        "agents.io.bag",
+        "agents.io.tof_rig_bag",
     )
     inside = [
         f"{name}:{line} imports {target}"

@@ -93,12 +93,15 @@ def read_bag(path: str | Path, topics: Topics | None = None) -> Recording:
             # the detections when recorded (exact), else the images (detected here)
             camera = [t for t in (topics.detections, topics.image) if t and t in present][:1]
             if not camera:
+                names = [t for t in (topics.image, topics.detections) if t] or ["(none given)"]
+                which = "neither camera topic " if len(names) > 1 else "camera topic "
                 raise RecordingError(
-                    f"{path}: missing topic: neither camera topic {topics.image} nor "
-                    f"{topics.detections}; the file has {', '.join(sorted(present)) or 'none'}"
+                    f"{path}: missing topic: {which}{' nor '.join(names)}; the file has "
+                    f"{', '.join(sorted(present)) or 'none'}"
                 )
-            exact = topics.exact_ranges in present
+            exact = bool(topics.exact_ranges) and topics.exact_ranges in present
             wanted = {*camera, topics.imu, *([topics.exact_ranges] if exact else topics.ranges)}
+            wanted.discard("")  # a topic not asked for
             rec.missing_topics = sorted(t for t in wanted if t not in present)
             if topics.tf:
                 wanted.add(topics.tf)  # optional: no vehicle pose when missing

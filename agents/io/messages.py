@@ -111,6 +111,59 @@ def vector3(v: np.ndarray) -> Any:
     return msg("geometry_msgs/msg/Vector3", x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
+#: the ToF sensors' frame ids, sensor 1..4
+TOF_FRAME_IDS = ("tof_1", "tof_2", "tof_3", "tof_4")
+#: the ToF sensors' field of view in ``sensor_msgs/Range`` (the VL53L1X's 27 degrees)
+TOF_FOV_RAD = float(np.deg2rad(27.0))
+
+
+def image_rgb8(t_s: float, image: np.ndarray, frame_id: str = "camera") -> Any:
+    """A ``sensor_msgs/Image`` (``rgb8``) of an 8-bit RGB (or RGBA: alpha dropped) image."""
+    pixels = np.ascontiguousarray(np.asarray(image, dtype=np.uint8)[:, :, :3])
+    height, width = pixels.shape[:2]
+    return msg(
+        IMAGE,
+        header=header(t_s, frame_id),
+        height=height,
+        width=width,
+        encoding="rgb8",
+        is_bigendian=0,
+        step=3 * width,
+        data=pixels.reshape(-1),
+    )
+
+
+def tof_messages(
+    t_s: float,
+    ranges_m: np.ndarray,
+    valid: np.ndarray,
+    *,
+    min_range_m: float,
+    max_range_m: float,
+    fov_rad: float = TOF_FOV_RAD,
+    frame_ids: tuple[str, ...] = TOF_FRAME_IDS,
+) -> tuple[list[Any], Any]:
+    """One reading of the ToF sensors: a ``sensor_msgs/Range`` per sensor (frame id
+    ``frame_ids[i]``, infrared; no return is +inf, REP 117) and the float64
+    ``deck_landing_msgs/TofRanges`` (frame ``body``)."""
+    values = np.asarray(ranges_m, dtype=np.float64)
+    ok = np.asarray(valid, dtype=bool)
+    ranges = [
+        msg(
+            RANGE,
+            header=header(t_s, frame_id),
+            radiation_type=1,  # INFRARED
+            field_of_view=float(fov_rad),
+            min_range=float(min_range_m),
+            max_range=float(max_range_m),
+            range=float(value) if good else float("inf"),
+        )
+        for frame_id, value, good in zip(frame_ids, values, ok, strict=True)
+    ]
+    exact = msg(TOF_RANGES, header=header(t_s, "body"), range_m=values, valid=ok)
+    return ranges, exact
+
+
 class McapWriter:
     """Writes CDR-encoded ROS 2 messages to an MCAP file (profile ``ros2``), registering
     each schema (its ``ros2msg`` definition) and topic the first time it is written."""

@@ -116,19 +116,7 @@ class McapRecorder(gym.Wrapper):
 
     def _camera(self, frame: Any, t: float) -> None:
         if frame.image is not None and np.asarray(frame.image).ndim == 3:
-            image = np.ascontiguousarray(np.asarray(frame.image, dtype=np.uint8)[:, :, :3])
-            height, width = image.shape[:2]
-            message = m.msg(
-                m.IMAGE,
-                header=m.header(t, "camera"),
-                height=height,
-                width=width,
-                encoding="rgb8",
-                is_bigendian=0,
-                step=3 * width,
-                data=image.reshape(-1),
-            )
-            self._write("/camera/image_raw", m.IMAGE, message, t)
+            self._write("/camera/image_raw", m.IMAGE, m.image_rgb8(t, frame.image), t)
         detections = [
             m.msg(
                 "deck_landing_msgs/msg/TagDetection",
@@ -148,20 +136,11 @@ class McapRecorder(gym.Wrapper):
         self._write("/camera/tag_detections", m.DETECTIONS, message, t)
 
     def _ranges(self, tof: Any, ranges: Any, t: float) -> None:
-        values = np.asarray(ranges.ranges, dtype=np.float64)
-        valid = np.asarray(ranges.valid, dtype=bool)
-        for i, (value, ok) in enumerate(zip(values, valid, strict=True)):
-            message = m.msg(
-                m.RANGE,
-                header=m.header(t, f"tof_{i + 1}"),
-                radiation_type=1,  # INFRARED
-                field_of_view=float(np.deg2rad(getattr(tof, "fov_deg", 27.0))),
-                min_range=float(tof.min_range),
-                max_range=float(tof.max_range),
-                range=float(value) if ok else float("inf"),
-            )
+        messages, exact = m.tof_messages(
+            t, ranges.ranges, ranges.valid, min_range_m=tof.min_range, max_range_m=tof.max_range
+        )
+        for message in messages:
             self._write("/tof/range", m.RANGE, message, t)
-        exact = m.msg(m.TOF_RANGES, header=m.header(t, "body"), range_m=values, valid=valid)
         self._write("/tof/ranges", m.TOF_RANGES, exact, t)
 
     def _imu(self, samples: np.ndarray, r_wb: np.ndarray, t: float) -> None:
