@@ -138,31 +138,59 @@ def test_the_shipped_policy_beats_land_now_on_held_out_seeds() -> None:
     assert learned_rate >= 0.85
 
 
-def test_rl_zoo3_trains_on_the_shipped_yaml_unmodified(tmp_path: Path) -> None:
+#: (file, algorithm, the id its rl-zoo3 section names, budget cuts) of each shipped YAML
+#: that rl-zoo3 trains; only the budget is cut (-n, --hyperparams) so that the test is short
+ZOO_YAMLS = (
+    (
+        CONFIG,
+        "ppo",
+        SCENARIO_ENV_ID,
+        ("n_envs:1", "n_steps:32", "batch_size:16", "n_epochs:1"),
+    ),
+    (
+        CONFIG.with_name("lander_sac.yaml"),
+        "sac",
+        "DeckLanding-BenchSS4-v1",
+        ("n_envs:1", "learning_starts:16", "batch_size:16", "buffer_size:200"),
+    ),
+)
+
+
+@pytest.mark.parametrize(("config", "algo", "env_id", "cuts"), ZOO_YAMLS)
+def test_rl_zoo3_trains_on_the_shipped_yaml_unmodified(
+    tmp_path: Path, config: Path, algo: str, env_id: str, cuts: tuple[str, ...]
+) -> None:
     import subprocess
     import sys
 
-    # the YAML as shipped; only the budget is cut (-n, --hyperparams) so that the test is short
     command = [
-        sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo",
-        "--env", SCENARIO_ENV_ID, "--gym-packages", "landing_env",
-        "--conf-file", str(CONFIG), "-f", str(tmp_path), "-n", "32", "--seed", "1",
+        sys.executable, "-m", "rl_zoo3.train", "--algo", algo,
+        "--env", env_id, "--gym-packages", "landing_env",
+        "--conf-file", str(config), "-f", str(tmp_path), "-n", "48", "--seed", "1",
         "--eval-freq", "-1", "--vec-env", "dummy", "--n-eval-envs", "1",
-        "--hyperparams", "n_envs:1", "n_steps:32", "batch_size:16", "n_epochs:1",
+        "--hyperparams", *cuts,
     ]  # fmt: skip
     done = subprocess.run(
-        command, cwd=CONFIG.parents[2], capture_output=True, text=True, timeout=600
+        command, cwd=config.parents[2], capture_output=True, text=True, timeout=600
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    saved = list(tmp_path.glob(f"ppo/{SCENARIO_ENV_ID}_*/{SCENARIO_ENV_ID}.zip"))
+    saved = list(tmp_path.glob(f"{algo}/{env_id}_*/{env_id}.zip"))
     assert saved, done.stdout[-2000:]
     import gymnasium as gym
-    from stable_baselines3 import PPO
+    from stable_baselines3 import PPO, SAC
 
-    model = PPO.load(saved[0], device="cpu")
-    env = gym.make(SCENARIO_ENV_ID)
-    assert model.observation_space.shape == env.observation_space.shape
-    env.close()
+    model = {"ppo": PPO, "sac": SAC}[algo].load(saved[0], device="cpu")
+    env = gym.make(env_id)
+    try:
+        if algo == "ppo":
+            assert model.observation_space.shape == env.observation_space.shape
+        else:  # the lander's Dict, each key stacked three steps deep (frame_stack: 3)
+            spaces = env.observation_space.spaces
+            for key, space in model.observation_space.spaces.items():
+                assert space.shape[-1] == 3 * spaces[key].shape[-1], key
+        assert model.num_timesteps >= 48
+    finally:
+        env.close()
 
 
 def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:

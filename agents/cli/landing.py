@@ -89,7 +89,9 @@ def add_landing_parser(evaluate_group: Any) -> None:
         "scenario's: ihrcf on the bench, tight on the ship decks)",
     )
     landing.add_argument("--mode", choices=("project", "render"), default="project")
-    landing.add_argument("--model", default=None, help="a trained timing model (timing-model)")
+    landing.add_argument(
+        "--model", default=None, help="a trained model (timing-model, lander-model)"
+    )
     landing.add_argument("--out", default="results/landing", help="output directory")
     landing.add_argument(
         "--record",
