@@ -36,6 +36,7 @@ import numpy as np
 import yaml
 
 from agents.lander import shipped_lander_model
+from agents.learning_curve import read_learning_curve, write_learning_curve
 from agents.timing.cards import (
     card_for_training,
     check_compatible,
@@ -520,6 +521,10 @@ def train(
             sort_keys=False,
         )
     )
+    if evaluations:
+        write_learning_curve(
+            read_learning_curve(out), out / "learning_curve.png", _model_name(config)
+        )
     if install:
         source = result.best_model_path or model_path
         target = (

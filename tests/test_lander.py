@@ -13,6 +13,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
 import landing_env  # noqa: F401
 from agents.lander import TrainedLanderPolicy, build_lander
+from agents.learning_curve import read_learning_curve
 from agents.training import load_train_config, train
 from landing_env.errors import ConfigError
 
@@ -42,7 +43,7 @@ def _yaml(tmp_path: Path, algo: str = "sac", **zoo: object) -> Path:
         "deck_landing": {
             "algo": algo,
             "vec_env": "dummy",
-            "eval": {"freq": 1000, "episodes": 1},
+            "eval": {"freq": 80, "episodes": 1},
             "out_dir": str(tmp_path / "run"),
         },
     }
@@ -67,6 +68,19 @@ def test_a_trained_lander_carries_a_card_of_its_id_observation_and_sensing(train
     assert policy.card.sensing == ["realistic"]
     assert policy.frame_stack == 3
     assert set(policy.card.observation["keys"]) >= {"deck_pose", "velocity", "attitude"}
+
+
+def test_training_draws_its_learning_curve_from_its_held_out_evaluations(trained: Path) -> None:
+    run = trained.parent
+    summary = yaml.safe_load((run / "train_summary.yaml").read_text())
+    curve = read_learning_curve(run)
+    assert [int(t) for t in curve.timesteps] == [t for t, _ in summary["evaluations"]] == [80, 160]
+    assert list(curve.success_rate) == [s for _, s in summary["evaluations"]]
+    assert (run / "learning_curve.png").stat().st_size > 10_000
+    rows = (run / "learning_curve.csv").read_text().splitlines()
+    assert rows[0].startswith("timesteps,success_rate") and len(rows) == 3
+    with pytest.raises(ConfigError, match=r"evaluations\.npz not found"):
+        read_learning_curve(run / "checkpoints")
 
 
 def test_the_lander_refuses_another_estimator_naming_it(trained: Path) -> None:
@@ -119,4 +133,5 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
     assert config.settings.env_kwargs["overrides"] == {
         "sensors": "realistic",
         "estimation.observed": "tight",
+        "reward.cone_weight": 1.0,
     }
