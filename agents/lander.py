@@ -6,11 +6,6 @@ own velocity and attitude, stacked over the last ``frame_stack`` steps as SB3's
 (:mod:`agents.timing.cards`) records the id, the observation's keys and stacking, the
 estimator and the sensing it was trained on, and is checked against the environment on load.
 
-A residual lander (its card's observation has ``residual``: trained through
-:class:`agents.residual.ResidualLanderWrapper`) outputs a correction of a scripted lander; it
-flies the same sum, ``clip(base + scale · correction, -1, 1)``, with its own copy of the base
-built for the environment it is checked against.
-
 Train one with ``deck-landing train landing --config configs/train/lander_sac.yaml``.
 """
 
@@ -22,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from agents.policy_registry import MODEL_DIR
-from agents.residual import RESIDUAL_BASES, residual_action, residual_settings
 from agents.timing.cards import (
     METADATA_NAME,
     check_compatible,
@@ -65,28 +59,15 @@ class TrainedLanderPolicy:
         self.frame_stack = int(card.observation.get("frame_stack", 1))
         self.model = model_class(self.path).load(self.path, device=device)
         self._stack: dict[str, np.ndarray] | None = None
-        residual = card.observation.get("residual")
-        #: the scripted lander the model corrects, and by how much (None: end to end)
-        self.residual = (
-            None if residual is None else residual_settings(residual["base"], residual["scale"])
-        )
-        #: the residual's base, built for the environment by :meth:`check_env`
-        self.base: Any = None
 
     def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
         """Refuse ``env`` unless it is what the model was trained on (its card)."""
         signature = env_signature(env, frame_stack=self.frame_stack)
-        if self.residual is not None:  # the policy corrects its base itself
-            signature["observation"] = {**signature["observation"], "residual": self.residual}
         check_compatible(self.card, signature, self.path.name, allow_mismatch)
-        if self.residual is not None:
-            self.base = RESIDUAL_BASES[self.residual["base"]](env)
 
     def reset(self) -> None:
         """Forget the stacked steps (a new episode starts from zeros, as ``VecFrameStack``)."""
         self._stack = None
-        if self.base is not None:
-            self.base.reset()
 
     def stacked(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """``observation`` stacked with the previous steps along the last axis, oldest first,
@@ -107,14 +88,7 @@ class TrainedLanderPolicy:
 
     def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         action, _ = self.model.predict(self.stacked(observation), deterministic=True)
-        action = np.asarray(action, dtype=np.float32).reshape(4)
-        if self.residual is None:
-            return action
-        if self.base is None:
-            raise RuntimeError(
-                f"{self.path.name} corrects {self.residual['base']}: call check_env(env) first"
-            )
-        return residual_action(self.base(observation), action, self.residual["scale"])
+        return np.asarray(action, dtype=np.float32).reshape(4)
 
     def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         return self.act(observation)

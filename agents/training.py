@@ -37,7 +37,6 @@ import yaml
 
 from agents.lander import shipped_lander_model
 from agents.learning_curve import read_learning_curve, write_learning_curve
-from agents.residual import start_at_zero_correction
 from agents.timing.cards import (
     card_for_training,
     check_compatible,
@@ -355,43 +354,6 @@ def _model_name(config: TrainConfig) -> str:
     return f"{task}_{config.settings.algo}"
 
 
-def zoo_env_wrapper(value: Any) -> Callable[[Any], Any] | None:
-    """rl-zoo3's ``env_wrapper`` as one callable ``env -> wrapped env``: a dotted class path,
-    ``{path: kwargs}``, or a list of those applied in order; ``None`` when not set.  A path
-    that does not import names the key and the path."""
-    import importlib
-
-    if value is None:
-        return None
-    entries = value if isinstance(value, list) else [value]
-    chain: list[tuple[Any, dict[str, Any]]] = []
-    for entry in entries:
-        if isinstance(entry, dict) and len(entry) == 1:
-            path, kwargs = next(iter(entry.items()))
-            kwargs = dict(kwargs or {})
-        elif isinstance(entry, str):
-            path, kwargs = entry, {}
-        else:
-            raise ConfigError(
-                "env_wrapper",
-                f"each entry must be 'module.Class' or {{'module.Class': {{kwargs}}}}; "
-                f"got {entry!r}",
-            )
-        module, _, name = str(path).rpartition(".")
-        try:
-            wrapper = getattr(importlib.import_module(module), name)
-        except (ImportError, AttributeError, ValueError) as error:
-            raise ConfigError("env_wrapper", f"cannot import {path!r}: {error}") from None
-        chain.append((wrapper, kwargs))
-
-    def wrap(env: Any) -> Any:
-        for wrapper, kwargs in chain:
-            env = wrapper(env, **kwargs)
-        return env
-
-    return wrap
-
-
 def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     """The training VecEnv (SubprocVecEnv over ``n_envs`` processes) and the evaluation env."""
     from stable_baselines3.common.env_util import make_vec_env
@@ -413,13 +375,6 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     wrapping: dict[str, Any] = {}
     if s.lookahead is not None:
         wrapping = {"wrapper_class": LookaheadTimingWrapper, "wrapper_kwargs": s.lookahead}
-    zoo_wrapper = zoo_env_wrapper(config.hyperparams.get("env_wrapper"))
-    if zoo_wrapper is not None:
-        if wrapping:
-            raise ConfigError(
-                "env_wrapper", "the look-ahead wraps the environment already; drop one of them"
-            )
-        wrapping = {"wrapper_class": zoo_wrapper}
     train_env = make_vec_env(
         env_id,
         n_envs=config.n_envs,
@@ -502,8 +457,6 @@ def train(
         )
         if settings.init_model:
             _start_from(model, settings.init_model, _base_env(eval_env))
-        elif env_signature(_base_env(eval_env))["observation"].get("residual"):
-            start_at_zero_correction(model)  # a residual lander starts as its base flies
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():

@@ -153,12 +153,6 @@ ZOO_YAMLS = (
         "DeckLanding-BenchSS4-v1",
         ("n_envs:1", "learning_starts:16", "batch_size:16", "buffer_size:200"),
     ),
-    (
-        CONFIG.with_name("lander_residual_sac.yaml"),
-        "sac",
-        "DeckLanding-BenchSS4-v1",
-        ("n_envs:1", "learning_starts:16", "batch_size:16", "buffer_size:200"),
-    ),
 )
 
 

@@ -261,17 +261,6 @@ def _observing_wrapper(env: Any) -> Any:
     return None
 
 
-def _residual_settings(env: Any) -> dict[str, Any] | None:
-    """The settings of a residual wrapper in ``env``'s chain
-    (:class:`agents.residual.ResidualLanderWrapper`), if any."""
-    while isinstance(env, gym.Wrapper):
-        settings = getattr(env, "residual_settings", None)
-        if settings is not None:
-            return dict(settings)
-        env = env.env
-    return None
-
-
 def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str, Any]:
     """What a ``DeckLanding`` observation is to a model: its keys with their shapes and
     bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``)."""
@@ -318,13 +307,9 @@ def env_signature(env: Any, lookahead: Any = None, frame_stack: int = 1) -> dict
     base = env.unwrapped
     spec = getattr(base, "spec", None)
     if getattr(base, "timing", None) is None:  # the landing task
-        observation = landing_observation_signature(base.observation_space, frame_stack)
-        residual = _residual_settings(env)
-        if residual is not None:  # the model's action corrects a scripted lander's
-            observation = {**observation, "residual": residual}
         return {
             "env_id": spec.id if spec is not None else LANDING_TASK,
-            "observation": observation,
+            "observation": landing_observation_signature(base.observation_space, frame_stack),
             "estimator": base.config.estimation.observed,
             "sensing": sensing_profile(base.config),
             "camera_mode": base.config.camera.mode,
