@@ -188,12 +188,6 @@ class RewardConfig:
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
     shaping_weight: float = 1.0
     vertical_weight: float = 0.5
-    #: ``DeckLanding`` only: shaping per metre outside the approach cone (0: off), a cone of
-    #: ``cone_radius_m`` at the deck widening at ``cone_half_angle_deg`` with height, so that
-    #: a learner lines up before it descends and keeps the tag in the camera's view
-    cone_weight: float = 0.0
-    cone_radius_m: float = 0.15
-    cone_half_angle_deg: float = 30.0
     #: per-second cost of flying
     time_cost: float = 0.1
     #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)

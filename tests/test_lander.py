@@ -133,5 +133,4 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
     assert config.settings.env_kwargs["overrides"] == {
         "sensors": "realistic",
         "estimation.observed": "tight",
-        "reward.cone_weight": 1.0,
     }

@@ -333,13 +333,7 @@ class DeckLandingBaseEnv(gym.Env):
         deck = self.world.deck_state()
         offset = drone - deck.tag_centre_w
         horizontal = math.hypot(offset[0], offset[1])
-        potential = -r.shaping_weight * (horizontal + r.vertical_weight * abs(offset[2]))
-        if r.cone_weight > 0.0:
-            radius = r.cone_radius_m + math.tan(math.radians(r.cone_half_angle_deg)) * max(
-                offset[2], 0.0
-            )
-            potential -= r.cone_weight * max(horizontal - radius, 0.0)
-        return potential
+        return -r.shaping_weight * (horizontal + r.vertical_weight * abs(offset[2]))
 
     def _reward(self) -> float:
         r = self.config.reward

@@ -110,12 +110,7 @@ class DeckLandingEnv(DeckLandingBaseEnv):
     a learner cannot land well yet; the success bonus then rewards landing well).  Each
     term is in ``info`` (``reward_shaping``, ``reward_time``, ``reward_success``,
     ``reward_touchdown``, ``reward_crash``, ``reward_normal_speed``, ``reward_tilt``,
-    ``reward_offset``) and they sum to the reward.  An optional approach cone
-    (``reward.cone_weight``, 0 by default; the shipped lander trains with 1) adds
-    ``-cone_weight · max(|Δxy| - (cone_radius_m + tan(cone_half_angle_deg) · Δz), 0)`` to the
-    potential (0.15 m at the deck, widening at 30°): a drone that descends before it has lined
-    up loses the tag from its camera, and the cone prices that while leaving the optimal
-    policy unchanged.
+    ``reward_offset``) and they sum to the reward.
 
     .. rubric:: Starting state
 
