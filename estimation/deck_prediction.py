@@ -174,26 +174,16 @@ class LinearMotionPredictor:
     def features(self, values: np.ndarray, valid: np.ndarray) -> np.ndarray | str:
         """The feature vector of a history of the ``channels`` (n >= window samples, oldest
         first), or the reason there is none."""
-        n = self.n_window
-        c = len(self.channels)
-        values = np.asarray(values, dtype=float)
-        valid = np.asarray(valid, dtype=bool).reshape(-1)
-        if values.ndim != 2 or values.shape[1] != c or len(valid) != len(values):
-            return f"history must be (n, {c}) values of {', '.join(self.channels)} with n flags"
-        if len(values) < n:
-            return f"history of {len(values)} samples; the predictor needs {n}"
-        window, ok = values[-n:], valid[-n:] & np.all(np.isfinite(values[-n:]), axis=1)
-        if ok.sum() < max(2, math.ceil(self.min_valid_fraction * n)):
-            return "too few valid estimates in the window"
-        recent = max(1, round(self.max_gap_s / self.dt_s))
-        if not ok[-recent:].any():
-            return "no valid estimate in the newest samples"
-        index = np.arange(n)
-        filled = np.column_stack(
-            [np.interp(index, index[ok], window[ok, axis]) for axis in range(c)]
+        return window_features(
+            values,
+            valid,
+            self.n_window,
+            self.block,
+            self.scales,
+            self.channels,
+            self.min_valid_fraction,
+            max(1, round(self.max_gap_s / self.dt_s)),
         )
-        blocks = filled[n % self.block :].reshape(-1, self.block, c).mean(axis=1) / self.scales
-        return np.concatenate([blocks.ravel(), [1.0]])
 
     # ---------------------------------------------------------------- prediction
     def predict_targets(self, values: np.ndarray, valid: np.ndarray) -> np.ndarray | str:
@@ -312,7 +302,7 @@ class LinearMotionPredictor:
             best: tuple[float, float, np.ndarray, np.ndarray] | None = None
             gram = grams.setdefault(train.tobytes(), x[train].T @ x[train])
             for ridge in ridges:
-                a = _ridge(x[train], y[train, k], ridge * scale * train.sum(), gram)
+                a = ridge_solve(x[train], y[train, k], ridge * scale * train.sum(), gram)
                 residual = y[test, k] - x[test] @ a
                 error = float(np.mean(residual**2))
                 if best is None or error < best[0]:
@@ -321,7 +311,7 @@ class LinearMotionPredictor:
             _, ridge, residual, fitted = best
             covariance[k] = np.atleast_2d(np.cov(residual.T))
             heldout_means[k] = x[recorded] @ fitted
-            coefficients[k] = _ridge(
+            coefficients[k] = ridge_solve(
                 x[known],
                 y[known, k],
                 ridge * scale * known.sum(),
@@ -413,15 +403,56 @@ class LinearMotionPredictor:
         return predictor
 
 
-def _ridge(
-    x: np.ndarray, y: np.ndarray, penalty: float, gram: np.ndarray | None = None
+def window_features(
+    values: np.ndarray,
+    valid: np.ndarray,
+    n_window: int,
+    block: int,
+    scales: np.ndarray,
+    channels: Sequence[str],
+    min_valid_fraction: float,
+    recent: int,
+) -> np.ndarray | str:
+    """The features of the newest ``n_window`` samples of a history of ``channels`` (values
+    (n, C), oldest first, and their validity (n,)): the window, gaps filled linearly, averaged
+    in blocks of ``block`` samples (aligned on the newest), divided by each channel's
+    ``scales``, and a constant; or the reason there are none (a malformed history, fewer than
+    ``min_valid_fraction`` of the window valid, no valid sample among the newest ``recent``).
+    Never raises on data."""
+    n = n_window
+    c = len(channels)
+    values = np.asarray(values, dtype=float)
+    valid = np.asarray(valid, dtype=bool).reshape(-1)
+    if values.ndim != 2 or values.shape[1] != c or len(valid) != len(values):
+        return f"history must be (n, {c}) values of {', '.join(channels)} with n flags"
+    if len(values) < n:
+        return f"history of {len(values)} samples; the predictor needs {n}"
+    window, ok = values[-n:], valid[-n:] & np.all(np.isfinite(values[-n:]), axis=1)
+    if ok.sum() < max(2, math.ceil(min_valid_fraction * n)):
+        return "too few valid estimates in the window"
+    if not ok[-recent:].any():
+        return "no valid estimate in the newest samples"
+    index = np.arange(n)
+    filled = np.column_stack([np.interp(index, index[ok], window[ok, axis]) for axis in range(c)])
+    blocks = filled[n % block :].reshape(-1, block, c).mean(axis=1) / scales
+    return np.concatenate([blocks.ravel(), [1.0]])
+
+
+def ridge_solve(
+    x: np.ndarray,
+    y: np.ndarray,
+    penalty: float,
+    gram: np.ndarray | None = None,
+    toward: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Least squares with an L2 penalty on every coefficient but the constant (the last);
+    """Least squares with an L2 penalty on every coefficient but the constant (the last),
+    pulling them to 0 or to ``toward`` (coefficients of the same shape: a prior fit);
     ``gram`` is ``x.T @ x`` when already known."""
     gram = x.T @ x if gram is None else gram
     regulariser = penalty * np.eye(x.shape[1])
     regulariser[-1, -1] = 0.0
-    return np.linalg.solve(gram + regulariser, x.T @ y)
+    right = x.T @ y if toward is None else x.T @ y + regulariser @ toward
+    return np.linalg.solve(gram + regulariser, right)
 
 
 class LinearTiltPredictor(LinearMotionPredictor):

@@ -198,12 +198,16 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
 
     layout = timing_layout(timing, env_hz)
     n_history = layout.n_history
+    # the deck-tilt predictor, and the online fit's prior where it has one
+    tilt_model = timing.tilt_model
+    if timing.tilt_prior:
+        tilt_model = f"{tilt_model} (prior {timing.tilt_prior})"
     # the prediction observation's values mean what its predictor and contact times make them
     prediction: dict[str, Any] = {}
     if timing.observation == "prediction":
         prediction = {
             "observation": timing.observation,
-            "tilt_model": timing.tilt_model,
+            "tilt_model": tilt_model,
             "contact_times_s": [float(c) for c in timing.contact_times_s],
             "opportunity_s": float(timing.opportunity_s),
         }
@@ -229,7 +233,7 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
             timing.guidance,
             timing.wave_off_tilt_deg,
             timing.wave_off_predictor,
-            timing.tilt_model,
+            tilt_model,
             timing.wave_off_probability,
             timing.wave_off_rule,
             timing.opportunity_s,

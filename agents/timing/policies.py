@@ -24,12 +24,14 @@ from agents.timing.cards import (
     read_metadata,
 )
 from estimation.deck_prediction import LinearTiltPredictor
+from estimation.online_deck_prediction import OnlineTiltPredictor
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
-from landing_env.timing.config import TimingConfig
+from landing_env.timing.config import ONLINE_TILT_MODEL, TimingConfig
+from landing_env.timing.deck_prediction import online_tilt_predictor
 from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import TimingObservationLayout
-from landing_env.timing.stopping import predictor_stopping_values
+from landing_env.timing.stopping import PredictorStoppingValues
 
 
 def shipped_timing_model(algo: str) -> Path:
@@ -110,7 +112,13 @@ class PredictivePolicy:
     (:class:`~landing_env.timing.stopping.StoppingValues`) of the chances the predictor gave
     held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
     independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
-    history at least as long as the predictor's window (``timing.history_s``)."""
+    history at least as long as the predictor's window (``timing.history_s``).
+
+    With an :class:`~estimation.online_deck_prediction.OnlineTiltPredictor`
+    (``timing.tilt_model: online``) the predictor is fitted during the episode from the
+    histories the policy is shown (each observation's new rows), the chances weighed are those
+    its fit gives the episode's past, and until it can predict the policy waits (the wait
+    limit forces the commit)."""
 
     name = "predictive"
 
@@ -125,7 +133,7 @@ class PredictivePolicy:
         contact_times_s: tuple[float, ...] | None = None,
     ) -> None:
 
-        if not isinstance(predictor, LinearTiltPredictor):
+        if not isinstance(predictor, LinearTiltPredictor | OnlineTiltPredictor):
             predictor = LinearTiltPredictor.load(predictor)
         if abs(predictor.dt_s - dt) > 1e-9:
             raise ConfigError(
@@ -152,8 +160,10 @@ class PredictivePolicy:
         self.contact_times_s = tuple(float(c) for c in contact_times_s)
         if not self.contact_times_s:
             raise ConfigError("timing.contact_window_s", "gives no contact time")
-        values = predictor_stopping_values(predictor, self.contact_times_s, max_tilt_deg)
-        if values is None:
+        values = PredictorStoppingValues(predictor, self.contact_times_s, max_tilt_deg)
+        #: the online predictor it teaches (None: a fitted one)
+        self.online = predictor if isinstance(predictor, OnlineTiltPredictor) else None
+        if self.online is None and values.current() is None:
             raise ConfigError(
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
@@ -174,6 +184,8 @@ class PredictivePolicy:
     def reset(self) -> None:
         self.last = None
         self.last_probability = 0.0
+        if self.online is not None:
+            self.online.reset()
 
     def probability(self, observation: np.ndarray) -> float:
         """The predicted chance that a commit now meets a deck within the tilt limit."""
@@ -181,13 +193,18 @@ class PredictivePolicy:
 
     def threshold(self, wait_fraction: float) -> float:
         """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of
-        waiting on."""
+        waiting on (0, which takes any chance, when there are no chances to weigh)."""
         remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
-        return self.values.threshold(remaining_s, self.opportunity_s)
+        values = self.values.current()
+        return 0.0 if values is None else values.threshold(remaining_s, self.opportunity_s)
 
     def _chance(self, rows: np.ndarray) -> float:
+        values, valid = rows[:, self.columns], rows[:, _VALID] > 0.5
+        if self.online is not None:
+            # the online fit learns from the rows it has not seen yet
+            self.online.update(values, valid)
         self.last = self.predictor.best_within(
-            rows[:, self.columns], rows[:, _VALID] > 0.5, self.contact_times_s, self.max_tilt_deg
+            values, valid, self.contact_times_s, self.max_tilt_deg
         )
         self.last_probability = self.last.probability_within(self.max_tilt_deg)
         return self.last_probability
@@ -331,13 +348,18 @@ def build_quiescent(env: Any, model_path: str | None, allow: tuple[str, ...]) ->
 
 
 def build_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
-    """``predictive``: ``model_path`` is a deck-tilt predictor (else the scenario's)."""
+    """``predictive``: ``model_path`` is a deck-tilt predictor (else the scenario's, or with
+    ``timing.tilt_model: online`` one of its own fitted online)."""
     base = _require_timing(env, "predictive")
     _require_history(base, "predictive")
+    name = base.deck_prediction.resolved_tilt_model()
+    online = model_path is None and name == ONLINE_TILT_MODEL
     return PredictivePolicy(
         base.layout,
         base.env_dt,
-        _tilt_model(model_path, base.deck_prediction.resolved_tilt_model()),
+        online_tilt_predictor(base.config, base.env_dt)
+        if online
+        else _tilt_model(model_path, name),
         base.config.touchdown.max_deck_tilt_deg,
         base.timing.wait_limit_s,
         base.timing.opportunity_s,

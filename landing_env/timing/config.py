@@ -33,6 +33,9 @@ CAMERA_BELOW_COM_M = 0.03
 #: ``timing.tilt_model`` that stands for the scenario's own deck-tilt predictor (its config's
 #: ``deck_predictor``): one model card then fits every scenario it was trained over
 SCENARIO_TILT_MODEL = "scenario"
+#: ``timing.tilt_model`` that fits the deck-tilt predictor online, during the episode, from the
+#: deck history alone (:class:`~estimation.online_deck_prediction.OnlineTiltPredictor`)
+ONLINE_TILT_MODEL = "online"
 
 
 @dataclass
@@ -97,9 +100,24 @@ class TimingConfig:
     #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
     #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
     #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
-    #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
-    #: ``predictive`` policy; empty: none
+    #: :mod:`agents.timing.deck_prediction_fit`) or a path; or ``online``: fitted during the
+    #: episode from the deck history alone, no file
+    #: (:class:`~estimation.online_deck_prediction.OnlineTiltPredictor`: a ridge fit of the
+    #: same direct multi-horizon form over the episode's own past, its error measured on its
+    #: own past predictions), which cannot predict until it has seen enough of the deck (its
+    #: first fit needs 6 s of examples, each 2 s of window and 2 s of future, then 1 s of its
+    #: own errors: about 13 s after the reset, 5 s into the wait of the ``predictive``
+    #: settings): until then the ``predictive`` policy waits (the wait limit forces the
+    #: commit), a commit takes ``expected_contact_s``, the ``model`` wave-off lets the descent
+    #: go on and the prediction observation holds no chance and says it is invalid.  Read by
+    #: the ``model`` wave-off, the contact window, the prediction observation and the
+    #: ``predictive`` policy (each fits its own from what it sees); empty: none
     tilt_model: str = ""
+    #: with ``tilt_model: online``, an optional fitted predictor (as ``tilt_model`` names one,
+    #: ``scenario`` included) the online fit starts from: it reads that predictor's window and
+    #: channels, predicts with it until its own fit predicts better (on its own past errors),
+    #: and pulls its fit toward it.  Empty (the default): none, the fit is the episode's alone
+    tilt_prior: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
     expected_contact_s: float = 1.3
     #: the contact time chosen at each commit: with a window ``[first, last]`` (seconds after
@@ -152,6 +170,14 @@ class TimingConfig:
         require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
         require_choice("observation", self.observation, OBSERVATION_KINDS)
         require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
+        if self.tilt_prior and self.tilt_model != ONLINE_TILT_MODEL:
+            raise ConfigError(
+                "tilt_prior",
+                f"{self.tilt_prior!r} is the online fit's prior: it needs tilt_model = "
+                f"{ONLINE_TILT_MODEL!r} (not {self.tilt_model!r})",
+            )
+        if self.tilt_prior == ONLINE_TILT_MODEL:
+            raise ConfigError("tilt_prior", "must name a fitted predictor, not 'online'")
         if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
             raise ConfigError(
                 "wave_off_rule",

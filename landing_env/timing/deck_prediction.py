@@ -2,7 +2,9 @@
 
 :class:`DeckPrediction` loads the fitted predictor
 (:class:`~estimation.deck_prediction.LinearTiltPredictor`) that the config's ``timing`` section
-asks for, checks it against the deck-motion history it will read
+asks for, or with ``timing.tilt_model: online`` starts the one fitted during the episode
+(:class:`~estimation.online_deck_prediction.OnlineTiltPredictor`, fed every sample of the
+history: :meth:`DeckPrediction.observe`), checks it against the deck-motion history it will read
 (:class:`~landing_env.timing.history.DeckMotionHistory`), and answers the three questions the
 task (:class:`~landing_env.timing.env.DeckLandingTimingEnv`) puts to it: when a descent starting
 now should meet the deck (the contact window), whether a descent under way should go around
@@ -16,12 +18,58 @@ import numpy as np
 
 from estimation.deck_prediction import LinearTiltPredictor
 from estimation.frames import tilt_deg
+from estimation.online_deck_prediction import OnlineTiltPredictor
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.timing.config import SCENARIO_TILT_MODEL, WAVE_OFF_CLIMB_S, TimingConfig
+from landing_env.timing.config import (
+    ONLINE_TILT_MODEL,
+    SCENARIO_TILT_MODEL,
+    WAVE_OFF_CLIMB_S,
+    TimingConfig,
+)
 from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
-from landing_env.timing.stopping import StoppingValues, predictor_stopping_values
+from landing_env.timing.stopping import PredictorStoppingValues, StoppingValues
+
+#: a deck-tilt predictor of the timing task: fitted offline, or fitted online in the episode
+TiltPredictor = LinearTiltPredictor | OnlineTiltPredictor
+
+
+def resolve_tilt_model(config: DeckLandingConfig, name: str) -> str:
+    """``name`` (``timing.tilt_model`` or ``timing.tilt_prior``), ``scenario`` resolved to the
+    config's ``deck_predictor`` (empty when it names none)."""
+    return config.deck_predictor if name == SCENARIO_TILT_MODEL else name
+
+
+def load_fitted_predictor(name: str, key: str) -> LinearTiltPredictor:
+    """The fitted deck-tilt predictor ``name`` (a shipped one or a path); a missing or
+    malformed one is a :class:`ConfigError` naming ``key`` and the shipped ones."""
+    try:
+        return LinearTiltPredictor.load(tilt_predictor_path(name))
+    except (OSError, ValueError) as error:
+        shipped = sorted(p.stem.removeprefix("deck_tilt_") for p in PREDICTOR_DIR.glob("*.npz"))
+        raise ConfigError(
+            key,
+            f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
+            "or a file written by `python -m agents.timing.deck_prediction_fit fit`",
+        ) from None
+
+
+def online_tilt_predictor(config: DeckLandingConfig, env_dt: float) -> OnlineTiltPredictor:
+    """A fresh online deck-tilt predictor of the history at ``env_dt``, with the prior
+    ``timing.tilt_prior`` names (none when empty)."""
+    prior_name = resolve_tilt_model(config, config.timing.tilt_prior)
+    if config.timing.tilt_prior and not prior_name:
+        raise ConfigError(
+            "timing.tilt_prior",
+            "'scenario' reads the scenario's deck_predictor, which this config does not name",
+        )
+    prior = load_fitted_predictor(prior_name, "timing.tilt_prior") if prior_name else None
+    try:
+        return OnlineTiltPredictor(env_dt, prior=prior)
+    except ValueError as error:
+        raise ConfigError("timing.tilt_prior", str(error)) from None
+
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -45,10 +93,37 @@ class DeckPrediction:
         self.env_dt = env_dt
         #: the scenario's deck-tilt predictor, read by the model wave-off, the contact
         #: window and the prediction observation (None when none is on)
-        self.tilt_predictor = self._load_tilt_predictor()
-        self.wave_off_values = self._wave_off_values()
-        #: the value of waiting on that the prediction observation holds
-        self.observed_values = self._observed_values()
+        self.tilt_predictor: TiltPredictor | None = self._load_tilt_predictor()
+        self._wave_off_values = self._wave_off_values_of()
+        self._observed_values = self._observed_values_of()
+
+    @property
+    def online(self) -> OnlineTiltPredictor | None:
+        """The predictor when it is fitted online (None otherwise)."""
+        predictor = self.tilt_predictor
+        return predictor if isinstance(predictor, OnlineTiltPredictor) else None
+
+    @property
+    def wave_off_values(self) -> StoppingValues | None:
+        """The value of waiting on that the ``value`` wave-off weighs (None: none; an online
+        predictor's change with its fit, and are none before it can predict)."""
+        return None if self._wave_off_values is None else self._wave_off_values.current()
+
+    @property
+    def observed_values(self) -> StoppingValues | None:
+        """The value of waiting on that the prediction observation holds."""
+        return None if self._observed_values is None else self._observed_values.current()
+
+    def reset(self) -> None:
+        """A new episode: an online predictor forgets the deck it saw."""
+        if self.online is not None:
+            self.online.reset()
+
+    def observe(self) -> None:
+        """The history took a sample: an online predictor learns from it."""
+        if self.online is not None:
+            row = self.history.rows()[-1]
+            self.online.append(row[self._predictor_columns()], row[_VALID] > 0.5)
 
     @property
     def timing(self) -> TimingConfig:
@@ -58,11 +133,10 @@ class DeckPrediction:
     def resolved_tilt_model(self) -> str:
         """``timing.tilt_model``, ``scenario`` resolved to the config's ``deck_predictor``
         (the predictor fitted to this scenario's deck; empty when it names none)."""
-        name = self.timing.tilt_model
-        return self.config.deck_predictor if name == SCENARIO_TILT_MODEL else name
+        return resolve_tilt_model(self.config, self.timing.tilt_model)
 
     # ------------------------------------------------------------------ loading
-    def _load_tilt_predictor(self) -> LinearTiltPredictor | None:
+    def _load_tilt_predictor(self) -> TiltPredictor | None:
         """The fitted deck-tilt predictor (read by the ``model`` wave-off, the contact
         window and the prediction observation), checked against the history it will read."""
         t = self.timing
@@ -90,27 +164,23 @@ class DeckPrediction:
                 "(e.g. bench-ss4, or a file written by "
                 "`python -m agents.timing.deck_prediction_fit fit`)",
             )
-        path = tilt_predictor_path(name)
-        try:
-            model = LinearTiltPredictor.load(path)
-        except (OSError, ValueError) as error:
-            shipped = sorted(p.stem.removeprefix("deck_tilt_") for p in PREDICTOR_DIR.glob("*.npz"))
-            raise ConfigError(
-                "timing.tilt_model",
-                f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.timing.deck_prediction_fit fit`",
-            ) from None
+        model: TiltPredictor
+        if name == ONLINE_TILT_MODEL:
+            model, what = online_tilt_predictor(self.config, self.env_dt), "the online predictor"
+        else:
+            model = load_fitted_predictor(name, "timing.tilt_model")
+            what = tilt_predictor_path(name).name
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:
             raise ConfigError(
                 "timing.tilt_model",
-                f"{path.name} reads {unknown}, which the history does not hold "
+                f"{what} reads {unknown}, which the history does not hold "
                 f"({', '.join(HISTORY_FEATURES)})",
             )
         if abs(model.dt_s - self.env_dt) > 1e-9:
             raise ConfigError(
                 "timing.tilt_model",
-                f"{path.name} was fitted at {1 / model.dt_s:g} Hz; simulation.env_hz is "
+                f"{what} was fitted at {1 / model.dt_s:g} Hz; simulation.env_hz is "
                 f"{1 / self.env_dt:g}",
             )
         if self.history.length < model.n_window:
@@ -121,18 +191,18 @@ class DeckPrediction:
             )
         return model
 
-    def _wave_off_values(self) -> StoppingValues | None:
+    def _wave_off_values_of(self) -> PredictorStoppingValues | None:
         """The value of waiting on for the ``value`` wave-off: from the chances the
-        predictor gave held-out examples at the contact."""
+        predictor gave held-out examples at the contact (an online one: its episode's past)."""
         t = self.timing
         if self.tilt_predictor is None or t.wave_off_rule != "value":
             return None
         if t.wave_off_predictor != "model" or t.wave_off_tilt_deg <= 0.0:
             return None
-        values = predictor_stopping_values(
+        values = PredictorStoppingValues(
             self.tilt_predictor, t.contact_times_s, t.wave_off_tilt_deg
         )
-        if values is None:
+        if self.online is None and values.current() is None:
             raise ConfigError(
                 "timing.wave_off_rule",
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
@@ -142,15 +212,15 @@ class DeckPrediction:
             )
         return values
 
-    def _observed_values(self) -> StoppingValues | None:
+    def _observed_values_of(self) -> PredictorStoppingValues | None:
         """The value of waiting on for the prediction observation: from the chances the
         predictor gave held-out examples at the contact times, within the touchdown limit."""
         t = self.timing
         if t.observation != "prediction" or self.tilt_predictor is None:
             return None
         limit = self.config.touchdown.max_deck_tilt_deg
-        values = predictor_stopping_values(self.tilt_predictor, t.contact_times_s, limit)
-        if values is None:
+        values = PredictorStoppingValues(self.tilt_predictor, t.contact_times_s, limit)
+        if self.online is None and values.current() is None:
             raise ConfigError(
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
@@ -189,10 +259,11 @@ class DeckPrediction:
         ``elapsed_s`` into the descent after ``wait_s`` of waiting: ``wave_off_probability``,
         or with the ``value`` rule the value of waiting on after the climb back."""
         t = self.timing
-        if self.wave_off_values is None:
+        values = self.wave_off_values
+        if values is None:
             return t.wave_off_probability
         remaining_s = t.wait_limit_s - wait_s - elapsed_s - WAVE_OFF_CLIMB_S
-        return self.wave_off_values.threshold(remaining_s, t.opportunity_s)
+        return values.threshold(remaining_s, t.opportunity_s)
 
     def wave_off_due(self, elapsed_s: float, contact_s: float, wait_s: float) -> bool:
         """The deck tilt predicted at the contact (``contact_s`` after the commit, now
@@ -232,7 +303,7 @@ class DeckPrediction:
         (:class:`~landing_env.timing.layout.TimingObservationLayout`) after ``wait_s`` of
         waiting: the chance at each contact time, the value of waiting on, the validity."""
         t = self.timing
-        assert self.tilt_predictor is not None and self.observed_values is not None
+        assert self.tilt_predictor is not None and self._observed_values is not None
         rows = self.history.rows()
         columns = self._predictor_columns()
         limit = self.config.touchdown.max_deck_tilt_deg
@@ -249,5 +320,7 @@ class DeckPrediction:
         if not valid:
             chances[:] = 0.0
         remaining_s = max(t.wait_limit_s - wait_s, 0.0)
-        value = self.observed_values.threshold(remaining_s, t.opportunity_s)
+        observed = self.observed_values
+        # an online predictor that cannot yet predict has no chances to weigh: 0
+        value = 0.0 if observed is None else observed.threshold(remaining_s, t.opportunity_s)
         return np.concatenate([chances, [float(np.clip(value, 0.0, 1.0)), float(valid)]])

@@ -250,6 +250,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         self._reset_episode_state()
         self.guidance.reset()
         self.history.reset()
+        self.deck_prediction.reset()
         self._base_observation = base_observation
         if self.forecast_observation is not None:
             # the ship's HMS record of this episode (its errors drawn from the episode's seed)
@@ -356,13 +357,16 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         observation = self._base_observation
         if not observation["deck_pose_valid"][0]:
             self.history.push(None)
-            return
-        pose = observation["deck_pose"].astype(float)
-        if self.timing.level_history:
-            # the drone's attitude stands in for the autopilot's estimate (good to a fraction
-            # of a degree in PX4); the deck pose stays the estimator's
-            pose = levelled_deck_pose(pose, level_from_body(self.world.drone_state().rotation_wb))
-        self.history.push(pose)
+        else:
+            pose = observation["deck_pose"].astype(float)
+            if self.timing.level_history:
+                # the drone's attitude stands in for the autopilot's estimate (good to a
+                # fraction of a degree in PX4); the deck pose stays the estimator's
+                rotation_wb = self.world.drone_state().rotation_wb
+                pose = levelled_deck_pose(pose, level_from_body(rotation_wb))
+            self.history.push(pose)
+        # an online deck-tilt predictor learns from every sample of the history
+        self.deck_prediction.observe()
 
     def _descend(self, wave_off: bool) -> float:
         """The final descent, run to touchdown (or crash, or the descent timeout), or until a

@@ -84,3 +84,29 @@ def predictor_stopping_values(
     recorded."""
     chances = predictor.chances(horizons_s, limit_deg)
     return StoppingValues.from_samples(chances) if chances.size else None
+
+
+class PredictorStoppingValues:
+    """:func:`predictor_stopping_values` of ``predictor``, renewed whenever its fit changes
+    (its ``fit_version``: the online predictor,
+    :class:`~estimation.online_deck_prediction.OnlineTiltPredictor`, refits as the episode
+    goes; a fitted one's are computed once)."""
+
+    def __init__(
+        self, predictor: Any, horizons_s: float | Sequence[float], limit_deg: float
+    ) -> None:
+        self.predictor = predictor
+        self.horizons_s = horizons_s
+        self.limit_deg = limit_deg
+        self._version: object = object()
+        self._values: StoppingValues | None = None
+
+    def current(self) -> StoppingValues | None:
+        """The values for the predictor's present fit (None when it holds no chances)."""
+        version = getattr(self.predictor, "fit_version", 0)
+        if version != self._version:
+            self._values = predictor_stopping_values(
+                self.predictor, self.horizons_s, self.limit_deg
+            )
+            self._version = version
+        return self._values
