@@ -168,3 +168,30 @@ def test_a_folder_without_enough_boards_is_a_one_line_error(
     assert code == 2
     err = capsys.readouterr().err
     assert "need at least 3 usable photos" in err and "blank.png" in err
+
+
+OPENCV_PHOTOS = Path(__file__).parent / "data" / "opencv_chessboard"
+#: OpenCV's Python calibration sample on its 13 ``left??.jpg`` photos, 9x6 (the data's README)
+OPENCV_K = {"fx": 532.795, "fy": 532.919, "cx": 342.458, "cy": 233.901}
+OPENCV_DIST = (-0.28109, 0.02726, 0.00122, -0.00013, 0.15851)
+
+
+def test_opencvs_sample_photos_give_opencvs_published_calibration() -> None:
+    run = calibrate_from_images(image_files(OPENCV_PHOTOS), (9, 6), 0.025)
+    assert len(run.used) == 12 and not run.rejected
+    k = run.result.K
+    # twelve of the thirteen photos (left14 is missing): the focal lengths to 0.05 %, the
+    # principal point to 1 px, and every pixel within half the image height of the centre on
+    # a ray within 1 px of OpenCV's (principal point and distortion together)
+    assert abs(k[0, 0] - OPENCV_K["fx"]) / OPENCV_K["fx"] < 5e-4
+    assert abs(k[1, 1] - OPENCV_K["fy"]) / OPENCV_K["fy"] < 5e-4
+    assert abs(k[0, 2] - OPENCV_K["cx"]) < 1.0 and abs(k[1, 2] - OPENCV_K["cy"]) < 1.0
+    angles = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    ring = np.stack([320.0 + 240.0 * np.cos(angles), 240.0 + 240.0 * np.sin(angles)], axis=1)
+    k_opencv = np.array(
+        [[OPENCV_K["fx"], 0.0, OPENCV_K["cx"]], [0.0, OPENCV_K["fy"], OPENCV_K["cy"]], [0, 0, 1]]
+    )
+    ours = cv2.undistortPoints(ring[:, None, :], k, run.result.dist[:5])[:, 0]
+    theirs = cv2.undistortPoints(ring[:, None, :], k_opencv, np.array(OPENCV_DIST))[:, 0]
+    assert np.max(np.linalg.norm(ours - theirs, axis=1)) * OPENCV_K["fx"] < 1.0
+    assert run.result.rms_reprojection_error < 0.3
