@@ -150,7 +150,10 @@ def test_the_simulator_hands_fused_the_seas_wave_components_when_asked() -> None
     from landing_env.config import load_config
     from landing_env.estimators import fusion_settings
 
-    fusion = fusion_settings(load_config("realistic"))  # the bench: 5 + 1.5 deg per axis
+    # the prior is off by default: the filter identifies the motion itself
+    assert fusion_settings(load_config("realistic")).deck_roll_periods_s == ()
+    told = load_config("realistic", overrides={"estimation.fusion.deck_waves_from_motion": True})
+    fusion = fusion_settings(told)  # the bench: 5 + 1.5 deg per axis
     np.testing.assert_allclose(fusion.deck_roll_periods_s, (1 / 0.091, 1 / 0.23))
     np.testing.assert_allclose(fusion.deck_pitch_periods_s, (1 / 0.11, 1 / 0.25))
     np.testing.assert_allclose(fusion.deck_attitude_rms_deg, [math.sqrt((25 + 2.25) / 2)] * 2)
