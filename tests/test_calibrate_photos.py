@@ -171,7 +171,7 @@ def test_a_folder_without_enough_boards_is_a_one_line_error(
 
 
 OPENCV_PHOTOS = Path(__file__).parent / "data" / "opencv_chessboard"
-#: OpenCV's Python calibration sample on its 13 ``left??.jpg`` photos, 9x6 (the data's README)
+#: OpenCV's calibration sample on its 13 ``left??.jpg`` photos, 9x6, as widely quoted (README)
 OPENCV_K = {"fx": 532.795, "fy": 532.919, "cx": 342.458, "cy": 233.901}
 OPENCV_DIST = (-0.28109, 0.02726, 0.00122, -0.00013, 0.15851)
 
