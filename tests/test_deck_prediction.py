@@ -14,9 +14,12 @@ from hypothesis.extra.numpy import arrays
 
 from agents.timing.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
+from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import PREDICTIVE_TIMING, dotted
+from landing_env.sea.heldout import HELD_OUT_SEAS
+from landing_env.sea.training_seas import training_family
 from landing_env.timing.stopping import predictor_stopping_values
 
 DT = 0.05
@@ -337,6 +340,21 @@ def test_each_bench_scenario_ships_a_predictor_fitted_on_its_estimated_motion(sc
     # the error a descent ahead is a fraction of the 5 deg limit, and larger at rougher seas
     k = int(np.argmin(abs(predictor.horizons_s - 1.3)))
     assert max(predictor.metadata["heldout_rms_deg"][k]) < 3.5
+
+
+def test_the_bench_family_predictor_is_fitted_on_the_training_family_and_no_held_out_sea():
+    predictor = LinearTiltPredictor.load(tilt_predictor_path("bench-broad"))
+    members = training_family("bench-broad")
+    assert predictor.metadata["seas"] == [m.name for m in members]
+    assert predictor.metadata["scenarios"] == sorted({m.scenario for m in members})
+    assert not set(predictor.metadata["scenarios"]) & set(HELD_OUT_SEAS)
+    assert predictor.metadata["sensing"] == "realistic"
+    assert predictor.metadata["estimator"] == "tight"
+    assert predictor.window_s == 8.0 and predictor.channels == CHANNELS
+    k = int(np.argmin(abs(predictor.horizons_s - 1.3)))
+    assert max(predictor.metadata["heldout_rms_deg"][k]) < 3.5
+    # the held-out bench sea reads the family's predictor, not one fitted to another sea
+    assert load_config("bench-unseen").deck_predictor == "bench-broad"
 
 
 def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):

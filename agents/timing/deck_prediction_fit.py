@@ -34,6 +34,7 @@ from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_d
 from landing_env.errors import require_choice, require_range
 from landing_env.resources import tilt_predictor_path
 from landing_env.scenarios import SCENARIOS
+from landing_env.sea.training_seas import TRAINING_FAMILIES, TrainingSea, training_family
 from landing_env.timing.history import HISTORY_FEATURES
 
 #: the horizons the predictor is fitted at: every decision period (0.1 s) up to 2 s
@@ -62,10 +63,13 @@ def collect(
     wait_s: float = 60.0,
     progress: bool = True,
     channels: tuple[str, ...] = CHANNELS,
+    overrides: dict[str, Any] | None = None,
+    label: str = "",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Waiting episodes of ``scenario``: per decision, the history's last ``window_s`` of
-    the ``channels`` and the validity (N, n, C + 1), the true levelled (roll, pitch) (N, 2),
-    the episode number (N,), and the decision period (s)."""
+    """Waiting episodes of ``scenario`` (its config changed by the dotted ``overrides``, e.g.
+    a training family's sea): per decision, the history's last ``window_s`` of the
+    ``channels`` and the validity (N, n, C + 1), the true levelled (roll, pitch) (N, 2), the
+    episode number (N,), and the decision period (s)."""
     from tqdm import tqdm
 
     require_range("episodes", episodes, 1)
@@ -78,6 +82,7 @@ def collect(
             "timing.history_s": window_s,
             "timing.wait_limit_s": wait_s,
             "simulation.max_episode_s": wait_s + window_s + 10.0,
+            **(overrides or {}),
         },
     )
     base = env.unwrapped
@@ -86,7 +91,8 @@ def collect(
     truth: list[np.ndarray] = []
     numbers: list[int] = []
     try:
-        for number in tqdm(range(episodes), desc=scenario, unit="ep", disable=not progress):
+        numbered = tqdm(range(episodes), desc=label or scenario, unit="ep", disable=not progress)
+        for number in numbered:
             _, info = env.reset(seed=first_seed + number)
             if info.get("hold_failed"):
                 env.step(0)  # the warm-up hold ended the episode: nothing to predict from
@@ -126,7 +132,7 @@ def futures(
 
 
 def fit_family(
-    scenarios: Sequence[str],
+    scenarios: Sequence[str | TrainingSea],
     sensing: str,
     episodes: int,
     first_seed: int = FIRST_SEED,
@@ -136,15 +142,22 @@ def fit_family(
     command: str = "",
     channels: tuple[str, ...] = CHANNELS,
 ) -> LinearTiltPredictor:
-    """Collect ``episodes`` per scenario and fit one predictor on all of them (held-out
-    episodes drawn from every scenario)."""
+    """Collect ``episodes`` per scenario (a scenario name, or a member of a training family of
+    seas, :mod:`landing_env.sea.training_seas`) and fit one predictor on all of them
+    (held-out episodes drawn from every scenario)."""
 
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     dt = decision_s = 0.0
-    for index, scenario in enumerate(scenarios):
-        require_choice("scenario", scenario, tuple(SCENARIOS))
+    members = [s if isinstance(s, TrainingSea) else TrainingSea(s, s) for s in scenarios]
+    for index, member in enumerate(members):
+        require_choice("scenario", member.scenario, tuple(SCENARIOS))
+        if SCENARIOS[member.scenario].held_out:
+            raise ValueError(
+                f"scenario {member.scenario!r} is a held-out sea: nothing is fitted on it "
+                "(landing_env/sea/heldout.py)"
+            )
         histories, truth, numbers, decision_s = collect(
-            scenario,
+            member.scenario,
             sensing,
             episodes,
             first_seed,
@@ -152,6 +165,8 @@ def fit_family(
             window_s,
             progress=progress,
             channels=channels,
+            overrides=member.overrides,
+            label=member.name,
         )
         dt = window_s / histories.shape[1]
         # groups: interleave the scenarios' episodes so the held-out quarter has them all
@@ -165,7 +180,8 @@ def fit_family(
         window_s,
         round(dt, 9),
         metadata={
-            "scenarios": list(scenarios),
+            "scenarios": sorted({m.scenario for m in members}),
+            "seas": [m.name for m in members],
             "sensing": sensing,
             "estimator": estimator,
             "episodes_per_scenario": episodes,
@@ -194,7 +210,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     commands = parser.add_subparsers(dest="command", required=True)
     fit = commands.add_parser("fit", help="collect waiting episodes and fit a predictor")
-    fit.add_argument("--scenario", nargs="+", required=True, choices=sorted(SCENARIOS))
+    what = fit.add_mutually_exclusive_group(required=True)
+    what.add_argument("--scenario", nargs="+", choices=sorted(SCENARIOS))
+    what.add_argument(
+        "--family",
+        choices=sorted(TRAINING_FAMILIES),
+        help="a training family of seas (landing_env/sea/training_seas.py)",
+    )
     fit.add_argument("--sensors", default="realistic", choices=sorted(SENSING_PROFILES))
     fit.add_argument("--estimator", default="tight")
     fit.add_argument("--episodes", type=int, default=60, help="per scenario")
@@ -224,7 +246,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(describe(predictor))
         return 0
     predictor = fit_family(
-        args.scenario,
+        args.scenario or training_family(args.family),
         args.sensors,
         args.episodes,
         args.seed,

@@ -1,0 +1,130 @@
+"""The training families of seas: what a model or predictor that must carry over to seas it has
+not seen is fitted on, in place of the one sea of its scenario.
+
+A family is a list of members, each a scenario (its platform, flight and sensing) and the
+dotted overrides of its sea (:mod:`landing_env.sea.generator`): one-peak and two-peak spectra
+(JONSWAP, Torsethaugen, Ochi-Hubble), seas from every quarter, the vessel at rest and under
+way, and sea states that build or decay during the episode.  The members span the range of
+the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldout`), and
+``tests/test_heldout_seas.py`` checks that no member repeats a held-out sea's spectrum,
+periods, headings and speed.
+
+``python -m agents.timing.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
+deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from landing_env.errors import require_choice
+
+_SEA = "motion.sea_state."
+_GEN = _SEA + "generator."
+
+
+@dataclass(frozen=True)
+class TrainingSea:
+    """One member of a training family: ``scenario`` with its sea replaced by ``overrides``
+    (dotted config keys)."""
+
+    name: str
+    scenario: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    #: what the member stands for, in words
+    description: str = ""
+
+
+def _bench(name: str, description: str, **keys: Any) -> TrainingSea:
+    overrides = {
+        (_GEN + key[4:] if key.startswith("gen_") else _SEA + key): value
+        for key, value in keys.items()
+    }
+    return TrainingSea(name, "bench-ss4", overrides, description)
+
+
+#: family name -> its members (each member's episodes are seeded as the fit's seeds)
+TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
+    "bench-broad": (
+        TrainingSea("ss3", "bench-ss3", {}, "the bench-ss3 scenario's JONSWAP sea"),
+        TrainingSea("ss4", "bench-ss4", {}, "the bench-ss4 scenario's JONSWAP sea"),
+        TrainingSea("ss5", "bench-ss5", {}, "the bench-ss5 scenario's JONSWAP sea"),
+        _bench(
+            "torsethaugen-head",
+            "Torsethaugen sea of sea state 4 from ahead, under way at 1 m/s",
+            wave_direction_deg=180.0,
+            gen_spectrum="torsethaugen",
+            gen_speed_m_s=1.0,
+        ),
+        _bench(
+            "torsethaugen-following",
+            "Torsethaugen sea, Hs 2.2 m, Tp 10 s, from the starboard quarter, at rest",
+            sea_state=None,
+            significant_height_m=2.2,
+            peak_period_s=10.0,
+            wave_direction_deg=45.0,
+            gen_spectrum="torsethaugen",
+        ),
+        _bench(
+            "ochi-hubble-bow",
+            "wind sea 5 s with a 10 s swell (40 % of the variance) on the port bow, 3 m/s",
+            sea_state=None,
+            significant_height_m=1.6,
+            peak_period_s=5.0,
+            wave_direction_deg=170.0,
+            gen_spectrum="ochi_hubble",
+            gen_swell_peak_period_s=10.0,
+            gen_swell_energy_fraction=0.4,
+            gen_swell_direction_deg=150.0,
+            gen_speed_m_s=3.0,
+        ),
+        _bench(
+            "ochi-hubble-quarter-building",
+            "wind sea 7 s with a 14 s following swell (60 %), 1 m/s, Hs 2.0 -> 2.4 m",
+            sea_state=None,
+            significant_height_m=2.0,
+            peak_period_s=7.0,
+            wave_direction_deg=60.0,
+            gen_spectrum="ochi_hubble",
+            gen_swell_peak_period_s=14.0,
+            gen_swell_energy_fraction=0.6,
+            gen_swell_direction_deg=30.0,
+            gen_speed_m_s=1.0,
+            gen_hs_end_m=2.4,
+            gen_ramp_start_s=10.0,
+            gen_ramp_duration_s=30.0,
+        ),
+        _bench(
+            "ochi-hubble-beam-decaying",
+            "wind sea 6.5 s with a 9 s beam swell from port (30 %), at rest, Hs 2.2 -> 1.6 m",
+            sea_state=None,
+            significant_height_m=2.2,
+            peak_period_s=6.5,
+            wave_direction_deg=240.0,
+            gen_spectrum="ochi_hubble",
+            gen_swell_peak_period_s=9.0,
+            gen_swell_energy_fraction=0.3,
+            gen_swell_direction_deg=270.0,
+            gen_hs_end_m=1.6,
+            gen_ramp_start_s=5.0,
+            gen_ramp_duration_s=40.0,
+        ),
+        _bench(
+            "jonswap-fast",
+            "JONSWAP sea of sea state 4 abeam, under way at 4 m/s, Tp 8.8 -> 7 s",
+            wave_direction_deg=100.0,
+            gen_speed_m_s=4.0,
+            gen_tp_end_s=7.0,
+            gen_ramp_start_s=0.0,
+            gen_ramp_duration_s=40.0,
+        ),
+    ),
+}
+
+
+def training_family(name: str) -> tuple[TrainingSea, ...]:
+    """The members of the training family ``name`` (an unknown name is refused, naming the
+    families)."""
+    require_choice("family", name, tuple(TRAINING_FAMILIES))
+    return TRAINING_FAMILIES[name]
