@@ -354,6 +354,23 @@ def _model_name(config: TrainConfig) -> str:
     return f"{task}_{config.settings.algo}"
 
 
+def training_wrapper(config: TrainConfig) -> Callable[[Any], Any] | None:
+    """The YAML's rl-zoo3 ``env_wrapper`` (``module.Class``, or a mapping of it to keyword
+    arguments), built as rl-zoo3 builds it; None without one.  A bad one names the key."""
+    if not config.hyperparams.get("env_wrapper"):
+        return None
+    if config.settings.lookahead is not None:
+        raise ConfigError(
+            f"{config.env_id}.env_wrapper", "cannot be combined with deck_landing.lookahead"
+        )
+    from rl_zoo3.utils import get_wrapper_class
+
+    try:
+        return get_wrapper_class(config.hyperparams)
+    except (ImportError, AttributeError, ValueError, TypeError) as error:
+        raise ConfigError(f"{config.env_id}.env_wrapper", str(error)) from None
+
+
 def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     """The training VecEnv (SubprocVecEnv over ``n_envs`` processes) and the evaluation env."""
     from stable_baselines3.common.env_util import make_vec_env
@@ -375,13 +392,19 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
     wrapping: dict[str, Any] = {}
     if s.lookahead is not None:
         wrapping = {"wrapper_class": LookaheadTimingWrapper, "wrapper_kwargs": s.lookahead}
+    # rl-zoo3's env_wrapper (e.g. the lander's start curriculum) wraps the training
+    # environments; the evaluation measures the task itself
+    train_wrapping = dict(wrapping)
+    zoo_wrapper = training_wrapper(config)
+    if zoo_wrapper is not None:
+        train_wrapping = {"wrapper_class": zoo_wrapper}
     train_env = make_vec_env(
         env_id,
         n_envs=config.n_envs,
         seed=s.seed,
         vec_env_cls=vec_cls,
         env_kwargs=env_kwargs,
-        **wrapping,
+        **train_wrapping,
     )
     eval_env = make_vec_env(env_id, n_envs=1, seed=s.eval.seed, env_kwargs=env_kwargs, **wrapping)
     if config.frame_stack > 1:

@@ -134,3 +134,29 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
         "sensors": "realistic",
         "estimation.observed": "tight",
     }
+
+
+def test_rl_zoos_env_wrapper_wraps_the_training_environments_not_the_evaluation(
+    tmp_path: Path,
+) -> None:
+    from agents.training import make_envs
+
+    wrapper = {"gymnasium.wrappers.RecordEpisodeStatistics": {"buffer_length": 7}}
+    config = load_train_config(_yaml(tmp_path, env_wrapper=[wrapper]))
+    train_env, eval_env = make_envs(config)
+    try:
+        trained_env = train_env.venv.envs[0]
+        assert isinstance(trained_env, gym.wrappers.RecordEpisodeStatistics)
+        assert trained_env.return_queue.maxlen == 7
+        assert not isinstance(eval_env.venv.envs[0], gym.wrappers.RecordEpisodeStatistics)
+    finally:
+        train_env.close()
+        eval_env.close()
+
+
+def test_an_env_wrapper_that_does_not_import_is_refused_naming_the_key(tmp_path: Path) -> None:
+    from agents.training import make_envs
+
+    config = load_train_config(_yaml(tmp_path, env_wrapper="agents.no_such_module.Wrapper"))
+    with pytest.raises(ConfigError, match="env_wrapper"):
+        make_envs(config)
