@@ -457,16 +457,6 @@ class LinearTiltPredictor(LinearMotionPredictor):
             return _invalid("non-finite prediction", horizon_s)
         return TiltPrediction(True, "", horizon_s, float(mean[0]), float(mean[1]), covariance)
 
-    def predict_at(
-        self, values: np.ndarray, valid: np.ndarray, horizons_s: Sequence[float]
-    ) -> list[TiltPrediction]:
-        """:meth:`predict` at each of ``horizons_s`` from one history (its features computed
-        once); never raises on data."""
-        phi = self.features(values, valid)
-        if isinstance(phi, str):
-            return [_invalid(phi, float(h)) for h in horizons_s]
-        return [self._from_features(phi, float(h)) for h in horizons_s]
-
     def best_within(
         self,
         values: np.ndarray,

@@ -9,7 +9,6 @@ functions here are its builders.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -25,7 +24,6 @@ from agents.timing.cards import (
     read_metadata,
 )
 from estimation.deck_prediction import LinearTiltPredictor
-from estimation.prediction_error import PredictionErrorScale
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
 from landing_env.timing.config import TimingConfig
@@ -125,7 +123,6 @@ class PredictivePolicy:
         wait_limit_s: float,
         opportunity_s: float,
         contact_times_s: tuple[float, ...] | None = None,
-        online_error: bool = False,
     ) -> None:
 
         if not isinstance(predictor, LinearTiltPredictor):
@@ -173,27 +170,10 @@ class PredictivePolicy:
         self.opportunity_s = opportunity_s
         self.last: Any = None
         self.last_probability = 0.0
-        self._wait_s = 0.0
-        #: the predictor's error on the sea at hand, checked online (``timing.tilt_error:
-        #: online``); None: the fitted covariance as it is
-        self.error_scale: PredictionErrorScale | None = None
-        if online_error:
-            h = predictor.horizons_s
-            check_s = self.contact_times_s[len(self.contact_times_s) // 2]
-            self.error_scale = PredictionErrorScale(
-                check_s,
-                predictor.covariance[int(np.argmin(abs(h - check_s)))],
-                predictor.covariance[int(np.argmin(abs(h)))],
-                # half the timing task's decision period (0.1 s)
-                tolerance_s=0.05,
-            )
 
     def reset(self) -> None:
         self.last = None
         self.last_probability = 0.0
-        self._wait_s = 0.0
-        if self.error_scale is not None:
-            self.error_scale.reset()
 
     def probability(self, observation: np.ndarray) -> float:
         """The predicted chance that a commit now meets a deck within the tilt limit."""
@@ -206,41 +186,14 @@ class PredictivePolicy:
         return self.values.threshold(remaining_s, self.opportunity_s)
 
     def _chance(self, rows: np.ndarray) -> float:
-        values, valid = rows[:, self.columns], rows[:, _VALID] > 0.5
-        if self.error_scale is None:
-            self.last = self.predictor.best_within(
-                values, valid, self.contact_times_s, self.max_tilt_deg
-            )
-            self.last_probability = self.last.probability_within(self.max_tilt_deg)
-            return self.last_probability
-        check = self.error_scale
-        now, ahead, *contacts = self.predictor.predict_at(
-            values, valid, (0.0, check.horizon_s, *self.contact_times_s)
+        self.last = self.predictor.best_within(
+            rows[:, self.columns], rows[:, _VALID] > 0.5, self.contact_times_s, self.max_tilt_deg
         )
-        # the predictions made a check horizon ago, against the deck now; then this one's
-        check.update(
-            self._wait_s,
-            np.array([ahead.roll, ahead.pitch]) if ahead.valid else None,
-            np.array([now.roll, now.pitch]) if now.valid else None,
-        )
-        scale = check.scale
-        best, best_chance = None, -1.0
-        for prediction in contacts:
-            if prediction.valid:
-                prediction = replace(prediction, covariance=prediction.covariance * scale)
-                chance = prediction.probability_within(self.max_tilt_deg)
-                if chance > best_chance:
-                    best, best_chance = prediction, chance
-            elif best is None:
-                best = prediction
-        self.last = best
-        self.last_probability = max(best_chance, 0.0)
+        self.last_probability = self.last.probability_within(self.max_tilt_deg)
         return self.last_probability
 
     def act(self, observation: np.ndarray) -> int:
         parts = self.layout.decode(observation)
-        # the wait's clock, which the online error check keys its predictions by
-        self._wait_s = parts.wait_fraction * self.wait_limit_s
         chance = self._chance(parts.history)
         return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
 
@@ -389,7 +342,6 @@ def build_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -
         base.timing.wait_limit_s,
         base.timing.opportunity_s,
         base.timing.contact_times_s,
-        online_error=base.timing.tilt_error == "online",
     )
 
 

@@ -14,7 +14,7 @@ Rules (checked by ``tests/test_heldout_seas.py``):
   predictors in ``landing_env/assets/predictors/``, the model cards in ``agents/models/``)
   names them;
 * a model or predictor that is retrained, where one does not carry over, is retrained on a
-  broader family of seas, never on these.
+  broader family of seas (:mod:`landing_env.sea.training_seas`), never on these.
 """
 
 from __future__ import annotations

@@ -100,11 +100,6 @@ class TimingConfig:
     #: :mod:`agents.deck_predictor`) or a path; read by the ``model`` wave-off and the
     #: ``predictive`` policy; empty: none
     tilt_model: str = ""
-    #: the ``predictive`` policy's error of ``tilt_model``: ``fit`` (the covariance measured
-    #: on its fitting seas) or ``online``: that covariance scaled up by the predictor's own
-    #: errors on the sea at hand, each prediction checked when its time comes
-    #: (:class:`~estimation.prediction_error.PredictionErrorScale`)
-    tilt_error: str = "fit"
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
     expected_contact_s: float = 1.3
     #: the contact time chosen at each commit: with a window ``[first, last]`` (seconds after
@@ -157,7 +152,6 @@ class TimingConfig:
         require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
         require_choice("observation", self.observation, OBSERVATION_KINDS)
         require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
-        require_choice("tilt_error", self.tilt_error, ("fit", "online"))
         if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
             raise ConfigError(
                 "wave_off_rule",
