@@ -394,10 +394,8 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
         wrapping = {"wrapper_class": LookaheadTimingWrapper, "wrapper_kwargs": s.lookahead}
     # rl-zoo3's env_wrapper (e.g. the lander's start curriculum) wraps the training
     # environments; the evaluation measures the task itself
-    train_wrapping = dict(wrapping)
     zoo_wrapper = training_wrapper(config)
-    if zoo_wrapper is not None:
-        train_wrapping = {"wrapper_class": zoo_wrapper}
+    train_wrapping = wrapping if zoo_wrapper is None else {"wrapper_class": zoo_wrapper}
     train_env = make_vec_env(
         env_id,
         n_envs=config.n_envs,

@@ -67,5 +67,5 @@ def test_an_unknown_family_is_refused_naming_the_families() -> None:
 
 @pytest.mark.parametrize("name", sorted(HELD_OUT_SEAS))
 def test_a_fit_refuses_a_held_out_sea(name) -> None:
-    with pytest.raises(ValueError, match="held-out sea"):
+    with pytest.raises(ConfigError, match=r"scenario: .* is a held-out sea"):
         fit_family([name], "ideal", 1, progress=False)

@@ -31,7 +31,7 @@ from agents.timing.hindsight import make_timing_env
 from agents.timing.sampler import SENSING_PROFILES
 from estimation.deck_prediction import LinearTiltPredictor
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
-from landing_env.errors import require_choice, require_range
+from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import tilt_predictor_path
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.training_seas import TRAINING_FAMILIES, TrainingSea, training_family
@@ -152,9 +152,10 @@ def fit_family(
     for index, member in enumerate(members):
         require_choice("scenario", member.scenario, tuple(SCENARIOS))
         if SCENARIOS[member.scenario].held_out:
-            raise ValueError(
-                f"scenario {member.scenario!r} is a held-out sea: nothing is fitted on it "
-                "(landing_env/sea/heldout.py)"
+            raise ConfigError(
+                "scenario",
+                f"{member.scenario!r} is a held-out sea: nothing is fitted on it "
+                "(landing_env/sea/heldout.py)",
             )
         histories, truth, numbers, decision_s = collect(
             member.scenario,

@@ -6,7 +6,7 @@ dotted overrides of its sea (:mod:`landing_env.sea.generator`): one-peak and two
 (JONSWAP, Torsethaugen, Ochi-Hubble), seas from every quarter, the vessel at rest and under
 way, and sea states that build or decay during the episode.  The members span the range of
 the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldout`), and
-``tests/test_heldout_seas.py`` checks that no member repeats a held-out sea's spectrum,
+``tests/test_training_seas.py`` checks that no member repeats a held-out sea's spectrum,
 periods, headings and speed.
 
 ``python -m agents.timing.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
