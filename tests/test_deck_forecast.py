@@ -29,7 +29,13 @@ from landing_env.sea.hms import (
     HelideckMonitor,
     HelideckMonitorConfig,
 )
-from landing_env.stewart.motion import ForecastMotion, MotionConfig, make_motion_source
+from landing_env.sea.hms_forecast import forecast_rms
+from landing_env.stewart.motion import (
+    ForecastMotion,
+    MotionConfig,
+    make_motion_source,
+    sample_poses,
+)
 
 
 def _ship_motion(sea_state: int = 4) -> MotionConfig:
@@ -541,5 +547,43 @@ def test_shifting_the_drone_keeps_its_attitude_and_velocities_and_refuses_a_bad_
         for bad in (np.array([np.nan, 0.0, 0.0]), np.zeros(2)):
             with pytest.raises(ValueError, match="shift_w"):
                 world.shift_drone(bad)
+    finally:
+        env.close()
+
+
+# ------------------------------------------------------------------------------ online
+def test_the_online_forecast_is_identified_from_the_episodes_own_record_and_refitted_when_old():
+    from landing_env.sea.hms_forecast import ONLINE_REFIT_S, EpisodeForecast
+
+    source = make_motion_source(_ship_motion(5), np.random.default_rng([3]))
+    monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=3)
+    episode = EpisodeForecast(None, monitor)
+    first = episode.at(2.0)
+    assert first.metadata["t_end_s"] == 2.0 and first.metadata["online_record_s"] == 1200.0
+    assert episode.at(2.0 + ONLINE_REFIT_S - 1.0) is first
+    later = episode.at(2.0 + ONLINE_REFIT_S)
+    assert later is not first and later.metadata["t_end_s"] == 2.0 + ONLINE_REFIT_S
+    # it forecasts the heave a second ahead far better than holding the present does
+    rms = forecast_rms(first, _ship_motion(5), record_s=300.0)
+    one_s = list(first.horizons_s).index(1.0)
+    times, _ = monitor.window(300.0, 300.0)
+    heave = sample_poses(source, times)[:, 2]
+    hold = np.sqrt(np.mean((heave[10:] - heave[:-10]) ** 2))
+    assert rms[one_s, 2] < 0.25 * hold
+    # a fitted forecast is flown as it is
+    assert EpisodeForecast(first, monitor).at(500.0) is first
+
+
+def test_the_deck_forecast_policy_identifies_the_sea_online_when_the_config_says_so():
+    env = _holding_with_an_estimate("ship-ss4", seed=5)
+    try:
+        env.unwrapped.config.deck_forecast = "online"
+        policy = DeckForecastTimingPolicy(env, draws=1)
+        assert policy.forecast is None
+        future = policy.deck_future(0)
+        assert isinstance(future, ForecastMotion)
+        assert isinstance(policy.last_forecast, np.ndarray)
+        assert policy.last_forecast.shape == (len(HORIZONS_S), 5)
+        assert np.all(np.isfinite(policy.last_forecast))
     finally:
         env.close()

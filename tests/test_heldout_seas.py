@@ -12,9 +12,12 @@ import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import CONFIG_DIR, load_config
+from landing_env.errors import ConfigError
 from landing_env.sea import heldout
 from landing_env.sea.generator import GeneratedSea
 from landing_env.sea.heldout import HELD_OUT_SEAS
+from landing_env.sea.hms import HelideckMonitorConfig
+from landing_env.sea.hms_forecast import ONLINE, deck_forecast_for, held_out_sea
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,6 +60,29 @@ def test_no_training_config_and_no_fit_names_a_held_out_sea() -> None:
             cards = [n for n in archive.namelist() if n.endswith(".json")]
             text = " ".join(archive.read(n).decode() for n in cards)
         assert not any(name in text for name in names), path.name
+
+
+@pytest.mark.parametrize("name", sorted(n for n in HELD_OUT_SEAS if n.startswith("ship")))
+def test_a_held_out_ship_sea_identifies_its_helideck_forecast_online_never_fitted_on_it(
+    name: str,
+) -> None:
+    config = load_config(name)
+    assert config.deck_forecast == ONLINE
+    assert deck_forecast_for(config, HelideckMonitorConfig()) is None
+    assert held_out_sea(config.motion) == name
+    # without the family, the forecast would be fitted on the held-out sea: refused
+    config.deck_forecast = ""
+    with pytest.raises(ConfigError, match=f"held-out {name!r}") as error:
+        deck_forecast_for(config, HelideckMonitorConfig())
+    assert error.value.key == "deck_forecast"
+    config.deck_forecast = "ship-everything"
+    with pytest.raises(ConfigError, match=r"online.*ship-broad") as error:
+        deck_forecast_for(config, HelideckMonitorConfig())
+    assert error.value.key == "deck_forecast"
+
+
+def test_a_scenarios_own_sea_is_no_held_out_sea() -> None:
+    assert held_out_sea(load_config("ship-ss5").motion) == ""
 
 
 @pytest.mark.parametrize("name", sorted(HELD_OUT_SEAS))

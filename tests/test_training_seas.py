@@ -3,6 +3,7 @@ sea, and a fit takes a family but refuses a held-out sea."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from agents.timing.deck_prediction_fit import fit_family, main
@@ -10,7 +11,8 @@ from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.heldout import HELD_OUT_SEAS
-from landing_env.sea.training_seas import TRAINING_FAMILIES, training_family
+from landing_env.sea.hms_forecast import fit_deck_forecast, forecast_rms
+from landing_env.sea.training_seas import TRAINING_FAMILIES, member_config, training_family
 
 
 def _sea(config):
@@ -56,6 +58,30 @@ def test_the_bench_family_spans_spectra_headings_speeds_and_ramps() -> None:
     assert any(s.generator.ramped for s in seas)
     headings = sorted({s.wave_direction_deg % 360 for s in seas})
     assert headings[-1] - headings[0] >= 180.0
+
+
+def test_the_ship_family_spans_spectra_headings_speeds_and_ramps_at_every_sea_state() -> None:
+    configs = [member_config(m) for m in training_family("ship-broad")]
+    assert {c.deck_mount for c in configs} == {"ship"}
+    seas = [c.motion.ship for c in configs]
+    assert {s.generator.spectrum for s in seas} == {"jonswap", "torsethaugen", "ochi_hubble"}
+    assert {s.generator.speed_m_s > 0 for s in seas} == {True, False}
+    assert any(s.generator.ramped for s in seas)
+    assert {s.sea_state for s in seas} >= {3, 4, 5, 6}
+    headings = sorted({s.wave_direction_deg % 360 for s in seas})
+    assert headings[-1] - headings[0] >= 180.0
+
+
+def test_a_forecast_fitted_on_several_seas_takes_a_record_of_each_in_turn() -> None:
+    motions = [member_config(m).motion for m in training_family("ship-broad")[:3]]
+    forecast = fit_deck_forecast(motions, realizations=2, record_s=200.0)
+    assert forecast.metadata["seas"] == 3
+    assert forecast.metadata["realizations"] == 3  # at least one record per sea
+    rms = forecast_rms(forecast, motions[1], record_s=200.0)
+    assert rms.shape == (len(forecast.horizons_s), 5) and np.all(np.isfinite(rms))
+    # heave a second ahead: better than 8 s ahead, where the forecast has little skill left
+    one_s = list(forecast.horizons_s).index(1.0)
+    assert rms[one_s, 2] < rms[-1, 2]
 
 
 def test_an_unknown_family_is_refused_naming_the_families() -> None:

@@ -13,10 +13,11 @@ future replaced by that forecast:
   (:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
   :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck to the same five
   every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.sea.hms_forecast`, which
-  the timing task's ``forecast`` observation reads too).  It is fitted, when the policy is built, on
-  :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with other seeds (other
-  days in the same sea state: a record of the episode's own sea would let a linear model lock
-  onto the simulated sea's finitely many wave frequencies, which no real sea has).
+  the timing task's ``forecast`` observation reads too).  By default it is fitted, when the
+  policy is built, on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
+  other seeds (other days in the same sea state); the config's ``deck_forecast: online``
+  identifies it in each episode from the HMS's own record of the last 20 min instead, as the
+  held-out seas do (:mod:`landing_env.sea.hms_forecast`).
 * **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
   futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
   deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
@@ -74,9 +75,13 @@ from landing_env.sea.hms_forecast import (
     REALIZATIONS,
     RECORD_S,
     WINDOW_S,
+    EpisodeForecast,
     deck_forecast_for,
     fit_deck_forecast,
+    fit_online_forecast,
+    forecast_rms,
 )
+from landing_env.sea.training_seas import TRAINING_FAMILIES
 from landing_env.stewart.motion import ForecastMotion, make_motion_source, sample_poses
 
 #: the forecast's home is :mod:`landing_env.sea.hms_forecast`; importing it from here still works
@@ -93,6 +98,7 @@ __all__ = [
     "OnboardModelConfig",
     "deck_forecast_for",
     "fit_deck_forecast",
+    "forecast_rms",
     "plot_forecasts",
 ]
 
@@ -217,23 +223,27 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         #: estimate's error, and the drone's wind estimate (world, m/s)
         self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.hms = hms or HelideckMonitorConfig()
-        self.forecast = forecast or deck_forecast_for(self.env.config.motion, self.hms)
-        if (
+        #: the fitted forecast; None: each episode identifies its own online
+        #: (``deck_forecast: online``, :class:`~landing_env.sea.hms_forecast.EpisodeForecast`)
+        self.forecast = forecast or deck_forecast_for(self.env.config, self.hms)
+        if self.forecast is not None and (
             tuple(self.forecast.channels) != HMS_CHANNELS
             or tuple(self.forecast.targets) != HMS_CHANNELS
         ):
             raise ValueError(f"the forecast must read and predict {HMS_CHANNELS}")
-        if abs(self.forecast.dt_s - self.hms.dt_s) > 1e-9:
+        if self.forecast is not None and abs(self.forecast.dt_s - self.hms.dt_s) > 1e-9:
             raise ValueError(
                 f"the forecast reads {1 / self.forecast.dt_s:g} Hz; the HMS gives "
                 f"{self.hms.rate_hz:g} Hz"
             )
+        self._episode_forecast: EpisodeForecast | None = None
         self._monitor: HelideckMonitor | None = None
         self.last_forecast: np.ndarray | str = "no forecast yet"
 
     def reset(self) -> None:
         super().reset()
         self._monitor = None
+        self._episode_forecast = None
         self.last_forecast = "no forecast yet"
 
     def monitor(self) -> HelideckMonitor:
@@ -252,18 +262,21 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
                 self.last_forecast = belief
                 return None
             self._belief = belief
-        _, measured = self.monitor().window(t0, self.forecast.window_s)
-        poses = self.forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
+        if self._episode_forecast is None:
+            self._episode_forecast = EpisodeForecast(self.forecast, self.monitor())
+        forecast = self._episode_forecast.at(t0)
+        _, measured = self.monitor().window(t0, forecast.window_s)
+        poses = forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
         self.last_forecast = poses
         if isinstance(poses, str):
             return None
         truth = world.stewart.motion
-        full = np.zeros((len(self.forecast.horizons_s), 6))
+        full = np.zeros((len(forecast.horizons_s), 6))
         full[:, : len(HMS_CHANNELS)] = poses
         full[:, 5] = float(np.asarray(truth.pose(t0))[5])  # the heading: held
         if not np.all(np.isfinite(full)) or not math.isfinite(t0):
             return None
-        return ForecastMotion(truth, t0, self.forecast.horizons_s, full)
+        return ForecastMotion(truth, t0, forecast.horizons_s, full)
 
     def _onboard_belief(self, decision: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
         """What the drone believes of the present at ``decision``: the deck's position in C as
@@ -389,32 +402,53 @@ def plot_forecasts(
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m agents.timing.deck_forecast --scenario ship-ss5``: fit the scenario's
-    forecast and print its held-out error per horizon, against holding the present (persistence)."""
+    forecast (on its config's ``deck_forecast``: its own sea, or a training family) and print
+    its RMS error per horizon on a record of the scenario's sea no fit used, against holding
+    the present (persistence)."""
     import argparse
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--scenario", nargs="+", default=["ship-ss5"], choices=sorted(SCENARIOS))
     parser.add_argument(
+        "--family",
+        choices=sorted(TRAINING_FAMILIES),
+        help="fit on this training family of seas (the config's deck_forecast otherwise)",
+    )
+    parser.add_argument(
         "--plot", metavar="PNG", help="also plot forecasts against the truth (first scenario)"
     )
     args = parser.parse_args(argv)
+    hms = HelideckMonitorConfig()
     for index, scenario in enumerate(args.scenario):
-        motion = load_config(SCENARIOS[scenario].config).motion
-        forecast = fit_deck_forecast(motion)
-        source = make_motion_source(motion, np.random.default_rng([FIT_SEED - 1]))
+        config = load_config(SCENARIOS[scenario].config)
+        if args.family:
+            config.deck_forecast = args.family
+        forecast = deck_forecast_for(config, hms)
+        if forecast is None:
+            monitor = HelideckMonitor(
+                make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1])),
+                hms,
+                seed=FIT_SEED - 1,
+            )
+            forecast = fit_online_forecast(monitor, 0.0)
+        source = make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1]))
         if args.plot and index == 0:
             print(f"wrote {plot_forecasts(forecast, source, scenario, args.plot)}")
         times = np.arange(0.0, RECORD_S, 0.1)
         poses = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
-        print(f"{scenario}: held-out RMS error (x, y, z m; roll, pitch deg), persistence after")
+        rms = forecast_rms(forecast, config.motion, hms)
+        rms[:, 3:] = np.degrees(rms[:, 3:])
+        print(
+            f"{scenario} (forecast fitted on {config.deck_forecast or 'its own sea'}): RMS "
+            "error (x, y, z m; roll, pitch deg), persistence after"
+        )
         for k, horizon in enumerate(forecast.horizons_s):
             lag = round(horizon / 0.1)
             hold = np.sqrt(np.mean((poses[lag:] - poses[: len(poses) - lag]) ** 2, axis=0))
             hold[3:] = np.degrees(hold[3:])
-            rms = forecast.metadata["heldout_rms"][k]
             print(
                 f"  {horizon:4.1f} s  "
-                + "  ".join(f"{v:6.3f}" for v in rms)
+                + "  ".join(f"{v:6.3f}" for v in rms[k])
                 + "   | "
                 + "  ".join(f"{v:6.3f}" for v in hold)
             )

@@ -4,10 +4,19 @@ A direct multi-horizon linear predictor
 (:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
 :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck
 (:class:`~landing_env.sea.hms.HelideckMonitor`) to the same five every 0.5 s up to
-:data:`HORIZONS_S`'s 8 s: the classical ship-motion prediction from the recent past.  It is
-fitted on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with other seeds
-(other days in the same sea state: a record of the episode's own sea would let a linear model
-lock onto the simulated sea's finitely many wave frequencies, which no real sea has).
+:data:`HORIZONS_S`'s 8 s: the classical ship-motion prediction from the recent past.  By
+default it is fitted on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
+other seeds (other days in the same sea state: a record of the episode's own sea would let a
+linear model lock onto the simulated sea's finitely many wave frequencies, which no real sea
+has).  A config's ``deck_forecast`` chooses otherwise: ``online`` identifies the forecast in
+each episode from the ship's own HMS record of the last 20 min, refitted every 30 s
+(:func:`fit_online_forecast`, :class:`EpisodeForecast`: a ship's HMS records all the time, so
+a sea never seen before is identified from its own past; fitted on the past alone it does not
+lock onto the simulated sea's components: ``benchmarks/bench_online_deck_forecast.py``
+measures it no better than the fit on other realisations of the sea); a training family of seas
+(:mod:`landing_env.sea.training_seas`, ``ship-broad``) fits it on the family, one record per
+member.  A held-out sea's config must name one of these: :func:`deck_forecast_for` refuses to
+fit on a held-out sea.
 
 Read by the ``deck-forecast`` policies (:mod:`agents.timing.deck_forecast`) and by the timing task's
 ``forecast`` observation (:mod:`landing_env.timing.env`).
@@ -15,11 +24,18 @@ Read by the ``deck-forecast`` policies (:mod:`agents.timing.deck_forecast`) and 
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+from functools import cache
+
 import numpy as np
 
 from estimation.deck_prediction import LinearMotionPredictor
-from landing_env.errors import ConfigError, require_range
+from landing_env.config import DeckLandingConfig, load_config
+from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
+from landing_env.sea.training_seas import TRAINING_FAMILIES, member_config
 from landing_env.stewart.motion import MotionConfig, make_motion_source, sample_poses
 
 #: the forecast's horizons, seconds: every 0.5 s to 8 s (a commit's descent, contact and
@@ -44,55 +60,190 @@ _FITTED: dict[str, LinearMotionPredictor] = {}
 
 
 def fit_deck_forecast(
-    motion: MotionConfig,
+    motion: MotionConfig | Sequence[MotionConfig],
     hms: HelideckMonitorConfig | None = None,
     realizations: int = REALIZATIONS,
     record_s: float = RECORD_S,
     seed: int = FIT_SEED,
 ) -> LinearMotionPredictor:
-    """The helideck forecast of the sea ``motion`` describes, fitted on ``realizations`` HMS
-    records of it (seeds ``seed``, ``seed + 1``, ...), each ``record_s`` long; the last quarter
-    of the records is held out for the ridge and the error (the predictor's metadata)."""
-    if motion.kind not in FORECAST_KINDS:
-        raise ConfigError(
-            "motion.kind",
-            f"is {motion.kind!r}; the deck forecast needs a sea ({', '.join(FORECAST_KINDS)})",
-        )
+    """The helideck forecast of the sea ``motion`` describes (or of the seas of a sequence of
+    motions, in turn), fitted on ``realizations`` HMS records (seeds ``seed``, ``seed + 1``,
+    ...; at least one per sea), each ``record_s`` long; the last quarter of the records is held
+    out for the ridge and the error (the predictor's metadata)."""
+    motions = [motion] if isinstance(motion, MotionConfig) else list(motion)
+    if not motions:
+        raise ConfigError("motion", "no sea to fit the deck forecast on")
+    for each in motions:
+        if each.kind not in FORECAST_KINDS:
+            raise ConfigError(
+                "motion.kind",
+                f"is {each.kind!r}; the deck forecast needs a sea ({', '.join(FORECAST_KINDS)})",
+            )
+    realizations = max(realizations, len(motions))
     require_range("realizations", realizations, 2, 1000)
     require_range("record_s", record_s, 2 * (WINDOW_S + HORIZONS_S[-1]), 1e6)
     hms = hms or HelideckMonitorConfig()
-    dt = hms.dt_s
-    n_window = round(WINDOW_S / dt)
-    steps = np.round(HORIZONS_S / dt).astype(int)
-    stride = max(1, round(EXAMPLE_EVERY_S / dt))
-    histories, futures, groups = [], [], []
+    records = []
     for k in range(realizations):
-        source = make_motion_source(motion, np.random.default_rng([seed + k]))
+        source = make_motion_source(motions[k % len(motions)], np.random.default_rng([seed + k]))
         monitor = HelideckMonitor(source, hms, seed=seed + k)
         times, measured = monitor.window(0.0, record_s)
-        truth = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
-        ends = np.arange(n_window - 1, len(times) - steps[-1], stride)
-        windows = np.stack([measured[end - n_window + 1 : end + 1] for end in ends])
-        histories.append(np.concatenate([windows, np.ones((*windows.shape[:2], 1))], axis=2))
-        futures.append(truth[ends[:, None] + steps[None, :]])
-        groups.append(np.full(len(ends), k))
+        records.append((measured, sample_poses(source, times)[:, : len(HMS_CHANNELS)]))
+    metadata = {"realizations": realizations, "record_s": record_s, "seed": seed}
+    return _fit(records, hms.dt_s, {**metadata, "seas": len(motions)})
+
+
+def _fit(
+    records: list[tuple[np.ndarray, np.ndarray]], dt_s: float, metadata: dict[str, float]
+) -> LinearMotionPredictor:
+    """The forecast fitted on ``records`` (each the HMS's measurements and the targets, one
+    group of examples each; the last quarter of them held out)."""
+    examples = [_examples(measured, targets, dt_s) for measured, targets in records]
     return LinearMotionPredictor.fit(
-        np.concatenate(histories),
-        np.concatenate(futures),
-        np.concatenate(groups),
+        np.concatenate([windows for windows, _ in examples]),
+        np.concatenate([future for _, future in examples]),
+        np.concatenate([np.full(len(w), k) for k, (w, _) in enumerate(examples)]),
         HORIZONS_S,
         WINDOW_S,
-        dt,
+        dt_s,
         block=BLOCK,
         channels=HMS_CHANNELS,
         targets=HMS_CHANNELS,
-        metadata={"realizations": realizations, "record_s": record_s, "seed": seed},
+        metadata=metadata,
     )
 
 
-def deck_forecast_for(motion: MotionConfig, hms: HelideckMonitorConfig) -> LinearMotionPredictor:
-    """:func:`fit_deck_forecast` with the defaults, once per sea and HMS in a process."""
-    key = repr((motion, hms))
+def _examples(
+    measured: np.ndarray, targets: np.ndarray, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The examples of one HMS record: every :data:`EXAMPLE_EVERY_S`, the last
+    :data:`WINDOW_S` of ``measured`` (with a valid column) and ``targets`` at
+    :data:`HORIZONS_S` after its end."""
+    n_window = round(WINDOW_S / dt_s)
+    steps = np.round(HORIZONS_S / dt_s).astype(int)
+    stride = max(1, round(EXAMPLE_EVERY_S / dt_s))
+    ends = np.arange(n_window - 1, len(measured) - steps[-1], stride)
+    windows = np.stack([measured[end - n_window + 1 : end + 1] for end in ends])
+    windows = np.concatenate([windows, np.ones((*windows.shape[:2], 1))], axis=2)
+    return windows, targets[ends[:, None] + steps[None, :]]
+
+
+#: how much of the HMS's own record the online forecast is fitted on, seconds before the
+#: decision (a ship's HMS records all the time; 20 min is the CAP 437 motion limits' window)
+ONLINE_RECORD_S = 1200.0
+#: the online fit's record is cut into this many parts; the last quarter is held out
+ONLINE_PARTS = 8
+
+
+def fit_online_forecast(
+    monitor: HelideckMonitor, t_end_s: float, record_s: float = ONLINE_RECORD_S
+) -> LinearMotionPredictor:
+    """The helideck forecast identified online: fitted on the HMS's own record of the
+    ``record_s`` before ``t_end_s`` (its measurements as the targets too: the truth is not
+    known on board), cut into :data:`ONLINE_PARTS` consecutive parts, the last quarter held
+    out for the ridge and the error.  It needs no prior sea: a held-out sea is identified from
+    its own past, as a real ship's would be."""
+    require_range("record_s", record_s, ONLINE_PARTS * (WINDOW_S + HORIZONS_S[-1]), 1e6)
+    _, measured = monitor.window(t_end_s, record_s)
+    part = len(measured) // ONLINE_PARTS
+    # each part keeps its own futures: no example reads past its part's end
+    chunks = [measured[k * part : (k + 1) * part] for k in range(ONLINE_PARTS)]
+    metadata = {"online_record_s": record_s, "t_end_s": t_end_s}
+    return _fit([(chunk, chunk) for chunk in chunks], monitor.dt_s, metadata)
+
+
+#: ``deck_forecast: online``: each episode identifies its forecast from its own HMS record
+ONLINE = "online"
+#: the online forecast is refitted once it is this old, seconds (the sea changes over minutes)
+ONLINE_REFIT_S = 30.0
+
+
+def deck_forecast_for(
+    config: DeckLandingConfig, hms: HelideckMonitorConfig
+) -> LinearMotionPredictor | None:
+    """The helideck forecast of ``config`` (:func:`fit_deck_forecast` with the defaults, once
+    per sea and HMS in a process): on the training family its ``deck_forecast`` names, else on
+    its own sea, which must not be a held-out sea (refused, naming ``deck_forecast``); None for
+    ``deck_forecast: online``, where each episode identifies its own
+    (:class:`EpisodeForecast`)."""
+    family = config.deck_forecast
+    if family == ONLINE:
+        return None
+    if family:
+        require_choice("deck_forecast", family, (ONLINE, *TRAINING_FAMILIES))
+        motions = tuple(member_config(m).motion for m in TRAINING_FAMILIES[family])
+    else:
+        held_out = held_out_sea(config.motion)
+        if held_out:
+            raise ConfigError(
+                "deck_forecast",
+                f"is empty, and the sea is the held-out {held_out!r}, which nothing is fitted "
+                f"on (landing_env/sea/heldout.py): use {ONLINE!r} or a training family of seas "
+                f"({', '.join(TRAINING_FAMILIES)})",
+            )
+        motions = (config.motion,)
+    key = repr((motions, hms))
     if key not in _FITTED:
-        _FITTED[key] = fit_deck_forecast(motion, hms)
+        _FITTED[key] = fit_deck_forecast(motions, hms)
     return _FITTED[key]
+
+
+class EpisodeForecast:
+    """The helideck forecast an episode flies with: ``fitted`` (:func:`deck_forecast_for`),
+    or where that is None, the one identified online from the episode's own HMS record
+    (:func:`fit_online_forecast` on the ``monitor``'s last :data:`ONLINE_RECORD_S`), refitted
+    once it is :data:`ONLINE_REFIT_S` old."""
+
+    def __init__(self, fitted: LinearMotionPredictor | None, monitor: HelideckMonitor) -> None:
+        self.fitted = fitted
+        self.monitor = monitor
+        self._online: LinearMotionPredictor | None = None
+        self._fitted_at = -math.inf
+
+    def at(self, t_s: float) -> LinearMotionPredictor:
+        """The forecast to make at ``t_s`` (seconds of episode time)."""
+        if self.fitted is not None:
+            return self.fitted
+        if self._online is None or not (0.0 <= t_s - self._fitted_at < ONLINE_REFIT_S):
+            self._online = fit_online_forecast(self.monitor, t_s)
+            self._fitted_at = t_s
+        return self._online
+
+
+@cache
+def _held_out_motions() -> tuple[tuple[str, MotionConfig], ...]:
+    return tuple((name, load_config(name).motion) for name in HELD_OUT_SEAS)
+
+
+def held_out_sea(motion: MotionConfig) -> str:
+    """The name of the held-out sea (:mod:`landing_env.sea.heldout`) ``motion`` is, or ``""``."""
+    return next((name for name, held in _held_out_motions() if held == motion), "")
+
+
+def forecast_rms(
+    forecast: LinearMotionPredictor,
+    motion: MotionConfig,
+    hms: HelideckMonitorConfig | None = None,
+    record_s: float = RECORD_S,
+    seed: int = FIT_SEED - 1,
+) -> np.ndarray:
+    """The RMS error of ``forecast`` on one HMS record of the sea ``motion`` describes (seed
+    ``seed``, which no fit uses), (H, 5) at its horizons: metres, and radians for roll and
+    pitch.  Measuring a forecast on a sea fits nothing to it, so a held-out sea may be given."""
+    hms = hms or HelideckMonitorConfig()
+    source = make_motion_source(motion, np.random.default_rng([seed]))
+    monitor = HelideckMonitor(source, hms, seed=seed)
+    times, measured = monitor.window(0.0, record_s)
+    truth = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
+    n_window = round(forecast.window_s / hms.dt_s)
+    steps = np.round(np.asarray(forecast.horizons_s) / hms.dt_s).astype(int)
+    stride = max(1, round(EXAMPLE_EVERY_S / hms.dt_s))
+    errors = []
+    for end in range(n_window - 1, len(times) - steps[-1], stride):
+        window = measured[end - n_window + 1 : end + 1]
+        poses = forecast.predict_targets(window, np.ones(len(window), dtype=bool))
+        if not isinstance(poses, str):
+            errors.append(poses - truth[end + steps])
+    if not errors:
+        raise ConfigError("record_s", f"{record_s:g} s holds no forecast window")
+    return np.sqrt(np.mean(np.square(errors), axis=0))

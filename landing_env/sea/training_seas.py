@@ -10,7 +10,10 @@ the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldou
 periods, headings and speed.
 
 ``python -m agents.timing.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
-deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``.
+deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``; a config's
+``deck_forecast: ship-broad`` fits the ship's helideck forecast
+(:mod:`landing_env.sea.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
+configs identify it online instead, which forecasts them better).
 """
 
 from __future__ import annotations
@@ -18,10 +21,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import require_choice
+from landing_env.scenarios import SCENARIOS
 
 _SEA = "motion.sea_state."
 _GEN = _SEA + "generator."
+_SHIP = "motion.ship."
+_SHIP_GEN = _SHIP + "generator."
 
 
 @dataclass(frozen=True)
@@ -42,6 +49,14 @@ def _bench(name: str, description: str, **keys: Any) -> TrainingSea:
         for key, value in keys.items()
     }
     return TrainingSea(name, "bench-ss4", overrides, description)
+
+
+def _ship(name: str, scenario: str, description: str, **keys: Any) -> TrainingSea:
+    overrides = {
+        (_SHIP_GEN + key[4:] if key.startswith("gen_") else _SHIP + key): value
+        for key, value in keys.items()
+    }
+    return TrainingSea(name, scenario, overrides, description)
 
 
 #: family name -> its members (each member's episodes are seeded as the fit's seeds)
@@ -120,6 +135,72 @@ TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
             gen_ramp_duration_s=40.0,
         ),
     ),
+    "ship-broad": (
+        TrainingSea("ss3", "ship-ss3", {}, "the ship-ss3 scenario's JONSWAP sea, hove-to"),
+        TrainingSea("ss4", "ship-ss4", {}, "the ship-ss4 scenario's JONSWAP sea, hove-to"),
+        TrainingSea("ss5", "ship-ss5", {}, "the ship-ss5 scenario's JONSWAP sea, hove-to"),
+        TrainingSea("ss6", "ship-ss6", {}, "the ship-ss6 scenario's JONSWAP sea, hove-to"),
+        _ship(
+            "torsethaugen-head",
+            "ship-ss4",
+            "Torsethaugen sea of sea state 4 from ahead, under way at 2 m/s",
+            wave_direction_deg=180.0,
+            gen_spectrum="torsethaugen",
+            gen_speed_m_s=2.0,
+        ),
+        _ship(
+            "torsethaugen-quarter",
+            "ship-ss5",
+            "Torsethaugen sea, Hs 3.0 m, Tp 10 s, from the starboard quarter, 1 m/s",
+            sea_state=None,
+            significant_height_m=3.0,
+            peak_period_s=10.0,
+            wave_direction_deg=45.0,
+            gen_spectrum="torsethaugen",
+            gen_speed_m_s=1.0,
+        ),
+        _ship(
+            "ochi-hubble-bow",
+            "ship-ss4",
+            "wind sea 5.5 s with a 10 s swell (35 % of the variance) off the starboard bow, 5 m/s",
+            sea_state=None,
+            significant_height_m=1.8,
+            peak_period_s=5.5,
+            wave_direction_deg=190.0,
+            gen_spectrum="ochi_hubble",
+            gen_swell_peak_period_s=10.0,
+            gen_swell_energy_fraction=0.35,
+            gen_swell_direction_deg=160.0,
+            gen_speed_m_s=5.0,
+        ),
+        _ship(
+            "ochi-hubble-beam-building",
+            "ship-ss5",
+            "wind sea 7.5 s with a 15 s beam swell (55 %), 2 m/s, Hs 2.8 -> 3.5 m",
+            sea_state=None,
+            significant_height_m=2.8,
+            peak_period_s=7.5,
+            wave_direction_deg=120.0,
+            gen_spectrum="ochi_hubble",
+            gen_swell_peak_period_s=15.0,
+            gen_swell_energy_fraction=0.55,
+            gen_swell_direction_deg=90.0,
+            gen_speed_m_s=2.0,
+            gen_hs_end_m=3.5,
+            gen_ramp_start_s=10.0,
+            gen_ramp_duration_s=30.0,
+        ),
+        _ship(
+            "jonswap-following-decaying",
+            "ship-ss5",
+            "JONSWAP sea of sea state 5 from astern, under way at 3 m/s, Hs 3.25 -> 2.6 m",
+            wave_direction_deg=10.0,
+            gen_speed_m_s=3.0,
+            gen_hs_end_m=2.6,
+            gen_ramp_start_s=5.0,
+            gen_ramp_duration_s=40.0,
+        ),
+    ),
 }
 
 
@@ -128,3 +209,9 @@ def training_family(name: str) -> tuple[TrainingSea, ...]:
     families)."""
     require_choice("family", name, tuple(TRAINING_FAMILIES))
     return TRAINING_FAMILIES[name]
+
+
+def member_config(member: TrainingSea, **keys: Any) -> DeckLandingConfig:
+    """The full config of ``member``: its scenario's config with its sea's overrides (and
+    ``keys``, further arguments of :func:`~landing_env.config.load_config`)."""
+    return load_config(SCENARIOS[member.scenario].config, overrides=member.overrides, **keys)

@@ -19,7 +19,7 @@ from estimation.frames import euler_zyx_from_matrix
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import FORECAST_KINDS, deck_forecast_for
+from landing_env.sea.hms_forecast import FORECAST_KINDS, EpisodeForecast, deck_forecast_for
 from landing_env.stewart.motion import MotionSource
 
 
@@ -38,15 +38,18 @@ class ForecastObservation:
                 f"'forecast' needs a sea to forecast (motion.kind one of {FORECAST_KINDS}), "
                 f"not {kind!r}",
             )
-        #: the helideck forecast of this scenario's sea, fitted once per process
-        self.deck_forecast = deck_forecast_for(config.motion, HelideckMonitorConfig())
-        #: this episode's HMS record (None before the first reset)
+        #: the helideck forecast of this scenario's sea, fitted once per process (None:
+        #: each episode identifies its own, ``deck_forecast: online``)
+        self.deck_forecast = deck_forecast_for(config, HelideckMonitorConfig())
+        #: this episode's HMS record and forecast (None before the first reset)
         self._monitor: HelideckMonitor | None = None
+        self._forecast: EpisodeForecast | None = None
 
     def reset(self, motion: MotionSource, seed: int) -> None:
         """Start the ship's HMS record of an episode of the deck ``motion``, its errors drawn
         from ``seed``."""
         self._monitor = HelideckMonitor(motion, HelideckMonitorConfig(), seed)
+        self._forecast = EpisodeForecast(self.deck_forecast, self._monitor)
 
     def values(
         self, t_s: float, velocity_w: np.ndarray, rotation_wb: np.ndarray
@@ -58,10 +61,11 @@ class ForecastObservation:
         c, s = math.cos(yaw), math.sin(yaw)
         v = np.asarray(velocity_w, dtype=float)
         own = np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2], roll, pitch])
-        if self._monitor is None:
+        if self._monitor is None or self._forecast is None:
             return None, own
-        _, measured = self._monitor.window(t_s, self.deck_forecast.window_s)
-        poses = self.deck_forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
+        forecast = self._forecast.at(t_s)
+        _, measured = self._monitor.window(t_s, forecast.window_s)
+        poses = forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
         if isinstance(poses, str) or not np.all(np.isfinite(poses)):
             return None, own
         poses = np.array(poses, dtype=float)
