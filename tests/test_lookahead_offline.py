@@ -490,3 +490,28 @@ def test_the_knowledge_benchmark_replays_the_all_draws_rule_and_ranks_the_checks
     assert result["lands_when_all"] == 1.0
     assert result["all_draws_land"] == 1 / 5  # of the five checks with a look-ahead
     assert result["auc_chance"] == 1.0  # the one landing check has the highest chance
+
+
+def test_records_on_a_training_sea_fly_its_sea_with_the_forecast_identified_online(
+    tmp_path,
+) -> None:
+    from landing_env.sea.training_seas import training_sea
+
+    sea = training_sea("ship-broad/ochi-hubble-bow")
+    settings = LookaheadSettings(draws=1, check_every_s=1.0)
+    path = collect_transitions(
+        "ship-ss4", [5002], tmp_path / "sea.npz", settings, progress=False, sea=sea
+    )
+    with np.load(path) as data:
+        assert str(data["sea"]) == "ochi-hubble-bow" and str(data["scenario"]) == "ship-ss4"
+        assert data["check_tried"].any()
+    recorded = load_transitions([path])
+    assert len(recorded["episode"]) > 0 and set(recorded["scenario"].tolist()) == {"ship-ss4"}
+    with pytest.raises(ConfigError) as error:
+        collect_transitions("ship-ss5", [5002], tmp_path / "x.npz", settings, sea=sea)
+    assert error.value.key == "sea"
+    with pytest.raises(ConfigError) as error:
+        collect_transitions("ship-unseen-4", [5002], tmp_path / "x.npz", settings)
+    assert error.value.key == "scenario" and "held-out" in str(error.value)
+    with pytest.raises(ConfigError, match="ochi-hubble-bow"):
+        training_sea("ship-broad/ochi-hubble-everywhere")

@@ -34,6 +34,8 @@ from agents.timing.sampler import SENSING_PROFILES
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS
+from landing_env.sea.hms_forecast import ONLINE
+from landing_env.sea.training_seas import TrainingSea, training_sea
 
 #: the arrays of a transitions file (:func:`collect_transitions`)
 TRANSITION_KEYS = (
@@ -63,6 +65,7 @@ def collect_transitions(
     progress: bool = True,
     forecast: Any = None,
     sensing: str | None = None,
+    sea: TrainingSea | None = None,
 ) -> Path:
     """Both actions' outcomes at every check of whole episodes: the data of an offline DQN.
 
@@ -80,6 +83,11 @@ def collect_transitions(
     scenario's lens where it is not the standard one: ``realistic-2x,lens=wide``).  Without it
     the ``sensors`` default applies (``DECK_LANDING_SENSORS``); the file records
     :func:`agents.timing.cards.sensing_profile` either way.
+
+    ``sea``: a member of a training family of seas (:mod:`landing_env.sea.training_seas`)
+    flown on its scenario (``scenario`` must be the member's) with its sea's overrides and
+    the helideck forecast identified online (``deck_forecast: online``); the file records
+    the member's name as ``sea``.  A held-out sea is refused.
     """
     from tqdm import tqdm
 
@@ -90,6 +98,17 @@ def collect_transitions(
         # a profile without a ``sensors`` bundle is ideal sensing plus its overrides, whatever
         # DECK_LANDING_SENSORS says
         overrides = {"sensors": "ideal", **SENSING_PROFILES[sensing]}
+    require_choice("scenario", scenario, tuple(SCENARIOS))
+    if SCENARIOS[scenario].held_out:
+        raise ConfigError(
+            "scenario", f"{scenario!r} is a held-out sea: nothing is recorded to fit on it"
+        )
+    if sea is not None:
+        if sea.scenario != scenario:
+            raise ConfigError(
+                "sea", f"{sea.name!r} is a sea of {sea.scenario!r}, not of {scenario!r}"
+            )
+        overrides = {**overrides, **sea.overrides, "deck_forecast": ONLINE}
     env, _ = make_env_and_policy(
         "land-now",
         scenario,
@@ -141,6 +160,7 @@ def collect_transitions(
                 path,
                 settings=json.dumps(settings.signature()),
                 scenario=scenario,
+                sea=sea.name if sea is not None else "",
                 estimator=base.config.estimation.observed,
                 sensing=sensing_profile(base.config, sensing),
                 **{key: np.asarray(value) for key, value in rows.items()},
@@ -399,6 +419,12 @@ def main(argv: list[str] | None = None) -> int:
         help="a sensing profile by name (ideal, realistic, realistic-2x, ...; default: the "
         "sensors default, DECK_LANDING_SENSORS)",
     )
+    collect.add_argument(
+        "--sea",
+        metavar="FAMILY/MEMBER",
+        help="a member of a training family of seas (e.g. ship-broad/ochi-hubble-bow), flown "
+        "on its own scenario with the helideck forecast identified online",
+    )
     collect.add_argument("--out", required=True, help="the .npz to write")
     args = parser.parse_args(argv)
     if args.command == "collect":
@@ -409,8 +435,15 @@ def main(argv: list[str] | None = None) -> int:
             airframe_in_trim=args.airframe_in_trim,
         )
         seeds = list(range(args.seed, args.seed + args.episodes))
+        sea = training_sea(args.sea) if args.sea else None
         path = collect_transitions(
-            args.scenario, seeds, args.out, settings, args.estimator, sensing=args.sensors
+            sea.scenario if sea is not None else args.scenario,
+            seeds,
+            args.out,
+            settings,
+            args.estimator,
+            sensing=args.sensors,
+            sea=sea,
         )
         print(f"wrote {path}")
     return 0

@@ -129,7 +129,7 @@ def _examples(
 
 
 #: how much of the HMS's own record the online forecast is fitted on, seconds before the
-#: decision (a ship's HMS records all the time; 20 min is the CAP 437 motion limits' window)
+#: decision (a ship's HMS records all the time: twice the window of its standard report)
 ONLINE_RECORD_S = 1200.0
 #: the online fit's record is cut into this many parts; the last quarter is held out
 ONLINE_PARTS = 8

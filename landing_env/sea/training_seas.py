@@ -215,3 +215,12 @@ def member_config(member: TrainingSea, **keys: Any) -> DeckLandingConfig:
     """The full config of ``member``: its scenario's config with its sea's overrides (and
     ``keys``, further arguments of :func:`~landing_env.config.load_config`)."""
     return load_config(SCENARIOS[member.scenario].config, overrides=member.overrides, **keys)
+
+
+def training_sea(name: str) -> TrainingSea:
+    """The member ``FAMILY/MEMBER`` (e.g. ``ship-broad/ochi-hubble-bow``); an unknown family or
+    member is refused, naming what there is."""
+    family, _, member = name.partition("/")
+    members = {m.name: m for m in training_family(family)}
+    require_choice("sea", member, tuple(members))
+    return members[member]
