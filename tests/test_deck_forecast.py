@@ -570,8 +570,10 @@ def test_the_online_forecast_is_identified_from_the_episodes_own_record_and_refi
     heave = sample_poses(source, times)[:, 2]
     hold = np.sqrt(np.mean((heave[10:] - heave[:-10]) ** 2))
     assert rms[one_s, 2] < 0.25 * hold
-    # a fitted forecast is flown as it is
+    # a fitted forecast is flown as it is; at a time that is not finite there is none to fit
     assert EpisodeForecast(first, monitor).at(500.0) is first
+    for bad in (math.nan, math.inf):
+        assert EpisodeForecast(None, monitor).at(bad) is None
 
 
 def test_the_deck_forecast_policy_identifies_the_sea_online_when_the_config_says_so():

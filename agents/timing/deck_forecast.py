@@ -265,6 +265,9 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         if self._episode_forecast is None:
             self._episode_forecast = EpisodeForecast(self.forecast, self.monitor())
         forecast = self._episode_forecast.at(t0)
+        if forecast is None:
+            self.last_forecast = "the time is not finite"
+            return None
         _, measured = self.monitor().window(t0, forecast.window_s)
         poses = forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
         self.last_forecast = poses

@@ -200,10 +200,13 @@ class EpisodeForecast:
         self._online: LinearMotionPredictor | None = None
         self._fitted_at = -math.inf
 
-    def at(self, t_s: float) -> LinearMotionPredictor:
-        """The forecast to make at ``t_s`` (seconds of episode time)."""
+    def at(self, t_s: float) -> LinearMotionPredictor | None:
+        """The forecast to make at ``t_s`` (seconds of episode time); None at a time that is
+        not finite (no record ends there)."""
         if self.fitted is not None:
             return self.fitted
+        if not math.isfinite(t_s):
+            return None
         if self._online is None or not (0.0 <= t_s - self._fitted_at < ONLINE_REFIT_S):
             self._online = fit_online_forecast(self.monitor, t_s)
             self._fitted_at = t_s

@@ -64,6 +64,8 @@ class ForecastObservation:
         if self._monitor is None or self._forecast is None:
             return None, own
         forecast = self._forecast.at(t_s)
+        if forecast is None:
+            return None, own
         _, measured = self._monitor.window(t_s, forecast.window_s)
         poses = forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
         if isinstance(poses, str) or not np.all(np.isfinite(poses)):
