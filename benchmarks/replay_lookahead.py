@@ -23,16 +23,14 @@ import numpy as np
 from agents.timing.cards import read_metadata
 from agents.timing.lookahead import LookaheadSettings
 from agents.timing.lookahead_data import load_transitions, replay_success
-from agents.timing.lookahead_training import RULES, _hindsight, greedy
+from agents.timing.lookahead_training import RULES, greedy, hindsight_success
 from landing_env.errors import ConfigError
 
 
 def _settings(path: Path) -> LookaheadSettings | None:
     card = read_metadata(path)
-    if card is None or not card.training_config:
-        return None
-    lookahead = (card.training_config.get("deck_landing") or {}).get("lookahead")
-    return LookaheadSettings(**lookahead) if lookahead else None
+    signed = card.observation.get("lookahead") if card is not None else None
+    return LookaheadSettings.from_signature(signed) if isinstance(signed, dict) else None
 
 
 def _label(path: Path) -> str:
@@ -69,7 +67,7 @@ def main() -> None:
         data = load_transitions([str(p) for p in paths], look)
         rates = [replay_success(data, greedy(model))[0] for model in models.values()]
         rates += [replay_success(data, rule)[0] for rule in RULES.values()]
-        rates.append(_hindsight(data))
+        rates.append(hindsight_success(data))
         episodes = len(np.unique(data["episode"]))
         cells = " | ".join(f"{100 * r:.1f} %" for r in rates)
         print(f"| {label} | {episodes} | {cells} |", flush=True)

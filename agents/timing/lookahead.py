@@ -133,6 +133,12 @@ class LookaheadSettings:
             "onboard": self.onboard().signature(),
         }
 
+    @classmethod
+    def from_signature(cls, signed: dict[str, Any]) -> LookaheadSettings:
+        """The settings a card's ``observation.lookahead`` (:meth:`signature`) was made by."""
+
+        return cls(**{k: signed[k] for k in cls.__dataclass_fields__ if k in signed})
+
     def onboard(self) -> Any:
         """The onboard model the look-ahead plays (:class:`OnboardModelConfig`)."""
 
@@ -318,8 +324,7 @@ class LookaheadTimingPolicy:
                 f"{Path(path).name} was not trained on the look-ahead's features "
                 "(its card has no observation.lookahead): use timing-dqn with it",
             )
-        fields = {k: card[k] for k in LookaheadSettings.__dataclass_fields__ if k in card}
-        self.settings = LookaheadSettings(**fields)
+        self.settings = LookaheadSettings.from_signature(card)
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.trained.check_layout(self.settings.size)
 

@@ -387,9 +387,9 @@ def train_offline(
         "baselines_heldout_replay": {
             name: round(replay_success(held, rule)[0], 4) for name, rule in RULES.items()
         },
-        "best_check_in_hindsight_heldout": round(_hindsight(held), 4),
+        "best_check_in_hindsight_heldout": round(hindsight_success(held), 4),
         "best_check_in_hindsight_by_scenario": {
-            name: round(_hindsight(_subset(held, held["scenario"] == name)), 4)
+            name: round(hindsight_success(_subset(held, held["scenario"] == name)), 4)
             for name in scenarios
             if np.any(held["scenario"] == name)
         },
@@ -504,7 +504,7 @@ RULES: dict[str, Any] = {
 }
 
 
-def _hindsight(data: dict[str, np.ndarray]) -> float:
+def hindsight_success(data: dict[str, np.ndarray]) -> float:
     """The share of episodes where some check's commit, or the forced one, lands."""
     return float(
         np.mean(
