@@ -22,7 +22,7 @@ import numpy as np
 
 from agents.timing.cards import read_metadata
 from agents.timing.lookahead import LookaheadSettings
-from agents.timing.lookahead_data import load_transitions, replay_success
+from agents.timing.lookahead_data import load_transitions, open_record, replay_success
 from agents.timing.lookahead_training import RULES, greedy, hindsight_success
 from landing_env.errors import ConfigError
 
@@ -34,7 +34,7 @@ def _settings(path: Path) -> LookaheadSettings | None:
 
 
 def _label(path: Path) -> str:
-    with np.load(path) as data:
+    with open_record(path) as data:
         if "sea" in data and str(data["sea"]):
             return str(data["sea"])
         return str(data["scenario"]) if "scenario" in data else path.stem

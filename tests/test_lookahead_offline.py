@@ -117,6 +117,20 @@ def test_transitions_of_another_lookahead_are_refused(tmp_path) -> None:
     assert error.value.key == "data"
 
 
+def test_a_file_that_is_not_a_lookahead_record_is_refused_naming_it(tmp_path) -> None:
+    text = tmp_path / "notes.npz"
+    text.write_text("not an archive")
+    other = tmp_path / "other.npz"
+    np.savez(other, x=np.zeros(3))
+    array = tmp_path / "array.npy"
+    np.save(array, np.zeros(3))
+    for path in (text, other, array, tmp_path / "missing.npz"):
+        with pytest.raises(ConfigError) as error:
+            load_transitions([path])
+        assert error.value.key == "data"
+        assert path.name in str(error.value)
+
+
 def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None:
     settings = LookaheadSettings()
     data_path = _episodes(tmp_path / "d.npz", range(150), settings, np.random.default_rng(2))

@@ -293,6 +293,26 @@ def with_hms_report(
     return out
 
 
+def open_record(path: str | Path) -> Any:
+    """A look-ahead record (:func:`collect_transitions`' ``.npz``), opened; anything else is
+    refused naming ``data`` and the file."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as error:
+        raise ConfigError("data", f"{path} is not a look-ahead record (.npz): {error}") from error
+    refusal = ConfigError(
+        "data",
+        f"{path} is not a look-ahead record (python -m agents.timing.lookahead_data collect "
+        "writes them)",
+    )
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise refusal
+    if "settings" not in data:
+        data.close()
+        raise refusal
+    return data
+
+
 def load_transitions(
     paths: list[str | Path], settings: LookaheadSettings | None = None, progress: bool = False
 ) -> dict[str, np.ndarray]:
@@ -308,7 +328,7 @@ def load_transitions(
     signature = None
     seen: dict[int, str] = {}
     for path in paths:
-        with np.load(path) as data:
+        with open_record(path) as data:
             if signature is None:
                 signature = str(data["settings"])
             elif str(data["settings"]) != signature:
