@@ -41,8 +41,8 @@ DEFAULT_PIXEL_SIGMA_PX = 0.2
 class TofNoiseModel:
     """Gaussian range noise ``sigma(r) = max(sigma_min_m, sigma_0_m + sigma_per_m * r)``,
     plus the uniform quantisation of a sensor that reports in steps of ``resolution_m``
-    (variance step²/12).  ``sigma_min_m`` (default 0) gives a floor, as in the issue's
-    synthetic model ``max(5 mm, 0.5 % of range)``.
+    (variance step²/12).  ``sigma_min_m`` (default 0) gives a floor, e.g. ``max(5 mm, 0.5 %
+    of range)``.
 
     Exact ranges (all zero) keep the floor :data:`EXACT_RANGE_SIGMA_M`, so that weights
     stay finite and a range is still compared with the plane at a scale it can meet.

@@ -14,8 +14,8 @@ from landing_env.errors import ConfigError
 from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.camera_profiles import PROFILES, camera_profile
 from landing_env.sensors.camera_realism import ImageFormation, RelativeMotion, bayer_mosaic
-from landing_env.sensors.renderer_agreement import Pose, place
 from landing_env.world import World
+from tests.renderer_agreement import Pose, place
 
 ZERO = np.zeros(3)
 

@@ -11,7 +11,8 @@ import pytest
 
 from estimation.detection import AprilTagDetector
 from landing_env.config import load_config
-from landing_env.sensors.renderer_agreement import (
+from landing_env.world import World
+from tests.renderer_agreement import (
     HEIGHTS_M,
     Pose,
     compare,
@@ -22,7 +23,6 @@ from landing_env.sensors.renderer_agreement import (
     planar_image,
     standard_poses,
 )
-from landing_env.world import World
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_planar_tag_corners_agree_with_supersampled_tinyrenderer_to_a_tenth_of_a
 ) -> None:
     everything = corner_statistics(_diffs(tinyrenderer_corners, "planar", "tiny x6"))
     assert everything.corners == 4 * len(standard_poses())
-    assert everything.mean_px < 0.1  # the target: mean over states at all heights
+    assert everything.mean_px < 0.1  # mean over states at all heights
     assert {pose.height_m for pose, _ in tinyrenderer_corners} == set(HEIGHTS_M)
     for pose, found in tinyrenderer_corners:
         planar = corner_norms(found["planar"] - found["truth"]).mean()

@@ -215,6 +215,15 @@ def test_with_realistic_noise_tight_beats_atda_and_ihrcf(noisy_errors: dict, hei
     assert np.all(mae["tight"][3:5] < best[3:5])
 
 
+def test_a_range_noise_floor_holds_sigma_up_to_where_the_linear_model_passes_it() -> None:
+    floored = TofNoiseModel(0.0, 0.005, 0.0, sigma_min_m=0.005)
+    np.testing.assert_allclose(floored.sigma([0.5, 1.0, 2.0, 3.0]), [5e-3, 5e-3, 1e-2, 1.5e-2])
+    assert floored.sigma_scalar(0.5) == pytest.approx(5e-3)
+    assert TofNoiseModel().sigma_min_m == 0.0  # the VL53L1X model has no floor
+    with pytest.raises(ValueError, match="sigma_min_m"):
+        TofNoiseModel(sigma_min_m=-1.0)
+
+
 def test_the_covariance_is_consistent_nees_in_the_chi2_band(noisy_errors: dict) -> None:
     nees = np.array(noisy_errors["nees"])
     n = len(nees)

@@ -28,7 +28,7 @@ from landing_env.sensors.planar_renderer import PlanarScene, UnsupportedScene
 #: i instead of i + 0.5 and flips rows, so it shifts content by (+0.5, -0.5) px; OpenGL
 #: (EGL) samples pixel centres and shows no shift (measured with Mesa's llvmpipe: the planar
 #: renderer's corners are off OpenGL's by a mean vector under 0.01 px; see
-#: :mod:`landing_env.sensors.renderer_agreement`).
+#: ``tests/renderer_agreement.py``).
 RENDERER_SHIFT_PX: dict[str, tuple[float, float]] = {"tiny": (0.5, -0.5), "egl": (0.0, 0.0)}
 
 #: Clients of this process with the EGL plugin loaded.  The plugin keeps one scene for the

@@ -1,13 +1,14 @@
 """How far the planar renderer's images and detections are from the reference renderers.
 
-Used by ``tests/test_planar_renderer.py`` and ``benchmarks/bench_renderer_agreement.py``: a
-world is posed (drone height above the deck, drone and deck tilts), the same camera pose is
+A helper of ``tests/test_planar_renderer.py`` and ``tests/test_camera_realism.py``: a world
+is posed (drone height above the deck, drone and deck tilts), the same camera pose is
 rendered by both renderers (ideal pinhole images, no lens distortion), the tag is detected in
 both images, and the corner differences and image differences are returned; the analytic
 projection of the tag corners is the truth both are also measured against.
 
-Which reference measures the truth (``python -m benchmarks.bench_renderer_agreement``, the
-15 :func:`standard_poses`).  Plain TinyRenderer is no fair yardstick: it samples its texture at
+Which reference measures the truth (the 15 :func:`standard_poses`; the benchmark that printed
+them is in history, ``git show 7d43668:benchmarks/bench_renderer_agreement.py``).  Plain
+TinyRenderer is no fair yardstick: it samples its texture at
 one point per pixel (nearest texel, no filtering, no anti-aliasing), so its corners are
 quantised.  The planar renderer minus plain TinyRenderer is 0.23 px mean, but its *mean
 vector* (the systematic offset a pixel-centre, half-pixel, row-flip or projection error would
@@ -38,7 +39,7 @@ from estimation.detection import AprilTagDetector
 from estimation.frames import matrix_from_euler_zyx
 from landing_env.sensors.camera import CameraSensor
 
-#: heights (drone centre above the deck's home surface, m) the issue asks to cover
+#: heights (drone centre above the deck's home surface, m) the agreement is checked at
 HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
 
 
