@@ -23,7 +23,7 @@ PUPIL_TO_OPENCV_OFFSET_PX: float = -0.5
 
 #: Smallest image side (pixels, before decimation) handed to the native detector.
 #: pupil-apriltags 1.0.4 segfaults on thin images: measured in subprocesses
-#: (``benchmarks/probe_detector_min_size.py``) it crashed for min(h, w) up to 4 at
+#: (``git show f2da2cc:benchmarks/probe_detector_min_size.py``) it crashed for min(h, w) up to 4 at
 #: ``quad_decimate`` 1, 5 at 1.5, 6 at 3 and 8 at 4, and never from the sizes below up to
 #: +30 px.  A tag36h11 needs 10 modules across (8 black-border modules and the white quiet
 #: zone), so nothing detectable is lost: a smaller image holds no tag at one pixel a module.

@@ -175,27 +175,6 @@ def test_the_forecast_observation_needs_a_sea() -> None:
         )
 
 
-def test_the_forecast_labels_benchmark_splits_the_observation_into_present_and_forecast(
-    ship_env,
-) -> None:
-    from benchmarks.bench_ship_forecast_labels import auc, observation_columns
-
-    columns = observation_columns(ship_env)
-    size = ship_env.unwrapped.layout.size
-    assert sorted(columns["present"] + columns["forecast"]) == list(range(size))
-    observation, _ = ship_env.reset(seed=5020)
-    parts = ship_env.unwrapped.layout.decode(observation)
-    block = observation[columns["forecast"]]
-    np.testing.assert_allclose(block[:-1].reshape(-1, 5) / 10.0, parts.forecast, atol=1e-5)
-    assert block[-1] == 1.0  # the forecast's validity
-    np.testing.assert_allclose(observation[columns["present"]][-5:] / 10.0, parts.own_state)
-    # the AUC of a perfect, a reversed and an uninformative score
-    success = np.array([False, False, True, True])
-    assert auc(np.array([0.1, 0.2, 0.8, 0.9]), success) == 1.0
-    assert auc(np.array([0.9, 0.8, 0.2, 0.1]), success) == 0.0
-    assert auc(np.ones(4), success) == 0.5
-
-
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), decisions=st.lists(st.integers(0, 1), max_size=25))
 def test_fuzzed_decisions_on_the_forecast_ids_keep_every_observation_in_its_space(

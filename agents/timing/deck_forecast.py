@@ -131,8 +131,8 @@ class OnboardModelConfig:
       relative position, as ``deck-forecast``), moved by a draw of its error,
       ``position_error_m`` (camera axes x, y, z).  The defaults round up `tight`'s measured
       RMS error at the 2 m hold of ``ship-ss5`` with realistic sensing, 2.5, 2.5 and
-      10.4 mm (``python -m benchmarks.bench_onboard_estimate_error``); its own covariance
-      reports 0.1-0.4 mm there, some 25 times too confident to draw from.
+      10.4 mm (``git show 4d17a9e:benchmarks/bench_onboard_estimate_error.py``); its own
+      covariance reports 0.1-0.4 mm there, some 25 times too confident to draw from.
     * ``airframe_in_trim``: each drawn airframe starts in its own trim, as a drone that has
       held its position for a while does: the aerodynamic force it holds is the one it
       feels (its lean and thrust say so), so a drawn drag comes with the airspeed that gives

@@ -7,8 +7,9 @@ waiting episode, the commit is run in a snapshot of the environment
 deck tilt and the relative attitude) is recorded beside that decision's observation, and the
 episode goes on as if nothing had been tried.  A trained policy sees one commit per episode;
 these labels judge every decision, so a commit rule can be replayed offline on them
-(:func:`replay_rule`), which is how ``benchmarks/bench_touchdown_prediction.py`` measures
-what a deck-tilt predictor is worth before any training.  Privileged: it needs the simulator.
+(:func:`replay_rule`), which is how the touchdown-prediction study measured what a deck-tilt
+predictor is worth before any training (``docs/experiments/index.md``).  Privileged: it needs
+the simulator.
 """
 
 from __future__ import annotations

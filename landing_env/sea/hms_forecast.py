@@ -12,8 +12,8 @@ has).  A config's ``deck_forecast`` chooses otherwise: ``online`` identifies the
 each episode from the ship's own HMS record of the last 20 min, refitted every 30 s
 (:func:`fit_online_forecast`, :class:`EpisodeForecast`: a ship's HMS records all the time, so
 a sea never seen before is identified from its own past; fitted on the past alone it does not
-lock onto the simulated sea's components: ``benchmarks/bench_online_deck_forecast.py``
-measures it no better than the fit on other realisations of the sea); a training family of seas
+lock onto the simulated sea's components: it measured no better than the fit on other
+realisations of the sea, ``docs/experiments/ship-timing.md``); a training family of seas
 (:mod:`landing_env.sea.training_seas`, ``ship-broad``) fits it on the family, one record per
 member.  A held-out sea's config must name one of these: :func:`deck_forecast_for` refuses to
 fit on a held-out sea.
