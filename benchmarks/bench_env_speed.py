@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_env_speed.py [--seconds 60]
 
 Measures the `project` and `render` camera modes, one environment in this process and two
-environments in parallel (one process each, as SubprocVecEnv runs them).  The deck moves
+environments in parallel (one process each, as SubprocVecEnv runs them; ``--envs``).  The deck moves
 (sum of sinusoids), the four ToF rays are cast and the IMU is sampled at 240 Hz in every case;
 `truth` rows measure the simulation alone, `ihrcf` rows add the default estimator, `tight`
 the tightly coupled one; `realistic` rows run with ``sensors: realistic`` (the OV9281-class
@@ -174,6 +174,9 @@ def main() -> None:
         default="ideal,realistic",
         help="comma-separated sensor sets of the first table's rows (ideal, realistic)",
     )
+    parser.add_argument(
+        "--envs", default="1,2", help="comma-separated environment counts of the first table"
+    )
     args = parser.parse_args()
     console = Console(width=140)
     if not args.no_heights:
@@ -200,7 +203,7 @@ def main() -> None:
     for sensors, mode, estimator, seconds in cases:
         if sensors not in chosen:
             continue
-        for n in (1, 2):
+        for n in (int(count) for count in args.envs.split(",")):
             if n == 1:
                 steps, wall, sim, cpu = _run(mode, estimator, seconds, 0, None, sensors)
             else:

@@ -59,14 +59,16 @@ def _listen(port_queue: mp.Queue, result_queue: mp.Queue, seconds: float) -> Non
     decoder = mavlink2.MAVLink(None)
     counts = {"LANDING_TARGET": 0, "HEARTBEAT": 0}
     deadline = time.monotonic() + seconds + 120.0
-    idle = 0
-    while time.monotonic() < deadline and idle < 15:
+    # until the stream has been quiet for 3 s (up to 30 s before its first message: the
+    # simulator starts meanwhile)
+    idle, heard = 0, False
+    while time.monotonic() < deadline and idle < (3 if heard else 30):
         try:
             data, _ = sock.recvfrom(4096)
         except TimeoutError:
             idle += 1
             continue
-        idle = 0
+        idle, heard = 0, True
         for message in decoder.parse_buffer(data) or []:
             kind = message.get_type()
             counts[kind] = counts.get(kind, 0) + 1

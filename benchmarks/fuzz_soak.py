@@ -2,9 +2,10 @@
 
     python -m benchmarks.fuzz_soak                       # 1e5 project + 1e4 render steps
     python -m benchmarks.fuzz_soak --project-steps 20000 --render-steps 2000   # shorter
+    python -m benchmarks.fuzz_soak --parts config --keys wind.   # the config keys under wind
 
-Three parts, each printing its figures and writing ``results/fuzz_soak/<part>.json`` as it
-goes (re-written after every config):
+Three parts, each printing its figures and writing ``<part>.json`` under ``--out``
+(``results/fuzz_soak``) as it goes (re-written after every config):
 
 1. ``project``: fuzzed episodes over every shipped config (steps split evenly; the
    configs that pin the drone also run with it free) in the ``project`` camera mode:
@@ -17,7 +18,8 @@ goes (re-written after every config):
    0, -1, +-1e9 and 0.1x / 10x its default, and every key to a string, None, a mapping
    and a mixed list: each must either build and run
    (``--config-steps`` steps, observations in space, finite rewards) or raise a
-   ``ConfigError`` naming that key.
+   ``ConfigError`` naming that key.  ``--keys`` limits it to the keys that start with a
+   prefix.
 
 An exception inside reset()/step() counts as a crash (its traceback is saved); a native
 crash would end the process, and the JSON written so far says where.
@@ -145,7 +147,7 @@ def soak_variants() -> list[tuple[str, str, dict]]:
     return variants
 
 
-def soak_configs(mode: str, total_steps: int, seed: int) -> dict:
+def soak_configs(mode: str, total_steps: int, seed: int, out: Path = OUT_DIR) -> dict:
     configs = soak_variants()
     per_config = max(1, total_steps // len(configs))
     rng = np.random.default_rng(seed)
@@ -169,7 +171,7 @@ def soak_configs(mode: str, total_steps: int, seed: int) -> dict:
             result["rss_mib_after_first_config"] = rss_first
             result["rss_mib_end"] = rss_mib()
             result["cpu_s"] = time.process_time() - start
-            _write(f"{mode}.json", result)
+            _write(out / f"{mode}.json", result)
     return result
 
 
@@ -189,12 +191,13 @@ def _values(default: object) -> list[object]:
     return [_shaped(default, v) for v in raw]
 
 
-def config_fuzz(steps: int, seed: int) -> dict:
-    """Every numeric key, one at a time: a run, or a ConfigError naming the key."""
-    leaves = numeric_leaves(DeckLandingConfig)
+def config_fuzz(steps: int, seed: int, out: Path = OUT_DIR, prefix: str = "") -> dict:
+    """Every numeric key (those that start with ``prefix``), one at a time: a run, or a
+    ConfigError naming the key."""
+    leaves = [(k, d) for k, d in numeric_leaves(DeckLandingConfig) if k.startswith(prefix)]
     cases = [(key, value) for key, default in leaves for value in _values(default)]
     # every key, numeric or not, with values of the wrong type
-    every = config_leaves(DeckLandingConfig)
+    every = [(k, d) for k, d in config_leaves(DeckLandingConfig) if k.startswith(prefix)]
     cases += [(key, value) for key, _ in every for value in ("fuzz", None, {"a": 1}, [1, "x"])]
     rng = np.random.default_rng(seed)
     result: dict = {"numeric_keys": len(leaves), "keys": len(every), "cases": len(cases)}
@@ -227,15 +230,15 @@ def config_fuzz(steps: int, seed: int) -> dict:
         else:
             counts["ran"] += 1
         result.update(counts=counts, problems=problems)
-        _write("config.json", result)
+        _write(out / "config.json", result)
     result.update(counts=counts, problems=problems)
-    _write("config.json", result)
+    _write(out / "config.json", result)
     return result
 
 
-def _write(name: str, data: dict) -> None:
-    OUT_DIR.mkdir(parents=True, exist_ok=True)
-    (OUT_DIR / name).write_text(json.dumps(data, indent=1, default=str))
+def _write(path: Path, data: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, default=str))
 
 
 def _report(result: dict) -> None:
@@ -266,13 +269,17 @@ def main() -> None:
     parser.add_argument("--config-steps", type=int, default=20, help="steps per fuzzed key")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--parts", nargs="+", default=["project", "render", "config"])
+    parser.add_argument("--keys", default="", help="fuzz only the config keys with this prefix")
+    parser.add_argument("--out", type=Path, default=OUT_DIR, help="folder of the JSON files")
     args = parser.parse_args()
+    if not any(key.startswith(args.keys) for key, _ in config_leaves(DeckLandingConfig)):
+        parser.error(f"--keys: no config key starts with {args.keys!r}")
     if "project" in args.parts:
-        _report(soak_configs("project", args.project_steps, args.seed))
+        _report(soak_configs("project", args.project_steps, args.seed, args.out))
     if "render" in args.parts:
-        _report(soak_configs("render", args.render_steps, args.seed + 1))
+        _report(soak_configs("render", args.render_steps, args.seed + 1, args.out))
     if "config" in args.parts:
-        result = config_fuzz(args.config_steps, args.seed + 2)
+        result = config_fuzz(args.config_steps, args.seed + 2, args.out, args.keys)
         print(
             f"config fuzz: {result['keys']} keys ({result['numeric_keys']} numeric), "
             f"{result['cases']} cases: {result['counts']}"
