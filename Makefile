@@ -29,10 +29,16 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 	$(PY) -m mypy estimation/
 
+# the maintained benchmarks (docs/reference/simulator.md), each at its default size
 bench: $(STAMP)
-	$(PY) benchmarks/bench_env_speed.py
-	$(PY) benchmarks/bench_estimators.py
-	$(PY) benchmarks/bench_ray_vs_pool.py
+	$(PY) -m benchmarks.bench_env_speed
+	$(PY) -m benchmarks.bench_estimators
+	$(PY) -m benchmarks.bench_mavlink_bridge
+	$(PY) -m benchmarks.bench_recording_load
+	$(PY) -m benchmarks.bench_corner_noise
+	$(PY) -m benchmarks.bench_fused_unseen
+	$(PY) -m benchmarks.bench_paper_setup
+	$(PY) -m benchmarks.fuzz_soak
 
 # both calibrations in the simulator; rewrites the shipped files in configs/calibration/
 calibrate: $(STAMP)

@@ -1,0 +1,181 @@
+"""Each maintained benchmark runs at its smallest size and prints or writes its figures.
+
+The benchmarks are scripts, not a package that tests import: each runs here in a subprocess,
+``python -m benchmarks.<name>`` with the repository on the path, in a temporary folder, at a
+size of seconds.  Their figures are not checked, only that the run ends and reports them.
+"""
+
+from __future__ import annotations
+
+import ast
+import csv
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+#: the maintained benchmarks, each named in docs/reference/simulator.md and run by `make bench`
+MAINTAINED = (
+    "bench_env_speed",
+    "bench_estimators",
+    "bench_mavlink_bridge",
+    "bench_recording_load",
+    "bench_corner_noise",
+    "bench_fused_unseen",
+    "bench_paper_setup",
+    "fuzz_soak",
+)
+#: modules of benchmarks/ that a maintained benchmark imports (not run on their own)
+HELPERS = ("fused_motions", "fused_replay")
+
+
+def run_benchmark(name: str, *args: str, cwd: Path, expect_rc: int = 0) -> str:
+    """Run ``benchmarks/<name>.py`` with ``args`` in ``cwd``; its stdout (and stderr)."""
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    result = subprocess.run(
+        [sys.executable, "-m", f"benchmarks.{name}", *args],
+        cwd=cwd,
+        env={**os.environ, "PYTHONPATH": path},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == expect_rc, result.stdout[-2000:] + result.stderr[-4000:]
+    return result.stdout + result.stderr
+
+
+def test_benchmarks_holds_the_maintained_benchmarks_and_their_helpers_only() -> None:
+    found = {p.stem for p in (ROOT / "benchmarks").glob("*.py")}
+    assert found == set(MAINTAINED) | set(HELPERS)
+
+
+def test_each_maintained_benchmark_is_listed_in_the_docs_and_run_by_make_bench() -> None:
+    listing = (ROOT / "docs" / "reference" / "simulator.md").read_text(encoding="utf-8")
+    bench = (ROOT / "Makefile").read_text(encoding="utf-8").split("\nbench:", 1)[1]
+    bench = bench.split("\n\n", 1)[0]
+    for name in MAINTAINED:
+        assert f"`{name}.py`" in listing, name
+        assert f"-m benchmarks.{name}\n" in bench + "\n", name
+
+
+def test_no_test_imports_from_benchmarks() -> None:
+    for path in (ROOT / "tests").glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            else:
+                continue
+            assert not any(n.split(".")[0] == "benchmarks" for n in names), path.name
+
+
+def test_recording_load_writes_its_table_of_load_times(tmp_path: Path) -> None:
+    out = tmp_path / "load.md"
+    run_benchmark(
+        "bench_recording_load", "--hours", "0.02", "--rate-hz", "10", "--out", str(out),
+        cwd=tmp_path,
+    )  # fmt: skip
+    text = out.read_text()
+    assert "721 samples" in text  # 0.02 h at 10 Hz, both ends
+    rows = [line for line in text.splitlines() if line.startswith("| ") and "seconds" not in line]
+    assert len(rows) == 6
+    assert all(math.isfinite(float(row.split("|")[2])) for row in rows)
+
+
+def test_estimators_prints_the_cost_of_every_estimator_and_of_detection(tmp_path: Path) -> None:
+    out = run_benchmark("bench_estimators", "--frames", "5", "--detect-frames", "2", cwd=tmp_path)
+    assert "per-frame cost" in out
+    for row in ("atda", "ihrcf", "crhf", "tight", "tight+kf", "detect 512x512"):
+        assert re.search(rf"│ {re.escape(row)} +│ +\d+ │", out), row
+
+
+@pytest.mark.slow
+def test_env_speed_prints_both_tables(tmp_path: Path) -> None:
+    out = run_benchmark(
+        "bench_env_speed", "--seconds", "0.5", "--render-seconds", "0.5", "--height-steps", "2",
+        "--renderers", "planar", "--sensors", "ideal", "--envs", "1", cwd=tmp_path,
+    )  # fmt: skip
+    assert "render mode by height" in out and "DeckLanding-v1 speed" in out
+    assert len(re.findall(r"^ideal (project|render)/\w+ x1: 10 steps", out, re.M)) == 4
+
+
+@pytest.mark.slow
+def test_corner_noise_fits_the_noise_model_and_compares_the_modes(tmp_path: Path) -> None:
+    out = run_benchmark("bench_corner_noise", "--states", "30", cwd=tmp_path)
+    fitted = re.search(r"fitted pixel_noise_fit \(base, size, blur, side2\): \((.*)\)", out)
+    assert fitted is not None, out
+    assert all(math.isfinite(float(v)) for v in fitted.group(1).split(","))
+    assert "two-sample KS" in out
+
+
+@pytest.mark.slow
+def test_mavlink_bridge_sends_and_the_listener_receives_every_landing_target(
+    tmp_path: Path,
+) -> None:
+    out = run_benchmark("bench_mavlink_bridge", "--seconds", "1", "--cpu", "-1", cwd=tmp_path)
+    for pacing in ("real time", "unpaced"):
+        line = re.search(rf"^{pacing}: (\d+) estimates .*; (\d+) sent", out, re.M)
+        assert line is not None and int(line.group(2)) > 0, out
+        sent = line.group(2)
+        assert re.search(rf"│ +{pacing} │.*│ +{sent}/{sent} │", out), out  # received all
+
+
+@pytest.mark.slow
+def test_fused_unseen_writes_every_motion_s_summary(tmp_path: Path) -> None:
+    out = tmp_path / "fused"
+    run_benchmark(
+        "bench_fused_unseen", "--duration", "3", "--seeds", "1", "--out", str(out), cwd=tmp_path
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    groups = {"held-out bimodal", "held-out long-swell", "own motion (sinusoids)"}
+    assert set(summary) == {"meta"} | groups
+    for group in groups:
+        for row in summary[group]["fused"].values():
+            assert all(math.isfinite(v) for v in row["mae_deg"])
+            # a 3 s run reaches neither the 20-30 s window nor 60 s: no figure, not an error
+            assert all(math.isnan(v) for v in row["after_60_deg"])
+    assert "| held-out bimodal | fused, identified |" in (out / "table.md").read_text()
+
+
+@pytest.mark.slow
+def test_paper_setup_writes_the_sweep_and_the_side_by_side_table(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    run_benchmark("bench_paper_setup", "--duration", "1", "--out", str(out), cwd=tmp_path)
+    with (out / "sweep.csv").open() as handle:
+        rows = list(csv.reader(handle))
+    assert rows[0][:3] == ["model", "method", "paper row"]
+    models = {row[0] for row in rows[1:]}
+    assert {"setup", "stated_layout", "readapriltag", "time_skew 0.2 s"} <= models
+    assert any(m.startswith("fitted: stated_layout") for m in models)
+    assert len(rows) - 1 == 4 * len(models)  # every paper row under every model
+    assert "# Papers' setup: error-model sweep" in (out / "side_by_side.md").read_text()
+
+
+@pytest.mark.slow
+def test_fuzz_soak_runs_every_config_and_fuzzes_the_keys_asked(tmp_path: Path) -> None:
+    out = tmp_path / "fuzz"
+    run_benchmark(
+        "fuzz_soak", "--parts", "project", "config", "--project-steps", "1",
+        "--config-steps", "2", "--keys", "reward.touchdown_bonus", "--out", str(out),
+        cwd=tmp_path,
+    )  # fmt: skip
+    project = json.loads((out / "project.json").read_text())
+    assert len(project["configs"]) >= 10
+    assert project["total"]["crashes"] == project["total"]["out_of_space"] == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["keys"] == 1 and config["cases"] == 13
+    assert config["counts"]["crashed"] == config["counts"]["refused_naming_other"] == 0
+
+
+def test_a_fuzz_prefix_that_names_no_key_is_refused_naming_keys(tmp_path: Path) -> None:
+    out = run_benchmark(
+        "fuzz_soak", "--parts", "config", "--keys", "no_such.", cwd=tmp_path, expect_rc=2
+    )
+    assert "--keys: no config key starts with 'no_such.'" in out
