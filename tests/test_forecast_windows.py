@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from estimation.frames import matrix_from_euler_zyx
 from landing_env.config import load_config
 from landing_env.scenarios import SCENARIOS
+from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
 from landing_env.sea.hms_forecast import (
     EXAMPLE_EVERY_S,
     HORIZONS_S,
@@ -70,6 +71,67 @@ def test_every_example_reads_the_past_and_targets_the_future_inside_the_record(
     np.testing.assert_array_equal(targets[:, :, 0], ends[:, None] + steps[None, :])
     np.testing.assert_array_equal(windows[:, 0, 0], ends - n_window + 1)
     np.testing.assert_array_equal(targets[:, :, 4] - 4000.0, targets[:, :, 0])
+
+
+# ------------------------------------------------------------------ the HMS record's windows
+class RampMotion:
+    """A deck moving at constant rates: (x, y, z, roll, pitch, yaw) = t (1, 2, 3, 0.1, 0.2, 0)."""
+
+    RATES = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.0])
+
+    def pose(self, t: float) -> np.ndarray:
+        return t * self.RATES
+
+    def velocity(self, t: float) -> np.ndarray:
+        return self.RATES.copy()
+
+    def poses(self, times: np.ndarray) -> np.ndarray:
+        return np.asarray(times, dtype=float)[:, None] * self.RATES[None, :]
+
+
+@pytest.fixture(scope="module")
+def exact_hms() -> HelideckMonitor:
+    """The HMS of the ramp without errors."""
+    config = HelideckMonitorConfig(
+        angle_noise_deg=0.0, position_noise_m=0.0, position_noise_fraction=0.0
+    )
+    return HelideckMonitor(RampMotion(), config, seed=1, spread_record_s=10.0)
+
+
+@pytest.fixture(scope="module")
+def noisy_hms() -> HelideckMonitor:
+    return HelideckMonitor(RampMotion(), HelideckMonitorConfig(), seed=7, spread_record_s=10.0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(t_end_s=st.floats(0.0, 2000.0), window_s=st.floats(0.05, 60.0))
+def test_an_hms_window_holds_the_samples_up_to_its_end_oldest_first(
+    exact_hms: HelideckMonitor, t_end_s: float, window_s: float
+) -> None:
+    dt_s = exact_hms.dt_s
+    times, values = exact_hms.window(t_end_s, window_s)
+    assert len(times) == max(1, round(window_s / dt_s)) == len(values)
+    # on the record's grid, evenly spaced, the newest the last sample at or before the end
+    assert t_end_s - dt_s - 1e-9 < times[-1] <= t_end_s + 1e-9
+    np.testing.assert_allclose(np.diff(times), dt_s, atol=1e-9)
+    np.testing.assert_allclose(times / dt_s, np.round(times / dt_s), atol=1e-6)
+    # each row is the deck at its time: surge, sway, heave, roll, pitch
+    np.testing.assert_allclose(values, times[:, None] * RampMotion.RATES[None, :5], atol=1e-9)
+
+
+@settings(max_examples=50, deadline=None)
+@given(t_end_s=st.floats(0.0, 2000.0), shift=st.integers(-300, 300), window_s=st.floats(1.0, 40.0))
+def test_overlapping_hms_windows_agree_on_the_samples_they_share(
+    noisy_hms: HelideckMonitor, t_end_s: float, shift: int, window_s: float
+) -> None:
+    # the record's errors are a fixed function of each sample, however it is read
+    first_t, first = noisy_hms.window(t_end_s, window_s)
+    second_t, second = noisy_hms.window(t_end_s + shift * noisy_hms.dt_s, window_s)
+    common, i, j = np.intersect1d(
+        np.round(first_t / noisy_hms.dt_s), np.round(second_t / noisy_hms.dt_s), return_indices=True
+    )
+    np.testing.assert_array_equal(first[i], second[j])
+    assert len(common) == max(0, len(first_t) - abs(shift))
 
 
 # ------------------------------------------------------------------ the own state
