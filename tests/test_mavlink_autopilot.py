@@ -434,7 +434,7 @@ def test_bad_frames_and_stray_messages_are_skipped_and_counted_never_raised() ->
                 "position: out of time order",
                 "attitude: quaternion not of unit norm",
                 "position: not finite",
-                "ODOMETRY not in MAV_FRAME_LOCAL_NED / MAV_FRAME_BODY_FRD",
+                "ODOMETRY pose not in MAV_FRAME_LOCAL_NED",
                 "LOCAL_POSITION_NED from another component",
                 "TIMESYNC reply to no request of ours",
             }

@@ -11,9 +11,10 @@ PX4 does not use a round trip of 10 ms or more) and
   the autopilot to a :class:`agents.io.timesync.ClockSync` (the offset of the autopilot's
   clock; a reply whose ``ts1`` is not one of its own recent requests is not its own and is
   skipped);
-* feeds the autopilot's ``LOCAL_POSITION_NED``, ``ATTITUDE_QUATERNION`` and ``ODOMETRY`` to
-  an :class:`agents.io.autopilot_pose.AutopilotPoses`, which the bridge asks for the
-  vehicle's pose at each measurement.
+* feeds the autopilot's ``LOCAL_POSITION_NED``, ``ATTITUDE_QUATERNION`` and ``ODOMETRY`` (its
+  pose in ``MAV_FRAME_LOCAL_NED``, whatever the velocity's ``child_frame_id``) to an
+  :class:`agents.io.autopilot_pose.AutopilotPoses`, which the bridge asks for the vehicle's
+  pose at each measurement.
 
 The companion's clock (``clock_s``) must be the clock of the measurement stamps, since
 LANDING_TARGET's ``time_usec`` is on it and PX4 maps it to its own clock through the same
@@ -31,7 +32,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from agents.io.autopilot_pose import HISTORY_S, KEPT, AutopilotPoses
-from agents.io.landing_target import MAV_FRAME_BODY_FRD, MAV_FRAME_LOCAL_NED
+from agents.io.landing_target import MAV_FRAME_LOCAL_NED
 from agents.io.timesync import USED, ClockSync
 from estimation.errors import ConfigError
 
@@ -173,8 +174,10 @@ class AutopilotListener:
         if kind == "ATTITUDE_QUATERNION":
             q = (message.q1, message.q2, message.q3, message.q4)
             return poses.add_attitude(message.time_boot_ms * 1e-3, q)
-        if (message.frame_id, message.child_frame_id) != (MAV_FRAME_LOCAL_NED, MAV_FRAME_BODY_FRD):
-            return "ODOMETRY not in MAV_FRAME_LOCAL_NED / MAV_FRAME_BODY_FRD"
+        # the pose's frame; child_frame_id is the velocity's, which is not read (PX4 sends
+        # MAV_FRAME_BODY_FRD up to v1.13, MAV_FRAME_LOCAL_NED from v1.14 on)
+        if message.frame_id != MAV_FRAME_LOCAL_NED:
+            return "ODOMETRY pose not in MAV_FRAME_LOCAL_NED"
         position = (message.x, message.y, message.z)
         return poses.add_odometry(message.time_usec * 1e-6, position, list(message.q))
 

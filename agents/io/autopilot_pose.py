@@ -5,8 +5,9 @@ companion computer needs the vehicle's pose at each measurement's time.  The aut
 streams it: ``LOCAL_POSITION_NED`` (#32: x, y, z of the body origin in the local NED frame)
 and ``ATTITUDE_QUATERNION`` (#31: ``q1..q4`` = ``(w, x, y, z)``, the body FRD axes in NED),
 each stamped ``time_boot_ms`` on the autopilot's clock, or ``ODOMETRY`` (#331) with both at
-once (``time_usec``; used with ``frame_id = MAV_FRAME_LOCAL_NED`` and ``child_frame_id =
-MAV_FRAME_BODY_FRD`` only).
+once (``time_usec``; used with ``frame_id = MAV_FRAME_LOCAL_NED`` only: ``child_frame_id`` is
+the velocity's frame, not read, which PX4 sends as ``MAV_FRAME_BODY_FRD`` up to v1.13 and as
+``MAV_FRAME_LOCAL_NED`` from v1.14 on).
 
 :class:`AutopilotPoses` keeps a short history of each, on the autopilot's clock, and answers
 ``poses(stamp_s)`` for a stamp on the companion's clock: the stamp goes to the autopilot's

@@ -1,0 +1,135 @@
+"""Properties of the frame conventions (:mod:`estimation.frames`) and the quaternions the io
+layer writes (MAVLink's ``(w, x, y, z)``, ROS's ``(x, y, z, w)``), for any rotation and offset:
+round trips, composition, and lengths kept."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from agents.io.landing_target import quaternion_wxyz
+from agents.io.messages import quaternion_xyzw, rotation_of
+from estimation.frames import (
+    R_BC,
+    R_PD,
+    deck_pose_in_camera,
+    euler_zyx_from_matrix,
+    invert_transform,
+    make_transform,
+    matrix_from_euler_zyx,
+)
+
+PROPERTY = settings(max_examples=150, deadline=None)
+
+components = st.floats(-1.0, 1.0, allow_nan=False)
+metres = st.floats(-50.0, 50.0, allow_nan=False)
+
+
+@st.composite
+def rotations(draw: st.DrawFn) -> np.ndarray:
+    """Any rotation: a random unit quaternion (gimbal lock and half turns included)."""
+    q = np.array([draw(components) for _ in range(4)])
+    assume(np.linalg.norm(q) > 0.1)
+    return Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
+
+
+vectors = st.tuples(metres, metres, metres).map(np.array)
+
+
+class Quat:
+    """A ``geometry_msgs/Quaternion`` stand-in."""
+
+    def __init__(self, xyzw: np.ndarray) -> None:
+        self.x, self.y, self.z, self.w = (float(v) for v in xyzw)
+
+
+@PROPERTY
+@given(rotation=rotations())
+def test_euler_angles_of_any_rotation_rebuild_it(rotation: np.ndarray) -> None:
+    roll, pitch, yaw = euler_zyx_from_matrix(rotation)
+    assert -np.pi <= roll <= np.pi and -np.pi / 2 <= pitch <= np.pi / 2 and -np.pi <= yaw <= np.pi
+    # within 1e-5 at gimbal lock (pitch +-90 deg), where roll is taken as 0
+    np.testing.assert_allclose(matrix_from_euler_zyx(roll, pitch, yaw), rotation, atol=1e-5)
+
+
+@PROPERTY
+@given(angles=st.tuples(*[st.floats(-3.1, 3.1)] * 3))
+def test_zyx_euler_is_yaw_then_pitch_then_roll(angles: tuple[float, float, float]) -> None:
+    roll, pitch, yaw = angles
+    rotation = matrix_from_euler_zyx(roll, pitch, yaw)
+    about = {
+        axis: Rotation.from_euler(axis, a).as_matrix()
+        for axis, a in zip("xyz", angles, strict=True)
+    }
+    np.testing.assert_allclose(rotation, about["z"] @ about["y"] @ about["x"], atol=1e-12)
+    np.testing.assert_allclose(rotation.T @ rotation, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rotation) > 0.0
+
+
+@PROPERTY
+@given(a=rotations(), b=rotations(), t_a=vectors, t_b=vectors, point=vectors)
+def test_rigid_transforms_invert_and_compose(
+    a: np.ndarray, b: np.ndarray, t_a: np.ndarray, t_b: np.ndarray, point: np.ndarray
+) -> None:
+    first, second = make_transform(a, t_a), make_transform(b, t_b)
+    np.testing.assert_allclose(first @ invert_transform(first), np.eye(4), atol=1e-9)
+    np.testing.assert_allclose(invert_transform(invert_transform(first)), first, atol=1e-9)
+    np.testing.assert_allclose(
+        invert_transform(first @ second),
+        invert_transform(second) @ invert_transform(first),
+        atol=1e-9,
+    )
+    # a transform keeps distances between points
+    moved = first @ np.append(point, 1.0)
+    origin = first @ np.array([0.0, 0.0, 0.0, 1.0])
+    assert abs(np.linalg.norm(moved[:3] - origin[:3]) - np.linalg.norm(point)) < 1e-9
+
+
+@PROPERTY
+@given(
+    r_wb=rotations(),
+    r_wp=rotations(),
+    t_wb=vectors,
+    t_wp=vectors,
+    t_bc=st.tuples(*[st.floats(-0.5, 0.5)] * 3).map(np.array),
+    offset=st.tuples(*[st.floats(-2.0, 2.0)] * 3).map(np.array),
+)
+def test_the_deck_pose_in_the_camera_is_the_composed_transforms(
+    r_wb: np.ndarray,
+    r_wp: np.ndarray,
+    t_wb: np.ndarray,
+    t_wp: np.ndarray,
+    t_bc: np.ndarray,
+    offset: np.ndarray,
+) -> None:
+    r_cd, t_cd = deck_pose_in_camera(t_wb, r_wb, t_wp, r_wp, t_bc, offset)
+    # T_CD = (T_WB T_BC)^-1 T_WP T_PD, the tag T_PD at the offset on the plate
+    t_wc = make_transform(r_wb, t_wb) @ make_transform(R_BC, t_bc)
+    t_wd = make_transform(r_wp, t_wp) @ make_transform(R_PD, offset)
+    expected = invert_transform(t_wc) @ t_wd
+    np.testing.assert_allclose(r_cd, expected[:3, :3], atol=1e-9)
+    np.testing.assert_allclose(t_cd, expected[:3, 3], atol=1e-9)
+    # the tag is as far from the camera in C as in the world
+    camera_w = t_wb + r_wb @ t_bc
+    tag_w = t_wp + r_wp @ offset
+    assert abs(np.linalg.norm(t_cd) - np.linalg.norm(tag_w - camera_w)) < 1e-9
+
+
+@PROPERTY
+@given(rotation=rotations())
+def test_mavlinks_quaternion_is_unit_scalar_first_non_negative_and_the_rotation(
+    rotation: np.ndarray,
+) -> None:
+    w, x, y, z = quaternion_wxyz(rotation)
+    assert abs(np.linalg.norm([w, x, y, z]) - 1.0) < 1e-12 and w >= 0.0
+    np.testing.assert_allclose(Rotation.from_quat([x, y, z, w]).as_matrix(), rotation, atol=1e-9)
+
+
+@PROPERTY
+@given(rotation=rotations())
+def test_a_ros_quaternion_round_trips_the_rotation(rotation: np.ndarray) -> None:
+    q = quaternion_xyzw(rotation)
+    assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+    np.testing.assert_allclose(rotation_of(Quat(q)), rotation, atol=1e-9)
