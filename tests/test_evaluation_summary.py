@@ -126,11 +126,12 @@ def test_the_landing_files_keep_the_landing_columns(tmp_path: Path) -> None:
     assert header[-2:] == ["wait_s", "wave_offs"] and "landing_error_m" not in header
 
 
-def test_one_episode_loop_runs_every_evaluation() -> None:
+def test_one_episode_loop_runs_every_evaluation_and_the_demo() -> None:
     import ast
 
     root = Path(__file__).resolve().parent.parent / "agents"
-    for path in (root / "evaluation" / "landing.py", root / "evaluation" / "approach.py"):
+    for path in (root / "evaluation" / "landing.py", root / "evaluation" / "approach.py",
+                 root / "demo.py"):  # fmt: skip
         tree = ast.parse(path.read_text())
         calls = {
             node.func.attr
