@@ -139,21 +139,15 @@ def landing_task(
     policy_name: str,
     scenario: str,
     estimator: str | None = None,
-    camera_mode: str = "project",
-    model_path: str | None = None,
-    extra_overrides: dict[str, Any] | None = None,
-    allow_mismatch: tuple[str, ...] = (),
+    *,
     record: tuple[str, int] | None = None,
+    **options: Any,
 ) -> EpisodeTask:
-    """The runner's task for one policy on one scenario; ``record``: (an MCAP file's
-    absolute path, the seed whose episode it records)."""
-    options: dict[str, Any] = {
-        "estimator": estimator,
-        "camera_mode": camera_mode,
-        "model_path": model_path,
-        "extra_overrides": extra_overrides,
-        "allow_mismatch": tuple(allow_mismatch),
-    }
+    """The runner's task for one policy on one scenario; ``options``: the rest of
+    :func:`~agents.evaluation.pipeline.make_episode`'s (camera_mode, model_path,
+    extra_overrides, allow_mismatch); ``record``: (an MCAP file's absolute path, the seed whose
+    episode it records)."""
+    options["estimator"] = estimator
     if record is not None:
         options["record"] = (str(record[0]), int(record[1]))
     return EpisodeTask("landing", policy_name, scenario, options)
@@ -171,20 +165,17 @@ def run_policy(
     episodes: int,
     first_seed: int = HELD_OUT_SEED,
     estimator: str | None = None,
-    camera_mode: str = "project",
-    model_path: str | None = None,
+    *,
     workers: int = 1,
     progress: bool = False,
-    extra_overrides: dict[str, Any] | None = None,
     address: str | None = None,
     results_path: Path | None = None,
     resume: bool = False,
-    allow_mismatch: tuple[str, ...] = (),
+    **options: Any,
 ) -> RunResult:
-    """One policy's episodes on one scenario, with the failed seeds and how the run went."""
-    task = landing_task(
-        policy_name, scenario, estimator, camera_mode, model_path, extra_overrides, allow_mismatch
-    )
+    """One policy's episodes on one scenario, with the failed seeds and how the run went;
+    ``options``: :func:`landing_task`'s."""
+    task = landing_task(policy_name, scenario, estimator, **options)
     seeds = held_out_seeds(first_seed, episodes)
     return run_task(task, seeds, workers, progress, address, results_path, resume)
 
@@ -221,18 +212,15 @@ def evaluate_landing(
         if wanted and timing_policy and name not in policies:
             policies = [*policies, name]
     recorded = None if record is None else (str(Path(record).resolve()), first_seed)
+    options = {
+        "camera_mode": camera_mode,
+        "model_path": model_path,
+        "extra_overrides": extra_overrides,
+        "allow_mismatch": tuple(allow_mismatch),
+    }
     tasks = [
-        landing_task(
-            name,
-            scenario,
-            estimator,
-            camera_mode,
-            model_path,
-            extra_overrides,
-            allow_mismatch,
-            recorded if name == policies[0] else None,
-        )
-        for name in policies
+        landing_task(name, scenario, estimator, record=recorded if i == 0 else None, **options)
+        for i, name in enumerate(policies)
     ]
     evaluated = evaluate(
         LANDING_EVALUATION, tasks, seeds, out_dir, workers, progress, address, resume
