@@ -6,7 +6,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import imageio.v2 as imageio
 import matplotlib
 
@@ -18,16 +17,23 @@ from rich.table import Table
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.align_descend import AlignDescendPolicy
-from agents.evaluation.landing import HELD_OUT_SEED
-from agents.policy_registry import default_policy, make_env_and_policy
+from agents.evaluation.pipeline import (
+    HELD_OUT_SEED,
+    Watch,
+    make_episode,
+    run_episode,
+)
+from agents.evaluation.records import EpisodeRecord
+from agents.policy_registry import default_policy
 from landing_env.errors import ConfigError, require_choice
 
 
 @dataclass
-class EpisodeLog:
-    """Per-step record of an episode, for plots and summaries."""
+class EpisodeLog(Watch):
+    """Per-step record of an episode, for plots and summaries (a :class:`Watch` of
+    :func:`agents.evaluation.pipeline.run_episode`); rendered frames go to ``frames``."""
 
+    frames: list[np.ndarray] | None = field(default=None, repr=False)
     time: list[float] = field(default_factory=list)
     drone: list[np.ndarray] = field(default_factory=list)
     deck: list[np.ndarray] = field(default_factory=list)
@@ -38,6 +44,20 @@ class EpisodeLog:
     estimates: dict[str, list[np.ndarray]] = field(default_factory=dict)
     total_reward: float = 0.0
     final_info: dict[str, Any] = field(default_factory=dict)
+
+    def start(self, env: Any, policy: Any, observation: Any, info: dict[str, Any]) -> None:
+        self.env = env
+        self.bar = tqdm(total=env.unwrapped.max_steps, desc="episode", unit="step", leave=False)
+        self.record(observation, info)
+
+    def step(self, observation: Any, reward: float, done: bool, info: dict[str, Any]) -> None:
+        self.total_reward += reward
+        self.record(observation, info)
+        self.bar.update()
+        self.final_info = info
+
+    def finish(self, record: EpisodeRecord) -> None:
+        self.bar.close()
 
     def record(self, observation: dict, info: dict) -> None:
         self.time.append(info["time_s"])
@@ -51,31 +71,8 @@ class EpisodeLog:
             if not estimate["valid"]:
                 pose = np.full(6, np.nan)  # info holds zeros for an invalid estimate
             self.estimates.setdefault(name, []).append(pose)
-
-
-def run_episode(
-    env: gym.Env, policy: AlignDescendPolicy, seed: int, frames: list | None = None
-) -> EpisodeLog:
-    """Run one episode; append rendered frames to ``frames`` when given."""
-    log = EpisodeLog()
-    observation, info = env.reset(seed=seed)
-    policy.reset()
-    log.record(observation, info)
-    if frames is not None:
-        frames.append(env.render())
-    limit = env.unwrapped.max_steps
-    with tqdm(total=limit, desc="episode", unit="step", leave=False) as bar:
-        while True:
-            observation, reward, terminated, truncated, info = env.step(policy(observation))
-            log.total_reward += reward
-            log.record(observation, info)
-            if frames is not None:
-                frames.append(env.render())
-            bar.update()
-            if terminated or truncated:
-                break
-    log.final_info = info
-    return log
+        if self.frames is not None:
+            self.frames.append(self.env.render())
 
 
 def plot_trajectory(log: EpisodeLog, path: Path) -> None:
@@ -165,7 +162,7 @@ def run_demo(
     episodes: int = 1,
     camera_mode: str = "render",
     record: Path | None = None,
-    **kw,
+    overrides: dict[str, Any] | None = None,
 ) -> EpisodeLog:
     """The `make demo` job: ``episodes`` seeded episodes (seeds ``seed``, ``seed + 1``, ...)
     with the camera rendered and the tag detected (``camera_mode="project"`` projects it,
@@ -174,7 +171,8 @@ def run_demo(
 
     ``timing_seed`` 4 (held-out seed 1 000 004) is an episode on which committing at once meets
     a 6.7° deck tilt (a hard landing): the one that shows the policy waiting.
-    ``record``: an MCAP file for the first episode (:class:`agents.io.record.McapRecorder`).
+    ``record``: an MCAP file for the first episode (:class:`agents.io.record.McapRecorder`);
+    ``overrides``: dotted config overrides.
     """
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
@@ -182,25 +180,23 @@ def run_demo(
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
-    overrides = kw.setdefault("overrides", {})
+    overrides = dict(overrides or {})
     overrides.setdefault("camera.mode", camera_mode)
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
-    env = gym.make("DeckLanding-v1", config=config, render_mode="rgb_array", **kw)
+    env, policy = make_episode(
+        "align-descend", config, render_mode="rgb_array", extra_overrides=overrides
+    )
     if record is not None:
         # mcap and rosbags: the optional extra ``io``
         from agents.io.record import McapRecorder
 
         env = McapRecorder(env, record)
-    base = env.unwrapped
-    policy = AlignDescendPolicy(
-        base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c
-    )
     frames: list[np.ndarray] = []
+    logs = [EpisodeLog(frames)] + [EpisodeLog() for _ in range(1, episodes)]
     try:
-        logs = [run_episode(env, policy, seed, frames)]
-        for offset in range(1, episodes):
-            logs.append(run_episode(env, policy, seed + offset))
+        for offset, log in enumerate(logs):
+            run_episode(env, policy, seed + offset, "align-descend", config, log)
     finally:
         env.close()
     for offset, log in enumerate(logs):
@@ -221,12 +217,28 @@ def run_demo(
 # ---------------------------------------------------------------------------------------------
 # Part 2: the trained landing-timing policy on a sea-state deck (see agents/timing/policies.py)
 @dataclass
-class TimingDemoLog:
-    """Every control period of a DeckLandingTiming-v0 episode, and its end."""
+class TimingDemoLog(Watch):
+    """Every control period of a DeckLandingTiming-v0 episode, and its end (a :class:`Watch`
+    of the environment's per-period records, ``record_periods``)."""
 
     periods: list[dict[str, Any]] = field(default_factory=list)
     commit_time_s: float = float("nan")
     final_info: dict[str, Any] = field(default_factory=dict)
+    frames: list[np.ndarray] = field(default_factory=list, repr=False)
+
+    def start(self, env: Any, policy: Any, observation: Any, info: dict[str, Any]) -> None:
+        self.base = env.unwrapped
+        self.periods += self.base.periods_of_last_step
+        self.frames += self.base.frames_of_last_step
+
+    def step(self, observation: Any, reward: float, done: bool, info: dict[str, Any]) -> None:
+        base = self.base
+        if info["committed"] and np.isnan(self.commit_time_s):
+            first = next(p for p in base.periods_of_last_step if p["committed"])
+            self.commit_time_s = first["time_s"] - base.env_dt
+        self.periods += base.periods_of_last_step
+        self.frames += base.frames_of_last_step
+        self.final_info = info
 
 
 def plot_timing(log: TimingDemoLog, path: Path, limit_deg: float) -> None:
@@ -279,31 +291,15 @@ def run_timing_demo(
     out_dir.mkdir(parents=True, exist_ok=True)
     if policy_name is None:
         policy_name = default_policy(scenario)
-    env, policy = make_env_and_policy(
-        policy_name, scenario, camera_mode="render", render_mode="rgb_array"
-    )
+    env, policy = make_episode(policy_name, scenario, camera_mode="render", render_mode="rgb_array")
     base = env.unwrapped
     base.record_periods = True
     log = TimingDemoLog()
-    frames: list[np.ndarray] = []
     try:
-        observation, info = env.reset(seed=HELD_OUT_SEED + seed)
-        policy.reset()
-        log.periods += base.periods_of_last_step
-        frames += base.frames_of_last_step
-        while True:
-            action = policy(observation)
-            observation, _, terminated, truncated, info = env.step(action)
-            if info["committed"] and np.isnan(log.commit_time_s):
-                first = next(p for p in base.periods_of_last_step if p["committed"])
-                log.commit_time_s = first["time_s"] - base.env_dt
-            log.periods += base.periods_of_last_step
-            frames += base.frames_of_last_step
-            if terminated or truncated:
-                break
+        run_episode(env, policy, HELD_OUT_SEED + seed, policy_name, scenario, log)
     finally:
         env.close()
-    log.final_info = info
+    info = log.final_info
     table = Table(title=f"{env.spec.id if env.spec else scenario}: {policy_name}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -320,7 +316,7 @@ def run_timing_demo(
         table.add_row("failed checks", ", ".join(touchdown["failed_checks"]) or "none")
     console.print(table)
     video = out_dir / "timing_camera.mp4"
-    imageio.mimsave(video, frames, fps=base.config.simulation.env_hz, macro_block_size=1)
+    imageio.mimsave(video, log.frames, fps=base.config.simulation.env_hz, macro_block_size=1)
     plot = out_dir / "timing_trajectory.png"
     plot_timing(log, plot, base.config.touchdown.max_deck_tilt_deg)
     console.print(f"timing camera video: {video}\ntiming plot: {plot}")

@@ -10,8 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.evaluation.landing import EpisodeResult, evaluate_landing, run_episode
-from agents.evaluation.landing_summary import compare_with_oracle, markdown_table, summarise
+from agents.evaluation.landing import LANDING_EVALUATION, evaluate_landing
+from agents.evaluation.pipeline import run_episode
+from agents.evaluation.records import EpisodeRecord
+from agents.evaluation.summary import compare_with_oracle, markdown_table, summarise
 from agents.policy_registry import make_env_and_policy, make_policy
 from agents.timing.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
 from landing_env.config import TouchdownConfig
@@ -147,10 +149,10 @@ def test_the_oracle_refuses_the_align_descend_task() -> None:
         env.close()
 
 
-def _episodes(policy: str, successes: list[bool]) -> list[EpisodeResult]:
+def _episodes(policy: str, successes: list[bool]) -> list[EpisodeRecord]:
     """Episode records of ``policy`` on seeds 0, 1, ... with these successes."""
     return [
-        EpisodeResult(policy, "s", seed, "success" if ok else "hard_landing", ok)
+        EpisodeRecord(policy, "s", seed, "success" if ok else "hard_landing", ok)
         for seed, ok in enumerate(successes)
     ]
 
@@ -166,7 +168,7 @@ def test_the_summary_gives_the_oracle_the_gap_and_the_unavoidable_failures() -> 
     assert land_now.oracle_success_rate == pytest.approx(0.75)
     assert land_now.gap_points == pytest.approx(25.0)
     assert land_now.unavoidable_failures == 1  # seed 2: the oracle failed it too
-    table = markdown_table(summaries)
+    table = markdown_table(summaries, LANDING_EVALUATION.columns)
     assert "+25.0" in table and "1 of 2" in table
 
 
@@ -300,7 +302,7 @@ def test_the_summary_gives_the_gap_to_the_deck_oracle() -> None:
     # the full oracle's lead over the deck oracle: the wind's and the noise's foresight
     assert deck_oracle.gap_points == pytest.approx(25.0)
     assert oracle.deck_gap_points == pytest.approx(-25.0)
-    table = markdown_table(summaries)
+    table = markdown_table(summaries, LANDING_EVALUATION.columns)
     assert "gap to deck oracle" in table and "+25.0" in table
 
 

@@ -9,9 +9,10 @@ import pytest
 
 from agents.align_descend import AlignDescendPolicy, Phase
 from agents.calm_window import CalmConfig, predict_calm
-from agents.evaluation.landing import EpisodeResult, run_episode
-from agents.evaluation.landing_summary import markdown_table, summarise
-from agents.evaluation.summary import wilson_interval
+from agents.evaluation.landing import LANDING_EVALUATION
+from agents.evaluation.pipeline import run_episode
+from agents.evaluation.records import EpisodeRecord
+from agents.evaluation.summary import markdown_table, summarise, wilson_interval
 from agents.policy_registry import make_env_and_policy, make_policy
 from agents.timing.policies import LandNowPolicy
 from estimation.frames import tilt_deg
@@ -148,14 +149,14 @@ def test_wilson_interval_and_summary() -> None:
     assert low == pytest.approx(centre - half, abs=1e-6)
     assert high == pytest.approx(centre + half, abs=1e-6)
     results = [
-        EpisodeResult("p", "s", 0, "success", True, 0.2, 1.0, 0.01, 1.0, 5.0),
-        EpisodeResult("p", "s", 1, "hard_landing", False, 0.6, 6.0, 0.03, 6.0, 7.0),
-        EpisodeResult("p", "s", 2, "crash", False),
+        EpisodeRecord("p", "s", 0, "success", True, 0.2, 1.0, 0.01, 1.0, 5.0),
+        EpisodeRecord("p", "s", 1, "hard_landing", False, 0.6, 6.0, 0.03, 6.0, 7.0),
+        EpisodeRecord("p", "s", 2, "crash", False),
     ]
     summary = summarise(results)
     assert summary.successes == 1 and summary.success_rate == pytest.approx(1 / 3)
     assert summary.normal_speed_mean == pytest.approx(0.4)
     assert summary.time_to_land_mean_s == pytest.approx(6.0)
     assert summary.outcomes == {"success": 1, "hard_landing": 1, "crash": 1}
-    table = markdown_table([summary])
+    table = markdown_table([summary], LANDING_EVALUATION.columns)
     assert "33.3%" in table and table.count("\n") == 2

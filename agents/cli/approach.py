@@ -11,16 +11,8 @@ from typing import Any
 
 from agents.cli_args import add_batch_arguments, positive_int
 from agents.cli_args import parse_overrides as _parse_overrides
-from agents.evaluation.approach import (
-    APPROACH_POLICIES,
-    ROUTINE_TIMINGS,
-    evaluate_approach,
-    markdown_table,
-)
-from agents.evaluation.landing import HELD_OUT_SEED
-from agents.evaluation.summary import (
-    print_summary,
-)
+from agents.evaluation.approach import APPROACH_POLICIES, ROUTINE_TIMINGS, evaluate_approach
+from agents.evaluation.pipeline import HELD_OUT_SEED
 
 
 def _evaluate_approach(args: argparse.Namespace) -> int:
@@ -40,9 +32,7 @@ def _evaluate_approach(args: argparse.Namespace) -> int:
         address=args.address,
         resume=args.resume,
     )
-    print_summary(
-        args.scenario, markdown_table(evaluation.summaries), evaluation.failures, evaluation.files
-    )
+    evaluation.show(args.scenario)
     return 0
 
 
@@ -64,7 +54,7 @@ def add_approach_parser(evaluate_group: Any) -> None:
     approach.add_argument(
         "--routine-estimator",
         default=None,
-        help="the routine's estimator (default: fused if available, else atda)",
+        help="the routine's estimator (default: fused)",
     )
     approach.add_argument(
         "--routine-timing",

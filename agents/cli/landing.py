@@ -12,12 +12,6 @@ from typing import Any
 from agents.cli_args import add_batch_arguments, positive_int
 from agents.cli_args import parse_overrides as _parse_overrides
 from agents.evaluation.landing import ESTIMATORS, HELD_OUT_SEED, evaluate_landing
-from agents.evaluation.landing_summary import (
-    markdown_table,
-)
-from agents.evaluation.summary import (
-    print_summary,
-)
 from agents.policy_registry import (
     POLICY_NAMES,
     default_policy,
@@ -54,12 +48,7 @@ def _evaluate_landing(args: argparse.Namespace) -> int:
             deck_oracle=args.deck_oracle,
             record=Path(args.record) if args.record and n == 0 else None,
         )
-        print_summary(
-            f"{scenario}: {SCENARIOS[scenario].description}",
-            markdown_table(evaluation.summaries),
-            evaluation.failures,
-            evaluation.files,
-        )
+        evaluation.show(f"{scenario}: {SCENARIOS[scenario].description}")
     return 0
 
 

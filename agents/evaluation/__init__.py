@@ -5,8 +5,9 @@
 the errors against height, ToF noise, deck tilt and lens distortion.  The command line is
 ``deck-landing evaluate estimators --scenario NAME`` and ``deck-landing evaluate sweep``.
 :mod:`~agents.evaluation.landing` and :mod:`~agents.evaluation.approach` evaluate policies over
-seeds on :mod:`~agents.evaluation.runner` (serial or Ray), records in
-:mod:`~agents.evaluation.records`, tables and files from :mod:`~agents.evaluation.summary`.
+seeds: two configurations of one pipeline (:mod:`~agents.evaluation.pipeline`: one record in
+:mod:`~agents.evaluation.records`, one episode loop, one summary and table in
+:mod:`~agents.evaluation.summary`), run by :mod:`~agents.evaluation.runner` (serial or Ray).
 """
 
 from __future__ import annotations

@@ -30,155 +30,133 @@ environment for that one episode, so the recording is the episode in the results
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import textwrap
 from pathlib import Path
 from typing import Any
 
-from agents.evaluation.landing_summary import (
-    LandingSummary,
-    compare_with_oracle,
-    is_timing,
-    markdown_table,
-    plot_results,
-    summarise,
+import numpy as np
+
+from agents.evaluation.pipeline import (
+    HELD_OUT_SEED,
+    Evaluated,
+    PolicyEvaluation,
+    env_config,
+    evaluate,
+    held_out_seeds,
+    run_episode,
+    run_task,
 )
 from agents.evaluation.records import EpisodeRecord
-from agents.evaluation.runner import (
-    EpisodeTask,
-    RunResult,
-    SeedFailure,
-    batch_session,
-    for_each_seed,
-    run_episodes,
-    split_runs,
-)
-from agents.evaluation.summary import (
-    write_summary_files,
-)
-from agents.policy_registry import (
-    env_settings,
-    make_env_and_policy,
-    scenario_config,
-)
+from agents.evaluation.runner import EpisodeTask, RunResult
+from agents.evaluation.summary import columns, is_timing
+from agents.policy_registry import make_env_and_policy
 from estimation.registry import ESTIMATOR_NAMES
-from landing_env.config import load_config
-from landing_env.errors import ConfigError
-from landing_env.scenarios import SCENARIO_IDS, SCENARIOS
+from landing_env.config import TouchdownConfig
+from landing_env.scenarios import SCENARIOS
 
-#: first held-out seed: training uses seeds from 0 (and its evaluation 900000 on)
-HELD_OUT_SEED = 1_000_000
 #: the estimators the observation can carry (the registry's names, ``tight`` and ``fused``
 #: included)
 ESTIMATORS = ESTIMATOR_NAMES
+#: the former name of the one episode record
+EpisodeResult = EpisodeRecord
 
 
-# ------------------------------------------------------------------------------ episodes
-@dataclass
-class EpisodeResult(EpisodeRecord):
-    """One evaluated landing episode: the shared record (:mod:`agents.evaluation.records`)
-    and the timing task's wait."""
+def plot_results(evaluated: Evaluated, path: Path, title: str) -> None:
+    """Histograms of the touchdown's relative normal speed and deck tilt per policy (with the
+    touchdown checks' limits), and success rates with their intervals."""
+    import matplotlib
 
-    #: the timing task's wait before the commit, seconds (NaN for align-descend)
-    wait_s: float = math.nan
-    #: the timing task's waved-off descents (``timing.wave_off_tilt_deg``)
-    wave_offs: int = 0
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
-
-def run_episode(env: Any, policy: Any, seed: int, policy_name: str, scenario: str) -> EpisodeResult:
-    """Run one episode to its end and record the touchdown metrics."""
-    observation, info = env.reset(seed=seed)
-    if info.get("hold_failed"):
-        # the timing task's warm-up hold ended on the deck or in a crash (a ship deck in wind):
-        # a failed episode, not a failed evaluation; its one step reports it
-        env.step(0)
-        return EpisodeResult(
-            policy_name, scenario, seed, "hold_failed", False, failed_checks="hold_failed"
-        )
-    policy.reset()
-    while True:
-        observation, _, terminated, truncated, info = env.step(policy(observation))
-        if terminated or truncated:
-            break
-    result = EpisodeResult(
-        policy=policy_name,
-        scenario=scenario,
-        seed=seed,
-        outcome=info["outcome"],
-        success=info["outcome"] == "success",
-        wait_s=float(info.get("wait_s", math.nan)),
-        wave_offs=int(info.get("wave_offs", 0)),
+    results, summaries = evaluated.results, evaluated.summaries
+    limits = TouchdownConfig()
+    fig, (ax_speed, ax_tilt, ax_bar) = plt.subplots(1, 3, figsize=(16, 4.8))
+    for ax, field_name, limit, label, heading in (
+        (
+            ax_speed,
+            "relative_normal_speed",
+            limits.max_normal_speed,
+            "relative normal speed at touchdown (m/s)",
+            "Touchdown speeds",
+        ),
+        (
+            ax_tilt,
+            "deck_tilt_deg",
+            limits.max_deck_tilt_deg,
+            "deck tilt at touchdown (deg)",
+            "Deck tilt",
+        ),
+    ):
+        values_all = [
+            getattr(r, field_name)
+            for rs in results.values()
+            for r in rs
+            if math.isfinite(getattr(r, field_name))
+        ]
+        bins = np.linspace(0.0, max([limit * 1.3, *values_all]), 31)
+        for name, rs in results.items():
+            values = [getattr(r, field_name) for r in rs if math.isfinite(getattr(r, field_name))]
+            ax.hist(values, bins=bins, histtype="step", linewidth=1.8, label=name)
+        ax.axvline(limit, color="k", linestyle="--", linewidth=1, label="success limit")
+        ax.set(xlabel=label, ylabel="episodes", title=heading)
+        ax.legend(fontsize="small")
+    names = [s.policy for s in summaries]
+    rates = np.array([100 * s.success_rate for s in summaries])
+    errors = np.array(
+        [
+            [100 * (s.success_rate - s.success_ci_low) for s in summaries],
+            [100 * (s.success_ci_high - s.success_rate) for s in summaries],
+        ]
     )
-    result.record_end(info)
-    return result
-
-
-class _LandingEvaluation:
-    """``evaluate landing`` for the runner (:mod:`agents.evaluation.runner`)."""
-
-    record_type = EpisodeResult
-
-    def validate(self, task: EpisodeTask) -> None:
-        o = task.options
-        env_id, overrides = env_settings(
-            task.policy,
-            task.scenario,
-            o.get("estimator"),
-            o.get("camera_mode", "project"),
-            extra_overrides=o.get("extra_overrides"),
-        )
-        scenario = SCENARIO_IDS[env_id]
-        load_config(scenario_config(task.scenario), {**scenario.overrides, **overrides})
-
-    def make(self, task: EpisodeTask) -> tuple[Any, Any]:
-        options = {k: v for k, v in task.options.items() if k != "record"}
-        return make_env_and_policy(task.policy, task.scenario, **options)
-
-    def run_episode(self, env: Any, policy: Any, seed: int, task: EpisodeTask) -> EpisodeResult:
-        record = task.options.get("record")
-        if record is None or seed != record[1]:
-            return run_episode(env, policy, seed, task.policy, task.scenario)
-        # mcap and rosbags: the optional extra ``io``, imported for the one recorded episode
-        from agents.io.record import McapRecorder
-
-        recorder = McapRecorder(env, record[0])
-        try:
-            return run_episode(recorder, policy, seed, task.policy, task.scenario)
-        finally:
-            recorder.finish()  # the file closed, the environment kept for the next seed
+    ax_bar.bar(names, rates, yerr=errors, capsize=6, color="tab:blue", alpha=0.8)
+    for i, rate in enumerate(rates):
+        ax_bar.text(i, 2, f"{rate:.1f}%", ha="center", color="white", fontweight="bold")
+    ax_bar.set(ylim=(0, 105), ylabel="success rate (%)", title="Success with 95% Wilson interval")
+    ax_bar.tick_params(axis="x", labelrotation=20 if len(names) > 3 else 0)
+    fig.suptitle(textwrap.fill(title, 170), fontsize="medium")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 #: the runner's handle on this evaluation (``EVALUATIONS["landing"]``)
-LANDING_EVALUATION = _LandingEvaluation()
+LANDING_EVALUATION = PolicyEvaluation(
+    name="landing",
+    heading="Landing",
+    columns=columns(
+        "policy", "episodes", "success (95% CI)", "v_n mean (m/s)", "v_n p95 (m/s)",
+        "tilt mean / p95 (deg)", "offset mean (m)", "time to land (s)", "wave-offs",
+        "bounce p95 (mm)", "peak load p95 (g)", "outcomes", "failed checks", "oracle",
+        "gap (points)", "failures no timing avoids", "deck oracle", "gap to deck oracle",
+    ),
+    plot=plot_results,
+)  # fmt: skip
 
 
 def landing_task(
     policy_name: str,
     scenario: str,
     estimator: str | None = None,
-    camera_mode: str = "project",
-    model_path: str | None = None,
-    extra_overrides: dict[str, Any] | None = None,
-    allow_mismatch: tuple[str, ...] = (),
+    *,
     record: tuple[str, int] | None = None,
+    **options: Any,
 ) -> EpisodeTask:
-    """The runner's task for one policy on one scenario; ``record``: (an MCAP file's
-    absolute path, the seed whose episode it records)."""
-    options: dict[str, Any] = {
-        "estimator": estimator,
-        "camera_mode": camera_mode,
-        "model_path": model_path,
-        "extra_overrides": extra_overrides,
-        "allow_mismatch": tuple(allow_mismatch),
-    }
+    """The runner's task for one policy on one scenario; ``options``: the rest of
+    :func:`~agents.evaluation.pipeline.make_episode`'s (camera_mode, model_path,
+    extra_overrides, allow_mismatch); ``record``: (an MCAP file's absolute path, the seed whose
+    episode it records)."""
+    options["estimator"] = estimator
     if record is not None:
         options["record"] = (str(record[0]), int(record[1]))
     return EpisodeTask("landing", policy_name, scenario, options)
 
 
-def evaluate_policy(*args: Any, **kwargs: Any) -> list[EpisodeResult]:
+def evaluate_policy(*args: Any, **kwargs: Any) -> list[EpisodeRecord]:
     """``episodes`` episodes of one policy on one scenario, over ``workers`` workers: the
     records of :func:`run_policy` (same arguments)."""
-    return run_policy(*args, **kwargs).records  # type: ignore[return-value]
+    return run_policy(*args, **kwargs).records
 
 
 def run_policy(
@@ -187,53 +165,19 @@ def run_policy(
     episodes: int,
     first_seed: int = HELD_OUT_SEED,
     estimator: str | None = None,
-    camera_mode: str = "project",
-    model_path: str | None = None,
+    *,
     workers: int = 1,
     progress: bool = False,
-    extra_overrides: dict[str, Any] | None = None,
     address: str | None = None,
     results_path: Path | None = None,
     resume: bool = False,
-    allow_mismatch: tuple[str, ...] = (),
-    record: Path | None = None,
+    **options: Any,
 ) -> RunResult:
-    """As :func:`evaluate_policy`, with the failed seeds and how the run went; ``record``:
-    an MCAP file for the episode of ``first_seed`` (module doc)."""
-    recorded = None if record is None else (str(Path(record).resolve()), first_seed)
-    task = landing_task(
-        policy_name,
-        scenario,
-        estimator,
-        camera_mode,
-        model_path,
-        extra_overrides,
-        allow_mismatch,
-        recorded,
-    )
-    return run_episodes(
-        task,
-        for_each_seed(first_seed, episodes),
-        workers=workers,
-        address=address,
-        results_path=results_path,
-        resume=resume,
-        progress=progress,
-        desc=f"{policy_name} @ {scenario}",
-        rerun=() if record is None else (first_seed,),
-    )
-
-
-@dataclass
-class LandingEvaluation:
-    """All policies on one scenario, and where the outputs went."""
-
-    scenario: str
-    summaries: list[LandingSummary]
-    results: dict[str, list[EpisodeResult]]
-    files: list[Path]
-    #: seeds whose worker crashed, per policy (the other seeds' results are kept)
-    failures: dict[str, list[SeedFailure]] = field(default_factory=dict)
+    """One policy's episodes on one scenario, with the failed seeds and how the run went;
+    ``options``: :func:`landing_task`'s."""
+    task = landing_task(policy_name, scenario, estimator, **options)
+    seeds = held_out_seeds(first_seed, episodes)
+    return run_task(task, seeds, workers, progress, address, results_path, resume)
 
 
 def evaluate_landing(
@@ -255,80 +199,67 @@ def evaluate_landing(
     allow_mismatch: tuple[str, ...] = (),
     deck_oracle: bool = False,
     record: Path | None = None,
-) -> LandingEvaluation:
+) -> Evaluated:
     """Evaluate every policy on ``scenario``; write the table, the episodes and the figure.
 
     With ``oracle`` and a timing policy among ``policies``, the oracle runs too (last); with
     ``deck_oracle`` the deck oracle too (it knows the deck's future, not the wind's: costlier,
     a look-ahead of several descents at each check).  ``record``: an MCAP file for the first
     policy's episode of ``first_seed`` (module doc)."""
-    if episodes < 1:
-        raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
+    seeds = held_out_seeds(first_seed, episodes)
     timing_policy = any(is_timing(p) for p in policies)
     for wanted, name in ((deck_oracle, "deck-oracle"), (oracle, "oracle")):
         if wanted and timing_policy and name not in policies:
             policies = [*policies, name]
-    runs: dict[str, RunResult] = {}
-    for name in policies:  # a bad config fails before Ray starts
-        task = landing_task(name, scenario, estimator, camera_mode, model_path, extra_overrides)
-        LANDING_EVALUATION.validate(task)
-    with batch_session(workers, address):
-        for name in policies:
-            run = run_policy(
-                name,
-                scenario,
-                episodes,
-                first_seed,
-                estimator,
-                camera_mode,
-                model_path,
-                workers,
-                progress,
-                extra_overrides,
-                address,
-                out_dir / f"landing_{scenario}_{name}.jsonl" if out_dir is not None else None,
-                resume,
-                allow_mismatch,
-                record if name == policies[0] else None,
-            )
-            runs[name] = run
-    results, failures = split_runs(runs)
-    summaries = [summarise(rs) for rs in results.values()]
-    compare_with_oracle(summaries, results)
-    files: list[Path] = []
+    recorded = None if record is None else (str(Path(record).resolve()), first_seed)
+    options = {
+        "camera_mode": camera_mode,
+        "model_path": model_path,
+        "extra_overrides": extra_overrides,
+        "allow_mismatch": tuple(allow_mismatch),
+    }
+    tasks = [
+        landing_task(name, scenario, estimator, record=recorded if i == 0 else None, **options)
+        for i, name in enumerate(policies)
+    ]
+    evaluated = evaluate(
+        LANDING_EVALUATION, tasks, seeds, out_dir, workers, progress, address, resume
+    )
     if out_dir is not None:
-        stem = f"landing_{scenario}"
-        observed = ", ".join(f"{name}: {_observed(name, scenario, estimator)}" for name in results)
+        observed = ", ".join(
+            f"{name}: {_observed(name, scenario, estimator)}" for name in evaluated.results
+        )
         title = (
             f"{SCENARIOS[scenario].description}; observed {observed}; "
             f"{episodes} held-out episodes per policy (seeds {first_seed}–"
             f"{first_seed + episodes - 1})"
         )
-        files = write_summary_files(
-            out_dir,
-            stem,
-            heading=f"Landing: {scenario}",
-            title=title,
-            table=markdown_table(summaries),
-            summaries=summaries,
-            results=results,
-            failures=failures,
-            settings={
-                "scenario": scenario,
-                "estimator": estimator,
-                "camera_mode": camera_mode,
-                "first_seed": first_seed,
-                "overrides": extra_overrides or {},
-            },
-            command=command,
-        )
-        figure = out_dir / f"{stem}.png"
-        plot_results(results, summaries, figure, title)
-        files.append(figure)
-    return LandingEvaluation(scenario, summaries, results, files, failures)
+        settings = {
+            "scenario": scenario,
+            "estimator": estimator,
+            "camera_mode": camera_mode,
+            "first_seed": first_seed,
+            "overrides": extra_overrides or {},
+        }
+        evaluated.write(out_dir, title, settings, command)
+    return evaluated
 
 
 def _observed(policy: str, scenario: str, estimator: str | None) -> str:
     """The estimator ``policy`` observes on ``scenario`` (``estimator``, its own, the id's)."""
-    _, overrides = env_settings(policy, scenario, estimator)
+    overrides = env_config(policy, scenario, {"estimator": estimator})[2]
     return str(overrides.get("estimation.observed", SCENARIOS[scenario].estimator))
+
+
+__all__ = [
+    "ESTIMATORS",
+    "HELD_OUT_SEED",
+    "LANDING_EVALUATION",
+    "EpisodeResult",
+    "evaluate_landing",
+    "evaluate_policy",
+    "landing_task",
+    "make_env_and_policy",
+    "run_episode",
+    "run_policy",
+]

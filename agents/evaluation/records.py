@@ -1,9 +1,10 @@
 """The record types the evaluations share (a leaf module: it imports no other evaluation).
 
-* :class:`EpisodeRecord`: one evaluated policy episode.  ``evaluate landing`` and ``evaluate
-  approach`` write the same columns first (who, where, which seed, how it ended, the
-  touchdown metrics) and add their own after them; the runner
-  (:mod:`agents.evaluation.runner`) writes each record as a JSON line as it arrives.
+* :class:`EpisodeRecord`: one evaluated policy episode, the one record of every evaluation
+  (:mod:`agents.evaluation.pipeline`).  The columns every evaluation fills come first (who,
+  where, which seed, how it ended, the touchdown metrics), then each evaluation's own, marked
+  with its name (:func:`own_fields`); the runner (:mod:`agents.evaluation.runner`) writes
+  each record as a JSON line as it arrives.
 * :class:`ScenarioRecord` and :class:`EstimatorTrace`: an estimator run's time series, with
   the axis names and units and the error helpers that the estimator tables
   (:mod:`~agents.evaluation.estimators`), the figures (:mod:`~agents.evaluation.plots`,
@@ -22,6 +23,10 @@ from typing import Any, TypeVar
 import numpy as np
 
 R = TypeVar("R", bound="EpisodeRecord")
+
+#: the metadata of a record's or summary's field that one evaluation alone fills
+LANDING = {"evaluation": "landing"}
+APPROACH = {"evaluation": "approach"}
 
 
 @dataclass
@@ -46,6 +51,30 @@ class EpisodeRecord:
     deck_vertical_accel_g: float = math.nan
     tipped_over: bool = False
     failed_checks: str = ""
+    #: the timing task's wait before the commit, seconds (NaN outside the timing task)
+    wait_s: float = field(default=math.nan, metadata=LANDING)
+    #: the timing task's waved-off descents (``timing.wave_off_tilt_deg``)
+    wave_offs: int = field(default=0, metadata=LANDING)
+    #: the approach: the estimator observed
+    estimator: str = field(default="", metadata=APPROACH)
+    #: start: height above the deck's home surface and horizontal offset, metres
+    start_height_m: float = field(default=math.nan, metadata=APPROACH)
+    start_offset_m: float = field(default=math.nan, metadata=APPROACH)
+    #: the policy's last state; relocations (svgs-routine's Algorithm 4); searches
+    #: (beacon-range: PX4 searches flown; svgs-routine: scans re-entered after a relocation)
+    final_state: str = field(default="", metadata=APPROACH)
+    relocations: int = field(default=0, metadata=APPROACH)
+    searches: int = field(default=0, metadata=APPROACH)
+    wall_time_s: float = field(default=math.nan, metadata=APPROACH)
+    #: the SVGS paper's landing error: commanded minus actual landing point at the first
+    #: touchdown, x and y in the deck plate's frame P and its length, metres
+    landing_error_x_m: float = field(default=math.nan, metadata=APPROACH)
+    landing_error_y_m: float = field(default=math.nan, metadata=APPROACH)
+    landing_error_m: float = field(default=math.nan, metadata=APPROACH)
+    #: (t, x, y, z) of the drone relative to the deck's home, every few periods (figures only)
+    trajectory: list[tuple[float, float, float, float]] = field(
+        default_factory=list, repr=False, metadata={**APPROACH, "table": False}
+    )
 
     def record_end(self, info: dict[str, Any]) -> None:
         """Fill the touchdown metrics (or the crash contact) from the last step's ``info``."""
@@ -91,6 +120,16 @@ class EpisodeRecord:
                 value = [tuple(point) for point in value]
             kwargs[name] = value
         return cls(**kwargs)
+
+
+def own_fields(cls: type, evaluation: str) -> tuple[str, ...]:
+    """The fields of a record or summary class that ``evaluation`` fills: the shared ones and
+    its own (not those marked with another's name), as its files show them."""
+    return tuple(
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.metadata.get("evaluation", evaluation) == evaluation and f.metadata.get("table", True)
+    )
 
 
 # ------------------------------------------------------------------------------ estimator runs
@@ -214,14 +253,17 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 
 __all__ = [
+    "APPROACH",
     "AXES",
     "AXIS_UNITS",
     "DISPLAY_NAMES",
+    "LANDING",
     "TRUTH",
     "EpisodeRecord",
     "EstimatorTrace",
     "ScenarioRecord",
     "display_name",
+    "own_fields",
     "pose_errors",
     "to_table_units",
     "wrap_degrees",
