@@ -24,6 +24,7 @@ from agents.demo import run_demo
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
+from estimation.registry import load_plugins
 from landing_env.config import SENSOR_SETS, SENSORS_ENV
 
 
@@ -160,6 +161,7 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
 
 # ---------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
+    load_plugins()  # the installed packages' estimators join the flags' choices
     parser = _Parser(
         prog="deck-landing",
         description="Quadrotor landing on a moving deck: a Stewart-platform bench or a ship's "
