@@ -58,6 +58,7 @@ from agents.evaluation.summary import (
 from agents.policy_registry import (
     env_settings,
     make_env_and_policy,
+    require_model,
     scenario_config,
 )
 from estimation.registry import ESTIMATOR_NAMES
@@ -119,6 +120,7 @@ class _LandingEvaluation:
 
     def validate(self, task: EpisodeTask) -> None:
         o = task.options
+        require_model(task.policy, o.get("model_path"))
         env_id, overrides = env_settings(
             task.policy,
             task.scenario,

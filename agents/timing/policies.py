@@ -15,7 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from agents.calm_window import CalmConfig, CalmPrediction, predict_calm
-from agents.policy_registry import MODEL_DIR
+from agents.policy_registry import MODEL_DIR, find_model
 from agents.timing.cards import (
     METADATA_NAME,
     check_compatible,
@@ -210,7 +210,7 @@ class TrainedTimingPolicy:
     """
 
     def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
-        self.path = Path(path)
+        self.path = find_model(path)
         if not self.path.is_file():
             algo = "ppo" if "ppo" in self.path.name else "dqn"
             raise FileNotFoundError(
