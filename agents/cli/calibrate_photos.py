@@ -19,7 +19,11 @@ from estimation.intrinsics_calibration import (
 
 def _calibrate_intrinsics(args: argparse.Namespace) -> int:
     try:
-        run = calibrate_from_images(image_files(args.images), args.pattern, args.square)
+        files = image_files(args.images)
+    except ValueError as exc:  # names the folder
+        raise UserError(f"--images {exc}") from None
+    try:
+        run = calibrate_from_images(files, args.pattern, args.square)
     except ValueError as exc:
         raise UserError(f"--images {args.images}: {exc}") from None
     console = Console()
