@@ -190,3 +190,60 @@ def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
     with pytest.warns(PinnedDroneWarning, match="cannot land"):
         env = gym.make("DeckLanding-v1", config="paper-stewart")
     env.close()
+
+
+def _help(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_shows_the_defaults(capsys: pytest.CaptureFixture[str]) -> None:
+    text = _help(["evaluate", "landing"], capsys)
+    assert "--episodes EPISODES episodes per policy and scenario (default: 100)" in text
+    assert "(default: None)" not in text and "(default: False)" not in text
+    assert "--views VIEWS chessboard poses (CRHF: 20) (default: 20)" in _help(["calibrate"], capsys)
+
+
+@pytest.mark.parametrize(
+    ("argv", "has_sensors"),
+    [
+        (["list"], False),
+        (["model", "show"], False),
+        (["calibrate", "intrinsics"], False),
+        (["calibrate", "tof"], False),
+        (["calibrate"], True),
+        (["demo"], True),
+        (["evaluate", "landing"], True),
+        (["estimate"], True),
+    ],
+)
+def test_sensors_is_offered_only_where_it_acts(
+    argv: list[str], has_sensors: bool, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert ("--sensors" in _help(argv, capsys)) is has_sensors
+
+
+def test_one_flag_name_has_one_meaning_stages_is_a_number_the_rig_file_another_flag(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert "--stages STAGES climb stages" in _help(["calibrate"], capsys)
+    tof = _help(["calibrate", "tof"], capsys)
+    assert "--stages-file STAGES_FILE the rig file" in tof and "--stages " not in tof
+    assert "in the simulator" not in _help([], capsys)
+
+
+def test_install_refuses_to_replace_a_model_a_policy_flies_unless_forced(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from agents.policy_registry import MODEL_DIR
+
+    shipped = MODEL_DIR / "timing_dqn.zip"
+    before = shipped.read_bytes()
+    argv = ["train", "timing", "--config", str(ROOT / "configs/train/timing_dqn_predictive.yaml"),
+            "--install", "--out", str(tmp_path)]  # fmt: skip
+    code, err = _run(argv, capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"--install: would replace {shipped}" in err and "add --force" in err
+    assert shipped.read_bytes() == before
+    assert not (tmp_path / "best_model.zip").exists()  # refused before training

@@ -71,4 +71,4 @@ def add_photo_parsers(kinds: argparse._SubParsersAction) -> None:
         "--out", default="results/calibration/intrinsics.json", help="the intrinsics file"
     )
     parser.add_argument("--summary", default=None, help="also write the figures as JSON here")
-    parser.set_defaults(func=_calibrate_intrinsics)
+    parser.set_defaults(func=_calibrate_intrinsics, sensors_act=False)

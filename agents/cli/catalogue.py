@@ -23,7 +23,7 @@ def add_list_parser(sub: argparse._SubParsersAction) -> None:
         "list", help="the registered ids, the policies (with what to use) or the shipped models"
     )
     listing.add_argument("what", choices=WHAT)
-    listing.set_defaults(func=run_list)
+    listing.set_defaults(func=run_list, sensors_act=False)
 
 
 def run_model_show(args: argparse.Namespace) -> int:
@@ -43,6 +43,7 @@ def run_model_show(args: argparse.Namespace) -> int:
 def add_model_parser(sub: argparse._SubParsersAction) -> None:
     """``deck-landing model show MODEL.zip``: a trained model's card."""
     model = sub.add_parser("model", help="a trained model's card (what it was trained on)")
+    model.set_defaults(sensors_act=False)
     which = model.add_subparsers(dest="model_command", required=True)
     show = which.add_parser("show", help="print the card of a model zip")
     show.add_argument(

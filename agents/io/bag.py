@@ -134,8 +134,7 @@ def _require_named(path: Path, topics: Topics, present: dict[str, str]) -> None:
         if topics.exact_ranges not in ("", default.exact_ranges)
         else (),
         "--imu-topic": (topics.imu,) if topics.imu not in ("", default.imu) else (),
-        "--tf-topic": (topics.tf,) if topics.tf not in ("", default.tf) else (),
-    }
+    }  # the vehicle's pose (--tf-topic) is optional: its users say what they miss
     for flag, names in named.items():
         absent = [t for t in names if t not in present]
         if absent:
