@@ -1,5 +1,5 @@
 """``deck-landing calibrate tof --recording REC.mcap`` (or a rosbag2 folder): the simulated
-rig's session written as ROS 2 messages calibrates to the plain folder's file, and bad input
+rig's run written as ROS 2 messages calibrates to the plain folder's file, and bad input
 is named."""
 
 from __future__ import annotations
