@@ -83,18 +83,16 @@ def test_the_howto_installs_an_estimator_that_the_command_line_evaluates(
     assert "11/11" in rows[0]  # every frame of the 0.5 s estimated
 
 
-def test_the_installed_estimator_is_among_the_estimate_commands_choices(
-    site: Path, tmp_path: Path
-) -> None:
-    done = _run(["-m", "agents.cli", "estimate", "--help"], [site], tmp_path)
-    assert done.returncode == 0, done.stderr
-    assert "tag_only" in done.stdout
-    done = _run(
-        ["-m", "agents.cli", "evaluate", "landing", "--help"],
-        [site],
-        tmp_path,
-    )
-    assert "tag_only" in done.stdout
+def test_the_installed_estimator_is_among_the_commands_choices(site: Path, tmp_path: Path) -> None:
+    for command in (["estimate"], ["evaluate", "landing"]):
+        done = _run(["-m", "agents.cli", *command, "--help"], [site], tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert "tag_only" in done.stdout, command
+    # the bridge's simulator names what it allows when refusing a name
+    bridge = ["bridge", "--to", "udpout:127.0.0.1:14599", "--autopilot", "ardupilot"]
+    done = _run(["-m", "agents.cli", *bridge, "--estimator", "nope"], [site], tmp_path)
+    assert done.returncode == 2
+    assert "'nope' is not allowed" in done.stderr and "'tag_only'" in done.stderr
 
 
 def test_gym_make_observes_the_installed_estimator(site: Path, tmp_path: Path) -> None:
