@@ -9,7 +9,8 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	# CPU PyTorch first, so that stable-baselines3 does not pull a CUDA build
+	# PyTorch first, pinned (PyPI's wheel: on Linux with CUDA's libraries; a CPU build
+	# installed into .venv beforehand from https://download.pytorch.org/whl/cpu is kept)
 	$(PY) -m pip install --quiet torch==2.13.0
 	$(PY) -m pip install --quiet -e ".[dev,io,docs]"
 	touch $(STAMP)

@@ -2,7 +2,7 @@
 
 Reads a rig's recording (:mod:`agents.io.tof_rig`: a folder of ``frames.csv``, the images
 and ``ranges.csv``, or an MCAP file or rosbag2 folder of images and ranges; the rig file
-``tof_rig.json`` or ``--stages``), calibrates it with
+``tof_rig.json`` or ``--stages-file``), calibrates it with
 :func:`estimation.tof_rig.calibrate_rig` (IHRCF Sec. 2.2: pads, YCbCr thresholds, hull,
 centroids, PCHIP), prints each sensor's samples, skips and hyperbola fit (CRHF Table 4), and
 writes ``tof_camera.json`` (its format: :mod:`estimation.tof_calibration`) and

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.policy_registry import MODEL_DIR
+from agents.policy_registry import MODEL_DIR, find_model
 from agents.timing.cards import (
     METADATA_NAME,
     check_compatible,
@@ -36,7 +36,7 @@ class TrainedLanderPolicy:
     """A trained SB3 lander acting deterministically on ``DeckLanding`` observations."""
 
     def __init__(self, path: str | Path, device: str = "cpu") -> None:
-        self.path = Path(path)
+        self.path = find_model(path)
         if not self.path.is_file():
             raise FileNotFoundError(
                 f"no trained lander at {self.path}; train one with `deck-landing train landing "

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,46 @@ from landing_env.scenarios import (
 
 #: where the shipped models are installed (package data of ``agents``)
 MODEL_DIR = Path(__file__).resolve().parent / "models"
+
+
+def find_model(text: str | Path) -> Path:
+    """A trained model by path, or by the name ``deck-landing list models`` prints (a shipped
+    model in :data:`MODEL_DIR`, ``.zip`` optional).  A missing file is returned as given (its
+    reader names it); a file that is not a model zip is refused naming it."""
+    path = Path(text)
+    if not path.exists() and path.name == str(text):
+        for candidate in (MODEL_DIR / path.name, MODEL_DIR / f"{path.name}.zip"):
+            if candidate.is_file():
+                return candidate
+    if path.is_file() and not zipfile.is_zipfile(path):
+        raise ConfigError(
+            "model",
+            f"{text} is not a model (an SB3 .zip; `deck-landing list models` names the "
+            "shipped ones)",
+        )
+    return path
+
+
+def require_model(name: str, model_path: str | None) -> str | None:
+    """The model the policy ``name`` flies: ``model_path`` (a path or a shipped model's
+    name), else its shipped one; a trained policy without either is refused naming
+    ``--model``.  Checked before any episode runs, in this process."""
+    spec = policy_spec(name)
+    if model_path is None and spec.model is not None:
+        return str(MODEL_DIR / spec.model)
+    if spec.kind != "trained":
+        return model_path  # a heuristic's own file (predictive: a deck-tilt predictor)
+    if model_path is None:
+        raise ConfigError(
+            "--model",
+            f"{name} runs a trained model: give --model PATH, or a name `deck-landing list "
+            "models` prints",
+        )
+    path = find_model(model_path)
+    if not path.is_file():
+        raise ConfigError("--model", f"{model_path}: no such file, nor a shipped model's name")
+    return str(path)
+
 
 KINDS = ("baseline", "heuristic", "trained", "bound")
 STATUSES = ("recommended", "supported", "legacy", "research")
@@ -384,8 +425,8 @@ def make_policy(
     spec = policy_spec(name)
     module, function = spec.builder.split(":")
     builder = getattr(importlib.import_module(module), function)
-    if model_path is None and spec.model is not None:
-        model_path = str(MODEL_DIR / spec.model)
+    if model_path is not None or spec.model is not None:
+        model_path = require_model(name, model_path)
     return builder(env, model_path, tuple(allow_mismatch))
 
 
@@ -481,8 +522,10 @@ __all__ = [
     "Recommendation",
     "default_policy",
     "env_settings",
+    "find_model",
     "make_env_and_policy",
     "make_policy",
     "policy_spec",
+    "require_model",
     "scenario_config",
 ]

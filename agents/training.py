@@ -437,19 +437,36 @@ def _start_from(model: Any, path: str, env: Any) -> None:
     model.set_parameters(str(found), exact_match=True, device="cpu")
 
 
+def install_path(config: TrainConfig) -> Path:
+    """Where ``--install`` copies the model ``config`` trains (its task's and algorithm's)."""
+    algo = config.settings.algo
+    return shipped_lander_model(algo) if config.task == LANDING_TASK else shipped_timing_model(algo)
+
+
 def train(
     config: TrainConfig,
     out_dir: str | Path | None = None,
     total_timesteps: int | None = None,
     progress_bar: bool = True,
     install: bool = False,
+    force: bool = False,
 ) -> TrainResult:
-    """Train, evaluate and save; with ``install`` copy the best model to the shipped path."""
+    """Train, evaluate and save; with ``install`` copy the best model to the shipped path,
+    which, when a model is there (a policy flies it), only ``force`` replaces: refused
+    before training."""
     import torch
     from sb3_contrib import TQC, RecurrentPPO
     from stable_baselines3 import DQN, PPO, SAC
 
     settings = config.settings
+    target = install_path(config)
+    if install and target.exists() and not force:
+        raise ConfigError(
+            "--install",
+            f"would replace {target}, a shipped model a policy flies (deck-landing list "
+            "models); add --force to replace it, or leave --install out and evaluate the "
+            "trained model with --model",
+        )
     torch.set_num_threads(settings.torch_threads)
     out = Path(out_dir or settings.out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -548,12 +565,6 @@ def train(
         )
     if install:
         source = result.best_model_path or model_path
-        target = (
-            shipped_lander_model(settings.algo)
-            if config.task == LANDING_TASK
-            else shipped_timing_model(settings.algo)
-        )
-
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(source, target)
     return result

@@ -8,6 +8,8 @@ reference) come from the directives of ``docs/_ext/``.
 from __future__ import annotations
 
 import sys
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as installed_version
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
@@ -22,6 +24,13 @@ sys.path.insert(0, str(DOCS / "_ext"))
 project = "deck-landing"
 author = "deck-landing contributors"
 copyright = "2026, deck-landing contributors"
+try:  # the installed package's (pyproject.toml's, once installed: make docs installs it)
+    release = installed_version(project)
+except PackageNotFoundError:
+    raise RuntimeError(
+        "the docs read the version from the installed package: pip install -e '.[docs]'"
+    ) from None
+version = ".".join(release.split(".")[:2])
 
 extensions = [
     "myst_parser",

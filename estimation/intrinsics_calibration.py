@@ -213,7 +213,7 @@ def image_files(folder: str | Path) -> list[Path]:
     """The image files of a folder (by :data:`IMAGE_SUFFIXES`), sorted by name."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise ValueError(f"--images {folder}: not a folder")
+        raise ValueError(f"{folder}: not a folder")
     return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
 
 

@@ -25,6 +25,7 @@ from estimation.registry import (
     AUTO_RANKING,
     ESTIMATOR_NAMES,
     REGISTRY,
+    load_plugins,
     make_estimator,
     needs_intrinsics_names,
     needs_tof_calibration_names,
@@ -95,6 +96,7 @@ def build_estimators(
 ) -> dict[str, DeckPoseEstimator]:
     """One estimator per name of ``options.names``; ``supplied`` gives the host's own
     (``truth``).  A config error is re-raised under ``estimation.<name>``."""
+    load_plugins()
     supplied = dict(supplied or {})
     return {name: _build(name, options, supplied) for name in options.names}
 

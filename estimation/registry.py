@@ -6,10 +6,16 @@ for one tag and :mod:`estimation.pipeline` builds everything an application asks
 options object.  The names that are not single-frame estimators are pipeline stages:
 ``truth`` (supplied by the simulator), ``beacon`` (bearing + rangefinder), ``auto`` (the
 first valid of :data:`AUTO_RANKING`) and ``fused`` (the EKF over the others' output).
+
+Estimators of other packages join through the entry-point group :data:`PLUGIN_GROUP`
+(``deck_landing.estimators``): :func:`load_plugins` imports each entry point once, when a
+host first needs the names (an environment built, a command's choices), and the entry point
+registers its estimator with :func:`register_estimator`.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -153,15 +159,17 @@ def register_estimator(
     wants_tof_calibration: bool = False,
 ) -> EstimatorSpec:
     """Make a single-frame estimator usable by name everywhere an estimator name is taken
-    (``estimation.observed``, ``estimation.compare``, the pipeline, the command line's
-    ``--estimator``), without editing this module.  ``fused`` keeps the shipped estimators as
+    (``estimation.observed``, ``estimation.compare``, the pipeline; the command line's
+    ``--estimator`` when the call is made by an entry point of :data:`PLUGIN_GROUP`), without
+    editing this module.  ``fused`` keeps the shipped estimators as
     its sources (each has its measurement sigmas in :class:`~estimation.fusion.FusionConfig`).
 
     ``build`` gets the :class:`BuildInputs` of one tag (its ``config`` an instance of
     ``config_type``, the defaults unless the host passes one) and returns a
     :class:`~estimation.estimator.DeckPoseEstimator`.  The flags say which calibrations it
     cannot run without and whether it takes the ToF ranges (see :class:`EstimatorSpec`).
-    Register before an environment or a command is built from the name.  A name already taken
+    Register before an environment or a command is built from the name (before or after
+    ``import landing_env``: the names are read when a config is built).  A name already taken
     or not a lower-case identifier is refused with a ``ValueError``; ``config_type`` must be a
     class that builds with no arguments.
     """
@@ -206,6 +214,50 @@ def unregister_estimator(name: str) -> None:
     ESTIMATOR_NAMES.remove(name)
 
 
+#: the entry-point group through which other packages add estimators
+PLUGIN_GROUP = "deck_landing.estimators"
+
+_plugins_loaded = False
+
+
+def load_plugins() -> list[str]:
+    """Register the estimators of the installed packages' ``deck_landing.estimators`` entry
+    points (once per process; later calls do nothing) and return the names added.
+
+    An entry point is named after its estimator and refers to a module whose import registers
+    it (``mine = my_package.estimator``) or to a function of no arguments that does
+    (``mine = my_package.estimator:register``).  One that fails to load, or loads without
+    registering its name, is skipped with a warning naming it and its cause: it never stops
+    the shipped estimators."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return []
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    added: list[str] = []
+    for point in entry_points(group=PLUGIN_GROUP):
+        where = f"estimator plugin {point.name!r} ({point.value})"
+        if point.name in REGISTRY:
+            continue
+        try:
+            loaded = point.load()
+            if callable(loaded) and point.attr:
+                loaded()
+        except Exception as exc:
+            warnings.warn(f"{where} skipped: {type(exc).__name__}: {exc}", stacklevel=2)
+            continue
+        if point.name not in REGISTRY:
+            warnings.warn(
+                f"{where} skipped: loading it did not register {point.name!r} "
+                "(register_estimator with the entry point's name)",
+                stacklevel=2,
+            )
+            continue
+        added.append(point.name)
+    return added
+
+
 def make_estimator(
     name: str,
     *,
@@ -225,6 +277,7 @@ def make_estimator(
     config dataclass (its defaults if None; tight's noise defaults are the VL53L1X model and
     0.5 px, :mod:`estimation.noise`).
     """
+    load_plugins()
     spec = REGISTRY.get(name)
     if spec is None:
         allowed = ", ".join(FRAME_ESTIMATOR_NAMES)

@@ -21,7 +21,7 @@ from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
-from estimation.registry import ESTIMATOR_NAMES
+from estimation.registry import ESTIMATOR_NAMES, load_plugins
 from estimation.tight_config import TightConfig
 from landing_env.config_limits import check_value
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
@@ -243,6 +243,7 @@ class EstimationConfig:
     vision_link: VisionLinkConfig = field(default_factory=VisionLinkConfig)
 
     def __post_init__(self) -> None:
+        load_plugins()  # the installed packages' estimators, read when a config is built
         require_choice("observed", self.observed, ESTIMATOR_NAMES)
         for name in self.compare:
             require_choice("compare", name, ESTIMATOR_NAMES)

@@ -212,7 +212,7 @@ def _error(capsys, argv: list[str]) -> str:
         ("missing", "no such file or folder"),
         ("truncated", "truncated or corrupt recording"),
         ("no camera topic", "missing topic: neither camera topic /nothing nor /nowhere"),
-        ("no range topic", "ihrcf needs ranges; missing: /no/ranges"),
+        ("no range topic", "--range-topics /no/ranges: not in"),
         ("estimator", "--estimator 'truth'; allowed:"),
     ],
 )

@@ -195,3 +195,24 @@ def test_opencvs_sample_photos_give_opencvs_published_calibration() -> None:
     theirs = cv2.undistortPoints(ring[:, None, :], k_opencv, np.array(OPENCV_DIST))[:, 0]
     assert np.max(np.linalg.norm(ours - theirs, axis=1)) * OPENCV_K["fx"] < 1.0
     assert run.result.rms_reprojection_error < 0.3
+
+
+def test_a_missing_images_folder_is_named_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    missing = tmp_path / "missing"
+    code = main(
+        [
+            "calibrate",
+            "intrinsics",
+            "--images",
+            str(missing),
+            "--pattern",
+            "9x6",
+            "--square",
+            "0.025",
+        ]
+    )
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"deck-landing calibrate: error: --images {missing}: not a folder"

@@ -92,6 +92,60 @@ def test_a_typo_in_set_fails_fast_with_two_workers(
     assert "tof.nosie" in err and "unknown key" in err
 
 
+@pytest.mark.parametrize("policy", ["lander-model", "timing-model"])
+def test_a_trained_policy_without_its_model_is_refused_alike_with_one_or_two_workers(
+    policy: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    import ray
+
+    errors = []
+    for workers in ("1", "2"):
+        argv = ["evaluate", "landing", "--policy", policy, "--scenario", "bench-ss4",
+                "--episodes", "2", "--workers", workers, "--no-progress",
+                "--out", str(tmp_path)]  # fmt: skip
+        code, err = _run(argv, capsys)
+        assert code == 2
+        errors.append(err)
+    assert errors[0] == errors[1]
+    assert errors[0] == (
+        f"deck-landing evaluate: error: --model: {policy} runs a trained model: give --model "
+        "PATH, or a name `deck-landing list models` prints"
+    )
+    assert not ray.is_initialized()  # refused before any worker started
+
+
+def test_model_show_takes_the_name_list_models_prints(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["model", "show", "timing_dqn_lookahead.zip"]) == 0
+    assert '"env_id": "DeckLandingTiming-ShipSS6-v7"' in capsys.readouterr().out
+    assert main(["model", "show", "timing_dqn_lookahead"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("model", "message"),
+    [
+        ("README.md", "model: README.md is not a model (an SB3 .zip;"),
+        ("nothing.zip", "nothing.zip: no such file, nor a shipped model"),
+    ],
+)
+def test_model_show_refuses_what_is_not_a_model_in_one_line(
+    model: str, message: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(ROOT)
+    code, err = _run(["model", "show", model], capsys)
+    assert code == 2
+    assert err.startswith("deck-landing model: error: ") and message in err
+    assert len(err.splitlines()) == 1
+
+
+def test_a_model_name_is_taken_where_a_model_path_is() -> None:
+    from agents.policy_registry import MODEL_DIR, find_model, require_model
+
+    assert find_model("timing_dqn.zip") == MODEL_DIR / "timing_dqn.zip"
+    assert require_model("timing-model", "timing_dqn") == str(MODEL_DIR / "timing_dqn.zip")
+    with pytest.raises(ConfigError, match=r"^model: .*pyproject\.toml is not a model"):
+        require_model("timing-model", str(ROOT / "pyproject.toml"))
+
+
 def test_debug_shows_the_traceback_instead() -> None:
     with pytest.raises(ConfigError, match="nope"):
         main(["--debug", "demo", "--config", "nope", "--no-timing"])
@@ -136,3 +190,60 @@ def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
     with pytest.warns(PinnedDroneWarning, match="cannot land"):
         env = gym.make("DeckLanding-v1", config="paper-stewart")
     env.close()
+
+
+def _help(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_shows_the_defaults(capsys: pytest.CaptureFixture[str]) -> None:
+    text = _help(["evaluate", "landing"], capsys)
+    assert "--episodes EPISODES episodes per policy and scenario (default: 100)" in text
+    assert "(default: None)" not in text and "(default: False)" not in text
+    assert "--views VIEWS chessboard poses (CRHF: 20) (default: 20)" in _help(["calibrate"], capsys)
+
+
+@pytest.mark.parametrize(
+    ("argv", "has_sensors"),
+    [
+        (["list"], False),
+        (["model", "show"], False),
+        (["calibrate", "intrinsics"], False),
+        (["calibrate", "tof"], False),
+        (["calibrate"], True),
+        (["demo"], True),
+        (["evaluate", "landing"], True),
+        (["estimate"], True),
+    ],
+)
+def test_sensors_is_offered_only_where_it_acts(
+    argv: list[str], has_sensors: bool, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert ("--sensors" in _help(argv, capsys)) is has_sensors
+
+
+def test_one_flag_name_has_one_meaning_stages_is_a_number_the_rig_file_another_flag(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert "--stages STAGES climb stages" in _help(["calibrate"], capsys)
+    tof = _help(["calibrate", "tof"], capsys)
+    assert "--stages-file STAGES_FILE the rig file" in tof and "--stages " not in tof
+    assert "in the simulator" not in _help([], capsys)
+
+
+def test_install_refuses_to_replace_a_model_a_policy_flies_unless_forced(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from agents.policy_registry import MODEL_DIR
+
+    shipped = MODEL_DIR / "timing_dqn.zip"
+    before = shipped.read_bytes()
+    argv = ["train", "timing", "--config", str(ROOT / "configs/train/timing_dqn_predictive.yaml"),
+            "--install", "--out", str(tmp_path)]  # fmt: skip
+    code, err = _run(argv, capsys)
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"--install: would replace {shipped}" in err and "add --force" in err
+    assert shipped.read_bytes() == before
+    assert not (tmp_path / "best_model.zip").exists()  # refused before training

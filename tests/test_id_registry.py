@@ -155,3 +155,30 @@ def test_a_section_keyword_is_laid_over_the_ids_settings_and_overrides_over_both
     )
     assert env.unwrapped.timing.wait_limit_s == 12.0
     env.close()
+
+
+def _expand(pattern: str) -> list[str]:
+    """``DeckLanding-{BenchSS3,4,5,PaperStewart}-v1`` as its ids (a bare number continues the
+    name before it: ``BenchSS3,4`` is BenchSS3 and BenchSS4)."""
+    import re
+
+    match = re.search(r"\{([^}]*)\}", pattern)
+    if match is None:
+        return [pattern]
+    names: list[str] = []
+    for part in match.group(1).split(","):
+        stem = re.sub(r"\d+$", "", names[-1]) if names and part.isdigit() else ""
+        names.append(stem + part)
+    return [pattern[: match.start()] + name + pattern[match.end() :] for name in names]
+
+
+def test_the_changelogs_list_of_current_ids_is_the_registrys() -> None:
+    import re
+
+    from tests.test_packaging import ROOT
+
+    text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    entry = text.split("registered ids, each the highest version of its name**", 1)[1]
+    entry = entry.split("\n- ", 1)[0].split(" The ", 1)[0]
+    named = [i for p in re.findall(r"`(DeckLanding[^`]*-v\d+)`", entry) for i in _expand(p)]
+    assert sorted(named) == sorted(CURRENT)

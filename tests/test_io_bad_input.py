@@ -294,3 +294,31 @@ def test_extrinsics_file_gives_body_poses_in_flu_and_frd(
     np.testing.assert_allclose(flu, np.array(r_bc) @ cam + [0.1, 0.0, -0.03], atol=1e-12)
     np.testing.assert_allclose(frd, flu * [1.0, -1.0, -1.0], atol=1e-12)
     assert flu[2] < 0.0 < frd[2]  # the deck below: down in FLU is -z, +z in FRD
+
+
+def test_a_range_topic_not_in_the_recording_is_refused_naming_it_and_the_topics_there(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    code, _, err = _estimate(
+        capsys,
+        "--input", str(recording), "--estimator", "ihrcf", "--out", str(tmp_path / "o"),
+        "--range-topics", "/tof/rnage",
+    )  # fmt: skip
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert f"--range-topics /tof/rnage: not in {recording}; its topics: " in err
+    assert "/tof/range" in err.split("its topics: ")[1]
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_an_empty_folder_says_it_holds_no_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = _estimate(
+        capsys, "--input", str(empty), "--estimator", "ihrcf", "--out", str(tmp_path / "o")
+    )
+    assert code == 2
+    assert f"{empty}: no recording in this folder" in err
+    assert "corrupt" not in err

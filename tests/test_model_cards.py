@@ -217,3 +217,36 @@ def test_env_signature_reads_the_environment() -> None:
         env.close()
     assert signature["env_id"] == "DeckLandingTiming-BenchSS5-v6"
     assert signature["estimator"] == "crhf" and signature["sensing"] == "ideal"
+
+
+@pytest.mark.parametrize(
+    ("trained", "flags"),
+    [
+        (["realistic"], "--sensors realistic;"),
+        (["realistic-2x", "realistic,lens=wide"], "--sensors realistic --set lens=wide;"),
+        (["tof.noise=vl53l1x"], "--set tof.noise=vl53l1x;"),
+    ],
+)
+def test_a_sensing_mismatch_suggests_the_flags_of_the_trained_sensing(
+    trained: list[str], flags: str
+) -> None:
+    card = _card("ideal")
+    card.sensing = trained
+    with pytest.raises(ConfigError, match=r"^sensing: .*'ideal': run it under its own") as error:
+        check_compatible(card, {"sensing": "ideal"})
+    assert flags in str(error.value)
+    assert str(error.value).endswith("to use it anyway: --allow-mismatch sensing)")
+
+
+def test_a_prediction_trained_model_blames_the_observation_kind_not_its_size() -> None:
+    policy = TrainedTimingPolicy(Path(SHIPPED).with_name("timing_dqn_predictive.zip"))
+    env = gym.make("DeckLandingTiming-BenchSS5-v6")
+    try:
+        with pytest.raises(
+            ConfigError,
+            match=r"^observation\.observation: .*'prediction', the environment has 'history'.*"
+            r"--set timing\.observation=prediction",
+        ):
+            policy.check_env(env)
+    finally:
+        env.close()

@@ -108,3 +108,17 @@ def test_the_wheel_installs_and_runs_from_another_directory(tmp_path: Path) -> N
     )  # fmt: skip
     assert cli.returncode == 0, cli.stderr[-3000:]
     assert (tmp_path / "out" / "landing_bench-ss4.md").is_file()
+
+
+def test_the_version_is_one_across_pyproject_citation_changelog_and_docs() -> None:
+    import re
+
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    citation = re.search(r"^version: (\S+)$", (ROOT / "CITATION.cff").read_text(), re.M)
+    assert citation and citation.group(1) == version
+    released = re.search(
+        r"^## \[(\d[^\]]*)\] - (\d{4}-\d\d-\d\d)$", (ROOT / "CHANGELOG.md").read_text(), re.M
+    )
+    assert released and released.group(1) == version
+    conf = (ROOT / "docs" / "conf.py").read_text()
+    assert "release = installed_version(project)" in conf  # the installed package's

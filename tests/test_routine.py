@@ -1,5 +1,5 @@
 """The SVGS routine, the beacon-range baseline, the beacon estimator, the rangefinder and the
-approach evaluation (issue 6, part C)."""
+approach evaluation."""
 
 from __future__ import annotations
 

@@ -40,6 +40,18 @@ def test_a_bad_config_fails_fast_with_its_message(ray_session: None) -> None:
 
 
 @pytest.mark.parametrize("workers", [1, 2])
+def test_a_workers_user_error_reaches_the_driver_as_its_own_one_line(
+    workers: int, ray_session: None
+) -> None:
+    task = EpisodeTask(TOY, "p", "s", {"bad_in_worker": True})
+    with pytest.raises(ConfigError) as error:
+        run_episodes(task, list(range(4)), workers=workers)
+    # no Ray traceback, actor id or colour codes: the same line as without Ray
+    assert str(error.value) == "camera.mode: 'raytrace' is not allowed"
+    assert type(error.value) is ConfigError
+
+
+@pytest.mark.parametrize("workers", [1, 2])
 def test_a_crashed_episode_is_reported_with_its_seed_and_the_rest_kept(
     workers: int, ray_session: None
 ) -> None:

@@ -1,5 +1,5 @@
 """``deck-landing calibrate tof --recording REC.mcap`` (or a rosbag2 folder): the simulated
-rig's session written as ROS 2 messages calibrates to the plain folder's file, and bad input
+rig's run written as ROS 2 messages calibrates to the plain folder's file, and bad input
 is named."""
 
 from __future__ import annotations
@@ -102,9 +102,9 @@ def test_the_float32_range_topics_alone_give_the_pixels_and_the_ranges_to_float3
     pixels are the folder's exactly, each stage's mean range within float32 rounding (a
     relative 2^-24 per reading, so for their mean too)."""
     topics = Topics(exact_ranges="", ranges=FOUR if layout == "four topics" else ("/tof/range",))
-    stages = tmp_path / "windows.json"  # elsewhere, named by --stages
+    stages = tmp_path / "windows.json"  # elsewhere, named by --stages-file
     mcap = write_rig_mcap(tmp_path / "rig.mcap", rig.stages, rig.description, topics, stages)
-    args = ["--recording", str(mcap), "--stages", str(stages), "--out", str(tmp_path / "out")]
+    args = ["--recording", str(mcap), "--stages-file", str(stages), "--out", str(tmp_path / "out")]
     args += ["--range-topics", ",".join(topics.ranges)]
     code, err = _calibrate(capsys, *args)
     assert code == 0, err
@@ -136,19 +136,19 @@ def test_an_mcap_without_its_stage_windows_names_the_option(
     (tmp_path / RIG_FILE).unlink()
     code, err = _calibrate(capsys, "--recording", str(mcap), "--out", str(tmp_path / "o"))
     assert code == 2
-    assert f"{mcap}: no {RIG_FILE} beside it and no --stages FILE given" in err
+    assert f"{mcap}: no {RIG_FILE} beside it and no --stages-file FILE given" in err
     missing = tmp_path / "windows.json"
-    args = ["--recording", str(mcap), "--stages", str(missing), "--out", str(tmp_path / "o")]
+    args = ["--recording", str(mcap), "--stages-file", str(missing), "--out", str(tmp_path / "o")]
     code, err = _calibrate(capsys, *args)
-    assert code == 2 and f"--stages {missing}: no such file" in err
+    assert code == 2 and f"--stages-file {missing}: no such file" in err
 
 
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
         (["--image-topic", "/cam/none"], "missing topic: camera topic /cam/none; the file has"),
-        (["--range-topics", "/tof/other"], "missing topic(s) /tof/other (sensor_msgs/Range"),
-        (["--range-topics", ",".join(FOUR)], "missing topic(s) /tof/a, /tof/b, /tof/c, /tof/d"),
+        (["--range-topics", "/tof/other"], "--range-topics /tof/other: not in"),
+        (["--range-topics", ",".join(FOUR)], "--range-topics /tof/a,/tof/b,/tof/c,/tof/d: not in"),
         (
             ["--range-frames", "tof_1,tof_2,tof_3,tof_9"],
             "no range of sensor 4 (frame id tof_9 on /tof/range)",
@@ -168,7 +168,7 @@ def test_a_missing_topic_is_named(
 def test_a_truncated_mcap_is_named(rig_mcap: Path, tmp_path: Path, capsys) -> None:
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(rig_mcap.read_bytes()[: rig_mcap.stat().st_size // 2])
-    args = ["--recording", str(cut), "--stages", str(rig_mcap.parent / RIG_FILE)]
+    args = ["--recording", str(cut), "--stages-file", str(rig_mcap.parent / RIG_FILE)]
     code, err = _calibrate(capsys, *args, "--out", str(tmp_path / "o"))
     assert code == 2
     assert f"{cut}: truncated or corrupt recording" in err
@@ -181,7 +181,8 @@ def test_a_stage_window_without_an_image_names_the_topic(
     doc["stages"].append({"t_start_s": 1000.0, "t_end_s": 1001.0})
     stages = tmp_path / "late.json"
     stages.write_text(json.dumps(doc))
-    args = ["--recording", str(rig_mcap), "--stages", str(stages), "--out", str(tmp_path / "o")]
+    out = str(tmp_path / "o")
+    args = ["--recording", str(rig_mcap), "--stages-file", str(stages), "--out", out]
     code, err = _calibrate(capsys, *args)
     assert code == 2
     assert "stages[8] (1000.0 to 1001.0 s): no frame of /camera/image_raw in it" in err

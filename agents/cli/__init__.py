@@ -10,6 +10,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from agents.cli.approach import add_approach_parser
 from agents.cli.bridge import add_bridge_parser
@@ -24,11 +25,30 @@ from agents.demo import run_demo
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
+from estimation.registry import load_plugins
 from landing_env.config import SENSOR_SETS, SENSORS_ENV
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's defaults in --help, where there is one to show: not for a flag that is off
+    unless given, an unset option or a help that already says its default."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        unset = default is None or default is False or default is argparse.SUPPRESS
+        if unset or default == [] or "default" in text:
+            return text
+        return super()._get_help_string(action) or text
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with its errors on one line (no usage block), exit status 2."""
+    """argparse with its errors on one line (no usage block), exit status 2, and the
+    defaults shown in every sub-command's --help."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
@@ -61,7 +81,10 @@ def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
         help="camera: render and detect the tag, or project it (faster)",
     )
     demo.add_argument(
-        "--no-timing", action="store_true", help="skip the trained timing policy's episode"
+        "--no-timing",
+        action="store_true",
+        help="skip the second episode: bench-ss4's recommended timing policy (deck-landing "
+        "list policies) waiting for a calm deck",
     )
     demo.add_argument("--out", default="results/demo", help="output directory")
     demo.add_argument("--record", default=None, help="record the first episode to FILE.mcap")
@@ -141,12 +164,16 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
     )
     sweep.add_argument("--scenario", default="paper-stewart", help="the base scenario")
     sweep.add_argument("--duration", type=float, default=10.0, help="simulated s per point")
-    sweep.add_argument("--seed", type=int, default=0)
+    sweep.add_argument("--seed", type=int, default=0, help="seeds the scenario at every point")
     sweep.add_argument(
         "--mode", choices=("render", "project"), default="render", help="camera mode"
     )
     sweep.add_argument(
-        "--parameters", nargs="+", choices=SWEEP_PARAMETERS, default=list(SWEEP_PARAMETERS)
+        "--parameters",
+        nargs="+",
+        choices=SWEEP_PARAMETERS,
+        default=list(SWEEP_PARAMETERS),
+        help="the swept parameters",
     )
     sweep.add_argument("--out", default="results/sweep", help="output directory")
     sweep.add_argument(
@@ -160,6 +187,7 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
 
 # ---------------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
+    load_plugins()  # the installed packages' estimators join the flags' choices
     parser = _Parser(
         prog="deck-landing",
         description="Quadrotor landing on a moving deck: a Stewart-platform bench or a ship's "
@@ -183,9 +211,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_sensors_option(parser: argparse.ArgumentParser) -> None:
-    """``--sensors ideal|realistic`` on every command (the config key ``sensors``)."""
+    """``--sensors ideal|realistic`` on every command that builds a config (the config key
+    ``sensors``); not where it would do nothing (``set_defaults(sensors_act=False)``: list,
+    model show, the calibrations of real data)."""
 
     actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if parser.get_default("sensors_act") is False:
+        return
     if not actions or parser.get_default("func") is not None:
         if "--sensors" in parser._option_string_actions:
             return

@@ -44,12 +44,16 @@ def add_approach_parser(evaluate_group: Any) -> None:
         "success (95%% Wilson interval), touchdown offset, time to land; table, CSV, figure",
     )
     approach.add_argument(
-        "--policy", nargs="+", choices=list(APPROACH_POLICIES), default=list(APPROACH_POLICIES)
+        "--policy",
+        nargs="+",
+        choices=list(APPROACH_POLICIES),
+        default=list(APPROACH_POLICIES),
+        help="the approach policies flown",
     )
     approach.add_argument(
         "--scenario", default="high-approach", help="a config in configs/ or a path"
     )
-    approach.add_argument("--episodes", type=positive_int, default=20)
+    approach.add_argument("--episodes", type=positive_int, default=20, help="episodes per policy")
     approach.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first seed")
     approach.add_argument(
         "--routine-estimator",

@@ -30,10 +30,12 @@ def add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     """Add the ``calibrate`` subcommand to the ``deck-landing`` parser."""
     parser = sub.add_parser(
         "calibrate",
-        help="run the chessboard and ToF–camera calibrations in the simulator",
+        help="the camera's intrinsics and the ToF–camera calibration: of the simulated rigs, "
+        "or of real data (intrinsics: chessboard photos; tof: a recorded pad rig)",
         description=(
-            "Both of the papers' calibrations (camera intrinsics and ToF-camera), "
-            "run in the simulator."
+            "Both of the papers' calibrations (camera intrinsics and ToF-camera). Without a "
+            "sub-command, of the simulated rigs (the options below); `calibrate intrinsics` "
+            "takes real chessboard photos, `calibrate tof` a real rig's recording."
         ),
     )
     parser.add_argument("--config", default="default", help="a config name in configs/ or a path")

@@ -19,7 +19,11 @@ from estimation.intrinsics_calibration import (
 
 def _calibrate_intrinsics(args: argparse.Namespace) -> int:
     try:
-        run = calibrate_from_images(image_files(args.images), args.pattern, args.square)
+        files = image_files(args.images)
+    except ValueError as exc:  # names the folder
+        raise UserError(f"--images {exc}") from None
+    try:
+        run = calibrate_from_images(files, args.pattern, args.square)
     except ValueError as exc:
         raise UserError(f"--images {args.images}: {exc}") from None
     console = Console()
@@ -67,4 +71,4 @@ def add_photo_parsers(kinds: argparse._SubParsersAction) -> None:
         "--out", default="results/calibration/intrinsics.json", help="the intrinsics file"
     )
     parser.add_argument("--summary", default=None, help="also write the figures as JSON here")
-    parser.set_defaults(func=_calibrate_intrinsics)
+    parser.set_defaults(func=_calibrate_intrinsics, sensors_act=False)

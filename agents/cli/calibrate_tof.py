@@ -14,7 +14,7 @@ def _calibrate_tof(args: argparse.Namespace) -> int:
     try:
         topics = Topics.from_arguments(args)
         run_tof_calibration(
-            args.recording, args.out, args.intrinsics, stages_file=args.stages, topics=topics
+            args.recording, args.out, args.intrinsics, stages_file=args.stages_file, topics=topics
         )
     except ValueError as exc:  # RecordingError, TofRigError, a bad intrinsics file
         raise UserError(str(exc)) from None
@@ -34,7 +34,7 @@ def add_tof_parser(kinds: argparse._SubParsersAction) -> None:
         description=(
             "The ToF-camera calibration from a rig's recording: a folder (frames.csv and the "
             "images, ranges.csv), or an MCAP file or rosbag2 folder (the images and the four "
-            "ToF ranges), with the stage windows in tof_rig.json (--stages)."
+            "ToF ranges), with the stage windows in tof_rig.json (--stages-file)."
         ),
     )
     parser.add_argument(
@@ -43,7 +43,7 @@ def add_tof_parser(kinds: argparse._SubParsersAction) -> None:
         help="the rig's recording: a folder, an .mcap file or a rosbag2 folder",
     )
     parser.add_argument(
-        "--stages",
+        "--stages-file",
         default=None,
         help="the rig file with the stage windows (default: tof_rig.json in the recording's "
         "folder, or beside the .mcap file)",
@@ -60,4 +60,4 @@ def add_tof_parser(kinds: argparse._SubParsersAction) -> None:
     )
     topics = parser.add_argument_group("MCAP and rosbag2 recordings")
     add_topic_arguments(topics, detections=False, imu=False)
-    parser.set_defaults(func=_calibrate_tof)
+    parser.set_defaults(func=_calibrate_tof, sensors_act=False)

@@ -7,7 +7,7 @@ import argparse
 
 from agents.cli.recording_args import add_alignment_arguments, add_topic_arguments
 from agents.cli_args import add_set_argument
-from agents.io.recording import ESTIMATORS
+from agents.io.recording import recording_estimators
 
 
 def _estimate(args: argparse.Namespace) -> int:
@@ -29,7 +29,7 @@ def add_estimate_parser(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--input", required=True, help="a recording: folder, .mcap or rosbag2 folder")
-    p.add_argument("--estimator", required=True, choices=ESTIMATORS)
+    p.add_argument("--estimator", required=True, choices=recording_estimators())
     p.add_argument("--out", required=True, help="output path; .csv and .mcap are written")
     p.add_argument("--config", default="default", help="estimator settings: a config name or path")
     add_alignment_arguments(p)

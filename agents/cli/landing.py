@@ -68,7 +68,9 @@ def add_landing_parser(evaluate_group: Any) -> None:
         "deck-landing list policies)",
     )
     landing.add_argument("--scenario", nargs="+", required=True, choices=list(SCENARIOS))
-    landing.add_argument("--episodes", type=positive_int, default=100)
+    landing.add_argument(
+        "--episodes", type=positive_int, default=100, help="episodes per policy and scenario"
+    )
     landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
     landing.add_argument(
         "--estimator",
@@ -77,7 +79,12 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="the estimate in the observation (default: the policy's own, else the "
         "scenario's: ihrcf on the bench, tight on the ship decks)",
     )
-    landing.add_argument("--mode", choices=("project", "render"), default="project")
+    landing.add_argument(
+        "--mode",
+        choices=("project", "render"),
+        default="project",
+        help="camera: project the tag (fast) or render and detect it",
+    )
     landing.add_argument(
         "--model", default=None, help="a trained model (timing-model, lander-model)"
     )

@@ -5,9 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from agents.cli_args import positive_int
-from agents.lander import shipped_lander_model
-from agents.timing.policies import shipped_timing_model
-from agents.training import ENV_ID, TASK_ALGOS, load_train_config, train
+from agents.training import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK
 
@@ -37,6 +35,7 @@ def _train(args: Any) -> int:
         total_timesteps=args.timesteps,
         progress_bar=not args.no_progress,
         install=args.install,
+        force=args.force,
     )
     minutes = result.wall_time_s / 60.0
     console.print(
@@ -46,11 +45,7 @@ def _train(args: Any) -> int:
         console.print(f"  evaluation at {steps:>8d} steps: success rate {rate:.3f}")
     console.print(f"final model: {result.model_path}\nbest model: {result.best_model_path}")
     if args.install:
-        algo = config.settings.algo
-        installed = (
-            shipped_lander_model(algo) if task == LANDING_TASK else shipped_timing_model(algo)
-        )
-        console.print(f"installed as {installed}")
+        console.print(f"installed as {install_path(config)}")
     return 0
 
 
@@ -70,6 +65,11 @@ def _add_task(which: Any, name: str, help_text: str, default_config: str, model:
         "--install",
         action="store_true",
         help=f"copy the best model to agents/models/{model}_<algo>.zip (the shipped policy)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="with --install: replace a shipped model there (a policy flies it)",
     )
     parser.set_defaults(func=_train)
 

@@ -47,6 +47,7 @@ from agents.policy_registry import (
     make_env_and_policy,
     make_policy,
     policy_spec,
+    require_model,
     scenario_config,
 )
 from landing_env.config import load_config
@@ -177,6 +178,7 @@ class PolicyEvaluation:
 
     def validate(self, task: EpisodeTask) -> None:
         """Build the task's config (a bad key raises ConfigError before any worker starts)."""
+        require_model(task.policy, task.options.get("model_path"))
         env_id, config, overrides = env_config(task.policy, task.scenario, task.options)
         scenario = SCENARIO_IDS.get(env_id)
         load_config(config, {**(scenario.overrides if scenario else {}), **overrides})

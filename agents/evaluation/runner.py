@@ -491,17 +491,19 @@ def map_tasks(
 
 
 def _user_error(exc: BaseException) -> BaseException | None:
-    """The user error (a ConfigError, a missing file) behind a Ray error, if any."""
+    """The user error (a ConfigError, a missing file) behind a Ray error, if any: the
+    worker's own exception, whose message is the user's one line (Ray's error, typed as
+    both, carries the worker's traceback in its message)."""
     seen: set[int] = set()
     current: BaseException | None = exc
     while current is not None and id(current) not in seen:
         seen.add(id(current))
-        if isinstance(current, USER_ERRORS):
-            return current
         cause = getattr(current, "cause", None)
         if isinstance(cause, BaseException):
             current = cause
             continue
+        if isinstance(current, USER_ERRORS):
+            return current
         current = current.__cause__
     return None
 

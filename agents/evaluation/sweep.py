@@ -420,8 +420,8 @@ def plot_overview(points: list[SweepPoint], path: Path) -> Path:
     return save_figure(fig, path)
 
 
-#: the estimators tight is held against in :func:`plot_tight_ratio` (the issue's target:
-#: at most 5 % above the better of them on every axis)
+#: the estimators tight is held against in :func:`plot_tight_ratio` (the bar it is judged
+#: by: at most 5 % above the better of them on every axis)
 RATIO_REFERENCES = ("atda", "crhf")
 
 

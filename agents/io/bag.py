@@ -86,6 +86,11 @@ def read_bag(path: str | Path, topics: Topics | None = None) -> Recording:
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such file or folder")
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise RecordingError(
+            f"{path}: no recording in this folder (a plain folder has frames.csv, a rosbag2 "
+            "folder metadata.yaml)"
+        )
     rec = Recording()
     try:
         with AnyReader([path], default_typestore=m.TYPESTORE) as reader:
@@ -99,6 +104,7 @@ def read_bag(path: str | Path, topics: Topics | None = None) -> Recording:
                     f"{path}: missing topic: {which}{' nor '.join(names)}; the file has "
                     f"{', '.join(sorted(present)) or 'none'}"
                 )
+            _require_named(path, topics, present)
             exact = bool(topics.exact_ranges) and topics.exact_ranges in present
             wanted = {*camera, topics.imu, *([topics.exact_ranges] if exact else topics.ranges)}
             wanted.discard("")  # a topic not asked for
@@ -116,6 +122,26 @@ def read_bag(path: str | Path, topics: Topics | None = None) -> Recording:
         ) from None
     rec.frames.sort(key=lambda f: f.timestamp)
     return rec
+
+
+def _require_named(path: Path, topics: Topics, present: dict[str, str]) -> None:
+    """Refuse a topic named in place of a default (``--range-topics``, ``--imu-topic``, ...)
+    that the recording does not hold: it would be read as no data."""
+    default = Topics()
+    named = {
+        "--range-topics": topics.ranges if topics.ranges != default.ranges else (),
+        "--exact-ranges-topic": (topics.exact_ranges,)
+        if topics.exact_ranges not in ("", default.exact_ranges)
+        else (),
+        "--imu-topic": (topics.imu,) if topics.imu not in ("", default.imu) else (),
+    }  # the vehicle's pose (--tf-topic) is optional: its users say what they miss
+    for flag, names in named.items():
+        absent = [t for t in names if t not in present]
+        if absent:
+            raise RecordingError(
+                f"{flag} {','.join(absent)}: not in {path}; its topics: "
+                f"{', '.join(sorted(present)) or 'none'}"
+            )
 
 
 def _one(

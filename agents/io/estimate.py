@@ -34,7 +34,13 @@ import numpy as np
 from agents.cli_args import UserError, parse_overrides
 from agents.io import messages as m
 from agents.io.bag import read_bag
-from agents.io.recording import ESTIMATORS, Recording, RecordingError, Topics, read_folder
+from agents.io.recording import (
+    Recording,
+    RecordingError,
+    Topics,
+    read_folder,
+    recording_estimators,
+)
 from estimation.detection import AprilTagDetector
 from estimation.frames import R_BC
 from estimation.fusion import METHOD as FUSED
@@ -122,8 +128,9 @@ class RecordingEstimator:
         calibration: Path | None,
         image_size: tuple[int, int] | None,
     ) -> None:
-        if name not in ESTIMATORS:
-            raise UserError(f"--estimator {name!r}; allowed: {', '.join(ESTIMATORS)}")
+        allowed = recording_estimators()
+        if name not in allowed:
+            raise UserError(f"--estimator {name!r}; allowed: {', '.join(allowed)}")
         self.name = name
         est = config.estimation
         t_bc = np.asarray(QuadrotorParams.from_yaml(config.vehicle or None).camera_offset_b)
@@ -335,8 +342,9 @@ def user_errors() -> Iterator[None]:
 def read_checked(args: argparse.Namespace) -> Recording:
     """``--input`` read with the command's topics (:meth:`Topics.from_arguments`) and checked
     for ``--estimator``: a frame to estimate, the ranges and the IMU it needs."""
-    if args.estimator not in ESTIMATORS:
-        raise UserError(f"--estimator {args.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
+    allowed = recording_estimators()
+    if args.estimator not in allowed:
+        raise UserError(f"--estimator {args.estimator!r}; allowed: {', '.join(allowed)}")
     rec = read_recording(args.input, Topics.from_arguments(args))
     if not rec.frames:
         skipped = "; ".join(f"{n} x {r}" for r, n in rec.skipped.items()) or "none"

@@ -35,13 +35,18 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from estimation.fusion import METHOD as FUSED
-from estimation.registry import FRAME_ESTIMATOR_NAMES
+from estimation.registry import FRAME_ESTIMATOR_NAMES, load_plugins
 from estimation.types import ImuSample, RangeReading, TagDetection
 
-#: the estimators a recording can be run through
-ESTIMATORS = (*FRAME_ESTIMATOR_NAMES, FUSED)
 N_SENSORS = 4
 ALIGN_MODES = ("nearest", "interpolate")
+
+
+def recording_estimators() -> tuple[str, ...]:
+    """The estimators a recording can be run through: the single-frame ones (those of the
+    installed plugins included) and ``fused``."""
+    load_plugins()
+    return (*FRAME_ESTIMATOR_NAMES, FUSED)
 
 
 class RecordingError(ValueError):

@@ -4,7 +4,7 @@ A rig's recording is a plain folder (:mod:`agents.io.recording`: ``frames.csv`` 
 images, ``ranges.csv``) or an MCAP file or rosbag2 folder (:mod:`agents.io.tof_rig_bag`:
 the images and the four ``sensor_msgs/Range`` topics, read as ``deck-landing estimate``
 reads them), with the rig file (:mod:`estimation.tof_rig`: the stage windows and the rig's
-settings): ``--stages FILE``, or ``tof_rig.json`` in the folder, in the rosbag2 folder or
+settings): ``--stages-file FILE``, or ``tof_rig.json`` in the folder, in the rosbag2 folder or
 beside the MCAP file.  :func:`read_rig_recording` groups the frames and the range samples
 into stages by the windows; :func:`calibrate_tof_recording` (``deck-landing calibrate tof
 --recording``) calibrates them with :func:`estimation.tof_rig.calibrate_rig`, the function
@@ -60,14 +60,14 @@ def rig_file(recording: Path, stages: str | Path | None = None) -> Path:
     if stages is not None:
         path = Path(stages)
         if not path.is_file():
-            raise TofRigError(f"--stages {path}: no such file (the rig's stage windows)")
+            raise TofRigError(f"--stages-file {path}: no such file (the rig's stage windows)")
         return path
     inside = recording.is_dir()
     path = (recording if inside else recording.parent) / RIG_FILE
     if not path.is_file():
         raise TofRigError(
             f"{recording}: no {RIG_FILE} {'in the folder' if inside else 'beside it'} and no "
-            "--stages FILE given (the rig's stage windows)"
+            "--stages-file FILE given (the rig's stage windows)"
         )
     return path
 

@@ -1,4 +1,4 @@
-"""A ToF rig's session as an MCAP or rosbag2 recording: written (the simulated rig's) and read
+"""A ToF rig's run as an MCAP or rosbag2 recording: written (the simulated rig's) and read
 (``deck-landing calibrate tof --recording REC.mcap``).  Needs the optional extra ``io``.
 
 The recording holds the rig's camera images (``sensor_msgs/Image``) and the four sensors'
@@ -32,7 +32,7 @@ NO_MAXIMUM_M = float(np.finfo(np.float32).max)
 
 
 def rig_topics(topics: Topics | None = None) -> Topics:
-    """The topics a rig's session is read from: the images and the ranges only (no tag
+    """The topics a rig's run is read from: the images and the ranges only (no tag
     detections, IMU or tf)."""
     return dataclasses.replace(topics or Topics(), detections="", imu="", tf="")
 

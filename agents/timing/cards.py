@@ -22,6 +22,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from landing_env.config import SENSOR_SETS
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
@@ -132,6 +133,32 @@ def _sensing_without_lens(config: Any) -> str:
     if config.camera.dropout_prob > 0.0:
         departures.append(f"camera.dropout_prob={config.camera.dropout_prob:g}")
     return ",".join(departures) if departures else "ideal"
+
+
+def _runnable(profiles: list[str]) -> str:
+    """The first of a card's sensing profiles that flags can give (else the first)."""
+    for profile in profiles:
+        base = profile.partition(",lens=")[0]
+        if base in SENSOR_SETS or "=" in base:
+            return profile
+    return profiles[0]
+
+
+def sensing_flags(profile: str) -> str:
+    """The command-line flags that give an environment the sensing ``profile``
+    (:func:`sensing_profile`): ``--sensors realistic``, ``--set tof.noise=vl53l1x lens=wide``."""
+    base, _, lens = profile.partition(",lens=")
+    flags: list[str] = []
+    settings = [f"lens={lens}"] if lens else []
+    if "=" in base:  # ideal with departures: each a config key
+        settings = base.split(",") + settings
+    elif base in SENSOR_SETS:
+        flags.append(f"--sensors {base}")
+    else:  # a profile of the training's sampler (realistic-2x): no flag gives it
+        return f"the training profile {profile!r}"
+    if settings:
+        flags.append("--set " + " ".join(settings))
+    return " ".join(flags)
 
 
 #: what a card written before a field was recorded was trained with (the descent was the
@@ -370,10 +397,12 @@ def check_compatible(
             continue
         if name == "sensing":
             if have not in card.sensing:
+                flags = sensing_flags(_runnable(card.sensing))
                 raise ConfigError(
                     "sensing",
                     f"{model} was trained under sensing {card.sensing}, the environment's is "
-                    f"{have!r}" + hint.format(field="sensing"),
+                    f"{have!r}: run it under its own ({flags}; to use it anyway: "
+                    "--allow-mismatch sensing)",
                 )
             continue
         trained = getattr(card, name)
@@ -402,20 +431,25 @@ def _observation_mismatch(
             )
         return None
     described = {**LEGACY_OBSERVATION, **trained}
-
-    for key, value in described.items():
-        if have.get(key) != value:
+    # what is observed first (history, prediction, forecast): the rest follows from it; a
+    # signature without the key is the deck-pose history's
+    described.setdefault("observation", "history")
+    present = {"observation": "history", **have}
+    for key in ("observation", *described):
+        value = described[key]
+        if present.get(key) != value:
+            fix = f" (--set timing.observation={value})" if key == "observation" else ""
             return ConfigError(
                 f"observation.{key}",
                 f"{model} was trained with {value!r}, the environment has "
-                f"{have.get(key)!r}: use the timing settings it was trained with"
+                f"{present.get(key)!r}: use the timing settings it was trained with{fix}"
                 + (
                     " (the range-scheduled descent: --set timing.guidance.descent_profile=range)"
                     if key == "descent" and value == LEGACY_OBSERVATION["descent"]
                     else ""
                 ),
             )
-    extra = sorted(set(have) - set(described))
+    extra = sorted(set(present) - set(described))
     if extra:
         return ConfigError(
             "observation", f"{model}'s card does not describe {extra}; retrain or re-stamp"

@@ -179,8 +179,8 @@ class TriedCommit:
 
 
 class DeckOracleTimingPolicy:
-    """``deck-oracle``: the issue's bound in the strict sense, the timing that **knows the deck's
-    future motion** and nothing else to come.
+    """``deck-oracle``: the bound of deck prediction in the strict sense, the timing that
+    **knows the deck's future motion** and nothing else to come.
 
     :class:`OracleTimingPolicy` knows the whole future: the deck's, and also the gusts' and
     every sensor's noise (they are all fixed by the episode's seed), so it commits where the

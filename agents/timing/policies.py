@@ -15,7 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from agents.calm_window import CalmConfig, CalmPrediction, predict_calm
-from agents.policy_registry import MODEL_DIR
+from agents.policy_registry import MODEL_DIR, find_model
 from agents.timing.cards import (
     METADATA_NAME,
     check_compatible,
@@ -210,7 +210,7 @@ class TrainedTimingPolicy:
     """
 
     def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
-        self.path = Path(path)
+        self.path = find_model(path)
         if not self.path.is_file():
             algo = "ppo" if "ppo" in self.path.name else "dqn"
             raise FileNotFoundError(
@@ -242,13 +242,14 @@ class TrainedTimingPolicy:
                 f"{self.path.name} decides on the onboard look-ahead's features: evaluate it "
                 "with --policy timing-dqn-lookahead",
             )
-        self.check_layout(base.layout.size)
+        # the card first: it names the setting that differs, where a shape would not
         check_compatible(self.metadata, env_signature(base), self.path.name, allow_mismatch)
+        self.check_layout(base.layout.size)
 
     def check_observation(self, signature: dict[str, Any]) -> None:
         """Refuse an observation whose meaning (``observation_signature``) differs."""
-        self.check_layout(int(signature["size"]))
         check_compatible(self.metadata, {"observation": signature}, self.path.name)
+        self.check_layout(int(signature["size"]))
 
     def check_layout(self, observation_size: int) -> None:
         """Refuse an environment whose observation does not match the model's."""

@@ -15,12 +15,13 @@ from estimation.noise import (
     VL53L1X_SIGMA_PER_M,
     TofNoiseModel,
 )
-from estimation.registry import FRAME_ESTIMATOR_NAMES
+from estimation.registry import BUILT_IN, FRAME_ESTIMATOR_NAMES
 
 #: Estimators whose deck pose (T_CD) the fusion can take as a measurement: the shipped
-#: single-frame ones, each with its measurement sigmas below (an estimator registered later
-#: by ``estimation.registry.register_estimator`` is not a source: it has no sigmas here)
-POSE_SOURCES: tuple[str, ...] = tuple(FRAME_ESTIMATOR_NAMES)
+#: single-frame ones, each with its measurement sigmas below (an estimator registered by
+#: ``estimation.registry.register_estimator``, before or after this import, is not a source:
+#: it has no sigmas here)
+POSE_SOURCES: tuple[str, ...] = tuple(n for n in FRAME_ESTIMATOR_NAMES if n in BUILT_IN)
 
 #: The SVGS paper's innovation gate for SVGS and for the IR beacon with its rangefinder:
 #: 10 standard deviations (paper 003, Table 1), deliberately relaxed so that intermittent
