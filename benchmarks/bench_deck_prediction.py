@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from agents.timing.deck_prediction_fit import collect
+from agents.training.deck_prediction_fit import collect
 from estimation.deck_prediction import LinearTiltPredictor
 from landing_env.resources import tilt_predictor_path
 

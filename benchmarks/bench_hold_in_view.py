@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.cli_args import add_set_argument, parse_overrides
+from agents.cli.args import add_set_argument
+from agents.common.user_input import parse_overrides
 
 FIRST_SEED = 1_000_000
 

@@ -2,7 +2,7 @@
 
     python -m benchmarks.bench_lookahead_discrimination --data FILE.npz [FILE.npz ...]
 
-Reads recorded look-ahead transitions (``python -m agents.timing.lookahead_data collect``: every
+Reads recorded look-ahead transitions (``python -m agents.training.lookahead_data collect``: every
 check of whole episodes, with the outcome of a commit there tried in the episode's own future) and
 prints, per scenario, over the checks where a look-ahead was made and a commit could be
 tried: the share whose commit lands, that share by quarter of the draws landing with the
@@ -18,8 +18,8 @@ import argparse
 
 import numpy as np
 
-from agents.timing.lookahead import LOOKAHEAD_FEATURES
-from agents.timing.lookahead_data import load_transitions
+from agents.policies.lookahead import LOOKAHEAD_FEATURES
+from agents.training.lookahead_data import load_transitions
 from benchmarks.bench_ship_forecast_labels import auc
 
 #: the bins of ``chance`` (the share of draws that land with the margin), the last one "all"

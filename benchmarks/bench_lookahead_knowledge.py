@@ -3,17 +3,17 @@
     python -m benchmarks.bench_lookahead_knowledge --data FILE.npz [--episodes N] [--draws D]
         [--variants deck-oracle forecast onboard] [--onboard KEY=VALUE ...] [--out FILE.npz]
 
-Replays recorded look-ahead episodes (``python -m agents.timing.lookahead_data collect``; the
+Replays recorded look-ahead episodes (``python -m agents.training.lookahead_data collect``; the
 drone waits through every check) and, at each recorded check, tries the commit now again in
 ``draws`` futures of other look-aheads, the gusts' and the sensors' draws shared (the same seeds)
 with the recorded one (:data:`VARIANTS`):
 
 * ``deck-oracle``: the deck's true future and the true present (drone, gust, airframe), as
-  :class:`agents.timing.oracle.DeckOracleTimingPolicy`;
+  :class:`agents.policies.oracle.DeckOracleTimingPolicy`;
 * ``forecast``: the ship's HMS forecast of the deck, the true present, as ``deck-forecast``
-  (:class:`agents.timing.deck_forecast.DeckForecastTimingPolicy`);
+  (:class:`agents.policies.deck_forecast.DeckForecastTimingPolicy`);
 * ``onboard``: the drone's own look-ahead with ``--onboard``'s changes to its
-  :class:`~agents.timing.deck_forecast.OnboardModelConfig` (none: the recorded one, again);
+  :class:`~agents.policies.deck_forecast.OnboardModelConfig` (none: the recorded one, again);
 * ``recorded``, always: the drone's own look-ahead as recorded (its first ``draws`` draws).
 
 For each it prints the ROC AUC of the share of draws landing with the margin and of the
@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.timing.lookahead import LookaheadSettings, check_features
-from agents.timing.lookahead_data import recorded_tries
-from agents.timing.oracle import TriedCommit
+from agents.policies.lookahead import LookaheadSettings, check_features
+from agents.policies.oracle import TriedCommit
+from agents.training.lookahead_data import recorded_tries
 from benchmarks.bench_ship_forecast_labels import auc
 from landing_env.errors import ConfigError
 
@@ -66,9 +66,9 @@ def replay_episode(
     recording used (default: the scenario's); ``onboard``: the ``onboard`` variant's model
     (default: :class:`OnboardModelConfig`'s, the recorded look-ahead's)."""
     from agents.evaluation.landing import SCENARIOS, make_env_and_policy
-    from agents.timing.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
-    from agents.timing.lookahead import in_flight
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+    from agents.policies.lookahead import in_flight
+    from agents.policies.oracle import DeckOracleTimingPolicy
     from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 
     unknown = sorted(set(variants) - set(VARIANTS))
@@ -158,8 +158,8 @@ def figures(
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
-    from agents.cli_args import parse_overrides
-    from agents.timing.deck_forecast import OnboardModelConfig
+    from agents.common.user_input import parse_overrides
+    from agents.policies.deck_forecast import OnboardModelConfig
     from landing_env.config_loading import build_dataclass
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

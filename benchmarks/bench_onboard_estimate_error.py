@@ -3,7 +3,7 @@
     python -m benchmarks.bench_onboard_estimate_error [--scenario ship-ss5] [--episodes 6]
         [--seed 5000] [--estimator tight] [--sensors realistic]
 
-``deck-forecast-onboard`` (:class:`agents.timing.deck_forecast.OnboardModelConfig`) starts its
+``deck-forecast-onboard`` (:class:`agents.policies.deck_forecast.OnboardModelConfig`) starts its
 look-ahead where the drone's estimate puts it over the deck, moved by a draw of that
 estimate's error.  This prints the error it draws from: the RMS, mean and 95th percentile of
 (estimate - truth) of the deck's position in the camera frame C over every decision of the

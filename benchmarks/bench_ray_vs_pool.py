@@ -46,8 +46,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agents.common.parallel import ensure_ray
 from agents.evaluation.landing import HELD_OUT_SEED, LANDING_EVALUATION, landing_task
-from agents.evaluation.runner import EpisodeTask, ensure_ray, get_evaluation, run_episodes
+from agents.evaluation.runner import EpisodeTask, get_evaluation, run_episodes
 
 #: where every episode appends "pid end_time" (set before the workers start)
 LOG_VARIABLE = "DECK_LANDING_BENCH_EPISODE_LOG"

@@ -5,21 +5,21 @@
         [--out results/ship_labels] [--set timing.guidance.tracker_model=velocity ...]
         [--windows 1,2] [--labels results/ship_labels/ship-ss5_labels.npz] [--plot FILE.png]
 
-The oracle (:mod:`agents.timing.oracle`) tries a commit at every decision (0.1 s apart) and
+The oracle (:mod:`agents.policies.oracle`) tries a commit at every decision (0.1 s apart) and
 knows the gusts and the heave to come; its lead over a policy mixes what the observation
 could tell and
 what no observation tells.  This benchmark separates the two:
 
 1. Seeded waiting episodes of the timing task (not the evaluation's held-out seeds); at every
-   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.timing.hindsight`), so each
-   labelled decision has the touchdown committing then would have given.
+   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.training.hindsight`), so
+   each labelled decision has the touchdown committing then would have given.
 2. Printed: the success of a commit at a labelled decision; how failures cluster in time (the
    chance that the commit ``every`` decisions later lands after one that failed, against after
    one that landed: persistent causes are in principle visible, isolated ones are luck); the
    best any commit on the labels' grid could do (the oracle on that grid); committing at once
-   (``land-now``); and the ``quiescent`` rule (:func:`agents.calm_window.predict_calm`) replayed
-   with its defaults and with each of a grid of its settings
-   (:func:`agents.timing.hindsight.replay_rule`; an episode without a calm decision commits at
+   (``land-now``); and the ``quiescent`` rule (:func:`agents.policies.calm_window.predict_calm`)
+   replayed with its defaults and with each of a grid of its settings
+   (:func:`agents.training.hindsight.replay_rule`; an episode without a calm decision commits at
    its last label), all judged by the outcome.
 3. What the observation can tell: a commit-chance model (:mod:`agents.timing.commit_chance`, a
    logistic regression on statistics of the observed deck motion over ``--windows``) fitted on
@@ -38,10 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.calm_window import CalmConfig, predict_calm
-from agents.cli_args import add_set_argument, parse_overrides
+from agents.cli.args import add_set_argument
+from agents.common.user_input import parse_overrides
+from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.timing.commit_chance import CommitChanceModel, commit_features
-from agents.timing.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
+from agents.training.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
 from landing_env.timing.stopping import StoppingValues
 
 #: the grid of the ``quiescent`` rule's settings replayed

@@ -6,13 +6,14 @@
     python -m benchmarks.bench_ship_deck_prediction --rule tilt-window [--window 2.5,5.0]
         [--max-tilt-deg 4.5] [--min-wait-s 3] ...
 
-The deck oracle (:class:`agents.timing.oracle.DeckOracleTimingPolicy`) knows the deck's future and
+The deck oracle (:class:`agents.policies.oracle.DeckOracleTimingPolicy`) knows the deck's future and
 lands far more often than ``quiescent`` on the ship.  How much of that is the forecast itself?
 These rules read the deck's **true** motion, as a perfect ship-motion link and a perfect
 forecast would give it (privileged: the motion source of the simulated ship), and fly the
 timing task of the scenario (realistic sensing, ``tight`` observed, as the evaluation):
 
-* ``calm``: ``quiescent``'s calm rule (:func:`agents.calm_window.predict_calm`) on the true deck
+* ``calm``: ``quiescent``'s calm rule (:func:`agents.policies.calm_window.predict_calm`) on the
+true deck
   motion over the last 2 s instead of its estimate.
 * ``tilt-window``: commit once the true deck tilt stays below ``--max-tilt-deg`` over the whole
   contact window (``--window``, seconds after the commit: the ship's descent meets the deck
@@ -33,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.calm_window import CalmConfig, predict_calm
+from agents.common.parallel import map_tasks
 from agents.evaluation.landing import HELD_OUT_SEED, make_env_and_policy
-from agents.evaluation.runner import map_tasks
+from agents.policies.calm_window import CalmConfig, predict_calm
 from estimation.frames import tilt_deg
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.timing.history import HISTORY_FEATURES

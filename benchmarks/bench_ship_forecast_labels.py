@@ -8,12 +8,12 @@ The timing task's ``forecast`` observation (the ship ids' v5) holds the newest d
 estimate, the ToF ranges, the ship's helideck forecast 0-8 s ahead and the drone's own
 velocity and lean.  Seeded waiting episodes (not the evaluation's held-out seeds) are flown
 with it, and at every ``every``-th decision a commit is tried in a snapshot
-(:func:`agents.timing.hindsight.collect_labels`), so each labelled observation has the touchdown a
+(:func:`agents.training.hindsight.collect_labels`), so each labelled observation has the touchdown a
 commit then would have given.  Then, with the episodes in 5 folds (held out by episode), a
 logistic regression and a two-layer MLP (64 units, PyTorch) are fitted on three subsets of
 the observation: the present alone (estimate, ranges, wait, own state), the present and the
 forecast, and the forecast alone.  Printed for each: the held-out AUC of the commit's
-success, and the success of replaying its held-out chances (:func:`agents.timing.hindsight.
+success, and the success of replaying its held-out chances (:func:`agents.training.hindsight.
 replay_rule`) against the value of waiting on and, in hindsight, at the best fixed threshold;
 then committing at once and the best commit on the labels' grid.
 
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.timing.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
+from agents.training.hindsight import LabelSet, collect_labels, make_timing_env, replay_rule
 from landing_env.timing.layout import timing_layout
 from landing_env.timing.stopping import StoppingValues
 

@@ -9,8 +9,8 @@ Yumori, OCEANS 1981; Triantafyllou, Bodson and Athans, IEEE JOE 8(1), 1983) pred
 motion a descent ahead from its recent history with a linear (AR / Kalman) model.  Here:
 
 1. Seeded waiting episodes of the timing task (not the evaluation's held-out seeds); at every
-   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.timing.hindsight`), so each
-   labelled decision has the touchdown that committing then would have given.
+   ``every``-th decision the commit is tried in a snapshot (:mod:`agents.training.hindsight`), so
+   each labelled decision has the touchdown that committing then would have given.
 2. A direct linear predictor (ridge least squares on the last 2 s of the *estimated*, levelled
    roll and pitch) of the estimated roll and pitch 1.0-2.7 s ahead is fitted on half the
    episodes' estimate series (self-supervised: no labels needed) and applied to the other half,
@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from agents.timing.hindsight import collect_labels, make_timing_env, replay_rule
+from agents.training.hindsight import collect_labels, make_timing_env, replay_rule
 from landing_env.timing.history import HISTORY_FEATURES
 
 #: prediction horizons, in samples of the history (20 Hz): 1.0-2.7 s

@@ -1,10 +1,10 @@
 """Look-ahead timing models replayed exactly on recorded episodes, file by file.
 
-Each file of ``python -m agents.timing.lookahead_data collect`` holds, at every check of its
+Each file of ``python -m agents.training.lookahead_data collect`` holds, at every check of its
 episodes, the outcome of a commit now and of a wait; a model's decisions replay on it exactly
-(:func:`agents.timing.lookahead_data.replay_success`).  This prints, for each file (its sea, or
+(:func:`agents.training.lookahead_data.replay_success`).  This prints, for each file (its sea, or
 its scenario) and for all together: the episodes, each model's replay, the fixed rules of
-:data:`agents.timing.lookahead_training.RULES` and the best check in hindsight (the bar of a
+:data:`agents.training.lookahead_training.RULES` and the best check in hindsight (the bar of a
 timing on these features).  A model is replayed as saved (an SB3 DQN), with the look-ahead of
 its card's training configuration.
 
@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.timing.cards import read_metadata
-from agents.timing.lookahead import LookaheadSettings
-from agents.timing.lookahead_data import load_transitions, open_record, replay_success
-from agents.timing.lookahead_training import RULES, greedy, hindsight_success
+from agents.common.cards import read_metadata
+from agents.policies.lookahead import LookaheadSettings
+from agents.training.lookahead_data import load_transitions, open_record, replay_success
+from agents.training.lookahead_training import RULES, greedy, hindsight_success
 from landing_env.errors import ConfigError
 
 

@@ -7,7 +7,7 @@ task, the scenario's timing settings.  It registers one id per task it serves
 ``deck-landing evaluate landing --scenario bench-ss4`` and
 ``gym.make("DeckLandingTiming-BenchSS4-v6")`` build the same environment; a policy lays its own
 settings (its estimator, its timing options) over the id's with the same dotted overrides
-(:mod:`agents.policy_registry`).
+(:mod:`agents.policies.registry`).
 
 Versions follow Gymnasium's rule: a version is the same task, fixed; variants (the observation,
 the wave-off, the contact window) are settings of the config's ``timing`` section

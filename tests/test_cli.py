@@ -110,7 +110,7 @@ def test_demo_timing_part_flies_the_realistic_policy_under_realistic_sensing(
 ) -> None:
     """`deck-landing demo --sensors realistic` flies the policy trained for realistic sensing
     (once it refused the ideal-trained timing-dqn)."""
-    from agents.demo import run_timing_demo
+    from agents.cli.demo import run_timing_demo
     from landing_env.config import SENSORS_ENV
 
     monkeypatch.setenv(SENSORS_ENV, "realistic")

@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from agents.evaluation.landing import evaluate_policy
-from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
-from agents.training import (
+from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
+from agents.training.trainer import (
     ENV_ID,
     SCENARIO_ENV_ID,
     ZOO_META_KEYS,
@@ -198,7 +198,7 @@ def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
     import torch
     from stable_baselines3 import DQN
 
-    from agents.training import _start_from
+    from agents.training.trainer import _start_from
 
     realistic = SHIPPED_TIMING_MODEL
     trained = DQN.load(realistic, device="cpu")

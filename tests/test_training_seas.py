@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.timing.deck_prediction_fit import fit_family, main
+from agents.training.deck_prediction_fit import fit_family, main
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIOS

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.cli_args import positive_int
-from agents.lander import shipped_lander_model
-from agents.timing.policies import shipped_timing_model
-from agents.training import ENV_ID, TASK_ALGOS, load_train_config, train
+from agents.cli.args import positive_int
+from agents.policies.lander import shipped_lander_model
+from agents.policies.timing import shipped_timing_model
+from agents.training.trainer import ENV_ID, TASK_ALGOS, load_train_config, train
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK
 

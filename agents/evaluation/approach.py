@@ -34,14 +34,13 @@ from typing import Any
 import numpy as np
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.beacon_range import make_beacon_range
+from agents.common.parallel import batch_session
 from agents.evaluation.landing import HELD_OUT_SEED
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import (
     EpisodeTask,
     RunResult,
     SeedFailure,
-    batch_session,
     for_each_seed,
     run_episodes,
     split_runs,
@@ -56,8 +55,9 @@ from agents.evaluation.summary import (
     write_summary_files,
 )
 from agents.evaluation.summary import markdown_table as summary_table
-from agents.policy_registry import POLICIES
-from agents.svgs_routine import RoutineConfig, make_svgs_routine
+from agents.policies.beacon_range import make_beacon_range
+from agents.policies.registry import POLICIES
+from agents.policies.svgs_routine import RoutineConfig, make_svgs_routine
 from estimation.frames import R_PD, matrix_from_euler_zyx
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config

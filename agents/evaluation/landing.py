@@ -6,7 +6,7 @@ them) and writes, per scenario, a Markdown and CSV table (success rate with its 
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).  With a timing policy among
-them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same
+them the ``oracle`` (:mod:`agents.policies.oracle`, the best any timing could do on the same
 seeds) runs too, unless ``--no-oracle``: each timing policy's row gives the oracle's
 success, the gap in points and how many of its failures the oracle failed as well (no timing
 could avoid them).
@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agents.common.parallel import batch_session
 from agents.evaluation.landing_summary import (
     LandingSummary,
     compare_with_oracle,
@@ -47,7 +48,6 @@ from agents.evaluation.runner import (
     EpisodeTask,
     RunResult,
     SeedFailure,
-    batch_session,
     for_each_seed,
     run_episodes,
     split_runs,
@@ -55,7 +55,7 @@ from agents.evaluation.runner import (
 from agents.evaluation.summary import (
     write_summary_files,
 )
-from agents.policy_registry import (
+from agents.policies.registry import (
     env_settings,
     make_env_and_policy,
     scenario_config,

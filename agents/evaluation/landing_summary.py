@@ -22,7 +22,7 @@ from agents.evaluation.summary import (
     success_fields,
 )
 from agents.evaluation.summary import markdown_table as summary_table
-from agents.policy_registry import POLICIES
+from agents.policies.registry import POLICIES
 from landing_env.config import TouchdownConfig
 from landing_env.scenarios import TIMING_TASK
 
@@ -61,7 +61,7 @@ class LandingSummary:
     #: this policy's failures on seeds where the oracle failed too: no timing avoids them
     unavoidable_failures: int = 0
     #: the deck oracle's success on the same seeds (it knows the deck's future, not the
-    #: wind's: :class:`agents.timing.oracle.DeckOracleTimingPolicy`); NaN without it
+    #: wind's: :class:`agents.policies.oracle.DeckOracleTimingPolicy`); NaN without it
     deck_oracle_success_rate: float = math.nan
     #: deck oracle minus this policy, percentage points
     deck_gap_points: float = math.nan

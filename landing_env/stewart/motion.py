@@ -361,7 +361,7 @@ class ForecastMotion:
     (``horizons_s[0]`` = 0), held at the last one beyond.
 
     A look-ahead plays it in place of the episode's own motion
-    (:mod:`agents.timing.deck_forecast`).  The spline starts at the true pose and velocity of
+    (:mod:`agents.policies.deck_forecast`).  The spline starts at the true pose and velocity of
     ``t0_s`` so that the servoed deck does not jump: the forecast's own error at horizon 0
     (the HMS's noise, a few cm) is added back with a ``fade_s`` time constant, and the
     spline's second derivative is zero at its end.

@@ -130,7 +130,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     "timing.wave_off_tilt_deg": 5.0}`` (hold height, history length, wait limit, the descent
     profile in ``timing.guidance``, the wave-off, the contact window, the observation).  A
     registered id lays its scenario's settings under the user's; a policy of
-    :mod:`agents.policy_registry` lays its own (``predictive``: the 8 s history, the wave-off
+    :mod:`agents.policies.registry` lays its own (``predictive``: the 8 s history, the wave-off
     and the contact window).  A pinned drone (``simulation.drone_fixed``) is refused with a
     ``ConfigError``.  A trained model's card records the id, observation and descent it was
     trained on and refuses another.

@@ -1,25 +1,12 @@
-"""Argument types and the user-error type of the ``deck-landing`` command (a leaf module).
-
-Every user error (a bad flag, a config key, a missing file) reaches :func:`agents.cli.main`,
-which prints one line and exits with status 2; ``--debug`` shows the traceback instead.
+"""Argument types of the ``deck-landing`` command (a leaf module); the user-error type and
+the ``--set`` overrides' parser are :mod:`agents.common.user_input`'s.
 """
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
-
-from estimation.errors import ConfigError
 
 SET_HELP = "dotted config overrides applied last, e.g. tof.noise=vl53l1x camera.k1=-0.05"
-
-
-class UserError(Exception):
-    """A mistake in what the user asked for (reported as one line, exit status 2)."""
-
-
-#: what :func:`agents.cli.main` reports as a user error rather than a crash
-USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, UserError, FileNotFoundError)
 
 
 def positive_int(text: str) -> int:
@@ -31,22 +18,6 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [1, inf]")
     return value
-
-
-def parse_overrides(pairs: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` pairs (dotted keys, YAML values) as an overrides mapping."""
-    import yaml
-
-    overrides: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError("--set", f"{pair!r} is not KEY=VALUE (e.g. tof.noise=vl53l1x)")
-        try:
-            overrides[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError as exc:
-            raise ConfigError(key.strip(), f"{value!r} is not a YAML value: {exc}") from None
-    return overrides
 
 
 def add_set_argument(parser: argparse.ArgumentParser) -> None:

@@ -17,7 +17,7 @@ pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
   with its deck-motion history): the trained timing model ``agents/models/timing_dqn.zip``
   chooses when to commit where it is installed (one decision per ``steps_per_decision``
   periods, forced at ``wait_limit_s``), else the quiescent heuristic
-  (:func:`agents.calm_window.predict_calm`); ``land`` descends to touchdown.
+  (:func:`agents.policies.calm_window.predict_calm`); ``land`` descends to touchdown.
   ``policy.timing_source`` says which.
 
 The SVGS offset manoeuvre (Algorithm 5) is not flown: the tag is the landing spot.
@@ -40,10 +40,10 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from agents.align_descend import normalise_setpoint
-from agents.calm_window import CalmConfig, predict_calm
-from agents.timing.cards import observation_signature
-from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
+from agents.common.cards import observation_signature
+from agents.policies.align_descend import normalise_setpoint
+from agents.policies.calm_window import CalmConfig, predict_calm
+from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
 from landing_env.config import ActionConfig
 from landing_env.errors import ConfigError, require_range

@@ -31,7 +31,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.timing.cards import sensing_profile
+from agents.common.cards import sensing_profile
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config
@@ -259,7 +259,7 @@ def variant_overrides(settings: RandomiseSettings, scenario: str, sensing: str) 
 
 def sensing_signatures(settings: RandomiseSettings) -> list[str]:
     """The sensing profiles of every world the settings can draw, as a model card names them
-    (:func:`agents.timing.cards.sensing_profile`)."""
+    (:func:`agents.common.cards.sensing_profile`)."""
 
     return sorted(
         {
@@ -277,5 +277,6 @@ def make_randomised_env(
     timing: dict[str, Any] | None = None,
     render_mode: str | None = None,
 ) -> RandomisedTimingEnv:
-    """The factory :func:`agents.training.make_envs` hands to SB3 (top level: it pickles)."""
+    """The factory :func:`agents.training.trainer.make_envs` hands to SB3 (top level: it
+    pickles)."""
     return RandomisedTimingEnv(randomise, timing, render_mode)

@@ -1,9 +1,9 @@
 """The timing task's scripted policies and the trained timing model's loader.
 
 ``land-now`` (commit at once), ``quiescent`` (the landing-period heuristic,
-:mod:`agents.calm_window`), ``predictive`` (the deck-tilt predictor weighed by optimal
+:mod:`agents.policies.calm_window`), ``predictive`` (the deck-tilt predictor weighed by optimal
 stopping) and :class:`TrainedTimingPolicy` (an SB3 model, checked against its card).  Which to
-use where, and every other policy, is in :mod:`agents.policy_registry`; the ``build_*``
+use where, and every other policy, is in :mod:`agents.policies.registry`; the ``build_*``
 functions here are its builders.
 """
 
@@ -14,15 +14,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from agents.calm_window import CalmConfig, CalmPrediction, predict_calm
-from agents.policy_registry import MODEL_DIR
-from agents.timing.cards import (
+from agents.common.cards import (
     METADATA_NAME,
     check_compatible,
     env_signature,
     model_class,
     read_metadata,
 )
+from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
+from agents.policies.registry import MODEL_DIR
 from estimation.deck_prediction import LinearTiltPredictor
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
@@ -101,7 +101,7 @@ class PredictivePolicy:
 
     The chance: that the deck's tilt at the contact is within the limit, by a
     :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
-    the estimated deck motion, :mod:`agents.timing.deck_prediction_fit`) on the observation's
+    the estimated deck motion, :mod:`agents.training.deck_prediction_fit`) on the observation's
     history, with the Gaussian error measured on held-out episodes; the contact comes at one of
     ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
     1.3 s, or a window the environment's descent chooses the best of, the same way), and the
@@ -158,7 +158,7 @@ class PredictivePolicy:
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
                 f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
-                "refit it with `python -m agents.timing.deck_prediction_fit fit`",
+                "refit it with `python -m agents.training.deck_prediction_fit fit`",
             )
         self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
@@ -204,7 +204,7 @@ class PredictivePolicy:
 class TrainedTimingPolicy:
     """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
 
-    The model's card (:mod:`agents.timing.cards`: env id and version, observation layout,
+    The model's card (:mod:`agents.common.cards`: env id and version, observation layout,
     estimator, sensing profiles, training config) is read on load; a model without one is
     refused.  :meth:`check_env` refuses an environment that differs from the card.
     """
@@ -293,7 +293,7 @@ def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
             "timing.tilt_model",
             "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
             "timing.tilt_model=NAME or pass --model FILE; fit one with "
-            "`python -m agents.timing.deck_prediction_fit fit`)",
+            "`python -m agents.training.deck_prediction_fit fit`)",
         )
     path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
     try:

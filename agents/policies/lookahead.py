@@ -1,6 +1,6 @@
 """The onboard look-ahead as an observation: a learned timing that weighs what it foresees.
 
-``deck-forecast-onboard`` (:mod:`agents.timing.deck_forecast`) tries a commit now in a handful of
+``deck-forecast-onboard`` (:mod:`agents.policies.deck_forecast`) tries a commit now in a handful of
 futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
 and wind estimate with their errors, its airframe's uncertain drag and thrust) and commits
 by a fixed rule: all of them land with 15 % slack, the standard falling over the last 5 s.
@@ -17,10 +17,10 @@ evaluation through :class:`LookaheadTimingPolicy`, which acts on the bare task a
 between its checks: the features of a given episode and check are the same in both (the
 look-ahead's draws are seeded by the episode and the decision).
 
-The look-ahead is the onboard model's (:class:`~agents.timing.deck_forecast.OnboardModelConfig`):
+The look-ahead is the onboard model's (:class:`~agents.policies.deck_forecast.OnboardModelConfig`):
 what the drone knows of the present, the HMS forecast of the deck; the drone's own code
 (guidance, controller, estimators) flies it.  Both actions' outcomes at every check, recorded
-for an offline DQN, are :mod:`agents.timing.lookahead_data`'s.
+for an offline DQN, are :mod:`agents.training.lookahead_data`'s.
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.timing.cards import check_compatible, env_signature
-from agents.timing.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
-from agents.timing.oracle import TriedCommit
-from agents.timing.policies import TrainedTimingPolicy
+from agents.common.cards import check_compatible, env_signature
+from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
+from agents.policies.oracle import TriedCommit
+from agents.policies.timing import TrainedTimingPolicy
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import validate_action
 from landing_env.errors import ConfigError, require_range
@@ -70,14 +70,14 @@ class LookaheadSettings:
       this machine's CPU at ``ship-ss5``);
     * ``check_every_s``: the wait between checks (a multiple of the task's decision);
     * ``min_margin``: the slack a draw needs to count in ``chance``
-      (:func:`agents.timing.oracle.touchdown_margin`);
+      (:func:`agents.policies.oracle.touchdown_margin`);
     * ``checks``: how many checks the observation holds (this one first);
     * ``seed``: the look-ahead's own streams (with the episode's seed and the decision);
     * ``hms_report_s``: with a window (CAP 437's is 600 s), the observation also carries the
       ship's HMS report over it (:data:`HMS_REPORT_FEATURES`, before the wait used): how
       hard the sea moves the deck, which the look-ahead's draws do not say; 0: no report.
     * ``airframe_in_trim``: the onboard model's drawn airframes start in their own trim
-      (:attr:`~agents.timing.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
+      (:attr:`~agents.policies.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
       shipped look-ahead's draws.
     """
 
@@ -270,7 +270,7 @@ class LookaheadTimingWrapper(gym.Wrapper):
         super().__init__(env)
 
         self.settings = build_dataclass(LookaheadSettings, settings, "lookahead")
-        #: what a model card records of this observation (:func:`agents.timing.cards.env_signature`)
+        #: what a model card records of this observation (:func:`agents.common.cards.env_signature`)
         self.lookahead_settings = self.settings
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.observation_space = self.observer.observation_space
@@ -304,7 +304,7 @@ class LookaheadTimingPolicy:
     """A model trained on :class:`LookaheadTimingWrapper`, acting in the bare timing task.
 
     Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
-    waits.  The card is checked as :class:`~agents.timing.policies.TrainedTimingPolicy` checks
+    waits.  The card is checked as :class:`~agents.policies.timing.TrainedTimingPolicy` checks
     one, the look-ahead's settings included.
     """
 
@@ -372,7 +372,7 @@ def find_lookahead(env: Any) -> LookaheadTimingWrapper | None:
 def build_lookahead_policy(
     env: Any, model_path: str | None, allow: tuple[str, ...]
 ) -> LookaheadTimingPolicy:
-    """``timing-dqn-lookahead`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    """``timing-dqn-lookahead`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
     if model_path is None:
         raise ConfigError(
             "model", "timing-dqn-lookahead needs a model (the shipped one by default)"

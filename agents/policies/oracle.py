@@ -337,12 +337,12 @@ class DeckOracleTimingPolicy:
 
 
 def build_oracle(env: Any, model_path: str | None, allow: tuple[str, ...]) -> OracleTimingPolicy:
-    """``oracle`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    """``oracle`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
     return OracleTimingPolicy(env)
 
 
 def build_deck_oracle(
     env: Any, model_path: str | None, allow: tuple[str, ...]
 ) -> DeckOracleTimingPolicy:
-    """``deck-oracle`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    """``deck-oracle`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
     return DeckOracleTimingPolicy(env)

@@ -34,7 +34,7 @@ from rich.console import Console
 from rich.table import Table
 from tqdm import tqdm
 
-from agents.evaluation.runner import map_tasks
+from agents.common.parallel import map_tasks
 from agents.io.tof_rig import INTRINSICS_NAME, calibrate_tof_recording, write_rig_recording
 from estimation.tof_calibration import PAD_COLOURS
 from landing_env.calibration.intrinsics_sim import (

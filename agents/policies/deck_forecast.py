@@ -1,7 +1,7 @@
 """``deck-forecast``: timing by a forecast of the ship's helideck, tried in a look-ahead.
 
-The deck oracle (:class:`agents.timing.oracle.DeckOracleTimingPolicy`) shows what knowing the deck's
-future is worth: at sea state 5 it lands 90 % where the best rule on the drone's own deck
+The deck oracle (:class:`agents.policies.oracle.DeckOracleTimingPolicy`) shows what knowing the
+deck's future is worth: at sea state 5 it lands 90 % where the best rule on the drone's own deck
 estimate lands 78.5 %.  A drone landing on a ship can know much of that future: the ship's
 helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
 CAP 437) measures the helideck's motion and passes it on, and ship motion a few seconds ahead
@@ -47,7 +47,7 @@ The guidance, the controller, the touchdown's physics and the estimators' softwa
 drone's own code and stay exact; so do its own attitude and velocity (its navigation).
 Registered as a policy, it also lowers its standard over the last 5 s of the wait, to half
 the look-aheads at the wait limit (``deadline_chance``,
-:meth:`~agents.timing.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
+:meth:`~agents.policies.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
 land beats the blind one the limit would force.
 """
 
@@ -60,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.timing.oracle import DeckOracleTimingPolicy
+from agents.policies.oracle import DeckOracleTimingPolicy
 from estimation.deck_prediction import LinearMotionPredictor
 from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_range
@@ -404,7 +404,7 @@ def plot_forecasts(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.timing.deck_forecast --scenario ship-ss5``: fit the scenario's
+    """``python -m agents.policies.deck_forecast --scenario ship-ss5``: fit the scenario's
     forecast (on its config's ``deck_forecast``: its own sea, or a training family) and print
     its RMS error per horizon on a record of the scenario's sea no fit used, against holding
     the present (persistence)."""
@@ -465,7 +465,7 @@ if __name__ == "__main__":
 def build_deck_forecast(
     env: Any, model_path: str | None, allow: tuple[str, ...]
 ) -> DeckForecastTimingPolicy:
-    """``deck-forecast`` for ``env`` (:mod:`agents.policy_registry`'s builder)."""
+    """``deck-forecast`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
     return DeckForecastTimingPolicy(env)
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from agents.calibrate import SUMMARY_NAME, TOF_NAME
+from agents.calibration.simulated import SUMMARY_NAME, TOF_NAME
 from agents.io.recording import Topics
 from agents.io.tof_rig import calibrate_tof_recording
 from estimation.tof_calibration import PAD_COLOURS

@@ -3,8 +3,8 @@
 The search YAML (``configs/train/tune_timing.yaml``) names a base training YAML, a budget
 (trials, timesteps per trial, evaluation episodes, concurrent trials) and a small search space
 over the zoo section's hyper-parameters (``choice``, ``uniform``, ``loguniform``).  Each trial
-is one :func:`agents.training.train` run with the sampled values; it reports the success rate
-of the evaluation at its end (``EvalCallback`` on held-out seeds), and Ray Tune keeps the best.
+is one :func:`agents.training.trainer.train` run with the sampled values; it reports the success
+rate of the evaluation at its end (``EvalCallback`` on held-out seeds), and Ray Tune keeps the best.
 Ray runs on this machine by default, or on a cluster with ``--address``.
 """
 
@@ -17,8 +17,8 @@ from typing import Any
 
 import yaml
 
-from agents.evaluation.runner import ensure_ray
-from agents.training import load_train_config, train
+from agents.common.parallel import ensure_ray
+from agents.training.trainer import load_train_config, train
 from landing_env.config import _calibration_path
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_range

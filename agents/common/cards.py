@@ -109,7 +109,7 @@ def sensing_profile(config: Any, profile: str | None = None) -> str:
     ``sensors: ideal``, ``ideal`` when no sensor noise is configured, else the settings that
     depart from ideal (``tof.noise=vl53l1x``, ...).  ``profile`` names the profile the config
     was built from where it has a name of its own (``realistic-2x``, a bundle with its noise
-    doubled: :data:`agents.timing.sampler.SENSING_PROFILES`).  A lens other than the
+    doubled: :data:`agents.training.sampler.SENSING_PROFILES`).  A lens other than the
     standard one is named after it (``realistic,lens=wide``): the camera sees another field
     at another resolution.
     """
@@ -253,7 +253,7 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
 
 def _observing_wrapper(env: Any) -> Any:
     """The wrapper in ``env``'s chain that observes for the policy (one with a
-    ``lookahead_settings``, :class:`agents.timing.lookahead.LookaheadTimingWrapper`), if any."""
+    ``lookahead_settings``, :class:`agents.policies.lookahead.LookaheadTimingWrapper`), if any."""
     while isinstance(env, gym.Wrapper):
         if getattr(env, "lookahead_settings", None) is not None:
             return env
@@ -495,7 +495,7 @@ def card_for_training(
     lookahead: Any = None,
     frame_stack: int = 1,
 ) -> ModelMetadata:
-    """The card of a model trained with ``config`` (:mod:`agents.training`) in environments
+    """The card of a model trained with ``config`` (:mod:`agents.training.trainer`) in environments
     like ``env`` (``sensing``: every profile the training sampled; ``lookahead``: the
     look-ahead settings it observed through, the env wrapped or not)."""
     signature = env_signature(env, lookahead, frame_stack)

@@ -35,18 +35,18 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
-from agents.lander import shipped_lander_model
-from agents.learning_curve import read_learning_curve, write_learning_curve
-from agents.timing.cards import (
+from agents.common.cards import (
     card_for_training,
     check_compatible,
     env_signature,
     read_metadata,
     write_metadata,
 )
-from agents.timing.lookahead import LookaheadSettings, LookaheadTimingWrapper
-from agents.timing.policies import shipped_timing_model
-from agents.timing.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
+from agents.policies.lander import shipped_lander_model
+from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
+from agents.policies.timing import shipped_timing_model
+from agents.training.learning_curve import read_learning_curve, write_learning_curve
+from agents.training.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS
@@ -89,7 +89,7 @@ class TrainSettings:
     #: in the shipped YAMLs, whose id has the scenario built in, so that rl-zoo3 trains the
     #: same task without ``--env-kwargs``
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-    #: domain randomisation per episode (:class:`agents.timing.sampler.RandomiseSettings`:
+    #: domain randomisation per episode (:class:`agents.training.sampler.RandomiseSettings`:
     #: scenarios, sensing profiles, estimator, wind, start heights); when set, the episodes
     #: come from it and ``env_kwargs`` keeps only ``timing``
     randomise: dict[str, Any] | None = None
@@ -110,7 +110,7 @@ class TrainSettings:
     #: describe the same task, observation and estimator): training goes on from it
     init_model: str | None = None
     #: decide on the onboard look-ahead's features
-    #: (:class:`agents.timing.lookahead.LookaheadSettings`: draws, check_every_s, min_margin,
+    #: (:class:`agents.policies.lookahead.LookaheadSettings`: draws, check_every_s, min_margin,
     #: checks, seed) instead of the task's observation
     lookahead: dict[str, Any] | None = None
 
@@ -427,7 +427,7 @@ def _start_from(model: Any, path: str, env: Any) -> None:
     found = Path(path)
     if not found.is_absolute() and not found.is_file():
         # a path in the repository (agents/models/...) from anywhere
-        found = Path(__file__).resolve().parent.parent / path
+        found = Path(__file__).resolve().parents[2] / path
     if not found.is_file():
         raise ConfigError("deck_landing.init_model", f"{path!r} does not exist")
     card = read_metadata(found)

@@ -39,7 +39,7 @@ from landing_env.scenarios import (
 )
 
 #: where the shipped models are installed (package data of ``agents``)
-MODEL_DIR = Path(__file__).resolve().parent / "models"
+MODEL_DIR = Path(__file__).resolve().parents[1] / "models"
 
 KINDS = ("baseline", "heuristic", "trained", "bound")
 STATUSES = ("recommended", "supported", "legacy", "research")
@@ -90,7 +90,7 @@ POLICIES: dict[str, PolicySpec] = {
             "heuristic",
             "supported",
             LANDING_TASK,
-            "agents.align_descend:build_align_descend",
+            "agents.policies.align_descend:build_align_descend",
             "visual servoing on the estimated deck pose: centre, descend, flare for a calm "
             "window, land",
         ),
@@ -99,7 +99,7 @@ POLICIES: dict[str, PolicySpec] = {
             "heuristic",
             "supported",
             LANDING_TASK,
-            "agents.svgs_routine:build_svgs_routine",
+            "agents.policies.svgs_routine:build_svgs_routine",
             "the SVGS paper's landing routine from altitude (search, align, descend, relocate, "
             "land) on the fused estimate, committing through the timing model",
             estimator="fused",
@@ -110,7 +110,7 @@ POLICIES: dict[str, PolicySpec] = {
             "baseline",
             "supported",
             LANDING_TASK,
-            "agents.beacon_range:build_beacon_range",
+            "agents.policies.beacon_range:build_beacon_range",
             "the IR-LOCK-style baseline: a beacon's bearing and the rangefinder through a "
             "landing-target filter, PX4's precision-landing search",
             estimator="beacon",
@@ -120,14 +120,14 @@ POLICIES: dict[str, PolicySpec] = {
             "land-now",
             kind="baseline",
             status="supported",
-            builder="agents.timing.policies:build_land_now",
+            builder="agents.policies.timing:build_land_now",
             summary="commit at once: the lower bar of the timing task",
         ),
         _timing(
             "quiescent",
             kind="heuristic",
             status="recommended",
-            builder="agents.timing.policies:build_quiescent",
+            builder="agents.policies.timing:build_quiescent",
             summary="commit when a calm window as long as the descent is predicted from the "
             "recent deck motion (the landing-period heuristic)",
         ),
@@ -135,7 +135,7 @@ POLICIES: dict[str, PolicySpec] = {
             "predictive",
             kind="heuristic",
             status="recommended",
-            builder="agents.timing.policies:build_predictive",
+            builder="agents.policies.timing:build_predictive",
             summary="commit when the scenario's deck-tilt predictor gives a chance of a level "
             "deck at the contact worth more than waiting on (optimal stopping); chooses the "
             "contact time and waves off by the same predictor",
@@ -147,7 +147,7 @@ POLICIES: dict[str, PolicySpec] = {
             "timing-dqn-predictive",
             kind="trained",
             status="supported",
-            builder="agents.timing.policies:build_trained",
+            builder="agents.policies.timing:build_trained",
             summary="a DQN observing what `predictive` weighs (the predictor's chances and "
             "the value of waiting on)",
             estimator="tight",
@@ -159,7 +159,7 @@ POLICIES: dict[str, PolicySpec] = {
             "timing-dqn-lookahead",
             kind="trained",
             status="recommended",
-            builder="agents.timing.lookahead:build_lookahead_policy",
+            builder="agents.policies.lookahead:build_lookahead_policy",
             summary="a DQN deciding every 0.5 s on 16 commits tried in an onboard model's "
             "futures of the ship deck",
             estimator="tight",
@@ -172,7 +172,7 @@ POLICIES: dict[str, PolicySpec] = {
             "trained",
             "research",
             LANDING_TASK,
-            "agents.lander:build_lander",
+            "agents.policies.lander:build_lander",
             "your own SB3 lander of DeckLanding-v1 (--model PATH; deck-landing train "
             "landing), checked against its card",
         ),
@@ -180,14 +180,14 @@ POLICIES: dict[str, PolicySpec] = {
             "timing-model",
             kind="trained",
             status="supported",
-            builder="agents.timing.policies:build_trained",
+            builder="agents.policies.timing:build_trained",
             summary="your own SB3 timing model (--model PATH), checked against its card",
         ),
         _timing(
             "oracle",
             kind="bound",
             status="supported",
-            builder="agents.timing.oracle:build_oracle",
+            builder="agents.policies.oracle:build_oracle",
             summary="the best timing of all, found by trying every commit in saved copies of "
             "the episode: the upper bar",
         ),
@@ -195,7 +195,7 @@ POLICIES: dict[str, PolicySpec] = {
             "deck-oracle",
             kind="bound",
             status="supported",
-            builder="agents.timing.oracle:build_deck_oracle",
+            builder="agents.policies.oracle:build_deck_oracle",
             summary="the timing that knows the deck's future and nothing else (gusts and noise "
             "drawn anew): the bar for timing by deck prediction",
         ),
@@ -203,7 +203,7 @@ POLICIES: dict[str, PolicySpec] = {
             "deck-forecast",
             kind="bound",
             status="research",
-            builder="agents.timing.deck_forecast:build_deck_forecast",
+            builder="agents.policies.deck_forecast:build_deck_forecast",
             summary="the deck oracle with the deck's future replaced by the ship's helideck "
             "forecast",
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
@@ -212,7 +212,7 @@ POLICIES: dict[str, PolicySpec] = {
             "deck-forecast-onboard",
             kind="heuristic",
             status="research",
-            builder="agents.timing.deck_forecast:build_deck_forecast_onboard",
+            builder="agents.policies.deck_forecast:build_deck_forecast_onboard",
             summary="the helideck forecast's look-ahead as a model the drone carries (its own "
             "estimates, uncertain drag and thrust)",
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),

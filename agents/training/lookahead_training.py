@@ -1,23 +1,23 @@
 """An offline DQN on the look-ahead's transitions: SB3's DQN fitted on recorded episodes.
 
-Online, a DQN on :class:`~agents.timing.lookahead.LookaheadTimingWrapper` learns from the one action
-it took at each check, and each check costs four descents of look-ahead (~0.7 s of CPU): in
+Online, a DQN on :class:`~agents.policies.lookahead.LookaheadTimingWrapper` learns from the one
+action it took at each check, and each check costs four descents of look-ahead (~0.7 s of CPU): in
 50 minutes on this machine it saw some 5 000 checks and still committed at the first or
 second (73 % at its 30-episode evaluations, README).
-:func:`agents.timing.lookahead_data.collect_transitions` records **both** actions' outcomes at
+:func:`agents.training.lookahead_data.collect_transitions` records **both** actions' outcomes at
 every check of whole episodes instead (the commit tried
 in a saved copy with the episode's own future, the wait played on), so every check labels
 the commit, and the DQN is fitted on that fixed replay buffer: SB3's own Q-learning update
 (:meth:`stable_baselines3.DQN.train`, its loss, optimiser and target network), run for as many
 gradient steps as it takes, with no further simulation.  Recorded episodes held out by seed
-score each model exactly (:func:`agents.timing.lookahead_data.replay_success`: a policy's path
+score each model exactly (:func:`agents.training.lookahead_data.replay_success`: a policy's path
 through a recorded episode is the recorded one up to its commit).  With
 ``offline.ensemble: K``, K DQNs of consecutive seeds are fitted side by side and scored, and
 decide, by their mean Q-values;
 the model shipped is one SB3 DQN distilled from that mean (:func:`distil`), so the policy
 that loads it is unchanged.
 
-``python -m agents.timing.lookahead_training
+``python -m agents.training.lookahead_training
 --config configs/train/timing_dqn_lookahead_offline.yaml --data results/lookahead/*.npz
 --out results/train/timing_dqn_lookahead_offline``
 """
@@ -33,11 +33,11 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from agents.policy_registry import make_env_and_policy
-from agents.timing.cards import card_for_training, merge_cards, write_metadata
-from agents.timing.lookahead import LookaheadSettings
-from agents.timing.lookahead_data import load_transitions, replay_success
-from agents.training import algorithm_kwargs, load_train_config
+from agents.common.cards import card_for_training, merge_cards, write_metadata
+from agents.policies.lookahead import LookaheadSettings
+from agents.policies.registry import make_env_and_policy
+from agents.training.lookahead_data import load_transitions, replay_success
+from agents.training.trainer import algorithm_kwargs, load_train_config
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS
@@ -445,7 +445,7 @@ def train_offline(
 
 def sign_card(config: Any, data: dict[str, np.ndarray], scenario: str | None = None) -> Any:
     """The card of a model fitted on ``data``: signed by the environment of each scenario and
-    estimator in the records (:func:`agents.timing.cards.merge_cards`: a fit on the ship's
+    estimator in the records (:func:`agents.common.cards.merge_cards`: a fit on the ship's
     and the bench's episodes knows both timing tasks), or by ``scenario``'s alone (the YAML's
     ``offline.scenario``, with its default estimator)."""
 
@@ -525,7 +525,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     parser = argparse.ArgumentParser(
-        prog="python -m agents.timing.lookahead_training", description=__doc__.split("\n\n")[0]
+        prog="python -m agents.training.lookahead_training", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument("--config", required=True)
     parser.add_argument("--data", nargs="+", required=True)

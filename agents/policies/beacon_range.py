@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.align_descend import normalise_setpoint
-from agents.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
+from agents.policies.align_descend import normalise_setpoint
+from agents.policies.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
 from estimation.landing_target import (
     ACCEPTED,
     INITIALISED,
@@ -84,7 +84,8 @@ class BeaconRangeConfig:
     k_xy: float = 0.8
     max_horizontal_speed: float = 1.0
     climb_speed: float = 1.0
-    #: the attitude filter's accelerometer gain, 1/s (see agents.svgs_routine.AttitudeFilter)
+    #: the attitude filter's accelerometer gain, 1/s (see
+    #: agents.policies.svgs_routine.AttitudeFilter)
     attitude_gain: float = 0.2
     #: the landing-target filter (gate in standard deviations: 10, the paper's)
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
@@ -278,5 +279,5 @@ def make_beacon_range(env: Any, config: BeaconRangeConfig | None = None) -> Beac
 
 
 def build_beacon_range(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
-    """``beacon-range`` (:mod:`agents.policy_registry`'s builder)."""
+    """``beacon-range`` (:mod:`agents.policies.registry`'s builder)."""
     return make_beacon_range(env)

@@ -2,9 +2,9 @@
 
 In simulation the touchdown of a commit *now* can be tried and undone: at every decision of a
 waiting episode, the commit is run in a snapshot of the environment
-(:mod:`landing_env.envs.snapshot`, as :mod:`agents.timing.oracle` does), its touchdown's margin
-(:func:`agents.timing.oracle.touchdown_margin`: the smallest relative slack of the normal speed, the
-deck tilt and the relative attitude) is recorded beside that decision's observation, and the
+(:mod:`landing_env.envs.snapshot`, as :mod:`agents.policies.oracle` does), its touchdown's margin
+(:func:`agents.policies.oracle.touchdown_margin`: the smallest relative slack of the normal speed,
+the deck tilt and the relative attitude) is recorded beside that decision's observation, and the
 episode goes on as if nothing had been tried.  A trained policy sees one commit per episode;
 these labels judge every decision, so a commit rule can be replayed offline on them
 (:func:`replay_rule`), which is how ``benchmarks/bench_touchdown_prediction.py`` measures
@@ -22,8 +22,8 @@ import gymnasium as gym
 import numpy as np
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.timing.oracle import touchdown_margin
-from agents.timing.sampler import SENSING_PROFILES
+from agents.policies.oracle import touchdown_margin
+from agents.training.sampler import SENSING_PROFILES
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import require_choice, require_range
 from landing_env.scenarios import SCENARIOS, TIMING_TASK
@@ -38,7 +38,7 @@ class LabelSet:
     """Observations of the timing task and the touchdown of a commit at each."""
 
     observations: np.ndarray
-    #: :func:`agents.timing.oracle.touchdown_margin`, clipped below at :data:`MIN_MARGIN`
+    #: :func:`agents.policies.oracle.touchdown_margin`, clipped below at :data:`MIN_MARGIN`
     margin: np.ndarray
     success: np.ndarray
     deck_tilt_deg: np.ndarray
@@ -78,7 +78,7 @@ def make_timing_env(
     overrides: dict[str, Any] | None = None,
 ) -> Any:
     """The timing environment of ``scenario`` under the sensing profile ``sensing``
-    (:data:`agents.timing.sampler.SENSING_PROFILES`), built as the evaluation builds it
+    (:data:`agents.training.sampler.SENSING_PROFILES`), built as the evaluation builds it
     (``overrides`` under ``timing.`` set the timing task, e.g. its descent)."""
     require_choice("sensing", sensing, tuple(SENSING_PROFILES))
     require_choice("scenario", scenario, tuple(SCENARIOS))

@@ -18,9 +18,9 @@ from rich.table import Table
 from tqdm import tqdm
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.align_descend import AlignDescendPolicy
 from agents.evaluation.landing import HELD_OUT_SEED
-from agents.policy_registry import default_policy, make_env_and_policy
+from agents.policies.align_descend import AlignDescendPolicy
+from agents.policies.registry import default_policy, make_env_and_policy
 from landing_env.errors import ConfigError, require_choice
 
 
@@ -219,7 +219,7 @@ def run_demo(
 
 
 # ---------------------------------------------------------------------------------------------
-# Part 2: the trained landing-timing policy on a sea-state deck (see agents/timing/policies.py)
+# Part 2: the trained landing-timing policy on a sea-state deck (see agents/policies/timing.py)
 @dataclass
 class TimingDemoLog:
     """Every control period of a DeckLandingTiming-v0 episode, and its end."""
@@ -268,7 +268,7 @@ def run_timing_demo(
     deck and lands.
 
     The camera is rendered and the tag detected for real.  ``policy_name`` None picks the
-    scenario's recommended policy (:func:`agents.policy_registry.default_policy`: ``predictive``
+    scenario's recommended policy (:func:`agents.policies.registry.default_policy`: ``predictive``
     on the bench) with its own estimator and settings; ``deck-landing demo --sensors
     realistic`` flies it under realistic sensing.  Writes ``timing_camera.mp4`` and
     ``timing_trajectory.png``.  The seed is offset into the held-out range, so that the

@@ -3,7 +3,7 @@
 The model maps the observation (the estimated deck pose, the ToF ranges, the IMU, the drone's
 own velocity and attitude, stacked over the last ``frame_stack`` steps as SB3's
 ``VecFrameStack`` stacks them in training) to the Box(4) velocity set-point.  Its card
-(:mod:`agents.timing.cards`) records the id, the observation's keys and stacking, the
+(:mod:`agents.common.cards`) records the id, the observation's keys and stacking, the
 estimator and the sensing it was trained on, and is checked against the environment on load.
 
 Train one with ``deck-landing train landing --config configs/train/lander_sac.yaml``.
@@ -16,14 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from agents.policy_registry import MODEL_DIR
-from agents.timing.cards import (
+from agents.common.cards import (
     METADATA_NAME,
     check_compatible,
     env_signature,
     model_class,
     read_metadata,
 )
+from agents.policies.registry import MODEL_DIR
 from landing_env.errors import ConfigError
 
 

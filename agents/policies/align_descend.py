@@ -1,7 +1,7 @@
 """``align-descend``: the scripted lander of ``DeckLanding`` (Box actions).
 
 Visual servoing on the estimated deck pose: centre over the tag while descending to a hold
-height, flare there until a calm window is predicted (:mod:`agents.calm_window`), then the
+height, flare there until a calm window is predicted (:mod:`agents.policies.calm_window`), then the
 final descent to touchdown.
 """
 
@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.calm_window import CalmConfig, CalmPrediction, predict_calm
+from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from estimation.frames import camera_to_heading_xy
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint

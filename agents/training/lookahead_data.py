@@ -1,12 +1,12 @@
 """The look-ahead's offline data: both actions' outcomes at every check, recorded and read back.
 
 :func:`collect_transitions` flies whole episodes of the timing task under the look-ahead
-(:class:`~agents.timing.lookahead.LookaheadTimingWrapper`) and records, at every check, the
+(:class:`~agents.policies.lookahead.LookaheadTimingWrapper`) and records, at every check, the
 observation with the outcome of a commit now (tried in a saved copy of the episode) and of a
 wait; :func:`load_transitions` reads such files back (with fewer draws, or the HMS report
 added, where the look-ahead asked for differs), and :func:`replay_success` scores a policy on
-them exactly.  The data of the offline DQN (:mod:`agents.timing.lookahead_training`).
-``python -m agents.timing.lookahead_data collect`` records a file.
+them exactly.  The data of the offline DQN (:mod:`agents.training.lookahead_training`).
+``python -m agents.training.lookahead_data collect`` records a file.
 """
 
 from __future__ import annotations
@@ -18,10 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.policy_registry import make_env_and_policy
-from agents.timing.cards import sensing_profile
-from agents.timing.deck_forecast import episode_monitor
-from agents.timing.lookahead import (
+from agents.common.cards import sensing_profile
+from agents.policies.deck_forecast import episode_monitor
+from agents.policies.lookahead import (
     LOOKAHEAD_FEATURES,
     LookaheadSettings,
     LookaheadTimingWrapper,
@@ -29,8 +28,9 @@ from agents.timing.lookahead import (
     hms_report_features,
     in_flight,
 )
-from agents.timing.oracle import TriedCommit
-from agents.timing.sampler import SENSING_PROFILES
+from agents.policies.oracle import TriedCommit
+from agents.policies.registry import make_env_and_policy
+from agents.training.sampler import SENSING_PROFILES
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS
@@ -71,18 +71,19 @@ def collect_transitions(
 
     Each episode holds to its wait limit; at every check the look-ahead's observation is
     recorded with the reward of a commit now, tried with the episode's own future in a saved
-    copy (as :class:`agents.timing.oracle.OracleTimingPolicy` tries it), and with the wait's reward
+    copy (as :class:`agents.policies.oracle.OracleTimingPolicy` tries it), and with the wait's
+    reward
     and the next check's observation.  The episode then goes on as if it waited, so any policy
     of the wrapper can be replayed exactly on the file (:func:`replay_success`): the states on
     its path and their observations are the ones recorded.  Each check's draws are kept
     (:data:`DRAW_KEYS`), so the file also serves a look-ahead of fewer draws.  The file is
     rewritten after every episode (an interrupted run keeps what it has).
 
-    ``sensing`` names a profile of :data:`agents.timing.sampler.SENSING_PROFILES`
+    ``sensing`` names a profile of :data:`agents.training.sampler.SENSING_PROFILES`
     (``realistic-2x``: twice the realistic noise); the file records that name (with the
     scenario's lens where it is not the standard one: ``realistic-2x,lens=wide``).  Without it
     the ``sensors`` default applies (``DECK_LANDING_SENSORS``); the file records
-    :func:`agents.timing.cards.sensing_profile` either way.
+    :func:`agents.common.cards.sensing_profile` either way.
 
     ``sea``: a member of a training family of seas (:mod:`landing_env.sea.training_seas`)
     flown on its scenario (``scenario`` must be the member's) with its sea's overrides and
@@ -302,7 +303,7 @@ def open_record(path: str | Path) -> Any:
         raise ConfigError("data", f"{path} is not a look-ahead record (.npz): {error}") from error
     refusal = ConfigError(
         "data",
-        f"{path} is not a look-ahead record (python -m agents.timing.lookahead_data collect "
+        f"{path} is not a look-ahead record (python -m agents.training.lookahead_data collect "
         "writes them)",
     )
     if not isinstance(data, np.lib.npyio.NpzFile):
@@ -319,7 +320,7 @@ def load_transitions(
     """The transitions of several files, concatenated; they must share their look-ahead, and
     an episode (its seed) may be in one file only, whatever its scenario.  Each record also
     gets its file's ``scenario``, the ``estimator`` observed (a file without one: the
-    scenario's own) and the ``sensing`` profile (:func:`agents.timing.cards.sensing_profile`;
+    scenario's own) and the ``sensing`` profile (:func:`agents.common.cards.sensing_profile`;
     a file without one: ``unknown``).  ``settings``: the look-ahead to see them with, the
     files' or the same with fewer draws (:func:`with_draws`), or with the HMS report where
     the files have none (:func:`with_hms_report`)."""
@@ -408,13 +409,13 @@ def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.timing.lookahead_data collect``: record transitions
-    (:func:`collect_transitions`); ``python -m agents.timing.lookahead_training`` fits a DQN
-    on them offline (:func:`agents.timing.lookahead_training.train_offline`)."""
+    """``python -m agents.training.lookahead_data collect``: record transitions
+    (:func:`collect_transitions`); ``python -m agents.training.lookahead_training`` fits a DQN
+    on them offline (:func:`agents.training.lookahead_training.train_offline`)."""
     import argparse
 
     parser = argparse.ArgumentParser(
-        prog="python -m agents.timing.lookahead_data", description=main.__doc__
+        prog="python -m agents.training.lookahead_data", description=main.__doc__
     )
     sub = parser.add_subparsers(dest="command", required=True)
     collect = sub.add_parser("collect", help="both actions' outcomes at every check")
