@@ -422,8 +422,8 @@ def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
 
 
 def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_contact():
-    from landing_env.timing.config import TimingConfig
-    from landing_env.timing.guidance_gains import GuidanceGains
+    from landing_env.guidance_gains import GuidanceGains
+    from landing_env.timing_config import TimingConfig
 
     timed = GuidanceGains(descent_profile="timed")
     config = TimingConfig(guidance=timed, contact_window_s=[1.2, 1.5])
@@ -445,7 +445,7 @@ def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_co
 )
 def test_a_bad_contact_window_is_refused_naming_the_key(window, extra, key):
     from landing_env.config_loading import build_dataclass
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     data = {"guidance": {"descent_profile": "timed"}, "contact_window_s": window}
     data.update(extra)
@@ -636,7 +636,7 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
 
 def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
     from agents.common.cards import descent_signature
-    from landing_env.timing.guidance_gains import GuidanceGains
+    from landing_env.guidance_gains import GuidanceGains
 
     gains = GuidanceGains(descent_profile="timed")
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
@@ -693,7 +693,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
     from dataclasses import fields
 
     from landing_env.config_loading import build_dataclass
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     numeric = [
         f.name
@@ -813,7 +813,7 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
 
     import landing_env  # noqa: F401
     from landing_env.errors import ConfigError
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     with pytest.raises(ConfigError, match="observation"):
         TimingConfig(observation="chances")
@@ -829,7 +829,7 @@ def test_a_model_card_tells_the_prediction_observation_from_the_history():
     from agents.common.cards import observation_signature
     from landing_env.config_loading import build_dataclass
     from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     history = {**BENCH_TIMING, **PREDICTIVE_TIMING}
     prediction = {**history, "observation": "prediction"}

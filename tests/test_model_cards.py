@@ -26,7 +26,7 @@ from agents.policies.registry import make_env_and_policy, make_policy
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, shipped_timing_model
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.timing.config import TimingConfig
+from landing_env.timing_config import TimingConfig
 
 #: the shipped model of the svgs-routine's commit was trained on the range-scheduled descent
 RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}

@@ -12,10 +12,10 @@ import pytest
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import ControllerGains
 from landing_env.timing.deck_tracker import OwnState
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 
 DT = 0.05
 

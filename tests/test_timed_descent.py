@@ -18,9 +18,9 @@ from agents.common.cards import (
 from agents.policies.timing import SHIPPED_TIMING_MODEL
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS, dotted
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.timed_descent import timed_descent_reference
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}

@@ -230,7 +230,7 @@ def test_the_randomised_predictive_yaml_flies_the_policys_settings_over_each_own
     states, each reading its own predictor (``tilt_model: scenario``)."""
     from landing_env.config_loading import build_dataclass
     from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     config = load_train_config(CONFIG.with_name("timing_dqn_predictive_randomised.yaml"))
     written = build_dataclass(TimingConfig, config.settings.env_kwargs["timing"], "timing")

@@ -48,6 +48,14 @@ def test_a_training_member_builds_its_sea_and_is_no_held_out_sea(family, member)
         assert getattr(owner, key.rsplit(".", 1)[1]) == value, key
 
 
+@pytest.mark.parametrize(("family", "member"), MEMBERS, ids=lambda v: getattr(v, "name", v))
+def test_a_member_is_flown_on_its_scenarios_config(family, member) -> None:
+    """member_config loads the shipped config named as the scenario, as the scenario does."""
+    assert SCENARIOS[member.scenario].config == member.scenario
+    expected = load_config(SCENARIOS[member.scenario].config, overrides=member.overrides)
+    assert member_config(member) == expected
+
+
 def test_the_bench_family_spans_spectra_headings_speeds_and_ramps() -> None:
     seas = [
         _sea(load_config(SCENARIOS[m.scenario].config, overrides=m.overrides))

@@ -149,7 +149,7 @@ def descent_signature(
     opportunity_s: float = 1.0,
     contact_times_s: tuple[float, ...] = (),
 ) -> dict[str, Any]:
-    """The final descent a commit starts (:class:`~landing_env.timing.guidance_gains.GuidanceGains`,
+    """The final descent a commit starts (:class:`~landing_env.guidance_gains.GuidanceGains`,
     and the timing task's wave-off): a timing policy learns how far ahead the touchdown comes
     and whether a bad commit is waved off, so another descent is another task even where the
     observation's layout is the same.  ``contact_times_s``: the contact times a commit
@@ -192,7 +192,7 @@ def descent_signature(
 def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
     """Every setting that changes what a timing observation's values mean.
 
-    ``timing`` is a :class:`~landing_env.timing.config.TimingConfig`; the layout's own constants
+    ``timing`` is a :class:`~landing_env.timing_config.TimingConfig`; the layout's own constants
     (features, scales, bounds) are included so that a change to them is caught too.
     """
 

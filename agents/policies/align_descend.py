@@ -18,10 +18,10 @@ from estimation.frames import camera_to_heading_xy
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import require_range
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.history import DeckMotionHistory
 
 

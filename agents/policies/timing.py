@@ -26,10 +26,10 @@ from agents.policies.registry import MODEL_DIR
 from estimation.deck_prediction import LinearTiltPredictor
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
-from landing_env.timing.config import TimingConfig
 from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import TimingObservationLayout
 from landing_env.timing.stopping import predictor_stopping_values
+from landing_env.timing_config import TimingConfig
 
 
 def shipped_timing_model(algo: str) -> Path:

@@ -38,7 +38,7 @@ from landing_env.config import load_config
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS, dotted, landing_overrides
-from landing_env.timing.config import CAMERA_BELOW_COM_M
+from landing_env.timing_config import CAMERA_BELOW_COM_M
 
 ENV_ID = "DeckLandingTiming-v0"
 

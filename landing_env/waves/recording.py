@@ -22,7 +22,7 @@ What the samples are (``frame``):
 * ``vessel``: the vessel's (surge, sway, heave, roll, pitch, yaw) at its centre of motion,
   as a ship's motion monitoring records it; the helideck at ``helideck_position_m`` (x
   forward, y port, z up from that centre) moves with it as a rigid body, exactly as the
-  simulated vessel carries its deck (:func:`landing_env.sea.ship.helideck_poses`).
+  simulated vessel carries its deck (:func:`landing_env.waves.ship.helideck_poses`).
 
 Where an episode starts in the recording (``start``): at the file's own time stamps
 (``file_time``: episode time t is file time t, so a log stamped from 10 s holds its first
@@ -45,7 +45,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.ship import helideck_poses
+from landing_env.waves.ship import helideck_poses
 
 CSV_HEADER: tuple[str, ...] = ("t", "x", "y", "z", "roll", "pitch", "yaw")
 #: ``motion.csv.end``: after the last sample, hold the last pose or loop to the first

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.timing.guidance_gains import GuidanceGains
+from landing_env.guidance_gains import GuidanceGains
 
 #: the wave-off's predictors of the deck tilt at the contact (``TimingConfig.wave_off_predictor``)
 WAVE_OFF_PREDICTORS = ("linear", "quadratic", "model")

@@ -135,7 +135,7 @@ class WaveComponents:
         self.omega = 2.0 * math.pi * frequency
         self.m0 = float(np.sum(amplitude**2) / 2.0)
         self.elevation_phasors = amplitude * np.exp(1j * phase)
-        #: a stationary sea met by a ship at rest (see landing_env.sea.generator for others)
+        #: a stationary sea met by a ship at rest (see landing_env.waves.generator for others)
         self.steady = True
         self.encounter_omega = self.omega
 

@@ -2,9 +2,9 @@
 
 :class:`SeaConfig` holds what a sea is (a WMO sea state or Hs and Tp, the JONSWAP spectrum's
 discretisation, the waves' mean direction and spread, and the generator of other seas,
-:mod:`landing_env.sea.generator`) and checks it once; the bench's
+:mod:`landing_env.waves.generator`) and checks it once; the bench's
 :class:`~landing_env.stewart.motion.SeaStateConfig` and the ship's
-:class:`~landing_env.sea.ship.ShipMotionConfig` add their vessel's response to it.
+:class:`~landing_env.waves.ship.ShipMotionConfig` add their vessel's response to it.
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.generator import SeaGeneratorConfig, require_generator
-from landing_env.sea.spectrum import SEA_STATE_TABLE, JonswapSeaFields
+from landing_env.waves.generator import SeaGeneratorConfig, require_generator
+from landing_env.waves.spectrum import SEA_STATE_TABLE, JonswapSeaFields
 
 
 @dataclass(frozen=True)
 class SeaConfig(JonswapSeaFields):
     """A JONSWAP sea (or the generator's): give ``sea_state`` (WMO code, typical Hs and Tp from
-    :data:`~landing_env.sea.spectrum.SEA_STATE_TABLE`) and/or explicit
+    :data:`~landing_env.waves.spectrum.SEA_STATE_TABLE`) and/or explicit
     ``significant_height_m`` and ``peak_period_s``, which take precedence."""
 
     #: the Hs (m) and Tp (s) a vessel of this kind is modelled for
@@ -32,7 +32,7 @@ class SeaConfig(JonswapSeaFields):
     significant_height_m: float | None = None
     peak_period_s: float | None = None
     #: JONSWAP peak enhancement factor (1 gives Pierson-Moskowitz); None: by the DNV-RP-C205
-    #: rule from Hs and Tp (:func:`~landing_env.sea.spectrum.dnv_gamma`: 1 for the tabled
+    #: rule from Hs and Tp (:func:`~landing_env.waves.spectrum.dnv_gamma`: 1 for the tabled
     #: sea states 3-6, whose Tp/sqrt(Hs) >= 5)
     gamma: float | None = None
     #: number of wave components (one per frequency bin)
@@ -46,7 +46,7 @@ class SeaConfig(JonswapSeaFields):
     #: half-width of the uniform random spread of component directions (short-crested sea)
     direction_spread_deg: float = 30.0
     #: other seas than the JONSWAP above: bimodal spectra, vessel speed, a changing sea state
-    #: (landing_env/sea/generator.py); its defaults keep the JONSWAP sea at zero speed
+    #: (landing_env/waves/generator.py); its defaults keep the JONSWAP sea at zero speed
     generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)
 
     def check_sea(self) -> None:

@@ -6,7 +6,7 @@ turn the single JONSWAP sea of a scenario into a family of other seas:
 * **Bimodal spectra, swell plus wind sea** (``spectrum``): Torsethaugen's from the
   scenario's Hs and Tp, or an Ochi-Hubble of the scenario's Hs with its wind sea peaking at
   Tp and a swell of ``swell_peak_period_s`` holding ``swell_energy_fraction`` of the
-  variance (formulas and references: :mod:`landing_env.sea.bimodal`, DNV-RP-C205 Sec.
+  variance (formulas and references: :mod:`landing_env.waves.bimodal`, DNV-RP-C205 Sec.
   3.5.7).  The wind sea travels towards ``wave_direction_deg`` with the scenario's spread,
   the swell towards ``swell_direction_deg`` with its own, narrower, ``swell_spread_deg``.
 * **Other headings and ship speeds**: the heading is ``wave_direction_deg`` (and the
@@ -16,7 +16,7 @@ turn the single JONSWAP sea of a scenario into a family of other seas:
   possibly negative, i.e. the ship overtakes the waves).  The motion is the same
   superposition with w_e in time; the vessel's own oscillators (its heave, pitch and roll
   resonances and their damping) respond at w_e while the excitation keeps the wave's
-  geometry (wave number k): :func:`landing_env.sea.ship.vessel_raos`.
+  geometry (wave number k): :func:`landing_env.waves.ship.vessel_raos`.
 * **A sea state that changes during the episode**: from ``ramp_start_s`` the significant
   height and peak period go from the scenario's to ``hs_end_m`` and ``tp_end_s`` over
   ``ramp_duration_s`` along a raised cosine (smooth at both ends).  The sea is then an
@@ -26,7 +26,7 @@ turn the single JONSWAP sea of a scenario into a family of other seas:
   spectrum's peaks over the whole ramp.  The vessel's response to a component is its RAO
   times the slowly changing amplitude (the ramp lasts many wave periods).
 
-Each wave system is realised as in :class:`~landing_env.sea.spectrum.WaveComponents`: one
+Each wave system is realised as in :class:`~landing_env.waves.spectrum.WaveComponents`: one
 component per frequency bin, its frequency drawn inside the bin, a random phase and a
 direction within the spread, all from the seeded generator, its amplitudes normalised so the
 discrete variance of the system is exactly its Hs_j^2 / 16.  A generator left at its
@@ -42,13 +42,13 @@ from typing import Literal
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.bimodal import (
+from landing_env.waves.bimodal import (
     SpectralPart,
     fully_developed_period_s,
     ochi_hubble_parts,
     torsethaugen_parts,
 )
-from landing_env.sea.spectrum import WaveComponents
+from landing_env.waves.spectrum import WaveComponents
 
 GRAVITY = 9.80665
 SPECTRA: tuple[str, ...] = ("jonswap", "torsethaugen", "ochi_hubble")
@@ -183,7 +183,7 @@ def require_generator(value: SeaGeneratorConfig | dict) -> SeaGeneratorConfig:
 class GeneratedSea:
     """A seeded sea of one or two wave systems, possibly changing, met at a ship speed.
 
-    The interface of :class:`~landing_env.sea.spectrum.WaveComponents` (``omega``,
+    The interface of :class:`~landing_env.waves.spectrum.WaveComponents` (``omega``,
     ``directions``, ``elevation_phasors`` at t = 0, ``m0``, ``elevation``) plus
     ``encounter_omega`` (the frequencies met by the moving ship, rad/s), ``steady``, and for
     a changing sea ``unit_phasors`` and the amplitudes in time (``amplitudes``,

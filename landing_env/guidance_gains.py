@@ -1,6 +1,6 @@
 """The gains and limits of the deck-relative guidance (:class:`GuidanceGains`).
 
-The config's ``timing.guidance`` section (:class:`~landing_env.timing.config.TimingConfig`);
+The config's ``timing.guidance`` section (:class:`~landing_env.timing_config.TimingConfig`);
 the guidance that flies with them is :class:`~landing_env.timing.guidance.DeckGuidance`.
 """
 
@@ -9,8 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.timing.deck_tracker import TRACKER_MODELS
 
+#: the deck tracker's motion models (:attr:`GuidanceGains.tracker_model`,
+#: :class:`~landing_env.timing.deck_tracker.DeckTracker`)
+TRACKER_MODELS = ("velocity", "acceleration")
 #: the final descent's profiles (:attr:`GuidanceGains.descent_profile`)
 DESCENT_PROFILES = ("range", "timed")
 #: what the deck-frame guidance does once the deck's height track is lost

@@ -2,7 +2,7 @@
 
 Both are written as a list of :class:`SpectralPart`, one per wave system (the wind sea and
 the swell), each with its own significant height and peak period, so that the sea generator
-(:mod:`landing_env.sea.generator`) can give each system its own direction.  Densities are
+(:mod:`landing_env.waves.generator`) can give each system its own direction.  Densities are
 one-sided, per hertz: S(f) in m^2/Hz, with m0 = integral S(f) df = Hs^2 / 16.
 
 References::

@@ -2,7 +2,7 @@
 
 The vessel: a 10-40 m monohull (defaults: a 30 m patrol or crew-transfer vessel, 7 m beam,
 1.8 m draught, block coefficient 0.45, metacentric height 1.2 m), hove-to (zero speed) in a
-short-crested JONSWAP sea (:class:`~landing_env.sea.spectrum.WaveComponents`, gamma by the
+short-crested JONSWAP sea (:class:`~landing_env.waves.spectrum.WaveComponents`, gamma by the
 DNV-RP-C205 rule).  Its response amplitude operators (RAOs), per wave component of
 frequency w, wave number k = w^2/g (deep water) and direction mu (the direction the waves
 travel towards, counter-clockwise from the bow: 0 following, 180 head seas):
@@ -51,19 +51,19 @@ from typing import ClassVar
 import numpy as np
 
 from landing_env.errors import ConfigError, require_range
-from landing_env.sea.generator import (
+from landing_env.waves.generator import (
     GeneratedSea,
     make_sea,
 )
-from landing_env.sea.sea_config import SeaConfig
-from landing_env.sea.spectrum import WaveComponents
+from landing_env.waves.sea_config import SeaConfig
+from landing_env.waves.spectrum import WaveComponents
 
 GRAVITY = 9.80665
 
 
 @dataclass(frozen=True)
 class ShipMotionConfig(SeaConfig):
-    """A sea (:class:`~landing_env.sea.sea_config.SeaConfig`), a 10-40 m vessel in it, and
+    """A sea (:class:`~landing_env.waves.sea_config.SeaConfig`), a 10-40 m vessel in it, and
     where its helideck is (see the module)."""
 
     HS_RANGE_M: ClassVar[tuple[float, float]] = (0.0, 16.0)
