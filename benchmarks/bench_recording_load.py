@@ -2,7 +2,7 @@
 
 Measures, on this machine (reported, never asserted):
 
-* the CSV read by numpy's C parser (``landing_env.sea.recording``), cold (first read in the
+* the CSV read by numpy's C parser (``landing_env.waves.recording``), cold (first read in the
   process) and again (the per-process cache);
 * the row-by-row ``csv`` module parse it replaced (the slow path kept to name a bad line);
 * the same recording as ``.npy`` (read without parsing);
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from landing_env.sea import recording
-from landing_env.sea.recording import (
+from landing_env.waves import recording
+from landing_env.waves.recording import (
     CsvMotionConfig,
     csv_motion_from_config,
     load_recording,

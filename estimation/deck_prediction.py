@@ -15,7 +15,7 @@ forecasting for real-time control of wave energy converters*, IEEE Trans. Sustai
 once, and its held-out residuals give the prediction's covariance.
 
 :class:`LinearMotionPredictor` is that predictor for any of the pose's values (the ship's
-helideck forecast, :mod:`agents.timing.deck_forecast`, predicts surge, sway, heave, roll and pitch
+helideck forecast, :mod:`agents.policies.deck_forecast`, predicts surge, sway, heave, roll and pitch
 8 s ahead from the ship's own motion record); :class:`LinearTiltPredictor` is the one of roll
 and pitch.  It maps the last ``window_s`` of the deck's (levelled) pose, the
 ``channels`` it was fitted on (roll and pitch, and the position: heave, surge and sway answer
@@ -125,7 +125,8 @@ class LinearMotionPredictor:
     ``horizons_s[k]``: ``coefficients[k]`` (features, T) and the held-out residual
     ``covariance[k]`` (T, T) of the T ``targets``.  :class:`LinearTiltPredictor` is the one of
     roll and pitch that the timing task reads; the ship's helideck forecast
-    (:mod:`agents.timing.deck_forecast`) predicts the whole pose from the ship's own motion record.
+    (:mod:`agents.policies.deck_forecast`) predicts the whole pose from the ship's own motion
+    record.
     """
 
     window_s: float

@@ -30,14 +30,13 @@ from landing_env.physics.controller import ControllerGains
 from landing_env.physics.wind import WindConfig
 from landing_env.resources import config_dir
 from landing_env.scene.deck import DeckSurfaceConfig
-from landing_env.sea.deck_mount import DECK_MOUNTS
 from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.imu import ImuConfig
 from landing_env.sensors.rangefinder import RangefinderConfig
 from landing_env.sensors.tof import TofConfig
 from landing_env.stewart.kinematics import StewartGeometry
 from landing_env.stewart.motion import MotionConfig
-from landing_env.timing.config import TimingConfig
+from landing_env.timing_config import TimingConfig
 from landing_env.vision_link import VisionLinkConfig
 
 #: Scenario and training configs shipped with the project (found as package data in a
@@ -52,6 +51,10 @@ LENS_SETS = ("standard", "wide")
 #: the environment variable ``deck-landing --sensors`` sets (worker processes inherit it);
 #: it is the default of the ``sensors`` key
 SENSORS_ENV = "DECK_LANDING_SENSORS"
+
+#: ``deck_mount``: the deck on the Stewart platform, or on a ship's helideck
+#: (:class:`~landing_env.sea.deck_mount.ShipDeck`)
+DECK_MOUNTS: tuple[str, ...] = ("stewart", "ship")
 
 #: Where the estimators' calibrations come from: a calibration file or the exact model.
 CALIBRATION_SOURCES = ("file", "exact")
@@ -318,7 +321,7 @@ class DeckLandingConfig:
     lens: str = "standard"
     #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
     #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
-    #: ``python -m agents.timing.deck_prediction_fit fit``); ``timing.tilt_model: scenario``
+    #: ``python -m agents.training.deck_prediction_fit fit``); ``timing.tilt_model: scenario``
     #: reads it.  Empty: none fitted
     deck_predictor: str = ""
     #: the seas the ship's helideck forecast (:mod:`landing_env.sea.hms_forecast`, read by the

@@ -7,11 +7,11 @@ task, the scenario's timing settings.  It registers one id per task it serves
 ``deck-landing evaluate landing --scenario bench-ss4`` and
 ``gym.make("DeckLandingTiming-BenchSS4-v6")`` build the same environment; a policy lays its own
 settings (its estimator, its timing options) over the id's with the same dotted overrides
-(:mod:`agents.policy_registry`).
+(:mod:`agents.policies.registry`).
 
 Versions follow Gymnasium's rule: a version is the same task, fixed; variants (the observation,
 the wave-off, the contact window) are settings of the config's ``timing`` section
-(:class:`~landing_env.timing.config.TimingConfig`), set with ``overrides={"timing.<key>": ...}``.
+(:class:`~landing_env.timing_config.TimingConfig`), set with ``overrides={"timing.<key>": ...}``.
 Each id family's history is in :data:`VERSION_HISTORY`; an id no longer registered is refused by
 Gymnasium with the latest version named.  To add a scenario, add a row to :data:`SCENARIOS`.
 """
@@ -33,7 +33,7 @@ from landing_env.config import (
 from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
 from landing_env.errors import ConfigError, require_choice
 from landing_env.sea.heldout import HELD_OUT_SEAS
-from landing_env.timing.config import SCENARIO_TILT_MODEL, TimingConfig
+from landing_env.timing_config import SCENARIO_TILT_MODEL, TimingConfig
 
 #: the top-level keys of the environment config (a keyword of ``gym.make`` for a section)
 CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))

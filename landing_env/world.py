@@ -230,7 +230,7 @@ class World:
         innovations (the present gust kept) and every sensor's noise.  The deck's motion, a
         fixed function of time since the reset, and the present state stay: a look-ahead
         from a snapshot then knows the deck's future but not the wind's (the deck oracle,
-        :mod:`agents.timing.oracle`)."""
+        :mod:`agents.policies.oracle`)."""
         streams = rng.spawn(5)
         self.wind.redraw(streams[0])
         self.camera.rng = streams[1]
@@ -265,7 +265,7 @@ class World:
     def shift_drone(self, shift_w: np.ndarray) -> None:
         """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
         without stepping time: a look-ahead's model of where the drone is
-        (:mod:`agents.timing.deck_forecast`).  A non-finite or misshapen shift is refused by
+        (:mod:`agents.policies.deck_forecast`).  A non-finite or misshapen shift is refused by
         name."""
         shift = np.asarray(shift_w, dtype=float).reshape(-1)
         if shift.shape != (3,) or not np.all(np.isfinite(shift)):

@@ -45,7 +45,7 @@ class ToyEvaluation:
 
 
 def square(x: int) -> int:
-    """A task for :func:`agents.evaluation.runner.map_tasks`."""
+    """A task for :func:`agents.common.parallel.map_tasks`."""
     return x * x
 
 

@@ -23,13 +23,13 @@ from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.align_descend import AlignDescendPolicy
 from agents.cli import main
 from agents.io.landing_target import CameraMount, VehiclePose, landing_target_fields
 from agents.io.pacing import StampPacer
 from agents.io.record import McapRecorder
 from agents.io.recording import PoseSeries, write_folder
 from agents.io.recording_source import RecordingSource
+from agents.policies.align_descend import AlignDescendPolicy
 from estimation.frames import R_BC
 from landing_env.config import SHIPPED_INTRINSICS_FILE, load_config
 

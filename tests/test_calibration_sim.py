@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from agents.calibrate import run_calibration
+from agents.calibration.simulated import run_calibration
 from agents.cli import main
 from estimation.frames import tof_positions_in_camera_frame
 from estimation.intrinsics_calibration import (

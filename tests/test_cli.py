@@ -138,7 +138,7 @@ def test_model_show_refuses_what_is_not_a_model_in_one_line(
 
 
 def test_a_model_name_is_taken_where_a_model_path_is() -> None:
-    from agents.policy_registry import MODEL_DIR, find_model, require_model
+    from agents.policies.registry import MODEL_DIR, find_model, require_model
 
     assert find_model("timing_dqn.zip") == MODEL_DIR / "timing_dqn.zip"
     assert require_model("timing-model", "timing_dqn") == str(MODEL_DIR / "timing_dqn.zip")
@@ -164,7 +164,7 @@ def test_demo_timing_part_flies_the_realistic_policy_under_realistic_sensing(
 ) -> None:
     """`deck-landing demo --sensors realistic` flies the policy trained for realistic sensing
     (once it refused the ideal-trained timing-dqn)."""
-    from agents.demo import run_timing_demo
+    from agents.cli.demo import run_timing_demo
     from landing_env.config import SENSORS_ENV
 
     monkeypatch.setenv(SENSORS_ENV, "realistic")
@@ -236,7 +236,7 @@ def test_one_flag_name_has_one_meaning_stages_is_a_number_the_rig_file_another_f
 def test_install_refuses_to_replace_a_model_a_policy_flies_unless_forced(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    from agents.policy_registry import MODEL_DIR
+    from agents.policies.registry import MODEL_DIR
 
     shipped = MODEL_DIR / "timing_dqn.zip"
     before = shipped.read_bytes()

@@ -152,7 +152,7 @@ def test_a_changed_camera_without_its_calibration_is_refused(key: str, value: fl
 
 def test_every_config_tree_built_by_the_loader_refuses_non_finite_numbers() -> None:
     from landing_env.config_loading import build_dataclass
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     with pytest.raises(ConfigError) as info:
         build_dataclass(TimingConfig, {"wait_limit_s": math.inf}, "timing")

@@ -11,13 +11,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.policy_registry import make_env_and_policy
-from agents.timing.deck_forecast import (
+from agents.policies.deck_forecast import (
     HORIZONS_S,
     DeckForecastTimingPolicy,
     OnboardModelConfig,
     fit_deck_forecast,
 )
+from agents.policies.registry import make_env_and_policy
 from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
@@ -299,7 +299,7 @@ def test_the_deck_forecast_refuses_a_forecast_of_another_rate_or_channels(small_
 
 
 def test_the_forecast_plot_draws_a_sea_the_forecast_never_saw(small_forecast, tmp_path):
-    from agents.timing.deck_forecast import plot_forecasts
+    from agents.policies.deck_forecast import plot_forecasts
 
     source = make_motion_source(_ship_motion(4), np.random.default_rng(5))
     path = plot_forecasts(small_forecast, source, "ship-ss4", str(tmp_path / "forecast.png"))

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.timing.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
+from agents.training.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
 from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
@@ -364,7 +364,7 @@ def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):
 
 # ------------------------------------------------------------------ the environment
 def _env(**timing):
-    from agents.timing.hindsight import make_timing_env
+    from agents.training.hindsight import make_timing_env
 
     return make_timing_env(
         "bench-ss4", "ideal", "truth", {f"timing.{k}": v for k, v in timing.items()}
@@ -422,8 +422,8 @@ def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
 
 
 def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_contact():
-    from landing_env.timing.config import TimingConfig
-    from landing_env.timing.guidance_gains import GuidanceGains
+    from landing_env.guidance_gains import GuidanceGains
+    from landing_env.timing_config import TimingConfig
 
     timed = GuidanceGains(descent_profile="timed")
     config = TimingConfig(guidance=timed, contact_window_s=[1.2, 1.5])
@@ -445,7 +445,7 @@ def test_the_contact_window_is_a_grid_of_contact_times_and_empty_is_the_fixed_co
 )
 def test_a_bad_contact_window_is_refused_naming_the_key(window, extra, key):
     from landing_env.config_loading import build_dataclass
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     data = {"guidance": {"descent_profile": "timed"}, "contact_window_s": window}
     data.update(extra)
@@ -461,7 +461,7 @@ def test_a_contact_window_needs_a_predictor():
 
 
 def test_each_commit_times_its_descent_to_meet_the_deck_when_the_predictor_prefers():
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     env = _env(contact_window_s=[1.2, 1.5], history_s=8.0)
     try:
@@ -486,7 +486,7 @@ def test_each_commit_times_its_descent_to_meet_the_deck_when_the_predictor_prefe
 
 # ------------------------------------------------------------------ the policy
 def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window():
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     env = _env()
     try:
@@ -497,7 +497,7 @@ def test_the_predictive_policy_needs_a_history_as_long_as_its_predictor_window()
 
 
 def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     env = _env(history_s=8.0)
     try:
@@ -515,7 +515,7 @@ def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
 
 
 def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
     from landing_env.timing.history import HISTORY_FEATURES
 
     env = _env(history_s=8.0)
@@ -536,7 +536,7 @@ def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted
 
 
 def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_the_wait_runs_out():
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     env = _env(history_s=8.0)
     try:
@@ -555,7 +555,7 @@ def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_
 def test_a_predictor_without_held_out_predictions_is_refused_by_the_policy_and_the_value_wave_off(
     tmp_path,
 ):
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     bare = LinearTiltPredictor.load(tilt_predictor_path("bench-ss4"))
     bare.heldout_means = np.zeros((0, 0, 2))
@@ -613,7 +613,7 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=_WAVE_OFF_VERSIONS[version])
     try:
@@ -635,8 +635,8 @@ def test_the_bench_id_with_the_predictive_settings_carries_the_history_and_wave_
 
 
 def test_a_model_card_records_the_predictor_a_model_wave_off_reads():
-    from agents.timing.cards import descent_signature
-    from landing_env.timing.guidance_gains import GuidanceGains
+    from agents.common.cards import descent_signature
+    from landing_env.guidance_gains import GuidanceGains
 
     gains = GuidanceGains(descent_profile="timed")
     signature = descent_signature(gains, 5.0, "model", "bench-ss4", 0.8)
@@ -693,7 +693,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
     from dataclasses import fields
 
     from landing_env.config_loading import build_dataclass
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     numeric = [
         f.name
@@ -712,7 +712,7 @@ def test_every_number_of_the_timing_settings_refuses_a_bad_value_naming_its_key(
 
 
 def test_the_evaluation_flies_the_predictive_policy_with_its_settings_and_set_overrides_win():
-    from agents.policy_registry import make_env_and_policy
+    from agents.policies.registry import make_env_and_policy
 
     env, policy = make_env_and_policy("predictive", "bench-ss4", "tight")
     try:
@@ -795,7 +795,7 @@ def test_the_history_reading_policies_refuse_a_prediction_observation_naming_the
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
     from landing_env.errors import ConfigError
 
     env = gym.make("DeckLandingTiming-BenchSS4-v6", overrides=PREDICTION)
@@ -813,7 +813,7 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
 
     import landing_env  # noqa: F401
     from landing_env.errors import ConfigError
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     with pytest.raises(ConfigError, match="observation"):
         TimingConfig(observation="chances")
@@ -826,10 +826,10 @@ def test_a_prediction_observation_needs_a_predictor_and_a_known_kind():
 
 
 def test_a_model_card_tells_the_prediction_observation_from_the_history():
-    from agents.timing.cards import observation_signature
+    from agents.common.cards import observation_signature
     from landing_env.config_loading import build_dataclass
     from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     history = {**BENCH_TIMING, **PREDICTIVE_TIMING}
     prediction = {**history, "observation": "prediction"}
@@ -870,10 +870,10 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     prediction observation read from the scenario's own predictor; a history observation (the
     v4 settings) is refused naming the key; on held-out seeds it lands at least as often as
     ``land-now``, and it runs at sea state 4 and on ideal sensing without a flag."""
+    from agents.common.cards import read_metadata
     from agents.evaluation.landing import evaluate_policy
-    from agents.policy_registry import make_env_and_policy
-    from agents.timing.cards import read_metadata
-    from agents.timing.policies import shipped_timing_model
+    from agents.policies.registry import make_env_and_policy
+    from agents.policies.timing import shipped_timing_model
     from landing_env.errors import ConfigError
 
     card = read_metadata(shipped_timing_model("dqn-predictive"))
@@ -881,7 +881,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     assert card.observation["tilt_model"] == "scenario" and card.estimator == "tight"
     # the second stage's card names its config and where it started from: the first stage's
     # final model, on the same task
-    from agents.training import load_train_config
+    from agents.training.trainer import load_train_config
 
     train = Path(__file__).resolve().parent.parent / "configs" / "train"
     first = load_train_config(train / "timing_dqn_predictive.yaml")

@@ -8,7 +8,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import landing_env  # noqa: F401
-from agents.align_descend import AlignDescendPolicy
+from agents.policies.align_descend import AlignDescendPolicy
 from landing_env.errors import ConfigError
 
 

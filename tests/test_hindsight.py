@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.timing.hindsight import (
+from agents.training.hindsight import (
     MIN_MARGIN,
     LabelSet,
     collect_labels,

@@ -12,7 +12,7 @@ from gymnasium.envs.registration import registry
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.policy_registry import (
+from agents.policies.registry import (
     DEFAULT_POLICY,
     POLICIES,
     check_registry,
@@ -125,7 +125,7 @@ def test_unknown_policies_and_scenarios_are_refused_naming_the_choices() -> None
 def test_the_readmes_which_to_use_table_is_the_registrys_recommendation() -> None:
     from pathlib import Path
 
-    from agents.policy_registry import RECOMMENDED
+    from agents.policies.registry import RECOMMENDED
 
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     rows = [line for line in readme.splitlines() if line.startswith("| ") and "% (" in line]

@@ -12,9 +12,9 @@ import yaml
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
 import landing_env  # noqa: F401
-from agents.lander import TrainedLanderPolicy, build_lander
-from agents.learning_curve import read_learning_curve
-from agents.training import load_train_config, train
+from agents.policies.lander import TrainedLanderPolicy, build_lander
+from agents.training.learning_curve import read_learning_curve
+from agents.training.trainer import load_train_config, train
 from landing_env.errors import ConfigError
 
 SHORT = {
@@ -139,7 +139,7 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
 def test_rl_zoos_env_wrapper_wraps_the_training_environments_not_the_evaluation(
     tmp_path: Path,
 ) -> None:
-    from agents.training import make_envs
+    from agents.training.trainer import make_envs
 
     wrapper = {"gymnasium.wrappers.RecordEpisodeStatistics": {"buffer_length": 7}}
     config = load_train_config(_yaml(tmp_path, env_wrapper=[wrapper]))
@@ -155,7 +155,7 @@ def test_rl_zoos_env_wrapper_wraps_the_training_environments_not_the_evaluation(
 
 
 def test_an_env_wrapper_that_does_not_import_is_refused_naming_the_key(tmp_path: Path) -> None:
-    from agents.training import make_envs
+    from agents.training.trainer import make_envs
 
     config = load_train_config(_yaml(tmp_path, env_wrapper="agents.no_such_module.Wrapper"))
     with pytest.raises(ConfigError, match="env_wrapper"):

@@ -132,3 +132,107 @@ def test_project_modules_are_imported_at_the_top_of_a_module_not_inside_function
         if in_function and not target.startswith(optional)
     ]
     assert not inside, inside
+
+
+# ------------------------------------------------------------------ the folders within a package
+#: each package's folders (and top-level modules), bottom up: a folder imports only itself and
+#: the folders of the layers below its own; the folders of one layer do not import each other
+FOLDER_LAYERS: dict[str, tuple[tuple[str, ...], ...]] = {
+    "agents": (
+        ("common",),  # model cards, the parallel runner, the user-error type
+        ("policies",),  # both tasks' policies and their registry
+        ("io",),  # recorded data, the MAVLink bridge (flies the simulator with a policy)
+        ("training", "calibration", "evaluation"),  # the roles
+        ("cli",),  # the command line: nothing imports it
+    ),
+    "landing_env": (
+        ("errors", "_quiet", "resources"),
+        # the parts' own settings and models: the waves and a ship's motion in them, the
+        # guidance's gains, the physics, the deck's surface, the vision link
+        ("config_limits", "guidance_gains", "physics", "scene", "vision_link", "waves"),
+        ("config_loading", "sensors", "stewart", "timing_config"),
+        ("config",),  # the environment config: every section's settings
+        ("sea", "touchdown"),  # the ship at sea (helideck mount, HMS, forecast); the contact
+        ("scenarios", "world"),  # the scenario table; the simulated world
+        ("calibration", "estimators"),
+        ("envs",),  # the landing task
+        ("timing",),  # the timing task, on the landing task's environment
+        ("__init__",),  # the package: registers the ids
+    ),
+}
+
+
+def _folder(module: str) -> str:
+    """The folder (or top-level module) of ``module`` within its package; ``__init__`` for
+    the package itself."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _folder_layer(package: str) -> dict[str, int]:
+    return {f: i for i, layer in enumerate(FOLDER_LAYERS[package]) for f in layer}
+
+
+def _upward_folder_imports(package: str) -> list[str]:
+    """Every import within ``package`` that runs up, or sideways within a layer, or touches a
+    folder not declared in :data:`FOLDER_LAYERS` (imports inside functions counted)."""
+    modules = _modules()
+    layer = _folder_layer(package)
+    wrong = []
+    for name, path in modules.items():
+        if name.split(".")[0] != package:
+            continue
+        here = _folder(name)
+        for target, _, line in _imports(path, modules):
+            there = _folder(target)
+            if target.split(".")[0] != package or there == here:
+                continue
+            if here not in layer or there not in layer or layer[there] >= layer[here]:
+                wrong.append(f"{name}:{line} imports {target}")
+    return wrong
+
+
+def test_agents_folders_import_only_the_layers_below_theirs() -> None:
+    """agents: common < policies < io < training, calibration, evaluation < cli."""
+    assert _upward_folder_imports("agents") == []
+
+
+def test_landing_env_folders_import_only_the_layers_below_theirs() -> None:
+    """landing_env: the waves below the deck's motion, the config below the sea and the timing
+    task, the scenario table above the sea."""
+    assert _upward_folder_imports("landing_env") == []
+
+
+def test_the_agents_command_line_is_imported_by_nothing_and_common_by_every_role() -> None:
+    modules = _modules()
+    into_cli = [
+        f"{name} imports {target}"
+        for name, path in modules.items()
+        if not name.startswith("agents.cli")
+        for target, _, _ in _imports(path, modules)
+        if target.startswith("agents.cli")
+    ]
+    assert into_cli == []
+    layers = FOLDER_LAYERS["agents"]
+    assert layers[0] == ("common",) and layers[-1] == ("cli",)
+    roles = {"training", "evaluation", "cli"}
+    assert not roles & {f for layer in layers[:2] for f in layer}, "policies under a role"
+
+
+def test_every_declared_folder_is_in_its_package() -> None:
+    for package, layers in FOLDER_LAYERS.items():
+        for folder in (f for layer in layers for f in layer):
+            path = ROOT / package / folder
+            assert path.is_dir() or path.with_suffix(".py").is_file(), path
+
+
+def test_agents_has_at_most_eight_top_level_entries() -> None:
+    """agents/ is its roles (and models/), not a heap of modules."""
+    entries = sorted(
+        p.name
+        for p in (ROOT / "agents").iterdir()
+        if p.name != "__init__.py"
+        and not p.name.startswith((".", "__pycache__"))
+        and (p.is_dir() or p.suffix == ".py")
+    )
+    assert len(entries) <= 8, entries

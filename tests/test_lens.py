@@ -126,7 +126,7 @@ def test_a_wide_lens_ship_episode_runs_to_an_outcome_with_every_observation_in_i
 
 
 def test_a_model_card_names_a_lens_other_than_the_standard_one_in_its_sensing() -> None:
-    from agents.timing.cards import sensing_profile
+    from agents.common.cards import sensing_profile
 
     assert sensing_profile(load_config("bench-ss5", {"sensors": "realistic"})) == "realistic"
     ship = load_config("ship-ss5", {"sensors": "realistic"})

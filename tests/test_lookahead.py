@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.timing.cards import card_for_training, env_signature, write_metadata
-from agents.timing.lookahead import (
+from agents.common.cards import card_for_training, env_signature, write_metadata
+from agents.policies.lookahead import (
     FAILED_SCORE,
     LOOKAHEAD_FEATURES,
     LookaheadSettings,
@@ -24,9 +24,9 @@ from agents.timing.lookahead import (
     check_features,
     find_lookahead,
 )
-from agents.timing.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
-from agents.timing.policies import TrainedTimingPolicy
-from agents.training import TrainConfig, TrainSettings
+from agents.policies.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
+from agents.policies.timing import TrainedTimingPolicy
+from agents.training.trainer import TrainConfig, TrainSettings
 from landing_env.errors import ConfigError
 
 SHIP_ID = "DeckLandingTiming-ShipSS4-v7"
@@ -283,7 +283,7 @@ def test_a_model_that_reads_the_hms_report_gets_it_in_the_bare_task_too(
         # a look-ahead without the report signs its card as before the report existed
         plain = LookaheadSettings(draws=1, check_every_s=0.3).signature()
         assert "hms_report_s" not in plain and "hms_report" not in plain
-        from agents.timing.cards import check_compatible, read_metadata
+        from agents.common.cards import check_compatible, read_metadata
 
         with pytest.raises(ConfigError) as error:
             check_compatible(
@@ -323,7 +323,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
         gym.make(SHIP_ID), forecast=small_forecast, draws=2, check_every_s=0.3, min_margin=0.3
     )
     try:
-        from agents.timing.cards import check_compatible, read_metadata
+        from agents.common.cards import check_compatible, read_metadata
 
         card = read_metadata(path)
         assert card.observation["lookahead"]["min_margin"] == 0.15  # the trained one
@@ -335,7 +335,7 @@ def test_a_card_of_other_lookahead_settings_is_refused_by_key(
 
 
 def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped_too() -> None:
-    from agents.training import load_train_config
+    from agents.training.trainer import load_train_config
     from landing_env.config_loading import build_dataclass
 
     config = load_train_config(
@@ -355,7 +355,7 @@ def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped
 
 
 def test_the_shipped_lookahead_model_decides_at_ship_ss5_with_realistic_sensing() -> None:
-    from agents.policy_registry import make_env_and_policy
+    from agents.policies.registry import make_env_and_policy
 
     env, policy = make_env_and_policy(
         "timing-dqn-lookahead", "ship-ss5", "tight", extra_overrides={"sensors": "realistic"}

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.timing.lookahead import LookaheadSettings, check_features
-from agents.timing.lookahead_data import (
+from agents.policies.lookahead import LookaheadSettings, check_features
+from agents.training.lookahead_data import (
     TRANSITION_KEYS,
     collect_transitions,
     load_transitions,
     replay_success,
 )
-from agents.timing.lookahead_training import split_episodes, train_offline
+from agents.training.lookahead_training import split_episodes, train_offline
 from landing_env.errors import ConfigError
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
@@ -144,7 +144,7 @@ def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None
     best_held = summary["best_heldout_replay"][0]
     assert summary["held_out_episodes"] == 30
     assert best_held >= 0.8 > at_once + 0.3  # it waits for the good checks
-    from agents.timing.cards import read_metadata
+    from agents.common.cards import read_metadata
 
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and card.observation["lookahead"] == settings.signature()
@@ -154,7 +154,7 @@ def test_the_offline_dqn_learns_to_wait_for_a_check_that_lands(tmp_path) -> None
 
 
 def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path) -> None:
-    from agents.timing.lookahead_training import sign_card
+    from agents.training.lookahead_training import sign_card
 
     settings = LookaheadSettings()
     rng = np.random.default_rng(5)
@@ -165,7 +165,7 @@ def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path
     assert set(data["estimator"].tolist()) == {"tight"}
     config_path = tmp_path / "offline.yaml"
     config_path.write_text(yaml.safe_dump(_config(draws=settings.draws)))
-    from agents.training import load_train_config
+    from agents.training.trainer import load_train_config
 
     card = sign_card(load_train_config(config_path), data)
     assert card.sensing == ["realistic", "realistic,lens=wide"]
@@ -213,7 +213,7 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_
     tried = np.flatnonzero(recorded["check_tried"])
     assert len(tried) >= 5 and recorded["draw_lands"].shape[1] == 3
     # every observation rebuilt from the draws equals the recorded one, the next ones too
-    from agents.timing.lookahead_data import with_draws
+    from agents.training.lookahead_data import with_draws
 
     same = with_draws(recorded, settings)
     assert np.array_equal(same["observation"], recorded["observation"])
@@ -308,7 +308,7 @@ def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_pa
 def test_an_ensemble_is_scored_by_its_mean_q_and_shipped_as_one_distilled_dqn(tmp_path) -> None:
     from stable_baselines3 import DQN
 
-    from agents.timing.lookahead_training import greedy, mean_q
+    from agents.training.lookahead_training import greedy, mean_q
 
     settings = LookaheadSettings()
     data_path = _episodes(tmp_path / "d.npz", range(60), settings, np.random.default_rng(8))
@@ -363,7 +363,7 @@ def test_a_fit_asked_for_airframes_in_trim_takes_only_records_made_so_and_signs_
     config_path = tmp_path / "offline.yaml"
     config_path.write_text(yaml.safe_dump(config))
     train_offline(config_path, [in_trim], tmp_path / "out", progress=False, airframe_in_trim=True)
-    from agents.timing.cards import read_metadata
+    from agents.common.cards import read_metadata
 
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and card.observation["lookahead"]["airframe_in_trim"] is True
@@ -415,7 +415,7 @@ def test_a_fit_on_two_scenarios_reports_each_ones_and_each_sensing_profiles_repl
     held_b = load_transitions([b])
     at_once, _ = replay_success(held_b, lambda obs: np.ones(len(obs), int))
     assert baselines["commit_at_once"] == pytest.approx(at_once, abs=1e-4)
-    from agents.timing.cards import read_metadata
+    from agents.common.cards import read_metadata
 
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and "60 of ship-ss5, 40 of ship-ss6" in card.note
@@ -423,7 +423,7 @@ def test_a_fit_on_two_scenarios_reports_each_ones_and_each_sensing_profiles_repl
 
 
 def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> None:
-    from agents.timing.lookahead_training import RULES
+    from agents.training.lookahead_training import RULES
 
     rule = RULES["all_land_relaxed_to_half"]
     observations = np.zeros((4, LookaheadSettings().size), np.float32)

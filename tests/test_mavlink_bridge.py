@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
 from agents.cli import main
-from agents.cli_args import UserError
+from agents.common.user_input import UserError
 from agents.io.landing_target import (
     CameraMount,
     VehiclePose,

@@ -10,8 +10,7 @@ from typing import Any
 import gymnasium as gym
 import pytest
 
-from agents.policy_registry import make_env_and_policy, make_policy
-from agents.timing.cards import (
+from agents.common.cards import (
     LEGACY_OBSERVATION,
     METADATA_NAME,
     ModelMetadata,
@@ -23,10 +22,11 @@ from agents.timing.cards import (
     sensing_profile,
     write_metadata,
 )
-from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, shipped_timing_model
+from agents.policies.registry import make_env_and_policy, make_policy
+from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy, shipped_timing_model
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.timing.config import TimingConfig
+from landing_env.timing_config import TimingConfig
 
 #: the shipped model of the svgs-routine's commit was trained on the range-scheduled descent
 RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
@@ -61,7 +61,7 @@ def test_the_shipped_model_loads_into_the_environment_it_was_trained_for() -> No
 
 
 def test_every_shipped_model_belongs_to_a_registered_policy_and_id() -> None:
-    from agents.policy_registry import MODEL_DIR, POLICIES
+    from agents.policies.registry import MODEL_DIR, POLICIES
     from landing_env.scenarios import SCENARIO_IDS
 
     registered = {spec.model for spec in POLICIES.values() if spec.model}

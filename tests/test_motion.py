@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from landing_env.errors import ConfigError
-from landing_env.sea.spectrum import SEA_STATE_TABLE
 from landing_env.stewart.kinematics import StewartGeometry, StewartKinematics
 from landing_env.stewart.motion import (
     BatchMotionSource,
@@ -28,6 +27,7 @@ from landing_env.stewart.motion import (
     sample_poses,
     write_motion_csv,
 )
+from landing_env.waves.spectrum import SEA_STATE_TABLE
 
 
 def rng(seed: int = 0) -> np.random.Generator:

@@ -14,8 +14,8 @@ from agents.evaluation.landing import LANDING_EVALUATION, evaluate_landing
 from agents.evaluation.pipeline import run_episode
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.summary import compare_with_oracle, markdown_table, summarise
-from agents.policy_registry import make_env_and_policy, make_policy
-from agents.timing.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
+from agents.policies.oracle import Candidate, OracleTimingPolicy, choose, touchdown_margin
+from agents.policies.registry import make_env_and_policy, make_policy
 from landing_env.config import TouchdownConfig
 from landing_env.envs.snapshot import release_snapshot, restore_snapshot, save_snapshot
 
@@ -223,7 +223,7 @@ def test_redrawing_the_unknowable_future_keeps_the_deck_and_changes_the_wind() -
 
 
 def test_the_deck_oracle_looks_ahead_without_changing_the_episode() -> None:
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.oracle import DeckOracleTimingPolicy
 
     env, _ = make_env_and_policy("land-now", "bench-ss4")
     try:
@@ -244,7 +244,7 @@ def test_the_deck_oracle_looks_ahead_without_changing_the_episode() -> None:
 
 
 def test_the_deck_oracle_commits_at_its_first_check_whose_draws_land() -> None:
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.oracle import DeckOracleTimingPolicy
 
     env, oracle = make_env_and_policy("deck-oracle", "bench-ss4")
     try:
@@ -263,7 +263,7 @@ def test_the_deck_oracle_commits_at_its_first_check_whose_draws_land() -> None:
 
 
 def test_the_deck_oracle_names_a_bad_setting() -> None:
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.oracle import DeckOracleTimingPolicy
     from landing_env.errors import ConfigError
 
     env, _ = make_env_and_policy("land-now", "bench-ss4")
@@ -344,7 +344,7 @@ def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
 ) -> None:
     from types import SimpleNamespace
 
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.oracle import DeckOracleTimingPolicy
     from landing_env.errors import ConfigError
 
     timing = SimpleNamespace(steps_per_decision=2, wait_limit_s=15.0)
@@ -380,7 +380,7 @@ def test_the_deck_oracle_lowers_its_standard_towards_the_wait_limit(monkeypatch)
     of its moment."""
     from types import SimpleNamespace
 
-    from agents.timing.oracle import DeckOracleTimingPolicy
+    from agents.policies.oracle import DeckOracleTimingPolicy
 
     timing = SimpleNamespace(steps_per_decision=2, wait_limit_s=15.0)
     env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))

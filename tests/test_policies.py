@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from agents.align_descend import AlignDescendPolicy, Phase
-from agents.calm_window import CalmConfig, predict_calm
 from agents.evaluation.landing import LANDING_EVALUATION
 from agents.evaluation.pipeline import run_episode
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.summary import markdown_table, summarise, wilson_interval
-from agents.policy_registry import make_env_and_policy, make_policy
-from agents.timing.policies import LandNowPolicy
+from agents.policies.align_descend import AlignDescendPolicy, Phase
+from agents.policies.calm_window import CalmConfig, predict_calm
+from agents.policies.registry import make_env_and_policy, make_policy
+from agents.policies.timing import LandNowPolicy
 from estimation.frames import tilt_deg
 from landing_env.errors import ConfigError
 from landing_env.timing.history import HISTORY_FEATURES

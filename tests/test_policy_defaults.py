@@ -1,12 +1,12 @@
 """What ``evaluate landing --scenario S`` flies without ``--policy``: the measured
-recommendation of S (:data:`agents.policy_registry.RECOMMENDED`), and on a held-out sea what
+recommendation of S (:data:`agents.policies.registry.RECOMMENDED`), and on a held-out sea what
 its sibling's recommendation is (nothing is chosen on a held-out sea)."""
 
 from __future__ import annotations
 
 import pytest
 
-from agents.policy_registry import DEFAULT_POLICY, RECOMMENDED, default_policy
+from agents.policies.registry import DEFAULT_POLICY, RECOMMENDED, default_policy
 from landing_env.scenarios import HELD_OUT_SCENARIOS, SCENARIOS
 
 RECOMMENDED_SCENARIOS = sorted({rec.scenario for rec in RECOMMENDED})

@@ -15,7 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from agents.cli import main
 from agents.evaluation.landing import HELD_OUT_SEED
-from agents.policy_registry import make_env_and_policy
+from agents.policies.registry import make_env_and_policy
 
 SCENARIO = "bench-ss4"
 POLICY = "align-descend"

@@ -16,7 +16,8 @@ from scipy.interpolate import PchipInterpolator
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sea.recording import (
+from landing_env.stewart.motion import MotionConfig, make_motion_source
+from landing_env.waves.recording import (
     ChunkedPchip,
     CsvMotion,
     CsvMotionConfig,
@@ -26,8 +27,7 @@ from landing_env.sea.recording import (
     write_motion_csv,
     write_motion_npy,
 )
-from landing_env.sea.ship import ShipMotion, ShipMotionConfig
-from landing_env.stewart.motion import MotionConfig, make_motion_source
+from landing_env.waves.ship import ShipMotion, ShipMotionConfig
 
 
 def smooth_log(t0_s: float, duration_s: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:

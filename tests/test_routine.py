@@ -11,8 +11,8 @@ import pybullet as p
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from agents.beacon_range import BeaconRangePolicy, PrecLandState
-from agents.svgs_routine import (
+from agents.policies.beacon_range import BeaconRangePolicy, PrecLandState
+from agents.policies.svgs_routine import (
     AttitudeFilter,
     RoutineConfig,
     RoutineState,
@@ -276,7 +276,7 @@ def test_env_observation_carries_the_downward_range() -> None:
 def test_seeded_high_approach_episodes_land(tmp_path: Path) -> None:
     """One seeded episode of each policy from 20 m, 5 m off, sea state 3 with gusts."""
     from agents.evaluation.approach import evaluate_approach
-    from agents.svgs_routine import RoutineState
+    from agents.policies.svgs_routine import RoutineState
 
     evaluation = evaluate_approach(
         ["svgs-routine", "beacon-range"],

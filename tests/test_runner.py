@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 import ray
 
+from agents.common.parallel import batch_session
 from agents.evaluation.landing import run_policy
-from agents.evaluation.runner import EpisodeTask, batch_session, run_episodes
+from agents.evaluation.runner import EpisodeTask, run_episodes
 from estimation.errors import ConfigError
 
 TOY = "tests.runner_toy:TOY"
@@ -99,7 +100,7 @@ def test_a_session_keeps_its_workers_and_their_env_from_run_to_run(ray_session: 
 def test_tasks_after_episodes_in_one_session_get_the_idle_workers_cpus(
     ray_session: None,
 ) -> None:
-    from agents.evaluation.runner import map_tasks
+    from agents.common.parallel import map_tasks
     from tests.runner_toy import square
 
     run_episodes(EpisodeTask(TOY, "p", "s", {}), list(range(4)), workers=2)
@@ -164,7 +165,7 @@ def test_a_sweep_on_ray_gives_the_serial_points(ray_session: None, tmp_path: Pat
 def test_the_two_calibrations_on_ray_give_the_serial_files(
     ray_session: None, tmp_path: Path
 ) -> None:
-    from agents.calibrate import run_calibration
+    from agents.calibration.simulated import run_calibration
 
     runs = {
         w: run_calibration(out_dir=tmp_path / str(w), views=4, stages=4, progress=False, workers=w)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.timing.sampler import (
+from agents.training.sampler import (
     SENSING_PROFILES,
     RandomisedTimingEnv,
     RandomiseSettings,
     register_sensing_profile,
     sensing_signatures,
 )
-from agents.training import ENV_ID, ZOO_META_KEYS, load_train_config, train
+from agents.training.trainer import ENV_ID, ZOO_META_KEYS, load_train_config, train
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError
 
@@ -139,8 +139,8 @@ def test_the_randomised_yaml_is_rl_zoo_style_and_loads() -> None:
 
 
 def test_a_tiny_randomised_recurrent_training_saves_a_model_with_its_card(tmp_path: Path) -> None:
-    from agents.timing.cards import read_metadata
-    from agents.timing.policies import TrainedTimingPolicy
+    from agents.common.cards import read_metadata
+    from agents.policies.timing import TrainedTimingPolicy
 
     config = load_train_config(RANDOMISED)
     settings = config.settings

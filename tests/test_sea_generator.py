@@ -11,10 +11,10 @@ from scipy.signal import argrelmax, welch
 
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sea.bimodal import ochi_hubble_parts, torsethaugen_parts, total_density
-from landing_env.sea.generator import GeneratedSea, SeaGeneratorConfig
-from landing_env.sea.ship import GRAVITY, ShipMotion, ShipMotionConfig
 from landing_env.stewart.motion import SeaStateConfig, SeaStateMotion
+from landing_env.waves.bimodal import ochi_hubble_parts, torsethaugen_parts, total_density
+from landing_env.waves.generator import GeneratedSea, SeaGeneratorConfig
+from landing_env.waves.ship import GRAVITY, ShipMotion, ShipMotionConfig
 
 
 def m0_of(parts) -> float:

@@ -12,10 +12,10 @@ import pytest
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import ControllerGains
 from landing_env.timing.deck_tracker import OwnState
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 
 DT = 0.05
 
@@ -384,7 +384,7 @@ def test_realistic_sensing_loses_the_deck_in_a_gust_and_the_go_around_finds_it_a
     pad; v2's guidance flies on down blind, past the pad's edge, until the descent times out;
     v3's climbs back over the deck's last track, finds it again and lands."""
     from agents.evaluation.landing import run_episode
-    from agents.policy_registry import make_env_and_policy
+    from agents.policies.registry import make_env_and_policy
 
     outcomes = {}
     for lost_deck in ("descend", "search"):
@@ -415,8 +415,8 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     ``info["hold_failed"]``; the first step, whatever its action, ends the episode with that
     outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
     from agents.evaluation.landing import run_episode
-    from agents.policy_registry import make_env_and_policy
-    from agents.timing.hindsight import make_timing_env
+    from agents.policies.registry import make_env_and_policy
+    from agents.training.hindsight import make_timing_env
 
     # the v5 ids' start (level, the bench's controller limits): the deck meets the drone
     start = LEVEL_START

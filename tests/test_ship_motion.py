@@ -15,8 +15,8 @@ from scipy.signal import welch
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.sea.ship import ShipMotion, ShipMotionConfig, vessel_raos
-from landing_env.sea.spectrum import WaveComponents, dnv_gamma, jonswap_shape
+from landing_env.waves.ship import ShipMotion, ShipMotionConfig, vessel_raos
+from landing_env.waves.spectrum import WaveComponents, dnv_gamma, jonswap_shape
 
 
 def test_dnv_gamma_follows_the_rule_of_dnv_rp_c205() -> None:

@@ -1,6 +1,6 @@
 """Sign and phase of the vessel's heave, pitch and roll against the wave, in a regular wave.
 
-Conventions (landing_env/sea/ship.py, estimation/frames.py): x forward (bow), y port, z up;
+Conventions (landing_env/waves/ship.py, estimation/frames.py): x forward (bow), y port, z up;
 Euler ZYX, so roll is positive with the port side up and pitch positive with the BOW DOWN.  A
 wave travelling towards mu (counter-clockwise from the bow; 180 = head seas) has the
 elevation Re(E exp(i(w t - k (x cos mu + y sin mu)))).
@@ -23,8 +23,8 @@ import math
 import numpy as np
 import pytest
 
-from landing_env.sea.ship import GRAVITY, ShipMotion, ShipMotionConfig
 from landing_env.stewart.motion import SeaStateConfig, SeaStateMotion
+from landing_env.waves.ship import GRAVITY, ShipMotion, ShipMotionConfig
 
 
 def regular_ship(period_s: float, direction_deg: float, **hull) -> ShipMotion:

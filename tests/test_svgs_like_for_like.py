@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.beacon_range import BeaconRangeConfig, BeaconRangePolicy, PrecLandState
 from agents.evaluation.approach import landing_error_p
+from agents.policies.beacon_range import BeaconRangeConfig, BeaconRangePolicy, PrecLandState
 from estimation.beacon import (
     BEYOND_BEACON_RANGE,
     IR_LOCK_MAX_RANGE_M,

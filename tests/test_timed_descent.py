@@ -8,19 +8,19 @@ import numpy as np
 import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.timing.cards import (
+from agents.common.cards import (
     LEGACY_OBSERVATION,
     check_compatible,
     descent_signature,
     env_signature,
     read_metadata,
 )
-from agents.timing.policies import SHIPPED_TIMING_MODEL
+from agents.policies.timing import SHIPPED_TIMING_MODEL
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS, dotted
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.timed_descent import timed_descent_reference
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}

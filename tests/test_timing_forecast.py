@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import landing_env  # noqa: F401  (registers the ids)
-from agents.timing.cards import check_compatible, env_signature
+from agents.common.cards import check_compatible, env_signature
 from estimation.frames import euler_zyx_from_matrix
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIO_IDS
@@ -133,7 +133,7 @@ def test_a_seeded_reset_repeats_the_forecast_observation(ship_env) -> None:
 
 
 def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) -> None:
-    from agents.timing.cards import ModelMetadata
+    from agents.common.cards import ModelMetadata
 
     signature = env_signature(ship_env)
     assert signature["observation"]["observation"] == "forecast"
@@ -155,7 +155,7 @@ def test_a_model_card_of_the_forecast_observation_refuses_the_history(ship_env) 
 
 
 def test_the_history_rules_refuse_the_forecast_observation(ship_env) -> None:
-    from agents.policy_registry import make_policy
+    from agents.policies.registry import make_policy
 
     for name in ("quiescent", "predictive"):
         with pytest.raises(ConfigError, match=r"timing\.observation: is 'forecast'"):

@@ -130,7 +130,7 @@ def test_the_simulated_rig_gives_the_same_calibration_through_its_recording(
 def test_calibrate_command_records_the_rig_and_calibrates_from_the_folder(
     tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
-    from agents.calibrate import run_calibration
+    from agents.calibration.simulated import run_calibration
 
     run = run_calibration(out_dir=tmp_path, views=4, stages=4, progress=False)
     folder = run.files["tof_rig"]

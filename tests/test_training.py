@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from agents.evaluation.landing import evaluate_policy
-from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
-from agents.training import (
+from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
+from agents.training.trainer import (
     ENV_ID,
     SCENARIO_ENV_ID,
     ZOO_META_KEYS,
@@ -198,7 +198,7 @@ def test_training_can_start_from_a_trained_model_whose_card_matches() -> None:
     import torch
     from stable_baselines3 import DQN
 
-    from agents.training import _start_from
+    from agents.training.trainer import _start_from
 
     realistic = SHIPPED_TIMING_MODEL
     trained = DQN.load(realistic, device="cpu")
@@ -230,7 +230,7 @@ def test_the_randomised_predictive_yaml_flies_the_policys_settings_over_each_own
     states, each reading its own predictor (``tilt_model: scenario``)."""
     from landing_env.config_loading import build_dataclass
     from landing_env.scenarios import BENCH_TIMING, PREDICTIVE_TIMING
-    from landing_env.timing.config import TimingConfig
+    from landing_env.timing_config import TimingConfig
 
     config = load_train_config(CONFIG.with_name("timing_dqn_predictive_randomised.yaml"))
     written = build_dataclass(TimingConfig, config.settings.env_kwargs["timing"], "timing")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.timing.deck_prediction_fit import fit_family, main
+from agents.training.deck_prediction_fit import fit_family, main
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIOS
@@ -46,6 +46,14 @@ def test_a_training_member_builds_its_sea_and_is_no_held_out_sea(family, member)
     for key, value in member.overrides.items():
         owner = sea.generator if ".generator." in key else sea
         assert getattr(owner, key.rsplit(".", 1)[1]) == value, key
+
+
+@pytest.mark.parametrize(("family", "member"), MEMBERS, ids=lambda v: getattr(v, "name", v))
+def test_a_member_is_flown_on_its_scenarios_config(family, member) -> None:
+    """member_config loads the shipped config named as the scenario, as the scenario does."""
+    assert SCENARIOS[member.scenario].config == member.scenario
+    expected = load_config(SCENARIOS[member.scenario].config, overrides=member.overrides)
+    assert member_config(member) == expected
 
 
 def test_the_bench_family_spans_spectra_headings_speeds_and_ramps() -> None:

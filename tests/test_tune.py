@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agents.timing.tune import TuneSettings, load_tune_settings, tune_timing
+from agents.training.tune import TuneSettings, load_tune_settings, tune_timing
 from landing_env.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -13,15 +13,16 @@ from pathlib import Path
 from typing import Any
 
 from agents.cli.approach import add_approach_parser
+from agents.cli.args import add_set_argument, positive_int
 from agents.cli.bridge import add_bridge_parser
 from agents.cli.calibrate import add_calibrate_parser
 from agents.cli.catalogue import add_list_parser, add_model_parser
+from agents.cli.demo import run_demo
 from agents.cli.estimate import add_estimate_parser
 from agents.cli.landing import add_landing_parser
 from agents.cli.train import add_train_parser
 from agents.cli.tune import add_tune_parser
-from agents.cli_args import USER_ERRORS, add_set_argument, parse_overrides, positive_int
-from agents.demo import run_demo
+from agents.common.user_input import USER_ERRORS, parse_overrides
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep

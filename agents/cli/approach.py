@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from agents.cli_args import add_batch_arguments, positive_int
-from agents.cli_args import parse_overrides as _parse_overrides
+from agents.cli.args import add_batch_arguments, positive_int
+from agents.common.user_input import parse_overrides as _parse_overrides
 from agents.evaluation.approach import APPROACH_POLICIES, ROUTINE_TIMINGS, evaluate_approach
 from agents.evaluation.pipeline import HELD_OUT_SEED
 

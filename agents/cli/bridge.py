@@ -18,13 +18,14 @@ import argparse
 import contextlib
 import math
 
+from agents.cli.args import add_set_argument, positive_int
 from agents.cli.recording_args import (
     add_alignment_arguments,
     add_topic_arguments,
     fill_alignment_defaults,
     recording_options_given,
 )
-from agents.cli_args import UserError, add_set_argument, parse_overrides, positive_int
+from agents.common.user_input import UserError, parse_overrides
 from agents.io.autopilot_listener import AutopilotListener
 from agents.io.landing_target import AUTOPILOTS, ardupilot_parameters
 from agents.io.sim_source import SimulatorSource

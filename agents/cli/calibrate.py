@@ -1,14 +1,16 @@
-"""``deck-landing calibrate``: its arguments and what it runs (:mod:`agents.calibrate`)."""
+"""``deck-landing calibrate``: its arguments and what it runs
+(:mod:`agents.calibration.simulated`)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from agents.calibrate import run_calibration
+from agents.calibration.simulated import run_calibration
+from agents.cli.args import add_set_argument, positive_int
 from agents.cli.calibrate_photos import add_photo_parsers
 from agents.cli.calibrate_tof import add_tof_parser
-from agents.cli_args import add_set_argument, parse_overrides, positive_int
+from agents.common.user_input import parse_overrides
 
 
 def _calibrate(args: argparse.Namespace) -> int:

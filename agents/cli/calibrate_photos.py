@@ -1,5 +1,5 @@
 """``deck-landing calibrate intrinsics``: its arguments and what it runs
-(:mod:`agents.calibrate_photos`)."""
+(:mod:`agents.calibration.photos`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 
 from rich.console import Console
 
-from agents.calibrate_photos import parse_pattern, positive_metres, print_report
-from agents.cli_args import UserError
+from agents.calibration.photos import parse_pattern, positive_metres, print_report
+from agents.common.user_input import UserError
 from estimation.intrinsics_calibration import (
     calibrate_from_images,
     image_files,

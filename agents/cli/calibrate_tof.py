@@ -1,12 +1,13 @@
-"""``deck-landing calibrate tof``: its arguments and what it runs (:mod:`agents.calibrate_tof`)."""
+"""``deck-landing calibrate tof``: its arguments and what it runs
+(:mod:`agents.calibration.tof`)."""
 
 from __future__ import annotations
 
 import argparse
 
-from agents.calibrate_tof import run_tof_calibration
+from agents.calibration.tof import run_tof_calibration
 from agents.cli.recording_args import add_topic_arguments
-from agents.cli_args import UserError
+from agents.common.user_input import UserError
 from agents.io.recording import Topics
 
 

@@ -1,15 +1,107 @@
-"""``deck-landing list`` and ``deck-landing model``: their arguments (:mod:`agents.catalogue`)."""
+"""``deck-landing list ids | policies | models`` and ``deck-landing model show``: what there
+is, and what to use.
+
+Each listing is built from its registry (:mod:`landing_env.scenarios`,
+:mod:`agents.policies.registry`, the model cards in ``agents/models``), so it cannot disagree
+with what the code runs.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from agents.catalogue import ids_table, models_table, policies_table
-from agents.cli_args import UserError
-from agents.policy_registry import find_model
-from agents.timing.cards import read_metadata
+from agents.common.cards import read_metadata
+from agents.common.user_input import UserError
+from agents.policies.registry import (
+    DEFAULT_POLICY,
+    MODEL_DIR,
+    POLICIES,
+    RECOMMENDED,
+    Recommendation,
+    find_model,
+)
+from landing_env.scenarios import SCENARIO_IDS, TASKS
 
 WHAT = ("ids", "policies", "models")
+
+
+def _table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def ids_table() -> str:
+    """Every registered id: its task, scenario and what it builds."""
+    rows = [
+        (env_id, "task", "default", "the bare task on configs/default.yaml") for env_id in TASKS
+    ]
+    for env_id, entry in SCENARIO_IDS.items():
+        status = f"superseded by {entry.superseded_by}" if entry.superseded_by else "current"
+        rows.append((env_id, status, entry.scenario, entry.description))
+    return _table(("id", "status", "scenario", "what it builds"), rows)
+
+
+def recommendation_cell(rec: Recommendation) -> str:
+    low, high = rec.ci95_pct
+    return (
+        f"{rec.success_pct:.1f} % ({low:.1f}-{high:.1f}) on {rec.episodes} seeds "
+        f"from {rec.first_seed}"
+    )
+
+
+def policies_table() -> str:
+    """Every registered policy with its kind and status, then the recommendation per setting."""
+    rows = []
+    for spec in POLICIES.values():
+        scenarios = ", ".join(spec.scenarios) or "all"
+        defaults = ", ".join(
+            f"{k}={v}" for k, v in (("estimator", spec.estimator), ("sensing", spec.sensing)) if v
+        )
+        rows.append(
+            (spec.name, spec.kind, spec.status, spec.task, scenarios, defaults or "-", spec.summary)
+        )
+    text = _table(
+        ("policy", "kind", "status", "task", "scenarios", "defaults", "what it does"), rows
+    )
+    recommended = [
+        (
+            rec.setting,
+            rec.policy,
+            rec.scenario,
+            rec.sensing,
+            recommendation_cell(rec),
+            rec.chosen_by,
+        )
+        for rec in RECOMMENDED
+    ]
+    text += "\n\nRecommended, setting by setting (reported on seeds held out from the choice):\n\n"
+    text += _table(
+        ("setting", "policy", "scenario", "sensing", "success (95% CI)", "chosen by"), recommended
+    )
+    defaults = ", ".join(f"{s}: {p}" for s, p in DEFAULT_POLICY.items())
+    text += f"\n\n`evaluate landing --scenario S` without --policy runs: {defaults}."
+    return text
+
+
+def models_table() -> str:
+    """Every shipped model with its card's id, estimator and sensing, and its policy."""
+    by_model = {spec.model: spec for spec in POLICIES.values() if spec.model}
+    rows = []
+    for path in sorted(MODEL_DIR.glob("*.zip")):
+        card = read_metadata(path)
+        spec = by_model.get(path.name)
+        policy = f"{spec.name} ({spec.status})" if spec else "svgs-routine's commit"
+        if card is None:
+            rows.append((path.name, policy, "no card", "", ""))
+            continue
+        rows.append(
+            (path.name, policy, ", ".join(card.env_ids()), card.estimator, ", ".join(card.sensing))
+        )
+    return _table(("model", "policy", "trained on", "estimator", "sensing"), rows)
+
+
+# ------------------------------------------------------------------------- the commands
 
 
 def run_list(args: argparse.Namespace) -> int:
@@ -50,3 +142,13 @@ def add_model_parser(sub: argparse._SubParsersAction) -> None:
         "model", help="an SB3 zip: a path, or a name `deck-landing list models` prints"
     )
     show.set_defaults(func=run_model_show)
+
+
+__all__ = [
+    "add_list_parser",
+    "add_model_parser",
+    "ids_table",
+    "models_table",
+    "policies_table",
+    "recommendation_cell",
+]

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from agents.cli.args import add_set_argument
 from agents.cli.recording_args import add_alignment_arguments, add_topic_arguments
-from agents.cli_args import add_set_argument
 from agents.io.recording import recording_estimators
 
 

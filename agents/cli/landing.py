@@ -9,10 +9,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from agents.cli_args import add_batch_arguments, positive_int
-from agents.cli_args import parse_overrides as _parse_overrides
+from agents.cli.args import add_batch_arguments, positive_int
+from agents.common.user_input import parse_overrides as _parse_overrides
 from agents.evaluation.landing import ESTIMATORS, HELD_OUT_SEED, evaluate_landing
-from agents.policy_registry import (
+from agents.policies.registry import (
     POLICY_NAMES,
     default_policy,
 )

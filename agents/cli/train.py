@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.cli_args import positive_int
-from agents.training import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
+from agents.cli.args import positive_int
+from agents.training.trainer import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK
 

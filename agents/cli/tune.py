@@ -1,11 +1,11 @@
-"""``deck-landing tune timing``: its arguments and what it runs (:mod:`agents.timing.tune`)."""
+"""``deck-landing tune timing``: its arguments and what it runs (:mod:`agents.training.tune`)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from agents.cli_args import positive_int
-from agents.timing.tune import load_tune_settings, tune_timing
+from agents.cli.args import positive_int
+from agents.training.tune import load_tune_settings, tune_timing
 
 
 def _tune_timing(args: Any) -> int:

@@ -43,8 +43,8 @@ from agents.evaluation.pipeline import (
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import EpisodeTask
 from agents.evaluation.summary import columns
-from agents.policy_registry import POLICIES
-from agents.svgs_routine import RoutineConfig, make_svgs_routine
+from agents.policies.registry import POLICIES
+from agents.policies.svgs_routine import RoutineConfig, make_svgs_routine
 from estimation.frames import R_PD, matrix_from_euler_zyx
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.errors import require_choice

@@ -6,7 +6,7 @@ them) and writes, per scenario, a Markdown and CSV table (success rate with its 
 interval, touchdown relative normal speed mean and 95th percentile, deck tilt and lateral
 offset at touchdown, time to land), every episode's record and a figure (histogram of the
 touchdown speeds per policy, success rates with their intervals).  With a timing policy among
-them the ``oracle`` (:mod:`agents.timing.oracle`, the best any timing could do on the same
+them the ``oracle`` (:mod:`agents.policies.oracle`, the best any timing could do on the same
 seeds) runs too, unless ``--no-oracle``: each timing policy's row gives the oracle's
 success, the gap in points and how many of its failures the oracle failed as well (no timing
 could avoid them).
@@ -49,7 +49,7 @@ from agents.evaluation.pipeline import (
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import EpisodeTask, RunResult
 from agents.evaluation.summary import columns, is_timing
-from agents.policy_registry import make_env_and_policy
+from agents.policies.registry import make_env_and_policy
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import TouchdownConfig
 from landing_env.scenarios import SCENARIOS

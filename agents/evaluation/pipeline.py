@@ -4,7 +4,7 @@ Every evaluation of policies over seeds runs the same steps, and ``evaluate land
 ``evaluate approach`` and the demo differ only in their configuration:
 
 * :func:`make_episode`: the environment and the policy; a scenario of the table flies its
-  registered id with the policy's settings (:func:`agents.policy_registry.make_env_and_policy`),
+  registered id with the policy's settings (:func:`agents.policies.registry.make_env_and_policy`),
   any other config, by name or path, the policy's bare task;
 * :func:`run_episode`: one episode to its end, as an :class:`EpisodeRecord`; a :class:`Watch`
   sees every step (the approach's trajectory, the demo's log and frames);
@@ -25,12 +25,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
+from agents.common.parallel import batch_session
 from agents.evaluation.records import EpisodeRecord, own_fields
 from agents.evaluation.runner import (
     EpisodeTask,
     RunResult,
     SeedFailure,
-    batch_session,
     for_each_seed,
     run_episodes,
     split_runs,
@@ -42,7 +42,7 @@ from agents.evaluation.summary import (
     markdown_table,
     summarise,
 )
-from agents.policy_registry import (
+from agents.policies.registry import (
     env_settings,
     make_env_and_policy,
     make_policy,
@@ -82,7 +82,7 @@ def env_config(policy: str, scenario: str, options: dict[str, Any]) -> tuple[str
 
 def make_episode(policy_name: str, scenario: str, **options: Any) -> tuple[Any, Any]:
     """The environment ``policy_name`` flies on ``scenario`` (module doc), and the policy;
-    ``options``: :func:`agents.policy_registry.make_env_and_policy`'s keyword arguments."""
+    ``options``: :func:`agents.policies.registry.make_env_and_policy`'s keyword arguments."""
     if is_scenario(scenario):
         return make_env_and_policy(policy_name, scenario, **options)
     import gymnasium as gym

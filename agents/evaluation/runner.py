@@ -8,8 +8,9 @@
 * more workers, or ``address``: on Ray (``ray.init()`` on this machine by default, an existing
   cluster with ``address``), one actor per worker holding its environment, seeds handed out
   one at a time, so the results are those of the serial run seed by seed; within a
-  :func:`batch_session` the actors outlive a run, and the next run (the next policy) takes
-  them, without starting worker processes and importing the simulation again;
+  :func:`~agents.common.parallel.batch_session` the actors outlive a run, and the next run
+  (the next policy) takes them, without starting worker processes and importing the
+  simulation again;
 * a bad config fails fast, before any worker starts, with its message
   (:class:`~estimation.errors.ConfigError` naming the key);
 * a worker that crashes (its process dies, or its episode raises) is reported with its seed
@@ -20,19 +21,18 @@
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import json
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import landing_env  # noqa: F401  (registers the ids; PyBullet's banner silenced there)
-from agents.cli_args import USER_ERRORS
+from agents.common.parallel import ensure_ray, keep_idle_actor, take_idle_actor, user_error_behind
+from agents.common.user_input import USER_ERRORS
 from agents.evaluation.records import EpisodeRecord
 from estimation.errors import ConfigError
 
@@ -265,73 +265,6 @@ class _EpisodeWorker:
         return record.to_json()
 
 
-def ensure_ray(address: str | None, workers: int) -> bool:
-    """Start Ray (this machine, ``workers`` CPUs) or connect to ``address``; True if this
-    call started it (the caller shuts it down)."""
-    import os
-
-    import ray
-
-    if ray.is_initialized():
-        return False
-    kwargs: dict[str, Any] = {
-        "include_dashboard": False,
-        "log_to_driver": True,
-        "configure_logging": False,
-    }
-    if address is None:
-        # workers import this checkout's packages (its root on their path)
-        root = str(Path(__file__).resolve().parents[2])
-        pythonpath = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
-        kwargs["num_cpus"] = workers
-        kwargs["runtime_env"] = {"env_vars": {"PYTHONPATH": pythonpath}}
-        # Ray runs its workers at nice 15 (a cluster keeps its control plane responsive so);
-        # here they are the job the user asked for, at the user's priority as the former
-        # process pool's were, not behind every other process of the batch
-        kwargs["_system_config"] = {"worker_niceness": 0}
-    ray.init(address=address, **kwargs)
-    return True
-
-
-#: the idle actors of the current :func:`batch_session` (None outside one): a batch's
-#: later runs (the next policy) take them instead of starting worker processes again
-_IDLE_ACTORS: list[Any] | None = None
-
-
-@contextlib.contextmanager
-def batch_session(workers: int, address: str | None) -> Iterator[None]:
-    """Keep one Ray runtime, and its workers, over several :func:`run_episodes` calls
-    (several policies) when the job uses Ray; shut it down at the end if this started it."""
-    global _IDLE_ACTORS
-    started = False
-    uses_ray = address is not None or workers > 1
-    if uses_ray:
-        started = ensure_ray(address, workers)
-    outer = _IDLE_ACTORS
-    if uses_ray and outer is None:
-        _IDLE_ACTORS = []
-    try:
-        yield
-    finally:
-        if uses_ray and outer is None:
-            _release_idle_actors()
-            _IDLE_ACTORS = None
-        if started:
-            import ray
-
-            ray.shutdown()
-
-
-def _release_idle_actors() -> None:
-    """Kill the batch's idle actors (they hold a CPU each that a task may need)."""
-    if not _IDLE_ACTORS:
-        return
-    import ray
-
-    while _IDLE_ACTORS:
-        ray.kill(_IDLE_ACTORS.pop())
-
-
 def _run_ray(
     task: EpisodeTask, seeds: list[int], workers: int, address: str | None, sink: _Sink
 ) -> tuple[list[EpisodeRecord], list[SeedFailure]]:
@@ -365,7 +298,7 @@ def _run_ray(
                 break
 
     def new_actor() -> None:
-        kept = _IDLE_ACTORS.pop() if _IDLE_ACTORS else None
+        kept = take_idle_actor()
         actor = kept if kept is not None else actor_class.remote()
         inflight[actor] = deque()
         fill(actor)
@@ -376,7 +309,7 @@ def _run_ray(
         sink.add(record)
 
     def report(seed: int, error: BaseException) -> None:
-        cause = _user_error(error)
+        cause = user_error_behind(error)
         if cause is not None:
             raise cause from None
         failures.append(SeedFailure(seed, _describe(error)))
@@ -431,81 +364,12 @@ def _run_ray(
         finished = True
     finally:
         for actor in inflight:
-            if finished and _IDLE_ACTORS is not None and not started:
-                _IDLE_ACTORS.append(actor)  # idle now: the batch's next run takes it
-            else:
+            # idle now: the batch's next run takes it
+            if not (finished and not started and keep_idle_actor(actor)):
                 ray.kill(actor)
         if started:
             ray.shutdown()
     return records, failures
-
-
-def map_tasks(
-    fn: Callable[[Any], Any],
-    items: list[Any],
-    *,
-    workers: int = 1,
-    address: str | None = None,
-    progress: bool = False,
-    desc: str = "",
-) -> list[Any]:
-    """``[fn(item) for item in items]``: in this process for one local worker, else as Ray
-    tasks (``fn`` top level, items picklable), results in the items' order, the progress bar
-    moving as each arrives.  A user error (ConfigError...) raised in a task is raised here
-    with its message; the other tasks are cancelled."""
-    from tqdm import tqdm
-
-    bar = tqdm(total=len(items), desc=desc, unit="run", disable=not progress)
-    try:
-        if address is None and (workers == 1 or len(items) <= 1):
-            out = []
-            for item in items:
-                out.append(fn(item))
-                bar.update(1)
-            return out
-        import ray
-        from ray.exceptions import RayTaskError
-
-        with batch_session(workers, address):
-            _release_idle_actors()  # their CPUs are the tasks'
-            remote = ray.remote(num_cpus=1, max_retries=0)(fn)
-            refs = [remote.remote(item) for item in items]
-            index = {ref: i for i, ref in enumerate(refs)}
-            results: list[Any] = [None] * len(items)
-            pending = list(refs)
-            try:
-                while pending:
-                    ready, pending = ray.wait(pending, num_returns=1)
-                    try:
-                        results[index[ready[0]]] = ray.get(ready[0])
-                    except RayTaskError as exc:
-                        cause = _user_error(exc)
-                        raise (cause or exc) from None
-                    bar.update(1)
-            finally:
-                for ref in pending:
-                    ray.cancel(ref, force=True)
-            return results
-    finally:
-        bar.close()
-
-
-def _user_error(exc: BaseException) -> BaseException | None:
-    """The user error (a ConfigError, a missing file) behind a Ray error, if any: the
-    worker's own exception, whose message is the user's one line (Ray's error, typed as
-    both, carries the worker's traceback in its message)."""
-    seen: set[int] = set()
-    current: BaseException | None = exc
-    while current is not None and id(current) not in seen:
-        seen.add(id(current))
-        cause = getattr(current, "cause", None)
-        if isinstance(cause, BaseException):
-            current = cause
-            continue
-        if isinstance(current, USER_ERRORS):
-            return current
-        current = current.__cause__
-    return None
 
 
 def _describe(exc: BaseException) -> str:
@@ -529,10 +393,7 @@ __all__ = [
     "Evaluation",
     "RunResult",
     "SeedFailure",
-    "batch_session",
-    "ensure_ray",
     "for_each_seed",
     "get_evaluation",
-    "map_tasks",
     "run_episodes",
 ]

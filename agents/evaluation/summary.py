@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from agents.evaluation.records import APPROACH, LANDING, EpisodeRecord
-from agents.policy_registry import POLICIES
+from agents.policies.registry import POLICIES
 from landing_env.scenarios import TIMING_TASK
 
 
@@ -118,7 +118,7 @@ class Summary:
     #: this policy's failures on seeds where the oracle failed too: no timing avoids them
     unavoidable_failures: int = field(default=0, metadata=LANDING)
     #: the deck oracle's success on the same seeds (it knows the deck's future, not the
-    #: wind's: :class:`agents.timing.oracle.DeckOracleTimingPolicy`); NaN without it
+    #: wind's: :class:`agents.policies.oracle.DeckOracleTimingPolicy`); NaN without it
     deck_oracle_success_rate: float = field(default=math.nan, metadata=LANDING)
     #: deck oracle minus this policy, percentage points
     deck_gap_points: float = field(default=math.nan, metadata=LANDING)

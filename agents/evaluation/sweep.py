@@ -37,6 +37,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from agents.common.parallel import map_tasks
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import (
     AXES,
@@ -48,7 +49,6 @@ from agents.evaluation.estimators import (
     score_record,
 )
 from agents.evaluation.plots import COLOURS, save_figure
-from agents.evaluation.runner import map_tasks
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
 from landing_env.config import DeckLandingConfig, load_config

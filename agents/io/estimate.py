@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.cli_args import UserError, parse_overrides
+from agents.common.user_input import UserError, parse_overrides
 from agents.io import messages as m
 from agents.io.bag import read_bag
 from agents.io.recording import (

@@ -35,7 +35,7 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
-from agents.cli_args import UserError
+from agents.common.user_input import UserError
 from agents.io.landing_target import (
     AUTOPILOTS,
     LANDING_TARGET_TYPE_VISION_FIDUCIAL,

@@ -42,8 +42,8 @@ class RecordingSource:
 
     ``args``: ``deck-landing estimate``'s options (``input``, ``estimator``, ``config``,
     ``calibration``, ``set``, ``tolerance``, ``align`` and the topics).  A bad recording,
-    calibration or config is a :class:`agents.cli_args.UserError` naming the file, topic or
-    field, as ``deck-landing estimate`` gives it."""
+    calibration or config is a :class:`agents.common.user_input.UserError` naming the file,
+    topic or field, as ``deck-landing estimate`` gives it."""
 
     def __init__(self, args: argparse.Namespace, speed: float = 1.0) -> None:
         with user_errors():

@@ -1,8 +1,8 @@
 """The live simulator as a source of ``(stamp_s, estimate)`` pairs for the MAVLink bridge.
 
 :class:`SimulatorSource` flies ``DeckLanding-v1`` episodes under the align-descend policy
-(:class:`agents.align_descend.AlignDescendPolicy`, as ``deck-landing demo``) with the chosen
-estimator observed, and yields the observed estimate of every control step: after the reset
+(:class:`agents.policies.align_descend.AlignDescendPolicy`, as ``deck-landing demo``) with the
+chosen estimator observed, and yields the observed estimate of every control step: after the reset
 and after each step.  The stamp is the estimate's own (the camera frame's capture time in
 simulated seconds; with the vision link, its capture time, not its delivery), continued across
 episodes so that it never runs backwards: episode k's stamps are offset by the simulated
@@ -30,9 +30,9 @@ from typing import Any
 import gymnasium as gym
 
 import landing_env  # noqa: F401  (registers the environments)
-from agents.align_descend import AlignDescendPolicy
 from agents.io.landing_target import CameraMount, VehiclePose
 from agents.io.pacing import StampPacer
+from agents.policies.align_descend import AlignDescendPolicy
 from estimation.errors import ConfigError, require_choice
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.types import DeckPoseEstimate

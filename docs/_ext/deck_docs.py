@@ -7,7 +7,7 @@ Directives (MyST: ```` ```{deck-env} DeckLanding-v1 ```` and so on):
   lacks one fails the build);
 * ``deck-ids``: every registered scenario id, current ones first, superseded ones in a table
   of their own naming the replacement;
-* ``deck-policies``: the policy registry ``agents.policy_registry.POLICIES`` with kind and
+* ``deck-policies``: the policy registry ``agents.policies.registry.POLICIES`` with kind and
   status.
 
 The results tables and the configuration reference are in :mod:`deck_results` and
@@ -191,7 +191,7 @@ class IdCatalogueDirective(GeneratedDirective):
 
 # ------------------------------------------------------------------------ the policies
 #: the registry module and the order its statuses are listed in
-POLICY_REGISTRY = "agents.policy_registry"
+POLICY_REGISTRY = "agents.policies.registry"
 STATUS_ORDER = ("recommended", "supported", "research", "legacy")
 
 

@@ -6,7 +6,7 @@ random streams, the estimators, the task's history).  Restoring both puts the ep
 exactly where it was: the steps that follow are the same, bit for bit, as if the look-ahead
 had never run (``tests/test_oracle.py`` checks it).  The PyBullet client and the config are
 shared, not copied.  This is privileged simulation access: the oracle timing uses it
-(:mod:`agents.timing.oracle`); a policy for a real drone cannot.
+(:mod:`agents.policies.oracle`); a policy for a real drone cannot.
 """
 
 from __future__ import annotations

@@ -148,7 +148,7 @@ class WindModel:
     def redraw(self, rng: np.random.Generator) -> None:
         """Draw the gusts' future innovations from ``rng``, keeping the present gust: the wind
         from now on is another realisation of the same process, from the same state (what
-        a look-ahead that must not know the future gusts tries, :mod:`agents.timing.oracle`)."""
+        a look-ahead that must not know the future gusts tries, :mod:`agents.policies.oracle`)."""
         self._rng = rng
         self._normals = []
         self._next_normal = 0
@@ -156,7 +156,7 @@ class WindModel:
     def set_present_gust_w(self, gust_w: np.ndarray) -> None:
         """Replace the present gust (m/s, world frame, without the mean) by ``gust_w``; the
         process goes on from it.  A model that does not know the present gust exactly plays
-        one drawn around its estimate (:mod:`agents.timing.deck_forecast`).  Disabled wind stays
+        one drawn around its estimate (:mod:`agents.policies.deck_forecast`).  Disabled wind stays
         zero; a non-finite gust is refused by name."""
         gust = np.asarray(gust_w, dtype=float).reshape(-1)
         if gust.shape != (3,) or not np.all(np.isfinite(gust)):

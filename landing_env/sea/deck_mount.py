@@ -16,9 +16,6 @@ from landing_env.stewart.kinematics import StewartGeometry
 from landing_env.stewart.motion import MotionSource
 from landing_env.stewart.platform import StewartPlatform, _quat_from_euler_zyx
 
-#: mount names of ``DeckLandingConfig.deck_mount``
-DECK_MOUNTS: tuple[str, ...] = ("stewart", "ship")
-
 
 class ShipDeck(StewartPlatform):
     """A deck body carried by a ship: servoed along ``motion`` about ``home_position_w``."""

@@ -4,7 +4,7 @@ or tuning anything in this project.
 They measure whether estimates and landing decisions carry over to seas the project has not
 seen: a bimodal swell plus wind sea (DNV-RP-C205 two-peak spectra), another heading, the ship
 under way, and a sea state that changes during the episode, all built by
-:mod:`landing_env.sea.generator` from the scenario's seed.  The episodes are the evaluation's
+:mod:`landing_env.waves.generator` from the scenario's seed.  The episodes are the evaluation's
 held-out seeds (``agents.evaluation.landing.HELD_OUT_SEED`` = 1 000 000 and on; the configs'
 ``seed`` is that first one), and the sea of each episode is a fixed function of its seed.
 

@@ -18,8 +18,8 @@ realisations of the sea, ``docs/experiments/ship-timing.md``); a training family
 member.  A held-out sea's config must name one of these: :func:`deck_forecast_for` refuses to
 fit on a held-out sea.
 
-Read by the ``deck-forecast`` policies (:mod:`agents.timing.deck_forecast`) and by the timing task's
-``forecast`` observation (:mod:`landing_env.timing.env`).
+Read by the ``deck-forecast`` policies (:mod:`agents.policies.deck_forecast`) and by the
+timing task's ``forecast`` observation (:mod:`landing_env.timing.env`).
 """
 
 from __future__ import annotations

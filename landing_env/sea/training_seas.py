@@ -2,14 +2,14 @@
 not seen is fitted on, in place of the one sea of its scenario.
 
 A family is a list of members, each a scenario (its platform, flight and sensing) and the
-dotted overrides of its sea (:mod:`landing_env.sea.generator`): one-peak and two-peak spectra
+dotted overrides of its sea (:mod:`landing_env.waves.generator`): one-peak and two-peak spectra
 (JONSWAP, Torsethaugen, Ochi-Hubble), seas from every quarter, the vessel at rest and under
 way, and sea states that build or decay during the episode.  The members span the range of
 the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldout`), and
 ``tests/test_training_seas.py`` checks that no member repeats a held-out sea's spectrum,
 periods, headings and speed.
 
-``python -m agents.timing.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
+``python -m agents.training.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
 deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``; a config's
 ``deck_forecast: ship-broad`` fits the ship's helideck forecast
 (:mod:`landing_env.sea.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
@@ -23,7 +23,6 @@ from typing import Any
 
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import require_choice
-from landing_env.scenarios import SCENARIOS
 
 _SEA = "motion.sea_state."
 _GEN = _SEA + "generator."
@@ -33,8 +32,9 @@ _SHIP_GEN = _SHIP + "generator."
 
 @dataclass(frozen=True)
 class TrainingSea:
-    """One member of a training family: ``scenario`` with its sea replaced by ``overrides``
-    (dotted config keys)."""
+    """One member of a training family: ``scenario`` (a scenario of
+    :data:`landing_env.scenarios.SCENARIOS`, flown on the shipped config of its name) with its
+    sea replaced by ``overrides`` (dotted config keys)."""
 
     name: str
     scenario: str
@@ -214,7 +214,7 @@ def training_family(name: str) -> tuple[TrainingSea, ...]:
 def member_config(member: TrainingSea, **keys: Any) -> DeckLandingConfig:
     """The full config of ``member``: its scenario's config with its sea's overrides (and
     ``keys``, further arguments of :func:`~landing_env.config.load_config`)."""
-    return load_config(SCENARIOS[member.scenario].config, overrides=member.overrides, **keys)
+    return load_config(member.scenario, overrides=member.overrides, **keys)
 
 
 def training_sea(name: str) -> TrainingSea:

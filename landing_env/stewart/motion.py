@@ -1,7 +1,7 @@
 """Motion sources for the Stewart platform: static, sums of sinusoids, a JONSWAP sea, CSV replay.
 
 The replay of recordings (CSV or .npy, deck or vessel frame, random start per seeded episode)
-lives in :mod:`landing_env.sea.recording`; its names are re-exported here.
+lives in :mod:`landing_env.waves.recording`; its names are re-exported here.
 
 Every source gives the commanded top-plate pose relative to the home frame as the 6-vector
 ``(x, y, z, roll, pitch, yaw)`` in metres and radians (Euler ZYX, see
@@ -24,14 +24,14 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.sea.generator import make_sea
-from landing_env.sea.recording import CsvMotion as CsvMotion
-from landing_env.sea.recording import CsvMotionConfig as CsvMotionConfig
-from landing_env.sea.recording import CsvMotionError as CsvMotionError
-from landing_env.sea.recording import csv_motion_from_config
-from landing_env.sea.recording import write_motion_csv as write_motion_csv
-from landing_env.sea.sea_config import SeaConfig
-from landing_env.sea.ship import ShipMotion, ShipMotionConfig
+from landing_env.waves.generator import make_sea
+from landing_env.waves.recording import CsvMotion as CsvMotion
+from landing_env.waves.recording import CsvMotionConfig as CsvMotionConfig
+from landing_env.waves.recording import CsvMotionError as CsvMotionError
+from landing_env.waves.recording import csv_motion_from_config
+from landing_env.waves.recording import write_motion_csv as write_motion_csv
+from landing_env.waves.sea_config import SeaConfig
+from landing_env.waves.ship import ShipMotion, ShipMotionConfig
 
 MOTION_KINDS: tuple[str, ...] = ("static", "sinusoids", "sea_state", "ship", "csv")
 AXES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -230,7 +230,7 @@ class SinusoidMotion:
 # ------------------------------------------------------------------------------- sea state
 @dataclass(frozen=True)
 class SeaStateConfig(SeaConfig):
-    """A sea (:class:`~landing_env.sea.sea_config.SeaConfig`), a small vessel's response to it
+    """A sea (:class:`~landing_env.waves.sea_config.SeaConfig`), a small vessel's response to it
     and its scaling onto the platform."""
 
     #: vessel natural periods (s) and damping ratios of its second-order responses
@@ -361,7 +361,7 @@ class ForecastMotion:
     (``horizons_s[0]`` = 0), held at the last one beyond.
 
     A look-ahead plays it in place of the episode's own motion
-    (:mod:`agents.timing.deck_forecast`).  The spline starts at the true pose and velocity of
+    (:mod:`agents.policies.deck_forecast`).  The spline starts at the true pose and velocity of
     ``t0_s`` so that the servoed deck does not jump: the forecast's own error at horizon 0
     (the HMS's noise, a few cm) is added back with a ``fade_s`` time constant, and the
     spline's second derivative is zero at its end.
@@ -440,7 +440,7 @@ class MotionConfig:
     static: StaticMotionConfig = field(default_factory=StaticMotionConfig)
     sinusoids: SinusoidConfig = field(default_factory=SinusoidConfig)
     sea_state: SeaStateConfig = field(default_factory=SeaStateConfig)
-    #: a full-scale vessel's helideck motion (landing_env/sea/ship.py; needs deck_mount: ship)
+    #: a full-scale vessel's helideck motion (landing_env/waves/ship.py; needs deck_mount: ship)
     ship: ShipMotionConfig = field(default_factory=ShipMotionConfig)
     csv: CsvMotionConfig = field(default_factory=CsvMotionConfig)
 

@@ -19,9 +19,9 @@ from estimation.frames import tilt_deg
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.timing.config import SCENARIO_TILT_MODEL, WAVE_OFF_CLIMB_S, TimingConfig
 from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.timing.stopping import StoppingValues, predictor_stopping_values
+from landing_env.timing_config import SCENARIO_TILT_MODEL, WAVE_OFF_CLIMB_S, TimingConfig
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
     HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "roll_rate", "pitch_rate", "valid")
@@ -88,7 +88,7 @@ class DeckPrediction:
                 "timing.tilt_model",
                 f"{what}; {user} needs the scenario's deck-tilt predictor "
                 "(e.g. bench-ss4, or a file written by "
-                "`python -m agents.timing.deck_prediction_fit fit`)",
+                "`python -m agents.training.deck_prediction_fit fit`)",
             )
         path = tilt_predictor_path(name)
         try:
@@ -98,7 +98,7 @@ class DeckPrediction:
             raise ConfigError(
                 "timing.tilt_model",
                 f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.timing.deck_prediction_fit fit`",
+                "or a file written by `python -m agents.training.deck_prediction_fit fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:
@@ -138,7 +138,7 @@ class DeckPrediction:
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
                 "does not hold: refit it "
-                "with `python -m agents.timing.deck_prediction_fit fit`",
+                "with `python -m agents.training.deck_prediction_fit fit`",
             )
         return values
 
@@ -155,7 +155,7 @@ class DeckPrediction:
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.timing.deck_prediction_fit fit`",
+                "does not hold: refit it with `python -m agents.training.deck_prediction_fit fit`",
             )
         return values
 
@@ -197,7 +197,7 @@ class DeckPrediction:
     def wave_off_due(self, elapsed_s: float, contact_s: float, wait_s: float) -> bool:
         """The deck tilt predicted at the contact (``contact_s`` after the commit, now
         ``elapsed_s`` ago, after ``wait_s`` of waiting) is beyond ``wave_off_tilt_deg`` while a
-        wave-off is still possible (see :class:`~landing_env.timing.config.TimingConfig`)."""
+        wave-off is still possible (see :class:`~landing_env.timing_config.TimingConfig`)."""
         t = self.timing
         decision_s = t.steps_per_decision * self.env_dt
         first = max(decision_s, t.wave_off_from_s) - 1e-9

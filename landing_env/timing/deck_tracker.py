@@ -21,10 +21,7 @@ from estimation.frames import (
     levelled_deck_pose,
 )
 from landing_env.errors import require_choice
-
-#: the deck tracker's motion models
-#: (:attr:`~landing_env.timing.guidance_gains.GuidanceGains.tracker_model`)
-TRACKER_MODELS = ("velocity", "acceleration")
+from landing_env.guidance_gains import TRACKER_MODELS
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ the final descent to touchdown **within that one step** (its control periods run
 ``step``), and the episode ends with the touchdown's outcome.  Running the descent inside the
 step keeps the decision problem a clean stopping problem: no steps with ignored actions reach
 the learner.  The settings are the config's ``timing`` section
-(:class:`~landing_env.timing.config.TimingConfig`); the observation is laid out by
+(:class:`~landing_env.timing_config.TimingConfig`); the observation is laid out by
 :class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
 (the wave-off, the contact window, the prediction observation) is read through
 :class:`~landing_env.timing.deck_prediction.DeckPrediction`, the helideck forecast of the
@@ -30,15 +30,15 @@ from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError
 from landing_env.estimators import load_intrinsics
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
-from landing_env.timing.config import CAMERA_BELOW_COM_M, WAVE_OFF_CLIMB_S, TimingConfig
 from landing_env.timing.deck_prediction import DeckPrediction
 from landing_env.timing.deck_tracker import OwnState
 from landing_env.timing.forecast_observation import ForecastObservation
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import timing_layout
+from landing_env.timing_config import CAMERA_BELOW_COM_M, WAVE_OFF_CLIMB_S, TimingConfig
 from landing_env.touchdown import Outcome
 
 
@@ -125,12 +125,12 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
 
     ``gym.make(id, render_mode=None, overrides=None, **sections)``: ``config``, ``overrides``
     and the section keywords as in ``DeckLanding-v1``.  The task's settings are the config's
-    ``timing`` section (:class:`~landing_env.timing.config.TimingConfig`), set by the same
+    ``timing`` section (:class:`~landing_env.timing_config.TimingConfig`), set by the same
     dotted overrides: ``overrides={"timing.observation": "prediction",
     "timing.wave_off_tilt_deg": 5.0}`` (hold height, history length, wait limit, the descent
     profile in ``timing.guidance``, the wave-off, the contact window, the observation).  A
     registered id lays its scenario's settings under the user's; a policy of
-    :mod:`agents.policy_registry` lays its own (``predictive``: the 8 s history, the wave-off
+    :mod:`agents.policies.registry` lays its own (``predictive``: the 8 s history, the wave-off
     and the contact window).  A pinned drone (``simulation.drone_fixed``) is refused with a
     ``ConfigError``.  A trained model's card records the id, observation and descent it was
     trained on and refuses another.

@@ -59,9 +59,9 @@ import math
 import numpy as np
 
 from estimation.frames import camera_to_heading_xy
+from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.timing.deck_tracker import DeckTracker, OwnState
-from landing_env.timing.guidance_gains import GuidanceGains
 from landing_env.timing.timed_descent import timed_descent_reference
 
 

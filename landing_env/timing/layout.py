@@ -8,8 +8,8 @@ import numpy as np
 from gymnasium import spaces
 
 from landing_env.sea.hms_forecast import HORIZONS_S
-from landing_env.timing.config import TimingConfig
 from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.timing_config import TimingConfig
 
 #: scale from SI units (m, rad, m/s, rad/s) to the observation: decimetres, tenths of a
 #: radian, so that typical values are of order one

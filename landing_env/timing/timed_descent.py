@@ -1,7 +1,7 @@
 """The timed final descent's reference: the height over the deck that meets it on time.
 
 With ``GuidanceGains.descent_profile = "timed"``
-(:class:`~landing_env.timing.guidance_gains.GuidanceGains`) the guidance
+(:class:`~landing_env.guidance_gains.GuidanceGains`) the guidance
 (:class:`~landing_env.timing.guidance.DeckGuidance`) makes the height over the deck track
 :func:`timed_descent_reference`, which reaches the deck ``descent_time_s`` after the commit at
 the touchdown speed: the feet touch a fixed time after the commit, the time a timing policy

@@ -1,0 +1,43 @@
+"""Argument types of the ``deck-landing`` command (a leaf module); the user-error type and
+the ``--set`` overrides' parser are :mod:`agents.common.user_input`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+SET_HELP = "dotted config overrides applied last, e.g. tof.noise=vl53l1x camera.k1=-0.05"
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [1, inf]")
+    return value
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    """``--set KEY=VALUE ...``: dotted config overrides."""
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help=SET_HELP)
+
+
+def add_batch_arguments(parser: argparse.ArgumentParser, workers: int = 2) -> None:
+    """The options of every batch job over seeds (see :mod:`agents.evaluation.runner`)."""
+    parser.add_argument(
+        "--workers", type=positive_int, default=workers, help="parallel worker processes"
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="an existing Ray cluster (e.g. ray://head:10001 or auto); default: this machine",
+    )
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the episodes already written in --out and run only the missing seeds",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,477 @@
+"""``deck-forecast``: timing by a forecast of the ship's helideck, tried in a look-ahead.
+
+The deck oracle (:class:`agents.policies.oracle.DeckOracleTimingPolicy`) shows what knowing the
+deck's future is worth: at sea state 5 it lands 90 % where the best rule on the drone's own deck
+estimate lands 78.5 %.  A drone landing on a ship can know much of that future: the ship's
+helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
+CAP 437) measures the helideck's motion and passes it on, and ship motion a few seconds ahead
+is predictable from its recent past (the classical ship-motion prediction of
+:mod:`estimation.deck_prediction`).  This policy is the deck oracle with the deck's true
+future replaced by that forecast:
+
+* **The forecast.** A direct multi-horizon linear predictor
+  (:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
+  :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck to the same five
+  every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.sea.hms_forecast`, which
+  the timing task's ``forecast`` observation reads too).  By default it is fitted, when the
+  policy is built, on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
+  other seeds (other days in the same sea state); the config's ``deck_forecast: online``
+  identifies it in each episode from the HMS's own record of the last 20 min instead, as the
+  held-out seas do (:mod:`landing_env.sea.hms_forecast`).
+* **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
+  futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
+  deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
+  when all of them land with ``min_margin`` of slack on every graded criterion (the
+  forecast's error eats into the margin the deck oracle can spend to the last bit).
+
+What ``deck-forecast`` still shares with the oracles: the look-ahead flies a saved copy of the
+simulation (:mod:`landing_env.envs.snapshot`), so the drone's side of the prediction (its own
+state, the guidance, the touchdown's physics) is a perfect model; it measures how much of the
+deck oracle's lead a realistic deck forecast keeps.
+
+``deck-forecast-onboard`` (:class:`OnboardModelConfig`) plays the same look-ahead as a model
+the drone carries would: it knows only what the drone knows of the present.
+
+* **Where it is over the deck**: its deck-pose estimate (the observed estimator's), not the
+  truth.  Each look-ahead moves the drone so that the deck is where the estimate puts it
+  plus a draw of the estimate's own error (its covariance), a sample of where the deck may
+  truly be; the estimators keep what they believed.  With no valid estimate it waits.
+* **The present gust**: the drone's wind estimate (the truth plus an error drawn once per
+  decision, :attr:`OnboardModelConfig.gust_error_mps`), and in each look-ahead a draw around
+  that estimate with the same spread.
+* **Its own airframe**: each look-ahead scales the linear drag and the rotors' thrust by
+  draws within :class:`OnboardModelConfig`'s fractions (an identified drag is known to a few
+  tens of percent; thrust goes with the day's air density).
+
+The guidance, the controller, the touchdown's physics and the estimators' software are the
+drone's own code and stay exact; so do its own attitude and velocity (its navigation).
+Registered as a policy, it also lowers its standard over the last 5 s of the wait, to half
+the look-aheads at the wait limit (``deadline_chance``,
+:meth:`~agents.policies.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
+land beats the blind one the limit would force.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from agents.policies.oracle import DeckOracleTimingPolicy
+from estimation.deck_prediction import LinearMotionPredictor
+from landing_env.config import load_config
+from landing_env.errors import ConfigError, require_range
+from landing_env.scenarios import SCENARIOS
+from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
+from landing_env.sea.hms_forecast import (
+    BLOCK,
+    EXAMPLE_EVERY_S,
+    FIT_SEED,
+    FORECAST_KINDS,
+    HORIZONS_S,
+    REALIZATIONS,
+    RECORD_S,
+    WINDOW_S,
+    EpisodeForecast,
+    deck_forecast_for,
+    fit_deck_forecast,
+    fit_online_forecast,
+    forecast_rms,
+)
+from landing_env.sea.training_seas import TRAINING_FAMILIES
+from landing_env.stewart.motion import ForecastMotion, make_motion_source, sample_poses
+
+#: the forecast's home is :mod:`landing_env.sea.hms_forecast`; importing it from here still works
+__all__ = [
+    "BLOCK",
+    "EXAMPLE_EVERY_S",
+    "FIT_SEED",
+    "FORECAST_KINDS",
+    "HORIZONS_S",
+    "REALIZATIONS",
+    "RECORD_S",
+    "WINDOW_S",
+    "DeckForecastTimingPolicy",
+    "OnboardModelConfig",
+    "deck_forecast_for",
+    "fit_deck_forecast",
+    "forecast_rms",
+    "plot_forecasts",
+]
+
+#: the HMS errors' stream of an episode (apart from the look-ahead's draws)
+_HMS_STREAM = 0x4D5
+
+#: the onboard model's streams: the wind estimate of a decision, and each look-ahead's draws
+_WIND_ESTIMATE_STREAM = 0x57E
+_MODEL_STREAM = 0x30D
+
+
+@dataclass(frozen=True)
+class OnboardModelConfig:
+    """What ``deck-forecast-onboard``'s look-ahead does not know of the present, 1 sigma.
+
+    * ``gust_error_mps`` (x, y, z in the world frame): the error of the drone's estimate of
+      the present wind.  Yu et al. (2025, *Design and implementation of a high-precision
+      wind-estimation UAV with onboard sensors*, arXiv:2512.10428) estimate it from the
+      airframe's dynamics (a disturbance observer) to 0.22 m/s RMS in outdoor hover, under
+      0.38 m/s in dynamic flight and under 0.17 m/s vertically, with a purpose-built
+      airframe; 0.4 m/s per horizontal axis and 0.2 m/s vertically take a drone that was
+      not built to measure wind.
+    * ``drag_error_fraction``: each look-ahead scales the linear drag by a uniform draw in
+      1 +- this (the identified drag of a quadrotor is known to a few tens of percent; an
+      assumption, not a measured figure).
+    * ``thrust_error_fraction``: each look-ahead scales the rotors' thrust coefficient by a
+      uniform draw in 1 +- this: thrust goes with the air's density, and a 30 degC day at
+      sea is 5 % thinner than the ISA's 15 degC (ideal gas law) that the model assumes.
+    * ``position_from_estimate``: start from the deck-pose estimate (False: the true
+      relative position, as ``deck-forecast``), moved by a draw of its error,
+      ``position_error_m`` (camera axes x, y, z).  The defaults round up `tight`'s measured
+      RMS error at the 2 m hold of ``ship-ss5`` with realistic sensing, 2.5, 2.5 and
+      10.4 mm (``git show 4d17a9e:benchmarks/bench_onboard_estimate_error.py``); its own
+      covariance reports 0.1-0.4 mm there, some 25 times too confident to draw from.
+    * ``airframe_in_trim``: each drawn airframe starts in its own trim, as a drone that has
+      held its position for a while does: the aerodynamic force it holds is the one it
+      feels (its lean and thrust say so), so a drawn drag comes with the airspeed that gives
+      that force (the wind a disturbance observer infers moves with its drag model), and
+      the controller's thrust model is the drawn thrust (a hover-thrust estimator: PX4's
+      ``MPC_USE_HTE``, ArduPilot's ``MOT_THST_HOVER`` learning).  What stays unknown is how
+      the drag answers a change of airspeed, and the thrust's ceiling.
+      False (the default, the shipped look-ahead's): a drawn airframe starts with the
+      nominal one's trim and finds its own during the descent.
+    """
+
+    gust_error_mps: tuple[float, float, float] = (0.4, 0.4, 0.2)
+    drag_error_fraction: float = 0.2
+    position_from_estimate: bool = True
+    position_error_m: tuple[float, float, float] = (0.003, 0.003, 0.010)
+    thrust_error_fraction: float = 0.05
+    airframe_in_trim: bool = False
+
+    def __post_init__(self) -> None:
+        for key, high, axes in (
+            ("gust_error_mps", 10.0, "m/s, world x, y, z"),
+            ("position_error_m", 1.0, "m, camera x, y, z"),
+        ):
+            values = tuple(float(v) for v in getattr(self, key))
+            if len(values) != 3:
+                raise ConfigError(key, f"needs 3 values ({axes})")
+            for value in values:
+                require_range(key, value, 0.0, high)
+            object.__setattr__(self, key, values)
+        require_range("drag_error_fraction", self.drag_error_fraction, 0.0, 0.9)
+        require_range("thrust_error_fraction", self.thrust_error_fraction, 0.0, 0.5)
+        for key in ("position_from_estimate", "airframe_in_trim"):
+            value = getattr(self, key)
+            if not isinstance(value, bool):
+                raise ConfigError(key, f"must be true or false, got {value!r}")
+
+    def signature(self) -> dict[str, Any]:
+        """The model's fields for a card (``airframe_in_trim`` only where set: a card made
+        before it existed signs as before)."""
+        fields = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if not self.airframe_in_trim:
+            del fields["airframe_in_trim"]
+        return fields
+
+
+def episode_monitor(
+    env: Any, seed: int = 0, hms: HelideckMonitorConfig | None = None
+) -> HelideckMonitor:
+    """The HMS of the episode ``env`` (the unwrapped timing task, reset) was reset to: the ship's
+    deck motion, its errors seeded by the episode's seed and ``seed`` (a policy's own)."""
+    episode_seed = int(env.np_random_seed) % 2**32
+    sequence = np.random.SeedSequence([seed, episode_seed, _HMS_STREAM])
+    hms_seed = int(sequence.generate_state(1)[0])
+    return HelideckMonitor(env.world.stewart.motion, hms or HelideckMonitorConfig(), hms_seed)
+
+
+class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
+    """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
+
+    ``last_forecast`` holds the latest forecast: (H, 5) poses at :data:`HORIZONS_S`, or the
+    reason there was none.
+    """
+
+    name = "deck-forecast"
+
+    def __init__(
+        self,
+        env: Any,
+        draws: int = 16,
+        min_chance: float = 1.0,
+        check_every_s: float = 0.2,
+        seed: int = 0,
+        min_margin: float = 0.15,
+        hms: HelideckMonitorConfig | None = None,
+        forecast: LinearMotionPredictor | None = None,
+        onboard: OnboardModelConfig | None = None,
+        deadline_chance: float | None = None,
+        relax_s: float = 5.0,
+    ) -> None:
+        super().__init__(
+            env, draws, min_chance, check_every_s, seed, min_margin, deadline_chance, relax_s
+        )
+        #: None: the look-ahead knows the present exactly (``deck-forecast``)
+        self.onboard = onboard
+        if onboard is not None:
+            self.name = "deck-forecast-onboard"
+        #: this decision's (estimate - truth) of the deck's position in C, the factor of the
+        #: estimate's error, and the drone's wind estimate (world, m/s)
+        self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.hms = hms or HelideckMonitorConfig()
+        #: the fitted forecast; None: each episode identifies its own online
+        #: (``deck_forecast: online``, :class:`~landing_env.sea.hms_forecast.EpisodeForecast`)
+        self.forecast = forecast or deck_forecast_for(self.env.config, self.hms)
+        if self.forecast is not None and (
+            tuple(self.forecast.channels) != HMS_CHANNELS
+            or tuple(self.forecast.targets) != HMS_CHANNELS
+        ):
+            raise ValueError(f"the forecast must read and predict {HMS_CHANNELS}")
+        if self.forecast is not None and abs(self.forecast.dt_s - self.hms.dt_s) > 1e-9:
+            raise ValueError(
+                f"the forecast reads {1 / self.forecast.dt_s:g} Hz; the HMS gives "
+                f"{self.hms.rate_hz:g} Hz"
+            )
+        self._episode_forecast: EpisodeForecast | None = None
+        self._monitor: HelideckMonitor | None = None
+        self.last_forecast: np.ndarray | str = "no forecast yet"
+
+    def reset(self) -> None:
+        super().reset()
+        self._monitor = None
+        self._episode_forecast = None
+        self.last_forecast = "no forecast yet"
+
+    def monitor(self) -> HelideckMonitor:
+        """The HMS of this episode's ship (its errors seeded by the episode and ``seed``)."""
+        if self._monitor is None:
+            self._monitor = episode_monitor(self.env, self.seed, self.hms)
+        return self._monitor
+
+    def deck_future(self, decision: int = 0) -> Any:
+        world = self.env.world
+        t0 = float(world.time)
+        if self.onboard is not None:
+            belief = self._onboard_belief(decision)
+            self._belief = None
+            if isinstance(belief, str):
+                self.last_forecast = belief
+                return None
+            self._belief = belief
+        if self._episode_forecast is None:
+            self._episode_forecast = EpisodeForecast(self.forecast, self.monitor())
+        forecast = self._episode_forecast.at(t0)
+        if forecast is None:
+            self.last_forecast = "the time is not finite"
+            return None
+        _, measured = self.monitor().window(t0, forecast.window_s)
+        poses = forecast.predict_targets(measured, np.ones(len(measured), dtype=bool))
+        self.last_forecast = poses
+        if isinstance(poses, str):
+            return None
+        truth = world.stewart.motion
+        full = np.zeros((len(forecast.horizons_s), 6))
+        full[:, : len(HMS_CHANNELS)] = poses
+        full[:, 5] = float(np.asarray(truth.pose(t0))[5])  # the heading: held
+        if not np.all(np.isfinite(full)) or not math.isfinite(t0):
+            return None
+        return ForecastMotion(truth, t0, forecast.horizons_s, full)
+
+    def _onboard_belief(self, decision: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
+        """What the drone believes of the present at ``decision``: the deck's position in C as
+        estimated less the truth, the factor of that estimate's error (1 sigma), and its wind
+        estimate; or why it cannot say."""
+        env = self.env
+        assert self.onboard is not None
+        sensing = getattr(env, "_sensing", None)
+        if sensing is None:
+            return "no sensing yet"
+        estimate = sensing.estimates.get(env.config.estimation.observed)
+        if estimate is None or not estimate.valid:
+            return "no valid deck-pose estimate: the drone does not know where the deck is"
+        t_est = np.asarray(estimate.translation, dtype=float)
+        if t_est.shape != (3,) or not np.all(np.isfinite(t_est)):
+            return "the deck-pose estimate is not finite"
+        factor = np.diag(self.onboard.position_error_m)
+        _, t_true = env.world.true_deck_pose_c()
+        episode_seed = int(env.np_random_seed) % 2**32
+        sequence = np.random.SeedSequence(
+            [self.seed, episode_seed, decision, _WIND_ESTIMATE_STREAM]
+        )
+        error = np.random.default_rng(sequence).normal(0.0, self.onboard.gust_error_mps)
+        wind_estimate = env.world.wind.gust_w + error
+        return t_est - np.asarray(t_true, dtype=float), factor, wind_estimate
+
+    def model_draw(self, decision: int, draw: int) -> None:
+        """Make the restored copy the drone's model of the present (``deck-forecast-onboard``):
+        the drone where its estimate (and a draw of its error) puts it over the deck, the
+        present gust drawn around its wind estimate, the drag and the thrust scaled by
+        draws (the plant; the controller keeps its nominal model)."""
+        if self.onboard is None or self._belief is None:
+            return
+        env = self.env
+        world = env.world
+        offset_c, factor, wind_estimate = self._belief
+        episode_seed = int(env.np_random_seed) % 2**32
+        rng = np.random.default_rng(
+            np.random.SeedSequence([self.seed, episode_seed, decision, draw, _MODEL_STREAM])
+        )
+        normals = rng.standard_normal(7)  # position 3, gust 3, one spare (kept: the streams)
+        drag_scale, thrust_scale = 1.0 + (2.0 * rng.random(2) - 1.0) * (
+            self.onboard.drag_error_fraction,
+            self.onboard.thrust_error_fraction,
+        )
+        if self.onboard.position_from_estimate:
+            # the deck, seen from the camera, where the estimate puts it less a draw of the
+            # estimate's error: move the drone by the opposite, keeping its velocities
+            _, rotation_wc = world.camera_pose_w()
+            world.shift_drone(-(rotation_wc @ (offset_c - factor @ normals[:3])))
+        gust = wind_estimate + np.asarray(self.onboard.gust_error_mps) * normals[3:6]
+        world.wind.set_present_gust_w(gust)
+        params = world.drone.params
+        world.drone.params = dataclasses.replace(
+            params,
+            linear_drag_b=np.asarray(params.linear_drag_b, dtype=float) * drag_scale,
+            k_f=float(params.k_f) * thrust_scale,
+        )
+        if self.onboard.airframe_in_trim:
+            # the force the drone holds is what it feels: with drag_scale times the drag, the
+            # air goes past it 1/drag_scale as fast (the wind it infers from that force, as a
+            # disturbance observer does, moves with the drag model); the thrust model is
+            # the drawn rotors'
+            air_w = world.drone_state().velocity_w - np.asarray(world.drone.last_wind_w)
+            world.shift_wind_at_drone(air_w * (1.0 - 1.0 / drag_scale))
+            world.controller.scale_thrust_model(float(thrust_scale))
+            world.drone.set_rotor_speeds(world.drone.rotor_speeds / math.sqrt(thrust_scale))
+
+
+def plot_forecasts(
+    forecast: LinearMotionPredictor,
+    source: Any,
+    scenario: str,
+    path: str,
+    starts_s: tuple[float, ...] = (40.0, 57.0, 74.0, 91.0),
+) -> str:
+    """Heave, roll and pitch of a sea the forecast never saw: the truth, the HMS record, and
+    the forecast made at each of ``starts_s`` with its held-out 1-sigma band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=FIT_SEED - 1)
+    span = np.arange(starts_s[0] - 12.0, starts_s[-1] + HORIZONS_S[-1], 0.05)
+    truth = sample_poses(source, span)
+    times, measured = monitor.window(span[-1], span[-1] - span[0])
+    sigma = np.sqrt(np.diagonal(forecast.covariance, axis1=1, axis2=2))
+    figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    for axis, (channel, label, scale) in zip(
+        axes,
+        (
+            (2, "heave (m)", 1.0),
+            (3, "roll (deg)", math.degrees(1.0)),
+            (4, "pitch (deg)", math.degrees(1.0)),
+        ),
+        strict=True,
+    ):
+        axis.plot(span, scale * truth[:, channel], color="k", lw=1.2, label="truth")
+        axis.plot(times, scale * measured[:, channel], ".", color="0.6", ms=2, label="HMS (10 Hz)")
+        for k, t0 in enumerate(starts_s):
+            _, window = monitor.window(t0, forecast.window_s)
+            predicted = forecast.predict_targets(window, np.ones(len(window), dtype=bool))
+            if isinstance(predicted, str):
+                continue
+            ahead = t0 + forecast.horizons_s
+            mean = scale * predicted[:, channel]
+            band = scale * sigma[:, channel]
+            axis.plot(ahead, mean, color="C0", lw=1.5, label="forecast" if k == 0 else None)
+            axis.fill_between(ahead, mean - band, mean + band, color="C0", alpha=0.2, lw=0)
+            axis.axvline(t0, color="C0", lw=0.5, ls=":")
+        axis.set_ylabel(label)
+    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[-1].set_xlabel("time (s)")
+    figure.suptitle(
+        f"{scenario}: the helideck forecast from the ship's HMS, 8 s ahead (band: held-out 1 sigma)"
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m agents.policies.deck_forecast --scenario ship-ss5``: fit the scenario's
+    forecast (on its config's ``deck_forecast``: its own sea, or a training family) and print
+    its RMS error per horizon on a record of the scenario's sea no fit used, against holding
+    the present (persistence)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--scenario", nargs="+", default=["ship-ss5"], choices=sorted(SCENARIOS))
+    parser.add_argument(
+        "--family",
+        choices=sorted(TRAINING_FAMILIES),
+        help="fit on this training family of seas (the config's deck_forecast otherwise)",
+    )
+    parser.add_argument(
+        "--plot", metavar="PNG", help="also plot forecasts against the truth (first scenario)"
+    )
+    args = parser.parse_args(argv)
+    hms = HelideckMonitorConfig()
+    for index, scenario in enumerate(args.scenario):
+        config = load_config(SCENARIOS[scenario].config)
+        if args.family:
+            config.deck_forecast = args.family
+        forecast = deck_forecast_for(config, hms)
+        if forecast is None:
+            monitor = HelideckMonitor(
+                make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1])),
+                hms,
+                seed=FIT_SEED - 1,
+            )
+            forecast = fit_online_forecast(monitor, 0.0)
+        source = make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1]))
+        if args.plot and index == 0:
+            print(f"wrote {plot_forecasts(forecast, source, scenario, args.plot)}")
+        times = np.arange(0.0, RECORD_S, 0.1)
+        poses = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
+        rms = forecast_rms(forecast, config.motion, hms)
+        rms[:, 3:] = np.degrees(rms[:, 3:])
+        print(
+            f"{scenario} (forecast fitted on {config.deck_forecast or 'its own sea'}): RMS "
+            "error (x, y, z m; roll, pitch deg), persistence after"
+        )
+        for k, horizon in enumerate(forecast.horizons_s):
+            lag = round(horizon / 0.1)
+            hold = np.sqrt(np.mean((poses[lag:] - poses[: len(poses) - lag]) ** 2, axis=0))
+            hold[3:] = np.degrees(hold[3:])
+            print(
+                f"  {horizon:4.1f} s  "
+                + "  ".join(f"{v:6.3f}" for v in rms[k])
+                + "   | "
+                + "  ".join(f"{v:6.3f}" for v in hold)
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
+def build_deck_forecast(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> DeckForecastTimingPolicy:
+    """``deck-forecast`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
+    return DeckForecastTimingPolicy(env)
+
+
+def build_deck_forecast_onboard(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> DeckForecastTimingPolicy:
+    """``deck-forecast-onboard``: the look-ahead as the drone's own model, its standard
+    falling to half the look-aheads over the wait's last 5 s."""
+    return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig(), deadline_chance=0.5)

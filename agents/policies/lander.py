@@ -1,0 +1,108 @@
+"""``lander-model``: a Stable-Baselines3 model that flies ``DeckLanding`` end to end.
+
+The model maps the observation (the estimated deck pose, the ToF ranges, the IMU, the drone's
+own velocity and attitude, stacked over the last ``frame_stack`` steps as SB3's
+``VecFrameStack`` stacks them in training) to the Box(4) velocity set-point.  Its card
+(:mod:`agents.common.cards`) records the id, the observation's keys and stacking, the
+estimator and the sensing it was trained on, and is checked against the environment on load.
+
+Train one with ``deck-landing train landing --config configs/train/lander_sac.yaml``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.common.cards import (
+    METADATA_NAME,
+    check_compatible,
+    env_signature,
+    model_class,
+    read_metadata,
+)
+from agents.policies.registry import MODEL_DIR, find_model
+from landing_env.errors import ConfigError
+
+
+def shipped_lander_model(algo: str) -> Path:
+    """Where the trained lander of ``algo`` is installed: ``agents/models/lander_<algo>.zip``."""
+    return MODEL_DIR / f"lander_{algo}.zip"
+
+
+class TrainedLanderPolicy:
+    """A trained SB3 lander acting deterministically on ``DeckLanding`` observations."""
+
+    def __init__(self, path: str | Path, device: str = "cpu") -> None:
+        self.path = find_model(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(
+                f"no trained lander at {self.path}; train one with `deck-landing train landing "
+                "--config configs/train/lander_sac.yaml --install`"
+            )
+        card = read_metadata(self.path)
+        if card is None:
+            raise ConfigError(
+                "model",
+                f"{self.path.name} has no card ({METADATA_NAME}); train it with "
+                "`deck-landing train landing`",
+            )
+        if card.observation.get("task") != "DeckLanding":
+            raise ConfigError(
+                "model",
+                f"{self.path.name} was trained on {card.env_id}, not a DeckLanding task: "
+                "evaluate it with --policy timing-model",
+            )
+        self.card = card
+        self.frame_stack = int(card.observation.get("frame_stack", 1))
+        self.model = model_class(self.path).load(self.path, device=device)
+        self._stack: dict[str, np.ndarray] | None = None
+
+    def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
+        """Refuse ``env`` unless it is what the model was trained on (its card)."""
+        signature = env_signature(env, frame_stack=self.frame_stack)
+        check_compatible(self.card, signature, self.path.name, allow_mismatch)
+
+    def reset(self) -> None:
+        """Forget the stacked steps (a new episode starts from zeros, as ``VecFrameStack``)."""
+        self._stack = None
+
+    def stacked(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``observation`` stacked with the previous steps along the last axis, oldest first,
+        zeros before the episode's first step (what ``VecFrameStack`` gives a model)."""
+        if self._stack is None:
+            self._stack = {
+                key: np.zeros(
+                    (*np.shape(value)[:-1], np.shape(value)[-1] * self.frame_stack)
+                ).astype(np.float32)
+                for key, value in observation.items()
+            }
+        for key, value in observation.items():
+            width = np.shape(value)[-1]
+            stack = self._stack[key]
+            stack[..., :-width] = stack[..., width:]
+            stack[..., -width:] = value
+        return {key: value.copy() for key, value in self._stack.items()}
+
+    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        action, _ = self.model.predict(self.stacked(observation), deterministic=True)
+        return np.asarray(action, dtype=np.float32).reshape(4)
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        return self.act(observation)
+
+
+def build_lander(env: Any, model_path: str | None, allow: tuple[str, ...]) -> TrainedLanderPolicy:
+    """``lander-model`` for ``env``: the trained lander at ``--model``, checked on its card."""
+    if not model_path:
+        raise ConfigError(
+            "--model",
+            "lander-model runs a trained lander: give --model PATH (train one with "
+            "`deck-landing train landing --config configs/train/lander_sac.yaml`)",
+        )
+    policy = TrainedLanderPolicy(model_path)
+
+    policy.check_env(env, allow)
+    return policy

@@ -1,0 +1,356 @@
+"""The timing task's scripted policies and the trained timing model's loader.
+
+``land-now`` (commit at once), ``quiescent`` (the landing-period heuristic,
+:mod:`agents.policies.calm_window`), ``predictive`` (the deck-tilt predictor weighed by optimal
+stopping) and :class:`TrainedTimingPolicy` (an SB3 model, checked against its card).  Which to
+use where, and every other policy, is in :mod:`agents.policies.registry`; the ``build_*``
+functions here are its builders.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from agents.common.cards import (
+    METADATA_NAME,
+    check_compatible,
+    env_signature,
+    model_class,
+    read_metadata,
+)
+from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
+from agents.policies.registry import MODEL_DIR, find_model
+from estimation.deck_prediction import LinearTiltPredictor
+from landing_env.errors import ConfigError, require_range
+from landing_env.resources import tilt_predictor_path
+from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.timing.layout import TimingObservationLayout
+from landing_env.timing.stopping import predictor_stopping_values
+from landing_env.timing_config import TimingConfig
+
+
+def shipped_timing_model(algo: str) -> Path:
+    """Where the trained timing policy of ``algo`` (``dqn``, ``ppo``, or a variant such as
+    ``dqn-predictive``) is installed: ``agents/models/timing_<algo, - as _>.zip``."""
+    return MODEL_DIR / f"timing_{algo.replace('-', '_')}.zip"
+
+
+#: the trained timing policy shipped with the package
+SHIPPED_TIMING_MODEL = shipped_timing_model("dqn")
+
+_Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
+_VALID = HISTORY_FEATURES.index("valid")
+
+
+# ------------------------------------------------------------------------------ timing policies
+class TimingPolicy(Protocol):
+    """A policy of the timing task: 0 = wait, 1 = commit."""
+
+    name: str
+
+    def reset(self) -> None: ...
+
+    def act(self, observation: np.ndarray) -> int: ...
+
+
+class LandNowPolicy:
+    """Commit at the first decision: the lower bar."""
+
+    name = "land-now"
+
+    def reset(self) -> None:
+        """Stateless."""
+
+    def act(self, observation: np.ndarray) -> int:
+        return 1
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+class QuiescentPolicy:
+    """Commit when :func:`predict_calm` predicts a calm window as long as the descent."""
+
+    name = "quiescent"
+
+    def __init__(
+        self, layout: TimingObservationLayout, dt: float, config: CalmConfig | None = None
+    ) -> None:
+        self.layout = layout
+        self.dt = dt
+        self.config = config or CalmConfig()
+        self.last: CalmPrediction | None = None
+
+    def reset(self) -> None:
+        self.last = None
+
+    def act(self, observation: np.ndarray) -> int:
+        parts = self.layout.decode(observation)
+        self.last = predict_calm(parts.history, self.dt, self.config)
+        return int(self.last.calm)
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+class PredictivePolicy:
+    """Commit when the chance of a good contact is worth more than waiting for a better one.
+
+    The chance: that the deck's tilt at the contact is within the limit, by a
+    :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
+    the estimated deck motion, :mod:`agents.training.deck_prediction_fit`) on the observation's
+    history, with the Gaussian error measured on held-out episodes; the contact comes at one of
+    ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
+    1.3 s, or a window the environment's descent chooses the best of, the same way), and the
+    chance is that of the best.  What
+    waiting is worth: the optimal-stopping value
+    (:class:`~landing_env.timing.stopping.StoppingValues`) of the chances the predictor gave
+    held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
+    independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
+    history at least as long as the predictor's window (``timing.history_s``)."""
+
+    name = "predictive"
+
+    def __init__(
+        self,
+        layout: TimingObservationLayout,
+        dt: float,
+        predictor: Any,
+        max_tilt_deg: float,
+        wait_limit_s: float,
+        opportunity_s: float,
+        contact_times_s: tuple[float, ...] | None = None,
+    ) -> None:
+
+        if not isinstance(predictor, LinearTiltPredictor):
+            predictor = LinearTiltPredictor.load(predictor)
+        if abs(predictor.dt_s - dt) > 1e-9:
+            raise ConfigError(
+                "simulation.env_hz",
+                f"the deck-tilt predictor was fitted at {1.0 / predictor.dt_s:g} Hz, the "
+                f"environment runs at {1.0 / dt:g} Hz",
+            )
+        if layout.n_history < predictor.n_window:
+            raise ConfigError(
+                "timing.history_s",
+                f"{layout.n_history * dt:g} s is shorter than the deck-tilt predictor's "
+                f"{predictor.window_s:g} s window: set timing.history_s={predictor.window_s:g}",
+            )
+        unknown = sorted(set(predictor.channels) - set(HISTORY_FEATURES))
+        if unknown:
+            raise ConfigError(
+                "timing.tilt_model", f"the predictor reads {unknown}, not in the history"
+            )
+        require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
+        require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
+        if contact_times_s is None:
+            # the timing task's default: the timed descent's one contact time
+            contact_times_s = TimingConfig().contact_times_s
+        self.contact_times_s = tuple(float(c) for c in contact_times_s)
+        if not self.contact_times_s:
+            raise ConfigError("timing.contact_window_s", "gives no contact time")
+        values = predictor_stopping_values(predictor, self.contact_times_s, max_tilt_deg)
+        if values is None:
+            raise ConfigError(
+                "timing.tilt_model",
+                "the predictor holds no held-out predictions to weigh a chance against "
+                f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
+                "refit it with `python -m agents.training.deck_prediction_fit fit`",
+            )
+        self.values = values
+        self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
+        self.layout = layout
+        self.dt = dt
+        self.predictor = predictor
+        self.max_tilt_deg = max_tilt_deg
+        self.wait_limit_s = wait_limit_s
+        self.opportunity_s = opportunity_s
+        self.last: Any = None
+        self.last_probability = 0.0
+
+    def reset(self) -> None:
+        self.last = None
+        self.last_probability = 0.0
+
+    def probability(self, observation: np.ndarray) -> float:
+        """The predicted chance that a commit now meets a deck within the tilt limit."""
+        return self._chance(self.layout.decode(observation).history)
+
+    def threshold(self, wait_fraction: float) -> float:
+        """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of
+        waiting on."""
+        remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
+        return self.values.threshold(remaining_s, self.opportunity_s)
+
+    def _chance(self, rows: np.ndarray) -> float:
+        self.last = self.predictor.best_within(
+            rows[:, self.columns], rows[:, _VALID] > 0.5, self.contact_times_s, self.max_tilt_deg
+        )
+        self.last_probability = self.last.probability_within(self.max_tilt_deg)
+        return self.last_probability
+
+    def act(self, observation: np.ndarray) -> int:
+        parts = self.layout.decode(observation)
+        chance = self._chance(parts.history)
+        return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+class TrainedTimingPolicy:
+    """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
+
+    The model's card (:mod:`agents.common.cards`: env id and version, observation layout,
+    estimator, sensing profiles, training config) is read on load; a model without one is
+    refused.  :meth:`check_env` refuses an environment that differs from the card.
+    """
+
+    def __init__(self, path: str | Path = SHIPPED_TIMING_MODEL, device: str = "cpu") -> None:
+        self.path = find_model(path)
+        if not self.path.is_file():
+            algo = "ppo" if "ppo" in self.path.name else "dqn"
+            raise FileNotFoundError(
+                f"no trained timing model at {self.path}; train one with `deck-landing train "
+                f"timing --config configs/train/timing_{algo}.yaml --install`"
+            )
+        metadata = read_metadata(self.path)
+        if metadata is None:
+            raise ConfigError(
+                "model",
+                f"{self.path.name} has no card ({METADATA_NAME}: what it was trained on); add "
+                "it by training it with `deck-landing train timing`",
+            )
+        self.metadata = metadata
+        self.model = model_class(self.path).load(self.path, device=device)
+        self.name = f"timing-{type(self.model).__name__.lower()}"
+        #: a recurrent policy's memory (RecurrentPPO), cleared by :meth:`reset`
+        self.recurrent = self.name == "timing-recurrentppo"
+        self._state: Any = None
+        self._episode_start = True
+
+    def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
+        """Refuse ``env`` unless it is what the model was trained on (see the card); the
+        fields in ``allow_mismatch`` (``sensing``, ``estimator``, ...) may differ."""
+        base = env.unwrapped
+        if "lookahead" in self.metadata.observation:
+            raise ConfigError(
+                "policy",
+                f"{self.path.name} decides on the onboard look-ahead's features: evaluate it "
+                "with --policy timing-dqn-lookahead",
+            )
+        # the card first: it names the setting that differs, where a shape would not
+        check_compatible(self.metadata, env_signature(base), self.path.name, allow_mismatch)
+        self.check_layout(base.layout.size)
+
+    def check_observation(self, signature: dict[str, Any]) -> None:
+        """Refuse an observation whose meaning (``observation_signature``) differs."""
+        check_compatible(self.metadata, {"observation": signature}, self.path.name)
+        self.check_layout(int(signature["size"]))
+
+    def check_layout(self, observation_size: int) -> None:
+        """Refuse an environment whose observation does not match the model's."""
+        expected = self.model.observation_space.shape
+        if expected != (observation_size,):
+            raise ConfigError(
+                "timing",
+                f"the model {self.path.name} expects observations of shape {expected}, the "
+                f"environment gives ({observation_size},): use the timing settings it was "
+                "trained with (history_s, env_hz)",
+            )
+
+    def reset(self) -> None:
+        """Forget a recurrent policy's memory (a feed-forward one has none)."""
+        self._state = None
+        self._episode_start = True
+
+    def act(self, observation: np.ndarray) -> int:
+        if self.recurrent:
+            action, self._state = self.model.predict(
+                observation,
+                state=self._state,
+                episode_start=np.array([self._episode_start]),
+                deterministic=True,
+            )
+            self._episode_start = False
+        else:
+            action, _ = self.model.predict(observation, deterministic=True)
+        return int(np.asarray(action).reshape(-1)[0])
+
+    def __call__(self, observation: np.ndarray) -> int:
+        return self.act(observation)
+
+
+# ------------------------------------------------------------------------------ builders
+def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
+    """The deck-tilt predictor of the predictive policy: ``--model``, else the scenario's
+    (``timing.tilt_model``), loaded; a missing or malformed one names the key."""
+
+    if model_path is None and not scenario_model:
+        raise ConfigError(
+            "timing.tilt_model",
+            "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
+            "timing.tilt_model=NAME or pass --model FILE; fit one with "
+            "`python -m agents.training.deck_prediction_fit fit`)",
+        )
+    path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
+    try:
+        return LinearTiltPredictor.load(path)
+    except (OSError, ValueError) as error:
+        raise ConfigError("timing.tilt_model", f"{path}: {error}") from None
+
+
+def _require_timing(env: Any, name: str) -> Any:
+    base = env.unwrapped
+    if not hasattr(base, "layout"):
+        raise ConfigError("policy", f"{name} acts in the timing task (DeckLandingTiming)")
+    return base
+
+
+def _require_history(base: Any, name: str) -> None:
+    if base.layout.observed_rows != base.layout.n_history:
+        raise ConfigError(
+            "timing.observation",
+            f"is {base.timing.observation!r}; {name} reads the deck-pose history: use 'history'",
+        )
+
+
+def build_land_now(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``land-now``: commit at once."""
+    _require_timing(env, "land-now")
+    return LandNowPolicy()
+
+
+def build_quiescent(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``quiescent`` for ``env`` (a timing environment observing the history)."""
+    base = _require_timing(env, "quiescent")
+    _require_history(base, "quiescent")
+    return QuiescentPolicy(base.layout, base.env_dt)
+
+
+def build_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``predictive``: ``model_path`` is a deck-tilt predictor (else the scenario's)."""
+    base = _require_timing(env, "predictive")
+    _require_history(base, "predictive")
+    return PredictivePolicy(
+        base.layout,
+        base.env_dt,
+        _tilt_model(model_path, base.deck_prediction.resolved_tilt_model()),
+        base.config.touchdown.max_deck_tilt_deg,
+        base.timing.wait_limit_s,
+        base.timing.opportunity_s,
+        base.timing.contact_times_s,
+    )
+
+
+def build_trained(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """A trained SB3 timing model at ``model_path``, checked against ``env`` (its card)."""
+    _require_timing(env, "a trained timing model")
+    if model_path is None:
+        raise ConfigError("model", "a trained timing policy needs --model PATH (an SB3 zip)")
+    policy = TrainedTimingPolicy(model_path)
+    policy.check_env(env, allow)
+    return policy
