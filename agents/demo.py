@@ -22,6 +22,7 @@ from agents.align_descend import AlignDescendPolicy
 from agents.evaluation.landing import HELD_OUT_SEED
 from agents.policy_registry import default_policy, make_env_and_policy
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import LANDING_TASK
 
 
 @dataclass
@@ -108,7 +109,7 @@ def plot_trajectory(log: EpisodeLog, path: Path) -> None:
 
 def summarise(log: EpisodeLog, console: Console) -> None:
     info = log.final_info
-    table = Table(title="DeckLanding-v1 episode")
+    table = Table(title=f"{LANDING_TASK} episode")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("outcome", info["outcome"])
@@ -186,7 +187,7 @@ def run_demo(
     overrides.setdefault("camera.mode", camera_mode)
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
-    env = gym.make("DeckLanding-v1", config=config, render_mode="rgb_array", **kw)
+    env = gym.make(LANDING_TASK, config=config, render_mode="rgb_array", **kw)
     if record is not None:
         # mcap and rosbags: the optional extra ``io``
         from agents.io.record import McapRecorder

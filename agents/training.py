@@ -49,9 +49,9 @@ from agents.timing.policies import shipped_timing_model
 from agents.timing.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS
+from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS, TIMING_TASK
 
-ENV_ID = "DeckLandingTiming-v0"
+ENV_ID = TIMING_TASK
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
 SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v6"
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm

@@ -26,11 +26,11 @@ def measure(scenario: str, sensors: str, episodes: int) -> dict[str, dict]:
     import gymnasium as gym
 
     import landing_env  # noqa: F401  (registers the environments)
-    from landing_env.scenarios import SCENARIO_IDS
+    from landing_env.scenarios import SCENARIO_IDS, TIMING_TASK
 
     sid = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{scenario[-1]}-v1"]
     overrides = {**sid.overrides, "estimation.compare": list(NAMES), "sensors": sensors}
-    env = gym.make("DeckLandingTiming-v0", config=scenario, overrides=overrides, **sid.task_kwargs)
+    env = gym.make(TIMING_TASK, config=scenario, overrides=overrides, **sid.task_kwargs)
     base = env.unwrapped
     periods = 0
     valid: Counter[str] = Counter()

@@ -39,12 +39,12 @@ from landing_env.timing.config import SCENARIO_TILT_MODEL, TimingConfig
 CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
-TASKS: dict[str, str] = {
-    "DeckLanding-v1": "landing_env.envs.deck_landing:DeckLandingEnv",
-    "DeckLandingTiming-v0": "landing_env.timing.env:DeckLandingTimingEnv",
-}
 LANDING_TASK = "DeckLanding-v1"
 TIMING_TASK = "DeckLandingTiming-v0"
+TASKS: dict[str, str] = {
+    LANDING_TASK: "landing_env.envs.deck_landing:DeckLandingEnv",
+    TIMING_TASK: "landing_env.timing.env:DeckLandingTimingEnv",
+}
 
 #: what turns a bench config (a pinned drone over the moving deck) into a landing run
 FLYING_OVERRIDES: dict[str, Any] = {

@@ -40,6 +40,7 @@ from agents.timing.policies import TrainedTimingPolicy
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import validate_action
 from landing_env.errors import ConfigError, require_range
+from landing_env.scenarios import TIMING_TASK
 from landing_env.sea.hms import REPORT_FIELDS
 from landing_env.touchdown import Outcome
 
@@ -198,7 +199,7 @@ class LookaheadObserver:
         self.settings = settings or LookaheadSettings()
         base = env.unwrapped
         if not hasattr(base, "layout") or not hasattr(base, "timing"):
-            raise ConfigError("env", "the look-ahead acts in DeckLandingTiming-v0")
+            raise ConfigError("env", f"the look-ahead acts in {TIMING_TASK}")
         self.env = base
         s = self.settings
         self.planner = DeckForecastTimingPolicy(

@@ -37,10 +37,8 @@ from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import SCENARIOS, dotted, landing_overrides
+from landing_env.scenarios import SCENARIOS, TIMING_TASK, dotted, landing_overrides
 from landing_env.timing.config import CAMERA_BELOW_COM_M
-
-ENV_ID = "DeckLandingTiming-v0"
 
 #: sensing profile name -> the dotted overrides that make it
 SENSING_PROFILES: dict[str, dict[str, Any]] = {
@@ -177,7 +175,7 @@ class RandomisedTimingEnv(gym.Env):
                 self._wind.pop(oldest)
             overrides = variant_overrides(self.settings, scenario, sensing)
             env = gym.make(
-                ENV_ID,
+                TIMING_TASK,
                 config=SCENARIOS[scenario].config,
                 overrides={**overrides, **dotted("timing", self.timing or {})},
             )
@@ -250,7 +248,7 @@ def variant_overrides(settings: RandomiseSettings, scenario: str, sensing: str) 
     """The dotted overrides of one (scenario, sensing) world."""
     require_choice("scenario", scenario, tuple(SCENARIOS))
     return {
-        **landing_overrides(ENV_ID),
+        **landing_overrides(TIMING_TASK),
         "estimation.observed": settings.estimator,
         **SENSING_PROFILES[sensing],
         **settings.overrides,
