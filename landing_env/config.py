@@ -24,7 +24,12 @@ from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.tight_config import TightConfig
 from landing_env.config_limits import check_value
-from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+from landing_env.config_loading import (
+    build_dataclass,
+    deep_merge,
+    dotted_to_nested,
+    nested_to_dotted,
+)
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
 from landing_env.physics.wind import WindConfig
@@ -46,6 +51,8 @@ CONFIG_DIR = config_dir()
 
 #: ``sensors``: each name is a preset in ``configs/sensors/`` laid over the scenario
 SENSOR_SETS = ("ideal", "realistic")
+#: the bundle a config has without a ``sensors`` key
+DEFAULT_SENSORS = "ideal"
 #: ``lens``: each name is a preset in ``configs/lenses/`` (the camera's lens and the
 #: calibrations made for it under each sensing profile) laid over the sensing preset
 LENS_SETS = ("standard", "wide")
@@ -309,7 +316,7 @@ class DeckLandingConfig:
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
     #: noise, lens distortion, VL53L1X ToF noise and the calibrations made for them): the
     #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
-    sensors: str = "ideal"
+    sensors: str = DEFAULT_SENSORS
     #: the camera's lens: "standard" (58 deg horizontal field of view, the papers' camera) or
     #: "wide" (80 deg, ship-ss5's and ship-ss6's): the preset ``configs/lenses/<name>.yaml`` (focal
     #: lengths and, per sensing profile, the calibration files made for it) laid over the
@@ -457,6 +464,35 @@ def sensor_preset(name: str) -> dict[str, Any]:
     require_choice("sensors", name, SENSOR_SETS)
     with (CONFIG_DIR / "sensors" / f"{name}.yaml").open() as handle:
         return {"sensors": name, **(yaml.safe_load(handle) or {})}
+
+
+def sensing_profiles() -> dict[str, dict[str, Any]]:
+    """Every sensing profile of ``configs/sensors/`` by name, as the dotted overrides that
+    make it (what training and data collection draw by name).
+
+    A bundle, a name of :data:`SENSOR_SETS`, is ``{"sensors": name}``; the default one,
+    ``ideal``, adds nothing (the scenario's sensing stays).  Any other file is settings laid
+    over a bundle: its own ``sensors`` key names the bundle (none: the scenario's), and the
+    rest of it are the overrides (``realistic-2x``: the realistic bundle with its noise
+    doubled).
+    """
+    profiles: dict[str, dict[str, Any]] = {}
+    for path in sorted((CONFIG_DIR / "sensors").glob("*.yaml"), key=lambda p: p.stem):
+        name = path.stem
+        if name in SENSOR_SETS:
+            profiles[name] = {} if name == DEFAULT_SENSORS else {"sensors": name}
+            continue
+        with path.open() as handle:
+            data = yaml.safe_load(handle) or {}
+        if not isinstance(data, dict):
+            raise ConfigError("sensing", f"{path} does not hold a mapping")
+        if data.get("sensors", DEFAULT_SENSORS) not in SENSOR_SETS:
+            raise ConfigError(
+                "sensors",
+                f"{path}: {data['sensors']!r} is not a bundle; choose one of {SENSOR_SETS}",
+            )
+        profiles[name] = nested_to_dotted(data)
+    return profiles
 
 
 def lens_preset(name: str, sensors: str = "ideal") -> dict[str, Any]:

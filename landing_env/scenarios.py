@@ -30,7 +30,12 @@ from landing_env.config import (
     episode_step_limit,
     read_config_data,
 )
-from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+from landing_env.config_loading import (
+    build_dataclass,
+    deep_merge,
+    dotted_to_nested,
+    nested_to_dotted,
+)
 from landing_env.errors import ConfigError, require_choice
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.timing.config import SCENARIO_TILT_MODEL, TimingConfig
@@ -79,14 +84,7 @@ def landing_overrides(
 
 def dotted(prefix: str, settings: dict[str, Any]) -> dict[str, Any]:
     """``{"a": {"b": 1}}`` under ``prefix`` as dotted keys: ``{"prefix.a.b": 1}``."""
-    flat: dict[str, Any] = {}
-    for key, value in settings.items():
-        name = f"{prefix}.{key}"
-        if isinstance(value, dict):
-            flat.update(dotted(name, value))
-        else:
-            flat[name] = value
-    return flat
+    return nested_to_dotted(settings, prefix)
 
 
 # ------------------------------------------------------------------------------ timing presets
