@@ -285,7 +285,13 @@ class FusionInputs:
 
 
 class RangeFusionEstimator(GuardedEstimator):
-    """Shared front end of IHRCF and CRHF: tag corners, ranges, touch points and the plane."""
+    """Shared front end of IHRCF and CRHF: tag corners, ranges, touch points and the plane.
+
+    A subclass names its settings class (``config_class``; ``config=None`` is its defaults)
+    and sets up what is its own in :meth:`_configure`.
+    """
+
+    config_class: type[RangeFusionConfig] = RangeFusionConfig
 
     def __init__(
         self,
@@ -293,10 +299,11 @@ class RangeFusionEstimator(GuardedEstimator):
         tag_size: float,
         tag_id: int,
         tof_calibration: TofCameraCalibration,
-        tof_positions_c: np.ndarray | None,
-        intrinsics: CameraIntrinsics | None,
-        config: RangeFusionConfig,
+        tof_positions_c: np.ndarray | None = None,
+        intrinsics: CameraIntrinsics | None = None,
+        config: RangeFusionConfig | None = None,
     ) -> None:
+        config = config or self.config_class()
         require_range("tag_size", tag_size, 0.0, low_inclusive=False)
         positions = (
             tof_positions_in_camera_frame()
@@ -331,6 +338,10 @@ class RangeFusionEstimator(GuardedEstimator):
             self._plane_fitter = geometry.ZPlaneFitter(positions[:, :2])
         except ValueError as err:
             raise ConfigError("tof_positions_c", str(err)) from None
+        self._configure()
+
+    def _configure(self) -> None:
+        """A subclass's own set-up from ``self.config``, after the shared one."""
 
     def _inputs(self, frame: CameraFrame, reading: RangeReading) -> FusionInputs | str:
         """The checked inputs, or the reason they cannot be used."""
