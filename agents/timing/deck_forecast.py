@@ -193,7 +193,9 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
 
     ``last_forecast`` holds the latest forecast: (H, 5) poses at :data:`HORIZONS_S`, or the
-    reason there was none.
+    reason there was none.  ``rule`` are the commit rule's settings, as the deck oracle's
+    (``draws``, ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``,
+    ``relax_s``); its ``min_margin`` is 0.15 here.
     """
 
     name = "deck-forecast"
@@ -201,20 +203,14 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     def __init__(
         self,
         env: Any,
-        draws: int = 16,
-        min_chance: float = 1.0,
-        check_every_s: float = 0.2,
-        seed: int = 0,
-        min_margin: float = 0.15,
         hms: HelideckMonitorConfig | None = None,
         forecast: LinearMotionPredictor | None = None,
         onboard: OnboardModelConfig | None = None,
-        deadline_chance: float | None = None,
-        relax_s: float = 5.0,
+        *,
+        min_margin: float = 0.15,
+        **rule: Any,
     ) -> None:
-        super().__init__(
-            env, draws, min_chance, check_every_s, seed, min_margin, deadline_chance, relax_s
-        )
+        super().__init__(env, min_margin=min_margin, **rule)
         #: None: the look-ahead knows the present exactly (``deck-forecast``)
         self.onboard = onboard
         if onboard is not None:
