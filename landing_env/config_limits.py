@@ -14,25 +14,11 @@ To validate a new numeric key, add one line here (or a ``require_range`` in its 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from landing_env.errors import require_finite, require_range
-
-
-@dataclass(frozen=True)
-class Limit:
-    """``low <= value <= high`` (ends exclusive when asked); ``inf`` allowed if ``allow_inf``."""
-
-    low: float | None = None
-    high: float | None = None
-    low_inclusive: bool = True
-    high_inclusive: bool = True
-    allow_inf: bool = False
-    #: where the bound comes from (a datasheet, a standard) or why it is there
-    note: str = ""
+from landing_env.errors import Limit, require_finite
 
 
 def _positive(high: float, note: str = "") -> Limit:
@@ -285,14 +271,7 @@ def check_value(key: str, value: Any, limits: dict[str, Limit] | None = None) ->
             continue
         require_finite(key, number)
         if limit is not None:
-            require_range(
-                key,
-                number,
-                limit.low,
-                limit.high,
-                low_inclusive=limit.low_inclusive,
-                high_inclusive=limit.high_inclusive,
-            )
+            limit.check(key, number)
 
 
 def config_leaves(cls: type, prefix: str = "") -> list[tuple[str, Any]]:
