@@ -43,15 +43,9 @@ from estimation.landing_target import (
     LandingTargetConfig,
     LandingTargetFilter,
 )
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
-from landing_env.errors import (
-    NON_NEGATIVE,
-    POSITIVE,
-    ConfigError,
-    Limit,
-    limited,
-    require_limits,
-)
+from landing_env.errors import ConfigError
 from landing_env.physics.controller import VelocitySetpoint
 
 

@@ -45,15 +45,9 @@ from agents.calm_window import CalmConfig, predict_calm
 from agents.timing.cards import observation_signature
 from agents.timing.policies import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
-from landing_env.errors import (
-    NON_NEGATIVE,
-    POSITIVE,
-    ConfigError,
-    Limit,
-    limited,
-    require_limits,
-)
+from landing_env.errors import ConfigError
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.physics.quadrotor_params import GRAVITY
 from landing_env.timing.config import TimingConfig

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field, fields
 from typing import Any
 
 
@@ -75,55 +74,3 @@ def require_range(
         hb = "]" if high_inclusive else ")"
         why = f" (set by {bounds_from})" if bounds_from else ""
         raise ConfigError(key, f"{value!r} is out of range; allowed {lb}{lo}, {hi}{hb}{why}")
-
-
-@dataclass(frozen=True)
-class Limit:
-    """``low <= value <= high`` (ends exclusive when asked); ``inf`` allowed if ``allow_inf``.
-
-    The one form of a numeric bound: a config field declares its own with :func:`limited`
-    (checked by :func:`require_limits` whenever the dataclass is built), and the loader's
-    table of physical ranges (:data:`landing_env.config_limits.LIMITS`) holds the same.
-    """
-
-    low: float | None = None
-    high: float | None = None
-    low_inclusive: bool = True
-    high_inclusive: bool = True
-    allow_inf: bool = False
-    #: where the bound comes from (a datasheet, a standard) or why it is there
-    note: str = ""
-
-    def check(self, key: str, value: float) -> None:
-        """Raise ConfigError unless the number ``value`` is within this limit."""
-        if self.allow_inf and math.isinf(value) and value > 0:
-            return
-        require_range(
-            key,
-            value,
-            self.low,
-            self.high,
-            low_inclusive=self.low_inclusive,
-            high_inclusive=self.high_inclusive,
-        )
-
-
-#: greater than zero
-POSITIVE = Limit(0.0, low_inclusive=False)
-#: zero or more
-NON_NEGATIVE = Limit(0.0)
-
-
-def limited(default: Any, limit: Limit) -> Any:
-    """A dataclass field with ``default`` whose value must lie within ``limit``
-    (:func:`require_limits`, called from the dataclass's ``__post_init__``, checks it)."""
-    return field(default=default, metadata={"limit": limit})
-
-
-def require_limits(config: Any) -> None:
-    """Raise ConfigError, keyed by the field's name, for the first field of the dataclass
-    ``config`` that is outside the limit it declares with :func:`limited`."""
-    for item in fields(config):
-        limit = item.metadata.get("limit")
-        if limit is not None:
-            limit.check(item.name, getattr(config, item.name))

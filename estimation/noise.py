@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.errors import require_range
+from estimation.limits import NON_NEGATIVE, limited, require_limits
 
 #: VL53L1X-class ToF ranging noise (long-distance mode): sigma = SIGMA_0 + SIGMA_PER_M * r.
 #: 2 mm + 2.5 mm/m is a few mm up close and 12 mm at 4 m, of the order of the +-20 mm
@@ -48,16 +48,13 @@ class TofNoiseModel:
     stay finite and a range is still compared with the plane at a scale it can meet.
     """
 
-    sigma_0_m: float = VL53L1X_SIGMA_0_M
-    sigma_per_m: float = VL53L1X_SIGMA_PER_M
-    resolution_m: float = VL53L1X_RESOLUTION_M
-    sigma_min_m: float = 0.0
+    sigma_0_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE)
+    sigma_per_m: float = limited(VL53L1X_SIGMA_PER_M, NON_NEGATIVE)
+    resolution_m: float = limited(VL53L1X_RESOLUTION_M, NON_NEGATIVE)
+    sigma_min_m: float = limited(0.0, NON_NEGATIVE)
 
     def __post_init__(self) -> None:
-        require_range("sigma_0_m", self.sigma_0_m, 0.0)
-        require_range("sigma_per_m", self.sigma_per_m, 0.0)
-        require_range("resolution_m", self.resolution_m, 0.0)
-        require_range("sigma_min_m", self.sigma_min_m, 0.0)
+        require_limits(self)
 
     @classmethod
     def exact(cls) -> TofNoiseModel:

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from landing_env.errors import Limit, require_finite
+from estimation.limits import Limit
+from landing_env.errors import require_finite
 
 
 def _positive(high: float, note: str = "") -> Limit:

@@ -1,16 +1,6 @@
 """Errors raised by the simulator and its configuration (defined in :mod:`estimation.errors`)."""
 
-from estimation.errors import (
-    NON_NEGATIVE,
-    POSITIVE,
-    ConfigError,
-    Limit,
-    limited,
-    require_choice,
-    require_finite,
-    require_limits,
-    require_range,
-)
+from estimation.errors import ConfigError, require_choice, require_finite, require_range
 
 
 class PinnedDroneWarning(UserWarning):
@@ -18,15 +8,4 @@ class PinnedDroneWarning(UserWarning):
     environment that cannot land.  Filter it where the bench is meant (the estimator runs)."""
 
 
-__all__ = [
-    "NON_NEGATIVE",
-    "POSITIVE",
-    "ConfigError",
-    "Limit",
-    "PinnedDroneWarning",
-    "limited",
-    "require_choice",
-    "require_finite",
-    "require_limits",
-    "require_range",
-]
+__all__ = ["ConfigError", "PinnedDroneWarning", "require_choice", "require_finite", "require_range"]

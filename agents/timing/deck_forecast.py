@@ -62,6 +62,7 @@ import numpy as np
 
 from agents.timing.oracle import DeckOracleTimingPolicy
 from estimation.deck_prediction import LinearMotionPredictor
+from estimation.limits import Limit, limited, require_limits
 from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_range
 from landing_env.scenarios import SCENARIOS
@@ -145,10 +146,10 @@ class OnboardModelConfig:
     """
 
     gust_error_mps: tuple[float, float, float] = (0.4, 0.4, 0.2)
-    drag_error_fraction: float = 0.2
+    drag_error_fraction: float = limited(0.2, Limit(0.0, 0.9))
     position_from_estimate: bool = True
     position_error_m: tuple[float, float, float] = (0.003, 0.003, 0.010)
-    thrust_error_fraction: float = 0.05
+    thrust_error_fraction: float = limited(0.05, Limit(0.0, 0.5))
     airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
@@ -162,8 +163,7 @@ class OnboardModelConfig:
             for value in values:
                 require_range(key, value, 0.0, high)
             object.__setattr__(self, key, values)
-        require_range("drag_error_fraction", self.drag_error_fraction, 0.0, 0.9)
-        require_range("thrust_error_fraction", self.thrust_error_fraction, 0.0, 0.5)
+        require_limits(self)
         for key in ("position_from_estimate", "airframe_in_trim"):
             value = getattr(self, key)
             if not isinstance(value, bool):

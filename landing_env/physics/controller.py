@@ -28,6 +28,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.drone_state import DroneState
 from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
@@ -63,7 +64,7 @@ class ControllerGains:
     vel_i_limit_xy: float = 3.0
     vel_i_limit_z: float = 4.0
     #: cut-off of the first-order filter on the velocity derivative (Hz)
-    vel_d_cutoff_hz: float = 10.0
+    vel_d_cutoff_hz: float = limited(10.0, POSITIVE)
     # set-point limits (m/s)
     max_horizontal_speed: float = 5.0
     max_climb_rate: float = 3.0
@@ -71,15 +72,15 @@ class ControllerGains:
     # acceleration and tilt limits
     max_tilt: float = math.radians(35.0)
     max_accel_up: float = 6.0
-    max_accel_down: float = 5.0
+    max_accel_down: float = limited(5.0, Limit(0.0, GRAVITY, high_inclusive=False))
     # attitude loop: body rate per radian of error (1/s)
     att_p_rp: float = 6.5
     att_p_yaw: float = 2.8
     #: the yaw set-point is kept within this of the actual yaw (rad)
     max_yaw_error: float = 0.5
     # rate limits (rad/s)
-    max_rate_rp: float = math.radians(220.0)
-    max_rate_yaw: float = math.radians(200.0)
+    max_rate_rp: float = limited(math.radians(220.0), POSITIVE)
+    max_rate_yaw: float = limited(math.radians(200.0), POSITIVE)
     # rate loop: angular acceleration = P e + I int(e) - D d(omega)/dt
     rate_p_rp: float = 20.0
     rate_i_rp: float = 10.0
@@ -91,7 +92,7 @@ class ControllerGains:
     rate_i_limit_rp: float = 30.0
     rate_i_limit_yaw: float = 10.0
     #: cut-off of the first-order filter on the rate derivative (Hz)
-    rate_d_cutoff_hz: float = 30.0
+    rate_d_cutoff_hz: float = limited(30.0, POSITIVE)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -100,10 +101,8 @@ class ControllerGains:
             if not math.isfinite(value):
                 raise ConfigError(f.name, f"{value!r} is not finite")
         require_range("max_tilt", self.max_tilt, 0.0, math.radians(80.0), low_inclusive=False)
-        require_range("max_accel_down", self.max_accel_down, 0.0, GRAVITY, high_inclusive=False)
+        require_limits(self)
         require_range("max_yaw_error", self.max_yaw_error, 0.0, math.pi, low_inclusive=False)
-        for name in ("max_rate_rp", "max_rate_yaw", "vel_d_cutoff_hz", "rate_d_cutoff_hz"):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
 
 
 @dataclass(frozen=True)
