@@ -190,9 +190,9 @@ class ATDAConfig:
     """
 
     ambiguity_ratio_threshold: float = limited(0.6, Limit(0.0, 1.0, low_inclusive=False))
-    history_timeout_s: float = limited(0.5, NON_NEGATIVE)
-    max_reprojection_error_px: float = limited(10.0, POSITIVE)
-    min_corner_area_px: float = limited(4.0, NON_NEGATIVE)
+    history_timeout_s: float = limited(0.5, NON_NEGATIVE, physical=Limit.non_negative(60.0))
+    max_reprojection_error_px: float = limited(10.0, POSITIVE, physical=Limit.positive(1e4))
+    min_corner_area_px: float = limited(4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7))
     joint_landmarks: bool = True
     pose_method: str = "ippe"
 

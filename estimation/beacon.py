@@ -106,13 +106,19 @@ class BeaconConfig:
     """Settings of the beacon estimator (``estimation.beacon.*``)."""
 
     #: the tag's quadrilateral must have at least this area to give a bearing, pixels²
-    min_corner_area_px: float = limited(4.0, NON_NEGATIVE)
+    min_corner_area_px: float = limited(
+        4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7, "px^2; a 4 K frame has 8.3e6")
+    )
     #: rangefinder origin below the camera along the optical axis, metres (a simulator sets
     #: it from its geometry)
     range_offset_m: float = limited(0.0, Limit(-1.0, 1.0))
     #: the beacon is seen only within this distance from the camera, metres (the IR-LOCK
     #: beacon's tracking range, IR_LOCK_MAX_RANGE_M); farther fixes are invalid
-    max_range_m: float = limited(IR_LOCK_MAX_RANGE_M, POSITIVE)
+    max_range_m: float = limited(
+        IR_LOCK_MAX_RANGE_M,
+        POSITIVE,
+        physical=Limit.positive(1e4, "m; the paper's COTS beacon: 40 m"),
+    )
 
     def __post_init__(self) -> None:
         require_limits(self)

@@ -23,6 +23,7 @@ from estimation import geometry
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
+from estimation.limits import Limit, limited
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
@@ -261,9 +262,13 @@ class RangeFusionConfig:
     """
 
     plane_fit: str = "lstsq"
-    max_plane_rms_m: float = 0.05
-    max_rigid_rms_rel: float = 0.25
-    min_corner_area_px: float = 4.0
+    max_plane_rms_m: float = limited(
+        0.05, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+    )
+    max_rigid_rms_rel: float = limited(
+        0.25, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+    )
+    min_corner_area_px: float = limited(4.0, physical=Limit.non_negative(1e7))
     undistort: bool = True
 
     def __post_init__(self) -> None:

@@ -58,21 +58,37 @@ class TightConfig:
     calibrated ones of the intrinsics file when rendering.
     """
 
-    pixel_sigma_px: float = limited(DEFAULT_PIXEL_SIGMA_PX, POSITIVE)
-    pixel_sigma_axes_px: float = limited(0.0, NON_NEGATIVE)
-    tof_sigma_0_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE)
-    tof_sigma_per_m: float = limited(VL53L1X_SIGMA_PER_M, NON_NEGATIVE)
-    tof_resolution_m: float = limited(VL53L1X_RESOLUTION_M, NON_NEGATIVE)
-    tof_sigma_min_m: float = limited(0.0, NON_NEGATIVE)
-    max_iterations: int = limited(12, Limit(1))
-    range_gate_sigma: float = limited(6.0, POSITIVE)
-    max_reprojection_error_px: float = limited(10.0, POSITIVE)
-    min_corner_area_px: float = limited(4.0, NON_NEGATIVE)
-    ambiguity_ratio_threshold: float = limited(0.6, Limit(0.0, 1.0, low_inclusive=False))
-    history_timeout_s: float = limited(0.5, NON_NEGATIVE)
-    start_cost_margin: float = limited(50.0, NON_NEGATIVE)
+    pixel_sigma_px: float = limited(
+        DEFAULT_PIXEL_SIGMA_PX, POSITIVE, physical=Limit.positive(100.0, "corner noise, pixels")
+    )
+    pixel_sigma_axes_px: float = limited(
+        0.0, NON_NEGATIVE, physical=Limit.non_negative(100.0, "0: pixel_sigma_px at every angle")
+    )
+    tof_sigma_0_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE, physical=Limit.positive(1.0))
+    tof_sigma_per_m: float = limited(
+        VL53L1X_SIGMA_PER_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
+    tof_resolution_m: float = limited(
+        VL53L1X_RESOLUTION_M,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(0.1, "VL53L1X reports whole millimetres"),
+    )
+    tof_sigma_min_m: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(1.0))
+    max_iterations: int = limited(12, Limit(1), physical=Limit(1, 1000))
+    range_gate_sigma: float = limited(6.0, POSITIVE, physical=Limit.positive(1e3, "gate in sigmas"))
+    max_reprojection_error_px: float = limited(10.0, POSITIVE, physical=Limit.positive(1e4))
+    min_corner_area_px: float = limited(
+        4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7, "a 512x512 image holds 2.6e5 px^2")
+    )
+    ambiguity_ratio_threshold: float = limited(
+        0.6, Limit(0.0, 1.0, low_inclusive=False), physical=Limit(0.0, 1.0)
+    )
+    history_timeout_s: float = limited(0.5, NON_NEGATIVE, physical=Limit.non_negative(60.0))
+    start_cost_margin: float = limited(50.0, NON_NEGATIVE, physical=Limit.non_negative(1e6))
     principal_point: str = "touch_points"
-    corner_bias_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    corner_bias_px: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0, "detector edge offset a, b (px), c (px^2)")
+    )
     noise_from_sensors: bool = True
 
     def __post_init__(self) -> None:

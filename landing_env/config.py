@@ -20,10 +20,11 @@ from estimation.beacon import BeaconConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
+from estimation.limits import Limit, limited
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.tight_config import TightConfig
-from landing_env.config_limits import check_value
+from landing_env.config_limits import LIMITS, check_value, physical_limits
 from landing_env.config_loading import (
     build_dataclass,
     deep_merge,
@@ -74,14 +75,18 @@ SHIPPED_TOF_CALIBRATION_FILE = CALIBRATION_DIR / "tof_camera.json"
 class SimulationConfig:
     """Rates and limits of the simulation."""
 
-    physics_hz: int = 240
-    env_hz: int = 20
+    #: PyBullet's step rate, Hz: above 4 kHz a step costs more than any motor/ESC update
+    #: rate (<= 2 kHz) justifies, and 1e6 Hz froze a run
+    physics_hz: int = limited(
+        240, physical=Limit(1, 4000, note="<= 4 kHz (motor/ESC updates <= 2 kHz)")
+    )
+    env_hz: int = limited(20, physical=Limit(1, 1000))
     #: episode time limit (truncation), seconds
-    max_episode_s: float = 30.0
+    max_episode_s: float = limited(30.0, physical=Limit.positive(1e5, "about a day"))
     #: leaving this horizontal distance from the deck's home position is a crash, metres
-    arena_half_extent_m: float = 8.0
+    arena_half_extent_m: float = limited(8.0, physical=Limit.positive(1e4))
     #: flying higher than this above the deck's home surface is a crash, metres
-    arena_max_height_m: float = 12.0
+    arena_max_height_m: float = limited(12.0, physical=Limit.positive(1e4))
     #: attitude tilt beyond which the drone counts as flipped, degrees
     flip_tilt_deg: float = 80.0
     #: pin the drone at its start pose, as on the papers' bench ("a motionless flying
@@ -110,9 +115,9 @@ class SimulationConfig:
 class ActionConfig:
     """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
 
-    max_horizontal_speed: float = 1.5
-    max_vertical_speed: float = 1.0
-    max_yaw_rate_deg: float = 60.0
+    max_horizontal_speed: float = limited(1.5, physical=Limit.positive(50.0, "multirotor airspeed"))
+    max_vertical_speed: float = limited(1.0, physical=Limit.positive(50.0))
+    max_yaw_rate_deg: float = limited(60.0, physical=Limit.positive(1000.0))
 
     def __post_init__(self) -> None:
         for name in ("max_horizontal_speed", "max_vertical_speed", "max_yaw_rate_deg"):
@@ -124,12 +129,12 @@ class StartConfig:
     """Where an episode starts, relative to the deck's home surface centre."""
 
     #: height of the drone's centre above the deck home surface, min and max, metres
-    height_m: tuple[float, float] = (1.8, 2.2)
+    height_m: tuple[float, float] = limited((1.8, 2.2), physical=Limit(0.2, 1e4))
     #: maximum horizontal offset from the deck centre, metres
-    max_offset_m: float = 0.3
+    max_offset_m: float = limited(0.3, physical=Limit.non_negative(1e4))
     #: minimum horizontal offset, metres (equal to max_offset_m: a fixed distance at a
     #: random bearing, e.g. the high approach's 5 m)
-    min_offset_m: float = 0.0
+    min_offset_m: float = limited(0.0, physical=Limit.non_negative(1e4))
     #: maximum ``|yaw|`` at the start, degrees
     max_yaw_deg: float = 10.0
     #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
@@ -162,11 +167,11 @@ class StartConfig:
 class TouchdownConfig:
     """Success thresholds of a touchdown; every measured value is reported in ``info``."""
 
-    max_normal_speed: float = 0.5
+    max_normal_speed: float = limited(0.5, physical=Limit.positive(20.0))
     max_deck_tilt_deg: float = 5.0
     max_relative_attitude_deg: float = 10.0
     #: the drone must still be on the deck this long after the first contact, seconds
-    settle_time_s: float = 1.0
+    settle_time_s: float = limited(1.0, physical=Limit.non_negative(60.0))
     #: a bounce higher than this (lowest foot above the deck, metres) fails the touchdown
     max_bounce_m: float = 0.01
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
@@ -181,26 +186,32 @@ class TouchdownConfig:
         require_range("settle_time_s", self.settle_time_s, 0.0)
 
 
+#: the physical range of a reward weight
+REWARD_WEIGHT = Limit.non_negative(
+    1e4, "reward weight: non-negative (the formula carries the signs)"
+)
+
+
 @dataclass
 class RewardConfig:
     """Weights of the reward; see the README for the formula."""
 
-    success_bonus: float = 10.0
+    success_bonus: float = limited(10.0, physical=REWARD_WEIGHT)
     #: ``DeckLanding`` only: any touchdown on the deck (a success or a hard landing) earns it,
     #: so that trying to land pays more than hovering to the time-out; the timing task, whose
     #: every commit ends in a touchdown, leaves it out
-    touchdown_bonus: float = 5.0
-    crash_penalty: float = 10.0
+    touchdown_bonus: float = limited(5.0, physical=REWARD_WEIGHT)
+    crash_penalty: float = limited(10.0, physical=REWARD_WEIGHT)
 
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
-    shaping_weight: float = 1.0
-    vertical_weight: float = 0.5
+    shaping_weight: float = limited(1.0, physical=REWARD_WEIGHT)
+    vertical_weight: float = limited(0.5, physical=REWARD_WEIGHT)
     #: per-second cost of flying
-    time_cost: float = 0.1
+    time_cost: float = limited(0.1, physical=REWARD_WEIGHT)
     #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)
-    normal_speed_penalty: float = 4.0
-    tilt_penalty: float = 0.2
-    offset_penalty: float = 5.0
+    normal_speed_penalty: float = limited(4.0, physical=REWARD_WEIGHT)
+    tilt_penalty: float = limited(0.2, physical=REWARD_WEIGHT)
+    offset_penalty: float = limited(5.0, physical=REWARD_WEIGHT)
 
 
 @dataclass
@@ -234,7 +245,7 @@ class EstimationConfig:
     tracking: bool = False
     tracking_estimators: tuple[str, ...] = ()
     tracking_smooth: bool = False
-    max_bridged_frames: int = 3
+    max_bridged_frames: int = limited(3, physical=Limit(0, 1000))
     tof_positions_c: tuple[tuple[float, float, float], ...] = ()
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
@@ -312,7 +323,7 @@ def _require_file(key: str, path: Path) -> None:
 class DeckLandingConfig:
     """Everything DeckLanding-v1 needs; each section is documented by its dataclass."""
 
-    seed: int | None = None
+    seed: int | None = limited(None, physical=Limit(0, 2**63 - 1))
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
     #: noise, lens distortion, VL53L1X ToF noise and the calibrations made for them): the
     #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
@@ -346,7 +357,9 @@ class DeckLandingConfig:
     deck: DeckSurfaceConfig = field(default_factory=DeckSurfaceConfig)
     stewart: StewartGeometry = field(default_factory=StewartGeometry)
     #: world position of the Stewart platform's base centre (the ship stand-in), metres
-    stewart_base_position: tuple[float, float, float] = (0.0, 0.0, 0.04)
+    stewart_base_position: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.04), physical=Limit.symmetric(1e3)
+    )
     motion: MotionConfig = field(default_factory=MotionConfig)
     #: what carries the deck: "stewart" (the papers' bench, motion clamped to its workspace)
     #: or "ship" (a full-scale helideck moved by the motion as it is, no legs; landing_env/sea/)
@@ -385,6 +398,10 @@ class DeckLandingConfig:
                 )
         require_choice("sensors", self.sensors, SENSOR_SETS)
         require_choice("lens", self.lens, LENS_SETS)
+
+
+# the loader's table of physical ranges: what every field of the tree declares
+LIMITS.update(physical_limits(DeckLandingConfig))
 
 
 def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:

@@ -36,16 +36,16 @@ class VisionLinkConfig:
     #: off by default: the existing scenarios see every estimate at once
     enabled: bool = False
     #: mean delay from image capture to delivery, seconds
-    latency_s: float = limited(0.2025, NON_NEGATIVE)
+    latency_s: float = limited(0.2025, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: the delay is uniform in latency_s ± latency_jitter_s (175–230 ms by default, the SVGS
     #: paper's measurement-to-flight-controller latency, Sec. 2.4)
-    latency_jitter_s: float = 0.0275
+    latency_jitter_s: float = limited(0.0275, physical=Limit.non_negative(10.0))
     #: the pipeline's rate, drawn uniformly in [min, max] for each frame it takes, Hz
-    rate_hz: tuple[float, float] = (6.0, 15.0)
+    rate_hz: tuple[float, float] = limited((6.0, 15.0), physical=Limit.positive(1e3))
     #: probability that a taken frame never arrives
     dropout_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: a delivered estimate is shown (stale) until it is this old, seconds
-    max_age_s: float = limited(1.0, POSITIVE)
+    max_age_s: float = limited(1.0, POSITIVE, physical=Limit.positive(60.0))
 
     def __post_init__(self) -> None:
         require_limits(self)

@@ -85,3 +85,26 @@ def test_require_limits_refuses_the_field_outside_its_limit_with_the_range(
 def test_fields_without_a_limit_and_values_on_a_bound_are_accepted() -> None:
     rig = _Rig(speed_mps=1e-9, count=10, margin_m=0.0, free=-1e9)
     assert (rig.count, rig.margin_m, rig.free) == (10, 0.0, -1e9)
+
+
+def test_the_loaders_table_is_the_physical_range_each_field_declares() -> None:
+    from landing_env.config_limits import LIMITS, physical_limits
+    from landing_env.sensors.camera_config import CameraConfig
+
+    assert LIMITS == physical_limits(DeckLandingConfig)
+    fx = next(item for item in dataclasses.fields(CameraConfig) if item.name == "fx")
+    assert LIMITS["camera.fx"] is fx.metadata["physical"]
+    assert len(LIMITS) >= 190
+
+
+def test_a_physical_range_is_checked_on_load_and_a_field_limit_always() -> None:
+    from landing_env.config import load_config
+    from landing_env.sensors.camera_config import CameraConfig
+
+    assert CameraConfig(fx=2e5).fx == 2e5  # beyond the physical range, still computable
+    with pytest.raises(ConfigError) as error:
+        load_config("default", overrides={"camera.fx": 2e5})
+    assert error.value.key == "camera.fx" and "100000.0]" in str(error.value)
+    for build in (lambda: CameraConfig(fx=0.0), lambda: load_config("default", camera={"fx": 0.0})):
+        with pytest.raises(ConfigError, match=r"fx: 0\.0 is out of range; allowed \(0\.0,"):
+            build()

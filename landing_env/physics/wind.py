@@ -44,11 +44,15 @@ class WindConfig:
 
     enabled: bool = False
     #: mean wind velocity in W (m/s): the air's velocity, not the direction it comes from
-    mean_velocity_w: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mean_velocity_w: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0, "m/s; hurricane force is ~33 m/s")
+    )
     #: stationary standard deviation of the gust in each world axis (m/s)
-    gust_intensity: tuple[float, float, float] = (0.5, 0.5, 0.2)
+    gust_intensity: tuple[float, float, float] = limited(
+        (0.5, 0.5, 0.2), physical=Limit.non_negative(100.0)
+    )
     #: correlation time of the gust process (s)
-    gust_time_constant: float = limited(2.0, POSITIVE)
+    gust_time_constant: float = limited(2.0, POSITIVE, physical=Limit.positive(1e3))
     #: "ou": gust_intensity and gust_time_constant as given; "dryden": both from the
     #: MIL-F-8785C low-altitude Dryden model for the mean wind and reference_height_m
     turbulence: str = "ou"

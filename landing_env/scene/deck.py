@@ -78,18 +78,18 @@ class DeckSurfaceConfig:
     """The deck's top plate and what is drawn on it."""
 
     #: edge of the square plate, metres
-    size: float = limited(1.0, POSITIVE)
+    size: float = limited(1.0, POSITIVE, physical=Limit.positive(1e3))
     #: plate thickness, metres (the body's frame is the centre of the *top* surface)
-    thickness: float = limited(0.03, POSITIVE)
+    thickness: float = limited(0.03, POSITIVE, physical=Limit.positive(10.0))
     #: AprilTag family (fixed: OpenCV draws it, pupil-apriltags detects it)
     tag_family: str = TAG_FAMILY
     tag_id: int = limited(0, Limit(0, 586))
     #: edge of the tag's black border, metres (pupil-apriltags' ``tag_size``)
-    tag_size: float = 0.30
+    tag_size: float = limited(0.30, physical=Limit.positive(1e3))
     #: draw the tag; with pads on the tag may be left out, as pads sit on its area
     tag: bool = True
     #: width of the white quiet zone round the tag, in tag cells (tag_size / 8)
-    quiet_zone_cells: float = limited(1.0, NON_NEGATIVE)
+    quiet_zone_cells: float = limited(1.0, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     #: texels across the plate
     texture_px: int = limited(1024, Limit(16, 8192))
     #: plate colour, RGB 0-255 (neutral grey fails every IHRCF Table 1 pad threshold)
@@ -97,7 +97,7 @@ class DeckSurfaceConfig:
     #: coloured ToF calibration pads (IHRCF Sec. 2.2), drawn over the tag
     pads: bool = False
     #: pad radius, metres
-    pad_radius: float = 0.04
+    pad_radius: float = limited(0.04, physical=Limit.positive(10.0))
     #: pad centres (x, y) in P in sensor order ps1..ps4; None = the ToF touch points
     pad_centres_p: tuple[tuple[float, float], ...] | None = None
     #: nested landmarks (tag_id, size, x, y in D; see estimation.landmarks) drawn instead of

@@ -73,7 +73,9 @@ class ShipMotionConfig(SeaConfig):
     n_components: int = 200
     band_high: float = 4.0
     #: 150 = bow seas 30 deg off the starboard bow, a usual heading for deck landings
-    wave_direction_deg: float = 150.0
+    wave_direction_deg: float = limited(
+        150.0, physical=Limit(-360.0, 360.0, note="from the bow, degrees")
+    )
     #: hull: length, moulded breadth, draught (m), block coefficient, metacentric height (m)
     length_m: float = limited(30.0, Limit(10.0, 40.0))
     beam_m: float = 7.0

@@ -24,50 +24,53 @@ class CameraConfig:
     mode: Literal["render", "project"] = "project"
     width: int = limited(512, Limit(16, 8192))
     height: int = limited(512, Limit(16, 8192))
-    fx: float = limited(458.5, POSITIVE)
-    fy: float = limited(457.855, POSITIVE)
+    fx: float = limited(458.5, POSITIVE, physical=Limit.positive(1e5, "pixels"))
+    fy: float = limited(457.855, POSITIVE, physical=Limit.positive(1e5, "pixels"))
     #: principal point, pixels (OpenCV convention); None = image centre, (width - 1) / 2
-    cx: float | None = None
-    cy: float | None = None
-    #: OpenCV radial-tangential distortion
-    k1: float = 0.0
-    k2: float = 0.0
-    p1: float = 0.0
-    p2: float = 0.0
-    k3: float = 0.0
+    cx: float | None = limited(None, physical=Limit.symmetric(1e5))
+    cy: float | None = limited(None, physical=Limit.symmetric(1e5))
+    #: OpenCV radial-tangential distortion (|k| of real lenses is < 10)
+    k1: float = limited(0.0, physical=Limit.symmetric(100.0))
+    k2: float = limited(0.0, physical=Limit.symmetric(100.0))
+    p1: float = limited(0.0, physical=Limit.symmetric(100.0))
+    p2: float = limited(0.0, physical=Limit.symmetric(100.0))
+    k3: float = limited(0.0, physical=Limit.symmetric(100.0))
     #: clipping planes of the renderer, metres; nearer tag corners count as behind the camera
-    near: float = limited(0.05, POSITIVE)
-    far: float = 30.0
+    near: float = limited(0.05, POSITIVE, physical=Limit.positive(1e3))
+    far: float = limited(30.0, physical=Limit.positive(1e4))
     #: Gaussian corner noise, pixels (project mode)
-    pixel_noise_px: float = limited(0.0, NON_NEGATIVE)
+    pixel_noise_px: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     #: project mode's corner noise: "constant" (``pixel_noise_px``) or "fitted": sigma from
     #: the tag's side and blur in pixels with ``pixel_noise_fit`` = (base px, size px^3,
     #: blur fraction, side^2 coefficient), fitted to render-and-detect under a camera profile
     #: (:mod:`landing_env.sensors.corner_noise`; ``sensors: realistic`` sets both)
     pixel_noise_model: Literal["constant", "fitted"] = "constant"
-    pixel_noise_fit: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    pixel_noise_fit: tuple[float, float, float, float] = limited(
+        (0.0, 0.0, 0.0, 0.0),
+        physical=Limit.non_negative(1e6, "fitted (base px, size px^3, blur, floor)"),
+    )
     #: probability that a visible tag is dropped from a frame (both modes)
     dropout_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: angle between the tag normal and the ray from the tag centre to the camera, degrees
     max_view_angle_deg: float = limited(75.0, Limit(0.0, 90.0))
     #: shortest tag side in pixels below which the tag is not detected (project mode)
-    min_tag_side_px: float = limited(12.0, NON_NEGATIVE)
+    min_tag_side_px: float = limited(12.0, NON_NEGATIVE, physical=Limit.non_negative(1e4))
     #: corners must lie this far inside the image, pixels
-    edge_margin_px: float = 2.0
+    edge_margin_px: float = limited(2.0, physical=Limit.non_negative(1e4))
     #: pupil-apriltags settings (render mode)
-    quad_decimate: float = limited(1.0, Limit(1.0))
-    quad_sigma: float = limited(0.0, NON_NEGATIVE)
+    quad_decimate: float = limited(1.0, Limit(1.0), physical=Limit(1.0, 16.0))
+    quad_sigma: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     refine_edges: bool = True
-    decode_sharpening: float = limited(0.25, NON_NEGATIVE)
-    detector_threads: int = limited(1, Limit(1, 64))
+    decode_sharpening: float = limited(0.25, NON_NEGATIVE, physical=Limit.non_negative(10.0))
+    detector_threads: int = limited(1, Limit(1, 64), physical=Limit(1, 256))
     #: render mode: "tag" renders and searches only a window round where the tag projects
     #: (the pixels there are the same as in a full render; the frame's image is grey outside
     #: it); "full" renders the whole image.  Both detect from pixels only.
     render_region: Literal["tag", "full"] = "tag"
     #: the "tag" window extends the tag's pixel bounding box by this fraction of its size
     #: and ``render_margin_px`` on each side (the quiet zone is 1/8 of the tag)
-    render_margin_frac: float = limited(0.25, NON_NEGATIVE)
-    render_margin_px: int = limited(8, Limit(0))
+    render_margin_frac: float = limited(0.25, NON_NEGATIVE, physical=Limit.non_negative(10.0))
+    render_margin_px: int = limited(8, Limit(0), physical=Limit(0, 10_000))
     #: render with the EGL plugin (OpenGL, falls back to TinyRenderer when it cannot load);
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
     #: and it only draws bodies created after it is loaded (the world creates its camera
@@ -90,8 +93,14 @@ class CameraConfig:
     #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
     #: None = no glare.  ``glare_strength``: the lobe's peak in white-surface units
     sun_direction_w: tuple[float, float, float] | None = None
-    glare_strength: float = limited(4.0, NON_NEGATIVE)
-    glare_shininess: float = limited(300.0, Limit(1.0))
+    glare_strength: float = limited(
+        4.0,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(1e3, "the lobe's peak in white-surface units"),
+    )
+    glare_shininess: float = limited(
+        300.0, Limit(1.0), physical=Limit(1.0, 1e5, note="Phong exponent")
+    )
     #: renderer lighting; specular off so the white quiet zone does not saturate in patches
     light_ambient: float = limited(0.6, Limit(0.0, 1.0))
     light_diffuse: float = limited(0.4, Limit(0.0, 1.0))

@@ -34,19 +34,21 @@ class RangefinderConfig:
 
     enabled: bool = True
     #: longest valid range, metres (LIDAR-Lite v3: 40 m)
-    max_range: float = limited(40.0, POSITIVE)
+    max_range: float = limited(40.0, POSITIVE, physical=Limit.positive(1e3, "LIDAR-Lite v3: 40 m"))
     #: shortest valid range, metres
-    min_range: float = limited(0.05, NON_NEGATIVE)
+    min_range: float = limited(0.05, NON_NEGATIVE, physical=Limit.non_negative(1e3))
     #: noise standard deviation at zero range, metres
-    sigma_0: float = limited(0.025, NON_NEGATIVE)
+    sigma_0: float = limited(0.025, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: growth of the standard deviation with range, metres per metre
-    sigma_per_m: float = limited(0.001, NON_NEGATIVE)
+    sigma_per_m: float = limited(0.001, NON_NEGATIVE, physical=Limit.non_negative(1.0))
     #: output resolution, metres (0 = no quantisation)
-    resolution: float = limited(0.01, NON_NEGATIVE)
+    resolution: float = limited(0.01, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: probability of no reading on an in-range target
     invalid_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: beam origin in the body frame B, metres (beside the camera, under the centre of mass)
-    mount_offset_b: tuple[float, float, float] = (0.0, 0.0, -0.03)
+    mount_offset_b: tuple[float, float, float] = limited(
+        (0.0, 0.0, -0.03), physical=Limit.symmetric(10.0)
+    )
 
     def __post_init__(self) -> None:
         require_limits(self)

@@ -61,18 +61,24 @@ class TofConfig:
     """
 
     #: beyond this the ranging status is invalid, metres (VL53L1X long mode: 4 m)
-    max_range: float = limited(4.0, POSITIVE)
+    max_range: float = limited(4.0, POSITIVE, physical=Limit.positive(100.0, "VL53L1X: 4 m"))
     #: nearer than this the reading is invalid, metres
-    min_range: float = limited(0.04, NON_NEGATIVE)
+    min_range: float = limited(0.04, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     noise: Literal["none", "vl53l1x"] = "none"
-    sigma_0: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE)
-    sigma_per_m: float = limited(VL53L1X_SIGMA_PER_M, NON_NEGATIVE)
+    sigma_0: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE, physical=Limit.non_negative(1.0))
+    sigma_per_m: float = limited(
+        VL53L1X_SIGMA_PER_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
     #: output resolution in vl53l1x mode, metres (0 = no quantisation)
-    resolution: float = limited(VL53L1X_RESOLUTION_M, NON_NEGATIVE)
+    resolution: float = limited(
+        VL53L1X_RESOLUTION_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
     #: probability of an invalid ranging status on an in-range target (vl53l1x mode)
     invalid_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: sensor origins in the camera frame C, metres (sensor order ps1..ps4)
-    mount_offsets_c: tuple[tuple[float, float, float], ...] = _default_mounts()
+    mount_offsets_c: tuple[tuple[float, float, float], ...] = limited(
+        _default_mounts(), physical=Limit.symmetric(10.0)
+    )
     #: beam misalignment: per sensor, its beam turned about the camera's x then y axis from
     #: the optical axis, degrees (empty: every beam along +z_C, as the estimators assume)
     beam_tilts_deg: tuple[tuple[float, float], ...] = ()

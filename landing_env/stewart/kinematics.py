@@ -36,22 +36,22 @@ class StewartGeometry:
     """
 
     #: radius of the circle through the base joints
-    base_radius: float = limited(0.50, POSITIVE)
+    base_radius: float = limited(0.50, POSITIVE, physical=Limit.positive(100.0))
     #: radius of the circle through the top joints
-    top_radius: float = limited(0.36, POSITIVE)
+    top_radius: float = limited(0.36, POSITIVE, physical=Limit.positive(100.0))
     #: half the angle between the two base joints of a pair, degrees
     base_half_angle_deg: float = limited(12.0, Limit(0.0, 60.0))
     #: half the angle between the two top joints of a pair (pairs centred between base
     #: pairs), degrees
     top_half_angle_deg: float = limited(12.0, Limit(0.0, 60.0))
     #: height of P's origin (the deck's top surface) above the base-joint plane at home
-    home_height: float = limited(0.55, POSITIVE)
+    home_height: float = limited(0.55, POSITIVE, physical=Limit.positive(1e3))
     #: depth of the top-joint plane below the deck's top surface (joints hide under the plate)
-    top_anchor_depth: float = 0.04
+    top_anchor_depth: float = limited(0.04, physical=Limit.symmetric(100.0))
     #: shortest leg (fully retracted actuator), joint centre to joint centre
-    min_leg_length: float = limited(0.47, POSITIVE)
+    min_leg_length: float = limited(0.47, POSITIVE, physical=Limit.positive(1e3))
     #: longest leg (fully extended actuator)
-    max_leg_length: float = 0.72
+    max_leg_length: float = limited(0.72, physical=Limit.positive(1e3))
     #: largest angle between a leg and the base normal, degrees; None: no limit
     max_base_joint_angle_deg: float | None = None
     #: largest angle between a leg and the top-plate normal, degrees; None: no limit
