@@ -20,7 +20,7 @@ from estimation.beacon import BeaconConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
-from estimation.limits import Limit, limited
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.tight_config import TightConfig
@@ -78,33 +78,30 @@ class SimulationConfig:
     #: PyBullet's step rate, Hz: above 4 kHz a step costs more than any motor/ESC update
     #: rate (<= 2 kHz) justifies, and 1e6 Hz froze a run
     physics_hz: int = limited(
-        240, physical=Limit(1, 4000, note="<= 4 kHz (motor/ESC updates <= 2 kHz)")
+        240, Limit(1), physical=Limit(1, 4000, note="<= 4 kHz (motor/ESC updates <= 2 kHz)")
     )
-    env_hz: int = limited(20, physical=Limit(1, 1000))
+    env_hz: int = limited(20, Limit(1), physical=Limit(1, 1000))
     #: episode time limit (truncation), seconds
-    max_episode_s: float = limited(30.0, physical=Limit.positive(1e5, "about a day"))
+    max_episode_s: float = limited(30.0, POSITIVE, physical=Limit.positive(1e5, "about a day"))
     #: leaving this horizontal distance from the deck's home position is a crash, metres
     arena_half_extent_m: float = limited(8.0, physical=Limit.positive(1e4))
     #: flying higher than this above the deck's home surface is a crash, metres
     arena_max_height_m: float = limited(12.0, physical=Limit.positive(1e4))
     #: attitude tilt beyond which the drone counts as flipped, degrees
-    flip_tilt_deg: float = 80.0
+    flip_tilt_deg: float = limited(80.0, Limit(0.0, 180.0))
     #: pin the drone at its start pose, as on the papers' bench ("a motionless flying
     #: quadrotor" over the moving platform); the action is then ignored
     drone_fixed: bool = False
     gui: bool = False
 
     def __post_init__(self) -> None:
-        require_range("physics_hz", self.physics_hz, 1)
-        require_range("env_hz", self.env_hz, 1)
+        require_limits(self)
         if self.physics_hz % self.env_hz != 0:
             raise ConfigError(
                 "physics_hz",
                 f"{self.physics_hz} Hz is not a multiple of simulation.env_hz = {self.env_hz} Hz; "
                 "choose physics_hz = k * env_hz (e.g. 240 with env_hz 20, 30, 40, 48, 60, 80)",
             )
-        require_range("max_episode_s", self.max_episode_s, 0.0, low_inclusive=False)
-        require_range("flip_tilt_deg", self.flip_tilt_deg, 0.0, 180.0)
 
     @property
     def substeps(self) -> int:
@@ -115,13 +112,14 @@ class SimulationConfig:
 class ActionConfig:
     """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
 
-    max_horizontal_speed: float = limited(1.5, physical=Limit.positive(50.0, "multirotor airspeed"))
-    max_vertical_speed: float = limited(1.0, physical=Limit.positive(50.0))
-    max_yaw_rate_deg: float = limited(60.0, physical=Limit.positive(1000.0))
+    max_horizontal_speed: float = limited(
+        1.5, POSITIVE, physical=Limit.positive(50.0, "multirotor airspeed")
+    )
+    max_vertical_speed: float = limited(1.0, POSITIVE, physical=Limit.positive(50.0))
+    max_yaw_rate_deg: float = limited(60.0, POSITIVE, physical=Limit.positive(1000.0))
 
     def __post_init__(self) -> None:
-        for name in ("max_horizontal_speed", "max_vertical_speed", "max_yaw_rate_deg"):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+        require_limits(self)
 
 
 @dataclass
@@ -131,12 +129,12 @@ class StartConfig:
     #: height of the drone's centre above the deck home surface, min and max, metres
     height_m: tuple[float, float] = limited((1.8, 2.2), physical=Limit(0.2, 1e4))
     #: maximum horizontal offset from the deck centre, metres
-    max_offset_m: float = limited(0.3, physical=Limit.non_negative(1e4))
+    max_offset_m: float = limited(0.3, NON_NEGATIVE, physical=Limit.non_negative(1e4))
     #: minimum horizontal offset, metres (equal to max_offset_m: a fixed distance at a
     #: random bearing, e.g. the high approach's 5 m)
     min_offset_m: float = limited(0.0, physical=Limit.non_negative(1e4))
     #: maximum ``|yaw|`` at the start, degrees
-    max_yaw_deg: float = 10.0
+    max_yaw_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
     #: is at t = 0 (a ship deck can be metres away from home), so the drone starts above it
     relative_to: str = "home"
@@ -152,7 +150,7 @@ class StartConfig:
         low, high = self.height_m
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
-        require_range("max_offset_m", self.max_offset_m, 0.0)
+        require_limits(self)
         require_range(
             "min_offset_m",
             self.min_offset_m,
@@ -160,30 +158,24 @@ class StartConfig:
             self.max_offset_m,
             bounds_from=f"max_offset_m = {self.max_offset_m}",
         )
-        require_range("max_yaw_deg", self.max_yaw_deg, 0.0, 180.0)
 
 
 @dataclass
 class TouchdownConfig:
     """Success thresholds of a touchdown; every measured value is reported in ``info``."""
 
-    max_normal_speed: float = limited(0.5, physical=Limit.positive(20.0))
-    max_deck_tilt_deg: float = 5.0
-    max_relative_attitude_deg: float = 10.0
+    max_normal_speed: float = limited(0.5, POSITIVE, physical=Limit.positive(20.0))
+    max_deck_tilt_deg: float = limited(5.0, Limit(0.0, 90.0))
+    max_relative_attitude_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: the drone must still be on the deck this long after the first contact, seconds
-    settle_time_s: float = limited(1.0, physical=Limit.non_negative(60.0))
+    settle_time_s: float = limited(1.0, NON_NEGATIVE, physical=Limit.non_negative(60.0))
     #: a bounce higher than this (lowest foot above the deck, metres) fails the touchdown
-    max_bounce_m: float = 0.01
+    max_bounce_m: float = limited(0.01, Limit(0.0, 1.0))
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
-    tip_over_deg: float = 45.0
+    tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
 
     def __post_init__(self) -> None:
-        require_range("max_bounce_m", self.max_bounce_m, 0.0, 1.0)
-        require_range("tip_over_deg", self.tip_over_deg, 1.0, 180.0)
-        require_range("max_normal_speed", self.max_normal_speed, 0.0, low_inclusive=False)
-        require_range("max_deck_tilt_deg", self.max_deck_tilt_deg, 0.0, 90.0)
-        require_range("max_relative_attitude_deg", self.max_relative_attitude_deg, 0.0, 180.0)
-        require_range("settle_time_s", self.settle_time_s, 0.0)
+        require_limits(self)
 
 
 #: the physical range of a reward weight
@@ -245,7 +237,7 @@ class EstimationConfig:
     tracking: bool = False
     tracking_estimators: tuple[str, ...] = ()
     tracking_smooth: bool = False
-    max_bridged_frames: int = limited(3, physical=Limit(0, 1000))
+    max_bridged_frames: int = limited(3, Limit(0), physical=Limit(0, 1000))
     tof_positions_c: tuple[tuple[float, float, float], ...] = ()
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
@@ -267,7 +259,7 @@ class EstimationConfig:
         require_choice("intrinsics", self.intrinsics, CALIBRATION_SOURCES)
         require_choice("tof_calibration", self.tof_calibration, CALIBRATION_SOURCES)
         require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
-        require_range("max_bridged_frames", self.max_bridged_frames, 0)
+        require_limits(self)
         for name in self.tracking_estimators:
             require_choice("tracking_estimators", name, ESTIMATOR_NAMES)
         if any(len(row) != 3 for row in self.tof_positions_c):
@@ -365,7 +357,7 @@ class DeckLandingConfig:
     #: or "ship" (a full-scale helideck moved by the motion as it is, no legs; landing_env/sea/)
     deck_mount: str = "stewart"
     #: deck_mount ship: height of the deck's home surface above the sea plane, metres
-    ship_deck_height_m: float = 10.0
+    ship_deck_height_m: float = limited(10.0, Limit(2.0, 50.0))
     camera: CameraConfig = field(default_factory=CameraConfig)
     tof: TofConfig = field(default_factory=TofConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
@@ -382,7 +374,7 @@ class DeckLandingConfig:
                 "landing_env/assets/quadrotor.yaml, or leave it empty for that one",
             )
         require_choice("deck_mount", self.deck_mount, DECK_MOUNTS)
-        require_range("ship_deck_height_m", self.ship_deck_height_m, 2.0, 50.0)
+        require_limits(self)
         if self.deck_mount == "stewart" and self.motion.kind == "ship":
             raise ConfigError(
                 "motion.kind",
