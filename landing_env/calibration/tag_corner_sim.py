@@ -22,6 +22,7 @@ from estimation.camera_model import CameraIntrinsics
 from estimation.corner_bias import CornerBiasFit, fit_corner_bias
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env.calibration import STILL_RIG
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import require_range
 from landing_env.world import World
@@ -55,15 +56,7 @@ def tag_rig_config(config: DeckLandingConfig) -> DeckLandingConfig:
     """The environment config turned into the tag rig (same camera, deck tag and detector)."""
     return load_config(
         config,
-        overrides={
-            "motion.kind": "static",
-            "motion.static.position_m": (0.0, 0.0, 0.0),
-            "motion.static.attitude_deg": (0.0, 0.0, 0.0),
-            "camera.mode": "render",
-            "camera.use_egl": False,
-            "simulation.gui": False,
-            "wind.enabled": False,
-        },
+        overrides={**STILL_RIG, "camera.mode": "render"},
     )
 
 

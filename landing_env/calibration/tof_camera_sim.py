@@ -51,6 +51,7 @@ from estimation.tof_rig import (
     TofRigDescription,
     calibrate_rig,
 )
+from landing_env.calibration import STILL_RIG
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice
 from landing_env.world import World
@@ -155,13 +156,8 @@ def rig_config(config: DeckLandingConfig, rig: TofRigConfig) -> DeckLandingConfi
             "deck.pads": True,
             "deck.pad_radius": rig.pad_radius_m,
             "deck.pad_centres_p": [tuple(float(v) for v in row[:2]) for row in pads_p],
-            "motion.kind": "static",
-            "motion.static.position_m": (0.0, 0.0, 0.0),
-            "motion.static.attitude_deg": (0.0, 0.0, 0.0),
+            **STILL_RIG,
             "camera.mode": "project",
-            "camera.use_egl": False,
-            "simulation.gui": False,
-            "wind.enabled": False,
         },
     )
 
