@@ -50,11 +50,11 @@ from agents.timing.sampler import RandomiseSettings, make_randomised_env, sensin
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice
-from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS, TIMING_TASK
+from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, SCENARIOS, TASKS, TIMING_TASK
 
 ENV_ID = TIMING_TASK
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
-SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v6"
+SCENARIO_ENV_ID = SCENARIOS["bench-ss4"].ids[TIMING_TASK]
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
 ALGOS = ("ppo", "dqn", "recurrentppo", "sac", "tqc")
@@ -186,7 +186,7 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
         raise ConfigError(
             "config",
             f"{path} needs one top-level section named by a registered id (rl-zoo3 style), "
-            f"e.g. {SCENARIO_ENV_ID!r} or 'DeckLanding-BenchSS4-v1'",
+            f"e.g. {SCENARIO_ENV_ID!r} or {SCENARIOS['bench-ss4'].ids[LANDING_TASK]!r}",
         )
     section = dict(data.get("deck_landing") or {})
     if algo is not None:

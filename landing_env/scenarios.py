@@ -247,13 +247,16 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
 }
 SCENARIOS.update(HELD_OUT_SCENARIOS)
 
+#: the approach from altitude's id, which its scenarios fly on their own configs
+HIGH_APPROACH_ID = "DeckLanding-HighApproach-v1"
+
 #: the scenarios of the approach from altitude (``DeckLanding-v1`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
     "high-approach": Scenario(
         "high-approach",
         "high-approach",
         "from 20 m up and 5 m off, gusty wind, sea state 3",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
     ),
     # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
     # on another config (``gym.make("DeckLanding-HighApproach-v1", config="svgs-100m")``)
@@ -261,14 +264,14 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
         "svgs-100m",
         "svgs-100m",
         "the SVGS paper's flights: from 101.7-106.7 m over a static pad, three landmarks",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
         own_id=False,
     ),
     "svgs-100m-irlock": Scenario(
         "svgs-100m-irlock",
         "svgs-100m-irlock",
         "the SVGS paper's IR-LOCK flights: from 53.1-55.0 m over a static pad",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
         own_id=False,
     ),
 }
