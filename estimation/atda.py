@@ -49,6 +49,7 @@ from estimation.estimator import (
 )
 from estimation.frames import tag_corners_in_tag_frame
 from estimation.landmarks import LandmarkLayout, shortest_side_px
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 REPROJECTION_ERROR = "reprojection_error"
@@ -188,27 +189,16 @@ class ATDAConfig:
     papers' MATLAB readAprilTag; single tags only, the joint PnP keeps IPPE).
     """
 
-    ambiguity_ratio_threshold: float = 0.6
-    history_timeout_s: float = 0.5
-    max_reprojection_error_px: float = 10.0
-    min_corner_area_px: float = 4.0
+    ambiguity_ratio_threshold: float = limited(0.6, Limit(0.0, 1.0, low_inclusive=False))
+    history_timeout_s: float = limited(0.5, NON_NEGATIVE, physical=Limit.non_negative(60.0))
+    max_reprojection_error_px: float = limited(10.0, POSITIVE, physical=Limit.positive(1e4))
+    min_corner_area_px: float = limited(4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7))
     joint_landmarks: bool = True
     pose_method: str = "ippe"
 
     def __post_init__(self) -> None:
         require_choice("pose_method", self.pose_method, POSE_METHODS)
-        require_range(
-            "ambiguity_ratio_threshold",
-            self.ambiguity_ratio_threshold,
-            0.0,
-            1.0,
-            low_inclusive=False,
-        )
-        require_range("history_timeout_s", self.history_timeout_s, 0.0)
-        require_range(
-            "max_reprojection_error_px", self.max_reprojection_error_px, 0.0, low_inclusive=False
-        )
-        require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
+        require_limits(self)
 
 
 class AtdaEstimator(GuardedEstimator):

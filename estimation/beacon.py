@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
-from estimation.errors import require_range
 from estimation.estimator import (
     NO_DETECTION,
     RANGE_INVALID,
@@ -37,6 +36,7 @@ from estimation.estimator import (
     target_corners,
 )
 from estimation.geometry import Undistorter
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 #: Reason of an invalid estimate whose bearing misses the range plane (beyond the horizon).
@@ -106,18 +106,22 @@ class BeaconConfig:
     """Settings of the beacon estimator (``estimation.beacon.*``)."""
 
     #: the tag's quadrilateral must have at least this area to give a bearing, pixels²
-    min_corner_area_px: float = 4.0
+    min_corner_area_px: float = limited(
+        4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7, "px^2; a 4 K frame has 8.3e6")
+    )
     #: rangefinder origin below the camera along the optical axis, metres (a simulator sets
     #: it from its geometry)
-    range_offset_m: float = 0.0
+    range_offset_m: float = limited(0.0, Limit(-1.0, 1.0))
     #: the beacon is seen only within this distance from the camera, metres (the IR-LOCK
     #: beacon's tracking range, IR_LOCK_MAX_RANGE_M); farther fixes are invalid
-    max_range_m: float = IR_LOCK_MAX_RANGE_M
+    max_range_m: float = limited(
+        IR_LOCK_MAX_RANGE_M,
+        POSITIVE,
+        physical=Limit.positive(1e4, "m; the paper's COTS beacon: 40 m"),
+    )
 
     def __post_init__(self) -> None:
-        require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
-        require_range("range_offset_m", self.range_offset_m, -1.0, 1.0)
-        require_range("max_range_m", self.max_range_m, 0.0, low_inclusive=False)
+        require_limits(self)
 
 
 class BeaconEstimator(GuardedEstimator):

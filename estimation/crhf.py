@@ -37,14 +37,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError, require_choice
 from estimation.estimator import (
     DEGENERATE_TOUCH_POINTS,
     RangeFusionConfig,
     RangeFusionEstimator,
 )
-from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 PRINCIPAL_POINT_METHODS = ("range_weighted", "lstsq")
@@ -69,27 +67,11 @@ class CrhfEstimator(RangeFusionEstimator):
     """The CRHF deck-pose estimator."""
 
     name = "crhf"
+    config_class = CRHFConfig
+    config: CRHFConfig
 
-    def __init__(
-        self,
-        *,
-        tag_size: float,
-        tag_id: int,
-        tof_calibration: TofCameraCalibration,
-        tof_positions_c: np.ndarray | None = None,
-        intrinsics: CameraIntrinsics | None = None,
-        config: CRHFConfig | None = None,
-    ) -> None:
-        config = config or CRHFConfig()
-        super().__init__(
-            tag_size=tag_size,
-            tag_id=tag_id,
-            tof_calibration=tof_calibration,
-            tof_positions_c=tof_positions_c,
-            intrinsics=intrinsics,
-            config=config,
-        )
-        self._pp_method = config.principal_point
+    def _configure(self) -> None:
+        self._pp_method = self.config.principal_point
         s = self.tof_positions_c[:, :2]
         self._use = np.abs(s) > _MIN_SENSOR_OFFSET_M
         if not np.all(self._use.sum(axis=0) >= 1):

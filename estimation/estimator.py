@@ -23,6 +23,7 @@ from estimation import geometry
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
+from estimation.limits import Limit, limited
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
@@ -261,9 +262,13 @@ class RangeFusionConfig:
     """
 
     plane_fit: str = "lstsq"
-    max_plane_rms_m: float = 0.05
-    max_rigid_rms_rel: float = 0.25
-    min_corner_area_px: float = 4.0
+    max_plane_rms_m: float = limited(
+        0.05, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+    )
+    max_rigid_rms_rel: float = limited(
+        0.25, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+    )
+    min_corner_area_px: float = limited(4.0, physical=Limit.non_negative(1e7))
     undistort: bool = True
 
     def __post_init__(self) -> None:
@@ -285,7 +290,13 @@ class FusionInputs:
 
 
 class RangeFusionEstimator(GuardedEstimator):
-    """Shared front end of IHRCF and CRHF: tag corners, ranges, touch points and the plane."""
+    """Shared front end of IHRCF and CRHF: tag corners, ranges, touch points and the plane.
+
+    A subclass names its settings class (``config_class``; ``config=None`` is its defaults)
+    and sets up what is its own in :meth:`_configure`.
+    """
+
+    config_class: type[RangeFusionConfig] = RangeFusionConfig
 
     def __init__(
         self,
@@ -293,10 +304,11 @@ class RangeFusionEstimator(GuardedEstimator):
         tag_size: float,
         tag_id: int,
         tof_calibration: TofCameraCalibration,
-        tof_positions_c: np.ndarray | None,
-        intrinsics: CameraIntrinsics | None,
-        config: RangeFusionConfig,
+        tof_positions_c: np.ndarray | None = None,
+        intrinsics: CameraIntrinsics | None = None,
+        config: RangeFusionConfig | None = None,
     ) -> None:
+        config = config or self.config_class()
         require_range("tag_size", tag_size, 0.0, low_inclusive=False)
         positions = (
             tof_positions_in_camera_frame()
@@ -331,6 +343,10 @@ class RangeFusionEstimator(GuardedEstimator):
             self._plane_fitter = geometry.ZPlaneFitter(positions[:, :2])
         except ValueError as err:
             raise ConfigError("tof_positions_c", str(err)) from None
+        self._configure()
+
+    def _configure(self) -> None:
+        """A subclass's own set-up from ``self.config``, after the shared one."""
 
     def _inputs(self, frame: CameraFrame, reading: RangeReading) -> FusionInputs | str:
         """The checked inputs, or the reason they cannot be used."""

@@ -26,14 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation import geometry
-from estimation.camera_model import CameraIntrinsics
 from estimation.errors import require_choice
 from estimation.estimator import (
     DEGENERATE_HOMOGRAPHY,
     RangeFusionConfig,
     RangeFusionEstimator,
 )
-from estimation.tof_calibration import TofCameraCalibration
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 
@@ -53,27 +51,11 @@ class IhrcfEstimator(RangeFusionEstimator):
     """The IHRCF deck-pose estimator."""
 
     name = "ihrcf"
+    config_class = IHRCFConfig
+    config: IHRCFConfig
 
-    def __init__(
-        self,
-        *,
-        tag_size: float,
-        tag_id: int,
-        tof_calibration: TofCameraCalibration,
-        tof_positions_c: np.ndarray | None = None,
-        intrinsics: CameraIntrinsics | None = None,
-        config: IHRCFConfig | None = None,
-    ) -> None:
-        config = config or IHRCFConfig()
-        super().__init__(
-            tag_size=tag_size,
-            tag_id=tag_id,
-            tof_calibration=tof_calibration,
-            tof_positions_c=tof_positions_c,
-            intrinsics=intrinsics,
-            config=config,
-        )
-        self._homography_method = config.homography
+    def _configure(self) -> None:
+        self._homography_method = self.config.homography
         self._sensors_xy = self.tof_positions_c[:, :2].copy()
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:

@@ -25,6 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from estimation.calibration_files import read_document
 from estimation.camera_model import CameraIntrinsics
 
 _FORMAT = "deck-landing/camera-intrinsics"
@@ -144,14 +145,7 @@ class IntrinsicsCalibrationResult:
     @classmethod
     def load(cls, path: str | Path) -> IntrinsicsCalibrationResult:
         """Read a result written by :meth:`save`."""
-        doc = json.loads(Path(path).read_text())
-        if doc.get("format") != _FORMAT:
-            raise ValueError(f"{path}: not a camera-intrinsics file")
-        version = doc.get("format_version", doc.get("version"))
-        if version not in _READABLE_VERSIONS:
-            raise ValueError(
-                f"{path}: unsupported format_version {version!r}; readable: {_READABLE_VERSIONS}"
-            )
+        doc = read_document(path, _FORMAT, _READABLE_VERSIONS, "camera-intrinsics file")
         model = doc.get("camera_model", CAMERA_MODEL)
         if model != CAMERA_MODEL:
             raise ValueError(f"{path}: camera_model {model!r} is unknown; known: {CAMERA_MODEL}")

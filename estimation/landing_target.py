@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.errors import require_range
 from estimation.fusion.config import PAPER_GATE_SD
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 
 #: What :meth:`LandingTargetFilter.update` did with a fix.
 INITIALISED = "initialised"
@@ -45,31 +45,22 @@ class LandingTargetConfig:
     """Settings of the landing-target filter (PX4's ``LTEST_*`` in the comments)."""
 
     #: innovation gate, standard deviations (the SVGS paper's 10 for the IR beacon)
-    gate_sd: float = PAPER_GATE_SD
+    gate_sd: float = limited(PAPER_GATE_SD, Limit(0.0, 1e3, low_inclusive=False))
     #: 1-sigma of the vehicle acceleration input, m/s^2 (LTEST_ACC_UNC = 10 (m/s^2)^2)
-    accel_sigma: float = math.sqrt(10.0)
+    accel_sigma: float = limited(math.sqrt(10.0), POSITIVE)
     #: 1-sigma of a fix: a floor, metres, and its growth per metre of distance
     #: (LTEST_MEAS_UNC = 0.005 m^2 per m^2 of distance: 0.071 m per m)
-    measurement_sigma_m: float = 0.02
-    measurement_sigma_per_m: float = math.sqrt(0.005)
+    measurement_sigma_m: float = limited(0.02, POSITIVE)
+    measurement_sigma_per_m: float = limited(math.sqrt(0.005), NON_NEGATIVE)
     #: 1-sigma of the position and velocity at (re)initialisation (LTEST_POS_UNC_IN,
     #: LTEST_VEL_UNC_IN = 0.1 m^2 and 0.1 (m/s)^2)
-    initial_position_sigma_m: float = math.sqrt(0.1)
-    initial_velocity_sigma: float = math.sqrt(0.1)
+    initial_position_sigma_m: float = limited(math.sqrt(0.1), POSITIVE)
+    initial_velocity_sigma: float = limited(math.sqrt(0.1), POSITIVE)
     #: the estimate is invalid this long after the last accepted fix, seconds
-    timeout_s: float = 2.0
+    timeout_s: float = limited(2.0, POSITIVE)
 
     def __post_init__(self) -> None:
-        require_range("gate_sd", self.gate_sd, 0.0, 1e3, low_inclusive=False)
-        for name in (
-            "accel_sigma",
-            "measurement_sigma_m",
-            "initial_position_sigma_m",
-            "initial_velocity_sigma",
-            "timeout_s",
-        ):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
-        require_range("measurement_sigma_per_m", self.measurement_sigma_per_m, 0.0)
+        require_limits(self)
 
 
 def _finite(*values: np.ndarray | float) -> bool:

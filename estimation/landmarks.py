@@ -40,6 +40,7 @@ import numpy as np
 
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.frames import tag_corners_in_tag_frame
+from estimation.limits import NON_NEGATIVE, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 
 #: Cells across a tag36h11 tag including its black border (the data bits are 6 x 6).
@@ -88,12 +89,12 @@ class LandmarkLayout:
 
     landmarks: tuple[Landmark, ...]
     #: width of the white quiet zone round every tag, in its cells (size / 8)
-    quiet_zone_cells: float = 1.0
+    quiet_zone_cells: float = limited(1.0, NON_NEGATIVE)
 
     def __post_init__(self) -> None:
         if not self.landmarks:
             raise ConfigError("landmarks", "need at least one landmark")
-        require_range("quiet_zone_cells", self.quiet_zone_cells, 0.0)
+        require_limits(self)
         ids = [lm.tag_id for lm in self.landmarks]
         if len(set(ids)) != len(ids):
             raise ConfigError("landmarks", f"tag ids {ids} must be distinct")
@@ -164,13 +165,13 @@ PREFERENCES = ("largest", "nearest")
 class LandmarkChoiceConfig:
     """The choice rule: the pixel band and the preference within it (module docstring)."""
 
-    min_side_px: float = 12.0
+    min_side_px: float = limited(12.0, NON_NEGATIVE)
     max_side_px: float = 400.0
     prefer: str = "largest"
 
     def __post_init__(self) -> None:
         require_choice("prefer", self.prefer, PREFERENCES)
-        require_range("min_side_px", self.min_side_px, 0.0)
+        require_limits(self)
         if not self.max_side_px > self.min_side_px:
             raise ConfigError(
                 "max_side_px", f"{self.max_side_px} must exceed min_side_px = {self.min_side_px}"

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.errors import require_range
+from estimation.limits import NON_NEGATIVE, Limit, limited, require_limits
 
 #: VL53L1X-class ToF ranging noise (long-distance mode): sigma = SIGMA_0 + SIGMA_PER_M * r.
 #: 2 mm + 2.5 mm/m is a few mm up close and 12 mm at 4 m, of the order of the +-20 mm
@@ -22,6 +22,8 @@ VL53L1X_SIGMA_0_M = 0.002
 VL53L1X_SIGMA_PER_M = 0.0025
 #: the VL53L1X reports whole millimetres
 VL53L1X_RESOLUTION_M = 0.001
+#: the physical range of an IMU noise density or bias random walk
+IMU_NOISE_DENSITY = Limit.non_negative(10.0, "IMU noise densities: MEMS datasheets give 1e-5..1e-2")
 
 #: The sigma of an "exact" range.  On the noise-free bench CRHF's tilt MAE of 0.004° (the
 #: README's paper-stewart table) says the simulator's ray casts agree with the plate's plane
@@ -48,16 +50,13 @@ class TofNoiseModel:
     stay finite and a range is still compared with the plane at a scale it can meet.
     """
 
-    sigma_0_m: float = VL53L1X_SIGMA_0_M
-    sigma_per_m: float = VL53L1X_SIGMA_PER_M
-    resolution_m: float = VL53L1X_RESOLUTION_M
-    sigma_min_m: float = 0.0
+    sigma_0_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE)
+    sigma_per_m: float = limited(VL53L1X_SIGMA_PER_M, NON_NEGATIVE)
+    resolution_m: float = limited(VL53L1X_RESOLUTION_M, NON_NEGATIVE)
+    sigma_min_m: float = limited(0.0, NON_NEGATIVE)
 
     def __post_init__(self) -> None:
-        require_range("sigma_0_m", self.sigma_0_m, 0.0)
-        require_range("sigma_per_m", self.sigma_per_m, 0.0)
-        require_range("resolution_m", self.resolution_m, 0.0)
-        require_range("sigma_min_m", self.sigma_min_m, 0.0)
+        require_limits(self)
 
     @classmethod
     def exact(cls) -> TofNoiseModel:

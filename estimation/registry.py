@@ -75,11 +75,12 @@ def _atda(inputs: BuildInputs) -> DeckPoseEstimator:
     )
 
 
-def _homography_fusion(cls: type) -> Callable[[BuildInputs], DeckPoseEstimator]:
-    """The builder of IHRCF or CRHF: the papers' camera+ToF fusions take the same inputs."""
+def _camera_and_tof(cls: type, needs: str) -> Callable[[BuildInputs], DeckPoseEstimator]:
+    """The builder of an estimator of the camera and the ToF sensors (IHRCF, CRHF, tight):
+    they take the same inputs; ``needs`` names the calibration it cannot run without."""
 
     def build(inputs: BuildInputs) -> DeckPoseEstimator:
-        assert inputs.tof_calibration is not None
+        assert getattr(inputs, needs) is not None
         return cls(
             tag_size=inputs.tag_size,
             tag_id=inputs.tag_id,
@@ -92,25 +93,17 @@ def _homography_fusion(cls: type) -> Callable[[BuildInputs], DeckPoseEstimator]:
     return build
 
 
-def _tight(inputs: BuildInputs) -> DeckPoseEstimator:
-    assert inputs.intrinsics is not None
-    return TightEstimator(
-        intrinsics=inputs.intrinsics,
-        tag_size=inputs.tag_size,
-        tag_id=inputs.tag_id,
-        tof_positions_c=inputs.tof_positions_c,
-        tof_calibration=inputs.tof_calibration,
-        config=inputs.config,  # type: ignore[arg-type]
-    )
-
+_ihrcf = _camera_and_tof(IhrcfEstimator, "tof_calibration")
+_crhf = _camera_and_tof(CrhfEstimator, "tof_calibration")
+_tight = _camera_and_tof(TightEstimator, "intrinsics")
 
 #: The single-frame camera(+ToF) estimators, by name.
 REGISTRY: dict[str, EstimatorSpec] = {
     spec.name: spec
     for spec in (
         EstimatorSpec("atda", ATDAConfig, _atda, True, False, False),
-        EstimatorSpec("ihrcf", IHRCFConfig, _homography_fusion(IhrcfEstimator), False, True, True),
-        EstimatorSpec("crhf", CRHFConfig, _homography_fusion(CrhfEstimator), False, True, True),
+        EstimatorSpec("ihrcf", IHRCFConfig, _ihrcf, False, True, True),
+        EstimatorSpec("crhf", CRHFConfig, _crhf, False, True, True),
         # the ranges enter through the sensors' mounts and the noise model, not a look-up
         EstimatorSpec("tight", TightConfig, _tight, True, False, True, True),
     )

@@ -7,7 +7,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from estimation.errors import ConfigError, require_choice, require_range
+from estimation.errors import ConfigError, require_choice
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import (
     DEFAULT_PIXEL_SIGMA_PX,
     VL53L1X_RESOLUTION_M,
@@ -57,42 +58,41 @@ class TightConfig:
     calibrated ones of the intrinsics file when rendering.
     """
 
-    pixel_sigma_px: float = DEFAULT_PIXEL_SIGMA_PX
-    pixel_sigma_axes_px: float = 0.0
-    tof_sigma_0_m: float = VL53L1X_SIGMA_0_M
-    tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
-    tof_resolution_m: float = VL53L1X_RESOLUTION_M
-    tof_sigma_min_m: float = 0.0
-    max_iterations: int = 12
-    range_gate_sigma: float = 6.0
-    max_reprojection_error_px: float = 10.0
-    min_corner_area_px: float = 4.0
-    ambiguity_ratio_threshold: float = 0.6
-    history_timeout_s: float = 0.5
-    start_cost_margin: float = 50.0
+    pixel_sigma_px: float = limited(
+        DEFAULT_PIXEL_SIGMA_PX, POSITIVE, physical=Limit.positive(100.0, "corner noise, pixels")
+    )
+    pixel_sigma_axes_px: float = limited(
+        0.0, NON_NEGATIVE, physical=Limit.non_negative(100.0, "0: pixel_sigma_px at every angle")
+    )
+    tof_sigma_0_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE, physical=Limit.positive(1.0))
+    tof_sigma_per_m: float = limited(
+        VL53L1X_SIGMA_PER_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
+    tof_resolution_m: float = limited(
+        VL53L1X_RESOLUTION_M,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(0.1, "VL53L1X reports whole millimetres"),
+    )
+    tof_sigma_min_m: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(1.0))
+    max_iterations: int = limited(12, Limit(1), physical=Limit(1, 1000))
+    range_gate_sigma: float = limited(6.0, POSITIVE, physical=Limit.positive(1e3, "gate in sigmas"))
+    max_reprojection_error_px: float = limited(10.0, POSITIVE, physical=Limit.positive(1e4))
+    min_corner_area_px: float = limited(
+        4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7, "a 512x512 image holds 2.6e5 px^2")
+    )
+    ambiguity_ratio_threshold: float = limited(
+        0.6, Limit(0.0, 1.0, low_inclusive=False), physical=Limit(0.0, 1.0)
+    )
+    history_timeout_s: float = limited(0.5, NON_NEGATIVE, physical=Limit.non_negative(60.0))
+    start_cost_margin: float = limited(50.0, NON_NEGATIVE, physical=Limit.non_negative(1e6))
     principal_point: str = "touch_points"
-    corner_bias_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    corner_bias_px: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0, "detector edge offset a, b (px), c (px^2)")
+    )
     noise_from_sensors: bool = True
 
     def __post_init__(self) -> None:
-        require_range("pixel_sigma_px", self.pixel_sigma_px, 0.0, low_inclusive=False)
-        require_range("pixel_sigma_axes_px", self.pixel_sigma_axes_px, 0.0)
-        require_range("tof_sigma_0_m", self.tof_sigma_0_m, 0.0)
-        require_range("tof_sigma_per_m", self.tof_sigma_per_m, 0.0)
-        require_range("tof_resolution_m", self.tof_resolution_m, 0.0)
-        require_range("tof_sigma_min_m", self.tof_sigma_min_m, 0.0)
-        require_range("max_iterations", self.max_iterations, 1)
-        require_range("range_gate_sigma", self.range_gate_sigma, 0.0, low_inclusive=False)
-        require_range(
-            "max_reprojection_error_px", self.max_reprojection_error_px, 0.0, low_inclusive=False
-        )
-        require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
-        require_range(
-            "ambiguity_ratio_threshold", self.ambiguity_ratio_threshold, 0.0, 1.0,
-            low_inclusive=False,
-        )  # fmt: skip
-        require_range("history_timeout_s", self.history_timeout_s, 0.0)
-        require_range("start_cost_margin", self.start_cost_margin, 0.0)
+        require_limits(self)
         require_choice("principal_point", self.principal_point, PRINCIPAL_POINT_SOURCES)
         if len(self.corner_bias_px) != 3 or not all(
             math.isfinite(float(v)) for v in self.corner_bias_px

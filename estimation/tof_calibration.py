@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from estimation.calibration_files import read_document
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import require_choice
 
@@ -397,14 +398,7 @@ class TofCameraCalibration:
     @classmethod
     def load(cls, path: str | Path) -> TofCameraCalibration:
         """Read a calibration written by :meth:`save`."""
-        doc = json.loads(Path(path).read_text())
-        if doc.get("format") != _FORMAT:
-            raise ValueError(f"{path}: not a ToF–camera calibration file")
-        version = doc.get("format_version", doc.get("version"))
-        if version not in _READABLE_VERSIONS:
-            raise ValueError(
-                f"{path}: unsupported format_version {version!r}; readable: {_READABLE_VERSIONS}"
-            )
+        doc = read_document(path, _FORMAT, _READABLE_VERSIONS, "ToF–camera calibration file")
         samples = [
             np.column_stack([s["range_m"], s["u_px"], s["v_px"]]).astype(float)
             for s in doc["sensors"]

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.errors import require_range
 from estimation.estimator import DeckPoseEstimator, GuardedEstimator, target_corners
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 
 TAG_LOST = "tag_lost"
@@ -34,19 +34,15 @@ class CornerTrackerConfig:
     purpose here is to bridge dropouts.
     """
 
-    dt: float = 0.05
-    process_noise: float = 1.0e4
-    measurement_noise: float = 0.5
-    max_bridged_frames: int = 3
-    initial_velocity_std: float = 500.0
+    dt: float = limited(0.05, POSITIVE)
+    process_noise: float = limited(1.0e4, NON_NEGATIVE)
+    measurement_noise: float = limited(0.5, POSITIVE)
+    max_bridged_frames: int = limited(3, Limit(0))
+    initial_velocity_std: float = limited(500.0, NON_NEGATIVE)
     smooth: bool = False
 
     def __post_init__(self) -> None:
-        require_range("dt", self.dt, 0.0, low_inclusive=False)
-        require_range("process_noise", self.process_noise, 0.0)
-        require_range("measurement_noise", self.measurement_noise, 0.0, low_inclusive=False)
-        require_range("max_bridged_frames", self.max_bridged_frames, 0)
-        require_range("initial_velocity_std", self.initial_velocity_std, 0.0)
+        require_limits(self)
 
 
 @dataclass(frozen=True)

@@ -20,11 +20,17 @@ from estimation.beacon import BeaconConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES, load_plugins
 from estimation.tight_config import TightConfig
-from landing_env.config_limits import check_value
-from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+from landing_env.config_limits import LIMITS, check_value, physical_limits
+from landing_env.config_loading import (
+    build_dataclass,
+    deep_merge,
+    dotted_to_nested,
+    nested_to_dotted,
+)
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.controller import ControllerGains
 from landing_env.physics.wind import WindConfig
@@ -45,6 +51,8 @@ CONFIG_DIR = config_dir()
 
 #: ``sensors``: each name is a preset in ``configs/sensors/`` laid over the scenario
 SENSOR_SETS = ("ideal", "realistic")
+#: the bundle a config has without a ``sensors`` key
+DEFAULT_SENSORS = "ideal"
 #: ``lens``: each name is a preset in ``configs/lenses/`` (the camera's lens and the
 #: calibrations made for it under each sensing profile) laid over the sensing preset
 LENS_SETS = ("standard", "wide")
@@ -70,32 +78,33 @@ SHIPPED_TOF_CALIBRATION_FILE = CALIBRATION_DIR / "tof_camera.json"
 class SimulationConfig:
     """Rates and limits of the simulation."""
 
-    physics_hz: int = 240
-    env_hz: int = 20
+    #: PyBullet's step rate, Hz: above 4 kHz a step costs more than any motor/ESC update
+    #: rate (<= 2 kHz) justifies, and 1e6 Hz froze a run
+    physics_hz: int = limited(
+        240, Limit(1), physical=Limit(1, 4000, note="<= 4 kHz (motor/ESC updates <= 2 kHz)")
+    )
+    env_hz: int = limited(20, Limit(1), physical=Limit(1, 1000))
     #: episode time limit (truncation), seconds
-    max_episode_s: float = 30.0
+    max_episode_s: float = limited(30.0, POSITIVE, physical=Limit.positive(1e5, "about a day"))
     #: leaving this horizontal distance from the deck's home position is a crash, metres
-    arena_half_extent_m: float = 8.0
+    arena_half_extent_m: float = limited(8.0, physical=Limit.positive(1e4))
     #: flying higher than this above the deck's home surface is a crash, metres
-    arena_max_height_m: float = 12.0
+    arena_max_height_m: float = limited(12.0, physical=Limit.positive(1e4))
     #: attitude tilt beyond which the drone counts as flipped, degrees
-    flip_tilt_deg: float = 80.0
+    flip_tilt_deg: float = limited(80.0, Limit(0.0, 180.0))
     #: pin the drone at its start pose, as on the papers' bench ("a motionless flying
     #: quadrotor" over the moving platform); the action is then ignored
     drone_fixed: bool = False
     gui: bool = False
 
     def __post_init__(self) -> None:
-        require_range("physics_hz", self.physics_hz, 1)
-        require_range("env_hz", self.env_hz, 1)
+        require_limits(self)
         if self.physics_hz % self.env_hz != 0:
             raise ConfigError(
                 "physics_hz",
                 f"{self.physics_hz} Hz is not a multiple of simulation.env_hz = {self.env_hz} Hz; "
                 "choose physics_hz = k * env_hz (e.g. 240 with env_hz 20, 30, 40, 48, 60, 80)",
             )
-        require_range("max_episode_s", self.max_episode_s, 0.0, low_inclusive=False)
-        require_range("flip_tilt_deg", self.flip_tilt_deg, 0.0, 180.0)
 
     @property
     def substeps(self) -> int:
@@ -106,13 +115,14 @@ class SimulationConfig:
 class ActionConfig:
     """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
 
-    max_horizontal_speed: float = 1.5
-    max_vertical_speed: float = 1.0
-    max_yaw_rate_deg: float = 60.0
+    max_horizontal_speed: float = limited(
+        1.5, POSITIVE, physical=Limit.positive(50.0, "multirotor airspeed")
+    )
+    max_vertical_speed: float = limited(1.0, POSITIVE, physical=Limit.positive(50.0))
+    max_yaw_rate_deg: float = limited(60.0, POSITIVE, physical=Limit.positive(1000.0))
 
     def __post_init__(self) -> None:
-        for name in ("max_horizontal_speed", "max_vertical_speed", "max_yaw_rate_deg"):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+        require_limits(self)
 
 
 @dataclass
@@ -120,14 +130,14 @@ class StartConfig:
     """Where an episode starts, relative to the deck's home surface centre."""
 
     #: height of the drone's centre above the deck home surface, min and max, metres
-    height_m: tuple[float, float] = (1.8, 2.2)
+    height_m: tuple[float, float] = limited((1.8, 2.2), physical=Limit(0.2, 1e4))
     #: maximum horizontal offset from the deck centre, metres
-    max_offset_m: float = 0.3
+    max_offset_m: float = limited(0.3, NON_NEGATIVE, physical=Limit.non_negative(1e4))
     #: minimum horizontal offset, metres (equal to max_offset_m: a fixed distance at a
     #: random bearing, e.g. the high approach's 5 m)
-    min_offset_m: float = 0.0
+    min_offset_m: float = limited(0.0, physical=Limit.non_negative(1e4))
     #: maximum ``|yaw|`` at the start, degrees
-    max_yaw_deg: float = 10.0
+    max_yaw_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: "home": heights and offsets from the deck's home surface; "deck": from where the deck
     #: is at t = 0 (a ship deck can be metres away from home), so the drone starts above it
     relative_to: str = "home"
@@ -143,7 +153,7 @@ class StartConfig:
         low, high = self.height_m
         if not 0.2 <= low <= high:
             raise ConfigError("height_m", f"{self.height_m} must satisfy 0.2 <= min <= max")
-        require_range("max_offset_m", self.max_offset_m, 0.0)
+        require_limits(self)
         require_range(
             "min_offset_m",
             self.min_offset_m,
@@ -151,52 +161,52 @@ class StartConfig:
             self.max_offset_m,
             bounds_from=f"max_offset_m = {self.max_offset_m}",
         )
-        require_range("max_yaw_deg", self.max_yaw_deg, 0.0, 180.0)
 
 
 @dataclass
 class TouchdownConfig:
     """Success thresholds of a touchdown; every measured value is reported in ``info``."""
 
-    max_normal_speed: float = 0.5
-    max_deck_tilt_deg: float = 5.0
-    max_relative_attitude_deg: float = 10.0
+    max_normal_speed: float = limited(0.5, POSITIVE, physical=Limit.positive(20.0))
+    max_deck_tilt_deg: float = limited(5.0, Limit(0.0, 90.0))
+    max_relative_attitude_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: the drone must still be on the deck this long after the first contact, seconds
-    settle_time_s: float = 1.0
+    settle_time_s: float = limited(1.0, NON_NEGATIVE, physical=Limit.non_negative(60.0))
     #: a bounce higher than this (lowest foot above the deck, metres) fails the touchdown
-    max_bounce_m: float = 0.01
+    max_bounce_m: float = limited(0.01, Limit(0.0, 1.0))
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
-    tip_over_deg: float = 45.0
+    tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
 
     def __post_init__(self) -> None:
-        require_range("max_bounce_m", self.max_bounce_m, 0.0, 1.0)
-        require_range("tip_over_deg", self.tip_over_deg, 1.0, 180.0)
-        require_range("max_normal_speed", self.max_normal_speed, 0.0, low_inclusive=False)
-        require_range("max_deck_tilt_deg", self.max_deck_tilt_deg, 0.0, 90.0)
-        require_range("max_relative_attitude_deg", self.max_relative_attitude_deg, 0.0, 180.0)
-        require_range("settle_time_s", self.settle_time_s, 0.0)
+        require_limits(self)
+
+
+#: the physical range of a reward weight
+REWARD_WEIGHT = Limit.non_negative(
+    1e4, "reward weight: non-negative (the formula carries the signs)"
+)
 
 
 @dataclass
 class RewardConfig:
     """Weights of the reward; see the README for the formula."""
 
-    success_bonus: float = 10.0
+    success_bonus: float = limited(10.0, physical=REWARD_WEIGHT)
     #: ``DeckLanding`` only: any touchdown on the deck (a success or a hard landing) earns it,
     #: so that trying to land pays more than hovering to the time-out; the timing task, whose
     #: every commit ends in a touchdown, leaves it out
-    touchdown_bonus: float = 5.0
-    crash_penalty: float = 10.0
+    touchdown_bonus: float = limited(5.0, physical=REWARD_WEIGHT)
+    crash_penalty: float = limited(10.0, physical=REWARD_WEIGHT)
 
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
-    shaping_weight: float = 1.0
-    vertical_weight: float = 0.5
+    shaping_weight: float = limited(1.0, physical=REWARD_WEIGHT)
+    vertical_weight: float = limited(0.5, physical=REWARD_WEIGHT)
     #: per-second cost of flying
-    time_cost: float = 0.1
+    time_cost: float = limited(0.1, physical=REWARD_WEIGHT)
     #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)
-    normal_speed_penalty: float = 4.0
-    tilt_penalty: float = 0.2
-    offset_penalty: float = 5.0
+    normal_speed_penalty: float = limited(4.0, physical=REWARD_WEIGHT)
+    tilt_penalty: float = limited(0.2, physical=REWARD_WEIGHT)
+    offset_penalty: float = limited(5.0, physical=REWARD_WEIGHT)
 
 
 @dataclass
@@ -230,7 +240,7 @@ class EstimationConfig:
     tracking: bool = False
     tracking_estimators: tuple[str, ...] = ()
     tracking_smooth: bool = False
-    max_bridged_frames: int = 3
+    max_bridged_frames: int = limited(3, Limit(0), physical=Limit(0, 1000))
     tof_positions_c: tuple[tuple[float, float, float], ...] = ()
     atda: ATDAConfig = field(default_factory=ATDAConfig)
     ihrcf: IHRCFConfig = field(default_factory=IHRCFConfig)
@@ -253,7 +263,7 @@ class EstimationConfig:
         require_choice("intrinsics", self.intrinsics, CALIBRATION_SOURCES)
         require_choice("tof_calibration", self.tof_calibration, CALIBRATION_SOURCES)
         require_choice("tof_lookup", self.tof_lookup, ("pchip", "hyperbola"))
-        require_range("max_bridged_frames", self.max_bridged_frames, 0)
+        require_limits(self)
         for name in self.tracking_estimators:
             require_choice("tracking_estimators", name, ESTIMATOR_NAMES)
         if any(len(row) != 3 for row in self.tof_positions_c):
@@ -309,11 +319,11 @@ def _require_file(key: str, path: Path) -> None:
 class DeckLandingConfig:
     """Everything DeckLanding-v1 needs; each section is documented by its dataclass."""
 
-    seed: int | None = None
+    seed: int | None = limited(None, physical=Limit(0, 2**63 - 1))
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
     #: noise, lens distortion, VL53L1X ToF noise and the calibrations made for them): the
     #: preset ``configs/sensors/<name>.yaml`` laid over the scenario, under explicit overrides
-    sensors: str = "ideal"
+    sensors: str = DEFAULT_SENSORS
     #: the camera's lens: "standard" (58 deg horizontal field of view, the papers' camera) or
     #: "wide" (80 deg, ship-ss5's and ship-ss6's): the preset ``configs/lenses/<name>.yaml`` (focal
     #: lengths and, per sensing profile, the calibration files made for it) laid over the
@@ -343,13 +353,15 @@ class DeckLandingConfig:
     deck: DeckSurfaceConfig = field(default_factory=DeckSurfaceConfig)
     stewart: StewartGeometry = field(default_factory=StewartGeometry)
     #: world position of the Stewart platform's base centre (the ship stand-in), metres
-    stewart_base_position: tuple[float, float, float] = (0.0, 0.0, 0.04)
+    stewart_base_position: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.04), physical=Limit.symmetric(1e3)
+    )
     motion: MotionConfig = field(default_factory=MotionConfig)
     #: what carries the deck: "stewart" (the papers' bench, motion clamped to its workspace)
     #: or "ship" (a full-scale helideck moved by the motion as it is, no legs; landing_env/sea/)
     deck_mount: str = "stewart"
     #: deck_mount ship: height of the deck's home surface above the sea plane, metres
-    ship_deck_height_m: float = 10.0
+    ship_deck_height_m: float = limited(10.0, Limit(2.0, 50.0))
     camera: CameraConfig = field(default_factory=CameraConfig)
     tof: TofConfig = field(default_factory=TofConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
@@ -366,7 +378,7 @@ class DeckLandingConfig:
                 "landing_env/assets/quadrotor.yaml, or leave it empty for that one",
             )
         require_choice("deck_mount", self.deck_mount, DECK_MOUNTS)
-        require_range("ship_deck_height_m", self.ship_deck_height_m, 2.0, 50.0)
+        require_limits(self)
         if self.deck_mount == "stewart" and self.motion.kind == "ship":
             raise ConfigError(
                 "motion.kind",
@@ -382,6 +394,10 @@ class DeckLandingConfig:
                 )
         require_choice("sensors", self.sensors, SENSOR_SETS)
         require_choice("lens", self.lens, LENS_SETS)
+
+
+# the loader's table of physical ranges: what every field of the tree declares
+LIMITS.update(physical_limits(DeckLandingConfig))
 
 
 def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:
@@ -461,6 +477,35 @@ def sensor_preset(name: str) -> dict[str, Any]:
     require_choice("sensors", name, SENSOR_SETS)
     with (CONFIG_DIR / "sensors" / f"{name}.yaml").open() as handle:
         return {"sensors": name, **(yaml.safe_load(handle) or {})}
+
+
+def sensing_profiles() -> dict[str, dict[str, Any]]:
+    """Every sensing profile of ``configs/sensors/`` by name, as the dotted overrides that
+    make it (what training and data collection draw by name).
+
+    A bundle, a name of :data:`SENSOR_SETS`, is ``{"sensors": name}``; the default one,
+    ``ideal``, adds nothing (the scenario's sensing stays).  Any other file is settings laid
+    over a bundle: its own ``sensors`` key names the bundle (none: the scenario's), and the
+    rest of it are the overrides (``realistic-2x``: the realistic bundle with its noise
+    doubled).
+    """
+    profiles: dict[str, dict[str, Any]] = {}
+    for path in sorted((CONFIG_DIR / "sensors").glob("*.yaml"), key=lambda p: p.stem):
+        name = path.stem
+        if name in SENSOR_SETS:
+            profiles[name] = {} if name == DEFAULT_SENSORS else {"sensors": name}
+            continue
+        with path.open() as handle:
+            data = yaml.safe_load(handle) or {}
+        if not isinstance(data, dict):
+            raise ConfigError("sensing", f"{path} does not hold a mapping")
+        if data.get("sensors", DEFAULT_SENSORS) not in SENSOR_SETS:
+            raise ConfigError(
+                "sensors",
+                f"{path}: {data['sensors']!r} is not a bundle; choose one of {SENSOR_SETS}",
+            )
+        profiles[name] = nested_to_dotted(data)
+    return profiles
 
 
 def lens_preset(name: str, sensors: str = "ideal") -> dict[str, Any]:

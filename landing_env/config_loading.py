@@ -185,6 +185,19 @@ def dotted_to_nested(flat: Mapping[str, Any]) -> dict[str, Any]:
     return nested
 
 
+def nested_to_dotted(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Turn ``{"camera": {"mode": "render"}}`` into ``{"camera.mode": "render"}`` (under
+    ``prefix.`` when given): the inverse of :func:`dotted_to_nested`."""
+    flat: dict[str, Any] = {}
+    for key, value in nested.items():
+        name = _join(prefix, str(key))
+        if isinstance(value, Mapping):
+            flat.update(nested_to_dotted(value, name))
+        else:
+            flat[name] = value
+    return flat
+
+
 def to_plain(obj: Any) -> Any:
     """A dataclass (tree) as plain Python data, for saving next to results."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
@@ -200,4 +213,11 @@ def to_plain(obj: Any) -> Any:
     return obj
 
 
-__all__ = ["_type_name", "build_dataclass", "deep_merge", "dotted_to_nested", "to_plain"]
+__all__ = [
+    "_type_name",
+    "build_dataclass",
+    "deep_merge",
+    "dotted_to_nested",
+    "nested_to_dotted",
+    "to_plain",
+]

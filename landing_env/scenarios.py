@@ -30,7 +30,12 @@ from landing_env.config import (
     episode_step_limit,
     read_config_data,
 )
-from landing_env.config_loading import build_dataclass, deep_merge, dotted_to_nested
+from landing_env.config_loading import (
+    build_dataclass,
+    deep_merge,
+    dotted_to_nested,
+    nested_to_dotted,
+)
 from landing_env.errors import ConfigError, require_choice
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.timing_config import SCENARIO_TILT_MODEL, TimingConfig
@@ -39,12 +44,12 @@ from landing_env.timing_config import SCENARIO_TILT_MODEL, TimingConfig
 CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
-TASKS: dict[str, str] = {
-    "DeckLanding-v1": "landing_env.envs.deck_landing:DeckLandingEnv",
-    "DeckLandingTiming-v0": "landing_env.timing.env:DeckLandingTimingEnv",
-}
 LANDING_TASK = "DeckLanding-v1"
 TIMING_TASK = "DeckLandingTiming-v0"
+TASKS: dict[str, str] = {
+    LANDING_TASK: "landing_env.envs.deck_landing:DeckLandingEnv",
+    TIMING_TASK: "landing_env.timing.env:DeckLandingTimingEnv",
+}
 
 #: what turns a bench config (a pinned drone over the moving deck) into a landing run
 FLYING_OVERRIDES: dict[str, Any] = {
@@ -79,14 +84,7 @@ def landing_overrides(
 
 def dotted(prefix: str, settings: dict[str, Any]) -> dict[str, Any]:
     """``{"a": {"b": 1}}`` under ``prefix`` as dotted keys: ``{"prefix.a.b": 1}``."""
-    flat: dict[str, Any] = {}
-    for key, value in settings.items():
-        name = f"{prefix}.{key}"
-        if isinstance(value, dict):
-            flat.update(dotted(name, value))
-        else:
-            flat[name] = value
-    return flat
+    return nested_to_dotted(settings, prefix)
 
 
 # ------------------------------------------------------------------------------ timing presets
@@ -249,13 +247,16 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
 }
 SCENARIOS.update(HELD_OUT_SCENARIOS)
 
+#: the approach from altitude's id, which its scenarios fly on their own configs
+HIGH_APPROACH_ID = "DeckLanding-HighApproach-v1"
+
 #: the scenarios of the approach from altitude (``DeckLanding-v1`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
     "high-approach": Scenario(
         "high-approach",
         "high-approach",
         "from 20 m up and 5 m off, gusty wind, sea state 3",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
     ),
     # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
     # on another config (``gym.make("DeckLanding-HighApproach-v1", config="svgs-100m")``)
@@ -263,14 +264,14 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
         "svgs-100m",
         "svgs-100m",
         "the SVGS paper's flights: from 101.7-106.7 m over a static pad, three landmarks",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
         own_id=False,
     ),
     "svgs-100m-irlock": Scenario(
         "svgs-100m-irlock",
         "svgs-100m-irlock",
         "the SVGS paper's IR-LOCK flights: from 53.1-55.0 m over a static pad",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: HIGH_APPROACH_ID},
         own_id=False,
     ),
 }

@@ -21,8 +21,9 @@ import numpy as np
 
 from estimation.fusion import METHOD as FUSED
 from estimation.fusion import DeckFusion, FusionConfig
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
 
 #: estimators the link never delays: the reference and the fusion (which fuses delayed input)
 UNDELAYED: frozenset[str] = frozenset({"truth", FUSED})
@@ -35,19 +36,19 @@ class VisionLinkConfig:
     #: off by default: the existing scenarios see every estimate at once
     enabled: bool = False
     #: mean delay from image capture to delivery, seconds
-    latency_s: float = 0.2025
+    latency_s: float = limited(0.2025, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: the delay is uniform in latency_s ± latency_jitter_s (175–230 ms by default, the SVGS
     #: paper's measurement-to-flight-controller latency, Sec. 2.4)
-    latency_jitter_s: float = 0.0275
+    latency_jitter_s: float = limited(0.0275, physical=Limit.non_negative(10.0))
     #: the pipeline's rate, drawn uniformly in [min, max] for each frame it takes, Hz
-    rate_hz: tuple[float, float] = (6.0, 15.0)
+    rate_hz: tuple[float, float] = limited((6.0, 15.0), physical=Limit.positive(1e3))
     #: probability that a taken frame never arrives
-    dropout_prob: float = 0.0
+    dropout_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: a delivered estimate is shown (stale) until it is this old, seconds
-    max_age_s: float = 1.0
+    max_age_s: float = limited(1.0, POSITIVE, physical=Limit.positive(60.0))
 
     def __post_init__(self) -> None:
-        require_range("latency_s", self.latency_s, 0.0)
+        require_limits(self)
         if not 0.0 <= self.latency_jitter_s <= self.latency_s:
             raise ConfigError(
                 "latency_jitter_s",
@@ -57,8 +58,6 @@ class VisionLinkConfig:
         self.rate_hz = tuple(float(v) for v in self.rate_hz)  # type: ignore[assignment]
         if len(self.rate_hz) != 2 or not 0.0 < self.rate_hz[0] <= self.rate_hz[1]:
             raise ConfigError("rate_hz", f"{self.rate_hz!r} must be [min, max] with 0 < min <= max")
-        require_range("dropout_prob", self.dropout_prob, 0.0, 1.0)
-        require_range("max_age_s", self.max_age_s, 0.0, low_inclusive=False)
 
 
 @dataclass

@@ -148,8 +148,9 @@ FOLDER_LAYERS: dict[str, tuple[tuple[str, ...], ...]] = {
     "landing_env": (
         ("errors", "_quiet", "resources"),
         # the parts' own settings and models: the waves and a ship's motion in them, the
-        # guidance's gains, the physics, the deck's surface, the vision link
-        ("config_limits", "guidance_gains", "physics", "scene", "vision_link", "waves"),
+        # physics, the deck's surface, the vision link
+        ("config_limits", "physics", "scene", "vision_link", "waves"),
+        ("guidance_gains",),  # the guidance's gains (the controller's PID gain by default)
         ("config_loading", "sensors", "stewart", "timing_config"),
         ("config",),  # the environment config: every section's settings
         ("sea", "touchdown"),  # the ship at sea (helideck mount, HMS, forecast); the contact

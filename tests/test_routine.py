@@ -3,6 +3,7 @@ approach evaluation."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import pybullet as p
 import pytest
 from pybullet_utils.bullet_client import BulletClient
 
-from agents.policies.beacon_range import BeaconRangePolicy, PrecLandState
+from agents.policies.beacon_range import BeaconRangeConfig, BeaconRangePolicy, PrecLandState
 from agents.policies.svgs_routine import (
     AttitudeFilter,
     RoutineConfig,
@@ -141,6 +142,45 @@ def test_routine_config_is_validated() -> None:
         RoutineConfig(descent_min_speed=2.0, descent_max_speed=1.0)
     with pytest.raises(ConfigError, match="scan_lane_spacing_m"):
         RoutineConfig(scan_lane_spacing_m=0.0)
+
+
+@pytest.mark.parametrize(
+    ("cls", "name", "refused", "accepted"),
+    [
+        (RoutineConfig, "scan_speed", 0.0, 1e-6),
+        (RoutineConfig, "align_hold_s", -1e-6, 0.0),
+        (RoutineConfig, "scan_squares", 51, 50),
+        (RoutineConfig, "misaligned_factor", 0.999, 1.0),
+        (RoutineConfig, "lock_frames", 0, 1),
+        (BeaconRangeConfig, "acceptance_radius_m", 0.0, 1e-6),
+        (BeaconRangeConfig, "search_timeout_s", -1e-6, 0.0),
+        (BeaconRangeConfig, "max_searches", 101, 0),
+        (BeaconRangeConfig, "attitude_gain", -0.2, 0.2),
+    ],
+)
+def test_a_setting_outside_its_declared_limit_is_refused_naming_it(
+    cls: type, name: str, refused: float, accepted: float
+) -> None:
+    with pytest.raises(ConfigError, match=rf"^{name}: {refused!r} is out of range"):
+        cls(**{name: refused})
+    assert getattr(cls(**{name: accepted}), name) == accepted
+
+
+@pytest.mark.parametrize("cls", [RoutineConfig, BeaconRangeConfig])
+def test_every_declared_limit_holds_at_its_bounds(cls: type) -> None:
+    declared = [f for f in dataclasses.fields(cls) if "limit" in f.metadata]
+    assert len(declared) >= 15
+    for item in declared:
+        limit = item.metadata["limit"]
+        for bound, inclusive, step in (
+            (limit.low, limit.low_inclusive, -1),
+            (limit.high, limit.high_inclusive, 1),
+        ):
+            if bound is None:
+                continue
+            outside = bound if not inclusive else bound + step
+            with pytest.raises(ConfigError, match=rf"^{item.name}: "):
+                cls(**{item.name: outside})
 
 
 # ------------------------------------------------------------------------------ attitude

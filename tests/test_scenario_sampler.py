@@ -109,6 +109,48 @@ def test_new_sensing_profiles_plug_in_by_name() -> None:
         register_sensing_profile("", {})
 
 
+def _leaves(nested: dict, prefix: str = "") -> list[tuple[str, object]]:
+    return [
+        leaf
+        for key, value in nested.items()
+        for leaf in (
+            _leaves(value, f"{prefix}{key}.")
+            if isinstance(value, dict)
+            else [(f"{prefix}{key}", value)]
+        )
+    ]
+
+
+def test_every_sensing_profile_the_sampler_offers_is_a_preset_file_and_sets_its_values() -> None:
+    from landing_env.config import CONFIG_DIR, SENSOR_SETS, load_config, sensor_preset
+
+    files = {path.stem: path for path in (CONFIG_DIR / "sensors").glob("*.yaml")}
+    assert set(SENSING_PROFILES) == set(files)
+    for name, path in files.items():
+        preset = sensor_preset(name) if name in SENSOR_SETS else yaml.safe_load(path.read_text())
+        config = load_config("default", SENSING_PROFILES[name])
+        assert config.sensors == preset.get("sensors", "ideal"), name
+        for key, value in _leaves(preset):
+            section, _, field = key.rpartition(".")
+            have = config
+            for part in section.split(".") if section else []:
+                have = getattr(have, part)
+            got = getattr(have, field)
+            assert (list(got) if isinstance(got, tuple) else got) == value, (name, key)
+
+
+def test_a_sensing_file_naming_no_bundle_is_refused_naming_the_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import landing_env.config as config_module
+
+    (tmp_path / "sensors").mkdir()
+    (tmp_path / "sensors" / "murky.yaml").write_text("sensors: foggy\ntof:\n  noise: vl53l1x\n")
+    monkeypatch.setattr(config_module, "CONFIG_DIR", tmp_path)
+    with pytest.raises(ConfigError, match=r"sensors: .*murky\.yaml: 'foggy'.*realistic"):
+        config_module.sensing_profiles()
+
+
 def test_twice_the_realistic_noise_doubles_every_noise_sigma() -> None:
     from landing_env.config import load_config
     from landing_env.sensors.corner_noise import sigma_px

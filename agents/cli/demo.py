@@ -26,6 +26,7 @@ from agents.evaluation.pipeline import (
 from agents.evaluation.records import EpisodeRecord
 from agents.policies.registry import default_policy
 from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import LANDING_TASK
 
 
 @dataclass
@@ -105,7 +106,7 @@ def plot_trajectory(log: EpisodeLog, path: Path) -> None:
 
 def summarise(log: EpisodeLog, console: Console) -> None:
     info = log.final_info
-    table = Table(title="DeckLanding-v1 episode")
+    table = Table(title=f"{LANDING_TASK} episode")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("outcome", info["outcome"])

@@ -36,7 +36,7 @@ from agents.policies.align_descend import AlignDescendPolicy
 from estimation.errors import ConfigError, require_choice
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.types import DeckPoseEstimate
-from landing_env.scenarios import landing_overrides
+from landing_env.scenarios import LANDING_TASK, landing_overrides
 
 #: how many captures' vehicle poses are kept (the vision link delivers up to ~1 s late)
 POSE_HISTORY = 256
@@ -67,12 +67,12 @@ class SimulatorSource:
             raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
         self.pacer = StampPacer(speed)
         if scenario is not None:
-            chosen = dict(landing_overrides("DeckLanding-v1", estimator, camera_mode))
+            chosen = dict(landing_overrides(LANDING_TASK, estimator, camera_mode))
             config = scenario
         else:
             chosen = {"estimation.observed": estimator, "camera.mode": camera_mode}
         chosen.update(overrides or {})
-        self.env = gym.make("DeckLanding-v1", config=config, overrides=chosen)
+        self.env = gym.make(LANDING_TASK, config=config, overrides=chosen)
         base = self.env.unwrapped
         self.base = base
         self.estimator = estimator

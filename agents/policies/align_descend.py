@@ -15,6 +15,7 @@ import numpy as np
 
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from estimation.frames import camera_to_heading_xy
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import require_range
@@ -53,20 +54,20 @@ class AlignDescendConfig:
     #: height of the flare, where the policy waits for a calm window, metres (low, so that
     #: the final descent is short and the calm prediction short-range; the tag still fits
     #: the image)
-    hold_height_m: float = 0.4
+    hold_height_m: float = limited(0.4, Limit(0.3, 3.0))
     #: the flare starts when the range is within this of the hold height, metres
-    hold_tolerance_m: float = 0.1
+    hold_tolerance_m: float = limited(0.1, POSITIVE)
     #: the final descent starts regardless after this long in the flare, seconds
-    max_flare_s: float = 25.0
+    max_flare_s: float = limited(25.0, NON_NEGATIVE)
     #: search speed without an estimate: climb (to widen the view) while a ToF sees a
     #: surface, descend while none does (every surface is beyond the ToF range), m/s
-    search_climb_speed: float = 0.3
+    search_climb_speed: float = limited(0.3, NON_NEGATIVE)
     #: horizontal speed towards the deck when the ToF ranges show its edge, m/s
-    edge_seek_speed: float = 0.3
+    edge_seek_speed: float = limited(0.3, NON_NEGATIVE)
     #: ToF ranges shorter than the longest by more than this are taken as on the deck, metres
-    edge_step_m: float = 0.1
+    edge_step_m: float = limited(0.1, POSITIVE)
     #: back to the approach after this long without a tag in the flare, seconds
-    lost_tag_s: float = 1.0
+    lost_tag_s: float = limited(1.0, NON_NEGATIVE)
     #: length of the motion history kept for the calm prediction, seconds
     history_s: float = 2.0
     rate_window_s: float = 0.5
@@ -74,13 +75,7 @@ class AlignDescendConfig:
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
 
     def __post_init__(self) -> None:
-        require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
-        require_range("hold_tolerance_m", self.hold_tolerance_m, 0.0, low_inclusive=False)
-        require_range("max_flare_s", self.max_flare_s, 0.0)
-        require_range("search_climb_speed", self.search_climb_speed, 0.0)
-        require_range("edge_seek_speed", self.edge_seek_speed, 0.0)
-        require_range("edge_step_m", self.edge_step_m, 0.0, low_inclusive=False)
-        require_range("lost_tag_s", self.lost_tag_s, 0.0)
+        require_limits(self)
         require_range(
             "history_s",
             self.history_s,

@@ -43,8 +43,9 @@ from estimation.landing_target import (
     LandingTargetConfig,
     LandingTargetFilter,
 )
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
 from landing_env.physics.controller import VelocitySetpoint
 
 
@@ -63,55 +64,35 @@ class BeaconRangeConfig:
     """Settings of the baseline (PX4 parameter names in the comments)."""
 
     #: horizontal acceptance radius before the descent, metres (PLD_HACC_RAD)
-    acceptance_radius_m: float = 0.2
+    acceptance_radius_m: float = limited(0.2, POSITIVE)
     #: below this height the descent goes on blind, metres (PLD_FAPPR_ALT)
-    final_approach_height_m: float = 0.3
+    final_approach_height_m: float = limited(0.3, NON_NEGATIVE)
     #: beacon lost after this long without it, seconds (PLD_BTOUT)
-    beacon_timeout_s: float = 2.0
+    beacon_timeout_s: float = limited(2.0, NON_NEGATIVE)
     #: climb to this height to search, metres (PLD_SRCH_ALT)
-    search_height_m: float = 20.0
+    search_height_m: float = limited(20.0, NON_NEGATIVE)
     #: hover this long at the search height, seconds (PLD_SRCH_TOUT)
-    search_timeout_s: float = 10.0
+    search_timeout_s: float = limited(10.0, NON_NEGATIVE)
     #: searches before landing in place (PLD_MAX_SRCH; the SVGS paper's IR-LOCK flights: 20)
-    max_searches: int = 20
+    max_searches: int = limited(20, Limit(0, 100))
     #: descent speeds, m/s, and the heights where they change, metres (MPC_LAND_*)
-    descent_speed: float = 1.0
-    land_speed: float = 0.5
-    crawl_speed: float = 0.3
-    slow_height_m: float = 5.0
-    crawl_height_m: float = 1.0
+    descent_speed: float = limited(1.0, POSITIVE)
+    land_speed: float = limited(0.5, POSITIVE)
+    crawl_speed: float = limited(0.3, POSITIVE)
+    slow_height_m: float = limited(5.0, NON_NEGATIVE)
+    crawl_height_m: float = limited(1.0, NON_NEGATIVE)
     #: horizontal velocity per metre of offset, 1/s, and its limit, m/s
-    k_xy: float = 0.8
-    max_horizontal_speed: float = 1.0
-    climb_speed: float = 1.0
+    k_xy: float = limited(0.8, POSITIVE)
+    max_horizontal_speed: float = limited(1.0, POSITIVE)
+    climb_speed: float = limited(1.0, POSITIVE)
     #: the attitude filter's accelerometer gain, 1/s (see
     #: agents.policies.svgs_routine.AttitudeFilter)
-    attitude_gain: float = 0.2
+    attitude_gain: float = limited(0.2, POSITIVE)
     #: the landing-target filter (gate in standard deviations: 10, the paper's)
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
 
     def __post_init__(self) -> None:
-        for name in (
-            "acceptance_radius_m",
-            "descent_speed",
-            "land_speed",
-            "crawl_speed",
-            "k_xy",
-            "max_horizontal_speed",
-            "climb_speed",
-            "attitude_gain",
-        ):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
-        for name in (
-            "final_approach_height_m",
-            "beacon_timeout_s",
-            "search_height_m",
-            "search_timeout_s",
-            "slow_height_m",
-            "crawl_height_m",
-        ):
-            require_range(name, getattr(self, name), 0.0)
-        require_range("max_searches", self.max_searches, 0, 100)
+        require_limits(self)
 
 
 class BeaconRangePolicy:

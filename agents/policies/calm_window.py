@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.frames import tilt_deg
-from landing_env.errors import require_range
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.timing.history import HISTORY_FEATURES
 
 _Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
@@ -25,30 +25,25 @@ class CalmConfig:
 
     #: sliding window of estimated deck motion that must have been calm, seconds (as long as
     #: the descent: the deck has been calm for a descent's length)
-    window_s: float = 1.3
+    window_s: float = limited(1.3, Limit(0.1, 10.0))
     #: duration of the final descent the calm must last for (the prediction horizon), seconds
-    descent_s: float = 1.3
+    descent_s: float = limited(1.3, Limit(0.0, 10.0))
     #: fraction of the fitted trend extrapolated over the descent: 0 predicts that the calm
     #: persists, 1 extrapolates the straight line (which overshoots on an oscillating deck)
-    trend_weight: float = 0.25
+    trend_weight: float = limited(0.25, Limit(0.0, 1.0))
     #: largest deck tilt relative to the camera, now and predicted at touchdown, degrees
-    max_tilt_deg: float = 4.0
+    max_tilt_deg: float = limited(4.0, Limit(0.0, 45.0, low_inclusive=False))
     #: also require every valid sample of the window to be within ``max_tilt_deg`` (the deck
     #: has been calm for a window, the landing-period heuristic); False judges by the fitted
     #: line alone
     require_calm_window: bool = True
     #: largest heave rate of the deck relative to the camera, m/s
-    max_heave_rate: float = 0.15
+    max_heave_rate: float = limited(0.15, POSITIVE)
     #: fewer valid estimates than this fraction of the window: not calm (nothing to judge by)
-    min_valid_fraction: float = 0.8
+    min_valid_fraction: float = limited(0.8, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
-        require_range("window_s", self.window_s, 0.1, 10.0)
-        require_range("descent_s", self.descent_s, 0.0, 10.0)
-        require_range("trend_weight", self.trend_weight, 0.0, 1.0)
-        require_range("max_tilt_deg", self.max_tilt_deg, 0.0, 45.0, low_inclusive=False)
-        require_range("max_heave_rate", self.max_heave_rate, 0.0, low_inclusive=False)
-        require_range("min_valid_fraction", self.min_valid_fraction, 0.0, 1.0)
+        require_limits(self)
 
 
 @dataclass

@@ -62,6 +62,7 @@ import numpy as np
 
 from agents.policies.oracle import DeckOracleTimingPolicy
 from estimation.deck_prediction import LinearMotionPredictor
+from estimation.limits import Limit, limited, require_limits
 from landing_env.config import load_config
 from landing_env.errors import ConfigError, require_range
 from landing_env.scenarios import SCENARIOS
@@ -145,10 +146,10 @@ class OnboardModelConfig:
     """
 
     gust_error_mps: tuple[float, float, float] = (0.4, 0.4, 0.2)
-    drag_error_fraction: float = 0.2
+    drag_error_fraction: float = limited(0.2, Limit(0.0, 0.9))
     position_from_estimate: bool = True
     position_error_m: tuple[float, float, float] = (0.003, 0.003, 0.010)
-    thrust_error_fraction: float = 0.05
+    thrust_error_fraction: float = limited(0.05, Limit(0.0, 0.5))
     airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
@@ -162,8 +163,7 @@ class OnboardModelConfig:
             for value in values:
                 require_range(key, value, 0.0, high)
             object.__setattr__(self, key, values)
-        require_range("drag_error_fraction", self.drag_error_fraction, 0.0, 0.9)
-        require_range("thrust_error_fraction", self.thrust_error_fraction, 0.0, 0.5)
+        require_limits(self)
         for key in ("position_from_estimate", "airframe_in_trim"):
             value = getattr(self, key)
             if not isinstance(value, bool):
@@ -193,7 +193,9 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
 
     ``last_forecast`` holds the latest forecast: (H, 5) poses at :data:`HORIZONS_S`, or the
-    reason there was none.
+    reason there was none.  ``rule`` are the commit rule's settings, as the deck oracle's
+    (``draws``, ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``,
+    ``relax_s``); its ``min_margin`` is 0.15 here.
     """
 
     name = "deck-forecast"
@@ -201,20 +203,14 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     def __init__(
         self,
         env: Any,
-        draws: int = 16,
-        min_chance: float = 1.0,
-        check_every_s: float = 0.2,
-        seed: int = 0,
-        min_margin: float = 0.15,
         hms: HelideckMonitorConfig | None = None,
         forecast: LinearMotionPredictor | None = None,
         onboard: OnboardModelConfig | None = None,
-        deadline_chance: float | None = None,
-        relax_s: float = 5.0,
+        *,
+        min_margin: float = 0.15,
+        **rule: Any,
     ) -> None:
-        super().__init__(
-            env, draws, min_chance, check_every_s, seed, min_margin, deadline_chance, relax_s
-        )
+        super().__init__(env, min_margin=min_margin, **rule)
         #: None: the look-ahead knows the present exactly (``deck-forecast``)
         self.onboard = onboard
         if onboard is not None:

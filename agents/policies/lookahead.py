@@ -37,9 +37,11 @@ from agents.common.cards import check_compatible, env_signature
 from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.oracle import TriedCommit
 from agents.policies.timing import TrainedTimingPolicy
+from estimation.limits import Limit, limited, require_limits
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import validate_action
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
+from landing_env.scenarios import TIMING_TASK
 from landing_env.sea.hms import REPORT_FIELDS
 from landing_env.touchdown import Outcome
 
@@ -81,20 +83,16 @@ class LookaheadSettings:
       shipped look-ahead's draws.
     """
 
-    draws: int = 4
-    check_every_s: float = 0.5
-    min_margin: float = 0.15
-    checks: int = 2
+    draws: int = limited(4, Limit(1, 64))
+    check_every_s: float = limited(0.5, Limit(0.0, 10.0, low_inclusive=False))
+    min_margin: float = limited(0.15, Limit(0.0, 1.0))
+    checks: int = limited(2, Limit(1, 16))
     seed: int = 0
-    hms_report_s: float = 0.0
+    hms_report_s: float = limited(0.0, Limit(0.0, 3600.0))
     airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
-        require_range("draws", self.draws, 1, 64)
-        require_range("check_every_s", self.check_every_s, 0.0, 10.0, low_inclusive=False)
-        require_range("min_margin", self.min_margin, 0.0, 1.0)
-        require_range("checks", self.checks, 1, 16)
-        require_range("hms_report_s", self.hms_report_s, 0.0, 3600.0)
+        require_limits(self)
         if not isinstance(self.airframe_in_trim, bool):
             raise ConfigError(
                 "airframe_in_trim", f"must be true or false, got {self.airframe_in_trim!r}"
@@ -198,7 +196,7 @@ class LookaheadObserver:
         self.settings = settings or LookaheadSettings()
         base = env.unwrapped
         if not hasattr(base, "layout") or not hasattr(base, "timing"):
-            raise ConfigError("env", "the look-ahead acts in DeckLandingTiming-v0")
+            raise ConfigError("env", f"the look-ahead acts in {TIMING_TASK}")
         self.env = base
         s = self.settings
         self.planner = DeckForecastTimingPolicy(

@@ -28,6 +28,7 @@ import numpy as np
 from landing_env.config import TouchdownConfig
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import require_range
+from landing_env.scenarios import TIMING_TASK
 from landing_env.touchdown import Outcome
 
 #: the margin of an episode that did not touch down (crash, descent timeout)
@@ -102,7 +103,7 @@ class OracleTimingPolicy:
     def __init__(self, env: Any, max_window_s: float = 2.0) -> None:
         self.env = env.unwrapped
         if not hasattr(self.env, "layout"):
-            raise TypeError("the oracle acts in DeckLandingTiming-v0")
+            raise TypeError(f"the oracle acts in {TIMING_TASK}")
         require_range("max_window_s", max_window_s, 0.0)
         decision_s = self.env.env_dt * self.env.timing.steps_per_decision
         #: most successful candidates tried in the first window
@@ -212,7 +213,7 @@ class DeckOracleTimingPolicy:
     ) -> None:
         self.env = env.unwrapped
         if not hasattr(self.env, "layout"):
-            raise TypeError(f"{self.name} acts in DeckLandingTiming-v0")
+            raise TypeError(f"{self.name} acts in {TIMING_TASK}")
         require_range("draws", draws, 1, 64)
         require_range("min_margin", min_margin, 0.0, 1.0)
         #: a tried commit lands only with this much slack on every graded criterion

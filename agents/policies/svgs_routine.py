@@ -45,8 +45,9 @@ from agents.policies.align_descend import normalise_setpoint
 from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.physics.quadrotor_params import GRAVITY
@@ -196,45 +197,45 @@ class RoutineConfig:
     """Settings of the SVGS routine (heights are camera heights above the surface below)."""
 
     #: first scan square's side, metres, and its growth per square (Algorithm 2's squareSize)
-    scan_first_side_m: float = 6.0
-    scan_growth_m: float = 6.0
+    scan_first_side_m: float = limited(6.0, POSITIVE)
+    scan_growth_m: float = limited(6.0, NON_NEGATIVE)
     #: lane spacing of the lawn-mower, metres (under the camera's footprint at 20 m, 22 m)
-    scan_lane_spacing_m: float = 3.0
+    scan_lane_spacing_m: float = limited(3.0, POSITIVE)
     #: squares flown before the scan gives up and lands in place
-    scan_squares: int = 4
+    scan_squares: int = limited(4, Limit(1, 50))
     #: scan speed, m/s (low: the paper scans slowly so that a sighting is not overflown)
-    scan_speed: float = 1.0
+    scan_speed: float = limited(1.0, POSITIVE)
     #: a waypoint counts as reached within this, metres
-    waypoint_tolerance_m: float = 0.4
+    waypoint_tolerance_m: float = limited(0.4, POSITIVE)
     #: aligned when the horizontal error is below ``align_tolerance_m`` +
     #: ``align_tolerance_per_m`` * height (wider high up, where the estimate is coarser)
-    align_tolerance_m: float = 0.1
-    align_tolerance_per_m: float = 0.06
+    align_tolerance_m: float = limited(0.1, NON_NEGATIVE)
+    align_tolerance_per_m: float = limited(0.06, NON_NEGATIVE)
     #: aligned for this long before the descent (starts), seconds
-    align_hold_s: float = 0.5
+    align_hold_s: float = limited(0.5, NON_NEGATIVE)
     #: during the descent, an error beyond this times the tolerance pauses it (back to align)
-    misaligned_factor: float = 2.0
+    misaligned_factor: float = limited(2.0, Limit(1.0))
     #: descent speed = descent_gain * (height - hold height), within [min, max], m/s
-    descent_gain: float = 0.5
-    descent_min_speed: float = 0.3
-    descent_max_speed: float = 1.0
+    descent_gain: float = limited(0.5, POSITIVE)
+    descent_min_speed: float = limited(0.3, POSITIVE)
+    descent_max_speed: float = limited(1.0, POSITIVE)
     #: sight counts as lost after this long without a valid estimate, seconds (covers the
     #: short dropouts of an intermittent vision link)
-    lost_sight_s: float = 0.6
+    lost_sight_s: float = limited(0.6, NON_NEGATIVE)
     #: consecutive valid measured estimates that count as having the landmark (target lock)
-    lock_frames: int = 2
+    lock_frames: int = limited(2, Limit(1, 100))
     #: relocation speed, m/s, reach tolerance, metres, and the time each leg may take, s
-    relocate_speed: float = 1.0
-    relocate_tolerance_m: float = 0.3
-    relocate_leg_s: float = 8.0
+    relocate_speed: float = limited(1.0, POSITIVE)
+    relocate_tolerance_m: float = limited(0.3, POSITIVE)
+    relocate_leg_s: float = limited(8.0, NON_NEGATIVE)
     #: the relocation is not invoked below this height (Algorithm 4's U_min), metres
-    relocate_min_height_m: float = 1.0
+    relocate_min_height_m: float = limited(1.0, NON_NEGATIVE)
     #: velocity-loop lag of the dead reckoning, seconds
-    dead_reckoning_lag_s: float = 0.35
+    dead_reckoning_lag_s: float = limited(0.35, POSITIVE)
     #: pull of the accelerometer on the attitude filter, 1/s: low, because a manoeuvre's
     #: acceleration tilts the apparent up (0.6 let a 20 m hover orbit the landmark), high
     #: enough that the gyro bias (~0.002 rad/s) leaves under a degree
-    attitude_gain: float = 0.2
+    attitude_gain: float = limited(0.2, POSITIVE)
     #: use the trained timing model when it is installed (else the quiescent heuristic)
     use_timing_model: bool = True
     timing_model_path: str = ""
@@ -245,33 +246,7 @@ class RoutineConfig:
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
 
     def __post_init__(self) -> None:
-        for name in (
-            "scan_first_side_m",
-            "scan_lane_spacing_m",
-            "scan_speed",
-            "waypoint_tolerance_m",
-            "descent_gain",
-            "descent_min_speed",
-            "descent_max_speed",
-            "relocate_speed",
-            "relocate_tolerance_m",
-            "dead_reckoning_lag_s",
-            "attitude_gain",
-        ):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
-        for name in (
-            "scan_growth_m",
-            "align_tolerance_m",
-            "align_tolerance_per_m",
-            "align_hold_s",
-            "lost_sight_s",
-            "relocate_leg_s",
-            "relocate_min_height_m",
-        ):
-            require_range(name, getattr(self, name), 0.0)
-        require_range("scan_squares", self.scan_squares, 1, 50)
-        require_range("misaligned_factor", self.misaligned_factor, 1.0)
-        require_range("lock_frames", self.lock_frames, 1, 100)
+        require_limits(self)
         if self.descent_min_speed > self.descent_max_speed:
             raise ConfigError(
                 "descent_min_speed",

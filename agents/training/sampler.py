@@ -5,9 +5,9 @@ a :class:`Variant` from :class:`RandomiseSettings`:
 
 * a **scenario** by name from the evaluation's registry (``agents.evaluation.landing.SCENARIOS``:
   the bench sea states today; the ship scenarios join it by name when they are added);
-* a **sensing profile** by name from :data:`SENSING_PROFILES` (dotted overrides: ``ideal``,
-  ``tof-vl53l1x``; ``realistic`` and its doubled noise join by name once the ``sensors`` switch
-  exists, with :func:`register_sensing_profile`);
+* a **sensing profile** by name from :data:`SENSING_PROFILES`, the presets of
+  ``configs/sensors/`` as dotted overrides (``ideal``, ``tof-vl53l1x``, ``realistic``,
+  ``realistic-2x``);
 * a **wind** (mean speed uniform in ``wind_speed_mps``, direction uniform) and a **start
   height** of the camera above the deck (uniform in ``start_height_m``; the guidance brings it
   to the hold height during the warm-up).
@@ -32,37 +32,21 @@ import gymnasium as gym
 import numpy as np
 
 from agents.common.cards import sensing_profile
-from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from estimation.registry import ESTIMATOR_NAMES
-from landing_env.config import load_config
+from landing_env.config import load_config, sensing_profiles
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import SCENARIOS, dotted, landing_overrides
+from landing_env.scenarios import SCENARIOS, TIMING_TASK, dotted, landing_overrides
 from landing_env.timing_config import CAMERA_BELOW_COM_M
 
-ENV_ID = "DeckLandingTiming-v0"
-
-#: sensing profile name -> the dotted overrides that make it
-SENSING_PROFILES: dict[str, dict[str, Any]] = {
-    "ideal": {},
-    "tof-vl53l1x": {"tof.noise": "vl53l1x"},
-    # configs/sensors/realistic.yaml: OV9281-class camera with its fitted corner noise,
-    # VL53L1X ToF, k1 = -0.05 with its calibrations
-    "realistic": {"sensors": "realistic"},
-    # the same with twice the noise standard deviations: the ToF's sigma_0 and sigma_per_m
-    # doubled, and the corner noise's sigma = sqrt(base^2 + size/side + (blur*b)^2) doubled
-    # (base and blur x2, size x4), a margin for sensors worse than their datasheets
-    "realistic-2x": {
-        "sensors": "realistic",
-        "tof.sigma_0": 2.0 * VL53L1X_SIGMA_0_M,
-        "tof.sigma_per_m": 2.0 * VL53L1X_SIGMA_PER_M,
-        "camera.pixel_noise_fit": [0.274, 8.588, 0.228, 0.0],
-    },
-}
+#: sensing profile name -> the dotted overrides that make it: the presets of
+#: ``configs/sensors/`` (:func:`landing_env.config.sensing_profiles`)
+SENSING_PROFILES: dict[str, dict[str, Any]] = sensing_profiles()
 
 
 def register_sensing_profile(name: str, overrides: dict[str, Any]) -> None:
-    """Add a sensing profile by name (e.g. ``realistic`` once the ``sensors`` switch exists)."""
+    """Add a sensing profile by name for this process (a shipped one is a file in
+    ``configs/sensors/``)."""
     if not name or not isinstance(overrides, dict):
         raise ConfigError("sensing", "a profile needs a name and a dict of dotted overrides")
     SENSING_PROFILES[name] = dict(overrides)
@@ -177,7 +161,7 @@ class RandomisedTimingEnv(gym.Env):
                 self._wind.pop(oldest)
             overrides = variant_overrides(self.settings, scenario, sensing)
             env = gym.make(
-                ENV_ID,
+                TIMING_TASK,
                 config=SCENARIOS[scenario].config,
                 overrides={**overrides, **dotted("timing", self.timing or {})},
             )
@@ -250,7 +234,7 @@ def variant_overrides(settings: RandomiseSettings, scenario: str, sensing: str) 
     """The dotted overrides of one (scenario, sensing) world."""
     require_choice("scenario", scenario, tuple(SCENARIOS))
     return {
-        **landing_overrides(ENV_ID),
+        **landing_overrides(TIMING_TASK),
         "estimation.observed": settings.estimator,
         **SENSING_PROFILES[sensing],
         **settings.overrides,

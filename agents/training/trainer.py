@@ -47,13 +47,14 @@ from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
 from agents.policies.timing import shipped_timing_model
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
 from agents.training.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config_loading import build_dataclass
-from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, TASKS
+from landing_env.errors import ConfigError, require_choice
+from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, SCENARIOS, TASKS, TIMING_TASK
 
-ENV_ID = "DeckLandingTiming-v0"
+ENV_ID = TIMING_TASK
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
-SCENARIO_ENV_ID = "DeckLandingTiming-BenchSS4-v6"
+SCENARIO_ENV_ID = SCENARIOS["bench-ss4"].ids[TIMING_TASK]
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
 ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", "frame_stack")
 ALGOS = ("ppo", "dqn", "recurrentppo", "sac", "tqc")
@@ -69,14 +70,13 @@ class EvalSettings:
     """The evaluation during training (``EvalCallback``) on held-out seeds."""
 
     #: evaluate every this many environment steps (summed over the parallel environments)
-    freq: int = 10_000
-    episodes: int = 40
+    freq: int = limited(10_000, Limit(1))
+    episodes: int = limited(40, Limit(1))
     #: seed of the evaluation environment; far from the training seeds
     seed: int = 900_000
 
     def __post_init__(self) -> None:
-        require_range("freq", self.freq, 1)
-        require_range("episodes", self.episodes, 1)
+        require_limits(self)
 
 
 @dataclass
@@ -95,17 +95,17 @@ class TrainSettings:
     randomise: dict[str, Any] | None = None
     eval: EvalSettings = field(default_factory=EvalSettings)
     #: save a checkpoint every this many environment steps (summed over the environments)
-    checkpoint_freq: int = 50_000
+    checkpoint_freq: int = limited(50_000, Limit(1))
     #: stop when the evaluation success rate reaches this (above 1: never stop early)
-    target_success_rate: float = 0.95
+    target_success_rate: float = limited(0.95, NON_NEGATIVE)
     #: stop after this much wall-clock time, minutes (the run keeps what it has learnt)
-    max_minutes: float = 30.0
+    max_minutes: float = limited(30.0, POSITIVE)
     out_dir: str = "results/train/timing_ppo"
     #: "subproc" runs one process per environment; "dummy" runs them in this process
     vec_env: Literal["subproc", "dummy"] = "subproc"
     #: threads of the learner's torch: one, so that the gradient steps do not compete with
     #: the environment processes for the cores (the network is small)
-    torch_threads: int = 1
+    torch_threads: int = limited(1, Limit(1))
     #: start from this trained model's weights (same algorithm and network; its card must
     #: describe the same task, observation and estimator): training goes on from it
     init_model: str | None = None
@@ -117,10 +117,7 @@ class TrainSettings:
     def __post_init__(self) -> None:
         require_choice("algo", self.algo, ALGOS)
         require_choice("vec_env", self.vec_env, ("subproc", "dummy"))
-        require_range("checkpoint_freq", self.checkpoint_freq, 1)
-        require_range("target_success_rate", self.target_success_rate, 0.0)
-        require_range("max_minutes", self.max_minutes, 0.0, low_inclusive=False)
-        require_range("torch_threads", self.torch_threads, 1)
+        require_limits(self)
         if self.randomise is not None:
             build_dataclass(RandomiseSettings, self.randomise, "deck_landing.randomise")
         if self.lookahead is not None:
@@ -189,7 +186,7 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
         raise ConfigError(
             "config",
             f"{path} needs one top-level section named by a registered id (rl-zoo3 style), "
-            f"e.g. {SCENARIO_ENV_ID!r} or 'DeckLanding-BenchSS4-v1'",
+            f"e.g. {SCENARIO_ENV_ID!r} or {SCENARIOS['bench-ss4'].ids[LANDING_TASK]!r}",
         )
     section = dict(data.get("deck_landing") or {})
     if algo is not None:

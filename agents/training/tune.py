@@ -19,9 +19,10 @@ import yaml
 
 from agents.common.parallel import ensure_ray
 from agents.training.trainer import load_train_config, train
+from estimation.limits import Limit, limited, require_limits
 from landing_env.config import _calibration_path
 from landing_env.config_loading import build_dataclass
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
 
 #: the samplers a search-space entry may use, and how many arguments each takes
 SAMPLERS = {"choice": 1, "uniform": 2, "loguniform": 2}
@@ -32,10 +33,10 @@ class TuneSettings:
     """A search: the base training YAML, the budget and the space."""
 
     base: str = "configs/train/timing_dqn.yaml"
-    samples: int = 8
-    timesteps: int = 20_000
-    eval_episodes: int = 20
-    max_concurrent: int = 2
+    samples: int = limited(8, Limit(1))
+    timesteps: int = limited(20_000, Limit(1))
+    eval_episodes: int = limited(20, Limit(1))
+    max_concurrent: int = limited(2, Limit(1))
     seed: int = 0
     out_dir: str = "results/tune/timing"
     space: dict[str, Any] = field(default_factory=dict)
@@ -43,8 +44,7 @@ class TuneSettings:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("samples", "timesteps", "eval_episodes", "max_concurrent"):
-            require_range(name, getattr(self, name), 1)
+        require_limits(self)
         if not self.space:
             raise ConfigError("space", "is empty; give at least one hyper-parameter to search")
         for key, spec in self.space.items():

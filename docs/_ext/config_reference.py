@@ -77,7 +77,9 @@ def sections(cls: type, prefix: str = "") -> list[tuple[str, type, list[list[str
 
 def timing_config() -> type | None:
     """The timing task's settings dataclass: the ``timing`` argument of its class."""
-    cls = task_class("DeckLandingTiming-v0")
+    from landing_env.scenarios import TIMING_TASK
+
+    cls = task_class(TIMING_TASK)
     if "timing" not in inspect.signature(cls.__init__).parameters:
         return None
     hint = typing.get_type_hints(cls.__init__).get("timing")

@@ -9,7 +9,9 @@ from scipy.stats import chi2
 
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.fusion.model import TwoWaves, deck_spectrum
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import (
+    IMU_NOISE_DENSITY,
     VL53L1X_RESOLUTION_M,
     VL53L1X_SIGMA_0_M,
     VL53L1X_SIGMA_PER_M,
@@ -63,24 +65,30 @@ class FusionConfig:
     #: fuse the four ToF ranges (undelayed: a range to the deck plane along each ray)
     use_tof: bool = True
     #: how far back a delayed measurement is still fused at its own timestamp, seconds
-    horizon_s: float = 0.5
+    horizon_s: float = limited(0.5, Limit(0.0, 10.0), physical=Limit.non_negative(10.0))
     #: chi-square innovation gate: a measurement whose NIS exceeds this quantile is rejected
-    gate_probability: float = 0.9995
+    gate_probability: float = limited(
+        0.9995, Limit(0.0, 1.0, low_inclusive=False, high_inclusive=False)
+    )
     #: the gate as a Mahalanobis distance in standard deviations (replaces gate_probability
     #: when set; PAPER_GATE_SD = 10 is the SVGS paper's); None: the chi-square gate above
     gate_sd: float | None = None
     #: no accepted pose update for this long: the estimate is invalid and the filter
     #: re-initialises from the next pose measurement, seconds
-    reset_timeout_s: float = 1.0
+    reset_timeout_s: float = limited(1.0, POSITIVE, physical=Limit.positive(60.0))
     #: white deck linear-acceleration PSD, m^2/s^3 (a random walk in velocity)
-    deck_accel_psd: float = 0.02
+    deck_accel_psd: float = limited(0.02, NON_NEGATIVE, physical=Limit.non_negative(1e3))
     #: white deck angular-acceleration PSD (of the Euler angles), rad^2/s^3
-    deck_angular_accel_psd: float = 0.002
+    deck_angular_accel_psd: float = limited(0.002, NON_NEGATIVE, physical=Limit.non_negative(1e3))
     #: the deck's roll/pitch natural period, s (0: constant-rate Euler angles, the white
     #: angular acceleration above); with a period, roll and pitch are a damped oscillator about
     #: level driven by that noise (estimation/fusion/model.py), damping ratio below
-    deck_period_s: float = 0.0
-    deck_damping_ratio: float = 0.3
+    deck_period_s: float = limited(
+        0.0,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(1e3, "0: no deck oscillator; ships roll at 5-30 s"),
+    )
+    deck_damping_ratio: float = limited(0.3, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: the sea's two wave components as seen in the deck's roll and in its pitch: periods, s
     #: (empty: none).  With both set, roll and pitch are each the fourth-order model of two
     #: components (estimation/fusion/model.py) with the damping ratio above, driven by the
@@ -88,7 +96,9 @@ class FusionConfig:
     #: deck_period_s is then unused and deck_angular_accel_psd drives yaw alone
     deck_roll_periods_s: tuple[float, ...] = ()
     deck_pitch_periods_s: tuple[float, ...] = ()
-    deck_attitude_rms_deg: tuple[float, ...] = (3.0, 3.0)
+    deck_attitude_rms_deg: tuple[float, ...] = limited(
+        (3.0, 3.0), physical=Limit.positive(90.0, "roll, pitch")
+    )
     #: a simulator (or any host that knows the sea) replaces the three above by the sea's own
     #: (landing_env: the two largest roll and pitch components of a `sinusoids` motion)
     deck_waves_from_motion: bool = False
@@ -133,30 +143,49 @@ class FusionConfig:
     tilt_error_coloured_share: float = 0.85
     tilt_error_sigma_scale: float = 1.45
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
-    accel_noise_density: float = 1.0e-3
-    accel_bias_random_walk: float = 4.0e-4
+    accel_noise_density: float = limited(1.0e-3, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
+    accel_bias_random_walk: float = limited(4.0e-4, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     #: prior 1-sigma of the accelerometer bias (m/s^2), the relative velocity (m/s) and the
     #: deck's Euler rates (rad/s) when the filter (re)initialises
-    initial_accel_bias_sigma: float = 0.05
-    initial_velocity_sigma: float = 0.3
-    initial_rate_sigma: float = 0.2
+    initial_accel_bias_sigma: float = limited(0.05, POSITIVE, physical=Limit.positive(1e3))
+    initial_velocity_sigma: float = limited(0.3, POSITIVE, physical=Limit.positive(1e3))
+    initial_rate_sigma: float = limited(0.2, POSITIVE, physical=Limit.positive(1e3))
     #: ToF range noise: sigma = tof_sigma_m + tof_sigma_per_m * range, with readings in steps
     #: of tof_resolution_m (estimation.noise.TofNoiseModel; defaults: the VL53L1X model)
-    tof_sigma_m: float = VL53L1X_SIGMA_0_M
-    tof_sigma_per_m: float = VL53L1X_SIGMA_PER_M
-    tof_resolution_m: float = VL53L1X_RESOLUTION_M
+    tof_sigma_m: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE, physical=Limit.positive(1.0))
+    tof_sigma_per_m: float = limited(
+        VL53L1X_SIGMA_PER_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
+    tof_resolution_m: float = limited(
+        VL53L1X_RESOLUTION_M,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(0.1, "VL53L1X reports whole millimetres"),
+    )
     #: a simulator (or any host that knows its sensors) replaces the ToF noise above by the
     #: configured sensor's model (landing_env: the `tof` section), so that the filter weights
     #: exact ranges as exact and noisy ones as noisy
     noise_from_sensors: bool = True
     #: per-source pose sigmas: x, y, z (m, camera frame), roll, pitch, yaw (deg).  IHRCF's
     #: and CRHF's z, roll and pitch are the plane through the same ToF ranges the filter
-    #: fuses itself (undelayed): using them again would count that noise twice
-    atda_sigma: tuple[float, ...] = (0.003, 0.003, 0.008, 3.0, 3.0, 0.3)
-    ihrcf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
-    crhf_sigma: tuple[float, ...] = (0.002, 0.002, math.inf, math.inf, math.inf, 0.3)
+    #: fuses itself (undelayed): using them again would count that noise twice; .inf drops a
+    #: component of that source's pose measurement
+    atda_sigma: tuple[float, ...] = limited(
+        (0.003, 0.003, 0.008, 3.0, 3.0, 0.3),
+        physical=Limit(0.0, 1e3, low_inclusive=False, allow_inf=True),
+    )
+    ihrcf_sigma: tuple[float, ...] = limited(
+        (0.002, 0.002, math.inf, math.inf, math.inf, 0.3),
+        physical=Limit(0.0, 1e3, low_inclusive=False, allow_inf=True),
+    )
+    crhf_sigma: tuple[float, ...] = limited(
+        (0.002, 0.002, math.inf, math.inf, math.inf, 0.3),
+        physical=Limit(0.0, 1e3, low_inclusive=False, allow_inf=True),
+    )
     #: tight: used only when an estimate carries no covariance (see covariance_sources)
-    tight_sigma: tuple[float, ...] = (0.002, 0.002, 0.005, 1.0, 1.0, 0.3)
+    tight_sigma: tuple[float, ...] = limited(
+        (0.002, 0.002, 0.005, 1.0, 1.0, 0.3),
+        physical=Limit(0.0, 1e3, low_inclusive=False, allow_inf=True),
+    )
     #: sources whose own 6x6 covariance (from their measurement model, e.g. tight's
     #: Jacobian) is the measurement noise, in place of the fixed sigmas above
     covariance_sources: tuple[str, ...] = ("tight",)
@@ -168,30 +197,9 @@ class FusionConfig:
         self.covariance_sources = tuple(self.covariance_sources)
         for name in self.covariance_sources:
             require_choice("covariance_sources", name, POSE_SOURCES)
-        require_range("horizon_s", self.horizon_s, 0.0, 10.0)
-        require_range(
-            "gate_probability",
-            self.gate_probability,
-            0.0,
-            1.0,
-            low_inclusive=False,
-            high_inclusive=False,
-        )
+        require_limits(self)
         if self.gate_sd is not None:
             require_range("gate_sd", self.gate_sd, 0.0, 1e3, low_inclusive=False)
-        require_range("reset_timeout_s", self.reset_timeout_s, 0.0, low_inclusive=False)
-        for name in (
-            "deck_accel_psd",
-            "deck_angular_accel_psd",
-            "deck_period_s",
-            "deck_damping_ratio",
-            "accel_noise_density",
-            "accel_bias_random_walk",
-            "tof_sigma_per_m",
-            "tof_sigma_m",
-            "tof_resolution_m",
-        ):
-            require_range(name, getattr(self, name), 0.0)
         self.deck_roll_periods_s = tuple(float(v) for v in self.deck_roll_periods_s)
         self.deck_pitch_periods_s = tuple(float(v) for v in self.deck_pitch_periods_s)
         self.deck_attitude_rms_deg = tuple(float(v) for v in self.deck_attitude_rms_deg)
@@ -210,12 +218,6 @@ class FusionConfig:
             # undamped, the model has no stationary spread to derive its driving noise from
             raise ConfigError("deck_damping_ratio", "must be >= 0.005 with the wave periods")
         self._check_identification()
-        for name in (
-            "initial_accel_bias_sigma",
-            "initial_velocity_sigma",
-            "initial_rate_sigma",
-        ):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
         for name in POSE_SOURCES:
             key = f"{name}_sigma"
             setattr(self, key, tuple(float(v) for v in getattr(self, key)))

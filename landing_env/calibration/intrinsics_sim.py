@@ -36,6 +36,7 @@ from estimation.intrinsics_calibration import (
     chessboard_object_points,
     find_chessboard,
 )
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env._quiet import quiet_stdout
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera import CameraSensor
@@ -71,29 +72,25 @@ class ChessboardRigConfig:
     """
 
     pattern: tuple[int, int] = (7, 10)
-    square_size_m: float = 0.07
-    margin_squares: float = 1.0
-    texels_per_square: int = 48
+    square_size_m: float = limited(0.07, POSITIVE)
+    margin_squares: float = limited(1.0, Limit(0.5))
+    texels_per_square: int = limited(48, Limit(4, 512))
     texture_blur_texels: float = 2.0
-    views: int = 20
+    views: int = limited(20, Limit(3))
     distance_m: tuple[float, float] = (1.0, 2.2)
-    min_tilt_deg: float = 10.0
+    min_tilt_deg: float = limited(10.0, Limit(0.0, 80.0))
     max_tilt_deg: float = 40.0
-    max_spin_deg: float = 30.0
-    edge_margin_px: float = 6.0
+    max_spin_deg: float = limited(30.0, Limit(0.0, 180.0))
+    edge_margin_px: float = limited(6.0, NON_NEGATIVE)
     distortion_model: str = "k1k2p1p2"
 
     def __post_init__(self) -> None:
         if len(self.pattern) != 2 or min(self.pattern) < 3:
             raise ConfigError("pattern", f"{self.pattern!r}: need two counts of at least 3")
-        require_range("square_size_m", self.square_size_m, 0.0, low_inclusive=False)
-        require_range("margin_squares", self.margin_squares, 0.5)
-        require_range("texels_per_square", self.texels_per_square, 4, 512)
-        require_range("views", self.views, 3)
+        require_limits(self)
         low, high = self.distance_m
         if not 0.0 < low <= high:
             raise ConfigError("distance_m", f"{self.distance_m!r} must satisfy 0 < min <= max")
-        require_range("min_tilt_deg", self.min_tilt_deg, 0.0, 80.0)
         require_range(
             "max_tilt_deg",
             self.max_tilt_deg,
@@ -101,8 +98,6 @@ class ChessboardRigConfig:
             80.0,
             bounds_from=f"min_tilt_deg = {self.min_tilt_deg}",
         )
-        require_range("max_spin_deg", self.max_spin_deg, 0.0, 180.0)
-        require_range("edge_margin_px", self.edge_margin_px, 0.0)
         require_choice("distortion_model", self.distortion_model, tuple(DISTORTION_FLAGS))
 
     @property

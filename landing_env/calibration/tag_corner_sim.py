@@ -21,6 +21,8 @@ import numpy as np
 from estimation.camera_model import CameraIntrinsics
 from estimation.corner_bias import CornerBiasFit, fit_corner_bias
 from estimation.frames import tag_corners_in_tag_frame
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env.calibration import STILL_RIG
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import require_range
 from landing_env.world import World
@@ -30,18 +32,15 @@ from landing_env.world import World
 class TagRigConfig:
     """Where the camera looks at the tag from (heights of the camera above the tag)."""
 
-    stages: int = 12
-    views_per_stage: int = 20
-    min_height_m: float = 0.75
+    stages: int = limited(12, Limit(1))
+    views_per_stage: int = limited(20, Limit(1))
+    min_height_m: float = limited(0.75, POSITIVE)
     max_height_m: float = 3.5
-    max_offset_m: float = 0.15
+    max_offset_m: float = limited(0.15, NON_NEGATIVE)
 
     def __post_init__(self) -> None:
-        require_range("stages", self.stages, 1)
-        require_range("views_per_stage", self.views_per_stage, 1)
-        require_range("min_height_m", self.min_height_m, 0.0, low_inclusive=False)
+        require_limits(self)
         require_range("max_height_m", self.max_height_m, self.min_height_m)
-        require_range("max_offset_m", self.max_offset_m, 0.0)
 
 
 @dataclass(frozen=True)
@@ -57,15 +56,7 @@ def tag_rig_config(config: DeckLandingConfig) -> DeckLandingConfig:
     """The environment config turned into the tag rig (same camera, deck tag and detector)."""
     return load_config(
         config,
-        overrides={
-            "motion.kind": "static",
-            "motion.static.position_m": (0.0, 0.0, 0.0),
-            "motion.static.attitude_deg": (0.0, 0.0, 0.0),
-            "camera.mode": "render",
-            "camera.use_egl": False,
-            "simulation.gui": False,
-            "wind.enabled": False,
-        },
+        overrides={**STILL_RIG, "camera.mode": "render"},
     )
 
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
 from estimation.frames import R_BC, R_PD
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from estimation.tof_calibration import PAD_COLOURS, HyperbolaFit, TofCameraCalibration
 from estimation.tof_rig import (
     PAD_NOT_FOUND,
@@ -50,8 +51,9 @@ from estimation.tof_rig import (
     TofRigDescription,
     calibrate_rig,
 )
+from landing_env.calibration import STILL_RIG
 from landing_env.config import DeckLandingConfig, load_config
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError, require_choice
 from landing_env.world import World
 
 #: the simulated rig's ToF reading period (its clock: module doc)
@@ -73,26 +75,21 @@ class TofRigConfig:
     pixels than this is "not found".  ``floor_rgb``: the rig's floor colour (0–1).
     """
 
-    stages: int = 120
-    min_range_m: float = 0.3
-    max_range_fraction: float = 0.995
+    stages: int = limited(120, Limit(2))
+    min_range_m: float = limited(0.3, POSITIVE)
+    max_range_fraction: float = limited(0.995, Limit(0.0, 1.0, low_inclusive=False))
     spacing: str = "log"
-    readings_per_stage: int = 10
-    pad_radius_m: float = 0.06
-    min_pad_area_px: float = 12.0
+    readings_per_stage: int = limited(10, Limit(1))
+    pad_radius_m: float = limited(0.06, POSITIVE)
+    min_pad_area_px: float = limited(12.0, Limit(1.0))
     floor_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
     ranges_m: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if any(not (math.isfinite(r) and r > 0.0) for r in self.ranges_m):
             raise ConfigError("ranges_m", f"{self.ranges_m!r}: need finite ranges > 0 m")
-        require_range("stages", self.stages, 2)
-        require_range("min_range_m", self.min_range_m, 0.0, low_inclusive=False)
-        require_range("max_range_fraction", self.max_range_fraction, 0.0, 1.0, low_inclusive=False)
+        require_limits(self)
         require_choice("spacing", self.spacing, ("log", "linear"))
-        require_range("readings_per_stage", self.readings_per_stage, 1)
-        require_range("pad_radius_m", self.pad_radius_m, 0.0, low_inclusive=False)
-        require_range("min_pad_area_px", self.min_pad_area_px, 1.0)
         if len(self.floor_rgb) != 3 or any(not 0.0 <= c <= 1.0 for c in self.floor_rgb):
             raise ConfigError("floor_rgb", f"{self.floor_rgb!r}: need three values in [0, 1]")
 
@@ -159,13 +156,8 @@ def rig_config(config: DeckLandingConfig, rig: TofRigConfig) -> DeckLandingConfi
             "deck.pads": True,
             "deck.pad_radius": rig.pad_radius_m,
             "deck.pad_centres_p": [tuple(float(v) for v in row[:2]) for row in pads_p],
-            "motion.kind": "static",
-            "motion.static.position_m": (0.0, 0.0, 0.0),
-            "motion.static.attitude_deg": (0.0, 0.0, 0.0),
+            **STILL_RIG,
             "camera.mode": "project",
-            "camera.use_egl": False,
-            "simulation.gui": False,
-            "wind.enabled": False,
         },
     )
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
 from landing_env.physics.drone_state import DroneState
 from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
@@ -48,50 +49,57 @@ class VelocitySetpoint:
         object.__setattr__(self, "yaw_rate", float(self.yaw_rate))
 
 
+#: the physical range of a PID gain, and of a derivative filter's cut-off
+PID_GAIN = Limit.non_negative(1e3, "PID gain; PX4's defaults are O(0.1-10)")
+FILTER_CUTOFF_HZ = Limit.positive(1e4, "a filter cut-off; above the physics rate it has no effect")
+
+
 @dataclass(frozen=True)
 class ControllerGains:
     """Gains (accelerations per unit error) and saturation limits of the cascade."""
 
     # velocity loop: a = P e + I int(e) - D dv/dt  (1/s, 1/s^2, dimensionless)
-    vel_p_xy: float = 3.0
-    vel_i_xy: float = 1.0
-    vel_d_xy: float = 0.2
-    vel_p_z: float = 5.0
-    vel_i_z: float = 4.0
-    vel_d_z: float = 0.0
+    vel_p_xy: float = limited(3.0, physical=PID_GAIN)
+    vel_i_xy: float = limited(1.0, physical=PID_GAIN)
+    vel_d_xy: float = limited(0.2, physical=PID_GAIN)
+    vel_p_z: float = limited(5.0, physical=PID_GAIN)
+    vel_i_z: float = limited(4.0, physical=PID_GAIN)
+    vel_d_z: float = limited(0.0, physical=PID_GAIN)
     #: integrator magnitude limits (m/s^2)
-    vel_i_limit_xy: float = 3.0
-    vel_i_limit_z: float = 4.0
+    vel_i_limit_xy: float = limited(3.0, physical=PID_GAIN)
+    vel_i_limit_z: float = limited(4.0, physical=PID_GAIN)
     #: cut-off of the first-order filter on the velocity derivative (Hz)
-    vel_d_cutoff_hz: float = 10.0
+    vel_d_cutoff_hz: float = limited(10.0, POSITIVE, physical=FILTER_CUTOFF_HZ)
     # set-point limits (m/s)
-    max_horizontal_speed: float = 5.0
-    max_climb_rate: float = 3.0
-    max_descent_rate: float = 2.0
+    max_horizontal_speed: float = limited(5.0, physical=Limit.positive(50.0))
+    max_climb_rate: float = limited(3.0, physical=Limit.positive(50.0))
+    max_descent_rate: float = limited(2.0, physical=Limit.positive(50.0))
     # acceleration and tilt limits
     max_tilt: float = math.radians(35.0)
-    max_accel_up: float = 6.0
-    max_accel_down: float = 5.0
+    max_accel_up: float = limited(6.0, physical=Limit.positive(100.0))
+    max_accel_down: float = limited(
+        5.0, Limit(0.0, GRAVITY, high_inclusive=False), physical=Limit.positive(100.0)
+    )
     # attitude loop: body rate per radian of error (1/s)
-    att_p_rp: float = 6.5
-    att_p_yaw: float = 2.8
+    att_p_rp: float = limited(6.5, physical=PID_GAIN)
+    att_p_yaw: float = limited(2.8, physical=PID_GAIN)
     #: the yaw set-point is kept within this of the actual yaw (rad)
     max_yaw_error: float = 0.5
     # rate limits (rad/s)
-    max_rate_rp: float = math.radians(220.0)
-    max_rate_yaw: float = math.radians(200.0)
+    max_rate_rp: float = limited(math.radians(220.0), POSITIVE, physical=Limit.positive(100.0))
+    max_rate_yaw: float = limited(math.radians(200.0), POSITIVE, physical=Limit.positive(100.0))
     # rate loop: angular acceleration = P e + I int(e) - D d(omega)/dt
-    rate_p_rp: float = 20.0
-    rate_i_rp: float = 10.0
-    rate_d_rp: float = 0.0
-    rate_p_yaw: float = 15.0
-    rate_i_yaw: float = 5.0
-    rate_d_yaw: float = 0.0
+    rate_p_rp: float = limited(20.0, physical=PID_GAIN)
+    rate_i_rp: float = limited(10.0, physical=PID_GAIN)
+    rate_d_rp: float = limited(0.0, physical=PID_GAIN)
+    rate_p_yaw: float = limited(15.0, physical=PID_GAIN)
+    rate_i_yaw: float = limited(5.0, physical=PID_GAIN)
+    rate_d_yaw: float = limited(0.0, physical=PID_GAIN)
     #: rate integrator limits (rad/s^2)
-    rate_i_limit_rp: float = 30.0
-    rate_i_limit_yaw: float = 10.0
+    rate_i_limit_rp: float = limited(30.0, physical=PID_GAIN)
+    rate_i_limit_yaw: float = limited(10.0, physical=PID_GAIN)
     #: cut-off of the first-order filter on the rate derivative (Hz)
-    rate_d_cutoff_hz: float = 30.0
+    rate_d_cutoff_hz: float = limited(30.0, POSITIVE, physical=FILTER_CUTOFF_HZ)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -100,10 +108,8 @@ class ControllerGains:
             if not math.isfinite(value):
                 raise ConfigError(f.name, f"{value!r} is not finite")
         require_range("max_tilt", self.max_tilt, 0.0, math.radians(80.0), low_inclusive=False)
-        require_range("max_accel_down", self.max_accel_down, 0.0, GRAVITY, high_inclusive=False)
+        require_limits(self)
         require_range("max_yaw_error", self.max_yaw_error, 0.0, math.pi, low_inclusive=False)
-        for name in ("max_rate_rp", "max_rate_yaw", "vel_d_cutoff_hz", "rate_d_cutoff_hz"):
-            require_range(name, getattr(self, name), 0.0, low_inclusive=False)
 
 
 @dataclass(frozen=True)

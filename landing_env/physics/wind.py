@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 
 #: how many standard normals are drawn at once (drawing one triple per physics step is slow)
@@ -43,29 +44,29 @@ class WindConfig:
 
     enabled: bool = False
     #: mean wind velocity in W (m/s): the air's velocity, not the direction it comes from
-    mean_velocity_w: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mean_velocity_w: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0, "m/s; hurricane force is ~33 m/s")
+    )
     #: stationary standard deviation of the gust in each world axis (m/s)
-    gust_intensity: tuple[float, float, float] = (0.5, 0.5, 0.2)
+    gust_intensity: tuple[float, float, float] = limited(
+        (0.5, 0.5, 0.2), physical=Limit.non_negative(100.0)
+    )
     #: correlation time of the gust process (s)
-    gust_time_constant: float = 2.0
+    gust_time_constant: float = limited(2.0, POSITIVE, physical=Limit.positive(1e3))
     #: "ou": gust_intensity and gust_time_constant as given; "dryden": both from the
     #: MIL-F-8785C low-altitude Dryden model for the mean wind and reference_height_m
     turbulence: str = "ou"
     #: height above the surface for the Dryden scales (m)
-    reference_height_m: float = 10.0
+    reference_height_m: float = limited(10.0, Limit(3.0, 300.0))
     #: airwake over the deck (0 radius: off): region, downdraft and turbulence increase
-    airwake_radius_m: float = 0.0
-    airwake_height_m: float = 5.0
-    airwake_downdraft_fraction: float = 0.0
-    airwake_turbulence_factor: float = 1.0
+    airwake_radius_m: float = limited(0.0, Limit(0.0, 100.0))
+    airwake_height_m: float = limited(5.0, Limit(0.0, 100.0))
+    airwake_downdraft_fraction: float = limited(0.0, Limit(0.0, 0.5))
+    airwake_turbulence_factor: float = limited(1.0, Limit(1.0, 5.0))
 
     def __post_init__(self) -> None:
         require_choice("turbulence", self.turbulence, ("ou", "dryden"))
-        require_range("reference_height_m", self.reference_height_m, 3.0, 300.0)
-        require_range("airwake_radius_m", self.airwake_radius_m, 0.0, 100.0)
-        require_range("airwake_height_m", self.airwake_height_m, 0.0, 100.0)
-        require_range("airwake_downdraft_fraction", self.airwake_downdraft_fraction, 0.0, 0.5)
-        require_range("airwake_turbulence_factor", self.airwake_turbulence_factor, 1.0, 5.0)
+        require_limits(self)
         # Accept lists and arrays, store plain float tuples (hashable, immutable).
         object.__setattr__(self, "mean_velocity_w", tuple(float(v) for v in self.mean_velocity_w))
         object.__setattr__(self, "gust_intensity", tuple(float(v) for v in self.gust_intensity))
@@ -78,7 +79,6 @@ class WindConfig:
                 raise ConfigError("mean_velocity_w", f"{value!r} is not finite")
         for value in self.gust_intensity:
             require_range("gust_intensity", value, 0.0, 50.0)
-        require_range("gust_time_constant", self.gust_time_constant, 0.0, low_inclusive=False)
 
     @property
     def mean_speed(self) -> float:

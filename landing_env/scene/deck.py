@@ -28,6 +28,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.landmarks import Landmark, LandmarkLayout
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import cache_dir
 
@@ -77,26 +78,26 @@ class DeckSurfaceConfig:
     """The deck's top plate and what is drawn on it."""
 
     #: edge of the square plate, metres
-    size: float = 1.0
+    size: float = limited(1.0, POSITIVE, physical=Limit.positive(1e3))
     #: plate thickness, metres (the body's frame is the centre of the *top* surface)
-    thickness: float = 0.03
+    thickness: float = limited(0.03, POSITIVE, physical=Limit.positive(10.0))
     #: AprilTag family (fixed: OpenCV draws it, pupil-apriltags detects it)
     tag_family: str = TAG_FAMILY
-    tag_id: int = 0
+    tag_id: int = limited(0, Limit(0, 586))
     #: edge of the tag's black border, metres (pupil-apriltags' ``tag_size``)
-    tag_size: float = 0.30
+    tag_size: float = limited(0.30, physical=Limit.positive(1e3))
     #: draw the tag; with pads on the tag may be left out, as pads sit on its area
     tag: bool = True
     #: width of the white quiet zone round the tag, in tag cells (tag_size / 8)
-    quiet_zone_cells: float = 1.0
+    quiet_zone_cells: float = limited(1.0, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     #: texels across the plate
-    texture_px: int = 1024
+    texture_px: int = limited(1024, Limit(16, 8192))
     #: plate colour, RGB 0-255 (neutral grey fails every IHRCF Table 1 pad threshold)
     deck_rgb: tuple[int, int, int] = (110, 110, 110)
     #: coloured ToF calibration pads (IHRCF Sec. 2.2), drawn over the tag
     pads: bool = False
     #: pad radius, metres
-    pad_radius: float = 0.04
+    pad_radius: float = limited(0.04, physical=Limit.positive(10.0))
     #: pad centres (x, y) in P in sensor order ps1..ps4; None = the ToF touch points
     pad_centres_p: tuple[tuple[float, float], ...] | None = None
     #: nested landmarks (tag_id, size, x, y in D; see estimation.landmarks) drawn instead of
@@ -104,12 +105,9 @@ class DeckSurfaceConfig:
     landmarks: tuple[Landmark, ...] = ()
 
     def __post_init__(self) -> None:
-        require_range("size", self.size, 0.0, low_inclusive=False)
-        require_range("thickness", self.thickness, 0.0, low_inclusive=False)
+        require_limits(self)
         require_choice("tag_family", self.tag_family, (TAG_FAMILY,))
         # tag36h11 has 587 codes
-        require_range("tag_id", self.tag_id, 0, 586)
-        require_range("quiet_zone_cells", self.quiet_zone_cells, 0.0)
         outer = self.tag_size * (TAG_CELLS + 2 * self.quiet_zone_cells) / TAG_CELLS
         require_range("tag_size", self.tag_size, 0.0, low_inclusive=False)
         if outer > self.size:
@@ -125,7 +123,6 @@ class DeckSurfaceConfig:
                 self.layout.check_fits(self.size)
             except ConfigError as exc:
                 raise exc.under("") from None
-        require_range("texture_px", self.texture_px, 16, 8192)
         if len(self.deck_rgb) != 3 or any(not 0 <= c <= 255 for c in self.deck_rgb):
             raise ConfigError("deck_rgb", f"{self.deck_rgb!r}: need three values in [0, 255]")
         require_range(

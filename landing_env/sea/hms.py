@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import require_range
 from landing_env.stewart.motion import MotionSource, sample_poses
 
@@ -52,19 +53,16 @@ class HelideckMonitorConfig:
     """What the ship's HMS reports to the drone, and how well (sources in the module's doc)."""
 
     #: samples per second on the link (HCA: at least 2; an MRU gives up to 200)
-    rate_hz: float = 10.0
+    rate_hz: float = limited(10.0, Limit(0.5, 1000.0))
     #: roll and pitch error, deg RMS (HCA Rev. 9's bound; the MRU 5 itself: 0.02)
-    angle_noise_deg: float = 0.1
+    angle_noise_deg: float = limited(0.1, Limit(0.0, 10.0))
     #: surge, sway and heave error floor, m RMS (MRU 5: 5 cm ...)
-    position_noise_m: float = 0.05
+    position_noise_m: float = limited(0.05, Limit(0.0, 10.0))
     #: ... or this fraction of the channel's standard deviation, whichever is larger
-    position_noise_fraction: float = 0.05
+    position_noise_fraction: float = limited(0.05, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
-        require_range("rate_hz", self.rate_hz, 0.5, 1000.0)
-        require_range("angle_noise_deg", self.angle_noise_deg, 0.0, 10.0)
-        require_range("position_noise_m", self.position_noise_m, 0.0, 10.0)
-        require_range("position_noise_fraction", self.position_noise_fraction, 0.0, 1.0)
+        require_limits(self)
 
     @property
     def dt_s(self) -> float:

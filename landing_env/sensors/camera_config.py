@@ -12,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from estimation.camera_model import CameraIntrinsics
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera_profiles import PROFILES
 
@@ -21,52 +22,55 @@ class CameraConfig:
     """Camera model, simulation mode, visibility rules and detector settings."""
 
     mode: Literal["render", "project"] = "project"
-    width: int = 512
-    height: int = 512
-    fx: float = 458.5
-    fy: float = 457.855
+    width: int = limited(512, Limit(16, 8192))
+    height: int = limited(512, Limit(16, 8192))
+    fx: float = limited(458.5, POSITIVE, physical=Limit.positive(1e5, "pixels"))
+    fy: float = limited(457.855, POSITIVE, physical=Limit.positive(1e5, "pixels"))
     #: principal point, pixels (OpenCV convention); None = image centre, (width - 1) / 2
-    cx: float | None = None
-    cy: float | None = None
-    #: OpenCV radial-tangential distortion
-    k1: float = 0.0
-    k2: float = 0.0
-    p1: float = 0.0
-    p2: float = 0.0
-    k3: float = 0.0
+    cx: float | None = limited(None, physical=Limit.symmetric(1e5))
+    cy: float | None = limited(None, physical=Limit.symmetric(1e5))
+    #: OpenCV radial-tangential distortion (|k| of real lenses is < 10)
+    k1: float = limited(0.0, physical=Limit.symmetric(100.0))
+    k2: float = limited(0.0, physical=Limit.symmetric(100.0))
+    p1: float = limited(0.0, physical=Limit.symmetric(100.0))
+    p2: float = limited(0.0, physical=Limit.symmetric(100.0))
+    k3: float = limited(0.0, physical=Limit.symmetric(100.0))
     #: clipping planes of the renderer, metres; nearer tag corners count as behind the camera
-    near: float = 0.05
-    far: float = 30.0
+    near: float = limited(0.05, POSITIVE, physical=Limit.positive(1e3))
+    far: float = limited(30.0, physical=Limit.positive(1e4))
     #: Gaussian corner noise, pixels (project mode)
-    pixel_noise_px: float = 0.0
+    pixel_noise_px: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     #: project mode's corner noise: "constant" (``pixel_noise_px``) or "fitted": sigma from
     #: the tag's side and blur in pixels with ``pixel_noise_fit`` = (base px, size px^3,
     #: blur fraction, side^2 coefficient), fitted to render-and-detect under a camera profile
     #: (:mod:`landing_env.sensors.corner_noise`; ``sensors: realistic`` sets both)
     pixel_noise_model: Literal["constant", "fitted"] = "constant"
-    pixel_noise_fit: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    pixel_noise_fit: tuple[float, float, float, float] = limited(
+        (0.0, 0.0, 0.0, 0.0),
+        physical=Limit.non_negative(1e6, "fitted (base px, size px^3, blur, floor)"),
+    )
     #: probability that a visible tag is dropped from a frame (both modes)
-    dropout_prob: float = 0.0
+    dropout_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: angle between the tag normal and the ray from the tag centre to the camera, degrees
-    max_view_angle_deg: float = 75.0
+    max_view_angle_deg: float = limited(75.0, Limit(0.0, 90.0))
     #: shortest tag side in pixels below which the tag is not detected (project mode)
-    min_tag_side_px: float = 12.0
+    min_tag_side_px: float = limited(12.0, NON_NEGATIVE, physical=Limit.non_negative(1e4))
     #: corners must lie this far inside the image, pixels
-    edge_margin_px: float = 2.0
+    edge_margin_px: float = limited(2.0, physical=Limit.non_negative(1e4))
     #: pupil-apriltags settings (render mode)
-    quad_decimate: float = 1.0
-    quad_sigma: float = 0.0
+    quad_decimate: float = limited(1.0, Limit(1.0), physical=Limit(1.0, 16.0))
+    quad_sigma: float = limited(0.0, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     refine_edges: bool = True
-    decode_sharpening: float = 0.25
-    detector_threads: int = 1
+    decode_sharpening: float = limited(0.25, NON_NEGATIVE, physical=Limit.non_negative(10.0))
+    detector_threads: int = limited(1, Limit(1, 64), physical=Limit(1, 256))
     #: render mode: "tag" renders and searches only a window round where the tag projects
     #: (the pixels there are the same as in a full render; the frame's image is grey outside
     #: it); "full" renders the whole image.  Both detect from pixels only.
     render_region: Literal["tag", "full"] = "tag"
     #: the "tag" window extends the tag's pixel bounding box by this fraction of its size
     #: and ``render_margin_px`` on each side (the quiet zone is 1/8 of the tag)
-    render_margin_frac: float = 0.25
-    render_margin_px: int = 8
+    render_margin_frac: float = limited(0.25, NON_NEGATIVE, physical=Limit.non_negative(10.0))
+    render_margin_px: int = limited(8, Limit(0), physical=Limit(0, 10_000))
     #: render with the EGL plugin (OpenGL, falls back to TinyRenderer when it cannot load);
     #: EGL always renders the full image (its cost jumps whenever the image size changes),
     #: and it only draws bodies created after it is loaded (the world creates its camera
@@ -85,23 +89,26 @@ class CameraConfig:
     #: exposure time, seconds; None = the profile's
     exposure_s: float | None = None
     #: analog gain (1 = the sensor's 0 dB, where full well meets the ADC's top)
-    gain: float = 1.0
+    gain: float = limited(1.0, Limit(0.0, 64.0, low_inclusive=False))
     #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
     #: None = no glare.  ``glare_strength``: the lobe's peak in white-surface units
     sun_direction_w: tuple[float, float, float] | None = None
-    glare_strength: float = 4.0
-    glare_shininess: float = 300.0
+    glare_strength: float = limited(
+        4.0,
+        NON_NEGATIVE,
+        physical=Limit.non_negative(1e3, "the lobe's peak in white-surface units"),
+    )
+    glare_shininess: float = limited(
+        300.0, Limit(1.0), physical=Limit(1.0, 1e5, note="Phong exponent")
+    )
     #: renderer lighting; specular off so the white quiet zone does not saturate in patches
-    light_ambient: float = 0.6
-    light_diffuse: float = 0.4
-    light_specular: float = 0.0
+    light_ambient: float = limited(0.6, Limit(0.0, 1.0))
+    light_diffuse: float = limited(0.4, Limit(0.0, 1.0))
+    light_specular: float = limited(0.0, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
         require_choice("mode", self.mode, ("render", "project"))
-        require_range("width", self.width, 16, 8192)
-        require_range("height", self.height, 16, 8192)
-        require_range("fx", self.fx, 0.0, low_inclusive=False)
-        require_range("fy", self.fy, 0.0, low_inclusive=False)
+        require_limits(self)
         if self.cx is not None:
             require_range(
                 "cx", self.cx, -0.5, self.width - 0.5, bounds_from=f"width = {self.width}"
@@ -110,10 +117,8 @@ class CameraConfig:
             require_range(
                 "cy", self.cy, -0.5, self.height - 0.5, bounds_from=f"height = {self.height}"
             )
-        require_range("near", self.near, 0.0, low_inclusive=False)
         if self.far <= self.near:
             raise ConfigError("far", f"{self.far} must be greater than near = {self.near}")
-        require_range("pixel_noise_px", self.pixel_noise_px, 0.0)
         require_choice("pixel_noise_model", self.pixel_noise_model, ("constant", "fitted"))
         if len(self.pixel_noise_fit) != 4 or any(
             not np.isfinite(v) or v < 0.0 for v in self.pixel_noise_fit
@@ -121,34 +126,20 @@ class CameraConfig:
             raise ConfigError(
                 "pixel_noise_fit", f"{self.pixel_noise_fit!r}: need four finite values >= 0"
             )
-        require_range("dropout_prob", self.dropout_prob, 0.0, 1.0)
-        require_range("max_view_angle_deg", self.max_view_angle_deg, 0.0, 90.0)
-        require_range("min_tag_side_px", self.min_tag_side_px, 0.0)
         require_range(
             "edge_margin_px", self.edge_margin_px, 0.0, 0.25 * min(self.width, self.height)
         )
-        require_range("quad_decimate", self.quad_decimate, 1.0)
-        require_range("quad_sigma", self.quad_sigma, 0.0)
-        require_range("decode_sharpening", self.decode_sharpening, 0.0)
-        require_range("detector_threads", self.detector_threads, 1, 64)
         require_choice("render_region", self.render_region, ("tag", "full"))
         require_choice("renderer", self.renderer, ("planar", "bullet"))
         require_choice("profile", self.profile, tuple(PROFILES))
         if self.exposure_s is not None:
             require_range("exposure_s", self.exposure_s, 0.0, 0.1)
-        require_range("gain", self.gain, 0.0, 64.0, low_inclusive=False)
         if self.sun_direction_w is not None:
             sun = np.asarray(self.sun_direction_w, dtype=float)
             if sun.shape != (3,) or not np.all(np.isfinite(sun)) or np.linalg.norm(sun) == 0:
                 raise ConfigError(
                     "sun_direction_w", f"{self.sun_direction_w!r}: need a nonzero (x, y, z)"
                 )
-        require_range("glare_strength", self.glare_strength, 0.0)
-        require_range("glare_shininess", self.glare_shininess, 1.0)
-        require_range("render_margin_frac", self.render_margin_frac, 0.0)
-        require_range("render_margin_px", self.render_margin_px, 0)
-        for name in ("light_ambient", "light_diffuse", "light_specular"):
-            require_range(name, getattr(self, name), 0.0, 1.0)
 
     @property
     def intrinsics(self) -> CameraIntrinsics:

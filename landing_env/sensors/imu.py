@@ -17,8 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.limits import NON_NEGATIVE, Limit, limited, require_limits
+from estimation.noise import IMU_NOISE_DENSITY
 from estimation.types import ImuSample
-from landing_env.errors import require_range
 from landing_env.physics.quadrotor_params import GRAVITY
 
 #: Gravity's magnitude (m/s^2) and the gravity vector in the world frame (z up).
@@ -32,27 +33,19 @@ class ImuConfig:
     #: whether the environment creates an IMU at all (the model itself ignores it)
     enabled: bool = True
     #: accelerometer white-noise density, m/s^2/sqrt(Hz) (~100 ug/sqrt(Hz))
-    accel_noise_density: float = 1.0e-3
+    accel_noise_density: float = limited(1.0e-3, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     #: gyroscope white-noise density, rad/s/sqrt(Hz) (~0.004 deg/s/sqrt(Hz))
-    gyro_noise_density: float = 7.0e-5
+    gyro_noise_density: float = limited(7.0e-5, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     #: accelerometer bias random-walk density, m/s^3/sqrt(Hz)
-    accel_bias_random_walk: float = 4.0e-4
+    accel_bias_random_walk: float = limited(4.0e-4, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     #: gyroscope bias random-walk density, rad/s^2/sqrt(Hz)
-    gyro_bias_random_walk: float = 2.0e-5
+    gyro_bias_random_walk: float = limited(2.0e-5, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     #: standard deviation of the bias drawn at each reset (after a factory calibration)
-    accel_bias_sigma: float = 0.05
-    gyro_bias_sigma: float = 0.002
+    accel_bias_sigma: float = limited(0.05, NON_NEGATIVE, physical=Limit.non_negative(100.0))
+    gyro_bias_sigma: float = limited(0.002, NON_NEGATIVE, physical=Limit.non_negative(100.0))
 
     def __post_init__(self) -> None:
-        for name in (
-            "accel_noise_density",
-            "gyro_noise_density",
-            "accel_bias_random_walk",
-            "gyro_bias_random_walk",
-            "accel_bias_sigma",
-            "gyro_bias_sigma",
-        ):
-            require_range(name, getattr(self, name), 0.0)
+        require_limits(self)
 
 
 class ImuModel:

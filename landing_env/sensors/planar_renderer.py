@@ -227,42 +227,23 @@ class PlanarScene:
                 albedo = np.floor(np.asarray(rgba[:3], dtype=np.float32) * 255.0).astype(float)
                 if kind == p.GEOM_BOX:
                     half = 0.5 * np.asarray(dims, dtype=float)
-                    faces, normals = _box_faces(half)
-                    radius = float(np.linalg.norm(half))
+                    # (faces, normals, bounding radius) of each solid the shape is drawn as
+                    parts = [(*_box_faces(half), float(np.linalg.norm(half)))]
                 elif kind == p.GEOM_CYLINDER:
                     length, r = float(dims[0]), float(dims[1])
-                    faces, normals = _cylinder_faces(length, r)
-                    caps, cap_normals = _cap_faces(length, r)
-                    solids.append(
-                        _Solid(
-                            body,
-                            link,
-                            np.asarray(shape[5], dtype=float),
-                            _rotation(shape[6]),
-                            caps,
-                            cap_normals,
-                            albedo,
-                            math.hypot(0.5 * length, r),
-                        )
-                    )
                     radius = math.hypot(0.5 * length, r)
+                    caps, side = _cap_faces(length, r), _cylinder_faces(length, r)
+                    parts = [(*caps, radius), (*side, radius)]
                 else:
                     raise UnsupportedScene(
                         f"body {body} link {link} has a visual shape of type {kind} "
                         "(only boxes, cylinders and registered textured plates are drawn)"
                     )
-                solids.append(
-                    _Solid(
-                        body,
-                        link,
-                        np.asarray(shape[5], dtype=float),
-                        _rotation(shape[6]),
-                        faces,
-                        normals,
-                        albedo,
-                        radius,
+                for faces, normals, radius in parts:
+                    position, rotation = np.asarray(shape[5], dtype=float), _rotation(shape[6])
+                    solids.append(
+                        _Solid(body, link, position, rotation, faces, normals, albedo, radius)
                     )
-                )
         self._solids = solids
         self._body_count = count
         self._colours = self._colour_key()

@@ -22,8 +22,9 @@ import numpy as np
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_BC
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import RangeReading
-from landing_env.errors import ConfigError, require_range
+from landing_env.errors import ConfigError
 from landing_env.sensors.tof import TofArray, TofConfig
 
 
@@ -33,31 +34,28 @@ class RangefinderConfig:
 
     enabled: bool = True
     #: longest valid range, metres (LIDAR-Lite v3: 40 m)
-    max_range: float = 40.0
+    max_range: float = limited(40.0, POSITIVE, physical=Limit.positive(1e3, "LIDAR-Lite v3: 40 m"))
     #: shortest valid range, metres
-    min_range: float = 0.05
+    min_range: float = limited(0.05, NON_NEGATIVE, physical=Limit.non_negative(1e3))
     #: noise standard deviation at zero range, metres
-    sigma_0: float = 0.025
+    sigma_0: float = limited(0.025, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: growth of the standard deviation with range, metres per metre
-    sigma_per_m: float = 0.001
+    sigma_per_m: float = limited(0.001, NON_NEGATIVE, physical=Limit.non_negative(1.0))
     #: output resolution, metres (0 = no quantisation)
-    resolution: float = 0.01
+    resolution: float = limited(0.01, NON_NEGATIVE, physical=Limit.non_negative(10.0))
     #: probability of no reading on an in-range target
-    invalid_prob: float = 0.0
+    invalid_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: beam origin in the body frame B, metres (beside the camera, under the centre of mass)
-    mount_offset_b: tuple[float, float, float] = (0.0, 0.0, -0.03)
+    mount_offset_b: tuple[float, float, float] = limited(
+        (0.0, 0.0, -0.03), physical=Limit.symmetric(10.0)
+    )
 
     def __post_init__(self) -> None:
-        require_range("max_range", self.max_range, 0.0, low_inclusive=False)
-        require_range("min_range", self.min_range, 0.0)
+        require_limits(self)
         if self.min_range >= self.max_range:
             raise ConfigError(
                 "min_range", f"{self.min_range} must be below max_range = {self.max_range}"
             )
-        require_range("sigma_0", self.sigma_0, 0.0)
-        require_range("sigma_per_m", self.sigma_per_m, 0.0)
-        require_range("resolution", self.resolution, 0.0)
-        require_range("invalid_prob", self.invalid_prob, 0.0, 1.0)
         if len(self.mount_offset_b) != 3:
             raise ConfigError("mount_offset_b", "needs (x, y, z) in the body frame, metres")
         self.mount_offset_b = tuple(float(v) for v in self.mount_offset_b)

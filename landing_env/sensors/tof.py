@@ -25,9 +25,10 @@ import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import R_BC, tof_positions_in_camera_frame
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import VL53L1X_RESOLUTION_M, VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from estimation.types import RangeReading
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError, require_choice
 
 #: Re-casts allowed per ray past the drone's own shapes (arms, legs, propeller guards...).
 MAX_SELF_HITS = 8
@@ -60,34 +61,35 @@ class TofConfig:
     """
 
     #: beyond this the ranging status is invalid, metres (VL53L1X long mode: 4 m)
-    max_range: float = 4.0
+    max_range: float = limited(4.0, POSITIVE, physical=Limit.positive(100.0, "VL53L1X: 4 m"))
     #: nearer than this the reading is invalid, metres
-    min_range: float = 0.04
+    min_range: float = limited(0.04, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     noise: Literal["none", "vl53l1x"] = "none"
-    sigma_0: float = VL53L1X_SIGMA_0_M
-    sigma_per_m: float = VL53L1X_SIGMA_PER_M
+    sigma_0: float = limited(VL53L1X_SIGMA_0_M, NON_NEGATIVE, physical=Limit.non_negative(1.0))
+    sigma_per_m: float = limited(
+        VL53L1X_SIGMA_PER_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
     #: output resolution in vl53l1x mode, metres (0 = no quantisation)
-    resolution: float = VL53L1X_RESOLUTION_M
+    resolution: float = limited(
+        VL53L1X_RESOLUTION_M, NON_NEGATIVE, physical=Limit.non_negative(1.0)
+    )
     #: probability of an invalid ranging status on an in-range target (vl53l1x mode)
-    invalid_prob: float = 0.0
+    invalid_prob: float = limited(0.0, Limit(0.0, 1.0))
     #: sensor origins in the camera frame C, metres (sensor order ps1..ps4)
-    mount_offsets_c: tuple[tuple[float, float, float], ...] = _default_mounts()
+    mount_offsets_c: tuple[tuple[float, float, float], ...] = limited(
+        _default_mounts(), physical=Limit.symmetric(10.0)
+    )
     #: beam misalignment: per sensor, its beam turned about the camera's x then y axis from
     #: the optical axis, degrees (empty: every beam along +z_C, as the estimators assume)
     beam_tilts_deg: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
-        require_range("max_range", self.max_range, 0.0, low_inclusive=False)
-        require_range("min_range", self.min_range, 0.0)
+        require_limits(self)
         if self.min_range >= self.max_range:
             raise ConfigError(
                 "min_range", f"{self.min_range} must be below max_range = {self.max_range}"
             )
         require_choice("noise", self.noise, ("none", "vl53l1x"))
-        require_range("sigma_0", self.sigma_0, 0.0)
-        require_range("sigma_per_m", self.sigma_per_m, 0.0)
-        require_range("resolution", self.resolution, 0.0)
-        require_range("invalid_prob", self.invalid_prob, 0.0, 1.0)
         if len(self.mount_offsets_c) == 0 or any(len(m) != 3 for m in self.mount_offsets_c):
             raise ConfigError("mount_offsets_c", "need one or more (x, y, z) sensor origins")
         if self.beam_tilts_deg and (

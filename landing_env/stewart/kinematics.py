@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
 
 #: A pose is (x, y, z, roll, pitch, yaw): metres and radians, P relative to the home frame.
@@ -35,33 +36,29 @@ class StewartGeometry:
     """
 
     #: radius of the circle through the base joints
-    base_radius: float = 0.50
+    base_radius: float = limited(0.50, POSITIVE, physical=Limit.positive(100.0))
     #: radius of the circle through the top joints
-    top_radius: float = 0.36
+    top_radius: float = limited(0.36, POSITIVE, physical=Limit.positive(100.0))
     #: half the angle between the two base joints of a pair, degrees
-    base_half_angle_deg: float = 12.0
+    base_half_angle_deg: float = limited(12.0, Limit(0.0, 60.0))
     #: half the angle between the two top joints of a pair (pairs centred between base
     #: pairs), degrees
-    top_half_angle_deg: float = 12.0
+    top_half_angle_deg: float = limited(12.0, Limit(0.0, 60.0))
     #: height of P's origin (the deck's top surface) above the base-joint plane at home
-    home_height: float = 0.55
+    home_height: float = limited(0.55, POSITIVE, physical=Limit.positive(1e3))
     #: depth of the top-joint plane below the deck's top surface (joints hide under the plate)
-    top_anchor_depth: float = 0.04
+    top_anchor_depth: float = limited(0.04, physical=Limit.symmetric(100.0))
     #: shortest leg (fully retracted actuator), joint centre to joint centre
-    min_leg_length: float = 0.47
+    min_leg_length: float = limited(0.47, POSITIVE, physical=Limit.positive(1e3))
     #: longest leg (fully extended actuator)
-    max_leg_length: float = 0.72
+    max_leg_length: float = limited(0.72, physical=Limit.positive(1e3))
     #: largest angle between a leg and the base normal, degrees; None: no limit
     max_base_joint_angle_deg: float | None = None
     #: largest angle between a leg and the top-plate normal, degrees; None: no limit
     max_top_joint_angle_deg: float | None = None
 
     def __post_init__(self) -> None:
-        require_range("base_radius", self.base_radius, 0.0, low_inclusive=False)
-        require_range("top_radius", self.top_radius, 0.0, low_inclusive=False)
-        require_range("base_half_angle_deg", self.base_half_angle_deg, 0.0, 60.0)
-        require_range("top_half_angle_deg", self.top_half_angle_deg, 0.0, 60.0)
-        require_range("home_height", self.home_height, 0.0, low_inclusive=False)
+        require_limits(self)
         require_range(
             "top_anchor_depth",
             self.top_anchor_depth,
@@ -69,7 +66,6 @@ class StewartGeometry:
             self.home_height,
             bounds_from=f"home_height = {self.home_height}",
         )
-        require_range("min_leg_length", self.min_leg_length, 0.0, low_inclusive=False)
         if not self.max_leg_length > self.min_leg_length:
             raise ConfigError(
                 "max_leg_length",

@@ -23,6 +23,7 @@ from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
+from estimation.limits import Limit, limited
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.waves.generator import make_sea
 from landing_env.waves.recording import CsvMotion as CsvMotion
@@ -84,9 +85,13 @@ class StaticMotionConfig:
     """A constant pose (e.g. the papers' static test)."""
 
     #: (x, y, z) in metres relative to home
-    position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_m: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0)
+    )
     #: (roll, pitch, yaw) in degrees
-    attitude_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    attitude_deg: tuple[float, float, float] = limited(
+        (0.0, 0.0, 0.0), physical=Limit.symmetric(90.0)
+    )
 
     def __post_init__(self) -> None:
         for name in ("position_m", "attitude_deg"):
@@ -140,11 +145,18 @@ class SinusoidConfig:
     """
 
     #: amplitudes: metres for x, y, z; degrees for roll, pitch, yaw
-    amplitudes: tuple[tuple[float, ...], ...] = field(default_factory=_default_amplitudes)
+    amplitudes: tuple[tuple[float, ...], ...] = limited(
+        default_factory=_default_amplitudes,
+        physical=Limit.non_negative(100.0, "metres and degrees"),
+    )
     #: frequencies in Hz
-    frequencies_hz: tuple[tuple[float, ...], ...] = field(default_factory=_default_frequencies)
+    frequencies_hz: tuple[tuple[float, ...], ...] = limited(
+        default_factory=_default_frequencies, physical=Limit.non_negative(100.0)
+    )
     #: phases in degrees; None: drawn uniformly from the seed
-    phases_deg: tuple[tuple[float, ...], ...] | None = None
+    phases_deg: tuple[tuple[float, ...], ...] | None = limited(
+        None, physical=Limit.symmetric(3600.0)
+    )
 
     def __post_init__(self) -> None:
         amplitudes = _six_rows("amplitudes", self.amplitudes)
@@ -228,25 +240,32 @@ class SinusoidMotion:
 
 
 # ------------------------------------------------------------------------------- sea state
+#: the physical range of a motion's period, and of its damping ratio
+MOTION_PERIOD_S = Limit.positive(1e3, "ship-motion periods are seconds to a minute")
+DAMPING_RATIO = Limit.non_negative(10.0, "damping ratio")
+
+
 @dataclass(frozen=True)
 class SeaStateConfig(SeaConfig):
     """A sea (:class:`~landing_env.waves.sea_config.SeaConfig`), a small vessel's response to it
     and its scaling onto the platform."""
 
     #: vessel natural periods (s) and damping ratios of its second-order responses
-    heave_period_s: float = 3.0
-    heave_damping: float = 0.3
-    roll_period_s: float = 5.0
-    roll_damping: float = 0.1
-    pitch_period_s: float = 3.5
-    pitch_damping: float = 0.25
-    surge_sway_period_s: float = 10.0
-    surge_sway_damping: float = 0.7
-    yaw_period_s: float = 8.0
-    yaw_damping: float = 0.5
+    heave_period_s: float = limited(3.0, physical=MOTION_PERIOD_S)
+    heave_damping: float = limited(0.3, physical=DAMPING_RATIO)
+    roll_period_s: float = limited(5.0, physical=MOTION_PERIOD_S)
+    roll_damping: float = limited(0.1, physical=DAMPING_RATIO)
+    pitch_period_s: float = limited(3.5, physical=MOTION_PERIOD_S)
+    pitch_damping: float = limited(0.25, physical=DAMPING_RATIO)
+    surge_sway_period_s: float = limited(10.0, physical=MOTION_PERIOD_S)
+    surge_sway_damping: float = limited(0.7, physical=DAMPING_RATIO)
+    yaw_period_s: float = limited(8.0, physical=MOTION_PERIOD_S)
+    yaw_damping: float = limited(0.5, physical=DAMPING_RATIO)
     #: platform motion = scale * vessel motion, per axis (x, y, z, roll, pitch, yaw); the
     #: defaults make sea state 4 use most of the default workspace (occasional clamping)
-    scale: tuple[float, float, float, float, float, float] = (0.1, 0.1, 0.06, 0.7, 1.0, 3.5)
+    scale: tuple[float, float, float, float, float, float] = limited(
+        (0.1, 0.1, 0.06, 0.7, 1.0, 3.5), physical=Limit.non_negative(100.0)
+    )
 
     def __post_init__(self) -> None:
         self.check_sea()

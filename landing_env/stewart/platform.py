@@ -43,6 +43,7 @@ import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
 from estimation.frames import euler_zyx_from_matrix
+from estimation.limits import NON_NEGATIVE, POSITIVE, limited, require_limits
 from landing_env.errors import require_range
 from landing_env.stewart.kinematics import (
     StewartGeometry,
@@ -60,20 +61,18 @@ class PlatformConfig:
     """Appearance of the base and legs; none of it affects the plate's motion."""
 
     #: thickness of the static base plate below the base-joint plane (m)
-    base_plate_thickness: float = 0.04
+    base_plate_thickness: float = limited(0.04, POSITIVE)
     #: how far the square base plate extends beyond the base-joint circle (m)
-    base_plate_margin: float = 0.08
+    base_plate_margin: float = limited(0.08, NON_NEGATIVE)
     #: radius of the actuator cylinders (m) and of the piston rods (m)
-    cylinder_radius: float = 0.03
+    cylinder_radius: float = limited(0.03, POSITIVE)
     rod_radius: float = 0.016
     base_plate_rgba: tuple[float, float, float, float] = (0.25, 0.25, 0.28, 1.0)
     cylinder_rgba: tuple[float, float, float, float] = (0.15, 0.15, 0.15, 1.0)
     rod_rgba: tuple[float, float, float, float] = (0.75, 0.75, 0.78, 1.0)
 
     def __post_init__(self) -> None:
-        require_range("base_plate_thickness", self.base_plate_thickness, 0.0, low_inclusive=False)
-        require_range("base_plate_margin", self.base_plate_margin, 0.0)
-        require_range("cylinder_radius", self.cylinder_radius, 0.0, low_inclusive=False)
+        require_limits(self)
         require_range(
             "rod_radius",
             self.rod_radius,

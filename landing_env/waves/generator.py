@@ -41,6 +41,7 @@ from typing import Literal
 
 import numpy as np
 
+from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.waves.bimodal import (
     SpectralPart,
@@ -69,40 +70,33 @@ class SeaGeneratorConfig:
     #: direction the swell travels towards, deg; None: with the wind sea
     swell_direction_deg: float | None = None
     #: half-width of the uniform spread of the swell's directions, deg
-    swell_spread_deg: float = 10.0
+    swell_spread_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: ochi_hubble: share of the variance (m0) in the swell, 0-1
-    swell_energy_fraction: float = 0.5
+    swell_energy_fraction: float = limited(0.5, Limit(0.0, 1.0))
     #: ochi_hubble: the swell's peak period, s (the wind sea peaks at the scenario's Tp)
-    swell_peak_period_s: float = 14.0
+    swell_peak_period_s: float = limited(14.0, Limit(2.0, 30.0))
     #: ochi_hubble: shape lambda of the wind sea and of the swell (1: Pierson-Moskowitz's
     #: width; larger: narrower)
-    wind_shape: float = 1.0
-    swell_shape: float = 3.0
+    wind_shape: float = limited(1.0, Limit(0.5, 20.0))
+    swell_shape: float = limited(3.0, Limit(0.5, 20.0))
     #: the ship's speed ahead through the water, m/s (the bench's stand-in vessel as well)
-    speed_m_s: float = 0.0
+    speed_m_s: float = limited(0.0, Limit(0.0, 20.0))
     #: the sea state at the end of the ramp: Hs (m) and Tp (s); None: unchanged
     hs_end_m: float | None = None
     tp_end_s: float | None = None
     #: when the ramp starts (s after the reset) and how long it lasts (s)
-    ramp_start_s: float = 0.0
-    ramp_duration_s: float = 60.0
+    ramp_start_s: float = limited(0.0, Limit(0.0, 1e5))
+    ramp_duration_s: float = limited(60.0, Limit(0.0, 1e5, low_inclusive=False))
 
     def __post_init__(self) -> None:
         require_choice("spectrum", self.spectrum, SPECTRA)
         if self.swell_direction_deg is not None:
             require_range("swell_direction_deg", self.swell_direction_deg, -360.0, 360.0)
-        require_range("swell_spread_deg", self.swell_spread_deg, 0.0, 180.0)
-        require_range("swell_energy_fraction", self.swell_energy_fraction, 0.0, 1.0)
-        require_range("swell_peak_period_s", self.swell_peak_period_s, 2.0, 30.0)
-        require_range("wind_shape", self.wind_shape, 0.5, 20.0)
-        require_range("swell_shape", self.swell_shape, 0.5, 20.0)
-        require_range("speed_m_s", self.speed_m_s, 0.0, 20.0)
+        require_limits(self)
         if self.hs_end_m is not None:
             require_range("hs_end_m", self.hs_end_m, 0.0, 16.0)
         if self.tp_end_s is not None:
             require_range("tp_end_s", self.tp_end_s, 2.0, 25.0)
-        require_range("ramp_start_s", self.ramp_start_s, 0.0, 1e5)
-        require_range("ramp_duration_s", self.ramp_duration_s, 0.0, 1e5, low_inclusive=False)
 
     @property
     def ramped(self) -> bool:

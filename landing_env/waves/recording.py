@@ -44,6 +44,7 @@ from typing import Literal
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.waves.ship import helideck_poses
 
@@ -76,7 +77,7 @@ class CsvMotionConfig:
     start: Literal["file_time", "first_sample", "random"] = "file_time"
     #: start "random" with end "hold": seconds of recording kept after the drawn start (an
     #: episode of up to this length never reaches the held end); s, >= 0
-    random_margin_s: float = 60.0
+    random_margin_s: float = limited(60.0, Limit(0.0, 1e6))
     #: "deck": the samples are the deck's pose from its home; "vessel": the vessel's motion
     #: at its centre of motion, carried to the helideck (needs deck_mount: ship)
     frame: Literal["deck", "vessel"] = "deck"
@@ -89,7 +90,7 @@ class CsvMotionConfig:
         require_choice("end", self.end, RECORDING_ENDS)
         require_choice("start", self.start, RECORDING_STARTS)
         require_choice("frame", self.frame, RECORDING_FRAMES)
-        require_range("random_margin_s", self.random_margin_s, 0.0, 1e6)
+        require_limits(self)
         position = tuple(float(v) for v in self.helideck_position_m)
         if len(position) != 3:
             raise ConfigError("helideck_position_m", f"needs 3 values, got {len(position)}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+from estimation.limits import Limit, limited
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.waves.generator import SeaGeneratorConfig, require_generator
 from landing_env.waves.spectrum import SEA_STATE_TABLE, JonswapSeaFields
@@ -42,9 +43,9 @@ class SeaConfig(JonswapSeaFields):
     band_high: float = 5.0
     #: direction the waves travel towards, from the bow (x) counter-clockwise (deg): 0
     #: following seas, 180 head seas, 90 beam seas from starboard
-    wave_direction_deg: float = 135.0
+    wave_direction_deg: float = limited(135.0, physical=Limit.symmetric(360.0))
     #: half-width of the uniform random spread of component directions (short-crested sea)
-    direction_spread_deg: float = 30.0
+    direction_spread_deg: float = limited(30.0, physical=Limit.non_negative(180.0))
     #: other seas than the JONSWAP above: bimodal spectra, vessel speed, a changing sea state
     #: (landing_env/waves/generator.py); its defaults keep the JONSWAP sea at zero speed
     generator: SeaGeneratorConfig = field(default_factory=SeaGeneratorConfig)

@@ -50,6 +50,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
 from landing_env.waves.generator import (
     GeneratedSea,
@@ -72,18 +73,20 @@ class ShipMotionConfig(SeaConfig):
     n_components: int = 200
     band_high: float = 4.0
     #: 150 = bow seas 30 deg off the starboard bow, a usual heading for deck landings
-    wave_direction_deg: float = 150.0
+    wave_direction_deg: float = limited(
+        150.0, physical=Limit(-360.0, 360.0, note="from the bow, degrees")
+    )
     #: hull: length, moulded breadth, draught (m), block coefficient, metacentric height (m)
-    length_m: float = 30.0
+    length_m: float = limited(30.0, Limit(10.0, 40.0))
     beam_m: float = 7.0
     draught_m: float = 1.8
-    block_coefficient: float = 0.45
-    metacentric_height_m: float = 1.2
+    block_coefficient: float = limited(0.45, Limit(0.3, 1.0))
+    metacentric_height_m: float = limited(1.2, Limit(0.2, 5.0))
     #: roll natural period (s); None: the IMO 2008 IS Code formula from the hull
     roll_period_s: float | None = None
-    roll_damping_ratio: float = 0.1
+    roll_damping_ratio: float = limited(0.1, Limit(0.01, 1.0))
     #: effective wave-slope factor of roll (IMO weather criterion's r, order 0.7)
-    roll_slope_factor: float = 0.7
+    roll_slope_factor: float = limited(0.7, Limit(0.0, 1.5))
     #: helideck centre from the centre of rotation (x forward, y port, z up), metres: aft
     #: helideck 10 m behind the CoG, 3 m above it
     helideck_position_m: tuple[float, float, float] = (-10.0, 0.0, 3.0)
@@ -91,7 +94,7 @@ class ShipMotionConfig(SeaConfig):
     def __post_init__(self) -> None:
         self.check_sea()
         # a 10-40 m class, with proportions a monohull can have
-        require_range("length_m", self.length_m, 10.0, 40.0)
+        require_limits(self)
         require_range(
             "beam_m",
             self.beam_m,
@@ -106,12 +109,8 @@ class ShipMotionConfig(SeaConfig):
             0.6 * self.beam_m,
             bounds_from=f"beam_m = {self.beam_m}",
         )
-        require_range("block_coefficient", self.block_coefficient, 0.3, 1.0)
-        require_range("metacentric_height_m", self.metacentric_height_m, 0.2, 5.0)
         if self.roll_period_s is not None:
             require_range("roll_period_s", self.roll_period_s, 2.0, 30.0)
-        require_range("roll_damping_ratio", self.roll_damping_ratio, 0.01, 1.0)
-        require_range("roll_slope_factor", self.roll_slope_factor, 0.0, 1.5)
         position = tuple(float(v) for v in self.helideck_position_m)
         if len(position) != 3:
             raise ConfigError("helideck_position_m", f"needs 3 values, got {len(position)}")

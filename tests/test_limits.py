@@ -1,0 +1,110 @@
+"""A numeric setting's bounds are declared on its field (estimation.limits) and hold."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+
+import pytest
+
+from estimation.errors import ConfigError
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env.config import DeckLandingConfig
+
+
+def _config_classes(cls: type, seen: dict[str, type]) -> dict[str, type]:
+    seen[cls.__name__] = cls
+    hints = typing.get_type_hints(cls)
+    for item in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(hints[item.name]):
+            _config_classes(hints[item.name], seen)
+    return seen
+
+
+CLASSES = _config_classes(DeckLandingConfig, {})
+DECLARED = [
+    (name, item.name, item.metadata["limit"])
+    for name, cls in CLASSES.items()
+    for item in dataclasses.fields(cls)
+    if "limit" in item.metadata
+]
+
+
+def _outside(limit: Limit) -> list[float]:
+    values = []
+    if limit.low is not None:
+        values.append(limit.low if not limit.low_inclusive else limit.low - 1)
+    if limit.high is not None:
+        values.append(limit.high if not limit.high_inclusive else limit.high + 1)
+    return values
+
+
+@pytest.mark.parametrize(
+    ("cls", "field", "limit"), DECLARED, ids=[f"{c}.{f}" for c, f, _ in DECLARED]
+)
+def test_a_config_field_refuses_a_value_just_outside_its_declared_limit_naming_it(
+    cls: str, field: str, limit: Limit
+) -> None:
+    for value in _outside(limit):
+        with pytest.raises(ConfigError) as error:
+            CLASSES[cls](**{field: value})
+        assert error.value.key == field, str(error.value)
+
+
+def test_the_config_tree_declares_its_limits_on_its_fields() -> None:
+    assert len(DECLARED) >= 100
+
+
+@dataclasses.dataclass
+class _Rig:
+    speed_mps: float = limited(1.0, POSITIVE)
+    count: int = limited(3, Limit(1, 10))
+    margin_m: float = limited(0.0, NON_NEGATIVE)
+    free: float = -5.0
+
+    def __post_init__(self) -> None:
+        require_limits(self)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"speed_mps": 0.0}, "speed_mps: 0.0 is out of range; allowed (0.0, inf]"),
+        ({"count": 11}, "count: 11 is out of range; allowed [1, 10]"),
+        ({"margin_m": -0.5}, "margin_m: -0.5 is out of range; allowed [0.0, inf]"),
+    ],
+)
+def test_require_limits_refuses_the_field_outside_its_limit_with_the_range(
+    changes: dict, message: str
+) -> None:
+    with pytest.raises(ConfigError) as error:
+        _Rig(**changes)
+    assert str(error.value) == message
+
+
+def test_fields_without_a_limit_and_values_on_a_bound_are_accepted() -> None:
+    rig = _Rig(speed_mps=1e-9, count=10, margin_m=0.0, free=-1e9)
+    assert (rig.count, rig.margin_m, rig.free) == (10, 0.0, -1e9)
+
+
+def test_the_loaders_table_is_the_physical_range_each_field_declares() -> None:
+    from landing_env.config_limits import LIMITS, physical_limits
+    from landing_env.sensors.camera_config import CameraConfig
+
+    assert LIMITS == physical_limits(DeckLandingConfig)
+    fx = next(item for item in dataclasses.fields(CameraConfig) if item.name == "fx")
+    assert LIMITS["camera.fx"] is fx.metadata["physical"]
+    assert len(LIMITS) >= 190
+
+
+def test_a_physical_range_is_checked_on_load_and_a_field_limit_always() -> None:
+    from landing_env.config import load_config
+    from landing_env.sensors.camera_config import CameraConfig
+
+    assert CameraConfig(fx=2e5).fx == 2e5  # beyond the physical range, still computable
+    with pytest.raises(ConfigError) as error:
+        load_config("default", overrides={"camera.fx": 2e5})
+    assert error.value.key == "camera.fx" and "100000.0]" in str(error.value)
+    for build in (lambda: CameraConfig(fx=0.0), lambda: load_config("default", camera={"fx": 0.0})):
+        with pytest.raises(ConfigError, match=r"fx: 0\.0 is out of range; allowed \(0\.0,"):
+            build()
