@@ -1,5 +1,6 @@
 """The deck motions on which ``fused``'s online deck-motion identification is tuned and those
-on which it is judged (benchmarks/bench_fused_unseen.py, tests/test_fusion_identify.py).
+on which it is judged (benchmarks/bench_fused_unseen.py,
+tests/estimation/fusion/test_filter_identification.py).
 
 TUNING motions (the only ones any setting of the identification was chosen on): the bench's
 JONSWAP sea (``motion.kind: sea_state``, sea state 3 and 4, the bench vessel), seeds 0-99.

@@ -10,8 +10,8 @@ physics fail.
 
 A field declares both where it is declared (:func:`estimation.limits.limited`: ``limit``,
 what the code can run with, and ``physical``, what a config may give); :data:`LIMITS`
-collects the physical ones by dotted key.  ``tests/test_config_validation.py`` fuzzes every
-numeric key with NaN, inf and +-1e9.
+collects the physical ones by dotted key.  ``tests/landing_env/test_config_limits.py`` fuzzes
+every numeric key with NaN, inf and +-1e9.
 """
 
 from __future__ import annotations

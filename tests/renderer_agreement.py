@@ -1,10 +1,11 @@
 """How far the planar renderer's images and detections are from the reference renderers.
 
-A helper of ``tests/test_planar_renderer.py`` and ``tests/test_camera_realism.py``: a world
-is posed (drone height above the deck, drone and deck tilts), the same camera pose is
-rendered by both renderers (ideal pinhole images, no lens distortion), the tag is detected in
-both images, and the corner differences and image differences are returned; the analytic
-projection of the tag corners is the truth both are also measured against.
+A helper of ``tests/landing_env/sensors/test_planar_renderer.py`` and
+``tests/landing_env/sensors/test_camera_realism.py``: a world is posed (drone height above the
+deck, drone and deck tilts), the same camera pose is rendered by both renderers (ideal pinhole
+images, no lens distortion), the tag is detected in both images, and the corner differences
+and image differences are returned; the analytic projection of the tag corners is the truth
+both are also measured against.
 
 Which reference measures the truth (the 15 :func:`standard_poses`; the benchmark that printed
 them is in history, ``git show 7d43668:benchmarks/bench_renderer_agreement.py``).  Plain

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.paths import ROOT
+
 #: the maintained benchmarks, each named in docs/reference/simulator.md and run by `make bench`
 MAINTAINED = (
     "bench_env_speed",
@@ -65,7 +66,7 @@ def test_each_maintained_benchmark_is_listed_in_the_docs_and_run_by_make_bench()
 
 
 def test_no_test_imports_from_benchmarks() -> None:
-    for path in (ROOT / "tests").glob("*.py"):
+    for path in (ROOT / "tests").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.ImportFrom):
                 names = [node.module or ""]
@@ -73,7 +74,7 @@ def test_no_test_imports_from_benchmarks() -> None:
                 names = [alias.name for alias in node.names]
             else:
                 continue
-            assert not any(n.split(".")[0] == "benchmarks" for n in names), path.name
+            assert not any(n.split(".")[0] == "benchmarks" for n in names), path.relative_to(ROOT)
 
 
 def test_recording_load_writes_its_table_of_load_times(tmp_path: Path) -> None:

@@ -4,7 +4,6 @@ the predictive timing policy and the wave-off that read it."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from landing_env.scenarios import PREDICTIVE_TIMING, dotted
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.training_seas import training_family
 from landing_env.timing.stopping import predictor_stopping_values
+from tests.paths import ROOT
 
 DT = 0.05
 WINDOW_S = 4.0
@@ -883,7 +883,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
     # final model, on the same task
     from agents.training.trainer import load_train_config
 
-    train = Path(__file__).resolve().parent.parent / "configs" / "train"
+    train = ROOT / "configs" / "train"
     first = load_train_config(train / "timing_dqn_predictive.yaml")
     second = load_train_config(train / "timing_dqn_predictive_finetune.yaml")
     assert second.env_id == first.env_id == "DeckLandingTiming-BenchSS5-v6"

@@ -22,6 +22,7 @@ from agents.policies.registry import (
 from landing_env.envs.base import without_nan
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIO_IDS, SCENARIOS, TASKS
+from tests.paths import ROOT
 
 CURRENT = [*TASKS, *(i for i, s in SCENARIO_IDS.items() if s.superseded_by is None)]
 
@@ -123,11 +124,9 @@ def test_unknown_policies_and_scenarios_are_refused_naming_the_choices() -> None
 
 
 def test_the_readmes_which_to_use_table_is_the_registrys_recommendation() -> None:
-    from pathlib import Path
-
     from agents.policies.registry import RECOMMENDED
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (ROOT / "README.md").read_text()
     rows = [line for line in readme.splitlines() if line.startswith("| ") and "% (" in line]
     assert len(rows) == len(RECOMMENDED)
     for rec, row in zip(RECOMMENDED, rows, strict=True):
@@ -174,8 +173,6 @@ def _expand(pattern: str) -> list[str]:
 
 def test_the_changelogs_list_of_current_ids_is_the_registrys() -> None:
     import re
-
-    from tests.test_packaging import ROOT
 
     text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
     entry = text.split("registered ids, each the highest version of its name**", 1)[1]

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import estimation
+from tests.paths import ROOT
 
 
 def test_estimation_imports_no_simulator_or_rl_package() -> None:
@@ -30,7 +31,6 @@ def test_estimation_imports_no_simulator_or_rl_package() -> None:
 
 
 # ------------------------------------------------------------------------------ the layering
-ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("estimation", "landing_env", "agents")
 #: each package may import only itself and the packages after it
 LAYERS = {"agents": {"agents", "landing_env", "estimation"}, "landing_env": {"landing_env",

@@ -7,7 +7,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.paths import ROOT
+
 #: what is scanned: files, and folders (their text files)
 SCANNED = ("README.md", "docs", "configs", "agents", "estimation", "landing_env")
 SUFFIXES = {".md", ".py", ".yaml", ".yml", ".json", ".txt", ".rst", ".toml", ".cfg", ".csv"}

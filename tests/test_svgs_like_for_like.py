@@ -32,7 +32,7 @@ from estimation.landing_target import (
 from estimation.types import CameraFrame, RangeReading, TagDetection
 from landing_env.config import load_config
 from landing_env.vision_link import VisionLinkConfig
-from tests.test_routine import observation
+from tests.agents.policies.test_svgs_routine import observation
 
 
 def settled_filter(config: LandingTargetConfig | None = None) -> LandingTargetFilter:

@@ -26,7 +26,8 @@ calibration tables pin the simulated camera and the sensor layout down more tigh
   ranges, a sign that the papers' images and ranges were not sampled at the same instant.
 
 :func:`reproduce_calibration_tables` runs the project's pad rig in this setup and returns
-Tables 2-4's quantities for comparison (``tests/test_paper_setup.py`` holds them).
+Tables 2-4's quantities for comparison (``tests/landing_env/calibration/test_paper_setup.py``
+holds them).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ A snapshot holds PyBullet's in-memory state (``saveState``) and a deep copy of t
 environment's Python state (the world's drone, controller, deck motion, sensors and their
 random streams, the estimators, the task's history).  Restoring both puts the episode back
 exactly where it was: the steps that follow are the same, bit for bit, as if the look-ahead
-had never run (``tests/test_oracle.py`` checks it).  The PyBullet client and the config are
-shared, not copied.  This is privileged simulation access: the oracle timing uses it
+had never run (``tests/agents/policies/test_oracle.py`` checks it).  The PyBullet client and
+the config are shared, not copied.  This is privileged simulation access: the oracle timing uses it
 (:mod:`agents.policies.oracle`); a policy for a real drone cannot.
 """
 

@@ -8,7 +8,7 @@ under way, and a sea state that changes during the episode, all built by
 held-out seeds (``agents.evaluation.landing.HELD_OUT_SEED`` = 1 000 000 and on; the configs'
 ``seed`` is that first one), and the sea of each episode is a fixed function of its seed.
 
-Rules (checked by ``tests/test_heldout_seas.py``):
+Rules (checked by ``tests/landing_env/sea/test_heldout.py``):
 
 * no training config (``configs/train/*.yaml``) and no shipped fit (the deck-tilt
   predictors in ``landing_env/assets/predictors/``, the model cards in ``agents/models/``)

@@ -6,8 +6,8 @@ dotted overrides of its sea (:mod:`landing_env.waves.generator`): one-peak and t
 (JONSWAP, Torsethaugen, Ochi-Hubble), seas from every quarter, the vessel at rest and under
 way, and sea states that build or decay during the episode.  The members span the range of
 the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldout`), and
-``tests/test_training_seas.py`` checks that no member repeats a held-out sea's spectrum,
-periods, headings and speed.
+``tests/landing_env/sea/test_training_seas.py`` checks that no member repeats a held-out sea's
+spectrum, periods, headings and speed.
 
 ``python -m agents.training.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
 deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``; a config's

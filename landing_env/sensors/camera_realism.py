@@ -363,8 +363,8 @@ class ImageFormation:
         With the read noise of the OV9281 (4 e-) and IMX219 (2.5 e-) profiles that holds at
         every signal (largest skew 0.10 and 0.15): after the ADC (8.4 and 4.7 e- per DN) the
         CDFs of the exact and the normal law differ by at most 0.006 and 0.010 over all
-        means (tests/test_camera_realism.py).  With less read noise, shot noise below 25 e-
-        is drawn from the Poisson law.
+        means (tests/landing_env/sensors/test_camera_realism.py).  With less read noise, shot
+        noise below 25 e- is drawn from the Poisson law.
         """
         p = self.profile
         # in place, float32: this runs on every pixel of every frame

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import zipfile
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -18,8 +17,7 @@ from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.hms import HelideckMonitorConfig
 from landing_env.sea.hms_forecast import ONLINE, deck_forecast_for, held_out_sea
 from landing_env.waves.generator import GeneratedSea
-
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
 
 
 def test_the_held_out_names_are_the_shipped_held_out_configs() -> None:

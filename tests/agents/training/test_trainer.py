@@ -21,10 +21,11 @@ from agents.training.trainer import (
     train,
 )
 from landing_env.errors import ConfigError
+from tests.paths import ROOT
 
 #: the range-scheduled descent the shipped timing_dqn.zip was trained on
 RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
-CONFIG = Path(__file__).resolve().parent.parent / "configs" / "train" / "timing_ppo.yaml"
+CONFIG = ROOT / "configs" / "train" / "timing_ppo.yaml"
 
 
 @pytest.mark.parametrize("name", ["ppo", "dqn"])
@@ -90,7 +91,8 @@ def test_a_short_training_run_updates_and_saves_a_policy_that_loads_again(tmp_pa
     settings.eval.freq = 256
     settings.eval.episodes = 2
     settings.checkpoint_freq = 256
-    settings.vec_env = "dummy"  # no worker processes to start (SubprocVecEnv: test_env.py)
+    # no worker processes to start (SubprocVecEnv: tests/landing_env/envs/test_deck_landing.py)
+    settings.vec_env = "dummy"
     settings.target_success_rate = 1.1  # run every step: no early stop on a lucky evaluation
     config.hyperparams.update(n_steps=128, batch_size=64, n_epochs=4)
     config.hyperparams["policy_kwargs"] = "dict(net_arch=[32, 32])"

@@ -13,6 +13,7 @@ from agents.common.parallel import batch_session
 from agents.evaluation.landing import run_policy
 from agents.evaluation.runner import EpisodeTask, run_episodes
 from estimation.errors import ConfigError
+from tests.paths import ROOT
 
 TOY = "tests.runner_toy:TOY"
 
@@ -122,7 +123,7 @@ def test_local_workers_run_at_the_users_priority(ray_session: None) -> None:
 def test_the_shared_record_types_live_in_a_leaf_module() -> None:
     import ast
 
-    root = Path(__file__).resolve().parent.parent / "agents" / "evaluation"
+    root = ROOT / "agents" / "evaluation"
 
     def imported(name: str) -> set[str]:
         tree = ast.parse((root / name).read_text())

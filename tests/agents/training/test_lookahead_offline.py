@@ -19,8 +19,9 @@ from agents.training.lookahead_data import (
 )
 from agents.training.lookahead_training import split_episodes, train_offline
 from landing_env.errors import ConfigError
+from tests.paths import ROOT
 
-CONFIG = Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
+CONFIG = ROOT / "configs/train/timing_dqn_lookahead_offline.yaml"
 
 
 def _config(draws: int) -> dict:

@@ -16,6 +16,7 @@ from estimation.intrinsics_calibration import (
     calibrate_from_images,
     image_files,
 )
+from tests.paths import DATA_DIR
 
 K_TRUE = np.array([[520.0, 0.0, 319.5], [0.0, 518.0, 241.0], [0.0, 0.0, 1.0]])
 SIZE = (640, 480)
@@ -170,7 +171,7 @@ def test_a_folder_without_enough_boards_is_a_one_line_error(
     assert "need at least 3 usable photos" in err and "blank.png" in err
 
 
-OPENCV_PHOTOS = Path(__file__).parent / "data" / "opencv_chessboard"
+OPENCV_PHOTOS = DATA_DIR / "opencv_chessboard"
 #: OpenCV's calibration sample on its 13 ``left??.jpg`` photos, 9x6, as widely quoted (README)
 OPENCV_K = {"fx": 532.795, "fy": 532.919, "cx": 342.458, "cy": 233.901}
 OPENCV_DIST = (-0.28109, 0.02726, 0.00122, -0.00013, 0.15851)

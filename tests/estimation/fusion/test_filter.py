@@ -105,7 +105,8 @@ def make_config(**kwargs: object) -> FusionConfig:
         "deck_angular_accel_psd": 0.002,
         "initial_rate_sigma": 0.05,
         # these tests' data follow the given deck models with independent pose errors (the
-        # identification and the coloured errors: tests/test_fusion_identify.py)
+        # identification and the coloured errors:
+        # tests/estimation/fusion/test_filter_identification.py)
         "identify_deck_motion": False,
         "tilt_error_correlation_s": 0.0,
         "tilt_error_sigma_scale": 1.0,

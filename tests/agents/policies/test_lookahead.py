@@ -28,6 +28,7 @@ from agents.policies.oracle import NO_TOUCHDOWN_MARGIN, TriedCommit
 from agents.policies.timing import TrainedTimingPolicy
 from agents.training.trainer import TrainConfig, TrainSettings
 from landing_env.errors import ConfigError
+from tests.paths import ROOT
 
 SHIP_ID = "DeckLandingTiming-ShipSS4-v7"
 #: v4 is the ship ids' history observation, which the look-ahead replaces: v5 adds only the forecast
@@ -338,9 +339,7 @@ def test_a_lookahead_training_config_signs_its_card_with_the_lookahead_unwrapped
     from agents.training.trainer import load_train_config
     from landing_env.config_loading import build_dataclass
 
-    config = load_train_config(
-        Path(__file__).resolve().parent.parent / "configs/train/timing_dqn_lookahead_offline.yaml"
-    )
+    config = load_train_config(ROOT / "configs/train/timing_dqn_lookahead_offline.yaml")
     assert config.settings.lookahead is not None
     env = gym.make("DeckLandingTiming-ShipSS5-v7")
     try:

@@ -28,7 +28,7 @@ from agents.io.mavlink import LandingTargetBridge, MavlinkLink
 from agents.io.timesync import ClockSync
 from estimation.frames import matrix_from_euler_zyx
 from estimation.types import DeckPoseEstimate
-from tests.test_mavlink_autopilot import FakeAutopilot, q_wxyz, trajectory
+from tests.agents.io.test_mavlink_autopilot import FakeAutopilot, q_wxyz, trajectory
 
 #: the frames PX4's ODOMETRY carries the estimator's pose in: up to v1.13, and from v1.14 on
 PX4_ODOMETRY_FRAMES = {

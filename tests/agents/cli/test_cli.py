@@ -14,9 +14,9 @@ import landing_env  # noqa: F401
 from agents.cli import main
 from estimation.errors import ConfigError
 from landing_env.errors import PinnedDroneWarning
+from tests.paths import ROOT
 
 LANDING = ["evaluate", "landing", "--policy", "land-now", "--scenario", "bench-ss4"]
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_config_error_survives_pickling_with_key_and_message() -> None:

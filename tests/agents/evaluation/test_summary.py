@@ -25,6 +25,7 @@ from agents.evaluation.summary import (
     success_fields,
     summarise,
 )
+from tests.paths import ROOT
 
 
 def _landings() -> list[EpisodeRecord]:
@@ -129,7 +130,7 @@ def test_the_landing_files_keep_the_landing_columns(tmp_path: Path) -> None:
 def test_one_episode_loop_runs_every_evaluation_and_the_demo() -> None:
     import ast
 
-    root = Path(__file__).resolve().parent.parent / "agents"
+    root = ROOT / "agents"
     for path in (root / "evaluation" / "landing.py", root / "evaluation" / "approach.py",
                  root / "demo.py"):  # fmt: skip
         tree = ast.parse(path.read_text())

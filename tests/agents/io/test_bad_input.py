@@ -19,7 +19,7 @@ from agents.cli import main
 from agents.io import messages as m
 from agents.io.bag import read_bag
 from agents.io.recording import RecordingError, read_folder
-from tests.test_io_roundtrip import record_episode
+from tests.agents.io.test_record import record_episode
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,7 @@ import yaml
 
 from agents.training.tune import TuneSettings, load_tune_settings, tune_timing
 from landing_env.errors import ConfigError
-
-ROOT = Path(__file__).resolve().parent.parent
+from tests.paths import ROOT
 
 
 def test_the_shipped_search_yaml_loads() -> None:

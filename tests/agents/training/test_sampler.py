@@ -19,8 +19,9 @@ from agents.training.sampler import (
 from agents.training.trainer import ENV_ID, ZOO_META_KEYS, load_train_config, train
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError
+from tests.paths import ROOT
 
-RANDOMISED = Path(__file__).resolve().parent.parent / "configs/train/timing_randomised.yaml"
+RANDOMISED = ROOT / "configs/train/timing_randomised.yaml"
 QUICK_TIMING = {"history_s": 0.25, "rate_window_s": 0.2, "hold_height_m": 0.45, "wait_limit_s": 2.0}
 TWO_BY_TWO = {
     "scenarios": ["bench-ss4", "bench-ss5"],
