@@ -132,7 +132,7 @@ def test_one_episode_loop_runs_every_evaluation_and_the_demo() -> None:
 
     root = ROOT / "agents"
     for path in (root / "evaluation" / "landing.py", root / "evaluation" / "approach.py",
-                 root / "demo.py"):  # fmt: skip
+                 root / "cli" / "demo.py"):  # fmt: skip
         tree = ast.parse(path.read_text())
         calls = {
             node.func.attr
