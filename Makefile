@@ -45,8 +45,8 @@ bench: $(STAMP)
 # make mutation MODULES='agents/io/*'. The report: docs/reference/mutation.md
 MODULES ?=
 mutation: $(STAMP)
-	$(PY) tools/mutation.py run $(MODULES) --workers 2
-	$(PY) tools/mutation.py summary $(MODULES)
+	set -f; $(PY) tools/mutation.py run $(MODULES) --workers 2
+	set -f; $(PY) tools/mutation.py summary $(MODULES)
 
 # both calibrations in the simulator; rewrites the shipped files in configs/calibration/
 calibrate: $(STAMP)
