@@ -469,7 +469,7 @@ def test_receive_waits_its_timeout_and_without_one_takes_what_has_arrived() -> N
         sender = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
         try:
             assert link.receive(0.2) is None  # nothing came: None once the timeout is over
-            later = threading.Timer(0.3, sender.mav.heartbeat_send, (6, 8, 0, 0, 4))
+            later = threading.Timer(0.6, sender.mav.heartbeat_send, (6, 8, 0, 0, 4))
             later.start()
             assert link.receive() is None  # no timeout: nothing has arrived yet
             message = link.receive(10.0)  # a timeout: waits for the heartbeat
