@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test docs lint bench calibrate clean-venv
+.PHONY: demo test docs lint bench calibrate mutation clean-venv
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -40,6 +40,14 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench_fused_unseen
 	$(PY) -m benchmarks.bench_paper_setup
 	$(PY) -m benchmarks.fuzz_soak
+
+# mutation testing (mutmut) of the modules in tools/mutation.yaml, each against the test files
+# that import it, two mutants at a time; not part of make test. MODULES narrows it, e.g.
+# make mutation MODULES='agents/io/*'. The report: docs/reference/mutation.md
+MODULES ?=
+mutation: $(STAMP)
+	set -f; $(PY) tools/mutation.py run $(MODULES) --workers 2
+	set -f; $(PY) tools/mutation.py summary $(MODULES)
 
 # both calibrations in the simulator; rewrites the shipped files in configs/calibration/
 calibrate: $(STAMP)

@@ -26,6 +26,7 @@ from agents.io.landing_target import (
     quaternion_wxyz,
 )
 from agents.io.mavlink import (
+    ConnectionUrl,
     LandingTargetBridge,
     MavlinkLink,
     parse_connection_url,
@@ -97,6 +98,64 @@ def test_px4_gets_the_tag_centre_in_local_ned_from_the_vehicle_pose() -> None:
     assert fields.frame == mavlink2.MAV_FRAME_LOCAL_NED
     assert (fields.x, fields.y, fields.z) == pytest.approx((1.3, -1.7, -2.95), abs=1e-12)
     assert fields.q == pytest.approx((1.0, 0.0, 0.0, 0.0), abs=1e-12)
+
+
+def test_ardupilots_parameters_enable_mavlink_precision_landing_at_the_cameras_offset() -> None:
+    mount = CameraMount(t_bc=np.array([0.1, 0.02, -0.05]))
+    assert ardupilot_parameters(mount) == pytest.approx(
+        {
+            "PLND_ENABLED": 1,
+            "PLND_TYPE": 1,  # MAVLink
+            "PLND_ORIENT": 25,  # down
+            "PLND_YAW_ALIGN": 0,
+            "PLND_CAM_POS_X": 0.1,
+            "PLND_CAM_POS_Y": -0.02,
+            "PLND_CAM_POS_Z": 0.05,
+        }
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "key", "allowed"),
+    [
+        ({"r_bc": np.eye(2)}, "camera mount r_bc", "must be a finite 3x3 rotation"),
+        ({"r_bc": np.diag([1.0, 1.0, 1.3])}, "camera mount r_bc", "must be a proper rotation"),
+        ({"r_bc": -np.eye(3)}, "camera mount r_bc", "must be a proper rotation"),
+        ({"t_bc": np.array([0.1, math.nan, 0.0])}, "camera mount t_bc", "must be 3 finite metres"),
+        ({"t_bc": np.zeros(2)}, "camera mount t_bc", "must be 3 finite metres"),
+    ],
+)
+def test_a_bad_camera_mount_is_refused_naming_the_field_and_what_it_must_be(
+    kwargs: dict, key: str, allowed: str
+) -> None:
+    with pytest.raises(ConfigError) as refused:
+        CameraMount(**kwargs)
+    assert refused.value.key == key and allowed in str(refused.value)
+
+
+def test_a_camera_mount_given_as_lists_or_rounded_to_float32_holds_its_float_rotation() -> None:
+    # a calibration stored in float32: orthonormal to about 1e-7, not to 1e-8
+    r_bc = matrix_from_euler_zyx(0.01, -0.02, 0.3).astype(np.float32).astype(float)
+    r_bc[0, 1] += 4e-7
+    mount = CameraMount(r_bc=r_bc.tolist(), t_bc=[0, 0, 1])
+    assert isinstance(mount.r_bc, np.ndarray) and mount.r_bc.dtype == float
+    assert isinstance(mount.t_bc, np.ndarray) and mount.t_bc.dtype == float
+    assert mount.r_bc.T.shape == (3, 3) and mount.t_bc_frd == pytest.approx([0.0, 0.0, -1.0])
+    quarter_turn = CameraMount(r_bc=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    assert quarter_turn.r_bc.dtype == float
+
+
+def test_the_fields_are_refused_for_an_unknown_autopilot_and_for_px4_without_a_pose() -> None:
+    with pytest.raises(ConfigError) as refused:
+        landing_target_fields("inav", np.eye(3), np.array([0.0, 0.0, 2.0]), CameraMount())
+    assert refused.value.key == "autopilot" and "'px4', 'ardupilot'" in str(refused.value)
+    with pytest.raises(ConfigError) as refused:
+        landing_target_fields("px4", np.eye(3), np.array([0.0, 0.0, 2.0]), CameraMount())
+    assert refused.value.key == "vehicle pose"
+    assert refused.value.detail == (
+        "px4 reads LANDING_TARGET in MAV_FRAME_LOCAL_NED, which needs the vehicle's "
+        "attitude and local position at the measurement's time; none was given"
+    )
 
 
 def test_a_drone_yawed_left_sees_the_north_facing_deck_turned_right_in_body_frd() -> None:
@@ -352,3 +411,179 @@ def test_px4_without_the_vehicle_pose_is_refused_naming_the_frame() -> None:
 def test_out_of_range_mavlink_ids_are_refused() -> None:
     with pytest.raises(UserError, match="--system-id: 0 is out of range"):
         MavlinkLink("udpout:127.0.0.1:14550", system_id=0)
+
+
+def test_ports_1_to_65535_and_serial_devices_with_or_without_a_baud_are_taken() -> None:
+    assert parse_connection_url("udpout:10.0.0.2:65535").device == "udpout:10.0.0.2:65535"
+    assert parse_connection_url("udpin:0.0.0.0:1").device == "udpin:0.0.0.0:1"
+    with pytest.raises(UserError, match=r"--to: port 65536 .* out of range; allowed 1\.\.65535"):
+        parse_connection_url("udpout:10.0.0.2:65536")
+    assert parse_connection_url(" /dev/ttyUSB0 ") == ConnectionUrl(
+        "/dev/ttyUSB0", "/dev/ttyUSB0", 57600
+    )
+    assert parse_connection_url("/dev/ttyACM0:921600") == ConnectionUrl(
+        "/dev/ttyACM0:921600", "/dev/ttyACM0", 921600
+    )
+    assert parse_connection_url("COM3:115200") == ConnectionUrl("COM3:115200", "COM3", 115200)
+    with pytest.raises(UserError, match=r"--to: baud 0 in '/dev/ttyUSB0:0' must be positive"):
+        parse_connection_url("/dev/ttyUSB0:0")
+
+
+def test_ids_up_to_255_are_taken_and_256_is_refused_naming_the_argument() -> None:
+    with MavlinkLink("udpout:127.0.0.1:14550", system_id=255, component_id=255) as link:
+        assert (link.system_id, link.component_id) == (255, 255)
+    for key in ("system_id", "component_id"):
+        flag = "--" + key.replace("_", "-")
+        with pytest.raises(UserError, match=rf"^{flag}: 256 is out of range; allowed 1\.\.255$"):
+            MavlinkLink("udpout:127.0.0.1:14550", **{key: 256})
+
+
+def test_an_endpoint_that_cannot_be_opened_is_refused_naming_it() -> None:
+    with pytest.raises(UserError, match=r"^--to: cannot open 'udpin:192\.0\.2\.1:14550': "):
+        MavlinkLink("udpin:192.0.2.1:14550")
+
+
+def test_the_heartbeat_is_an_active_onboard_controller_with_no_autopilot_and_no_modes(
+    listener: socket.socket,
+) -> None:
+    with MavlinkLink(url_of(listener)) as link:
+        link.send_heartbeat()
+    (heartbeat,) = receive(listener, 1)
+    assert heartbeat.get_srcComponent() == mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER
+    assert heartbeat.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+    assert heartbeat.autopilot == mavlink2.MAV_AUTOPILOT_INVALID
+    assert (heartbeat.base_mode, heartbeat.custom_mode) == (0, 0)
+    assert heartbeat.system_status == mavlink2.MAV_STATE_ACTIVE
+
+
+def test_receive_waits_its_timeout_and_without_one_takes_what_has_arrived() -> None:
+    import threading
+
+    from pymavlink import mavutil
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    with MavlinkLink(f"udpin:127.0.0.1:{port}") as link:
+        sender = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
+        try:
+            assert link.receive(0.2) is None  # nothing came: None once the timeout is over
+            later = threading.Timer(0.6, sender.mav.heartbeat_send, (6, 8, 0, 0, 4))
+            later.start()
+            assert link.receive() is None  # no timeout: nothing has arrived yet
+            message = link.receive(10.0)  # a timeout: waits for the heartbeat
+            later.join()
+            soon = threading.Timer(0.05, sender.mav.heartbeat_send, (6, 8, 0, 0, 4))
+            soon.start()
+            second = link.receive(1.0)  # a second is a timeout too
+            soon.join()
+        finally:
+            sender.close()
+    assert message is not None and message.get_type() == "HEARTBEAT"
+    assert second is not None and second.get_type() == "HEARTBEAT"
+
+
+class RecordingLink:
+    """A link that keeps what the bridge sends."""
+
+    def __init__(self) -> None:
+        self.targets: list = []
+
+    def send_heartbeat(self) -> None:
+        pass
+
+    def send_landing_target(self, time_usec: int, fields) -> None:
+        self.targets.append((time_usec, fields))
+
+
+def test_the_bridge_is_refused_naming_the_autopilot_or_the_missing_pose_source() -> None:
+    with pytest.raises(ConfigError) as refused:
+        LandingTargetBridge(RecordingLink(), "inav")  # type: ignore[arg-type]
+    assert refused.value.key == "autopilot"
+    with pytest.raises(ConfigError) as refused:
+        LandingTargetBridge(RecordingLink(), "px4")  # type: ignore[arg-type]
+    assert refused.value.key == "vehicle_pose"
+    assert refused.value.detail == (
+        "px4 reads LANDING_TARGET in MAV_FRAME_LOCAL_NED: give the vehicle's pose "
+        "at each measurement (a source of VehiclePose)"
+    )
+
+
+def test_each_estimate_not_sent_is_skipped_under_its_own_reason_without_a_warning() -> None:
+    import warnings
+
+    bridge = LandingTargetBridge(RecordingLink(), "ardupilot")  # type: ignore[arg-type]
+    eye, ahead = np.eye(3), np.array([0.1, 0.0, 2.0])
+    cases = [
+        (1.0, DeckPoseEstimate("tight", 1.0, False), "invalid: no reason given"),
+        (math.nan, estimate(eye, ahead), "bad stamp (not a finite time >= 0)"),
+        (math.inf, estimate(eye, ahead), "bad stamp (not a finite time >= 0)"),
+        (2.0, estimate(np.eye(2), ahead), "malformed pose"),
+        (2.0, estimate(eye, [0.0, 2.0]), "malformed pose"),
+        (2.0, estimate(np.diag([1.0, 1.0, 1.3]), ahead), "rotation not orthonormal"),
+        (2.0, estimate(np.diag([1e200, 1.0, 1.0]), ahead), "rotation not orthonormal"),
+        (2.0, estimate(np.diag([1.0, 1.0, -1.0]), ahead), "rotation is a reflection"),
+        (2.0, estimate(eye, [0.1, 0.0, 0.0]), "target not in front of the camera"),
+        (2.0, estimate(eye, [0.0, 0.0, 1e39]), "fields beyond float32"),
+        (2.0, estimate(eye, [0.1, 0.0, 0.5]), "sent"),  # half a metre in front
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        results = [bridge.send(stamp, est) for stamp, est, _ in cases]
+    assert results == [why for *_, why in cases]
+    assert sum(bridge.stats.skipped.values()) == len(cases) - 1 and bridge.stats.sent == 1
+
+
+def test_a_pose_source_giving_none_or_an_empty_reason_is_counted_as_unknown() -> None:
+    answers = iter([None, ""])
+    bridge = LandingTargetBridge(RecordingLink(), "px4", vehicle_pose=lambda s: next(answers))  # type: ignore[arg-type]
+    for stamp in (1.0, 2.0):
+        assert bridge.send(stamp, estimate(np.eye(3), [0.0, 0.0, 2.0])) == (
+            "no vehicle pose at the stamp: unknown"
+        )
+    assert bridge.stats.skipped == {"no vehicle pose at the stamp: unknown": 2}
+
+
+def test_on_sent_hears_each_sent_stamp_and_the_wall_time_of_runs_adds_up(monkeypatch) -> None:
+    import time as time_module
+
+    heard: list = []
+    bridge = LandingTargetBridge(RecordingLink(), "ardupilot", on_sent=heard.append)  # type: ignore[arg-type]
+    ticks = iter([10.0, 12.0, 20.0, 23.0])
+    monkeypatch.setattr(time_module, "perf_counter", lambda: next(ticks))
+    bridge.run([(1.0, estimate(np.eye(3), [0.0, 0.0, 2.0]))])
+    stats = bridge.run([(2.0, estimate(np.eye(3), [0.0, 0.0, 2.0]))])
+    assert heard == [1.0, 2.0]
+    assert stats.wall_s == 5.0 and stats.rate_hz == pytest.approx(0.4)
+
+
+def test_a_link_receiving_mavlink_2_leaves_pymavlinks_own_dialect_as_it_was() -> None:
+    import os
+    import subprocess
+    import sys
+
+    program = (
+        "import os, socket\n"
+        "os.environ.pop('MAVLINK20', None)\n"
+        "from pymavlink import mavutil\n"
+        "from pymavlink.dialects.v20 import common\n"
+        "from agents.io.mavlink import MavlinkLink\n"
+        "dialect = mavutil.mavlink\n"
+        "probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+        "probe.bind(('127.0.0.1', 0))\n"
+        "port = probe.getsockname()[1]\n"
+        "probe.close()\n"
+        "link = MavlinkLink(f'udpin:127.0.0.1:{port}')\n"
+        "sender = mavutil.mavlink_connection(f'udpout:127.0.0.1:{port}')\n"
+        "common.MAVLink(sender, srcSystem=1, srcComponent=1).heartbeat_send(6, 8, 0, 0, 4)\n"
+        "message = link.receive(10.0)\n"
+        "assert message is not None and message.get_type() == 'HEARTBEAT'\n"
+        "assert mavutil.mavlink is dialect and 'MAVLINK20' not in os.environ\n"
+    )
+    MavlinkLink("udpout:127.0.0.1:14550").close()  # the link opens here too
+    # the same code as this process imports, in an interpreter where pymavlink speaks MAVLink 1
+    env = {k: v for k, v in os.environ.items() if k != "MAVLINK20"}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    done = subprocess.run([sys.executable, "-c", program], env=env, timeout=120, check=False)
+    assert done.returncode == 0

@@ -115,8 +115,56 @@ def test_a_clock_jump_restarts_the_filter_after_five_far_samples() -> None:
     ],
 )
 def test_bad_clock_sync_settings_are_refused_naming_the_key(key: str, kwargs: dict) -> None:
-    with pytest.raises(ConfigError, match=key):
+    with pytest.raises(ConfigError, match=key) as refused:
         ClockSync(**kwargs)
+    assert refused.value.key == key and "allowed" in str(refused.value)
+
+
+def test_the_gain_halfway_through_the_window_weighs_the_initial_gain_by_exp_minus_a_half() -> None:
+    # PX4's schedule final + (initial - final) * exp(-k / (2 (N - k))): at k = N / 2, exp(-1/2)
+    expected = GAIN_FINAL + (GAIN_INITIAL - GAIN_FINAL) * math.exp(-0.5)
+    assert smoothing_gain(250, 500) == pytest.approx(expected, rel=1e-12)
+    assert smoothing_gain(400, 500) == pytest.approx(
+        GAIN_FINAL + (GAIN_INITIAL - GAIN_FINAL) * math.exp(-2.0), rel=1e-12
+    )
+
+
+def test_stamps_that_are_not_integers_are_not_used_and_counted_once_under_their_reason() -> None:
+    sync = ClockSync()
+    assert sync.add_exchange(0.0, 5 * NS, 2_000_000) == "stamps not integers"
+    assert sync.add_exchange(0, 5 * NS, 20 * NS) == "round trip >= 10 ms"
+    assert sync.add_exchange(0, 5 * NS, 20 * NS) == "round trip >= 10 ms"
+    assert sync.rejected == {"stamps not integers": 1, "round trip >= 10 ms": 2}
+    assert sync.samples == 0 and math.isnan(sync.offset_s)
+
+
+def test_a_reply_received_in_the_nanosecond_its_request_left_is_used() -> None:
+    sync = ClockSync()
+    assert sync.add_exchange(1000, 3 * NS + 1000, 1000) == "used"
+    assert sync.offset_s == pytest.approx(3.0, abs=1e-12) and sync.rtt_s == 0.0
+
+
+def test_a_sample_exactly_at_the_deviation_bound_is_used() -> None:
+    # "more than max_deviation_s from the estimate" is not used: at the bound it still is
+    sync = ClockSync(convergence_window=1, max_deviation_s=0.125)
+    assert sync.add_exchange(0, 3 * NS + 500, 1000) == "used"
+    assert sync.converged and sync.offset_s == 3.0
+    assert sync.add_exchange(0, 3 * NS + 500 + NS // 8, 1000) == "used"
+    assert (
+        sync.add_exchange(0, 3 * NS + 500 + NS // 4, 1000) == "more than 125 ms from the estimate"
+    )
+
+
+def test_each_clock_jump_counts_one_restart() -> None:
+    sync = ClockSync(convergence_window=1)
+    for jump, offset_s in enumerate((5, 9), start=1):
+        assert sync.add_exchange(0, 1000, 1000) == "used"
+        for _ in range(5):
+            sync.add_exchange(0, offset_s * NS, 1000)
+        assert (
+            sync.add_exchange(0, offset_s * NS, 1000) == "far from the estimate: filter restarted"
+        )
+        assert sync.restarts == jump and sync.samples == 0
 
 
 # ------------------------------------------------------------------ the pose history
@@ -188,6 +236,79 @@ def test_odometry_becomes_the_only_source_once_it_arrives() -> None:
     pose = poses(1.5)
     assert isinstance(pose, VehiclePose)
     assert pose.position_ned_m == pytest.approx((2.0, 2.0, 2.0))
+
+
+def test_a_sample_exactly_the_history_behind_the_newest_is_out_of_order_not_a_restart() -> None:
+    poses = AutopilotPoses(synced(), history_s=2.0)
+    assert poses.add_position(5.0, (1.0, 2.0, 3.0)) == "kept"
+    assert poses.add_position(3.0, (0.0, 0.0, 0.0)) == "position: out of time order"
+    assert poses.positions.times_s == [5.0]
+    assert poses.add_position(2.5, (0.0, 0.0, 0.0)) == "kept"  # further back: a restart
+    assert poses.positions.times_s == [2.5]
+
+
+@pytest.mark.parametrize("history_s", [0, -1.0, math.inf, "2 s"])
+def test_a_bad_history_length_is_refused_naming_it(history_s) -> None:
+    with pytest.raises(ConfigError, match="history_s") as refused:
+        AutopilotPoses(synced(), history_s=history_s)
+    assert refused.value.key == "history_s" and "allowed (0, inf)" in str(refused.value)
+
+
+def test_once_odometry_arrives_both_separate_messages_are_ignored_naming_them() -> None:
+    poses = AutopilotPoses(synced())
+    assert poses.add_odometry(1.0, (1.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0)) == "kept"
+    assert poses.add_attitude(1.5, (0.0, 1.0, 0.0, 0.0)) == (
+        "ATTITUDE_QUATERNION ignored: ODOMETRY in use"
+    )
+    assert poses.add_position(1.5, (9.0, 9.0, 9.0)) == "LOCAL_POSITION_NED ignored: ODOMETRY in use"
+    assert poses.attitudes.times_s == [1.0] and poses.positions.times_s == [1.0]
+
+
+@pytest.mark.parametrize(
+    ("stamp", "position", "q"),
+    [
+        (1.0, (1.0, math.nan, 3.0), (1.0, 0.0, 0.0, 0.0)),
+        (1.0, (1.0, 2.0, 3.0), (1.0, math.inf, 0.0, 0.0)),
+        (math.nan, (1.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0)),
+    ],
+)
+def test_an_odometry_with_any_part_not_finite_keeps_nothing_and_leaves_the_sources(
+    stamp, position, q
+) -> None:
+    poses = AutopilotPoses(synced())
+    assert poses.add_odometry(stamp, position, q) == "odometry: not finite"
+    assert poses.skipped == {"odometry: not finite": 1}
+    assert not poses.odometry and not poses.positions.times_s and not poses.attitudes.times_s
+    assert poses.add_position(2.0, (1.0, 2.0, 3.0)) == "kept"
+
+
+def test_each_sample_is_counted_once_as_kept_or_skipped_and_each_miss_once() -> None:
+    poses = AutopilotPoses(synced())
+    for t in (1.0, 2.0, 3.0):
+        assert poses.add_position(t, (t, 0.0, 0.0)) == "kept"
+    assert poses.add_position(2.0, (0.0, 0.0, 0.0)) == "position: out of time order"
+    assert poses.kept == {"position": 3}
+    assert poses.skipped == {"position: out of time order": 1}
+    assert poses(0.5) == poses(0.6) == "stamp before the oldest position"
+    assert poses.misses == {"stamp before the oldest position": 2}
+
+
+def test_a_quaternion_with_a_huge_entry_is_refused_without_a_warning() -> None:
+    import warnings
+
+    poses = AutopilotPoses(synced())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        reason = poses.add_attitude(1.0, (1e200, 0.0, 0.0, 0.0))
+    assert reason == "attitude: quaternion not of unit norm"
+
+
+def test_values_that_are_not_numbers_are_skipped_and_a_column_vector_is_taken() -> None:
+    poses = AutopilotPoses(synced())
+    assert poses.add_position(1.0, (1.0, None, 3.0)) == "position: not finite"
+    assert poses.add_attitude(1.0, ("w", 0.0, 0.0, 0.0)) == "attitude: not finite"
+    assert poses.add_position(1.0, np.array([[1.0], [2.0], [3.0]])) == "kept"
+    assert poses.positions.values[0] == pytest.approx([1.0, 2.0, 3.0])
 
 
 @settings(max_examples=200, deadline=None)
@@ -489,3 +610,196 @@ def test_the_autopilots_pose_is_refused_where_it_cannot_work(
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "--vehicle-pose mavlink" in err and message in err
+
+
+# ------------------------------------------------------- the listener, message by message
+class Message:
+    """A decoded MAVLink message as the listener reads it: type, source and fields."""
+
+    def __init__(self, kind: str, source: tuple[int, int] = (1, 1), **fields) -> None:
+        self.kind, self.source = kind, source
+        self.__dict__.update(fields)
+
+    def get_type(self) -> str:
+        return self.kind
+
+    def get_srcSystem(self) -> int:
+        return self.source[0]
+
+    def get_srcComponent(self) -> int:
+        return self.source[1]
+
+
+class FakeLink:
+    """A link with the bridge's ids (system 1, component 191) that records what is sent and
+    hands out queued messages (or raises a queued error), waiting its timeout when empty."""
+
+    system_id, component_id = 1, 191
+
+    def __init__(self, *incoming) -> None:
+        self.incoming = list(incoming)
+        self.sent: list[tuple[int, int, int, int]] = []
+
+    def receive(self, timeout_s: float):
+        if not self.incoming:
+            time.sleep(timeout_s)
+            return None
+        item = self.incoming.pop(0)
+        if isinstance(item, Exception):
+            raise item
+        return item
+
+    def send_timesync(self, tc1: int, ts1: int, target_system: int = 0, target_component=0):
+        self.sent.append((tc1, ts1, target_system, target_component))
+
+
+def test_a_request_is_answered_to_its_sender_and_our_own_looped_back_is_not() -> None:
+    link = FakeLink()
+    listener = AutopilotListener(link, clock_s=lambda: 2.5)
+    for source in ((1, 1), (7, 42)):
+        answer = listener.handle(Message("TIMESYNC", source, tc1=0, ts1=1234))
+        assert answer == "answered TIMESYNC request"
+    assert link.sent == [(2_500_000_000, 1234, 1, 1), (2_500_000_000, 1234, 7, 42)]
+    looped = listener.handle(Message("TIMESYNC", (1, 191), tc1=0, ts1=99))
+    assert looped == "TIMESYNC request of our own, looped back"
+    assert len(link.sent) == 2
+    assert listener.handled == {"answered TIMESYNC request": 2}
+    assert listener.skipped == {"TIMESYNC request of our own, looped back": 1}
+
+
+def test_a_reply_addressed_to_us_by_system_and_component_feeds_the_clock_at_its_receipt() -> None:
+    link = FakeLink()
+    listener = AutopilotListener(link, clock_s=lambda: 1.0, sync=ClockSync(convergence_window=1))
+    ts1 = listener.send_request()
+    reply = Message("TIMESYNC", tc1=ts1 + 5 * NS, ts1=ts1, target_system=1, target_component=191)
+    # received 2 ms after the request left: the round trip is the receipt's, not the clock's
+    assert listener.handle(reply, received_ns=ts1 + 2_000_000) == "used"
+    assert listener.sync.rtt_s == pytest.approx(0.002, abs=1e-12)
+    assert listener.sync.offset_s == pytest.approx(5.0 - 0.001, abs=1e-12)
+    assert listener.handled == {"TIMESYNC requests sent": 1, "TIMESYNC replies used": 1}
+
+
+def test_replies_not_for_us_are_skipped_each_under_its_reason() -> None:
+    listener = AutopilotListener(FakeLink(), clock_s=lambda: 1.0)
+    ts1 = listener.send_request()
+    replies = [
+        Message("TIMESYNC", tc1=-5, ts1=ts1),
+        Message("TIMESYNC", tc1=9, ts1=ts1, target_system=1, target_component=7),
+        Message("TIMESYNC", tc1=9, ts1=ts1, target_system=2, target_component=191),
+        Message("TIMESYNC", (1, 42), tc1=9, ts1=ts1),
+        Message("HEARTBEAT"),
+    ]
+    results = [listener.handle(m, received_ns=ts1 + 1000) for m in replies]
+    assert results == [
+        "TIMESYNC: negative tc1",
+        "TIMESYNC reply addressed to another component",
+        "TIMESYNC reply addressed to another component",
+        "TIMESYNC reply from another component",
+        "ignored",
+    ]
+    assert listener.skipped == {
+        "TIMESYNC: negative tc1": 1,
+        "TIMESYNC reply addressed to another component": 2,
+        "TIMESYNC reply from another component": 1,
+    }
+    assert listener.sync.samples == 0
+
+
+def test_a_malformed_message_is_counted_by_its_error_and_never_raised() -> None:
+    listener = AutopilotListener(FakeLink())
+    assert (
+        listener.handle(Message("TIMESYNC", tc1="soon", ts1=1)) == "malformed message (ValueError)"
+    )
+    assert listener.handle(Message("LOCAL_POSITION_NED")) == "malformed message (AttributeError)"
+    assert listener.skipped == {
+        "malformed message (ValueError)": 1,
+        "malformed message (AttributeError)": 1,
+    }
+
+
+def test_the_autopilot_named_by_its_system_id_is_the_one_listened_to() -> None:
+    listener = AutopilotListener(FakeLink(), autopilot_system_id=7)
+    position = {"time_boot_ms": 1000, "x": 1.0, "y": 2.0, "z": 3.0}
+    assert listener.handle(Message("LOCAL_POSITION_NED", (7, 1), **position)) == "kept"
+    other = listener.handle(Message("LOCAL_POSITION_NED", (1, 1), **position))
+    assert other == "LOCAL_POSITION_NED from another component"
+
+
+def test_every_request_is_counted_and_a_reply_to_one_long_forgotten_is_not_ours() -> None:
+    clock = itertools.count(1)
+    listener = AutopilotListener(FakeLink(), clock_s=lambda: next(clock) * 1e-3)
+    sent = [listener.send_request() for _ in range(65)]
+    assert listener.handled["TIMESYNC requests sent"] == 65
+    forgotten = Message("TIMESYNC", tc1=9, ts1=sent[0])
+    assert (
+        listener.handle(forgotten, received_ns=sent[-1]) == "TIMESYNC reply to no request of ours"
+    )
+    remembered = Message("TIMESYNC", tc1=sent[1] + 500, ts1=sent[1])
+    assert listener.handle(remembered, received_ns=sent[1] + 1000) == "used"
+
+
+@pytest.mark.parametrize("period", [0, -0.05, math.inf, "fast"])
+def test_a_bad_request_period_is_refused_naming_it(period) -> None:
+    with pytest.raises(ConfigError, match="request_period_s") as refused:
+        AutopilotListener(FakeLink(), request_period_s=period)
+    assert refused.value.key == "request_period_s" and "allowed (0, 1e6)" in str(refused.value)
+
+
+def test_the_summary_line_gives_the_offset_round_trip_samples_state_and_requests_answered() -> None:
+    listener = AutopilotListener(FakeLink(), sync=ClockSync(convergence_window=1))
+    assert "(not converged)" in listener.summary()
+    listener.handle(Message("TIMESYNC", (1, 1), tc1=0, ts1=5))
+    listener.sync.add_exchange(0, 3 * NS + 4_000_000, 8_000_000)
+    assert listener.summary() == (
+        "TIMESYNC: offset (autopilot - companion) 3.000000 s, last round trip 8.00 ms, "
+        "1 samples used (converged), 1 requests answered"
+    )
+
+
+def test_a_link_error_is_counted_once_and_the_listener_goes_on_listening() -> None:
+    link = FakeLink(OSError("link down"), Message("TIMESYNC", (1, 1), tc1=0, ts1=77))
+    with AutopilotListener(link, request_period_s=1e3) as listener:
+        wait_for(lambda: listener.handled["answered TIMESYNC request"] == 1)
+    assert listener.skipped == {"link error: link down": 1}
+
+
+def test_on_a_quiet_link_requests_go_out_every_request_period() -> None:
+    link = FakeLink()
+    with AutopilotListener(link, request_period_s=0.01):
+        wait_for(lambda: len(link.sent) >= 20)
+    assert all(tc1 == 0 for tc1, *_ in link.sent)
+
+
+def test_a_listener_stopped_can_start_again_and_one_never_started_stops_quietly() -> None:
+    AutopilotListener(FakeLink()).stop()
+    link = FakeLink()
+    listener = AutopilotListener(link, request_period_s=1e3)
+    for run in (1, 2):
+        link.incoming.append(Message("TIMESYNC", (1, 1), tc1=0, ts1=run))
+        with listener:
+            wait_for(lambda run=run: listener.handled["answered TIMESYNC request"] == run)
+        assert not any(t.name == "autopilot" for t in threading.enumerate())
+
+
+def test_a_listener_left_running_never_keeps_the_program_from_exiting() -> None:
+    import os
+    import subprocess
+    import sys
+
+    program = (
+        "import time\n"
+        "from agents.io.autopilot_listener import AutopilotListener\n"
+        "class Link:\n"
+        "    system_id, component_id = 1, 191\n"
+        "    def receive(self, timeout_s):\n"
+        "        time.sleep(timeout_s)\n"
+        "    def send_timesync(self, *args):\n"
+        "        pass\n"
+        "AutopilotListener(Link()).start()\n"
+    )
+    with AutopilotListener(FakeLink(), request_period_s=1e3) as listener:  # here it ends
+        wait_for(lambda: listener.handled["TIMESYNC requests sent"] == 1)
+    # the same code as this process imports
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    done = subprocess.run([sys.executable, "-c", program], env=env, timeout=120, check=False)
+    assert done.returncode == 0

@@ -1,0 +1,43 @@
+"""The mutation-testing map (tools/mutation.yaml): each mutated module with the test files that
+import it, so that `make mutation` runs each mutant against those tests alone."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def mutation_tool():
+    spec = importlib.util.spec_from_file_location("mutation_tool", ROOT / "tools" / "mutation.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_map_names_for_each_module_the_test_files_that_import_it() -> None:
+    tool = mutation_tool()
+    mapping = tool.load_map()
+    assert mapping["tests"] == tool.derive_tests(mapping["paths"]), (
+        "tools/mutation.yaml is out of date: run python tools/mutation.py map"
+    )
+    assert "tests/test_mavlink_autopilot.py" in mapping["tests"]["agents/io/timesync.py"]
+
+
+def test_a_test_file_imports_a_module_by_either_form_of_import(tmp_path: Path) -> None:
+    tool = mutation_tool()
+    test_file = tmp_path / "test_x.py"
+    test_file.write_text(
+        "import agents.io.bag\nfrom agents.io import timesync\nfrom agents.io.mavlink import X\n"
+    )
+    names = tool.imported_modules(test_file)
+    assert {"agents.io.bag", "agents.io.timesync", "agents.io.mavlink"} <= names
+
+
+def test_a_module_not_in_the_map_is_refused_naming_it() -> None:
+    tool = mutation_tool()
+    with pytest.raises(SystemExit, match=r"agents/io/nowhere\.py"):
+        tool.chosen(["agents/io/nowhere.py"], {"agents/io/timesync.py": []})

@@ -1,0 +1,238 @@
+"""Mutation testing of the modules a user relies on beyond the simulator, with mutmut.
+
+``tools/mutation.yaml`` keeps the one mapping: the modules to mutate (``paths``, globs) and,
+for each module, the test files that import it (``tests``, derived by ``map``). Each module
+runs in its own folder ``results/mutation/<module>/`` (links to the packages, a
+``pyproject.toml`` with the module's ``[tool.mutmut]`` section), so that mutmut collects its
+coverage from that module's tests alone and runs each mutant against the tests that reached
+the mutated function. The report of a run is ``docs/reference/mutation.md``.
+
+    python tools/mutation.py map            # derive tests: from the imports in tests/
+    python tools/mutation.py map --check    # refuse a mapping that is out of date
+    python tools/mutation.py run agents/io/timesync.py agents/io/mavlink.py --workers 2
+    python tools/mutation.py run 'agents/io/*'            # every mapped module under agents/io
+    python tools/mutation.py summary 'agents/io/*'        # score and survivors with their diffs
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import fnmatch
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+MAP_FILE = ROOT / "tools" / "mutation.yaml"
+RUNS = ROOT / "results" / "mutation"
+# what a module's tests need next to the mutated package: the code, the configs, the tests
+LINKED = ("agents", "estimation", "landing_env", "configs", "tests", "benchmarks")
+SOURCES = ("agents", "estimation", "landing_env")
+HEADER = """\
+# Mutation testing (tools/mutation.py, make mutation): the modules mutated and, for each, the
+# test files that import it. `paths` is kept by hand; `tests` is derived from the imports in
+# tests/ by `python tools/mutation.py map` (tests/test_mutation_map.py checks it is current).
+"""
+
+
+def module_name(path: str) -> str:
+    """``agents/io/timesync.py`` -> ``agents.io.timesync``."""
+    return path.removesuffix(".py").replace("/", ".")
+
+
+def imported_modules(test_file: Path) -> set[str]:
+    """Every module a test file imports, the ``from package import module`` form included."""
+    tree = ast.parse(test_file.read_text(encoding="utf-8"))
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return found
+
+
+def selected_modules(paths: list[str]) -> list[str]:
+    """The module files the globs in ``paths`` name (package ``__init__`` files left out)."""
+    modules: set[str] = set()
+    for pattern in paths:
+        matches = [p.relative_to(ROOT).as_posix() for p in ROOT.glob(pattern)]
+        if not matches:
+            raise SystemExit(f"tools/mutation.yaml: paths entry {pattern!r} names no file")
+        modules.update(m for m in matches if not m.endswith("__init__.py"))
+    return sorted(modules)
+
+
+def derive_tests(paths: list[str]) -> dict[str, list[str]]:
+    """For each selected module, the test files that import it, sorted."""
+    imports = {
+        f.relative_to(ROOT).as_posix(): imported_modules(f)
+        for f in sorted((ROOT / "tests").glob("test_*.py"))
+    }
+    return {
+        module: [test for test, names in imports.items() if module_name(module) in names]
+        for module in selected_modules(paths)
+    }
+
+
+def load_map() -> dict:
+    return yaml.safe_load(MAP_FILE.read_text(encoding="utf-8"))
+
+
+def write_map(paths: list[str], tests: dict[str, list[str]]) -> None:
+    body = yaml.safe_dump({"paths": paths, "tests": tests}, sort_keys=False, width=100)
+    MAP_FILE.write_text(HEADER + body, encoding="utf-8")
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    mapping = load_map()
+    derived = derive_tests(mapping["paths"])
+    if args.check:
+        if derived != mapping["tests"]:
+            stale = sorted(
+                m
+                for m in derived.keys() | mapping["tests"].keys()
+                if derived.get(m) != mapping["tests"].get(m)
+            )
+            print(
+                f"tools/mutation.yaml: tests of {', '.join(stale)} out of date; "
+                "run python tools/mutation.py map"
+            )
+            return 1
+        return 0
+    write_map(mapping["paths"], derived)
+    untested = [m for m, tests in derived.items() if not tests]
+    print(f"{len(derived)} modules, {len(untested)} imported by no test: {', '.join(untested)}")
+    return 0
+
+
+def chosen(patterns: list[str], tests: dict[str, list[str]]) -> list[str]:
+    """The mapped modules the command-line patterns name; a pattern naming none is refused."""
+    if not patterns:
+        return list(tests)
+    picked: list[str] = []
+    for pattern in patterns:
+        hits = [m for m in tests if fnmatch.fnmatch(m, pattern) or m == pattern]
+        if not hits:
+            raise SystemExit(f"module {pattern!r} is not in tools/mutation.yaml (paths and tests)")
+        picked.extend(h for h in hits if h not in picked)
+    return picked
+
+
+def prepare(module: str, test_files: list[str]) -> Path:
+    """The module's run folder: links to the packages and its own ``[tool.mutmut]`` section."""
+    run_dir = RUNS / module_name(module)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for name in LINKED:
+        link = run_dir / name
+        if not link.is_symlink():
+            link.symlink_to(ROOT / name, target_is_directory=True)
+    settings = {
+        "source_paths": list(SOURCES),
+        "only_mutate": [module],
+        "also_copy": ["configs", "benchmarks"],
+        "pytest_add_cli_args_test_selection": test_files,
+        "pytest_add_cli_args": ["-p", "no:cacheprovider", "-x", "-q"],
+        "use_git_change_detection": False,
+        "mutate_only_covered_lines": False,
+    }
+    lines = ["", "[tool.mutmut]"]
+    for key, value in settings.items():
+        if isinstance(value, bool):
+            lines.append(f"{key} = {'true' if value else 'false'}")
+        else:
+            lines.append(f"{key} = [{', '.join(repr(v).replace(chr(39), chr(34)) for v in value)}]")
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8") + "\n".join(lines) + "\n"
+    (run_dir / "pyproject.toml").write_text(text, encoding="utf-8")
+    return run_dir
+
+
+def mutmut(run_dir: Path, *argv: str, capture: bool = False) -> subprocess.CompletedProcess:
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONPATH": ""}
+    exe = Path(sys.executable).with_name("mutmut")
+    return subprocess.run(
+        [str(exe), *argv], cwd=run_dir, env=env, text=True, capture_output=capture, check=False
+    )
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    tests = load_map()["tests"]
+    failed = 0
+    for module in chosen(args.modules, tests):
+        if not tests[module]:
+            print(f"{module}: no test imports it; not run")
+            continue
+        run_dir = prepare(module, tests[module])
+        started = time.monotonic()
+        names = args.mutants or [f"{module_name(module)}*"]
+        print(f"== {module}: mutmut over {len(tests[module])} test files", flush=True)
+        result = mutmut(run_dir, "run", "--max-children", str(args.workers), *names)
+        failed += result.returncode != 0
+        print(f"== {module}: {time.monotonic() - started:.0f} s", flush=True)
+    return 1 if failed else 0
+
+
+STATUS = re.compile(r"^\s*(\S+): (.+)$")
+
+
+def statuses(run_dir: Path) -> dict[str, str]:
+    out = mutmut(run_dir, "results", "--all", "true", capture=True).stdout
+    return {m[1]: m[2] for m in map(STATUS.match, out.splitlines()) if m}
+
+
+def cmd_summary(args: argparse.Namespace) -> int:
+    tests = load_map()["tests"]
+    total: dict[str, int] = {}
+    for module in chosen(args.modules, tests):
+        run_dir = RUNS / module_name(module)
+        if not (run_dir / "mutants").is_dir():
+            print(f"## {module}: not run")
+            continue
+        found = statuses(run_dir)
+        counts: dict[str, int] = {}
+        for status in found.values():
+            counts[status] = counts.get(status, 0) + 1
+            total[status] = total.get(status, 0) + 1
+        print(f"## {module}: {score_line(counts)}")
+        for name, status in found.items():
+            if status not in ("killed", "caught by type check"):
+                print(mutmut(run_dir, "show", name, capture=True).stdout)
+    print(f"## all: {score_line(total)}")
+    return 0
+
+
+def score_line(counts: dict[str, int]) -> str:
+    mutants = sum(counts.values())
+    killed = counts.get("killed", 0) + counts.get("timeout", 0)
+    score = 100.0 * killed / mutants if mutants else float("nan")
+    parts = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+    return f"{killed}/{mutants} killed ({score:.1f} %): {parts}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("map", help="derive each module's test files from the imports in tests/")
+    p.add_argument("--check", action="store_true", help="refuse a mapping that is out of date")
+    p.set_defaults(func=cmd_map)
+    p = sub.add_parser("run", help="mutate the modules, each against its own test files")
+    p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
+    p.add_argument("--workers", type=int, default=2, help="mutants tested at once (default 2)")
+    p.add_argument("--mutants", nargs="+", help="only these mutant names (mutmut's, globs)")
+    p.set_defaults(func=cmd_run)
+    p = sub.add_parser("summary", help="score and the diff of each mutant not killed")
+    p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
+    p.set_defaults(func=cmd_summary)
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
