@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.paths import ROOT
 
 
 def mutation_tool():
@@ -24,7 +24,7 @@ def test_the_map_names_for_each_module_the_test_files_that_import_it() -> None:
     assert mapping["tests"] == tool.derive_tests(mapping["paths"]), (
         "tools/mutation.yaml is out of date: run python tools/mutation.py map"
     )
-    assert "tests/test_mavlink_autopilot.py" in mapping["tests"]["agents/io/timesync.py"]
+    assert "tests/agents/io/test_mavlink_autopilot.py" in mapping["tests"]["agents/io/timesync.py"]
 
 
 def test_a_test_file_imports_a_module_by_either_form_of_import(tmp_path: Path) -> None:

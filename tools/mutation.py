@@ -74,7 +74,7 @@ def derive_tests(paths: list[str]) -> dict[str, list[str]]:
     """For each selected module, the test files that import it, sorted."""
     imports = {
         f.relative_to(ROOT).as_posix(): imported_modules(f)
-        for f in sorted((ROOT / "tests").glob("test_*.py"))
+        for f in sorted((ROOT / "tests").rglob("test_*.py"))
     }
     return {
         module: [test for test, names in imports.items() if module_name(module) in names]
