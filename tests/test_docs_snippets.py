@@ -50,11 +50,15 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 #: the pages whose blocks run: the README and the docs, less the dated experiment records
-PAGES = ["README.md"] + sorted(
-    str(p.relative_to(ROOT))
-    for p in (ROOT / "docs").rglob("*.md")
-    if "experiments" not in p.relative_to(ROOT / "docs").parts and "_build" not in p.parts
-)
+_DOCS = (ROOT / "docs").rglob("*.md")
+PAGES = [
+    "README.md",
+    *sorted(
+        str(p.relative_to(ROOT))
+        for p in _DOCS
+        if not {"experiments", "_build"} & set(p.relative_to(ROOT / "docs").parts)
+    ),
+]
 LANGUAGES = ("bash", "sh", "shell", "console", "python")
 _FENCE = re.compile(
     r"^```(?P<lang>[\w-]+)[ \t]*\n(?P<code>.*?)^```[ \t]*$", re.DOTALL | re.MULTILINE
