@@ -16,14 +16,16 @@ How a block runs
 
 What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for it)
   * ``--episodes N`` -> 1, ``--workers N`` -> 1, ``--seeds N`` -> 1, ``--duration N`` -> 1,
-    ``--seconds N`` -> 2, ``--n-timesteps``/``-n`` of rl-zoo3 -> 64 (added when absent);
-  * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1`` and ``evaluate landing``
-    ``--workers 1 --episodes 1`` in front of their own flags (the written ones, reduced, win);
+    ``--seconds N`` -> 2, rl-zoo3 given ``-n 64`` (its step budget);
+  * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1``, ``evaluate landing``
+    ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen`` ``--duration 10`` in
+    front of their own flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
   * ``configs/train/*.yaml`` -> copies with 64 steps, an evaluation every 32 steps of one episode
     and small buffers, so ``train`` still writes ``best_model.zip``;
   * placeholders name small files made once per run: ``DIR`` (the chessboard photos of
-    tests/data and a calibration), ``photos/``, ``my_camera/intrinsics.json``, ``REC`` and
+    tests/data and the simulated camera's calibration folder), ``photos/`` (the photos),
+    ``my_camera/`` (the calibration folder), ``REC`` and
     ``REC.mcap`` and ``results/episode.mcap`` (a recorded demo episode), ``rig/``, ``rig.mcap``
     with ``rig.json`` and ``rig_stages.json`` (the simulated ToF rig).
 
@@ -76,11 +78,12 @@ REDUCTIONS: tuple[tuple[str, str], ...] = (
     (r"--duration \d+(\.\d+)?", "--duration 1"),
     (r"--seconds \d+", "--seconds 2"),
     (r"\b(\w+)(?:\|\w+)+\b", r"\1"),  # tight|ihrcf|crhf -> tight
-    (r"(python -m rl_zoo3\.train\b)", r"\1 -n 64 --eval-freq 32 --eval-episodes 1"),
+    (r"(python -m rl_zoo3\.train\b)", r"\1 -n 64"),
     (r"--input REC\b(?!\.)", "--input REC.mcap"),
     # the flags a command's default makes long, given first (a written value still wins)
     (r"(deck-landing evaluate (?:estimators|sweep))\b", r"\1 --duration 1"),
     (r"(deck-landing evaluate landing)\b", r"\1 --workers 1 --episodes 1"),
+    (r"(-m benchmarks\.bench_fused_unseen)\b", r"\1 --duration 10"),
 )
 
 
@@ -224,6 +227,24 @@ rig = record_tof_rig_in_sim(
 write_rig_recording("rig", rig.stages, rig.description)
 write_rig_mcap("rig.mcap", rig.stages, rig.description, stages_file="rig.json")
 shutil.copy("rig.json", "rig_stages.json")
+
+# the simulated camera's calibration folder: its intrinsics, ToF calibration and mount
+import json
+from estimation.frames import R_BC
+from landing_env.physics.quadrotor_params import QuadrotorParams
+
+for name in ("intrinsics.json", "tof_camera.json"):
+    shutil.copy(f"configs/calibration/{name}", f"my_camera/{name}")
+mount = {
+    "format": "deck-landing/camera-extrinsics",
+    "format_version": 1,
+    "r_bc": R_BC.tolist(),
+    "t_bc_m": list(map(float, QuadrotorParams.from_yaml(None).camera_offset_b)),
+}
+with open("my_camera/extrinsics.json", "w") as f:
+    json.dump(mount, f)
+for name in ("intrinsics.json", "tof_camera.json", "extrinsics.json"):
+    shutil.copy(f"my_camera/{name}", f"DIR/{name}")
 """
 
 #: the placeholders' small data, made once per test process: shell steps run in the seed folder
@@ -231,9 +252,6 @@ SEED_DATA = (
     "mkdir -p photos DIR my_camera results",
     "cp tests/data/opencv_chessboard/*.jpg photos/",
     "cp tests/data/opencv_chessboard/*.jpg DIR/",
-    "deck-landing calibrate intrinsics --images photos --pattern 9x6 --square 0.025"
-    " --out my_camera/intrinsics.json",
-    "cp my_camera/intrinsics.json DIR/",
     "deck-landing demo --mode project --no-timing --episodes 1 --record REC.mcap",
     "cp REC.mcap results/episode.mcap",
     "python seed_rig.py",
