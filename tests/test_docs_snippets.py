@@ -1,63 +1,379 @@
-"""Every ```python block of the README and the getting-started page runs, warning-free.
+"""Every command of the README and the docs runs: each ```bash/```sh/```shell/```console and
+```python block of README.md and docs/**/*.md (not the dated records in docs/experiments/) runs
+in a fresh process, at reduced size, and a failing block fails the suite under its page:line.
 
-Deprecation warnings are errors, and so is any warning Gymnasium gives (an out-of-date id,
-a checker's complaint), so a snippet that shows a superseded id fails here.  Bash blocks are
-not run.
+How a block runs
+  * Shell blocks run as ``bash -euo pipefail -c BLOCK`` with the test's virtualenv first on PATH
+    (so ``deck-landing`` and ``python`` are its own); ``$ `` prompts of ```console blocks are
+    stripped and their output lines dropped.  Python blocks run as a file in a fresh ``python``.
+  * Each block runs in its own temporary folder that holds the repository's top-level entries
+    as symbolic links (configs/, tests/, the packages), shrunk training configs, and small data
+    under the placeholders' names (``SEED_DATA``); outputs go there, never into the repository.
+  * A Python block whose first line is a path comment (``# my_estimators/tag_only.py``) is
+    written to that path before it runs, so a later block of its page can import it; a
+    ```toml block of the same page that declares the package's entry points is then installed
+    there as pip lays it out (its ``.dist-info``), as the page's ``pip install -e .`` would.
+
+What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for it)
+  * ``--episodes N`` -> 1, ``--workers N`` -> 1, ``--seeds N`` -> 1, ``--duration N`` -> 1,
+    ``--seconds N`` -> 2, rl-zoo3 given ``-n 64`` (its step budget);
+  * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1``, ``evaluate landing``
+    ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen`` ``--duration 10`` in
+    front of their own flags (the written ones, reduced, win);
+  * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
+  * ``configs/train/*.yaml`` -> copies with 64 steps, an evaluation every 32 steps of one episode
+    and small buffers, so ``train`` still writes ``best_model.zip``;
+  * placeholders name small files made once per run: ``DIR`` (the chessboard photos of
+    tests/data and the simulated camera's calibration folder), ``photos/`` (the photos),
+    ``my_camera/`` (the calibration folder), ``REC`` and
+    ``REC.mcap`` and ``results/episode.mcap`` (a recorded demo episode), ``rig/``, ``rig.mcap``
+    with ``rig.json`` and ``rig_stages.json`` (the simulated ToF rig).
+
+What is not run
+  A block right after ``<!-- not-run: REASON -->`` in the Markdown source (MyST renders the
+  comment invisibly) is reported as a skipped test with that reason (``pytest -ra`` lists them).
+
+Python blocks also run with deprecation warnings as errors, so a snippet that shows a
+superseded API or id fails here.
 """
 
 from __future__ import annotations
 
+import os
 import re
-import warnings
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 from tests.paths import ROOT
 
-DOCUMENTS = ("README.md", "docs/getting-started.md")
-_PYTHON_BLOCK = re.compile(r"^```python\n(.*?)^```", re.DOTALL | re.MULTILINE)
+#: the pages whose blocks run: the README and the docs, less the dated experiment records
+_DOCS = (ROOT / "docs").rglob("*.md")
+PAGES = [
+    "README.md",
+    *sorted(
+        str(p.relative_to(ROOT))
+        for p in _DOCS
+        if not {"experiments", "_build"} & set(p.relative_to(ROOT / "docs").parts)
+    ),
+]
+LANGUAGES = ("bash", "sh", "shell", "console", "python")
+_FENCE = re.compile(
+    r"^```(?P<lang>[\w-]+)[ \t]*\n(?P<code>.*?)^```[ \t]*$", re.DOTALL | re.MULTILINE
+)
+_NOT_RUN = re.compile(r"<!--\s*not-run:\s*(?P<reason>(?:(?!-->).)*?)\s*-->\s*\Z", re.DOTALL)
+_PATH_COMMENT = re.compile(r"\A#\s*(?P<path>[\w./-]+\.py)\s*\n")
+#: seconds one block may take before it fails as hung
+BLOCK_TIMEOUT_S = 600
+
+#: (pattern, replacement) applied in order to every shell block: the reduction rules
+REDUCTIONS: tuple[tuple[str, str], ...] = (
+    (r"--episodes \d+", "--episodes 1"),
+    (r"--workers \d+", "--workers 1"),
+    (r"--seeds \d+", "--seeds 1"),
+    (r"--duration \d+(\.\d+)?", "--duration 1"),
+    (r"--seconds \d+", "--seconds 2"),
+    (r"\b(\w+)(?:\|\w+)+\b", r"\1"),  # tight|ihrcf|crhf -> tight
+    (r"(python -m rl_zoo3\.train\b)", r"\1 -n 64"),
+    (r"--input REC\b(?!\.)", "--input REC.mcap"),
+    # the flags a command's default makes long, given first (a written value still wins)
+    (r"(deck-landing evaluate (?:estimators|sweep))\b", r"\1 --duration 1"),
+    (r"(deck-landing evaluate landing)\b", r"\1 --workers 1 --episodes 1"),
+    (r"(-m benchmarks\.bench_fused_unseen)\b", r"\1 --duration 10"),
+)
 
 
-def python_blocks(path: Path) -> list[str]:
-    """The code of every fenced ```python block of a Markdown file."""
-    return _PYTHON_BLOCK.findall(path.read_text(encoding="utf-8"))
+@dataclass(frozen=True)
+class Block:
+    """One fenced block of a page: where it starts, its language, its code and its marker."""
+
+    page: str
+    line: int
+    lang: str
+    code: str
+    not_run: str | None
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}"
 
 
-SNIPPETS = [
-    pytest.param(code, id=f"{name}[{i}]")
-    for name in DOCUMENTS
-    for i, code in enumerate(python_blocks(ROOT / name))
+def blocks_of(text: str, page: str) -> list[Block]:
+    """The shell and Python blocks of a Markdown text, each with the reason of a ``not-run``
+    comment right before it (None when it runs)."""
+    found = []
+    for match in _FENCE.finditer(text):
+        if match["lang"] not in LANGUAGES:
+            continue
+        marker = _NOT_RUN.search(text[: match.start()])
+        line = text.count("\n", 0, match.start()) + 1
+        reason = marker["reason"] if marker else None
+        found.append(Block(page, line, match["lang"], match["code"], reason))
+    return found
+
+
+def shell_of(block: Block) -> str:
+    """The block as bash runs it: prompts stripped, output dropped, the reductions applied."""
+    code = block.code
+    if block.lang == "console":
+        kept, continued = [], False
+        for line in code.splitlines():
+            if line.startswith("$ "):
+                kept.append(line[2:])
+            elif continued:
+                kept.append(line)
+            else:
+                continue
+            continued = line.rstrip().endswith("\\")
+        code = "\n".join(kept) + "\n"
+    for pattern, replacement in REDUCTIONS:
+        code = re.sub(pattern, replacement, code)
+    return code
+
+
+def shrink_train_config(source: Path, target: Path) -> None:
+    """A training YAML cut to a few steps that still evaluates once and saves its best model."""
+    doc = yaml.safe_load(source.read_text(encoding="utf-8"))
+    for key, value in doc.items():
+        if key == "deck_landing":
+            value["eval"] = {**value.get("eval", {}), "freq": 32, "episodes": 1}
+            value["checkpoint_freq"] = 64
+            value["vec_env"] = "dummy"
+        elif isinstance(value, dict):
+            value.update(n_envs=1, n_timesteps=64)
+            for name, small in (("learning_starts", 16), ("buffer_size", 1000), ("n_steps", 32)):
+                if name in value:
+                    value[name] = small
+            if "batch_size" in value:
+                value["batch_size"] = min(int(value["batch_size"]), 32)
+    target.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+
+
+ALL_BLOCKS = [block for page in PAGES for block in blocks_of((ROOT / page).read_text(), page)]
+_CASES = [
+    pytest.param(
+        block,
+        id=block.id,
+        marks=[pytest.mark.skip(reason=f"not-run: {block.not_run}")] if block.not_run else [],
+    )
+    for block in ALL_BLOCKS
 ]
 
 
-def test_each_document_has_python_snippets() -> None:
-    for name in DOCUMENTS:
-        assert python_blocks(ROOT / name), f"{name} has no ```python block"
+def _environment(cwd: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["PYTHONPATH"] = str(cwd)
+    env["MPLBACKEND"] = "Agg"
+    env.pop("PYTEST_XDIST_WORKER", None)
+    return env
 
 
-def test_a_block_is_found_between_its_fences() -> None:
-    text = "x\n```python\nprint(1)\n```\n```bash\nls\n```\n```python\na = 2\n```\n"
-    path = ROOT / "results" / "snippet_probe.md"
-    path.parent.mkdir(exist_ok=True)
-    path.write_text(text, encoding="utf-8")
-    try:
-        assert python_blocks(path) == ["print(1)\n", "a = 2\n"]
-    finally:
-        path.unlink()
+def _run(command: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(
+        command,
+        cwd=cwd,
+        env=_environment(cwd),
+        capture_output=True,
+        text=True,
+        timeout=BLOCK_TIMEOUT_S,
+        check=False,
+    )
+    assert done.returncode == 0, (
+        f"{what} exited {done.returncode}\n--- stdout\n{done.stdout[-4000:]}"
+        f"\n--- stderr\n{done.stderr[-4000:]}"
+    )
+    return done
 
 
-def _is_gymnasium_warning(warning: warnings.WarningMessage) -> bool:
-    return "gymnasium" in str(warning.filename) or "WARN:" in str(warning.message)
+def _link_repository(folder: Path) -> None:
+    """The repository's top-level entries as links in ``folder``; configs/ as a real folder
+    whose train/ holds shrunk copies; results/ left out (outputs land in the folder)."""
+    for entry in ROOT.iterdir():
+        if entry.name in {".git", "results", "configs"} or entry.name.startswith("."):
+            continue
+        (folder / entry.name).symlink_to(entry)
+    (folder / ".venv").symlink_to(Path(sys.prefix))
+    configs = folder / "configs"
+    configs.mkdir()
+    for entry in (ROOT / "configs").iterdir():
+        if entry.name != "train":
+            (configs / entry.name).symlink_to(entry)
+    (configs / "train").mkdir()
+    for entry in (ROOT / "configs" / "train").iterdir():
+        target = configs / "train" / entry.name
+        if entry.suffix == ".yaml":
+            shrink_train_config(entry, target)
+        else:
+            target.symlink_to(entry)
 
 
-@pytest.mark.parametrize("code", SNIPPETS)
-def test_the_snippet_runs_without_a_deprecation_or_gymnasium_warning(code: str) -> None:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        warnings.simplefilter("error", DeprecationWarning)
-        exec(compile(code, "<snippet>", "exec"), {"__name__": "__snippet__"})
-    bad = [
-        w for w in caught if issubclass(w.category, DeprecationWarning) or _is_gymnasium_warning(w)
+_SEED_SCRIPT = """
+import numpy as np
+from agents.io.tof_rig import write_rig_recording
+from agents.io.tof_rig_bag import write_rig_mcap
+from estimation.tof_rig import RIG_FILE
+from landing_env.calibration.tof_camera_sim import TofRigConfig, record_tof_rig_in_sim
+from landing_env.config import load_config
+import shutil
+
+rig = record_tof_rig_in_sim(
+    load_config("default"), TofRigConfig(stages=8, readings_per_stage=5), np.random.default_rng(7)
+)
+write_rig_recording("rig", rig.stages, rig.description)
+write_rig_mcap("rig.mcap", rig.stages, rig.description, stages_file="rig.json")
+shutil.copy("rig.json", "rig_stages.json")
+
+# the simulated camera's calibration folder: its intrinsics, ToF calibration and mount
+import json
+from estimation.frames import R_BC
+from landing_env.physics.quadrotor_params import QuadrotorParams
+
+for name in ("intrinsics.json", "tof_camera.json"):
+    shutil.copy(f"configs/calibration/{name}", f"my_camera/{name}")
+mount = {
+    "format": "deck-landing/camera-extrinsics",
+    "format_version": 1,
+    "r_bc": R_BC.tolist(),
+    "t_bc_m": list(map(float, QuadrotorParams.from_yaml(None).camera_offset_b)),
+}
+with open("my_camera/extrinsics.json", "w") as f:
+    json.dump(mount, f)
+for name in ("intrinsics.json", "tof_camera.json", "extrinsics.json"):
+    shutil.copy(f"my_camera/{name}", f"DIR/{name}")
+"""
+
+#: the placeholders' small data, made once per test process: shell steps run in the seed folder
+SEED_DATA = (
+    "mkdir -p photos DIR my_camera results",
+    "cp tests/data/opencv_chessboard/*.jpg photos/",
+    "cp tests/data/opencv_chessboard/*.jpg DIR/",
+    "deck-landing demo --mode project --no-timing --episodes 1 --record REC.mcap",
+    "cp REC.mcap results/episode.mcap",
+    "python seed_rig.py",
+)
+_SEEDS = ("photos", "DIR", "my_camera", "results", "REC.mcap", "rig", "rig.mcap", "rig.json")
+
+
+@pytest.fixture(scope="session")
+def seed_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The placeholders' data, made by the CLI in a folder of this test process."""
+    folder = tmp_path_factory.mktemp("doc-seed")
+    _link_repository(folder)
+    (folder / "seed_rig.py").write_text(_SEED_SCRIPT, encoding="utf-8")
+    _run(["bash", "-euo", "pipefail", "-c", "\n".join(SEED_DATA)], folder, "the seed data")
+    shutil.copy(folder / "rig.json", folder / "rig_stages.json")
+    return folder
+
+
+@pytest.fixture
+def page_folder(seed_folder: Path, tmp_path: Path) -> Path:
+    """A block's working folder: the repository linked, the seed data copied."""
+    _link_repository(tmp_path)
+    for name in (*_SEEDS, "rig_stages.json"):
+        source = seed_folder / name
+        if source.is_dir():
+            shutil.copytree(source, tmp_path / name)
+        else:
+            shutil.copy(source, tmp_path / name)
+    return tmp_path
+
+
+def _earlier_blocks(block: Block) -> list[Block]:
+    """The Python blocks of the same page before ``block`` that define a module by path."""
+    return [
+        b
+        for b in ALL_BLOCKS
+        if b.page == block.page
+        and b.line < block.line
+        and b.lang == "python"
+        and _PATH_COMMENT.match(b.code)
     ]
-    assert not bad, [f"{w.category.__name__}: {w.message}" for w in bad]
+
+
+_PROJECT_NAME = re.compile(r'^name = "(?P<name>[\w.-]+)"$', re.MULTILINE)
+_ENTRY_POINTS = re.compile(
+    r'^\[project\.entry-points\."(?P<group>[\w.-]+)"\]\n(?P<body>(?:\w+ = ".*"\n)+)', re.MULTILINE
+)
+
+
+def install_page_package(page: str, folder: Path) -> None:
+    """A package a page declares (a ```toml block with entry points) installed in ``folder`` as
+    pip lays it out: its dist-info beside the modules its path-named blocks wrote there."""
+    text = (ROOT / page).read_text(encoding="utf-8")
+    for match in _FENCE.finditer(text):
+        name = _PROJECT_NAME.search(match["code"])
+        if match["lang"] != "toml" or not name:
+            continue
+        info = folder / f"{name['name'].replace('-', '_')}-0.0.0.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(
+            f"Metadata-Version: 2.1\nName: {name['name']}\nVersion: 0.0.0\n", encoding="utf-8"
+        )
+        groups = "".join(
+            f"[{group['group']}]\n{group['body'].replace(chr(34), '')}"
+            for group in _ENTRY_POINTS.finditer(match["code"])
+        )
+        (info / "entry_points.txt").write_text(groups, encoding="utf-8")
+
+
+_WARNINGS_AS_ERRORS = "import warnings\nwarnings.simplefilter('error', DeprecationWarning)\n"
+
+
+@pytest.mark.parametrize("block", _CASES)
+def test_the_documented_block_runs_in_a_fresh_process(block: Block, page_folder: Path) -> None:
+    for earlier in _earlier_blocks(block):
+        path = page_folder / _PATH_COMMENT.match(earlier.code)["path"]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(earlier.code, encoding="utf-8")
+    if _earlier_blocks(block):
+        install_page_package(block.page, page_folder)
+    if block.lang == "python":
+        named = _PATH_COMMENT.match(block.code)
+        path = page_folder / (named["path"] if named else "snippet.py")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(block.code, encoding="utf-8")
+        runner = page_folder / "run_snippet.py"
+        runner.write_text(
+            _WARNINGS_AS_ERRORS
+            + f"import runpy\nrunpy.run_path({str(path)!r}, run_name='__main__')\n",
+            encoding="utf-8",
+        )
+        _run([sys.executable, str(runner)], page_folder, block.id)
+    else:
+        _run(["bash", "-euo", "pipefail", "-c", shell_of(block)], page_folder, block.id)
+
+
+# ------------------------------------------------------------------ the collector itself
+
+
+def test_every_page_with_commands_is_collected() -> None:
+    pages = {block.page for block in ALL_BLOCKS}
+    assert {"README.md", "docs/getting-started.md", "docs/howto/train-policy.md"} <= pages
+    assert not any(page.startswith("docs/experiments/") for page in pages)
+
+
+def test_a_block_is_found_between_its_fences_with_its_line_and_marker() -> None:
+    text = (
+        "<!-- not-run: a -->\n```sh\nx\n```\n"
+        "x\n```python\nprint(1)\n```\n<!-- not-run: runs until stopped -->\n\n"
+        "```bash\nls\n```\n```text\nno\n```\n```console\n$ a \\\n  b\nout\n$ c\n```\n"
+    )
+    found = blocks_of(text, "p.md")
+    assert [(b.line, b.lang, b.not_run) for b in found] == [
+        (2, "sh", "a"),
+        (6, "python", None),
+        (11, "bash", "runs until stopped"),
+        (17, "console", None),
+    ]
+    assert shell_of(found[3]) == "a \\\n  b\nc\n"
+
+
+def test_the_reductions_shrink_counts_and_pick_the_first_alternative() -> None:
+    block = Block("p.md", 1, "bash", "x --episodes 200 --workers 2 --estimator tight|crhf\n", None)
+    assert shell_of(block) == "x --episodes 1 --workers 1 --estimator tight\n"

@@ -122,7 +122,7 @@ def _evaluate_sweep(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         seed=args.seed,
         camera_mode=args.mode,
-        parameters=tuple(args.parameters),
+        parameters=None if args.parameters is None else tuple(args.parameters),
         overrides=parse_overrides(args.set),
         calibration_dir=str(Path(args.out) / "calibration"),
         workers=args.workers,
@@ -173,8 +173,8 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
         "--parameters",
         nargs="+",
         choices=SWEEP_PARAMETERS,
-        default=list(SWEEP_PARAMETERS),
-        help="the swept parameters",
+        default=None,
+        help="the swept parameters (default: all; pixel_noise only with --mode project)",
     )
     sweep.add_argument("--out", default="results/sweep", help="output directory")
     sweep.add_argument(
