@@ -71,11 +71,13 @@ def _leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPars
     return [leaf for child in subs[0].choices.values() for leaf in _leaf_parsers(child)]
 
 
-def test_every_command_takes_sensors() -> None:
+def test_every_command_that_builds_a_config_takes_sensors_and_no_other_offers_it() -> None:
     leaves = _leaf_parsers(build_parser())
-    assert len(leaves) >= 5
+    acting = [leaf for leaf in leaves if leaf.get_default("sensors_act") is not False]
+    assert len(acting) >= 5
     for leaf in leaves:
-        assert "--sensors" in leaf._option_string_actions, leaf.prog
+        offered = "--sensors" in leaf._option_string_actions
+        assert offered == (leaf in acting), leaf.prog
 
 
 def test_the_cli_switch_reaches_the_run_and_is_undone_after(monkeypatch) -> None:
