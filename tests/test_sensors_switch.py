@@ -71,9 +71,21 @@ def _leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPars
     return [leaf for child in subs[0].choices.values() for leaf in _leaf_parsers(child)]
 
 
+def _acting_leaves(parser: argparse.ArgumentParser, acts: bool = True) -> list:
+    """The leaf parsers where ``--sensors`` acts: neither they nor a parent set
+    ``sensors_act=False``."""
+    acts = acts and parser.get_default("sensors_act") is not False
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        return [parser] if acts else []
+    return [leaf for child in subs[0].choices.values() for leaf in _acting_leaves(child, acts)]
+
+
 def test_every_command_that_builds_a_config_takes_sensors_and_no_other_offers_it() -> None:
-    leaves = _leaf_parsers(build_parser())
-    acting = [leaf for leaf in leaves if leaf.get_default("sensors_act") is not False]
+    parser = build_parser()
+    leaves = _leaf_parsers(parser)
+    acting = _acting_leaves(parser)
+    assert 5 <= len(acting) < len(leaves)
     assert len(acting) >= 5
     for leaf in leaves:
         offered = "--sensors" in leaf._option_string_actions
