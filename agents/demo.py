@@ -1,4 +1,4 @@
-"""One seeded episode of DeckLanding-v1 under the align-descend policy: summary, video, plot."""
+"""One seeded episode of DeckLanding-v2 under the align-descend policy: summary, video, plot."""
 
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def plot_trajectory(log: EpisodeLog, path: Path) -> None:
 
 def summarise(log: EpisodeLog, console: Console) -> None:
     info = log.final_info
-    table = Table(title="DeckLanding-v1 episode")
+    table = Table(title="DeckLanding-v2 episode")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("outcome", info["outcome"])
@@ -186,7 +186,7 @@ def run_demo(
     overrides.setdefault("camera.mode", camera_mode)
     # run the other estimators beside the observed one, for the record in info["estimates"]
     overrides.setdefault("estimation.compare", ["atda", "crhf"])
-    env = gym.make("DeckLanding-v1", config=config, render_mode="rgb_array", **kw)
+    env = gym.make("DeckLanding-v2", config=config, render_mode="rgb_array", **kw)
     if record is not None:
         # mcap and rosbags: the optional extra ``io``
         from agents.io.record import McapRecorder

@@ -36,7 +36,7 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         config="high-approach",
         render_mode="rgb_array",
         overrides={
@@ -64,7 +64,7 @@ def main() -> None:
         errors: dict[str, list[tuple[float, float]]] = {"atda": [], "ihrcf": [], "crhf": []}
         for i in range(args.frames):
             if i:
-                _, _, _, _, info = env.step(np.zeros(4))
+                _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
             frame = base._sensing.frame
             for d in frame.detections:
                 seen.setdefault(d.tag_id, []).append(shortest_side_px(d.corners_px))

@@ -19,7 +19,7 @@ CAMERA_BELOW_COM_M = 0.03
 
 def main() -> None:
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         config="default",
         overrides={
             "camera.mode": "render",

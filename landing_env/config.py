@@ -101,15 +101,24 @@ class SimulationConfig:
 
 @dataclass
 class ActionConfig:
-    """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
+    """Scaling of the Box action in [-1, 1] to velocity set-points of the heading frame, and
+    ``DeckLanding``'s land trigger (its fifth entry; see the env card's "Action space")."""
 
     max_horizontal_speed: float = 1.5
     max_vertical_speed: float = 1.0
     max_yaw_rate_deg: float = 60.0
+    #: the fifth action entry ``land``: above ``land_threshold`` it commits to the timing
+    #: task's descent, obeyed only aligned over the tag and within ``land_band_m`` of
+    #: ``timing.hold_height_m``; false: the Box(4) velocity task
+    land_trigger: bool = True
+    land_threshold: float = 0.5
+    land_band_m: float = 0.2
 
     def __post_init__(self) -> None:
         for name in ("max_horizontal_speed", "max_vertical_speed", "max_yaw_rate_deg"):
             require_range(name, getattr(self, name), 0.0, low_inclusive=False)
+        require_range("land_threshold", self.land_threshold, -1.0, 1.0)
+        require_range("land_band_m", self.land_band_m, 0.0, 2.0, low_inclusive=False)
 
 
 @dataclass
@@ -188,6 +197,12 @@ class RewardConfig:
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
     shaping_weight: float = 1.0
     vertical_weight: float = 0.5
+    #: ``DeckLanding``: the shaping potential's weight on the relative speed (per m/s), the
+    #: cost of the action's change per step (per unit squared), and the touchdown's cost per
+    #: (m/s)^2 of normal speed on top of ``normal_speed_penalty``
+    velocity_weight: float = 0.5
+    action_rate_weight: float = 0.002
+    normal_speed_sq_penalty: float = 10.0
     #: per-second cost of flying
     time_cost: float = 0.1
     #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)
@@ -303,7 +318,7 @@ def _require_file(key: str, path: Path) -> None:
 
 @dataclass
 class DeckLandingConfig:
-    """Everything DeckLanding-v1 needs; each section is documented by its dataclass."""
+    """Everything DeckLanding-v2 needs; each section is documented by its dataclass."""
 
     seed: int | None = None
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
@@ -383,7 +398,7 @@ class DeckLandingConfig:
 def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:
     """The most steps an episode of this config can take (``max_episode_steps``).
 
-    ``DeckLanding-v1`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
+    ``DeckLanding-v2`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
     task decides every ``steps_per_decision`` control periods until ``wait_limit_s`` forces
     the commit (one step).
     """

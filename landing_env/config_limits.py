@@ -54,7 +54,7 @@ _DAMPING = _nonneg(10.0, "damping ratio")
 _WEIGHT = _nonneg(1e4, "reward weight: non-negative (the formula carries the signs)")
 _NOISE_DENSITY = _nonneg(10.0, "IMU noise densities: MEMS datasheets give 1e-5..1e-2")
 
-#: Dotted key -> physical range, for the DeckLanding-v1 config tree.
+#: Dotted key -> physical range, for the DeckLanding-v2 config tree.
 LIMITS: dict[str, Limit] = {
     "seed": Limit(0, 2**63 - 1),
     # simulation: PyBullet is stepped at 240 Hz by default; above 4 kHz a step costs more
@@ -67,6 +67,8 @@ LIMITS: dict[str, Limit] = {
     "action.max_horizontal_speed": _positive(50.0, "multirotor airspeed"),
     "action.max_vertical_speed": _positive(50.0),
     "action.max_yaw_rate_deg": _positive(1000.0),
+    "action.land_threshold": Limit(-1.0, 1.0),
+    "action.land_band_m": _positive(2.0),
     "start.height_m": Limit(0.2, 1e4),
     "start.max_offset_m": _nonneg(1e4),
     "start.min_offset_m": _nonneg(1e4),
@@ -81,6 +83,9 @@ LIMITS: dict[str, Limit] = {
     "reward.normal_speed_penalty": _WEIGHT,
     "reward.tilt_penalty": _WEIGHT,
     "reward.offset_penalty": _WEIGHT,
+    "reward.velocity_weight": _WEIGHT,
+    "reward.action_rate_weight": _WEIGHT,
+    "reward.normal_speed_sq_penalty": _WEIGHT,
     "estimation.max_bridged_frames": Limit(0, 1000),
     "estimation.atda.history_timeout_s": _nonneg(60.0),
     "estimation.atda.max_reprojection_error_px": _positive(1e4),

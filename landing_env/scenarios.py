@@ -3,7 +3,7 @@
 A :class:`Scenario` (``bench-ss4``, ``ship-ss5``, ...) is a shipped config made a landing run:
 the drone flying, the tag projected analytically, an estimator observed and, for the timing
 task, the scenario's timing settings.  It registers one id per task it serves
-(``DeckLanding-BenchSS4-v1``, ``DeckLandingTiming-BenchSS4-v6``), so that
+(``DeckLanding-BenchSS4-v2``, ``DeckLandingTiming-BenchSS4-v6``), so that
 ``deck-landing evaluate landing --scenario bench-ss4`` and
 ``gym.make("DeckLandingTiming-BenchSS4-v6")`` build the same environment; a policy lays its own
 settings (its estimator, its timing options) over the id's with the same dotted overrides
@@ -40,10 +40,10 @@ CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
 TASKS: dict[str, str] = {
-    "DeckLanding-v1": "landing_env.envs.deck_landing:DeckLandingEnv",
+    "DeckLanding-v2": "landing_env.envs.deck_landing:DeckLandingEnv",
     "DeckLandingTiming-v0": "landing_env.timing.env:DeckLandingTimingEnv",
 }
-LANDING_TASK = "DeckLanding-v1"
+LANDING_TASK = "DeckLanding-v2"
 TIMING_TASK = "DeckLandingTiming-v0"
 
 #: what turns a bench config (a pinned drone over the moving deck) into a landing run
@@ -113,6 +113,11 @@ PREDICTIVE_TIMING: dict[str, Any] = {
     "contact_window_s": CONTACT_WINDOW_S,
 }
 
+#: what the lander's ids add to a bench scenario's timing settings: the ``predictive`` policy's
+#: descent options (the deck-tilt predictor's wave-off and contact window) and the predictor's
+#: chances and value of waiting in the observation
+LANDER_TIMING: dict[str, Any] = {**PREDICTIVE_TIMING, "observation": "prediction"}
+
 #: the ship's timing task: the drone holds 2 m over a helideck that heaves metres; the guidance
 #: flies in the deck's frame (deck-velocity feed-forward led 0.2 s by a constant-acceleration
 #: tracker, relative descent speed), descends blind on the track and the ToF below 0.8 m where
@@ -148,11 +153,12 @@ class Scenario:
     name: str
     config: str
     description: str
-    #: registered id per task it serves (``DeckLanding-v1`` / ``DeckLandingTiming-v0``)
+    #: registered id per task it serves (``DeckLanding-v2`` / ``DeckLandingTiming-v0``)
     ids: dict[str, str]
     #: the estimate in the observation
     estimator: str = "ihrcf"
-    #: the timing task's settings (the config's ``timing`` section, nested)
+    #: the timing task's settings (the config's ``timing`` section, nested); the lander's
+    #: descent flies them too (with :data:`LANDER_TIMING` where a deck-tilt predictor is named)
     timing: dict[str, Any] = field(default_factory=dict)
     #: further dotted overrides of the config
     extra: dict[str, Any] = field(default_factory=dict)
@@ -179,6 +185,9 @@ class Scenario:
         }
         if task == TIMING_TASK:
             result.update(dotted("timing", self.timing))
+        elif self.timing:
+            predicted = LANDER_TIMING if "tilt_model" in self.timing else {}
+            result.update(dotted("timing", {**self.timing, **predicted}))
         return result
 
 
@@ -197,7 +206,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"bench-ss{n}",
             f"Stewart bench, {sea} scaled into the platform's workspace",
             {
-                LANDING_TASK: f"DeckLanding-BenchSS{n}-v1",
+                LANDING_TASK: f"DeckLanding-BenchSS{n}-v2",
                 TIMING_TASK: f"DeckLandingTiming-BenchSS{n}-v6",
             },
             timing=BENCH_TIMING,
@@ -209,7 +218,7 @@ SCENARIOS: dict[str, Scenario] = {
         "paper-stewart",
         "the papers' Stewart bench (sums of sinusoids)",
         {
-            LANDING_TASK: "DeckLanding-PaperStewart-v1",
+            LANDING_TASK: "DeckLanding-PaperStewart-v2",
             TIMING_TASK: "DeckLandingTiming-PaperStewart-v0",
         },
     ),
@@ -219,7 +228,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"ship-ss{n}",
             f"30 m vessel's helideck, {sea}, wind and gusts; the drone starts in trim",
             {
-                LANDING_TASK: f"DeckLanding-ShipSS{n}-v4",
+                LANDING_TASK: f"DeckLanding-ShipSS{n}-v5",
                 TIMING_TASK: f"DeckLandingTiming-ShipSS{n}-v7",
             },
             estimator=SHIP_ESTIMATOR,
@@ -249,28 +258,28 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
 }
 SCENARIOS.update(HELD_OUT_SCENARIOS)
 
-#: the scenarios of the approach from altitude (``DeckLanding-v1`` only)
+#: the scenarios of the approach from altitude (``DeckLanding-v2`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
     "high-approach": Scenario(
         "high-approach",
         "high-approach",
         "from 20 m up and 5 m off, gusty wind, sea state 3",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v2"},
     ),
     # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
-    # on another config (``gym.make("DeckLanding-HighApproach-v1", config="svgs-100m")``)
+    # on another config (``gym.make("DeckLanding-HighApproach-v2", config="svgs-100m")``)
     "svgs-100m": Scenario(
         "svgs-100m",
         "svgs-100m",
         "the SVGS paper's flights: from 101.7-106.7 m over a static pad, three landmarks",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v2"},
         own_id=False,
     ),
     "svgs-100m-irlock": Scenario(
         "svgs-100m-irlock",
         "svgs-100m-irlock",
         "the SVGS paper's IR-LOCK flights: from 53.1-55.0 m over a static pad",
-        {LANDING_TASK: "DeckLanding-HighApproach-v1"},
+        {LANDING_TASK: "DeckLanding-HighApproach-v2"},
         own_id=False,
     ),
 }
@@ -280,7 +289,10 @@ VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-<Scenario>": [
         "v0: the scenario's config made a landing run, IHRCF observed on the bench.",
         "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v2: DeckLanding-v2's land action (the timing task's descent in the step, obeyed in "
+        "the hold band, forced after the wait limit in it), its observation and reward, the "
+        "bench's timing settings (current).",
     ],
     "DeckLanding-ShipSS<n>": [
         "v0: the bench's settings over the ship deck.",
@@ -288,7 +300,9 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "v2: the scenario's lens (wide at sea states 5 and 6).",
         "v3: started in trim with the mean wind, the autopilots' limits.",
         "v4: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v5: DeckLanding-v2's land action, observation and reward, the ship's timing settings "
+        "(a 2 m hold) (current).",
     ],
     "DeckLandingTiming-BenchSS<n>": [
         "v0: the range-scheduled final descent.",
@@ -316,7 +330,8 @@ VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-HighApproach": [
         "v0: from 20 m up and 5 m off.",
         "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v2: DeckLanding-v2's land action, observation and reward (current).",
     ],
 }
 
@@ -447,6 +462,7 @@ __all__ = [
     "CONTACT_WINDOW_S",
     "FLYING_OVERRIDES",
     "HELD_OUT_SCENARIOS",
+    "LANDER_TIMING",
     "LANDING_TASK",
     "PREDICTIVE_TIMING",
     "SCENARIOS",

@@ -23,7 +23,7 @@ TRUTH = {"estimation.observed": "truth", "start.max_offset_m": 0.0}
 
 
 def make(**overrides: object) -> gym.Env:
-    return gym.make("DeckLanding-v1", overrides={**TRUTH, **overrides})
+    return gym.make("DeckLanding-v2", overrides={**TRUTH, **overrides})
 
 
 def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict]:
@@ -56,7 +56,7 @@ def test_imu_saturation_is_clipped_in_the_observation_and_flagged_in_info() -> N
     env = make(**{"imu.gyro_bias_sigma": 100.0})  # biases of order 100 rad/s: past 2000 deg/s
     try:
         observation, info = env.reset(seed=3)
-        observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        observation, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert info["imu_saturated"] is True
         assert np.isclose(np.abs(observation["imu"][3:]), IMU_HIGH[3:]).any()
         assert env.observation_space.contains(observation)
@@ -65,7 +65,7 @@ def test_imu_saturation_is_clipped_in_the_observation_and_flagged_in_info() -> N
     env = make()
     try:
         env.reset(seed=3)
-        _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert info["imu_saturated"] is False
     finally:
         env.close()

@@ -1,4 +1,4 @@
-"""ATDA, IHRCF and CRHF wired into DeckLanding-v1 with the shipped calibration files."""
+"""ATDA, IHRCF and CRHF wired into DeckLanding-v2 with the shipped calibration files."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def make(observed: str = "ihrcf", compare: tuple[str, ...] = ESTIMATORS, **overr
         "estimation.compare": list(compare),
         **overrides,
     }
-    return gym.make("DeckLanding-v1", overrides=settings)
+    return gym.make("DeckLanding-v2", overrides=settings)
 
 
 def static_bench(mode: str = "render", attitude_deg=(0.0, 0.0, 0.0), position_m=(0.0, 0.0, 0.0)):

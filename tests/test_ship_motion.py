@@ -102,7 +102,7 @@ def test_ship_motion_needs_the_ship_mount_and_a_small_vessel() -> None:
 
 
 def test_ship_deck_moves_metres_without_legs_and_the_drone_starts_above_it() -> None:
-    env = gym.make("DeckLanding-v1", config="ship-ss6")
+    env = gym.make("DeckLanding-v2", config="ship-ss6")
     try:
         world = env.unwrapped.world
         assert world.stewart.cylinder_body_ids == [] and world.stewart.base_body_id == -1

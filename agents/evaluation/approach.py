@@ -130,7 +130,7 @@ def make_env_and_policy(
     overrides: dict[str, Any] | None = None,
     routine_timing: str = "model",
 ) -> tuple[Any, Any]:
-    """``DeckLanding-v1`` on ``scenario`` with ``estimator`` observed, and the policy.
+    """``DeckLanding-v2`` on ``scenario`` with ``estimator`` observed, and the policy.
 
     ``routine_timing`` (svgs-routine only): ``"model"`` commits through the shipped timing
     policy where it is installed, ``"quiescent"`` through the calm-window heuristic.

@@ -306,7 +306,7 @@ def env_signature(env: Any, lookahead: Any = None, frame_stack: int = 1) -> dict
         lookahead = wrapper.lookahead_settings if wrapper is not None else None
     base = env.unwrapped
     spec = getattr(base, "spec", None)
-    if getattr(base, "timing", None) is None:  # the landing task
+    if isinstance(base.action_space, gym.spaces.Box):  # the landing task (Box actions)
         return {
             "env_id": spec.id if spec is not None else LANDING_TASK,
             "observation": landing_observation_signature(base.observation_space, frame_stack),
