@@ -7,6 +7,7 @@ which prints one line and exits with status 2; ``--debug`` shows the traceback i
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from estimation.errors import ConfigError
@@ -30,6 +31,17 @@ def positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [1, inf]")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed (0, inf)")
     return value
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.cli_args import positive_int
+from agents.cli_args import positive_float, positive_int
 from agents.lander import shipped_lander_model
 from agents.timing.policies import shipped_timing_model
 from agents.training import ENV_ID, TASK_ALGOS, load_train_config, train
@@ -31,6 +31,8 @@ def _train(args: Any) -> int:
         config.settings.seed = args.seed
     if args.n_envs is not None:
         config.hyperparams["n_envs"] = args.n_envs
+    if args.max_minutes is not None:
+        config.settings.max_minutes = args.max_minutes
     result = train(
         config,
         out_dir=args.out,
@@ -64,6 +66,12 @@ def _add_task(which: Any, name: str, help_text: str, default_config: str, model:
     parser.add_argument(
         "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"
     )
+    parser.add_argument(
+        "--max-minutes",
+        type=positive_float,
+        default=None,
+        help="wall-clock budget (default: the YAML's max_minutes)",
+    )
     parser.add_argument("--out", default=None, help="output directory (default: the YAML's)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument(
@@ -88,7 +96,7 @@ def add_train_parser(subparsers: Any) -> None:
     _add_task(
         which,
         "landing",
-        "a lander of DeckLanding-v1, end to end (SAC, TQC or PPO)",
+        "a lander of DeckLanding-v2, end to end (SAC, TQC or PPO)",
         "configs/train/lander_sac.yaml",
         "lander",
     )
