@@ -16,6 +16,7 @@ import yaml
 
 import landing_env  # noqa: F401
 from agents.align_descend import AlignDescendPolicy
+from agents.lander import build_lander
 from agents.training import load_train_config, train
 from landing_env.config import RewardConfig
 from landing_env.envs.actions import action_from_setpoint
@@ -215,6 +216,23 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
 
     model = PPO.load(result.model_path, device="cpu")
     assert type(model.policy).__name__ == "PrivilegedCriticPolicy"
+    # lander-model flies it on the task built without the privileged key, normalised
+    overrides = data_overrides(RECIPE)
+    env = gym.make("DeckLanding-BenchSS4-v2", overrides=overrides)
+    try:
+        policy = build_lander(env, str(result.model_path), ())
+        assert policy.normalize is not None
+        observation, _ = env.reset(seed=1)
+        assert "privileged" not in observation
+        action = policy.act(observation)
+        assert action.shape == env.action_space.shape and env.action_space.contains(action)
+    finally:
+        env.close()
+
+
+def data_overrides(path: Path) -> dict:
+    """The recipe's environment overrides (its sensing and estimator)."""
+    return yaml.safe_load(path.read_text())["DeckLanding-BenchSS4-v2"]["env_kwargs"]["overrides"]
 
 
 def test_rl_zoo3_trains_the_ppo_recipe_unmodified(tmp_path: Path) -> None:

@@ -22,6 +22,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
@@ -263,7 +264,9 @@ def _observing_wrapper(env: Any) -> Any:
 
 def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str, Any]:
     """What a ``DeckLanding`` observation is to a model: its keys with their shapes and
-    bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``)."""
+    bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``).  The
+    ``privileged`` key is left out: only a critic reads it, and a trained actor flies an
+    environment built without it."""
     keys = {
         key: {
             "shape": list(box.shape),
@@ -271,6 +274,7 @@ def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str,
             "high": [float(v) for v in box.high.reshape(-1)[:1]],
         }
         for key, box in sorted(space.spaces.items())
+        if key != PRIVILEGED_KEY
     }
     return {"task": "DeckLanding", "keys": keys, "frame_stack": int(frame_stack)}
 
