@@ -33,6 +33,10 @@ def _train(args: Any) -> int:
         config.hyperparams["n_envs"] = args.n_envs
     if args.max_minutes is not None:
         config.settings.max_minutes = args.max_minutes
+    if args.eval_freq is not None:
+        config.settings.eval.freq = args.eval_freq
+    if args.eval_episodes is not None:
+        config.settings.eval.episodes = args.eval_episodes
     result = train(
         config,
         out_dir=args.out,
@@ -71,6 +75,18 @@ def _add_task(which: Any, name: str, help_text: str, default_config: str, model:
         type=positive_float,
         default=None,
         help="wall-clock budget (default: the YAML's max_minutes)",
+    )
+    parser.add_argument(
+        "--eval-freq",
+        type=positive_int,
+        default=None,
+        help="evaluate every this many steps (default: the YAML's eval.freq)",
+    )
+    parser.add_argument(
+        "--eval-episodes",
+        type=positive_int,
+        default=None,
+        help="held-out episodes per evaluation (default: the YAML's eval.episodes)",
     )
     parser.add_argument("--out", default=None, help="output directory (default: the YAML's)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
