@@ -27,9 +27,13 @@ def make(**overrides: object) -> gym.Env:
 
 
 def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict]:
+    """``n`` steps of the velocity set-point ``action`` (the land trigger, where the action
+    has one, not pulled)."""
+    full = np.full(env.action_space.shape, -1.0, dtype=np.float32)
+    full[: len(action)] = action
     rewards, info = [], {}
     for _ in range(n):
-        _, reward, terminated, truncated, info = env.step(np.array(action, dtype=np.float32))
+        _, reward, terminated, truncated, info = env.step(full)
         rewards.append(reward)
         if terminated or truncated:
             break
@@ -37,8 +41,16 @@ def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict
 
 
 def test_shaping_rewards_approaching_the_deck_and_charges_leaving_it() -> None:
-    # without the time cost only the shaping term is left in flight
-    env = make(**{"reward.time_cost": 0.0, "motion.kind": "static"})
+    # without the time cost, the relative speed's potential and the action-rate term only the
+    # distance's shaping is left in flight
+    env = make(
+        **{
+            "reward.time_cost": 0.0,
+            "reward.velocity_weight": 0.0,
+            "reward.action_rate_weight": 0.0,
+            "motion.kind": "static",
+        }
+    )
     try:
         env.reset(seed=0)
         down, _ = step_n(env, [0.0, 0.0, -0.5, 0.0], 10)

@@ -116,7 +116,7 @@ def test_ship_deck_moves_metres_without_legs_and_the_drone_starts_above_it() -> 
             assert math.hypot(*(drone[:2] - deck[:2])) <= 0.3 + 1e-9
             heights.append(deck[2] - world.deck_home_w[2])
         assert np.ptp(heights) > 0.3
-        zero = np.zeros(4)
+        zero = np.zeros(env.action_space.shape)
         start = world.deck_state().position_w[2]
         travel = 0.0
         for _ in range(40):

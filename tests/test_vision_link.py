@@ -168,7 +168,7 @@ def test_fused_follows_a_flying_drone_where_held_estimates_lag() -> None:
     fused_errors, held_errors = [], []
     for k in range(120):
         t = 0.05 * k
-        action = [0.25 * math.sin(2.5 * t), 0.25 * math.sin(1.9 * t), 0.0, 0.2 * math.sin(t)]
+        action = [0.25 * math.sin(2.5 * t), 0.25 * math.sin(1.9 * t), 0.0, 0.2 * math.sin(t), -1]
         _, _, terminated, truncated, info = env.step(np.array(action, dtype=np.float32))
         truth = info["deck_pose_true"][:3]
         fused, held = info["estimates"]["fused"], info["estimates"]["atda"]
