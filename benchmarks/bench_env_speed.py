@@ -1,4 +1,4 @@
-"""Steps per second and real-time factor of DeckLanding-v1 (prints figures; not a test).
+"""Steps per second and real-time factor of DeckLanding-v2 (prints figures; not a test).
 
     .venv/bin/python benchmarks/bench_env_speed.py [--seconds 60]
 
@@ -44,12 +44,12 @@ def _run(
         "simulation.max_episode_s": 1e4,
         "sensors": sensors,
     }
-    env = gym.make("DeckLanding-v1", overrides=overrides)
+    env = gym.make("DeckLanding-v2", overrides=overrides)
     env.reset(seed=seed)
     env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
     steps = int(sim_seconds / env_dt)
     # hover: the drone stays in the air, so every step runs the full pipeline
-    action = np.zeros(4, dtype=np.float32)
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
     env.step(action)
     start = time.perf_counter()
     cpu_start = time.process_time()
@@ -108,10 +108,10 @@ def _by_height(case: str, height: float, steps: int, renders: int) -> dict[str, 
     }
     if extra:
         overrides["sensors"] = extra
-    env = gym.make("DeckLanding-v1", render_mode="rgb_array", overrides=overrides)
+    env = gym.make("DeckLanding-v2", render_mode="rgb_array", overrides=overrides)
     env.reset(seed=0)
     env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
-    action = np.zeros(4, dtype=np.float32)
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
     env.step(action)
     cpu, wall = time.process_time(), time.perf_counter()
     for _ in range(steps):
@@ -183,7 +183,7 @@ def main() -> None:
         height_table(console, args.height_steps, 10, args.renderers.split(","))
     if args.heights:
         return
-    table = Table(title="DeckLanding-v1 speed (240 Hz physics, 20 Hz steps)")
+    table = Table(title="DeckLanding-v2 speed (240 Hz physics, 20 Hz steps)")
     columns = ("sensors", "camera mode", "observed estimator", "envs", "steps/s")
     columns = (*columns, "real-time factor")
     # CPU time per step: what a shared machine inflates least (wall-clock figures need it idle)

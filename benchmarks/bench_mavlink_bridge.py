@@ -3,7 +3,7 @@
 
     nice -n 10 .venv/bin/python benchmarks/bench_mavlink_bridge.py [--seconds 60] [--cpu 0]
 
-The live simulator (``DeckLanding-v1`` on the default config, the align-descend policy
+The live simulator (``DeckLanding-v2`` on the default config, the align-descend policy
 landing episode after episode, seeds 0, 1, ...) with ``tight`` observed in ``project`` camera
 mode and the camera at ``--env-hz`` (30 by default: ``simulation.env_hz``), bridged to a UDP
 port on loopback (``udpout``; a pymavlink listener in a child process counts what arrives)

@@ -71,7 +71,7 @@ def record(
     config = load_config(scenario, {**overrides, **forced})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make("DeckLanding-v1", config=config)
+        env = gym.make("DeckLanding-v2", config=config)
     base = env.unwrapped
     stage = base.bank.vision
     rec = Recording(
@@ -103,7 +103,7 @@ def record(
     try:
         _, info = env.reset(seed=seed)
         keep(info)
-        hover = np.zeros(4, dtype=np.float32)
+        hover = np.zeros(env.action_space.shape, dtype=np.float32)
         for _ in range(base.max_steps):
             _, _, terminated, truncated, info = env.step(hover)
             keep(info)

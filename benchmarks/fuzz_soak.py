@@ -1,4 +1,4 @@
-"""Fuzz soak of DeckLanding-v1: crashes, observations outside the space, NaN rewards, memory.
+"""Fuzz soak of DeckLanding-v2: crashes, observations outside the space, NaN rewards, memory.
 
     python -m benchmarks.fuzz_soak                       # 1e5 project + 1e4 render steps
     python -m benchmarks.fuzz_soak --project-steps 20000 --render-steps 2000   # shorter
@@ -80,15 +80,15 @@ class Tally:
         self.errors.extend(other.errors[:5])
 
 
-def _actions(rng: np.random.Generator, kind: str) -> Iterator[np.ndarray]:
-    """An endless stream of actions of one kind."""
+def _actions(rng: np.random.Generator, kind: str, n: int) -> Iterator[np.ndarray]:
+    """An endless stream of ``n``-entry actions of one kind."""
     while True:
         if kind == "uniform":
-            yield rng.uniform(-1.0, 1.0, 4).astype(np.float32)
+            yield rng.uniform(-1.0, 1.0, n).astype(np.float32)
         elif kind == "extreme":
-            yield rng.choice([-1.0, 1.0], 4).astype(np.float32)
+            yield rng.choice([-1.0, 1.0], n).astype(np.float32)
         else:  # descend: down at full rate with some lateral noise
-            action = np.clip(rng.normal(0.0, 0.3, 4), -1.0, 1.0)
+            action = np.clip(rng.normal(0.0, 0.3, n), -1.0, 1.0)
             action[2] = -1.0
             yield action.astype(np.float32)
 
@@ -107,7 +107,8 @@ def soak(
                 observation, _ = env.reset(seed=int(rng.integers(2**31)))
                 tally.episodes += 1
                 need_reset = False
-                actions = _actions(rng, str(rng.choice(["uniform", "extreme", "descend"])))
+                kind = str(rng.choice(["uniform", "extreme", "descend"]))
+                actions = _actions(rng, kind, env.action_space.shape[0])
                 if not space.contains(observation):
                     tally.out_of_space += 1
             observation, reward, terminated, truncated, info = env.step(next(actions))
@@ -158,7 +159,7 @@ def soak_configs(mode: str, total_steps: int, seed: int, out: Path = OUT_DIR) ->
     with tqdm(total=per_config * len(configs), desc=f"{mode} soak", unit="step") as bar:
         for index, (name, config, overrides) in enumerate(configs):
             overrides = {**overrides, "camera.mode": mode}
-            env = gym.make("DeckLanding-v1", config=config, overrides=overrides)
+            env = gym.make("DeckLanding-v2", config=config, overrides=overrides)
             try:
                 tally = soak(env, per_config, rng, bar)
             finally:
@@ -205,7 +206,7 @@ def config_fuzz(steps: int, seed: int, out: Path = OUT_DIR, prefix: str = "") ->
     problems: list[str] = []
     for key, value in tqdm(cases, desc="config fuzz", unit="case"):
         try:
-            env = gym.make("DeckLanding-v1", overrides={key: value})
+            env = gym.make("DeckLanding-v2", overrides={key: value})
         except ConfigError as error:
             named = error.key.split("[", 1)[0] == key or key.rsplit(".", 1)[-1] in str(error)
             counts["refused_naming_key" if named else "refused_naming_other"] += 1

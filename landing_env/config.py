@@ -113,13 +113,20 @@ class SimulationConfig:
 
 @dataclass
 class ActionConfig:
-    """Scaling of the Box(4) action in [-1, 1] to velocity set-points of the heading frame."""
+    """Scaling of the Box action in [-1, 1] to velocity set-points of the heading frame, and
+    ``DeckLanding``'s land trigger (its fifth entry; see the env card's "Action space")."""
 
     max_horizontal_speed: float = limited(
         1.5, POSITIVE, physical=Limit.positive(50.0, "multirotor airspeed")
     )
     max_vertical_speed: float = limited(1.0, POSITIVE, physical=Limit.positive(50.0))
     max_yaw_rate_deg: float = limited(60.0, POSITIVE, physical=Limit.positive(1000.0))
+    #: the fifth action entry ``land``: above ``land_threshold`` it commits to the timing
+    #: task's descent, obeyed only aligned over the tag and within ``land_band_m`` of
+    #: ``timing.hold_height_m``; false: the Box(4) velocity task
+    land_trigger: bool = True
+    land_threshold: float = limited(0.5, Limit(-1.0, 1.0), physical=Limit(-1.0, 1.0))
+    land_band_m: float = limited(0.2, Limit.positive(2.0), physical=Limit.positive(2.0))
 
     def __post_init__(self) -> None:
         require_limits(self)
@@ -201,6 +208,12 @@ class RewardConfig:
     #: potential-based shaping on the distance to the deck (horizontal + vertical weight)
     shaping_weight: float = limited(1.0, physical=REWARD_WEIGHT)
     vertical_weight: float = limited(0.5, physical=REWARD_WEIGHT)
+    #: ``DeckLanding``: the shaping potential's weight on the relative speed (per m/s), the
+    #: cost of the action's change per step (per unit squared), and the touchdown's cost per
+    #: (m/s)^2 of normal speed on top of ``normal_speed_penalty``
+    velocity_weight: float = limited(0.5, physical=REWARD_WEIGHT)
+    action_rate_weight: float = limited(0.002, physical=REWARD_WEIGHT)
+    normal_speed_sq_penalty: float = limited(10.0, physical=REWARD_WEIGHT)
     #: per-second cost of flying
     time_cost: float = limited(0.1, physical=REWARD_WEIGHT)
     #: touchdown penalties per unit of normal speed (m/s), deck tilt (deg), lateral offset (m)
@@ -317,7 +330,7 @@ def _require_file(key: str, path: Path) -> None:
 
 @dataclass
 class DeckLandingConfig:
-    """Everything DeckLanding-v1 needs; each section is documented by its dataclass."""
+    """Everything DeckLanding-v2 needs; each section is documented by its dataclass."""
 
     seed: int | None = limited(None, physical=Limit(0, 2**63 - 1))
     #: "ideal" (the papers' simulator) or "realistic" (OV9281-class camera with blur and
@@ -403,7 +416,7 @@ LIMITS.update(physical_limits(DeckLandingConfig))
 def episode_step_limit(config: DeckLandingConfig, timing: TimingConfig | None = None) -> int:
     """The most steps an episode of this config can take (``max_episode_steps``).
 
-    ``DeckLanding-v1`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
+    ``DeckLanding-v2`` (``timing`` None) truncates at ``simulation.max_episode_s``; the timing
     task decides every ``steps_per_decision`` control periods until ``wait_limit_s`` forces
     the commit (one step).
     """

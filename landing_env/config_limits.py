@@ -26,7 +26,7 @@ import numpy as np
 from estimation.limits import Limit
 from landing_env.errors import require_finite
 
-#: Dotted key -> physical range, for the DeckLanding-v1 config tree: the ``physical`` bound
+#: Dotted key -> physical range, for the DeckLanding-v2 config tree: the ``physical`` bound
 #: each field declares (:func:`estimation.limits.limited`), collected by
 #: :func:`physical_limits` as soon as :mod:`landing_env.config` has defined the tree.
 LIMITS: dict[str, Limit] = {}

@@ -3,7 +3,7 @@
 A :class:`Scenario` (``bench-ss4``, ``ship-ss5``, ...) is a shipped config made a landing run:
 the drone flying, the tag projected analytically, an estimator observed and, for the timing
 task, the scenario's timing settings.  It registers one id per task it serves
-(``DeckLanding-BenchSS4-v1``, ``DeckLandingTiming-BenchSS4-v6``), so that
+(``DeckLanding-BenchSS4-v2``, ``DeckLandingTiming-BenchSS4-v6``), so that
 ``deck-landing evaluate landing --scenario bench-ss4`` and
 ``gym.make("DeckLandingTiming-BenchSS4-v6")`` build the same environment; a policy lays its own
 settings (its estimator, its timing options) over the id's with the same dotted overrides
@@ -44,11 +44,11 @@ from landing_env.timing_config import SCENARIO_TILT_MODEL, TimingConfig
 CONFIG_SECTIONS = frozenset(f.name for f in fields(DeckLandingConfig))
 
 #: the task environments: id -> entry point
-LANDING_TASK = "DeckLanding-v1"
+LANDING_TASK = "DeckLanding-v2"
 TIMING_TASK = "DeckLandingTiming-v0"
 TASKS: dict[str, str] = {
     LANDING_TASK: "landing_env.envs.deck_landing:DeckLandingEnv",
-    TIMING_TASK: "landing_env.timing.env:DeckLandingTimingEnv",
+    TIMING_TASK: "landing_env.envs.timing:DeckLandingTimingEnv",
 }
 
 #: what turns a bench config (a pinned drone over the moving deck) into a landing run
@@ -111,6 +111,11 @@ PREDICTIVE_TIMING: dict[str, Any] = {
     "contact_window_s": CONTACT_WINDOW_S,
 }
 
+#: what the lander's ids add to a bench scenario's timing settings: the ``predictive`` policy's
+#: descent options (the deck-tilt predictor's wave-off and contact window) and the predictor's
+#: chances and value of waiting in the observation
+LANDER_TIMING: dict[str, Any] = {**PREDICTIVE_TIMING, "observation": "prediction"}
+
 #: the ship's timing task: the drone holds 2 m over a helideck that heaves metres; the guidance
 #: flies in the deck's frame (deck-velocity feed-forward led 0.2 s by a constant-acceleration
 #: tracker, relative descent speed), descends blind on the track and the ToF below 0.8 m where
@@ -146,11 +151,12 @@ class Scenario:
     name: str
     config: str
     description: str
-    #: registered id per task it serves (``DeckLanding-v1`` / ``DeckLandingTiming-v0``)
+    #: registered id per task it serves (``DeckLanding-v2`` / ``DeckLandingTiming-v0``)
     ids: dict[str, str]
     #: the estimate in the observation
     estimator: str = "ihrcf"
-    #: the timing task's settings (the config's ``timing`` section, nested)
+    #: the timing task's settings (the config's ``timing`` section, nested); the lander's
+    #: descent flies them too (with :data:`LANDER_TIMING` where a deck-tilt predictor is named)
     timing: dict[str, Any] = field(default_factory=dict)
     #: further dotted overrides of the config
     extra: dict[str, Any] = field(default_factory=dict)
@@ -177,6 +183,9 @@ class Scenario:
         }
         if task == TIMING_TASK:
             result.update(dotted("timing", self.timing))
+        elif self.timing:
+            predicted = LANDER_TIMING if "tilt_model" in self.timing else {}
+            result.update(dotted("timing", {**self.timing, **predicted}))
         return result
 
 
@@ -195,7 +204,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"bench-ss{n}",
             f"Stewart bench, {sea} scaled into the platform's workspace",
             {
-                LANDING_TASK: f"DeckLanding-BenchSS{n}-v1",
+                LANDING_TASK: f"DeckLanding-BenchSS{n}-v2",
                 TIMING_TASK: f"DeckLandingTiming-BenchSS{n}-v6",
             },
             timing=BENCH_TIMING,
@@ -207,7 +216,7 @@ SCENARIOS: dict[str, Scenario] = {
         "paper-stewart",
         "the papers' Stewart bench (sums of sinusoids)",
         {
-            LANDING_TASK: "DeckLanding-PaperStewart-v1",
+            LANDING_TASK: "DeckLanding-PaperStewart-v2",
             TIMING_TASK: "DeckLandingTiming-PaperStewart-v0",
         },
     ),
@@ -217,7 +226,7 @@ SCENARIOS: dict[str, Scenario] = {
             f"ship-ss{n}",
             f"30 m vessel's helideck, {sea}, wind and gusts; the drone starts in trim",
             {
-                LANDING_TASK: f"DeckLanding-ShipSS{n}-v4",
+                LANDING_TASK: f"DeckLanding-ShipSS{n}-v5",
                 TIMING_TASK: f"DeckLandingTiming-ShipSS{n}-v7",
             },
             estimator=SHIP_ESTIMATOR,
@@ -248,9 +257,9 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
 SCENARIOS.update(HELD_OUT_SCENARIOS)
 
 #: the approach from altitude's id, which its scenarios fly on their own configs
-HIGH_APPROACH_ID = "DeckLanding-HighApproach-v1"
+HIGH_APPROACH_ID = "DeckLanding-HighApproach-v2"
 
-#: the scenarios of the approach from altitude (``DeckLanding-v1`` only)
+#: the scenarios of the approach from altitude (``DeckLanding-v2`` only)
 APPROACH_SCENARIOS: dict[str, Scenario] = {
     "high-approach": Scenario(
         "high-approach",
@@ -259,7 +268,7 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
         {LANDING_TASK: HIGH_APPROACH_ID},
     ),
     # the SVGS paper's flights from 100 m (its Tables 3-4) on a static pad: the high approach
-    # on another config (``gym.make("DeckLanding-HighApproach-v1", config="svgs-100m")``)
+    # on another config (``gym.make("DeckLanding-HighApproach-v2", config="svgs-100m")``)
     "svgs-100m": Scenario(
         "svgs-100m",
         "svgs-100m",
@@ -281,7 +290,10 @@ VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-<Scenario>": [
         "v0: the scenario's config made a landing run, IHRCF observed on the bench.",
         "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v2: DeckLanding-v2's land action (the timing task's descent in the step, obeyed in "
+        "the hold band, forced after the wait limit in it), its observation and reward, the "
+        "bench's timing settings (current).",
     ],
     "DeckLanding-ShipSS<n>": [
         "v0: the bench's settings over the ship deck.",
@@ -289,7 +301,9 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "v2: the scenario's lens (wide at sea states 5 and 6).",
         "v3: started in trim with the mean wind, the autopilots' limits.",
         "v4: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v5: DeckLanding-v2's land action, observation and reward, the ship's timing settings "
+        "(a 2 m hold) (current).",
     ],
     "DeckLandingTiming-BenchSS<n>": [
         "v0: the range-scheduled final descent.",
@@ -317,7 +331,8 @@ VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-HighApproach": [
         "v0: from 20 m up and 5 m off.",
         "v1: every observation key a float32 Box, the drone's velocity and attitude observed, "
-        "a touchdown bonus (current).",
+        "a touchdown bonus.",
+        "v2: DeckLanding-v2's land action, observation and reward (current).",
     ],
 }
 
@@ -448,6 +463,7 @@ __all__ = [
     "CONTACT_WINDOW_S",
     "FLYING_OVERRIDES",
     "HELD_OUT_SCENARIOS",
+    "LANDER_TIMING",
     "LANDING_TASK",
     "PREDICTIVE_TIMING",
     "SCENARIOS",

@@ -23,13 +23,17 @@ TRUTH = {"estimation.observed": "truth", "start.max_offset_m": 0.0}
 
 
 def make(**overrides: object) -> gym.Env:
-    return gym.make("DeckLanding-v1", overrides={**TRUTH, **overrides})
+    return gym.make("DeckLanding-v2", overrides={**TRUTH, **overrides})
 
 
 def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict]:
+    """``n`` steps of the velocity set-point ``action`` (the land trigger, where the action
+    has one, not pulled)."""
+    full = np.full(env.action_space.shape, -1.0, dtype=np.float32)
+    full[: len(action)] = action
     rewards, info = [], {}
     for _ in range(n):
-        _, reward, terminated, truncated, info = env.step(np.array(action, dtype=np.float32))
+        _, reward, terminated, truncated, info = env.step(full)
         rewards.append(reward)
         if terminated or truncated:
             break
@@ -37,8 +41,16 @@ def step_n(env: gym.Env, action: list[float], n: int) -> tuple[list[float], dict
 
 
 def test_shaping_rewards_approaching_the_deck_and_charges_leaving_it() -> None:
-    # without the time cost only the shaping term is left in flight
-    env = make(**{"reward.time_cost": 0.0, "motion.kind": "static"})
+    # without the time cost, the relative speed's potential and the action-rate term only the
+    # distance's shaping is left in flight
+    env = make(
+        **{
+            "reward.time_cost": 0.0,
+            "reward.velocity_weight": 0.0,
+            "reward.action_rate_weight": 0.0,
+            "motion.kind": "static",
+        }
+    )
     try:
         env.reset(seed=0)
         down, _ = step_n(env, [0.0, 0.0, -0.5, 0.0], 10)
@@ -56,7 +68,7 @@ def test_imu_saturation_is_clipped_in_the_observation_and_flagged_in_info() -> N
     env = make(**{"imu.gyro_bias_sigma": 100.0})  # biases of order 100 rad/s: past 2000 deg/s
     try:
         observation, info = env.reset(seed=3)
-        observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        observation, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert info["imu_saturated"] is True
         assert np.isclose(np.abs(observation["imu"][3:]), IMU_HIGH[3:]).any()
         assert env.observation_space.contains(observation)
@@ -65,7 +77,7 @@ def test_imu_saturation_is_clipped_in_the_observation_and_flagged_in_info() -> N
     env = make()
     try:
         env.reset(seed=3)
-        _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+        _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert info["imu_saturated"] is False
     finally:
         env.close()

@@ -103,7 +103,7 @@ def test_env_speed_prints_both_tables(tmp_path: Path) -> None:
         "bench_env_speed", "--seconds", "0.5", "--render-seconds", "0.5", "--height-steps", "2",
         "--renderers", "planar", "--sensors", "ideal", "--envs", "1", cwd=tmp_path,
     )  # fmt: skip
-    assert "render mode by height" in out and "DeckLanding-v1 speed" in out
+    assert "render mode by height" in out and "DeckLanding-v2 speed" in out
     assert len(re.findall(r"^ideal (project|render)/\w+ x1: 10 steps", out, re.M)) == 4
 
 

@@ -930,7 +930,7 @@ def test_the_shipped_predictive_dqn_reads_the_prediction_and_refuses_the_history
 def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_none_is_fitted():
     """``timing.tilt_model: scenario`` reads the config's ``deck_predictor``; a scenario that
     names none (paper-stewart) is refused naming the key and what it reads."""
-    from landing_env.timing.env import DeckLandingTimingEnv
+    from landing_env.envs.timing import DeckLandingTimingEnv
 
     loaded = {}
     for n in (3, 5):

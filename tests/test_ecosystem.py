@@ -58,14 +58,14 @@ def test_the_config_seed_applies_to_the_first_reset_only_and_a_given_seed_wins()
     # the config seed is the first env's of the process (others derive their own from it):
     # let environments that earlier tests left unclosed go first
     gc.collect()
-    env = gym.make("DeckLanding-v1", **SEEDED)
+    env = gym.make("DeckLanding-v2", **SEEDED)
     a, _ = env.reset()
     b, _ = env.reset()
     c, _ = env.reset(seed=0)
     env.close()
     assert np.array_equal(_start(a), _start(c))  # the YAML's seed 0 on the first reset
     assert not np.array_equal(_start(a), _start(b))  # not on the next ones
-    other = gym.make("DeckLanding-v1", **SEEDED)
+    other = gym.make("DeckLanding-v2", **SEEDED)
     d, _ = other.reset(seed=5)
     other.close()
     assert not np.array_equal(_start(a), _start(d))
@@ -73,7 +73,7 @@ def test_the_config_seed_applies_to_the_first_reset_only_and_a_given_seed_wins()
 
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_make_vec_workers_play_distinct_episodes_without_a_seed(mode: str) -> None:
-    envs = gym.make_vec("DeckLanding-v1", num_envs=2, vectorization_mode=mode, **SEEDED)
+    envs = gym.make_vec("DeckLanding-v2", num_envs=2, vectorization_mode=mode, **SEEDED)
     try:
         observations, _ = envs.reset()
         assert not np.array_equal(_start_batch(observations, 0), _start_batch(observations, 1))
@@ -95,7 +95,7 @@ def test_sb3_vec_env_workers_play_distinct_episodes_without_a_seed(vec: str) -> 
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     cls = DummyVecEnv if vec == "dummy" else SubprocVecEnv
-    envs = make_vec_env("landing_env:DeckLanding-v1", n_envs=2, vec_env_cls=cls, env_kwargs=SEEDED)
+    envs = make_vec_env("landing_env:DeckLanding-v2", n_envs=2, vec_env_cls=cls, env_kwargs=SEEDED)
     try:
         observations = envs.reset()
         assert not np.array_equal(_start_batch(observations, 0), _start_batch(observations, 1))
@@ -108,7 +108,7 @@ def test_sb3_vec_env_workers_play_distinct_episodes_without_a_seed(vec: str) -> 
 def test_gymnasium_check_env_with_default_arguments_on_every_shipped_config(config: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make("DeckLanding-v1", config=config)
+        env = gym.make("DeckLanding-v2", config=config)
         try:
             # info holds no NaN (missing values are 0 beside their validity, or None): the
             # determinism check passes where a ToF ray or the vision link gives no value too
@@ -122,7 +122,7 @@ def test_human_mode_without_a_display_runs_headless_and_renders_nothing(
 ) -> None:
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    env = gym.make("DeckLanding-v1", render_mode="human")
+    env = gym.make("DeckLanding-v2", render_mode="human")
     env.reset(seed=0)
     assert env.render() is None
     env.close()

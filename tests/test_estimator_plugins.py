@@ -112,7 +112,7 @@ def test_the_howtos_script_registers_before_landing_env_is_imported(tmp_path: Pa
     first, second = _blocks("python")
     done = _run(["-c", f"{first}\n{second}\nprint('built', env.spec.id)"], [], tmp_path)
     assert done.returncode == 0, done.stderr
-    assert "built DeckLanding-v1" in done.stdout
+    assert "built DeckLanding-v2" in done.stdout
 
 
 def test_a_plugin_that_fails_to_load_is_skipped_naming_it(tmp_path: Path) -> None:

@@ -156,7 +156,7 @@ def test_fuzzed_estimator_inputs_never_raise_nor_give_nonsense(
 # ------------------------------------------------------------------------------ actions
 @pytest.fixture(scope="module")
 def env() -> gym.Env:
-    environment = gym.make("DeckLanding-v1", overrides={"tof.noise": "vl53l1x"})
+    environment = gym.make("DeckLanding-v2", overrides={"tof.noise": "vl53l1x"})
     yield environment
     environment.close()
 
@@ -170,7 +170,7 @@ _action_value = st.one_of(
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     seed=st.integers(0, 2**31 - 1),
-    actions=st.lists(st.lists(_action_value, min_size=4, max_size=4), min_size=1, max_size=25),
+    actions=st.lists(st.lists(_action_value, min_size=5, max_size=5), min_size=1, max_size=25),
 )
 def test_fuzzed_actions_keep_every_observation_in_its_space(
     env: gym.Env, seed: int, actions: list
@@ -186,7 +186,7 @@ def test_fuzzed_actions_keep_every_observation_in_its_space(
 
 
 @pytest.mark.parametrize(
-    "action", [[math.nan, 0, 0, 0], [0, math.inf, 0, 0], [0, 0, 0], [[0, 0], [0, 0, 1]]]
+    "action", [[math.nan, 0, 0, 0, 0], [0, math.inf, 0, 0, 0], [0, 0, 0, 0], [[0, 0], [0, 0, 1]]]
 )
 def test_malformed_actions_are_a_value_error(env: gym.Env, action: object) -> None:
     env.reset(seed=0)
@@ -222,7 +222,7 @@ def test_a_fuzzed_override_runs_or_is_refused_naming_its_key(
     base = float(numbers[np.isfinite(numbers)][0]) if np.isfinite(numbers).any() else 1.0
     value = _shaped(default, (base if base != 0.0 else 1.0) * factor)
     try:
-        environment = gym.make("DeckLanding-v1", overrides={key: value})
+        environment = gym.make("DeckLanding-v2", overrides={key: value})
     except ConfigError as error:
         assert error.key.split("[", 1)[0] == key or key.rsplit(".", 1)[-1] in str(error), (
             key,

@@ -55,7 +55,7 @@ import gymnasium as gym
 import landing_env
 from landing_env.scenarios import SCENARIO_IDS
 assert "site-packages" in landing_env.__file__, landing_env.__file__
-for env_id in [*SCENARIO_IDS, "DeckLanding-v1", "DeckLandingTiming-v0"]:
+for env_id in [*SCENARIO_IDS, "DeckLanding-v2", "DeckLandingTiming-v0"]:
     kwargs = {} if env_id in SCENARIO_IDS else {"config": "bench-ss4",
               "overrides": {"simulation.drone_fixed": False, "camera.mode": "project"}}
     env = gym.make(env_id, **kwargs)

@@ -1,4 +1,4 @@
-"""``DeckLanding-v1`` takes the standard RL wrappers with their default arguments, and its
+"""``DeckLanding-v2`` takes the standard RL wrappers with their default arguments, and its
 observation carries what a learner needs to fly: its own velocity and attitude."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ FAST = {"overrides": {"camera.mode": "project"}}
 
 
 def test_every_observation_key_is_a_float_box_so_vecnormalize_takes_the_defaults() -> None:
-    env = gym.make("DeckLanding-v1", **FAST)
+    env = gym.make("DeckLanding-v2", **FAST)
     try:
         for key, space in env.observation_space.spaces.items():
             assert isinstance(space, spaces.Box), key
@@ -26,12 +26,14 @@ def test_every_observation_key_is_a_float_box_so_vecnormalize_takes_the_defaults
         sb3_check_env(env.unwrapped, warn=True)
     finally:
         env.close()
-    vec = make_vec_env("landing_env:DeckLanding-v1", n_envs=1, seed=2, env_kwargs=FAST)
+    vec = make_vec_env("landing_env:DeckLanding-v2", n_envs=1, seed=2, env_kwargs=FAST)
     normalised = VecNormalize(vec)  # default arguments: every key normalised
     try:
         observation = normalised.reset()
         for _ in range(5):
-            observation, reward, _, _ = normalised.step(np.zeros((1, 4), dtype=np.float32))
+            observation, reward, _, _ = normalised.step(
+                np.zeros((1, *normalised.action_space.shape), dtype=np.float32)
+            )
         assert set(observation) == set(vec.observation_space.spaces)
         for key, value in observation.items():
             assert np.all(np.isfinite(value)), key
@@ -42,7 +44,7 @@ def test_every_observation_key_is_a_float_box_so_vecnormalize_takes_the_defaults
 
 
 def test_the_flags_are_zero_or_one() -> None:
-    env = gym.make("DeckLanding-v1", **FAST)
+    env = gym.make("DeckLanding-v2", **FAST)
     try:
         observation, _ = env.reset(seed=4)
         for _ in range(10):
@@ -54,13 +56,13 @@ def test_the_flags_are_zero_or_one() -> None:
 
 
 def test_the_velocity_is_the_drones_in_its_heading_frame_and_the_attitude_its_roll_pitch() -> None:
-    env = gym.make("DeckLanding-v1", **FAST)
+    env = gym.make("DeckLanding-v2", **FAST)
     try:
         observation, info = env.reset(seed=7)
         # fly forward and up for a second: the heading-frame velocity follows the set-point
         for _ in range(20):
             observation, _, terminated, truncated, info = env.step(
-                np.array([0.6, 0.0, 0.3, 0.0], dtype=np.float32)
+                np.array([0.6, 0.0, 0.3, 0.0, -1.0], dtype=np.float32)
             )
             assert not (terminated or truncated)
         roll, pitch, yaw = info["drone"]["euler_w"]
@@ -78,13 +80,15 @@ def test_the_velocity_is_the_drones_in_its_heading_frame_and_the_attitude_its_ro
 
 def test_a_time_out_is_a_truncation_with_no_terminal_penalty() -> None:
     env = gym.make(
-        "DeckLanding-v1", overrides={"camera.mode": "project", "simulation.max_episode_s": 1.0}
+        "DeckLanding-v2", overrides={"camera.mode": "project", "simulation.max_episode_s": 1.0}
     )
     try:
         env.reset(seed=1)
         truncated = terminated = False
         while not (terminated or truncated):
-            _, reward, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
+            _, reward, terminated, truncated, info = env.step(
+                np.zeros(env.action_space.shape, dtype=np.float32)
+            )
         assert truncated and not terminated
         assert info["outcome"] == "timeout"
         assert info["reward_crash"] == 0.0 and info["reward_success"] == 0.0
@@ -96,12 +100,14 @@ def test_a_time_out_is_a_truncation_with_no_terminal_penalty() -> None:
 
 
 def test_a_dummy_vec_env_of_the_scenario_id_normalises_with_default_arguments() -> None:
-    vec = DummyVecEnv([lambda: gym.make("DeckLanding-BenchSS4-v1", **FAST)])
+    vec = DummyVecEnv([lambda: gym.make("DeckLanding-BenchSS4-v2", **FAST)])
     normalised = VecNormalize(vec)
     try:
         normalised.seed(3)
         normalised.reset()
-        _, _, done, _ = normalised.step(np.zeros((1, 4), dtype=np.float32))
+        _, _, done, _ = normalised.step(
+            np.zeros((1, *normalised.action_space.shape), dtype=np.float32)
+        )
         assert done.shape == (1,)
     finally:
         normalised.close()

@@ -48,7 +48,7 @@ def test_an_unknown_sensor_set_is_refused_by_name() -> None:
         load_config("default", overrides={"sensors": "great"})
 
 
-@pytest.mark.parametrize("env_id", ["DeckLanding-v1", "DeckLandingTiming-v0"])
+@pytest.mark.parametrize("env_id", ["DeckLanding-v2", "DeckLandingTiming-v0"])
 def test_every_env_honours_the_switch(env_id: str) -> None:
     env = gym.make(env_id, overrides={"sensors": "realistic", "camera.mode": "render"})
     try:
@@ -57,7 +57,7 @@ def test_every_env_honours_the_switch(env_id: str) -> None:
         assert world.camera.formation is not None
         assert world.camera.formation.profile.name == "ov9281"
         assert world.config.tof.noise == "vl53l1x"
-        # hover (DeckLanding-v1) or wait (the timing task's 0)
+        # hover (DeckLanding-v2) or wait (the timing task's 0)
         hold = np.zeros(env.action_space.shape, np.float32) if env.action_space.shape else 0
         env.step(hold)
     finally:

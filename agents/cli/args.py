@@ -5,6 +5,7 @@ the ``--set`` overrides' parser are :mod:`agents.common.user_input`'s.
 from __future__ import annotations
 
 import argparse
+import math
 
 SET_HELP = "dotted config overrides applied last, e.g. tof.noise=vl53l1x camera.k1=-0.05"
 
@@ -17,6 +18,17 @@ def positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [1, inf]")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed (0, inf)")
     return value
 
 

@@ -1,4 +1,4 @@
-"""One seeded episode of DeckLanding-v1 under the align-descend policy: summary, video, plot."""
+"""One seeded episode of DeckLanding-v2 under the align-descend policy: summary, video, plot."""
 
 from __future__ import annotations
 

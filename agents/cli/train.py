@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.cli.args import positive_int
+from agents.cli.args import positive_float, positive_int
 from agents.training.trainer import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK
@@ -29,6 +29,12 @@ def _train(args: Any) -> int:
         config.settings.seed = args.seed
     if args.n_envs is not None:
         config.hyperparams["n_envs"] = args.n_envs
+    if args.max_minutes is not None:
+        config.settings.max_minutes = args.max_minutes
+    if args.eval_freq is not None:
+        config.settings.eval.freq = args.eval_freq
+    if args.eval_episodes is not None:
+        config.settings.eval.episodes = args.eval_episodes
     result = train(
         config,
         out_dir=args.out,
@@ -59,6 +65,24 @@ def _add_task(which: Any, name: str, help_text: str, default_config: str, model:
     parser.add_argument(
         "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"
     )
+    parser.add_argument(
+        "--max-minutes",
+        type=positive_float,
+        default=None,
+        help="wall-clock budget (default: the YAML's max_minutes)",
+    )
+    parser.add_argument(
+        "--eval-freq",
+        type=positive_int,
+        default=None,
+        help="evaluate every this many steps (default: the YAML's eval.freq)",
+    )
+    parser.add_argument(
+        "--eval-episodes",
+        type=positive_int,
+        default=None,
+        help="held-out episodes per evaluation (default: the YAML's eval.episodes)",
+    )
     parser.add_argument("--out", default=None, help="output directory (default: the YAML's)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument(
@@ -88,7 +112,7 @@ def add_train_parser(subparsers: Any) -> None:
     _add_task(
         which,
         "landing",
-        "a lander of DeckLanding-v1, end to end (SAC, TQC or PPO)",
+        "a lander of DeckLanding-v2, end to end (SAC, TQC or PPO)",
         "configs/train/lander_sac.yaml",
         "lander",
     )

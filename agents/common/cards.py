@@ -23,6 +23,7 @@ from typing import Any
 import gymnasium as gym
 
 from landing_env.config import SENSOR_SETS
+from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
@@ -290,7 +291,9 @@ def _observing_wrapper(env: Any) -> Any:
 
 def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str, Any]:
     """What a ``DeckLanding`` observation is to a model: its keys with their shapes and
-    bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``)."""
+    bounds, and how many steps a model sees stacked (SB3's ``VecFrameStack``).  The
+    ``privileged`` key is left out: only a critic reads it, and a trained actor flies an
+    environment built without it."""
     keys = {
         key: {
             "shape": list(box.shape),
@@ -298,6 +301,7 @@ def landing_observation_signature(space: Any, frame_stack: int = 1) -> dict[str,
             "high": [float(v) for v in box.high.reshape(-1)[:1]],
         }
         for key, box in sorted(space.spaces.items())
+        if key != PRIVILEGED_KEY
     }
     return {"task": "DeckLanding", "keys": keys, "frame_stack": int(frame_stack)}
 
@@ -333,7 +337,7 @@ def env_signature(env: Any, lookahead: Any = None, frame_stack: int = 1) -> dict
         lookahead = wrapper.lookahead_settings if wrapper is not None else None
     base = env.unwrapped
     spec = getattr(base, "spec", None)
-    if getattr(base, "timing", None) is None:  # the landing task
+    if isinstance(base.action_space, gym.spaces.Box):  # the landing task (Box actions)
         return {
             "env_id": spec.id if spec is not None else LANDING_TASK,
             "observation": landing_observation_signature(base.observation_space, frame_stack),

@@ -161,7 +161,7 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
         )
     with warnings.catch_warnings():  # the pinned drone is this bench's point
         warnings.simplefilter("ignore", PinnedDroneWarning)
-        env = gym.make("DeckLanding-v1", config=config)
+        env = gym.make("DeckLanding-v2", config=config)
     base = env.unwrapped
     steps = base.max_steps
     times: list[float] = []
@@ -192,7 +192,7 @@ def run_scenario(settings: RunSettings) -> ScenarioRecord:
             stds[name].append(np.asarray(estimate.get("std", np.full(6, np.nan)), dtype=float))
             captures[name].append(float(estimate["extras"].get("capture_time_s", np.nan)))
 
-    hover = np.zeros(4, dtype=np.float32)  # ignored: the drone is pinned
+    hover = np.zeros(env.action_space.shape, dtype=np.float32)  # ignored: the drone is pinned
     start = time.perf_counter()
     try:
         _, info = env.reset(seed=seed)

@@ -1,6 +1,6 @@
 """The live simulator as a source of ``(stamp_s, estimate)`` pairs for the MAVLink bridge.
 
-:class:`SimulatorSource` flies ``DeckLanding-v1`` episodes under the align-descend policy
+:class:`SimulatorSource` flies ``DeckLanding-v2`` episodes under the align-descend policy
 (:class:`agents.policies.align_descend.AlignDescendPolicy`, as ``deck-landing demo``) with the
 chosen estimator observed, and yields the observed estimate of every control step: after the reset
 and after each step.  The stamp is the estimate's own (the camera frame's capture time in
@@ -43,7 +43,7 @@ POSE_HISTORY = 256
 
 
 class SimulatorSource:
-    """Seeded ``DeckLanding-v1`` episodes as a stream of observed estimates.
+    """Seeded ``DeckLanding-v2`` episodes as a stream of observed estimates.
 
     ``config``: a config name or path, flown as it is; ``scenario``: a shipped config made a
     landing run (the drone flying, as the landing evaluations do); give one of the two.

@@ -93,7 +93,7 @@ class AlignDescendConfig:
 
 
 class AlignDescendPolicy:
-    """Visual servoing for ``DeckLanding-v1`` on the estimated deck pose.
+    """Visual servoing for ``DeckLanding-v2`` on the estimated deck pose.
 
     Approach: centre over the tag and descend while aligned to the hold height; without a
     valid estimate, move towards the deck when the ToF ranges show its edge (IHRCF and CRHF

@@ -1,4 +1,4 @@
-"""``beacon-range``: the IR-LOCK / PX4 precision-landing baseline on ``DeckLanding-v1``.
+"""``beacon-range``: the IR-LOCK / PX4 precision-landing baseline on ``DeckLanding-v2``.
 
 It knows what an IR-LOCK camera and a downward rangefinder give: the bearing to the beacon's
 centre and one range, turned into a position by the ``beacon`` estimator
@@ -249,7 +249,7 @@ class BeaconRangePolicy:
 
 
 def make_beacon_range(env: Any, config: BeaconRangeConfig | None = None) -> BeaconRangePolicy:
-    """The baseline for a ``DeckLanding-v1`` environment with ``estimation.observed: beacon``."""
+    """The baseline for a ``DeckLanding-v2`` environment with ``estimation.observed: beacon``."""
     base = env.unwrapped
     if base.config.estimation.observed != "beacon":
         raise ConfigError(

@@ -1,12 +1,15 @@
 """``lander-model``: a Stable-Baselines3 model that flies ``DeckLanding`` end to end.
 
-The model maps the observation (the estimated deck pose, the ToF ranges, the IMU, the drone's
-own velocity and attitude, stacked over the last ``frame_stack`` steps as SB3's
-``VecFrameStack`` stacks them in training) to the Box(4) velocity set-point.  Its card
+The model maps the observation (stacked over the last ``frame_stack`` steps as SB3's
+``VecFrameStack`` stacks them in training, and normalised by the ``VecNormalize`` statistics
+saved beside it, ``vecnormalize.pkl``, where it was trained with them) to the Box action: the
+velocity set-point and, on ``DeckLanding-v2``, the land trigger.  A model whose critic read
+the ``privileged`` key (:class:`landing_env.privileged.PrivilegedCriticPolicy`) flies an
+environment built without it: its actor never reads the key.  Its card
 (:mod:`agents.common.cards`) records the id, the observation's keys and stacking, the
 estimator and the sensing it was trained on, and is checked against the environment on load.
 
-Train one with ``deck-landing train landing --config configs/train/lander_sac.yaml``.
+Train one with ``deck-landing train landing --config configs/train/lander_ppo.yaml``.
 """
 
 from __future__ import annotations
@@ -24,7 +27,11 @@ from agents.common.cards import (
     read_metadata,
 )
 from agents.policies.registry import MODEL_DIR, find_model
+from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
+
+#: the ``VecNormalize`` statistics a training run saves beside its models (rl-zoo3's name)
+NORMALIZE_NAME = "vecnormalize.pkl"
 
 
 def shipped_lander_model(algo: str) -> Path:
@@ -40,7 +47,7 @@ class TrainedLanderPolicy:
         if not self.path.is_file():
             raise FileNotFoundError(
                 f"no trained lander at {self.path}; train one with `deck-landing train landing "
-                "--config configs/train/lander_sac.yaml --install`"
+                "--config configs/train/lander_ppo.yaml --install`"
             )
         card = read_metadata(self.path)
         if card is None:
@@ -58,6 +65,7 @@ class TrainedLanderPolicy:
         self.card = card
         self.frame_stack = int(card.observation.get("frame_stack", 1))
         self.model = model_class(self.path).load(self.path, device=device)
+        self.normalize = _normalization(self.path.parent / NORMALIZE_NAME)
         self._stack: dict[str, np.ndarray] | None = None
 
     def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
@@ -87,11 +95,30 @@ class TrainedLanderPolicy:
         return {key: value.copy() for key, value in self._stack.items()}
 
     def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        action, _ = self.model.predict(self.stacked(observation), deterministic=True)
-        return np.asarray(action, dtype=np.float32).reshape(4)
+        stacked = self.stacked(observation)
+        spaces = self.model.observation_space.spaces
+        if PRIVILEGED_KEY in spaces and PRIVILEGED_KEY not in stacked:
+            # the critic's key: the actor never reads it, so any value stands in for it
+            stacked[PRIVILEGED_KEY] = np.zeros(spaces[PRIVILEGED_KEY].shape, np.float32)
+        if self.normalize is not None:
+            stacked = self.normalize.normalize_obs(stacked)
+        action, _ = self.model.predict(stacked, deterministic=True)
+        return np.asarray(action, dtype=np.float32).reshape(-1)
 
     def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         return self.act(observation)
+
+
+def _normalization(path: Path) -> Any:
+    """The ``VecNormalize`` saved at ``path`` (its statistics, frozen), or None."""
+    if not path.is_file():
+        return None
+    import pickle
+
+    with path.open("rb") as stream:
+        normalize = pickle.load(stream)
+    normalize.training = False
+    return normalize
 
 
 def build_lander(env: Any, model_path: str | None, allow: tuple[str, ...]) -> TrainedLanderPolicy:
@@ -100,7 +127,7 @@ def build_lander(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Tr
         raise ConfigError(
             "--model",
             "lander-model runs a trained lander: give --model PATH (train one with "
-            "`deck-landing train landing --config configs/train/lander_sac.yaml`)",
+            "`deck-landing train landing --config configs/train/lander_ppo.yaml`)",
         )
     policy = TrainedLanderPolicy(model_path)
 

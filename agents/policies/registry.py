@@ -214,7 +214,7 @@ POLICIES: dict[str, PolicySpec] = {
             "research",
             LANDING_TASK,
             "agents.policies.lander:build_lander",
-            "your own SB3 lander of DeckLanding-v1 (--model PATH; deck-landing train "
+            "your own SB3 lander of DeckLanding-v2 (--model PATH; deck-landing train "
             "landing), checked against its card",
         ),
         _timing(

@@ -1,6 +1,6 @@
 """``svgs-routine``: the SVGS high-altitude landing routine (SVGS paper Sec. 2.5.4, Alg. 2–6).
 
-A state machine on ``DeckLanding-v1`` that reads only the observation (the estimated deck
+A state machine on ``DeckLanding-v2`` that reads only the observation (the estimated deck
 pose, the ToF ranges, the downward rangefinder and the IMU), never ``info``:
 
 * ``scan`` (Algorithm 2): fly an expanding-square lawn-mower pattern around where the scan
@@ -266,7 +266,7 @@ def _load_timing_model(config: RoutineConfig) -> TrainedTimingPolicy | None:
 
 # ------------------------------------------------------------------------------ the routine
 class SvgsRoutinePolicy:
-    """The SVGS routine as a ``DeckLanding-v1`` policy (see the module docstring)."""
+    """The SVGS routine as a ``DeckLanding-v2`` policy (see the module docstring)."""
 
     name = "svgs-routine"
     #: the commanded landing point, x and y in the deck frame D, metres: the landing point
@@ -566,7 +566,7 @@ class SvgsRoutinePolicy:
 
 
 def make_svgs_routine(env: Any, config: RoutineConfig | None = None) -> SvgsRoutinePolicy:
-    """The routine for a ``DeckLanding-v1`` environment (its action scaling and step)."""
+    """The routine for a ``DeckLanding-v2`` environment (its action scaling and step)."""
     return SvgsRoutinePolicy(env.unwrapped.config.action, config, dt=env.unwrapped.env_dt)
 
 

@@ -24,6 +24,7 @@ reaches the target.
 from __future__ import annotations
 
 import ast
+import importlib
 import shutil
 import time
 import warnings
@@ -141,7 +142,7 @@ class TrainConfig:
 
     @property
     def task(self) -> str:
-        """The task its id builds (``DeckLandingTiming-v0`` or ``DeckLanding-v1``)."""
+        """The task its id builds (``DeckLandingTiming-v0`` or ``DeckLanding-v2``)."""
         return self.env_id if self.env_id in TASKS else SCENARIO_IDS[self.env_id].task
 
     @property
@@ -407,7 +408,50 @@ def make_envs(config: TrainConfig) -> tuple[Any, Any]:
 
         train_env = VecFrameStack(train_env, config.frame_stack)
         eval_env = VecFrameStack(eval_env, config.frame_stack)
+    normalize = normalize_kwargs(config.hyperparams)
+    if normalize is not None:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        # as rl-zoo3: the training env's statistics, the evaluation env reading them (SB3's
+        # EvalCallback copies them before each evaluation) and scoring the raw reward
+        train_env = VecNormalize(train_env, **normalize)
+        eval_env = VecNormalize(eval_env, **{**normalize, "training": False, "norm_reward": False})
     return train_env, eval_env
+
+
+def normalize_kwargs(hyperparams: dict[str, Any]) -> dict[str, Any] | None:
+    """rl-zoo3's ``normalize`` key as ``VecNormalize``'s keyword arguments: ``true`` (its
+    defaults), a ``"dict(...)"`` string or a mapping; None when absent or false.  As in
+    rl-zoo3, the reward's discount is the algorithm's ``gamma``."""
+    value = hyperparams.get("normalize", False)
+    if value is False or value is None:
+        return None
+    kwargs: dict[str, Any] = {}
+    if value is not True:
+        try:
+            kwargs = parse_policy_kwargs(value)
+        except ConfigError:
+            raise ConfigError(
+                "normalize", f"{value!r} is not true, false or a dict(...) of VecNormalize's"
+            ) from None
+    if "gamma" in hyperparams:
+        kwargs.setdefault("gamma", float(hyperparams["gamma"]))
+    return kwargs
+
+
+def resolve_policy(policy: Any) -> Any:
+    """A policy name as rl-zoo3 reads it: an SB3 alias (``MultiInputPolicy``, the
+    ``PrivilegedCriticPolicy`` of :mod:`landing_env.privileged`) or a ``module.Class`` path."""
+    from landing_env.privileged import register_policy_aliases
+
+    register_policy_aliases()
+    if not isinstance(policy, str) or "." not in policy:
+        return policy
+    module, _, name = policy.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as error:
+        raise ConfigError("policy", f"{policy!r} does not import: {error}") from None
 
 
 def _base_env(vec_env: Any) -> Any:
@@ -454,6 +498,7 @@ def train(
     import torch
     from sb3_contrib import TQC, RecurrentPPO
     from stable_baselines3 import DQN, PPO, SAC
+    from stable_baselines3.common.logger import configure
 
     settings = config.settings
     target = install_path(config)
@@ -482,7 +527,7 @@ def train(
     train_env, eval_env = make_envs(config)
     try:
         model = algo_cls(
-            config.hyperparams.get("policy", default_policy),
+            resolve_policy(config.hyperparams.get("policy", default_policy)),
             train_env,
             seed=settings.seed,
             tensorboard_log=str(out / "tb"),
@@ -490,6 +535,8 @@ def train(
             verbose=0,
             **algorithm_kwargs(config.hyperparams),
         )
+        # SB3's TensorBoard log and its CSV twin (progress.csv) in one folder
+        model.set_logger(configure(str(out / "tb" / _model_name(config)), ["csv", "tensorboard"]))
         if settings.init_model:
             _start_from(model, settings.init_model, _base_env(eval_env))
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
@@ -505,6 +552,9 @@ def train(
             )
         model_path = out / f"{_model_name(config)}_final.zip"
         model.save(model_path)
+        if hasattr(train_env, "obs_rms"):
+            # the normalisation the model was trained under (rl-zoo3's file name)
+            train_env.save(str(out / "vecnormalize.pkl"))
         # the model's card: what it was trained on (checked when it is loaded)
         sensing = None
         if settings.randomise is not None:

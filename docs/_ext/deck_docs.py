@@ -1,6 +1,6 @@
 """Pages generated from the code: task environment cards, the id catalogue, the policies.
 
-Directives (MyST: ```` ```{deck-env} DeckLanding-v1 ```` and so on):
+Directives (MyST: ```` ```{deck-env} DeckLanding-v2 ```` and so on):
 
 * ``deck-env ID``: the task environment's page from its class docstring, in Gymnasium's
   fixed template (the rubrics of :data:`CARD_SECTIONS`, in that order; a docstring that

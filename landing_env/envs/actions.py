@@ -1,13 +1,15 @@
 """Actions of the landing tasks: validation against the action space, encoding and decoding.
 
 Both environments check an action with :func:`validate_action` against their own action
-space before anything moves: ``DeckLanding-v1``'s ``Box(4)`` velocity set-point and
-``DeckLandingTiming-v0``'s ``Discrete(2)`` wait/commit.  A bad action is refused with a
+space before anything moves: ``DeckLanding-v2``'s ``Box(5)`` velocity set-point and land
+trigger (``Box(4)`` with ``action.land_trigger: false``) and ``DeckLandingTiming-v0``'s
+``Discrete(2)`` wait/commit.  A bad action is refused with a
 ``ValueError`` that says what was given and what is allowed (never an ``OverflowError``,
 ``IndexError`` or ``TypeError`` from deeper down, and never silently flattened or cut).
 
 :func:`setpoint_from_action` decodes the Box action into a heading-frame velocity set-point and
-:func:`action_from_setpoint` encodes one (what the scripted policies output).
+:func:`action_from_setpoint` encodes one (what the scripted policies output; their ``land``
+entry is -1: they fly their own descent).
 """
 
 from __future__ import annotations
@@ -23,8 +25,16 @@ from landing_env.physics.controller import VelocitySetpoint
 
 #: the timing task's actions
 WAIT, COMMIT = 0, 1
-#: what each entry of the Box(4) action means
+#: what each entry of the Box(4) velocity action means
 BOX_ACTION_FIELDS: tuple[str, ...] = ("vx", "vy", "vz", "yaw_rate")
+#: ``DeckLanding``'s fifth entry: above ``action.land_threshold`` it commits to the descent
+LAND_FIELD = "land"
+
+
+def action_fields(config: ActionConfig) -> tuple[str, ...]:
+    """The entries of ``DeckLanding``'s Box action under ``config``: the velocity set-point,
+    and ``land`` with ``land_trigger``."""
+    return (*BOX_ACTION_FIELDS, LAND_FIELD) if config.land_trigger else BOX_ACTION_FIELDS
 
 
 def _describe(action: Any) -> str:
@@ -84,7 +94,8 @@ def _validate_box(action: Any, space: spaces.Box, suffix: str) -> np.ndarray:
 
 
 def setpoint_from_action(action: np.ndarray, config: ActionConfig) -> VelocitySetpoint:
-    """The heading-frame set-point of a Box(4) action in [-1, 1] (vx, vy, vz, yaw rate)."""
+    """The heading-frame set-point of a Box action in [-1, 1] (vx, vy, vz, yaw rate; a
+    ``land`` entry after them is not a set-point)."""
     velocity = np.array(
         [
             action[0] * config.max_horizontal_speed,
@@ -96,16 +107,17 @@ def setpoint_from_action(action: np.ndarray, config: ActionConfig) -> VelocitySe
 
 
 def action_from_setpoint(setpoint: VelocitySetpoint, config: ActionConfig) -> np.ndarray:
-    """A heading-frame set-point as the Box(4) action in [-1, 1] (the inverse of
-    :func:`setpoint_from_action` inside the bounds; beyond them it is clipped)."""
+    """A heading-frame set-point as the Box action in [-1, 1] (the inverse of
+    :func:`setpoint_from_action` inside the bounds; beyond them it is clipped), with
+    ``land`` at -1 (no commit) where ``config.land_trigger`` adds that entry."""
     v = setpoint.velocity_h
-    command = np.array(
-        [
-            v[0] / config.max_horizontal_speed,
-            v[1] / config.max_horizontal_speed,
-            v[2] / config.max_vertical_speed,
-            setpoint.yaw_rate / math.radians(config.max_yaw_rate_deg),
-        ]
-    )
+    command = [
+        v[0] / config.max_horizontal_speed,
+        v[1] / config.max_horizontal_speed,
+        v[2] / config.max_vertical_speed,
+        setpoint.yaw_rate / math.radians(config.max_yaw_rate_deg),
+    ]
+    if config.land_trigger:
+        command.append(-1.0)
     # the guidance's limits lie inside the action's; this clip only guards hand-set gains
-    return np.clip(command, -1.0, 1.0).astype(np.float32)
+    return np.clip(np.array(command), -1.0, 1.0).astype(np.float32)

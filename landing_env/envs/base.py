@@ -255,7 +255,7 @@ class DeckLandingBaseEnv(gym.Env):
     @property
     def spec(self) -> EnvSpec | None:  # type: ignore[override]
         """The registration spec, with ``max_episode_steps`` of this env's config where the id
-        leaves it open (``DeckLanding-v1``, ``DeckLandingTiming-v0``)."""
+        leaves it open (``DeckLanding-v2``, ``DeckLandingTiming-v0``)."""
         return self.__dict__.get("_spec")
 
     @spec.setter

@@ -19,7 +19,7 @@ member.  A held-out sea's config must name one of these: :func:`deck_forecast_fo
 fit on a held-out sea.
 
 Read by the ``deck-forecast`` policies (:mod:`agents.policies.deck_forecast`) and by the
-timing task's ``forecast`` observation (:mod:`landing_env.timing.env`).
+timing task's ``forecast`` observation (:mod:`landing_env.envs.timing`).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 (:class:`~estimation.deck_prediction.LinearTiltPredictor`) that the config's ``timing`` section
 asks for, checks it against the deck-motion history it will read
 (:class:`~landing_env.timing.history.DeckMotionHistory`), and answers the three questions the
-task (:class:`~landing_env.timing.env.DeckLandingTimingEnv`) puts to it: when a descent starting
+task (:class:`~landing_env.envs.timing.DeckLandingTimingEnv`) puts to it: when a descent starting
 now should meet the deck (the contact window), whether a descent under way should go around
 (the wave-off, by the predictor or by extrapolating the history), and what the prediction
 observation holds (the chance of a level deck at each contact time, the value of waiting on).

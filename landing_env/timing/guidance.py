@@ -3,7 +3,7 @@
 :class:`DeckGuidance` turns the *observation* (the estimated deck pose and the ToF ranges, never
 the truth) into velocity set-points: hold centred over the tag at a height, or fly the final
 descent to touchdown.  ``DeckLandingTiming-v0`` holds and descends with it, and the
-``align-descend`` policy of ``DeckLanding-v1`` flies its approach and descent with the same
+``align-descend`` policy of ``DeckLanding-v2`` flies its approach and descent with the same
 gains.
 
 Two laws, chosen by ``GuidanceGains.track_deck``:

@@ -52,20 +52,27 @@ class DeckMotionHistory:
             pose = np.asarray(pose, dtype=float)
             self._recent.append((self._t, pose))
             row[:6] = pose
-            row[6:9] = self._rates()
+            row[6:9] = self.slope((2, 3, 4))
             row[9] = 1.0
         else:
             self._recent.append((self._t, None))
         self._rows.append(row)
 
-    def _rates(self) -> np.ndarray:
+    def slope(self, columns: tuple[int, ...]) -> np.ndarray:
+        """The least-squares rate of the pose's ``columns`` (indices of x, y, z, roll, pitch,
+        yaw) over the valid samples of the rate window, per second; zeros with fewer than two
+        samples."""
         samples = [(t, p) for t, p in self._recent if p is not None]
         if len(samples) < 2:
-            return np.zeros(3)
+            return np.zeros(len(columns))
         t = np.array([s[0] for s in samples])
-        values = np.array([s[1][2:5] for s in samples])
+        values = np.array([s[1][list(columns)] for s in samples])
         t = t - t.mean()
         return (t @ (values - values.mean(axis=0))) / float(t @ t)
+
+    def newest(self) -> np.ndarray:
+        """The newest row (an invalid row of zeros before the first sample)."""
+        return self._rows[-1].copy() if self._rows else np.zeros(len(HISTORY_FEATURES))
 
     def rows(self) -> np.ndarray:
         """(length, features), oldest first; missing leading samples are invalid rows."""

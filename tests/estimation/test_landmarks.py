@@ -226,7 +226,7 @@ def test_ranked_estimator_uses_atda_above_the_tof_range_and_ihrcf_within() -> No
 
 # ------------------------------------------------------------------------------- scenario
 def test_high_approach_starts_20_m_up_and_5_m_off_with_only_atda_valid() -> None:
-    env = gym.make("DeckLanding-v1", config="high-approach")
+    env = gym.make("DeckLanding-v2", config="high-approach")
     try:
         for seed in (0, 1):
             _, info = env.reset(seed=seed)
@@ -250,7 +250,7 @@ def test_render_mode_decodes_the_large_tag_high_and_the_small_one_low(
     height_m: float, tag_id: int
 ) -> None:
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         config="high-approach",
         overrides={
             "camera.mode": "render",

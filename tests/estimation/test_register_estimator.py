@@ -137,13 +137,15 @@ def test_the_environment_observes_a_registered_estimator(tag_only: str) -> None:
     import landing_env  # noqa: F401  (registers the ids)
 
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         overrides={"estimation.observed": tag_only, "motion.kind": "static"},
     )
     try:
         observation, info = env.reset(seed=1)
         for _ in range(3):
-            observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+            observation, _, _, _, info = env.step(
+                np.zeros(env.action_space.shape, dtype=np.float32)
+            )
         mine = info["estimates"][tag_only]
         assert mine["valid"], mine["reason"]
         assert observation["deck_pose_valid"][0] == 1

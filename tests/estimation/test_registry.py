@@ -105,7 +105,7 @@ def test_the_env_observes_tight_and_fuses_it(tmp_path) -> None:
     import landing_env  # noqa: F401
 
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         overrides={
             "estimation.observed": "tight",
             "estimation.compare": ["fused", "truth"],
@@ -116,7 +116,7 @@ def test_the_env_observes_tight_and_fuses_it(tmp_path) -> None:
     try:
         _, info = env.reset(seed=1)
         for _ in range(10):
-            _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+            _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         tight = info["estimates"]["tight"]
         assert tight["valid"], tight["reason"]
         assert np.all(np.abs(np.asarray(tight["pose"]) - info["deck_pose_true"]) < 0.02)

@@ -132,14 +132,14 @@ def test_a_changed_camera_without_its_calibration_is_refused(key: str, value: fl
     import landing_env  # noqa: F401  (registers the environments)
 
     with pytest.raises(ConfigError) as info:
-        gym.make("DeckLanding-v1", overrides={key: value, "estimation.observed": "ihrcf"})
+        gym.make("DeckLanding-v2", overrides={key: value, "estimation.observed": "ihrcf"})
     message = str(info.value)
     assert info.value.key == "estimation.intrinsics_file"  # the prefix is added once
     assert key in message and "matching calibration" in message
     assert "deck-landing calibrate" in message
     # with the exact camera model no calibration file is needed
     env = gym.make(
-        "DeckLanding-v1",
+        "DeckLanding-v2",
         overrides={
             key: value,
             "estimation.observed": "ihrcf",

@@ -1,4 +1,4 @@
-"""ATDA, IHRCF and CRHF wired into DeckLanding-v1 with the shipped calibration files."""
+"""ATDA, IHRCF and CRHF wired into DeckLanding-v2 with the shipped calibration files."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from landing_env.errors import ConfigError
 from landing_env.estimators import OUT_OF_BOUNDS, load_intrinsics, load_tof_calibration
 
 ESTIMATORS = ("atda", "ihrcf", "crhf", "tight")
-HOVER = np.zeros(4, dtype=np.float32)
+HOVER = np.zeros(5, dtype=np.float32)  # vx, vy, vz, yaw rate, land (not triggered)
 #: the drone's centre 2.03 m above the deck puts the camera (3 cm below it) 2 m above it
 LEVEL_START = {"height_m": 2.03, "offset_m": (0.0, 0.0), "yaw": 0.0}
 
@@ -33,7 +33,7 @@ def make(observed: str = "ihrcf", compare: tuple[str, ...] = ESTIMATORS, **overr
         "estimation.compare": list(compare),
         **overrides,
     }
-    return gym.make("DeckLanding-v1", overrides=settings)
+    return gym.make("DeckLanding-v2", overrides=settings)
 
 
 def static_bench(mode: str = "render", attitude_deg=(0.0, 0.0, 0.0), position_m=(0.0, 0.0, 0.0)):

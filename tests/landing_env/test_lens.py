@@ -102,7 +102,7 @@ def test_the_ship_ids_see_through_the_scenarios_lens_and_gate_on_its_view() -> N
         finally:
             env.close()
     # the ship ids fly their scenario's own lens
-    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v4"].overrides
+    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v5"].overrides
     assert load_config("ship-ss6").lens == "wide"
     # at sea state 4 the standard lens's finer pixels win (README "A wider lens for the ship")
     assert load_config("ship-ss4").lens == load_config("ship-ss3").lens == "standard"
@@ -167,7 +167,7 @@ def test_any_camera_keeps_a_point_within_its_half_view_inside_the_image(
 def test_a_view_gate_from_a_camera_its_calibration_does_not_fit_is_refused_naming_the_file() -> (
     None
 ):
-    from landing_env.timing.env import DeckLandingTimingEnv
+    from landing_env.envs.timing import DeckLandingTimingEnv
 
     with pytest.raises(ConfigError, match=r"estimation\.intrinsics_file"):
         DeckLandingTimingEnv(

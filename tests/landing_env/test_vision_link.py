@@ -120,18 +120,20 @@ def test_env_with_fused_passes_check_env() -> None:
         "estimation.vision_link.rate_hz": [20.0, 20.0],
         "estimation.vision_link.dropout_prob": 0.0,
     }
-    env = gym.make("DeckLanding-v1", overrides=overrides)
+    env = gym.make("DeckLanding-v2", overrides=overrides)
     check_env(env.unwrapped, skip_render_check=True)
     env.close()
 
 
 def test_env_steps_with_fused_and_degraded_link() -> None:
-    env = gym.make("DeckLanding-v1", overrides={**FUSED_ENV, "simulation.drone_fixed": True})
+    env = gym.make("DeckLanding-v2", overrides={**FUSED_ENV, "simulation.drone_fixed": True})
     obs, info = env.reset(seed=0)
     assert "deck_pose_std" in obs and obs["deck_pose_valid"][0] == 0  # nothing delivered yet
     errors, stds = [], []
     for _ in range(100):
-        obs, _, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
+        obs, _, terminated, truncated, info = env.step(
+            np.zeros(env.action_space.shape, dtype=np.float32)
+        )
         assert env.observation_space.contains(obs)
         fused = info["estimates"]["fused"]
         if fused["valid"]:
@@ -151,7 +153,7 @@ def test_env_steps_with_fused_and_degraded_link() -> None:
 
 def test_link_off_leaves_estimates_untouched() -> None:
     overrides = {"camera.mode": "project", "estimation.observed": "ihrcf"}
-    env = gym.make("DeckLanding-v1", overrides=overrides)
+    env = gym.make("DeckLanding-v2", overrides=overrides)
     _, info = env.reset(seed=0)
     assert "deck_pose_std" not in env.observation_space.spaces
     assert "age_s" not in info["estimates"]["ihrcf"]["extras"]
@@ -161,12 +163,12 @@ def test_link_off_leaves_estimates_untouched() -> None:
 
 def test_fused_follows_a_flying_drone_where_held_estimates_lag() -> None:
     """The IMU carries the estimate between late deliveries while the drone manoeuvres."""
-    env = gym.make("DeckLanding-v1", overrides=FUSED_ENV)
+    env = gym.make("DeckLanding-v2", overrides=FUSED_ENV)
     env.reset(seed=1, options={"height_m": 2.5, "offset_m": (0.0, 0.0)})
     fused_errors, held_errors = [], []
     for k in range(120):
         t = 0.05 * k
-        action = [0.25 * math.sin(2.5 * t), 0.25 * math.sin(1.9 * t), 0.0, 0.2 * math.sin(t)]
+        action = [0.25 * math.sin(2.5 * t), 0.25 * math.sin(1.9 * t), 0.0, 0.2 * math.sin(t), -1]
         _, _, terminated, truncated, info = env.step(np.array(action, dtype=np.float32))
         truth = info["deck_pose_true"][:3]
         fused, held = info["estimates"]["fused"], info["estimates"]["atda"]

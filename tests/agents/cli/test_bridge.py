@@ -40,7 +40,7 @@ EPISODE_S = 3.0
 def record_landing(path: Path) -> Path:
     """A few seconds of the align-descend policy in project mode, recorded to ``path``."""
     overrides = {"camera.mode": "project", "simulation.max_episode_s": EPISODE_S}
-    env = McapRecorder(gym.make("DeckLanding-v1", config="default", overrides=overrides), path)
+    env = McapRecorder(gym.make("DeckLanding-v2", config="default", overrides=overrides), path)
     base = env.unwrapped
     policy = AlignDescendPolicy(
         base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c

@@ -177,7 +177,7 @@ def test_demo_timing_part_flies_the_realistic_policy_under_realistic_sensing(
 def test_pybullet_prints_nothing_when_an_env_is_made() -> None:
     code = (
         "import gymnasium as gym, landing_env; "
-        "env = gym.make('DeckLanding-v1'); env.reset(seed=0); env.close()"
+        "env = gym.make('DeckLanding-v2'); env.reset(seed=0); env.close()"
     )
     done = subprocess.run(
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
@@ -188,7 +188,7 @@ def test_pybullet_prints_nothing_when_an_env_is_made() -> None:
 
 def test_an_env_with_a_pinned_drone_says_it_cannot_land() -> None:
     with pytest.warns(PinnedDroneWarning, match="cannot land"):
-        env = gym.make("DeckLanding-v1", config="paper-stewart")
+        env = gym.make("DeckLanding-v2", config="paper-stewart")
     env.close()
 
 

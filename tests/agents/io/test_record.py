@@ -24,7 +24,7 @@ COMPARED = ["atda", "crhf", "tight"]
 def record_episode(path: Path) -> Path:
     """A short project-mode episode, hovering, recorded to ``path``."""
     overrides = {"camera.mode": "project", "estimation.compare": COMPARED}
-    env = McapRecorder(gym.make("DeckLanding-v1", config="default", overrides=overrides), path)
+    env = McapRecorder(gym.make("DeckLanding-v2", config="default", overrides=overrides), path)
     env.reset(seed=3)
     for _ in range(STEPS):
         env.step(np.zeros(env.action_space.shape, dtype=np.float32))

@@ -39,7 +39,7 @@ def _yaml(tmp_path: Path, algo: str = "sac", **zoo: object) -> Path:
         **zoo,
     }
     data = {
-        "DeckLanding-BenchSS4-v1": section,
+        "DeckLanding-BenchSS4-v2": section,
         "deck_landing": {
             "algo": algo,
             "vec_env": "dummy",
@@ -62,7 +62,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_a_trained_lander_carries_a_card_of_its_id_observation_and_sensing(trained: Path) -> None:
     policy = TrainedLanderPolicy(trained)
-    assert policy.card.env_id == "DeckLanding-BenchSS4-v1"
+    assert policy.card.env_id == "DeckLanding-BenchSS4-v2"
     assert policy.card.algo == "sac"
     assert policy.card.estimator == "tight"
     assert policy.card.sensing == ["realistic"]
@@ -84,7 +84,7 @@ def test_training_draws_its_learning_curve_from_its_held_out_evaluations(trained
 
 
 def test_the_lander_refuses_another_estimator_naming_it(trained: Path) -> None:
-    env = gym.make("DeckLanding-BenchSS4-v1", overrides={**SHORT, "estimation.observed": "ihrcf"})
+    env = gym.make("DeckLanding-BenchSS4-v2", overrides={**SHORT, "estimation.observed": "ihrcf"})
     try:
         with pytest.raises(ConfigError, match="estimator"):
             build_lander(env, str(trained), ())
@@ -94,11 +94,11 @@ def test_the_lander_refuses_another_estimator_naming_it(trained: Path) -> None:
 
 
 def test_the_stacked_observation_at_inference_is_vecframestacks(trained: Path) -> None:
-    policy = build_lander(gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT), str(trained), ())
+    policy = build_lander(gym.make("DeckLanding-BenchSS4-v2", overrides=SHORT), str(trained), ())
     vec = VecFrameStack(
-        DummyVecEnv([lambda: gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT)]), 3
+        DummyVecEnv([lambda: gym.make("DeckLanding-BenchSS4-v2", overrides=SHORT)]), 3
     )
-    env = gym.make("DeckLanding-BenchSS4-v1", overrides=SHORT)
+    env = gym.make("DeckLanding-BenchSS4-v2", overrides=SHORT)
     try:
         vec.seed(5)
         stacked = vec.reset()
@@ -128,8 +128,8 @@ def test_a_lander_yaml_with_a_timing_algorithm_or_a_bad_stack_is_refused(tmp_pat
 
 def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing() -> None:
     config = load_train_config("configs/train/lander_sac.yaml")
-    assert config.env_id == "DeckLanding-BenchSS4-v1"
-    assert config.task == "DeckLanding-v1"
+    assert config.env_id == "DeckLanding-BenchSS4-v2"
+    assert config.task == "DeckLanding-v2"
     assert config.settings.env_kwargs["overrides"] == {
         "sensors": "realistic",
         "estimation.observed": "tight",

@@ -41,7 +41,7 @@ HOVER_IMU = np.array([0.0, 0.0, 9.81, 0.0, 0.0, 0.0], dtype=np.float32)
 def observation(
     pose: tuple[float, ...] | None, tof: float | None = None, range_down: float | None = None
 ) -> dict[str, np.ndarray]:
-    """A DeckLanding-v1 observation with the given deck pose (None: invalid)."""
+    """A DeckLanding-v2 observation with the given deck pose (None: invalid)."""
     valid = pose is not None
     return {
         "deck_pose": np.array(pose if valid else [0.0] * 6, dtype=np.float32),
@@ -301,7 +301,7 @@ def test_env_observation_carries_the_downward_range() -> None:
 
     import landing_env  # noqa: F401
 
-    env = gym.make("DeckLanding-v1", overrides={"start.max_offset_m": 0.0})
+    env = gym.make("DeckLanding-v2", overrides={"start.max_offset_m": 0.0})
     try:
         obs, info = env.reset(seed=0)
         assert env.observation_space.contains(obs)

@@ -152,7 +152,7 @@ ZOO_YAMLS = (
     (
         CONFIG.with_name("lander_sac.yaml"),
         "sac",
-        "DeckLanding-BenchSS4-v1",
+        "DeckLanding-BenchSS4-v2",
         ("n_envs:1", "learning_starts:16", "batch_size:16", "buffer_size:200"),
     ),
 )

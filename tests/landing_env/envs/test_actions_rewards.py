@@ -77,7 +77,7 @@ def test_both_environments_refuse_bad_actions_before_moving() -> None:
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )
-    landing = gym.make("DeckLanding-v1")
+    landing = gym.make("DeckLanding-v2")
     try:
         timing.reset(seed=0)
         landing.reset(seed=0)
@@ -87,12 +87,12 @@ def test_both_environments_refuse_bad_actions_before_moving() -> None:
                 timing.unwrapped.step(action)
         assert timing.unwrapped.world.time == time_before
         for action in (np.zeros((2, 2)), np.zeros(4, dtype=complex)):
-            with pytest.raises(ValueError, match=r"shape \(4,\)"):
+            with pytest.raises(ValueError, match=r"shape \(5,\)"):
                 landing.unwrapped.step(action)
         # and the episodes go on with good actions
         _, _, _, _, info = timing.step(np.int64(0))
         assert info["outcome"] == "in_flight"
-        _, _, _, _, info = landing.step(np.zeros(4, dtype=np.float32))
+        _, _, _, _, info = landing.step(np.zeros(landing.action_space.shape, dtype=np.float32))
         assert info["outcome"] == "in_flight"
     finally:
         timing.close()
@@ -147,7 +147,7 @@ def test_the_reward_is_the_sum_of_its_terms_in_info_in_both_tasks() -> None:
         overrides=TIMING_OVERRIDES,
         timing=QUICK_TIMING,
     )
-    landing = gym.make("DeckLanding-v1")
+    landing = gym.make("DeckLanding-v2")
     try:
         _, info = timing.reset(seed=1)
         assert sum(_terms(info).values()) == 0.0
@@ -160,7 +160,7 @@ def test_the_reward_is_the_sum_of_its_terms_in_info_in_both_tasks() -> None:
             -RewardConfig().tilt_penalty * info["touchdown"]["deck_tilt_deg"]
         )
         landing.reset(seed=1)
-        _, reward, _, _, info = landing.step(np.array([0.0, 0.0, -0.5, 0.0]))
+        _, reward, _, _, info = landing.step(np.array([0.0, 0.0, -0.5, 0.0, -1.0]))
         assert info["reward_shaping"] != 0.0
         assert reward == pytest.approx(sum(_terms(info).values()))
     finally:

@@ -1,4 +1,4 @@
-"""DeckLanding-v1 against the Gymnasium and SB3 API checks, seeding, vec envs, episodes."""
+"""DeckLanding-v2 against the Gymnasium and SB3 API checks, seeding, vec envs, episodes."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from landing_env.errors import ConfigError
 
 
 def make(**kwargs) -> gym.Env:
-    return gym.make("DeckLanding-v1", **kwargs)
+    return gym.make("DeckLanding-v2", **kwargs)
 
 
 def test_both_ids_make_the_env() -> None:
-    for env_id in ("DeckLanding-v1", "landing_env:DeckLanding-v1"):
+    for env_id in ("DeckLanding-v2", "landing_env:DeckLanding-v2"):
         env = gym.make(env_id)
         observation, _ = env.reset(seed=1)
         assert env.observation_space.contains(observation)
@@ -50,7 +50,7 @@ def _rollout(seed: int, steps: int = 25) -> list[np.ndarray]:
     trace = [np.concatenate([observation["deck_pose"], observation["tof_range"]])]
     for _ in range(steps):
         observation, _reward, terminated, truncated, info = env.step(
-            rng.uniform(-0.3, 0.3, 4).astype(np.float32)
+            rng.uniform(-0.3, 0.3, 5).astype(np.float32)
         )
         trace.append(
             np.concatenate(
@@ -76,12 +76,14 @@ def test_runs_under_subproc_vec_env() -> None:
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
     # the "module:id" form makes the worker processes import and register the package
-    vec = make_vec_env("landing_env:DeckLanding-v1", n_envs=2, seed=3, vec_env_cls=SubprocVecEnv)
+    vec = make_vec_env("landing_env:DeckLanding-v2", n_envs=2, seed=3, vec_env_cls=SubprocVecEnv)
     try:
         observations = vec.reset()
         assert observations["deck_pose"].shape == (2, 6)
         for _ in range(5):
-            observations, rewards, _dones, _infos = vec.step(np.zeros((2, 4), dtype=np.float32))
+            observations, rewards, _dones, _infos = vec.step(
+                np.zeros((2, *vec.action_space.shape), dtype=np.float32)
+            )
         assert rewards.shape == (2,)
         assert np.all(np.isfinite(observations["deck_pose"]))
     finally:
@@ -91,7 +93,7 @@ def test_runs_under_subproc_vec_env() -> None:
 def test_info_carries_truth_state_and_imu_samples() -> None:
     env = make()
     _, info = env.reset(seed=0)
-    observation, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    observation, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     assert info["deck_pose_true"].shape == (6,)
     # the deck is below the camera: the tag is at positive z_C
     assert 1.0 < info["deck_pose_true"][2] < 3.0
@@ -132,7 +134,7 @@ def test_flying_into_the_ground_off_the_deck_is_a_crash() -> None:
     for _ in range(400):
         # fly sideways off the deck and down: the feet hit the ground, not the deck
         _, reward, terminated, truncated, info = env.step(
-            np.array([1.0, 0.0, -0.6, 0.0], dtype=np.float32)
+            np.array([1.0, 0.0, -0.6, 0.0, -1.0], dtype=np.float32)
         )
         if terminated or truncated:
             outcome = info["outcome"]
@@ -147,7 +149,9 @@ def test_time_limit_truncates() -> None:
     env.reset(seed=0)
     steps = 0
     while True:
-        _, _, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
+        _, _, terminated, truncated, info = env.step(
+            np.zeros(env.action_space.shape, dtype=np.float32)
+        )
         steps += 1
         if terminated or truncated:
             break
@@ -160,9 +164,9 @@ def test_time_limit_truncates() -> None:
 def test_out_of_bounds_action_is_flagged_not_silently_clipped() -> None:
     env = make()
     env.reset(seed=0)
-    _, _, _, _, info = env.step(np.array([2.0, 0.0, 0.0, 0.0], dtype=np.float32))
+    _, _, _, _, info = env.step(np.array([2.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32))
     assert info["action_clipped"]
-    _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     assert not info["action_clipped"]
     env.close()
 
@@ -173,7 +177,9 @@ def test_fixed_drone_stays_put_over_the_moving_deck() -> None:
     start = info["drone"]["position_w"].copy()
     deck_heights = []
     for _ in range(40):
-        _, _, terminated, truncated, info = env.step(np.ones(4, dtype=np.float32))
+        _, _, terminated, truncated, info = env.step(
+            np.ones(env.action_space.shape, dtype=np.float32)
+        )
         deck_heights.append(info["deck"]["position_w"][2])
         assert not (terminated or truncated)
     env.close()
@@ -239,10 +245,12 @@ def test_info_with_missing_readings_is_deterministic() -> None:
     # cannot compare; the episode is deterministic all the same
     infos = []
     for _ in range(2):
-        env = gym.make("DeckLanding-v1", config="high-approach")
+        env = gym.make("DeckLanding-v2", config="high-approach")
         try:
             _, first = env.reset(seed=5)
-            steps = [env.step(np.zeros(4, dtype=np.float32))[4] for _ in range(3)]
+            steps = [
+                env.step(np.zeros(env.action_space.shape, dtype=np.float32))[4] for _ in range(3)
+            ]
         finally:
             env.close()
         infos.append([first, *steps])

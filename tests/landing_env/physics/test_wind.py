@@ -170,7 +170,7 @@ def test_the_ship_ids_start_in_trim_with_the_autopilots_limits() -> None:
     from landing_env.scenarios import SCENARIO_IDS
 
     for n in (3, 4, 5, 6):
-        for env_id in (f"DeckLandingTiming-ShipSS{n}-v7", f"DeckLanding-ShipSS{n}-v4"):
+        for env_id in (f"DeckLandingTiming-ShipSS{n}-v7", f"DeckLanding-ShipSS{n}-v5"):
             scenario = SCENARIO_IDS[env_id]
             config = load_config(scenario.config, scenario.overrides)
             assert config.start.trim_to_wind is True, env_id

@@ -85,7 +85,7 @@ def test_a_scenarios_own_sea_is_no_held_out_sea() -> None:
 
 @pytest.mark.parametrize("name", sorted(HELD_OUT_SEAS))
 def test_a_deck_landing_env_runs_a_held_out_sea(name: str) -> None:
-    env = gym.make("DeckLanding-v1", config=name)
+    env = gym.make("DeckLanding-v2", config=name)
     try:
         flat = lambda o: gym.spaces.flatten(env.observation_space, o)  # noqa: E731
         first = flat(env.reset(seed=1_000_000)[0])
@@ -93,7 +93,7 @@ def test_a_deck_landing_env_runs_a_held_out_sea(name: str) -> None:
         assert isinstance(world.stewart.motion.waves, GeneratedSea)
         deck = [world.deck_state().position_w.copy()]
         for _ in range(5):
-            observation, reward, *_ = env.step(np.zeros(4))
+            observation, reward, *_ = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
             assert np.all(np.isfinite(flat(observation))) and np.isfinite(reward)
             deck.append(world.deck_state().position_w.copy())
         assert np.ptp(np.array(deck), axis=0).max() > 0.0

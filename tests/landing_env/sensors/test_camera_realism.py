@@ -207,11 +207,11 @@ def test_tags_still_decode_at_the_default_heights(name: str, height: float) -> N
     }
     import gymnasium as gym
 
-    env = gym.make("DeckLanding-v1", overrides=overrides)
+    env = gym.make("DeckLanding-v2", overrides=overrides)
     env.reset(seed=4)
     seen = 0
     for _ in range(10):
-        env.step(np.zeros(4, dtype=np.float32))
+        env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         seen += bool(env.unwrapped._sensing.frame.detections)
     env.close()
     assert seen >= 9
@@ -223,7 +223,7 @@ def test_realistic_images_are_seeded_and_deterministic() -> None:
     frames = []
     for _ in range(2):
         env = gym.make(
-            "DeckLanding-v1",
+            "DeckLanding-v2",
             overrides={
                 "camera.mode": "render",
                 "camera.profile": "imx219",
@@ -232,7 +232,7 @@ def test_realistic_images_are_seeded_and_deterministic() -> None:
         )
         env.reset(seed=11)
         for _ in range(3):
-            env.step(np.array([0.3, -0.2, 0.0, 0.0], dtype=np.float32))
+            env.step(np.array([0.3, -0.2, 0.0, 0.0, -1.0], dtype=np.float32))
         frames.append(env.unwrapped._sensing.frame)
         env.close()
     np.testing.assert_array_equal(frames[0].image, frames[1].image)

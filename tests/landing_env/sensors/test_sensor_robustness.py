@@ -124,7 +124,7 @@ def test_reset_far_above_the_rangefinder_range_gives_an_invalid_range_down() -> 
     import landing_env  # noqa: F401  (registers the environments)
 
     overrides = {"start.height_m": [41, 41], "simulation.arena_max_height_m": 60}
-    env = gym.make("DeckLanding-v1", config="high-approach", overrides=overrides)
+    env = gym.make("DeckLanding-v2", config="high-approach", overrides=overrides)
     try:
         observation, _ = env.reset(seed=0)
         assert observation["range_down_valid"].tolist() == [0]

@@ -208,7 +208,7 @@ def test_a_ship_deck_env_plays_a_random_stretch_of_a_vessel_log_per_seed(tmp_pat
         "motion.csv.start": "random",
         "wind.enabled": False,
     }
-    env = gym.make("DeckLanding-v1", config="ship-ss4", overrides=overrides)
+    env = gym.make("DeckLanding-v2", config="ship-ss4", overrides=overrides)
     try:
         world = env.unwrapped.world
         first = {}
@@ -222,7 +222,7 @@ def test_a_ship_deck_env_plays_a_random_stretch_of_a_vessel_log_per_seed(tmp_pat
                 np.testing.assert_allclose(deck, first[seed], atol=1e-9)
             first[seed] = deck
             for _ in range(3):
-                env.step(np.zeros(4))
+                env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert not np.allclose(first[1], first[2])
     finally:
         env.close()

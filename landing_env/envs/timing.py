@@ -17,32 +17,24 @@ the learner.  The settings are the config's ``timing`` section
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config import episode_step_limit
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError
-from landing_env.estimators import load_intrinsics
-from landing_env.guidance_gains import GuidanceGains
-from landing_env.physics.controller import VelocitySetpoint
-from landing_env.timing.deck_prediction import DeckPrediction
-from landing_env.timing.deck_tracker import OwnState
+from landing_env.timing.committed_descent import CommittedDescent
 from landing_env.timing.forecast_observation import ForecastObservation
-from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import timing_layout
-from landing_env.timing_config import CAMERA_BELOW_COM_M, WAVE_OFF_CLIMB_S, TimingConfig
+from landing_env.timing_config import CAMERA_BELOW_COM_M
 from landing_env.touchdown import Outcome
 
 
-class DeckLandingTimingEnv(DeckLandingBaseEnv):
+class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
     """Hold over the moving deck and choose the moment to land.
 
     .. rubric:: Description
@@ -52,7 +44,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     the agent waits or commits; on a commit the same guidance flies the final descent to
     touchdown **within that one step**, and the episode ends with the touchdown's outcome.
     The decision is a clean stopping problem: no steps with ignored actions reach a learner.
-    The touchdown is judged as in ``DeckLanding-v1`` (at most 0.5 m/s relative normal speed,
+    The touchdown is judged as in ``DeckLanding-v2`` (at most 0.5 m/s relative normal speed,
     5° deck tilt, 10° drone-to-deck attitude, the drone still on the deck after 1 s), so the
     policy's task is to meet the deck when it is level and slow.
 
@@ -98,7 +90,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     ``-reward.time_cost`` per second waited (0.1); at the end ``+reward.success_bonus`` (10)
     on a successful touchdown, minus ``normal_speed_penalty · v_n + tilt_penalty · tilt_deg +
     offset_penalty · offset_m`` on any touchdown, minus ``crash_penalty`` (10) on a crash or
-    a descent that does not touch down.  The terms are those of ``DeckLanding-v1``, from one
+    a descent that does not touch down.  The terms are those of ``DeckLanding-v2``, from one
     function, and each is in ``info``.
 
     .. rubric:: Starting state
@@ -112,7 +104,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     .. rubric:: Episode end
 
     * **Touchdown** (terminated) after a commit, with the outcome and metrics of
-      ``DeckLanding-v1``.
+      ``DeckLanding-v2``.
     * **Wave-off**: with ``wave_off_tilt_deg`` set, a chosen descent whose predicted deck at
       the contact is too tilted climbs back to the hold inside the step, and the episode
       goes on (``info["wave_offs"]``).
@@ -124,7 +116,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     .. rubric:: Arguments
 
     ``gym.make(id, render_mode=None, overrides=None, **sections)``: ``config``, ``overrides``
-    and the section keywords as in ``DeckLanding-v1``.  The task's settings are the config's
+    and the section keywords as in ``DeckLanding-v2``.  The task's settings are the config's
     ``timing`` section (:class:`~landing_env.timing_config.TimingConfig`), set by the same
     dotted overrides: ``overrides={"timing.observation": "prediction",
     "timing.wave_off_tilt_deg": 5.0}`` (hold height, history length, wait limit, the descent
@@ -175,16 +167,9 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
                 "simulation.drone_fixed",
                 "True pins the drone (the papers' bench); the timing task flies it: set it false",
             )
-        sim = self.config.simulation
-        rate_window = max(2, round(self.timing.rate_window_s * sim.env_hz))
-        self.layout = timing_layout(self.timing, sim.env_hz)
-        n_history = self.layout.n_history
-        self.history = DeckMotionHistory(n_history, rate_window, self.env_dt)
-        self.guidance = DeckGuidance(self._guidance_gains(), self.env_dt)
+        self.layout = timing_layout(self.timing, self.config.simulation.env_hz)
+        self._build_descent(self.layout.n_history)
         try:
-            #: the scenario's deck-tilt predictor and what it foresees (the model wave-off,
-            #: the contact window, the prediction observation)
-            self.deck_prediction = DeckPrediction(self.config, self.history, self.env_dt)
             #: the helideck forecast and own state of the forecast observation (None when
             #: the observation holds none)
             self.forecast_observation = (
@@ -195,33 +180,7 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
             raise
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
-        #: set True to keep a record of every control period of a step (a commit step holds
-        #: the whole descent): ``periods_of_last_step`` (time, drone and deck positions, true
-        #: and observed deck pose) and, with ``render_mode="rgb_array"``, the camera images in
-        #: ``frames_of_last_step``.  Off by default: SB3's ``make_vec_env`` asks for
-        #: ``rgb_array`` unless told otherwise, and rendering every period is slow
-        self.record_periods = False
-        self.frames_of_last_step: list[np.ndarray] = []
-        self.periods_of_last_step: list[dict[str, Any]] = []
         self._reset_episode_state()
-
-    @property
-    def timing(self) -> TimingConfig:
-        """The config's ``timing`` section."""
-        return self.config.timing
-
-    def _guidance_gains(self) -> GuidanceGains:
-        """The guidance's gains, the view gate's half field of view taken from the camera's
-        calibration where ``view_from_camera`` asks for it."""
-        gains = self.timing.guidance
-        if not gains.view_from_camera:
-            return gains
-        try:
-            half_view_tan = load_intrinsics(self.config).half_view_tan()
-        except ConfigError:
-            self.world.close()
-            raise
-        return replace(gains, view_half_tan=half_view_tan)
 
     @property
     def episode_step_limit(self) -> int:
@@ -229,14 +188,10 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         return episode_step_limit(self.config, self.timing)
 
     def _reset_episode_state(self) -> None:
+        self._reset_descent()
         self._wait_s = 0.0
-        self._committed = False
         self._forced = False
-        self._descent_s = 0.0
-        self._contact_s = self.timing.expected_contact_s
-        self._wave_offs = 0
         self._observation_clipped = False
-        self._base_observation: dict[str, np.ndarray] | None = None
         #: the warm-up hold ended the episode (the deck rose into the drone, a gust crashed
         #: it); the first step reports that outcome instead of deciding
         self._hold_failed = False
@@ -248,17 +203,11 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         base_observation, _ = super().reset(seed=seed, options=options)
         self._reset_episode_state()
-        self.guidance.reset()
-        self.history.reset()
-        self._base_observation = base_observation
+        self._start_descent_episode(base_observation)
         if self.forecast_observation is not None:
             # the ship's HMS record of this episode (its errors drawn from the episode's seed)
             hms_seed = int(self.np_random.integers(2**31))
             self.forecast_observation.reset(self.world.stewart.motion, hms_seed)
-        self.guidance.observe(base_observation, self._own_state())
-        self._record()
-        self.frames_of_last_step = []
-        self.periods_of_last_step = []
         # warm-up: hold until the history is full; the agent decides only from then on.  A
         # warm-up that ends the episode (a ship deck heaving into the hold, a gust) does not
         # raise: reset returns (``info["hold_failed"]``) and the first step, whatever its
@@ -310,101 +259,6 @@ class DeckLandingTimingEnv(DeckLandingBaseEnv):
         return self._flat_observation(), reward, terminated, False, self._info()
 
     # ------------------------------------------------------------------ internals
-    def _advance(self, setpoint: VelocitySetpoint) -> None:
-        """One control period of the world under ``setpoint``, then sense and record."""
-        self._control_period(setpoint)
-        self._base_observation = self._observation()
-        self.guidance.observe(self._base_observation, self._own_state())
-        self._record()
-        if self.record_periods:
-            self._record_period()
-
-    def _own_state(self) -> OwnState:
-        """The drone's navigation estimate for the guidance (the true state standing in for
-        the autopilot's, as for the levelled history)."""
-        state = self.world.drone_state()
-        return OwnState(state.position_w, state.velocity_w, state.rotation_wb)
-
-    def _hold_setpoint(self) -> VelocitySetpoint:
-        assert self._base_observation is not None
-        return self.guidance.hold(
-            self._base_observation, self.timing.hold_height_m, self._own_state()
-        )
-
-    def _record_period(self) -> None:
-        assert self._sensing is not None and self._base_observation is not None
-        world = self.world
-        r_cd, t_cd = world.true_deck_pose_c()
-        deck = world.deck_state()
-        self.periods_of_last_step.append(
-            {
-                "time_s": world.time,
-                "drone_position_w": world.drone_state().position_w.copy(),
-                "deck_position_w": deck.position_w.copy(),
-                "deck_euler_w": euler_zyx_from_matrix(deck.rotation_wp),
-                "deck_pose_true": np.concatenate([t_cd, euler_zyx_from_matrix(r_cd)]),
-                "deck_pose_observed": self._base_observation["deck_pose"].astype(float),
-                "deck_pose_valid": bool(self._base_observation["deck_pose_valid"][0]),
-                "committed": self._committed,
-            }
-        )
-        if self.render_mode == "rgb_array":
-            self.frames_of_last_step.append(world.camera_image(self._sensing.frame))
-
-    def _record(self) -> None:
-        assert self._base_observation is not None
-        observation = self._base_observation
-        if not observation["deck_pose_valid"][0]:
-            self.history.push(None)
-            return
-        pose = observation["deck_pose"].astype(float)
-        if self.timing.level_history:
-            # the drone's attitude stands in for the autopilot's estimate (good to a fraction
-            # of a degree in PX4); the deck pose stays the estimator's
-            pose = levelled_deck_pose(pose, level_from_body(self.world.drone_state().rotation_wb))
-        self.history.push(pose)
-
-    def _descend(self, wave_off: bool) -> float:
-        """The final descent, run to touchdown (or crash, or the descent timeout), or until a
-        wave-off (``wave_off`` allows it); returns the seconds a wave-off cost (else 0)."""
-        self._committed = True
-        # the contact time of the descent starting now (the contact window's choice), and the
-        # timed descent's duration that meets the deck then
-        self._contact_s = self.deck_prediction.plan_contact()
-        self.guidance.plan_descent(self.timing.descent_time_for(self._contact_s))
-        start = self.world.time
-        while self._outcome is Outcome.IN_FLIGHT:
-            if self.world.time - start >= self.timing.descent_timeout_s:
-                # no touchdown: a failed landing of this task, not a time limit of the MDP
-                self._outcome = Outcome.TIMEOUT
-                break
-            assert self._base_observation is not None
-            self._advance(self.guidance.descend(self._base_observation, self._own_state()))
-            elapsed = self.world.time - start
-            if (
-                wave_off
-                and self._outcome is Outcome.IN_FLIGHT
-                and self.deck_prediction.wave_off_due(elapsed, self._contact_s, self._wait_s)
-            ):
-                # go around: climb back to the hold (within 5 cm, or for at most 1.5 s) before
-                # the agent decides again, so that the next descent starts where they all do
-                self._committed = False
-                self._wave_offs += 1
-                back = self.world.time
-                while (
-                    self._outcome is Outcome.IN_FLIGHT and self.world.time - back < WAVE_OFF_CLIMB_S
-                ):
-                    self._advance(self._hold_setpoint())
-                    height = self.guidance.range_m(self._base_observation)
-                    if abs(height - self.timing.hold_height_m) < 0.05:
-                        break
-                elapsed = self.world.time - start
-                self._wait_s += elapsed
-                return elapsed
-        end = self._touchdown.time_s if self._touchdown is not None else self.world.time
-        self._descent_s = end - start
-        return 0.0
-
     def _flat_observation(self) -> np.ndarray:
         assert self._base_observation is not None
         tof_valid = self._base_observation["tof_valid"].astype(bool)
