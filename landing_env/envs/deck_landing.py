@@ -233,12 +233,12 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
     Term by term (each in ``info`` as ``reward_<term>``; they sum to the reward):
 
     * ``shaping`` = Φ(s') - Φ(s), potential-based (it does not change the optimal policy),
-      with Φ = -``shaping_weight`` (1) · (|Δxy| + ``vertical_weight`` (0.5) · |Δz|) -
-      ``velocity_weight`` (0.5) · |Δv|: the true distance from the drone to the tag centre,
+      with Φ = -``shaping_weight`` (1) · (‖Δxy‖ + ``vertical_weight`` (0.5) · ‖Δz‖) -
+      ``velocity_weight`` (0.5) · ‖Δv‖: the true distance from the drone to the tag centre,
       m, and the drone's speed relative to the deck, m/s.
     * ``time`` = -``time_cost`` (0.1 per second) · the seconds the step flew (a landing
       step: its descent too).
-    * ``action_rate`` = -``action_rate_weight`` (0.002) · |a - a_prev|² over the four
+    * ``action_rate`` = -``action_rate_weight`` (0.002) · ‖a - a_prev‖² over the four
       set-points (the ``land`` entry is a decision, not charged).
     * on a touchdown: ``touchdown`` = +``touchdown_bonus`` (5) for being on the deck;
       ``normal_speed`` = -``normal_speed_penalty`` (4) · v_n; ``normal_speed_sq`` =

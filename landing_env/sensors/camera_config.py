@@ -29,7 +29,7 @@ class CameraConfig:
     #: principal point, pixels (OpenCV convention); None = image centre, (width - 1) / 2
     cx: float | None = limited(None, physical=Limit.symmetric(1e5))
     cy: float | None = limited(None, physical=Limit.symmetric(1e5))
-    #: OpenCV radial-tangential distortion (|k| of real lenses is < 10)
+    #: OpenCV radial-tangential distortion (real lenses have coefficients below 10 in magnitude)
     k1: float = limited(0.0, physical=Limit.symmetric(100.0))
     k2: float = limited(0.0, physical=Limit.symmetric(100.0))
     p1: float = limited(0.0, physical=Limit.symmetric(100.0))
