@@ -39,9 +39,11 @@ superseded API or id fails here.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -175,15 +177,27 @@ def _environment(cwd: Path) -> dict[str, str]:
 
 
 def _run(command: list[str], cwd: Path, what: str) -> subprocess.CompletedProcess[str]:
-    done = subprocess.run(
+    """Run a block in a session of its own: a block that hangs fails, and every process it
+    started (a make target's workers) ends with it."""
+    with subprocess.Popen(
         command,
         cwd=cwd,
         env=_environment(cwd),
-        capture_output=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
         text=True,
-        timeout=BLOCK_TIMEOUT_S,
-        check=False,
-    )
+        start_new_session=True,
+    ) as process:
+        try:
+            stdout, stderr = process.communicate(timeout=BLOCK_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
+            raise
+        finally:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, signal.SIGKILL)
+    done = subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
     assert done.returncode == 0, (
         f"{what} exited {done.returncode}\n--- stdout\n{done.stdout[-4000:]}"
         f"\n--- stderr\n{done.stderr[-4000:]}"
