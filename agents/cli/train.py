@@ -112,7 +112,7 @@ def add_train_parser(subparsers: Any) -> None:
     _add_task(
         which,
         "landing",
-        "a lander of DeckLanding-v2, end to end (SAC, TQC or PPO)",
-        "configs/train/lander_sac.yaml",
+        "a lander of DeckLanding-v2, end to end (PPO, SAC or TQC)",
+        "configs/train/lander_ppo.yaml",
         "lander",
     )

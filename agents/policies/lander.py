@@ -34,6 +34,13 @@ from landing_env.errors import ConfigError
 NORMALIZE_NAME = "vecnormalize.pkl"
 
 
+def normalization_path(model: Path) -> Path:
+    """Where the ``VecNormalize`` statistics of the model at ``model`` are saved:
+    ``<stem>_vecnormalize.pkl`` beside it (the statistics of that model's own moment of
+    training, e.g. the best model's at its evaluation)."""
+    return model.with_name(f"{model.stem}_{NORMALIZE_NAME}")
+
+
 def shipped_lander_model(algo: str) -> Path:
     """Where the trained lander of ``algo`` is installed: ``agents/models/lander_<algo>.zip``."""
     return MODEL_DIR / f"lander_{algo}.zip"
@@ -65,7 +72,9 @@ class TrainedLanderPolicy:
         self.card = card
         self.frame_stack = int(card.observation.get("frame_stack", 1))
         self.model = model_class(self.path).load(self.path, device=device)
-        self.normalize = _normalization(self.path.parent / NORMALIZE_NAME)
+        # the model's own statistics, else the run's (rl-zoo3's vecnormalize.pkl beside it)
+        own = normalization_path(self.path)
+        self.normalize = _normalization(own if own.is_file() else self.path.parent / NORMALIZE_NAME)
         self._stack: dict[str, np.ndarray] | None = None
 
     def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:

@@ -6,7 +6,7 @@ and, for environments that report ``info["is_success"]``, ``successes``).  This 
 that file and draws the success rate and the mean return against the steps trained, with the
 wall time of the run where its summary gives it::
 
-    python -m agents.training.learning_curve results/train/lander_sac \
+    python -m agents.training.learning_curve results/train/lander_ppo \
         --out docs/img/lander-learning-curve.png
 
 Training writes ``<run>/learning_curve.png`` and ``learning_curve.csv`` itself at its end.

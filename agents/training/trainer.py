@@ -2,7 +2,7 @@
 RecurrentPPO) or a lander of ``DeckLanding`` (SAC, TQC, PPO).
 
 ``deck-landing train timing --config configs/train/timing_ppo.yaml`` and ``deck-landing train
-landing --config configs/train/lander_sac.yaml`` read a YAML with two top-level keys:
+landing --config configs/train/lander_ppo.yaml`` read a YAML with two top-level keys:
 
 * a registered id (``DeckLandingTiming-BenchSS4-v6``: the scenario is built in, see
   :mod:`landing_env.scenarios`) holding the hyper-parameters in rl-zoo3's
@@ -43,7 +43,7 @@ from agents.common.cards import (
     read_metadata,
     write_metadata,
 )
-from agents.policies.lander import shipped_lander_model
+from agents.policies.lander import normalization_path, shipped_lander_model
 from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
 from agents.policies.timing import shipped_timing_model
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
@@ -328,6 +328,16 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
                 return False
             return True
 
+    class SaveBestNormalization(BaseCallback):
+        """On a new best model: save the training env's ``VecNormalize`` statistics beside
+        it, so that the best model is run with the statistics it was evaluated with."""
+
+        def _on_step(self) -> bool:
+            normalize = self.model.get_vec_normalize_env()
+            if normalize is not None:
+                normalize.save(str(normalization_path(out / "best_model.zip")))
+            return True
+
     evaluation = EvalCallback(
         eval_env,
         # SB3 counts callback calls per vectorised step: divide by the number of environments
@@ -337,6 +347,7 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
         log_path=str(out / "eval"),
         deterministic=True,
         callback_after_eval=StopOnSuccessRate(),
+        callback_on_new_best=SaveBestNormalization(),
         verbose=1,
     )
     checkpoints = CheckpointCallback(
@@ -614,4 +625,9 @@ def train(
         source = result.best_model_path or model_path
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(source, target)
+        statistics = normalization_path(source)
+        if not statistics.is_file():
+            statistics = source.parent / "vecnormalize.pkl"
+        if statistics.is_file():
+            shutil.copyfile(statistics, normalization_path(target))
     return result

@@ -127,7 +127,7 @@ def test_a_lander_yaml_with_a_timing_algorithm_or_a_bad_stack_is_refused(tmp_pat
 
 
 def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing() -> None:
-    config = load_train_config("configs/train/lander_sac.yaml")
+    config = load_train_config("configs/train/lander_ppo.yaml")
     assert config.env_id == "DeckLanding-BenchSS4-v2"
     assert config.task == "DeckLanding-v2"
     assert config.settings.env_kwargs["overrides"] == {

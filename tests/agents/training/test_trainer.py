@@ -149,12 +149,6 @@ ZOO_YAMLS = (
         SCENARIO_ENV_ID,
         ("n_envs:1", "n_steps:32", "batch_size:16", "n_epochs:1"),
     ),
-    (
-        CONFIG.with_name("lander_sac.yaml"),
-        "sac",
-        "DeckLanding-BenchSS4-v2",
-        ("n_envs:1", "learning_starts:16", "batch_size:16", "buffer_size:200"),
-    ),
 )
 
 

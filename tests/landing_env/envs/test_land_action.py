@@ -4,6 +4,7 @@ and the PPO recipe trained by ``deck-landing train landing`` and by rl-zoo3 unmo
 
 from __future__ import annotations
 
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -226,6 +227,17 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
         assert "privileged" not in observation
         action = policy.act(observation)
         assert action.shape == env.action_space.shape and env.action_space.contains(action)
+        # the best model flies with the statistics of its own evaluation, not the run's end
+        assert result.best_model_path is not None
+        best_statistics = tmp_path / "best_model_vecnormalize.pkl"
+        assert best_statistics.is_file()
+        best = build_lander(env, str(result.best_model_path), ())
+        with best_statistics.open("rb") as stream:
+            saved = pickle.load(stream)
+        assert best.normalize is not None
+        counted = saved.obs_rms["deck_position"].count
+        assert best.normalize.obs_rms["deck_position"].count == counted
+        assert counted <= policy.normalize.obs_rms["deck_position"].count
     finally:
         env.close()
 
