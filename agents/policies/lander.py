@@ -14,6 +14,7 @@ Train one with ``deck-landing train landing --config configs/train/lander_ppo.ya
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,13 @@ NORMALIZE_NAME = "vecnormalize.pkl"
 def normalization_path(model: Path) -> Path:
     """Where the ``VecNormalize`` statistics of the model at ``model`` are saved:
     ``<stem>_vecnormalize.pkl`` beside it (the statistics of that model's own moment of
-    training, e.g. the best model's at its evaluation)."""
+    training, e.g. the best model's at its evaluation), or, for a checkpoint
+    ``<prefix>_<N>_steps.zip``, SB3's ``<prefix>_vecnormalize_<N>_steps.pkl``."""
+    checkpoint = re.fullmatch(r"(?P<prefix>.+)_(?P<steps>\d+)_steps", model.stem)
+    if checkpoint is not None:
+        return model.with_name(
+            f"{checkpoint['prefix']}_vecnormalize_{checkpoint['steps']}_steps.pkl"
+        )
     return model.with_name(f"{model.stem}_{NORMALIZE_NAME}")
 
 

@@ -354,6 +354,8 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
         save_freq=max(settings.checkpoint_freq // n_envs, 1),
         save_path=str(out / "checkpoints"),
         name_prefix=_model_name(config),
+        # each checkpoint with its VecNormalize statistics (lander-model reads them)
+        save_vecnormalize=True,
     )
     return CallbackList([checkpoints, evaluation, WallClockBudget()]), evaluation
 

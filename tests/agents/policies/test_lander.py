@@ -12,7 +12,7 @@ import yaml
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack
 
 import landing_env  # noqa: F401
-from agents.policies.lander import TrainedLanderPolicy, build_lander
+from agents.policies.lander import TrainedLanderPolicy, build_lander, normalization_path
 from agents.training.learning_curve import read_learning_curve
 from agents.training.trainer import load_train_config, train
 from landing_env.errors import ConfigError
@@ -160,3 +160,12 @@ def test_an_env_wrapper_that_does_not_import_is_refused_naming_the_key(tmp_path:
     config = load_train_config(_yaml(tmp_path, env_wrapper="agents.no_such_module.Wrapper"))
     with pytest.raises(ConfigError, match="env_wrapper"):
         make_envs(config)
+
+
+def test_a_model_reads_its_own_normalisation_and_a_checkpoint_sb3s() -> None:
+    run = Path("results/run")
+    assert normalization_path(run / "best_model.zip") == run / "best_model_vecnormalize.pkl"
+    assert (
+        normalization_path(run / "checkpoints/lander_ppo_200000_steps.zip")
+        == run / "checkpoints/lander_ppo_vecnormalize_200000_steps.pkl"
+    )

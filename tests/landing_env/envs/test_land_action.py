@@ -17,7 +17,7 @@ import yaml
 
 import landing_env  # noqa: F401
 from agents.policies.align_descend import AlignDescendPolicy
-from agents.policies.lander import build_lander
+from agents.policies.lander import build_lander, normalization_path
 from agents.training.trainer import load_train_config, train
 from landing_env.config import RewardConfig
 from landing_env.envs.actions import action_from_setpoint
@@ -196,7 +196,12 @@ def _short_recipe(tmp_path: Path) -> Path:
     zoo.update({"n_envs": 1, "n_timesteps": 256, "n_steps": 64, "batch_size": 32, "n_epochs": 1})
     zoo["env_kwargs"]["overrides"]["simulation.max_episode_s"] = 3.0
     data["deck_landing"].update(
-        {"vec_env": "dummy", "eval": {"freq": 128, "episodes": 1}, "out_dir": str(tmp_path)}
+        {
+            "vec_env": "dummy",
+            "eval": {"freq": 128, "episodes": 1},
+            "checkpoint_freq": 128,
+            "out_dir": str(tmp_path),
+        }
     )
     path = tmp_path / "lander_ppo.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -238,6 +243,10 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
         counted = saved.obs_rms["deck_position"].count
         assert best.normalize.obs_rms["deck_position"].count == counted
         assert counted <= policy.normalize.obs_rms["deck_position"].count
+        # and each checkpoint with the statistics of its own step
+        checkpoints = sorted((tmp_path / "checkpoints").glob("*_steps.zip"))
+        assert checkpoints
+        assert all(normalization_path(checkpoint).is_file() for checkpoint in checkpoints)
     finally:
         env.close()
 
