@@ -364,7 +364,7 @@ def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):
 
 # ------------------------------------------------------------------ the environment
 def _env(**timing):
-    from agents.training.hindsight import make_timing_env
+    from agents.training.sampler import make_timing_env
 
     return make_timing_env(
         "bench-ss4", "ideal", "truth", {f"timing.{k}": v for k, v in timing.items()}

@@ -27,8 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.hindsight import make_timing_env
-from agents.training.sampler import SENSING_PROFILES
+from agents.training.sampler import SENSING_PROFILES, make_timing_env
 from estimation.deck_prediction import LinearTiltPredictor
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.errors import ConfigError, require_choice, require_range

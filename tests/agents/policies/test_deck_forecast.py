@@ -298,16 +298,6 @@ def test_the_deck_forecast_refuses_a_forecast_of_another_rate_or_channels(small_
         env.close()
 
 
-def test_the_forecast_plot_draws_a_sea_the_forecast_never_saw(small_forecast, tmp_path):
-    from agents.policies.deck_forecast import plot_forecasts
-
-    source = make_motion_source(_ship_motion(4), np.random.default_rng(5))
-    path = plot_forecasts(small_forecast, source, "ship-ss4", str(tmp_path / "forecast.png"))
-    with open(path, "rb") as handle:
-        assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
-
-
-# ------------------------------------------------------------------- the onboard model
 def test_the_onboard_model_starts_the_drone_where_its_estimate_puts_it(small_forecast):
     """With no error drawn, the copy's drone sees the deck exactly where its estimate put
     it, flies in its wind estimate's gust and keeps its velocity; the episode is unchanged."""
