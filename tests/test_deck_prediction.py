@@ -12,14 +12,14 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from agents.training.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
-from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
+from estimation.anticipation.linear_predictors import LinearTiltPredictor, TiltPrediction
+from estimation.anticipation.stopping import predictor_stopping_values
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import PREDICTIVE_TIMING, dotted
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.training_seas import training_family
-from landing_env.timing.stopping import predictor_stopping_values
 from tests.paths import ROOT
 
 DT = 0.05
@@ -516,7 +516,7 @@ def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
 
 def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
     from agents.policies.registry import make_policy
-    from landing_env.timing.history import HISTORY_FEATURES
+    from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
     env = _env(history_s=8.0)
     try:
@@ -760,7 +760,7 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.timing.history import HISTORY_FEATURES
+    from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
     env = gym.make(
         "DeckLandingTiming-BenchSS5-v6", overrides={"sensors": "realistic", **PREDICTION}

@@ -6,18 +6,18 @@ estimate lands 78.5 %.  A drone landing on a ship can know much of that future: 
 helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
 CAP 437) measures the helideck's motion and passes it on, and ship motion a few seconds ahead
 is predictable from its recent past (the classical ship-motion prediction of
-:mod:`estimation.deck_prediction`).  This policy is the deck oracle with the deck's true
-future replaced by that forecast:
+:mod:`estimation.anticipation.linear_predictors`).  This policy is the deck oracle with the deck's
+true future replaced by that forecast:
 
 * **The forecast.** A direct multi-horizon linear predictor
-  (:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
+  (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's last
   :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck to the same five
-  every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.sea.hms_forecast`, which
+  every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.anticipation.hms_forecast`, which
   the timing task's ``forecast`` observation reads too).  By default it is fitted, when the
   policy is built, on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
   other seeds (other days in the same sea state); the config's ``deck_forecast: online``
   identifies it in each episode from the HMS's own record of the last 20 min instead, as the
-  held-out seas do (:mod:`landing_env.sea.hms_forecast`).
+  held-out seas do (:mod:`landing_env.anticipation.hms_forecast`).
 * **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
   futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
   deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
@@ -61,11 +61,9 @@ from typing import Any
 import numpy as np
 
 from agents.policies.oracle import DeckOracleTimingPolicy
-from estimation.deck_prediction import LinearMotionPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor
 from estimation.limits import Limit, limited, require_limits
-from landing_env.errors import ConfigError, require_range
-from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import (
+from landing_env.anticipation.hms_forecast import (
     BLOCK,
     EXAMPLE_EVERY_S,
     FIT_SEED,
@@ -79,9 +77,12 @@ from landing_env.sea.hms_forecast import (
     fit_deck_forecast,
     forecast_rms,
 )
+from landing_env.errors import ConfigError, require_range
+from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
 from landing_env.stewart.motion import ForecastMotion
 
-#: the forecast's home is :mod:`landing_env.sea.hms_forecast`; importing it from here still works
+#: the forecast's home is :mod:`landing_env.anticipation.hms_forecast`; importing it from here still
+#: works
 __all__ = [
     "BLOCK",
     "EXAMPLE_EVERY_S",
@@ -214,8 +215,8 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         #: estimate's error, and the drone's wind estimate (world, m/s)
         self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.hms = hms or HelideckMonitorConfig()
-        #: the fitted forecast; None: each episode identifies its own online
-        #: (``deck_forecast: online``, :class:`~landing_env.sea.hms_forecast.EpisodeForecast`)
+        #: the fitted forecast; None: each episode identifies its own online (``deck_forecast:
+        #: online``, :class:`~landing_env.anticipation.hms_forecast.EpisodeForecast`)
         self.forecast = forecast or deck_forecast_for(self.env.config, self.hms)
         if self.forecast is not None and (
             tuple(self.forecast.channels) != HMS_CHANNELS

@@ -1,6 +1,6 @@
 """Fit the deck-tilt predictor of a scenario family on recorded, estimated deck motion.
 
-The predictor (:class:`estimation.deck_prediction.LinearTiltPredictor`) maps the last
+The predictor (:class:`estimation.anticipation.linear_predictors.LinearTiltPredictor`) maps the last
 ``window_s`` of the deck's levelled pose (:data:`CHANNELS`), *as the timing task's history
 holds it*
 (the configured estimator under the given sensing, the drone's tilt removed), to the true
@@ -28,13 +28,13 @@ from typing import Any
 import numpy as np
 
 from agents.training.sampler import SENSING_PROFILES, make_timing_env
-from estimation.deck_prediction import LinearTiltPredictor
+from estimation.anticipation.linear_predictors import LinearTiltPredictor
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import tilt_predictor_path
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.training_seas import TRAINING_FAMILIES, TrainingSea, training_family
-from landing_env.timing.history import HISTORY_FEATURES
 
 #: the horizons the predictor is fitted at: every decision period (0.1 s) up to 2 s
 HORIZONS_S = np.round(np.arange(0.0, 2.0 + 1e-9, 0.1), 2)

@@ -12,7 +12,7 @@ spectrum, periods, headings and speed.
 ``python -m agents.training.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
 deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``; a config's
 ``deck_forecast: ship-broad`` fits the ship's helideck forecast
-(:mod:`landing_env.sea.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
+(:mod:`landing_env.anticipation.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
 configs identify it online instead, which forecasts them better).
 """
 

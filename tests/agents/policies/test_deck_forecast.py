@@ -18,7 +18,8 @@ from agents.policies.deck_forecast import (
     fit_deck_forecast,
 )
 from agents.policies.registry import make_env_and_policy
-from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor, LinearTiltPredictor
+from landing_env.anticipation.hms_forecast import forecast_rms
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.physics.wind import WindConfig, WindModel
@@ -29,7 +30,6 @@ from landing_env.sea.hms import (
     HelideckMonitor,
     HelideckMonitorConfig,
 )
-from landing_env.sea.hms_forecast import forecast_rms
 from landing_env.stewart.motion import (
     ForecastMotion,
     MotionConfig,
@@ -543,7 +543,7 @@ def test_shifting_the_drone_keeps_its_attitude_and_velocities_and_refuses_a_bad_
 
 # ------------------------------------------------------------------------------ online
 def test_the_online_forecast_is_identified_from_the_episodes_own_record_and_refitted_when_old():
-    from landing_env.sea.hms_forecast import ONLINE_REFIT_S, EpisodeForecast
+    from landing_env.anticipation.hms_forecast import ONLINE_REFIT_S, EpisodeForecast
 
     source = make_motion_source(_ship_motion(5), np.random.default_rng([3]))
     monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=3)
