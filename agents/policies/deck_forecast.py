@@ -9,15 +9,14 @@ is predictable from its recent past (the classical ship-motion prediction of
 :mod:`estimation.anticipation.linear_predictors`).  This policy is the deck oracle with the deck's
 true future replaced by that forecast:
 
-* **The forecast.** A direct multi-horizon linear predictor
-  (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's last
-  :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck to the same five
-  every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.anticipation.hms_forecast`, which
-  the timing task's ``forecast`` observation reads too).  By default it is fitted, when the
-  policy is built, on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
-  other seeds (other days in the same sea state); the config's ``deck_forecast: online``
-  identifies it in each episode from the HMS's own record of the last 20 min instead, as the
-  held-out seas do (:mod:`landing_env.anticipation.hms_forecast`).
+* **The forecast** (:mod:`landing_env.anticipation.hms_forecast`, which the timing task's
+  ``forecast`` observation reads too). A direct multi-horizon linear predictor
+  (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's
+  last ``WINDOW_S`` of surge, sway, heave, roll and pitch at the helideck to the same five
+  every 0.5 s up to ``HORIZONS_S``'s 8 s.  By default it is fitted, when the policy is built,
+  on ``REALIZATIONS`` HMS records of the scenario's own sea drawn with other seeds (other days
+  in the same sea state); the config's ``deck_forecast: online`` identifies it in each
+  episode from the HMS's own record of the last 20 min instead, as the held-out seas do.
 * **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
   futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
   deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
@@ -63,41 +62,10 @@ import numpy as np
 from agents.policies.oracle import DeckOracleTimingPolicy
 from estimation.anticipation.linear_predictors import LinearMotionPredictor
 from estimation.limits import Limit, limited, require_limits
-from landing_env.anticipation.hms_forecast import (
-    BLOCK,
-    EXAMPLE_EVERY_S,
-    FIT_SEED,
-    FORECAST_KINDS,
-    HORIZONS_S,
-    REALIZATIONS,
-    RECORD_S,
-    WINDOW_S,
-    EpisodeForecast,
-    deck_forecast_for,
-    fit_deck_forecast,
-    forecast_rms,
-)
+from landing_env.anticipation.hms_forecast import EpisodeForecast, deck_forecast_for
 from landing_env.errors import ConfigError, require_range
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
 from landing_env.stewart.motion import ForecastMotion
-
-#: the forecast's home is :mod:`landing_env.anticipation.hms_forecast`; importing it from here still
-#: works
-__all__ = [
-    "BLOCK",
-    "EXAMPLE_EVERY_S",
-    "FIT_SEED",
-    "FORECAST_KINDS",
-    "HORIZONS_S",
-    "REALIZATIONS",
-    "RECORD_S",
-    "WINDOW_S",
-    "DeckForecastTimingPolicy",
-    "OnboardModelConfig",
-    "deck_forecast_for",
-    "fit_deck_forecast",
-    "forecast_rms",
-]
 
 #: the HMS errors' stream of an episode (apart from the look-ahead's draws)
 _HMS_STREAM = 0x4D5
@@ -188,10 +156,11 @@ def episode_monitor(
 class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
 
-    ``last_forecast`` holds the latest forecast: (H, 5) poses at :data:`HORIZONS_S`, or the
-    reason there was none.  ``rule`` are the commit rule's settings, as the deck oracle's
-    (``draws``, ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``,
-    ``relax_s``); its ``min_margin`` is 0.15 here.
+    ``last_forecast`` holds the latest forecast: (H, 5) poses at the forecast's horizons
+    (:data:`~landing_env.anticipation.hms_forecast.HORIZONS_S`), or the reason there was
+    none.  ``rule`` are the commit rule's settings, as the deck oracle's (``draws``,
+    ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``, ``relax_s``); its
+    ``min_margin`` is 0.15 here.
     """
 
     name = "deck-forecast"

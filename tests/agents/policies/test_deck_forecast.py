@@ -11,15 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.policies.deck_forecast import (
-    HORIZONS_S,
-    DeckForecastTimingPolicy,
-    OnboardModelConfig,
-    fit_deck_forecast,
-)
+from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.registry import make_env_and_policy
 from estimation.anticipation.linear_predictors import LinearMotionPredictor, LinearTiltPredictor
-from landing_env.anticipation.hms_forecast import forecast_rms
+from landing_env.anticipation.hms_forecast import HORIZONS_S, fit_deck_forecast, forecast_rms
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.physics.wind import WindConfig, WindModel
