@@ -344,7 +344,7 @@ class DeckLandingConfig:
     lens: str = "standard"
     #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
     #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
-    #: ``python -m agents.training.deck_prediction_fit fit``); ``timing.tilt_model: scenario``
+    #: ``python -m agents.training.tilt_predictor_fit fit``); ``timing.tilt_model: scenario``
     #: reads it.  Empty: none fitted
     deck_predictor: str = ""
     #: the seas the ship's helideck forecast (:mod:`landing_env.anticipation.hms_forecast`, read by

@@ -50,7 +50,7 @@ def cache_dir() -> Path:
 
 
 #: the shipped deck-tilt predictors (:mod:`estimation.anticipation.linear_predictors`, fitted by
-#: :mod:`agents.training.deck_prediction_fit` on a scenario family's estimated deck motion)
+#: :mod:`agents.training.tilt_predictor_fit` on a scenario family's estimated deck motion)
 PREDICTOR_DIR = Path(__file__).resolve().parent / "assets" / "predictors"
 
 

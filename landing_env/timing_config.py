@@ -97,7 +97,7 @@ class TimingConfig:
     #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
     #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
     #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
-    #: :mod:`agents.training.deck_prediction_fit`) or a path; read by the ``model`` wave-off and
+    #: :mod:`agents.training.tilt_predictor_fit`) or a path; read by the ``model`` wave-off and
     #: the ``predictive`` policy; empty: none
     tilt_model: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.training.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
+from agents.training.tilt_predictor_fit import CHANNELS, HORIZONS_S, futures
 from estimation.anticipation.linear_predictors import LinearTiltPredictor, TiltPrediction
 from estimation.anticipation.stopping import predictor_stopping_values
 from landing_env.config import load_config

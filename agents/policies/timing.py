@@ -101,7 +101,7 @@ class PredictivePolicy:
 
     The chance: that the deck's tilt at the contact is within the limit, by a
     :class:`~estimation.anticipation.linear_predictors.LinearTiltPredictor` (the Wiener predictor
-    fitted to the estimated deck motion, :mod:`agents.training.deck_prediction_fit`) on the
+    fitted to the estimated deck motion, :mod:`agents.training.tilt_predictor_fit`) on the
     observation's history, with the Gaussian error measured on held-out episodes; the contact comes
     at one of
     ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
@@ -159,7 +159,7 @@ class PredictivePolicy:
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
                 f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
-                "refit it with `python -m agents.training.deck_prediction_fit fit`",
+                "refit it with `python -m agents.training.tilt_predictor_fit fit`",
             )
         self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
@@ -295,7 +295,7 @@ def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
             "timing.tilt_model",
             "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
             "timing.tilt_model=NAME or pass --model FILE; fit one with "
-            "`python -m agents.training.deck_prediction_fit fit`)",
+            "`python -m agents.training.tilt_predictor_fit fit`)",
         )
     path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
     try:

@@ -88,7 +88,7 @@ class DeckPrediction:
                 "timing.tilt_model",
                 f"{what}; {user} needs the scenario's deck-tilt predictor "
                 "(e.g. bench-ss4, or a file written by "
-                "`python -m agents.training.deck_prediction_fit fit`)",
+                "`python -m agents.training.tilt_predictor_fit fit`)",
             )
         path = tilt_predictor_path(name)
         try:
@@ -98,7 +98,7 @@ class DeckPrediction:
             raise ConfigError(
                 "timing.tilt_model",
                 f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.training.deck_prediction_fit fit`",
+                "or a file written by `python -m agents.training.tilt_predictor_fit fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:
@@ -138,7 +138,7 @@ class DeckPrediction:
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
                 "does not hold: refit it "
-                "with `python -m agents.training.deck_prediction_fit fit`",
+                "with `python -m agents.training.tilt_predictor_fit fit`",
             )
         return values
 
@@ -155,7 +155,7 @@ class DeckPrediction:
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.training.deck_prediction_fit fit`",
+                "does not hold: refit it with `python -m agents.training.tilt_predictor_fit fit`",
             )
         return values
 

@@ -10,7 +10,7 @@ read from the simulator.  Seeds start at 5000 (the evaluations hold out 1 000 00
 
 ::
 
-    python -m agents.training.deck_prediction_fit fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
+    python -m agents.training.tilt_predictor_fit fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
         --sensors realistic --episodes 60 --out landing_env/assets/predictors/deck_tilt_bench.npz
 
 The shipped ``bench`` predictor was made by exactly that command (9 min on 2 cores); the
@@ -204,9 +204,9 @@ def describe(predictor: LinearTiltPredictor) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.training.deck_prediction_fit fit``: fit a scenario's predictor."""
+    """``python -m agents.training.tilt_predictor_fit fit``: fit a scenario's predictor."""
     parser = argparse.ArgumentParser(
-        prog="python -m agents.training.deck_prediction_fit", description=__doc__
+        prog="python -m agents.training.tilt_predictor_fit", description=__doc__
     )
     commands = parser.add_subparsers(dest="command", required=True)
     fit = commands.add_parser("fit", help="collect waiting episodes and fit a predictor")
@@ -253,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.estimator,
         args.window,
         progress=not args.no_progress,
-        command="python -m agents.training.deck_prediction_fit "
+        command="python -m agents.training.tilt_predictor_fit "
         + " ".join(list(argv) if argv is not None else sys.argv[1:]),
         channels=tuple(args.channels),
     )
