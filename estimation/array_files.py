@@ -1,9 +1,10 @@
 """The files of fitted estimation models: named NumPy arrays and JSON metadata in one ``.npz``.
 
-One home for how fitted models such as :class:`~estimation.deck_prediction.LinearTiltPredictor`
-are written and read: compressed, no pickles (``allow_pickle=False``: a model file cannot run
-code), the metadata as a JSON string, and a malformed file reported as a ``ValueError`` that
-names it and what it should have been.
+One home for how fitted models such as
+:class:`~estimation.anticipation.linear_predictors.LinearTiltPredictor` are written and read:
+compressed, no pickles (``allow_pickle=False``: a model file cannot run code), the metadata as a
+JSON string, and a malformed file reported as a ``ValueError`` that names it and what it should have
+been.
 """
 
 from __future__ import annotations

@@ -344,14 +344,14 @@ class DeckLandingConfig:
     lens: str = "standard"
     #: the deck-tilt predictor fitted to this scenario's deck motion (a shipped one by name,
     #: ``landing_env/assets/predictors/deck_tilt_<name>.npz``, or a path; fitted by
-    #: ``python -m agents.training.deck_prediction_fit fit``); ``timing.tilt_model: scenario``
+    #: ``python -m agents.training.tilt_predictor_fit fit``); ``timing.tilt_model: scenario``
     #: reads it.  Empty: none fitted
     deck_predictor: str = ""
-    #: the seas the ship's helideck forecast (:mod:`landing_env.sea.hms_forecast`, read by the
-    #: ``deck-forecast`` policies, the look-ahead and the ``forecast`` observation) is fitted
+    #: the seas the ship's helideck forecast (:mod:`landing_env.anticipation.hms_forecast`, read by
+    #: the ``deck-forecast`` policies, the look-ahead and the ``forecast`` observation) is fitted
     #: on: empty, other realisations of this config's own sea; or a training family of seas
-    #: (:data:`landing_env.sea.training_seas.TRAINING_FAMILIES`, e.g. ``ship-broad``), as a
-    #: held-out sea's config must name (nothing is fitted on a held-out sea)
+    #: (:data:`landing_env.sea.training_seas.TRAINING_FAMILIES`, e.g. ``ship-broad``), as a held-out
+    #: sea's config must name (nothing is fitted on a held-out sea)
     deck_forecast: str = ""
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     action: ActionConfig = field(default_factory=ActionConfig)

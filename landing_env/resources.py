@@ -49,8 +49,8 @@ def cache_dir() -> Path:
     return Path(user_cache_dir("deck-landing", appauthor=False))
 
 
-#: the shipped deck-tilt predictors (:mod:`estimation.deck_prediction`, fitted by
-#: :mod:`agents.training.deck_prediction_fit` on a scenario family's estimated deck motion)
+#: the shipped deck-tilt predictors (:mod:`estimation.anticipation.linear_predictors`, fitted by
+#: :mod:`agents.training.tilt_predictor_fit` on a scenario family's estimated deck motion)
 PREDICTOR_DIR = Path(__file__).resolve().parent / "assets" / "predictors"
 
 

@@ -74,16 +74,16 @@ class TimingConfig:
     #: least-squares rates) or ``quadratic`` (a parabola fitted to roll and pitch over the last
     #: ``wave_off_window_s``: the deck's curvature, at the price of a noisier acceleration)
     #: or ``model``: the scenario's fitted linear (Wiener) predictor ``tilt_model``
-    #: (:class:`~estimation.deck_prediction.LinearTiltPredictor` on the history, which must be
-    #: at least its window long), which aborts when the chance that the tilt at the contact is
-    #: within ``wave_off_tilt_deg`` is below what ``wave_off_rule`` asks (its error measured
-    #: on held-out episodes: the chance is honest where a straight line's is not)
+    #: (:class:`~estimation.anticipation.linear_predictors.LinearTiltPredictor` on the history,
+    #: which must be at least its window long), which aborts when the chance that the tilt at the
+    #: contact is within ``wave_off_tilt_deg`` is below what ``wave_off_rule`` asks (its error
+    #: measured on held-out episodes: the chance is honest where a straight line's is not)
     wave_off_predictor: str = "linear"
     wave_off_window_s: float = 1.0
     wave_off_probability: float = 0.8
     #: what the ``model`` wave-off compares the chance with: ``fixed``
     #: (``wave_off_probability``) or ``value``: the value of waiting on, i.e. the
-    #: optimal-stopping value (:mod:`landing_env.timing.stopping`) of the chance a commit
+    #: optimal-stopping value (:mod:`estimation.anticipation.stopping`) of the chance a commit
     #: gets, over the wait that will be left once the climb back is done, with one
     #: independent opportunity per ``opportunity_s``: it aborts a descent only when a retry
     #: is expected to do better, so less and less often as the wait limit nears
@@ -97,7 +97,7 @@ class TimingConfig:
     #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
     #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
     #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
-    #: :mod:`agents.training.deck_prediction_fit`) or a path; read by the ``model`` wave-off and
+    #: :mod:`agents.training.tilt_predictor_fit`) or a path; read by the ``model`` wave-off and
     #: the ``predictive`` policy; empty: none
     tilt_model: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
@@ -119,7 +119,7 @@ class TimingConfig:
     #: optimal-stopping value of such chances over the wait left, one opportunity per
     #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`);
     #: or ``forecast``: the history's newest row, and after it the ship's helideck forecast
-    #: (its HMS record 0-8 s ahead, :mod:`landing_env.sea.hms_forecast`; a sea scenario's)
+    #: (its HMS record 0-8 s ahead, :mod:`landing_env.anticipation.hms_forecast`; a sea scenario's)
     #: and the drone's own velocity and lean, what the deck oracle weighs against each other
     observation: str = "history"
 

@@ -23,7 +23,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 @pytest.fixture(scope="session")
 def small_forecast():
     """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
-    from agents.policies.deck_forecast import fit_deck_forecast
+    from landing_env.anticipation.hms_forecast import fit_deck_forecast
     from landing_env.config import load_config
     from landing_env.scenarios import SCENARIOS
 

@@ -15,7 +15,7 @@ from tests.paths import ROOT
 
 
 def test_estimation_imports_no_simulator_or_rl_package() -> None:
-    modules = [f"estimation.{m.name}" for m in pkgutil.iter_modules(estimation.__path__)]
+    modules = [m.name for m in pkgutil.walk_packages(estimation.__path__, "estimation.")]
     code = (
         "import importlib, sys\n"
         f"for name in {modules!r}: importlib.import_module(name)\n"
@@ -154,11 +154,12 @@ FOLDER_LAYERS: dict[str, tuple[tuple[str, ...], ...]] = {
         ("guidance_gains",),  # the guidance's gains (the controller's PID gain by default)
         ("config_loading", "sensors", "stewart", "timing_config"),
         ("config",),  # the environment config: every section's settings
-        ("sea", "touchdown"),  # the ship at sea (helideck mount, HMS, forecast); the contact
+        ("sea", "touchdown"),  # the ship at sea (helideck mount, HMS); the contact
+        # the deck ahead: onboard a descent ahead, from the ship's HMS seconds ahead
+        ("anticipation",),
         ("scenarios", "world"),  # the scenario table; the simulated world
         ("calibration", "estimators"),
-        # the deck's anticipation and the committed descent (hold, guidance, timed descent,
-        # wave-off) that both tasks fly
+        # the committed descent (hold, guidance, timed descent, wave-off) that both tasks fly
         ("timing",),
         ("envs",),  # the landing task and the timing task, on one base environment
         ("privileged",),  # the SB3 policy class whose critic reads the privileged key

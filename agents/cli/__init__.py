@@ -21,7 +21,6 @@ from agents.cli.demo import run_demo
 from agents.cli.estimate import add_estimate_parser
 from agents.cli.landing import add_landing_parser
 from agents.cli.train import add_train_parser
-from agents.cli.tune import add_tune_parser
 from agents.common.user_input import USER_ERRORS, parse_overrides
 from agents.evaluation import SWEEP_PARAMETERS
 from agents.evaluation.estimators import RunSettings, evaluate_estimators
@@ -201,7 +200,6 @@ def build_parser() -> argparse.ArgumentParser:
     add_landing_parser(which)
     add_approach_parser(which)
     add_train_parser(sub)
-    add_tune_parser(sub)
     add_estimate_parser(sub)
     add_calibrate_parser(sub)
     add_list_parser(sub)

@@ -22,13 +22,13 @@ from typing import Any
 
 import gymnasium as gym
 
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
+from landing_env.anticipation.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
 from landing_env.config import SENSOR_SETS
 from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
-from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import (
     FORECAST_SCALES,
     HISTORY_SCALES,

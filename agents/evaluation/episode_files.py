@@ -2,7 +2,7 @@
 
 ``evaluate landing`` writes one JSON-lines file per policy and scenario
 (``landing_<scenario>_<policy>.jsonl``, one episode a line). The figures and comparisons made
-across runs (:mod:`agents.evaluation.success_plot`, :mod:`agents.evaluation.paired`) read them
+across runs (:mod:`agents.evaluation.paired`) read them
 here: a directory stands for every ``landing_*.jsonl`` in it; a seed written twice (a resumed
 run) counts once, its last line; the same policy and scenario from two files is an error that
 names both (pass the files wanted instead of the directory).

@@ -16,6 +16,7 @@ import numpy as np
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from estimation.frames import camera_to_heading_xy
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env.anticipation.deck_history import DeckMotionHistory
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import require_range
@@ -23,7 +24,6 @@ from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.history import DeckMotionHistory
 
 
 # ------------------------------------------------------------------------------ align-descend

@@ -12,7 +12,7 @@ import numpy as np
 
 from estimation.frames import tilt_deg
 from estimation.limits import POSITIVE, Limit, limited, require_limits
-from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
 _Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
 _VALID = HISTORY_FEATURES.index("valid")
@@ -63,11 +63,11 @@ class CalmPrediction:
 def predict_calm(history: np.ndarray, dt: float, config: CalmConfig) -> CalmPrediction:
     """Is a calm window at least ``config.descent_s`` long ahead?
 
-    ``history`` holds rows of :data:`~landing_env.timing.history.HISTORY_FEATURES` (SI units),
-    oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all show
-    a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
-    rates, and the tilt extrapolated ``descent_s`` ahead (``trend_weight`` of the trend) and
-    the heave rate must be within the limits too (the tilt is convex in (roll, pitch), so on a
+    ``history`` holds rows of :data:`~landing_env.anticipation.deck_history.HISTORY_FEATURES` (SI
+    units), oldest first, one per ``dt``.  Over the last ``window_s`` the valid samples must all
+    show a tilt below ``max_tilt_deg``; straight lines fitted to roll, pitch and z there give the
+    rates, and the tilt extrapolated ``descent_s`` ahead (``trend_weight`` of the trend) and the
+    heave rate must be within the limits too (the tilt is convex in (roll, pitch), so on a
     straight line its largest value is at one end: checking now and at the end of the descent
     covers the whole descent).
     """

@@ -6,18 +6,17 @@ estimate lands 78.5 %.  A drone landing on a ship can know much of that future: 
 helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
 CAP 437) measures the helideck's motion and passes it on, and ship motion a few seconds ahead
 is predictable from its recent past (the classical ship-motion prediction of
-:mod:`estimation.deck_prediction`).  This policy is the deck oracle with the deck's true
-future replaced by that forecast:
+:mod:`estimation.anticipation.linear_predictors`).  This policy is the deck oracle with the deck's
+true future replaced by that forecast:
 
-* **The forecast.** A direct multi-horizon linear predictor
-  (:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
-  :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck to the same five
-  every 0.5 s up to :data:`HORIZONS_S`'s 8 s (:mod:`landing_env.sea.hms_forecast`, which
-  the timing task's ``forecast`` observation reads too).  By default it is fitted, when the
-  policy is built, on :data:`REALIZATIONS` HMS records of the scenario's own sea drawn with
-  other seeds (other days in the same sea state); the config's ``deck_forecast: online``
-  identifies it in each episode from the HMS's own record of the last 20 min instead, as the
-  held-out seas do (:mod:`landing_env.sea.hms_forecast`).
+* **The forecast** (:mod:`landing_env.anticipation.hms_forecast`, which the timing task's
+  ``forecast`` observation reads too). A direct multi-horizon linear predictor
+  (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's
+  last ``WINDOW_S`` of surge, sway, heave, roll and pitch at the helideck to the same five
+  every 0.5 s up to ``HORIZONS_S``'s 8 s.  By default it is fitted, when the policy is built,
+  on ``REALIZATIONS`` HMS records of the scenario's own sea drawn with other seeds (other days
+  in the same sea state); the config's ``deck_forecast: online`` identifies it in each
+  episode from the HMS's own record of the last 20 min instead, as the held-out seas do.
 * **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
   futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
   deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
@@ -61,47 +60,12 @@ from typing import Any
 import numpy as np
 
 from agents.policies.oracle import DeckOracleTimingPolicy
-from estimation.deck_prediction import LinearMotionPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor
 from estimation.limits import Limit, limited, require_limits
-from landing_env.config import load_config
+from landing_env.anticipation.hms_forecast import EpisodeForecast, deck_forecast_for
 from landing_env.errors import ConfigError, require_range
-from landing_env.scenarios import SCENARIOS
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import (
-    BLOCK,
-    EXAMPLE_EVERY_S,
-    FIT_SEED,
-    FORECAST_KINDS,
-    HORIZONS_S,
-    REALIZATIONS,
-    RECORD_S,
-    WINDOW_S,
-    EpisodeForecast,
-    deck_forecast_for,
-    fit_deck_forecast,
-    fit_online_forecast,
-    forecast_rms,
-)
-from landing_env.sea.training_seas import TRAINING_FAMILIES
-from landing_env.stewart.motion import ForecastMotion, make_motion_source, sample_poses
-
-#: the forecast's home is :mod:`landing_env.sea.hms_forecast`; importing it from here still works
-__all__ = [
-    "BLOCK",
-    "EXAMPLE_EVERY_S",
-    "FIT_SEED",
-    "FORECAST_KINDS",
-    "HORIZONS_S",
-    "REALIZATIONS",
-    "RECORD_S",
-    "WINDOW_S",
-    "DeckForecastTimingPolicy",
-    "OnboardModelConfig",
-    "deck_forecast_for",
-    "fit_deck_forecast",
-    "forecast_rms",
-    "plot_forecasts",
-]
+from landing_env.stewart.motion import ForecastMotion
 
 #: the HMS errors' stream of an episode (apart from the look-ahead's draws)
 _HMS_STREAM = 0x4D5
@@ -192,10 +156,11 @@ def episode_monitor(
 class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
 
-    ``last_forecast`` holds the latest forecast: (H, 5) poses at :data:`HORIZONS_S`, or the
-    reason there was none.  ``rule`` are the commit rule's settings, as the deck oracle's
-    (``draws``, ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``,
-    ``relax_s``); its ``min_margin`` is 0.15 here.
+    ``last_forecast`` holds the latest forecast: (H, 5) poses at the forecast's horizons
+    (:data:`~landing_env.anticipation.hms_forecast.HORIZONS_S`), or the reason there was
+    none.  ``rule`` are the commit rule's settings, as the deck oracle's (``draws``,
+    ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``, ``relax_s``); its
+    ``min_margin`` is 0.15 here.
     """
 
     name = "deck-forecast"
@@ -219,8 +184,8 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         #: estimate's error, and the drone's wind estimate (world, m/s)
         self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.hms = hms or HelideckMonitorConfig()
-        #: the fitted forecast; None: each episode identifies its own online
-        #: (``deck_forecast: online``, :class:`~landing_env.sea.hms_forecast.EpisodeForecast`)
+        #: the fitted forecast; None: each episode identifies its own online (``deck_forecast:
+        #: online``, :class:`~landing_env.anticipation.hms_forecast.EpisodeForecast`)
         self.forecast = forecast or deck_forecast_for(self.env.config, self.hms)
         if self.forecast is not None and (
             tuple(self.forecast.channels) != HMS_CHANNELS
@@ -343,119 +308,6 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             world.shift_wind_at_drone(air_w * (1.0 - 1.0 / drag_scale))
             world.controller.scale_thrust_model(float(thrust_scale))
             world.drone.set_rotor_speeds(world.drone.rotor_speeds / math.sqrt(thrust_scale))
-
-
-def plot_forecasts(
-    forecast: LinearMotionPredictor,
-    source: Any,
-    scenario: str,
-    path: str,
-    starts_s: tuple[float, ...] = (40.0, 57.0, 74.0, 91.0),
-) -> str:
-    """Heave, roll and pitch of a sea the forecast never saw: the truth, the HMS record, and
-    the forecast made at each of ``starts_s`` with its held-out 1-sigma band."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=FIT_SEED - 1)
-    span = np.arange(starts_s[0] - 12.0, starts_s[-1] + HORIZONS_S[-1], 0.05)
-    truth = sample_poses(source, span)
-    times, measured = monitor.window(span[-1], span[-1] - span[0])
-    sigma = np.sqrt(np.diagonal(forecast.covariance, axis1=1, axis2=2))
-    figure, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
-    for axis, (channel, label, scale) in zip(
-        axes,
-        (
-            (2, "heave (m)", 1.0),
-            (3, "roll (deg)", math.degrees(1.0)),
-            (4, "pitch (deg)", math.degrees(1.0)),
-        ),
-        strict=True,
-    ):
-        axis.plot(span, scale * truth[:, channel], color="k", lw=1.2, label="truth")
-        axis.plot(times, scale * measured[:, channel], ".", color="0.6", ms=2, label="HMS (10 Hz)")
-        for k, t0 in enumerate(starts_s):
-            _, window = monitor.window(t0, forecast.window_s)
-            predicted = forecast.predict_targets(window, np.ones(len(window), dtype=bool))
-            if isinstance(predicted, str):
-                continue
-            ahead = t0 + forecast.horizons_s
-            mean = scale * predicted[:, channel]
-            band = scale * sigma[:, channel]
-            axis.plot(ahead, mean, color="C0", lw=1.5, label="forecast" if k == 0 else None)
-            axis.fill_between(ahead, mean - band, mean + band, color="C0", alpha=0.2, lw=0)
-            axis.axvline(t0, color="C0", lw=0.5, ls=":")
-        axis.set_ylabel(label)
-    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[-1].set_xlabel("time (s)")
-    figure.suptitle(
-        f"{scenario}: the helideck forecast from the ship's HMS, 8 s ahead (band: held-out 1 sigma)"
-    )
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.policies.deck_forecast --scenario ship-ss5``: fit the scenario's
-    forecast (on its config's ``deck_forecast``: its own sea, or a training family) and print
-    its RMS error per horizon on a record of the scenario's sea no fit used, against holding
-    the present (persistence)."""
-    import argparse
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("--scenario", nargs="+", default=["ship-ss5"], choices=sorted(SCENARIOS))
-    parser.add_argument(
-        "--family",
-        choices=sorted(TRAINING_FAMILIES),
-        help="fit on this training family of seas (the config's deck_forecast otherwise)",
-    )
-    parser.add_argument(
-        "--plot", metavar="PNG", help="also plot forecasts against the truth (first scenario)"
-    )
-    args = parser.parse_args(argv)
-    hms = HelideckMonitorConfig()
-    for index, scenario in enumerate(args.scenario):
-        config = load_config(SCENARIOS[scenario].config)
-        if args.family:
-            config.deck_forecast = args.family
-        forecast = deck_forecast_for(config, hms)
-        if forecast is None:
-            monitor = HelideckMonitor(
-                make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1])),
-                hms,
-                seed=FIT_SEED - 1,
-            )
-            forecast = fit_online_forecast(monitor, 0.0)
-        source = make_motion_source(config.motion, np.random.default_rng([FIT_SEED - 1]))
-        if args.plot and index == 0:
-            print(f"wrote {plot_forecasts(forecast, source, scenario, args.plot)}")
-        times = np.arange(0.0, RECORD_S, 0.1)
-        poses = sample_poses(source, times)[:, : len(HMS_CHANNELS)]
-        rms = forecast_rms(forecast, config.motion, hms)
-        rms[:, 3:] = np.degrees(rms[:, 3:])
-        print(
-            f"{scenario} (forecast fitted on {config.deck_forecast or 'its own sea'}): RMS "
-            "error (x, y, z m; roll, pitch deg), persistence after"
-        )
-        for k, horizon in enumerate(forecast.horizons_s):
-            lag = round(horizon / 0.1)
-            hold = np.sqrt(np.mean((poses[lag:] - poses[: len(poses) - lag]) ** 2, axis=0))
-            hold[3:] = np.degrees(hold[3:])
-            print(
-                f"  {horizon:4.1f} s  "
-                + "  ".join(f"{v:6.3f}" for v in rms[k])
-                + "   | "
-                + "  ".join(f"{v:6.3f}" for v in hold)
-            )
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
 
 
 def build_deck_forecast(

@@ -46,13 +46,13 @@ from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env.anticipation.deck_history import DeckMotionHistory
 from landing_env.config import ActionConfig
 from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.physics.quadrotor_params import GRAVITY
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing.layout import TimingObservationLayout
 from landing_env.timing_config import TimingConfig
 

@@ -23,12 +23,12 @@ from agents.common.cards import (
 )
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.registry import MODEL_DIR, find_model
-from estimation.deck_prediction import LinearTiltPredictor
+from estimation.anticipation.linear_predictors import LinearTiltPredictor
+from estimation.anticipation.stopping import predictor_stopping_values
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.errors import ConfigError, require_range
 from landing_env.resources import tilt_predictor_path
-from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import TimingObservationLayout
-from landing_env.timing.stopping import predictor_stopping_values
 from landing_env.timing_config import TimingConfig
 
 
@@ -100,14 +100,15 @@ class PredictivePolicy:
     """Commit when the chance of a good contact is worth more than waiting for a better one.
 
     The chance: that the deck's tilt at the contact is within the limit, by a
-    :class:`~estimation.deck_prediction.LinearTiltPredictor` (the Wiener predictor fitted to
-    the estimated deck motion, :mod:`agents.training.deck_prediction_fit`) on the observation's
-    history, with the Gaussian error measured on held-out episodes; the contact comes at one of
+    :class:`~estimation.anticipation.linear_predictors.LinearTiltPredictor` (the Wiener predictor
+    fitted to the estimated deck motion, :mod:`agents.training.tilt_predictor_fit`) on the
+    observation's history, with the Gaussian error measured on held-out episodes; the contact comes
+    at one of
     ``contact_times_s`` after the commit (``timing.contact_times_s``: the timed descent's
     1.3 s, or a window the environment's descent chooses the best of, the same way), and the
     chance is that of the best.  What
     waiting is worth: the optimal-stopping value
-    (:class:`~landing_env.timing.stopping.StoppingValues`) of the chances the predictor gave
+    (:class:`~estimation.anticipation.stopping.StoppingValues`) of the chances the predictor gave
     held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
     independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
     history at least as long as the predictor's window (``timing.history_s``)."""
@@ -158,7 +159,7 @@ class PredictivePolicy:
                 "timing.tilt_model",
                 "the predictor holds no held-out predictions to weigh a chance against "
                 f"(or none {self.contact_times_s[0]:g}-{self.contact_times_s[-1]:g} s ahead): "
-                "refit it with `python -m agents.training.deck_prediction_fit fit`",
+                "refit it with `python -m agents.training.tilt_predictor_fit fit`",
             )
         self.values = values
         self.columns = [HISTORY_FEATURES.index(name) for name in predictor.channels]
@@ -294,7 +295,7 @@ def _tilt_model(model_path: str | Path | None, scenario_model: str) -> Any:
             "timing.tilt_model",
             "is empty: the predictive policy needs the scenario's deck-tilt predictor (set "
             "timing.tilt_model=NAME or pass --model FILE; fit one with "
-            "`python -m agents.training.deck_prediction_fit fit`)",
+            "`python -m agents.training.tilt_predictor_fit fit`)",
         )
     path = Path(model_path) if model_path is not None else tilt_predictor_path(scenario_model)
     try:

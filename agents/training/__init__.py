@@ -1,3 +1,2 @@
-"""Training: the trainer (:mod:`~agents.training.trainer`), tuning, the randomised sampler,
-hindsight labels, the look-ahead's data and training, the deck predictor's fit and the
-learning curve."""
+"""Training: the trainer (:mod:`~agents.training.trainer`), the randomised sampler, the
+look-ahead's data and training, the onboard deck-tilt predictor's fit and the learning curve."""

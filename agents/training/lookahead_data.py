@@ -31,10 +31,10 @@ from agents.policies.lookahead import (
 from agents.policies.oracle import TriedCommit
 from agents.policies.registry import make_env_and_policy
 from agents.training.sampler import SENSING_PROFILES
+from landing_env.anticipation.hms_forecast import ONLINE
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.scenarios import SCENARIOS
-from landing_env.sea.hms_forecast import ONLINE
 from landing_env.sea.training_seas import TrainingSea, training_sea
 
 #: the arrays of a transitions file (:func:`collect_transitions`)

@@ -52,6 +52,27 @@ def register_sensing_profile(name: str, overrides: dict[str, Any]) -> None:
     SENSING_PROFILES[name] = dict(overrides)
 
 
+def make_timing_env(
+    scenario: str,
+    sensing: str,
+    estimator: str = "tight",
+    overrides: dict[str, Any] | None = None,
+) -> Any:
+    """The timing environment of ``scenario`` under the sensing profile ``sensing``
+    (:data:`SENSING_PROFILES`), built as the evaluation builds it (``overrides`` under
+    ``timing.`` set the timing task, e.g. its descent)."""
+    require_choice("sensing", sensing, tuple(SENSING_PROFILES))
+    require_choice("scenario", scenario, tuple(SCENARIOS))
+    settings = {
+        **SCENARIOS[scenario].overrides(TIMING_TASK, estimator),
+        **SENSING_PROFILES[sensing],
+        **(overrides or {}),
+    }
+    return gym.make(
+        TIMING_TASK, config=SCENARIOS[scenario].config, overrides=settings, render_mode=None
+    )
+
+
 def _pair(key: str, values: Sequence[float], low: float, high: float) -> tuple[float, float]:
     if len(values) != 2:
         raise ConfigError(key, f"{list(values)!r} needs two values [low, high]")

@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from estimation.frames import camera_to_heading_xy, euler_zyx_from_matrix, tilt_deg
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.envs.actions import action_fields, validate_action
 from landing_env.envs.base import (
     ATTITUDE_HIGH,
@@ -20,7 +21,6 @@ from landing_env.envs.base import (
 )
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.timing.committed_descent import CommittedDescent
-from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.touchdown import Outcome
 
 #: the observation key only a critic may read (``gym.make(id, privileged=True)``)
@@ -150,7 +150,7 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
        * - ``prediction``
          - (n + 2,) [0, 1]
          - what ``timing.observation: prediction`` computes
-           (:meth:`~landing_env.timing.deck_prediction.DeckPrediction.prediction_values`):
+           (:meth:`~landing_env.anticipation.onboard_tilt_prediction.DeckPrediction.prediction_values`):
            the scenario's deck-tilt predictor's chance of a deck within the touchdown limit
            at each of the n contact times of ``timing.contact_times_s`` after a commit now,
            the value of waiting on over the band time left, and the prediction's validity;

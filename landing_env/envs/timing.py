@@ -10,9 +10,9 @@ the learner.  The settings are the config's ``timing`` section
 (:class:`~landing_env.timing_config.TimingConfig`); the observation is laid out by
 :class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
 (the wave-off, the contact window, the prediction observation) is read through
-:class:`~landing_env.timing.deck_prediction.DeckPrediction`, the helideck forecast of the
-``forecast`` observation through
-:class:`~landing_env.timing.forecast_observation.ForecastObservation`.
+:class:`~landing_env.anticipation.onboard_tilt_prediction.DeckPrediction`, the helideck forecast
+of the ``forecast`` observation through
+:class:`~landing_env.anticipation.hms_forecast_observation.ForecastObservation`.
 """
 
 from __future__ import annotations
@@ -22,13 +22,13 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from landing_env.anticipation.hms_forecast_observation import ForecastObservation
 from landing_env.config import episode_step_limit
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
 from landing_env.envs.rewards import touchdown_terms, zero_terms
 from landing_env.errors import ConfigError
 from landing_env.timing.committed_descent import CommittedDescent
-from landing_env.timing.forecast_observation import ForecastObservation
 from landing_env.timing.layout import timing_layout
 from landing_env.timing_config import CAMERA_BELOW_COM_M
 from landing_env.touchdown import Outcome

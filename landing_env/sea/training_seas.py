@@ -9,10 +9,10 @@ the generator's parameters; none is a held-out sea (:mod:`landing_env.sea.heldou
 ``tests/landing_env/sea/test_training_seas.py`` checks that no member repeats a held-out sea's
 spectrum, periods, headings and speed.
 
-``python -m agents.training.deck_prediction_fit fit --family bench-broad ...`` fits the bench's
+``python -m agents.training.tilt_predictor_fit fit --family bench-broad ...`` fits the bench's
 deck-tilt predictor on :data:`TRAINING_FAMILIES` ``["bench-broad"]``; a config's
 ``deck_forecast: ship-broad`` fits the ship's helideck forecast
-(:mod:`landing_env.sea.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
+(:mod:`landing_env.anticipation.hms_forecast`) on ``["ship-broad"]``'s seas (the held-out ship seas'
 configs identify it online instead, which forecasts them better).
 """
 

@@ -1,14 +1,15 @@
 """The committed descent: hold over the deck, and on a commit fly the final descent to
 touchdown (or a wave-off back to the hold) inside one environment step.
 
-:class:`CommittedDescent` is what ``DeckLandingTiming`` (a wait/commit decision) and
-``DeckLanding`` (whose ``land`` action commits) share: the scripted guidance
+:class:`CommittedDescent` is what ``DeckLandingTiming`` (a wait/commit decision) and ``DeckLanding``
+(whose ``land`` action commits) share: the scripted guidance
 (:class:`~landing_env.timing.guidance.DeckGuidance`) fed every control period, the levelled
-deck-motion history (:class:`~landing_env.timing.history.DeckMotionHistory`), the scenario's
-deck-tilt predictor (:class:`~landing_env.timing.deck_prediction.DeckPrediction`) and the descent
-itself: the timed descent of the ``timing`` settings, its contact window and its wave-off.  It is
-a mixin of :class:`~landing_env.envs.base.DeckLandingBaseEnv`; the task owns the episode state it
-reads (``_wait_s``: the time spent waiting, which the wave-off's value of waiting weighs).
+deck-motion history (:class:`~landing_env.anticipation.deck_history.DeckMotionHistory`), the
+scenario's deck-tilt predictor
+(:class:`~landing_env.anticipation.onboard_tilt_prediction.DeckPrediction`) and the descent itself:
+the timed descent of the ``timing`` settings, its contact window and its wave-off.  It is a mixin of
+:class:`~landing_env.envs.base.DeckLandingBaseEnv`; the task owns the episode state it reads
+(``_wait_s``: the time spent waiting, which the wave-off's value of waiting weighs).
 """
 
 from __future__ import annotations
@@ -19,14 +20,14 @@ from typing import Any
 import numpy as np
 
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
+from landing_env.anticipation.deck_history import DeckMotionHistory
+from landing_env.anticipation.onboard_tilt_prediction import DeckPrediction
 from landing_env.errors import ConfigError
 from landing_env.estimators import load_intrinsics
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
-from landing_env.timing.deck_prediction import DeckPrediction
 from landing_env.timing.deck_tracker import OwnState
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.history import DeckMotionHistory
 from landing_env.timing_config import WAVE_OFF_CLIMB_S, TimingConfig
 from landing_env.touchdown import Outcome
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from gymnasium import spaces
 
-from landing_env.sea.hms_forecast import HORIZONS_S
-from landing_env.timing.history import HISTORY_FEATURES
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
+from landing_env.anticipation.hms_forecast import HORIZONS_S
 from landing_env.timing_config import TimingConfig
 
 #: scale from SI units (m, rad, m/s, rad/s) to the observation: decimetres, tenths of a
@@ -63,7 +63,7 @@ class TimingObservationLayout:
     With ``n_forecast`` > 0 (``TimingConfig.observation = "forecast"``) only the newest
     history row is observed (the deck's motion is in the forecast) and ``n_forecast * 5 + 1 +
     5`` values follow the wait fraction: the ship's helideck forecast
-    (:mod:`landing_env.sea.hms_forecast`) at its ``n_forecast`` horizons (surge, sway and
+    (:mod:`landing_env.anticipation.hms_forecast`) at its ``n_forecast`` horizons (surge, sway and
     heave from the forecast's present, roll and pitch; :data:`FORECAST_SCALES`), 1 when it
     was made, and the drone's own state (:data:`OWN_STATE_FEATURES`)."""
 

@@ -52,12 +52,8 @@ import numpy as np
 
 from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
-from landing_env.waves.generator import (
-    GeneratedSea,
-    make_sea,
-)
+from landing_env.waves.generator import make_sea
 from landing_env.waves.sea_config import SeaConfig
-from landing_env.waves.spectrum import WaveComponents
 
 GRAVITY = 9.80665
 
@@ -283,10 +279,6 @@ class ShipMotion:
         self.vertical_reach_m = reach(vertical) + abs(lz) * (
             1.0 - math.cos(min(self.tilt_reach_rad, 1.5))
         )
-
-    @property
-    def elevation_spectrum(self) -> WaveComponents | GeneratedSea:
-        return self.waves
 
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
         return self.waves.elevation(t)

@@ -92,11 +92,6 @@ def jonswap_shape(frequency_hz: np.ndarray, peak_period_s: float, gamma: float) 
     return f**-5 * np.exp(-1.25 * (fp / f) ** 4) * peak
 
 
-def mean_period_ratio(gamma: float) -> float:
-    """T_m01 / Tp of a JONSWAP spectrum (DNV-RP-C205 Sec. 3.5.5.4 fit, 1 <= gamma <= 7)."""
-    return 0.7303 + 0.04936 * gamma - 0.006556 * gamma**2 + 0.0003610 * gamma**3
-
-
 class WaveComponents:
     """A seeded discrete JONSWAP sea: one cosine per frequency bin of the band.
 

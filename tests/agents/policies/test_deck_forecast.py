@@ -11,14 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.policies.deck_forecast import (
-    HORIZONS_S,
-    DeckForecastTimingPolicy,
-    OnboardModelConfig,
-    fit_deck_forecast,
-)
+from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.registry import make_env_and_policy
-from estimation.deck_prediction import LinearMotionPredictor, LinearTiltPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor, LinearTiltPredictor
+from landing_env.anticipation.hms_forecast import HORIZONS_S, fit_deck_forecast, forecast_rms
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.physics.wind import WindConfig, WindModel
@@ -29,7 +25,6 @@ from landing_env.sea.hms import (
     HelideckMonitor,
     HelideckMonitorConfig,
 )
-from landing_env.sea.hms_forecast import forecast_rms
 from landing_env.stewart.motion import (
     ForecastMotion,
     MotionConfig,
@@ -298,16 +293,6 @@ def test_the_deck_forecast_refuses_a_forecast_of_another_rate_or_channels(small_
         env.close()
 
 
-def test_the_forecast_plot_draws_a_sea_the_forecast_never_saw(small_forecast, tmp_path):
-    from agents.policies.deck_forecast import plot_forecasts
-
-    source = make_motion_source(_ship_motion(4), np.random.default_rng(5))
-    path = plot_forecasts(small_forecast, source, "ship-ss4", str(tmp_path / "forecast.png"))
-    with open(path, "rb") as handle:
-        assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
-
-
-# ------------------------------------------------------------------- the onboard model
 def test_the_onboard_model_starts_the_drone_where_its_estimate_puts_it(small_forecast):
     """With no error drawn, the copy's drone sees the deck exactly where its estimate put
     it, flies in its wind estimate's gust and keeps its velocity; the episode is unchanged."""
@@ -553,7 +538,7 @@ def test_shifting_the_drone_keeps_its_attitude_and_velocities_and_refuses_a_bad_
 
 # ------------------------------------------------------------------------------ online
 def test_the_online_forecast_is_identified_from_the_episodes_own_record_and_refitted_when_old():
-    from landing_env.sea.hms_forecast import ONLINE_REFIT_S, EpisodeForecast
+    from landing_env.anticipation.hms_forecast import ONLINE_REFIT_S, EpisodeForecast
 
     source = make_motion_source(_ship_motion(5), np.random.default_rng([3]))
     monitor = HelideckMonitor(source, HelideckMonitorConfig(), seed=3)

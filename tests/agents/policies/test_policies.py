@@ -16,8 +16,8 @@ from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.registry import make_env_and_policy, make_policy
 from agents.policies.timing import LandNowPolicy
 from estimation.frames import tilt_deg
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.errors import ConfigError
-from landing_env.timing.history import HISTORY_FEATURES
 
 DT = 0.05
 

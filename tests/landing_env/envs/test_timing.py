@@ -9,10 +9,10 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import landing_env  # noqa: F401  (registers the environments)
 from estimation.frames import level_from_body, levelled_deck_pose, matrix_from_euler_zyx
+from landing_env.anticipation.deck_history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.errors import ConfigError
 from landing_env.scenarios import dotted
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.timing.layout import TimingObservationLayout
 
 #: the bench of the papers with a bench-ss4 deck, the drone flying, IHRCF observed

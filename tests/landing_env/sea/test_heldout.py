@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import landing_env  # noqa: F401  (registers the environments)
+from landing_env.anticipation.hms_forecast import ONLINE, deck_forecast_for, held_out_sea
 from landing_env.config import CONFIG_DIR, load_config
 from landing_env.errors import ConfigError
 from landing_env.sea import heldout
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.hms import HelideckMonitorConfig
-from landing_env.sea.hms_forecast import ONLINE, deck_forecast_for, held_out_sea
 from landing_env.waves.generator import GeneratedSea
 from tests.paths import ROOT
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.training.deck_prediction_fit import fit_family, main
+from agents.training.tilt_predictor_fit import fit_family, main
+from landing_env.anticipation.hms_forecast import fit_deck_forecast, forecast_rms
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.heldout import HELD_OUT_SEAS
-from landing_env.sea.hms_forecast import fit_deck_forecast, forecast_rms
 from landing_env.sea.training_seas import TRAINING_FAMILIES, member_config, training_family
 
 

@@ -416,7 +416,7 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     outcome, no success bonus, and the evaluation counts it as ``hold_failed``."""
     from agents.evaluation.landing import run_episode
     from agents.policies.registry import make_env_and_policy
-    from agents.training.hindsight import make_timing_env
+    from agents.training.sampler import make_timing_env
 
     # the v5 ids' start (level, the bench's controller limits): the deck meets the drone
     start = LEVEL_START

@@ -13,16 +13,16 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from estimation.frames import matrix_from_euler_zyx
-from landing_env.config import load_config
-from landing_env.scenarios import SCENARIOS
-from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import (
+from landing_env.anticipation.hms_forecast import (
     EXAMPLE_EVERY_S,
     HORIZONS_S,
     WINDOW_S,
     _examples,
 )
-from landing_env.timing.forecast_observation import ForecastObservation
+from landing_env.anticipation.hms_forecast_observation import ForecastObservation
+from landing_env.config import load_config
+from landing_env.scenarios import SCENARIOS
+from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
 
 DT_S = 0.1  # the HMS at 10 Hz
 CHANNELS = 5

@@ -1,4 +1,4 @@
-"""The optimal-stopping value of waiting for a better chance (landing_env.timing.stopping)."""
+"""The optimal-stopping value of waiting for a better chance (estimation.anticipation.stopping)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from landing_env.timing.stopping import StoppingValues
+from estimation.anticipation.stopping import StoppingValues
 
 #: a uniform distribution on [0, 1], as evenly spaced quantiles
 UNIFORM = (np.arange(20000) + 0.5) / 20000

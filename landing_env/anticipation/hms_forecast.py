@@ -1,7 +1,7 @@
 """The helideck forecast: the ship's HMS record a few seconds ahead.
 
 A direct multi-horizon linear predictor
-(:class:`~estimation.deck_prediction.LinearMotionPredictor`) maps the HMS's last
+(:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's last
 :data:`WINDOW_S` of surge, sway, heave, roll and pitch at the helideck
 (:class:`~landing_env.sea.hms.HelideckMonitor`) to the same five every 0.5 s up to
 :data:`HORIZONS_S`'s 8 s: the classical ship-motion prediction from the recent past.  By
@@ -30,7 +30,7 @@ from functools import cache
 
 import numpy as np
 
-from estimation.deck_prediction import LinearMotionPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sea.heldout import HELD_OUT_SEAS

@@ -11,15 +11,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from agents.training.deck_prediction_fit import CHANNELS, HORIZONS_S, futures
-from estimation.deck_prediction import LinearTiltPredictor, TiltPrediction
+from agents.training.tilt_predictor_fit import CHANNELS, HORIZONS_S, futures
+from estimation.anticipation.linear_predictors import LinearTiltPredictor, TiltPrediction
+from estimation.anticipation.stopping import predictor_stopping_values
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
 from landing_env.scenarios import PREDICTIVE_TIMING, dotted
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.training_seas import training_family
-from landing_env.timing.stopping import predictor_stopping_values
 from tests.paths import ROOT
 
 DT = 0.05
@@ -364,7 +364,7 @@ def test_a_bare_name_is_a_shipped_predictor_and_a_path_is_itself(tmp_path):
 
 # ------------------------------------------------------------------ the environment
 def _env(**timing):
-    from agents.training.hindsight import make_timing_env
+    from agents.training.sampler import make_timing_env
 
     return make_timing_env(
         "bench-ss4", "ideal", "truth", {f"timing.{k}": v for k, v in timing.items()}
@@ -516,7 +516,7 @@ def test_the_predictive_policy_decides_on_any_observation_inside_the_space():
 
 def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted_one():
     from agents.policies.registry import make_policy
-    from landing_env.timing.history import HISTORY_FEATURES
+    from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
     env = _env(history_s=8.0)
     try:
@@ -760,7 +760,7 @@ def test_the_v5_ids_observe_the_predictor_s_chances_and_the_value_of_waiting_on(
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.timing.history import HISTORY_FEATURES
+    from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
     env = gym.make(
         "DeckLandingTiming-BenchSS5-v6", overrides={"sensors": "realistic", **PREDICTION}

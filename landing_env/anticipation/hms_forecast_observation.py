@@ -2,7 +2,7 @@
 state.
 
 :class:`ForecastObservation` holds the helideck forecast of the scenario's sea
-(:func:`~landing_env.sea.hms_forecast.deck_forecast_for`, fitted once per process) and each
+(:func:`~landing_env.anticipation.hms_forecast.deck_forecast_for`, fitted once per process) and each
 episode's HMS record (:class:`~landing_env.sea.hms.HelideckMonitor`), and gives the values the
 observation carries after the history's newest row
 (:class:`~landing_env.timing.layout.TimingObservationLayout`): the deck's surge, sway, heave,
@@ -16,10 +16,10 @@ import math
 import numpy as np
 
 from estimation.frames import euler_zyx_from_matrix
+from landing_env.anticipation.hms_forecast import FORECAST_KINDS, EpisodeForecast, deck_forecast_for
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
-from landing_env.sea.hms_forecast import FORECAST_KINDS, EpisodeForecast, deck_forecast_for
 from landing_env.stewart.motion import MotionSource
 
 

@@ -80,7 +80,7 @@ def predictor_stopping_values(
 ) -> StoppingValues | None:
     """The value of waiting for a better chance when the chances are distributed as the
     deck-tilt ``predictor`` gave them to held-out examples
-    (:meth:`~estimation.deck_prediction.LinearTiltPredictor.chances`); None when none were
-    recorded."""
+    (:meth:`~estimation.anticipation.linear_predictors.LinearTiltPredictor.chances`); None when none
+    were recorded."""
     chances = predictor.chances(horizons_s, limit_deg)
     return StoppingValues.from_samples(chances) if chances.size else None

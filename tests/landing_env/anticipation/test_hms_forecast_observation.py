@@ -12,11 +12,11 @@ from hypothesis import strategies as st
 import landing_env  # noqa: F401  (registers the ids)
 from agents.common.cards import check_compatible, env_signature
 from estimation.frames import euler_zyx_from_matrix
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
+from landing_env.anticipation.hms_forecast import HORIZONS_S
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIO_IDS
-from landing_env.sea.hms_forecast import HORIZONS_S
 from landing_env.stewart.motion import sample_poses
-from landing_env.timing.history import HISTORY_FEATURES
 from landing_env.timing.layout import OWN_STATE_FEATURES, TimingObservationLayout
 
 FORECAST_ID = "DeckLandingTiming-ShipSS5-v7"

@@ -1,6 +1,6 @@
 """Fit the deck-tilt predictor of a scenario family on recorded, estimated deck motion.
 
-The predictor (:class:`estimation.deck_prediction.LinearTiltPredictor`) maps the last
+The predictor (:class:`estimation.anticipation.linear_predictors.LinearTiltPredictor`) maps the last
 ``window_s`` of the deck's levelled pose (:data:`CHANNELS`), *as the timing task's history
 holds it*
 (the configured estimator under the given sensing, the drone's tilt removed), to the true
@@ -10,7 +10,7 @@ read from the simulator.  Seeds start at 5000 (the evaluations hold out 1 000 00
 
 ::
 
-    python -m agents.training.deck_prediction_fit fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
+    python -m agents.training.tilt_predictor_fit fit --scenario bench-ss3 bench-ss4 bench-ss5 \\
         --sensors realistic --episodes 60 --out landing_env/assets/predictors/deck_tilt_bench.npz
 
 The shipped ``bench`` predictor was made by exactly that command (9 min on 2 cores); the
@@ -27,15 +27,14 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.hindsight import make_timing_env
-from agents.training.sampler import SENSING_PROFILES
-from estimation.deck_prediction import LinearTiltPredictor
+from agents.training.sampler import SENSING_PROFILES, make_timing_env
+from estimation.anticipation.linear_predictors import LinearTiltPredictor
 from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
+from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import tilt_predictor_path
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.training_seas import TRAINING_FAMILIES, TrainingSea, training_family
-from landing_env.timing.history import HISTORY_FEATURES
 
 #: the horizons the predictor is fitted at: every decision period (0.1 s) up to 2 s
 HORIZONS_S = np.round(np.arange(0.0, 2.0 + 1e-9, 0.1), 2)
@@ -205,9 +204,9 @@ def describe(predictor: LinearTiltPredictor) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m agents.training.deck_prediction_fit fit``: fit a scenario's predictor."""
+    """``python -m agents.training.tilt_predictor_fit fit``: fit a scenario's predictor."""
     parser = argparse.ArgumentParser(
-        prog="python -m agents.training.deck_prediction_fit", description=__doc__
+        prog="python -m agents.training.tilt_predictor_fit", description=__doc__
     )
     commands = parser.add_subparsers(dest="command", required=True)
     fit = commands.add_parser("fit", help="collect waiting episodes and fit a predictor")
@@ -254,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.estimator,
         args.window,
         progress=not args.no_progress,
-        command="python -m agents.training.deck_prediction_fit "
+        command="python -m agents.training.tilt_predictor_fit "
         + " ".join(list(argv) if argv is not None else sys.argv[1:]),
         channels=tuple(args.channels),
     )

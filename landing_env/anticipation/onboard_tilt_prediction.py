@@ -1,11 +1,11 @@
 """The deck ahead: the timing task's use of the scenario's deck-tilt predictor.
 
 :class:`DeckPrediction` loads the fitted predictor
-(:class:`~estimation.deck_prediction.LinearTiltPredictor`) that the config's ``timing`` section
-asks for, checks it against the deck-motion history it will read
-(:class:`~landing_env.timing.history.DeckMotionHistory`), and answers the three questions the
-task (:class:`~landing_env.envs.timing.DeckLandingTimingEnv`) puts to it: when a descent starting
-now should meet the deck (the contact window), whether a descent under way should go around
+(:class:`~estimation.anticipation.linear_predictors.LinearTiltPredictor`) that the config's
+``timing`` section asks for, checks it against the deck-motion history it will read
+(:class:`~landing_env.anticipation.deck_history.DeckMotionHistory`), and answers the three questions
+the task (:class:`~landing_env.envs.timing.DeckLandingTimingEnv`) puts to it: when a descent
+starting now should meet the deck (the contact window), whether a descent under way should go around
 (the wave-off, by the predictor or by extrapolating the history), and what the prediction
 observation holds (the chance of a level deck at each contact time, the value of waiting on).
 """
@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimation.deck_prediction import LinearTiltPredictor
+from estimation.anticipation.linear_predictors import LinearTiltPredictor
+from estimation.anticipation.stopping import StoppingValues, predictor_stopping_values
 from estimation.frames import tilt_deg
+from landing_env.anticipation.deck_history import HISTORY_FEATURES, DeckMotionHistory
 from landing_env.config import DeckLandingConfig
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.timing.history import HISTORY_FEATURES, DeckMotionHistory
-from landing_env.timing.stopping import StoppingValues, predictor_stopping_values
 from landing_env.timing_config import SCENARIO_TILT_MODEL, WAVE_OFF_CLIMB_S, TimingConfig
 
 _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
@@ -88,7 +88,7 @@ class DeckPrediction:
                 "timing.tilt_model",
                 f"{what}; {user} needs the scenario's deck-tilt predictor "
                 "(e.g. bench-ss4, or a file written by "
-                "`python -m agents.training.deck_prediction_fit fit`)",
+                "`python -m agents.training.tilt_predictor_fit fit`)",
             )
         path = tilt_predictor_path(name)
         try:
@@ -98,7 +98,7 @@ class DeckPrediction:
             raise ConfigError(
                 "timing.tilt_model",
                 f"{name!r}: {error}; give a shipped one ({', '.join(shipped)}) "
-                "or a file written by `python -m agents.training.deck_prediction_fit fit`",
+                "or a file written by `python -m agents.training.tilt_predictor_fit fit`",
             ) from None
         unknown = sorted(set(model.channels) - set(HISTORY_FEATURES))
         if unknown:
@@ -138,7 +138,7 @@ class DeckPrediction:
                 f"'value' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
                 "does not hold: refit it "
-                "with `python -m agents.training.deck_prediction_fit fit`",
+                "with `python -m agents.training.tilt_predictor_fit fit`",
             )
         return values
 
@@ -155,7 +155,7 @@ class DeckPrediction:
                 "timing.observation",
                 f"'prediction' needs the chances the predictor {t.tilt_model!r} gave held-out "
                 f"examples {t.contact_times_s[0]:g}-{t.contact_times_s[-1]:g} s ahead, which it "
-                "does not hold: refit it with `python -m agents.training.deck_prediction_fit fit`",
+                "does not hold: refit it with `python -m agents.training.tilt_predictor_fit fit`",
             )
         return values
 
