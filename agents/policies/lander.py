@@ -79,9 +79,7 @@ class TrainedLanderPolicy:
         self.card = card
         self.frame_stack = int(card.observation.get("frame_stack", 1))
         self.model = model_class(self.path).load(self.path, device=device)
-        # the model's own statistics, else the run's (rl-zoo3's vecnormalize.pkl beside it)
-        own = normalization_path(self.path)
-        self.normalize = _normalization(own if own.is_file() else self.path.parent / NORMALIZE_NAME)
+        self.normalize = model_normalization(self.path)
         self._stack: dict[str, np.ndarray] | None = None
 
     def check_env(self, env: Any, allow_mismatch: tuple[str, ...] = ()) -> None:
@@ -123,6 +121,14 @@ class TrainedLanderPolicy:
 
     def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         return self.act(observation)
+
+
+def model_normalization(model: Path) -> Any:
+    """The ``VecNormalize`` statistics of the model at ``model`` (frozen): its own
+    (:func:`normalization_path`), else the run's (rl-zoo3's ``vecnormalize.pkl`` beside it),
+    else None."""
+    own = normalization_path(model)
+    return _normalization(own if own.is_file() else model.parent / NORMALIZE_NAME)
 
 
 def _normalization(path: Path) -> Any:

@@ -43,7 +43,7 @@ from agents.common.cards import (
     read_metadata,
     write_metadata,
 )
-from agents.policies.lander import normalization_path, shipped_lander_model
+from agents.policies.lander import model_normalization, normalization_path, shipped_lander_model
 from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
 from agents.policies.timing import shipped_timing_model
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
@@ -474,9 +474,11 @@ def _base_env(vec_env: Any) -> Any:
     return vec_env.envs[0]
 
 
-def _start_from(model: Any, path: str, env: Any) -> None:
+def _start_from(model: Any, path: str, env: Any, train_env: Any) -> None:
     """Load ``path``'s weights into ``model`` after checking its card against ``env`` (the
-    sensing may differ: a randomised training draws several)."""
+    sensing may differ: a randomised training draws several), and, where the training
+    normalises, the ``VecNormalize`` statistics the model was saved with (as rl-zoo3 does
+    for ``--trained-agent``), which training then goes on updating."""
 
     found = Path(path)
     if not found.is_absolute() and not found.is_file():
@@ -489,6 +491,10 @@ def _start_from(model: Any, path: str, env: Any) -> None:
         raise ConfigError("deck_landing.init_model", f"{path} has no card")
     check_compatible(card, env_signature(env), found.name, allow=("sensing",))
     model.set_parameters(str(found), exact_match=True, device="cpu")
+    saved = model_normalization(found)
+    if saved is not None and hasattr(train_env, "obs_rms"):
+        train_env.obs_rms = saved.obs_rms
+        train_env.ret_rms = saved.ret_rms
 
 
 def install_path(config: TrainConfig) -> Path:
@@ -551,18 +557,23 @@ def train(
         # SB3's TensorBoard log and its CSV twin (progress.csv) in one folder
         model.set_logger(configure(str(out / "tb" / _model_name(config)), ["csv", "tensorboard"]))
         if settings.init_model:
-            _start_from(model, settings.init_model, _base_env(eval_env))
+            _start_from(model, settings.init_model, _base_env(eval_env), train_env)
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():
             # the evaluation env runs in this process on purpose (a DummyVecEnv of one)
             warnings.filterwarnings("ignore", message="Training and eval env are not of the same")
-            model.learn(
-                total_timesteps=steps,
-                callback=callbacks,
-                progress_bar=progress_bar,
-                tb_log_name=_model_name(config),
-            )
+            try:
+                model.learn(
+                    total_timesteps=steps,
+                    callback=callbacks,
+                    progress_bar=progress_bar,
+                    tb_log_name=_model_name(config),
+                )
+            except KeyboardInterrupt:
+                # Ctrl-C ends the run as a budget would: the model, its statistics and the
+                # cards are saved below
+                model._stopped_because = "interrupted"  # type: ignore[attr-defined]
         model_path = out / f"{_model_name(config)}_final.zip"
         model.save(model_path)
         if hasattr(train_env, "obs_rms"):
@@ -587,8 +598,11 @@ def train(
             frame_stack=config.frame_stack,
         )
     finally:
-        train_env.close()
-        eval_env.close()
+        for env in (train_env, eval_env):
+            try:
+                env.close()
+            except (EOFError, BrokenPipeError, ConnectionResetError):
+                pass  # a subprocess environment already ended by Ctrl-C
     wall = time.perf_counter() - started
     best = out / "best_model.zip"
     for saved in (model_path, best):

@@ -191,6 +191,7 @@ def test_the_actor_never_sees_the_privileged_key_and_the_critic_does() -> None:
 
 
 def _short_recipe(tmp_path: Path) -> Path:
+    tmp_path.mkdir(parents=True, exist_ok=True)
     data = yaml.safe_load(RECIPE.read_text())
     zoo = data["DeckLanding-BenchSS4-v2"]
     zoo.update({"n_envs": 1, "n_timesteps": 256, "n_steps": 64, "batch_size": 32, "n_epochs": 1})
@@ -274,3 +275,34 @@ def test_rl_zoo3_trains_the_ppo_recipe_unmodified(tmp_path: Path) -> None:
     model = PPO.load(saved[0], device="cpu")
     assert type(model.policy).__name__ == "PrivilegedCriticPolicy"
     assert model.num_timesteps >= 256
+
+
+def test_a_run_started_from_a_model_goes_on_from_its_normalisation(tmp_path: Path) -> None:
+    first = train(load_train_config(_short_recipe(tmp_path / "first")), progress_bar=False)
+    recipe = yaml.safe_load(_short_recipe(tmp_path / "second").read_text())
+    recipe["deck_landing"]["init_model"] = str(first.model_path)
+    (tmp_path / "second" / "lander_ppo.yaml").write_text(yaml.safe_dump(recipe))
+    second = train(load_train_config(tmp_path / "second" / "lander_ppo.yaml"), progress_bar=False)
+    counts = []
+    for run in (first, second):
+        with (run.model_path.parent / "vecnormalize.pkl").open("rb") as stream:
+            counts.append(pickle.load(stream).obs_rms["deck_position"].count)
+    # the second run's statistics include the first run's samples
+    assert counts[1] == pytest.approx(counts[0] + second.timesteps, abs=1.0)
+
+
+def test_ctrl_c_ends_a_run_with_its_model_statistics_and_card_saved(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from stable_baselines3 import PPO
+
+    def interrupted(self: PPO, *args: object, **kwargs: object) -> PPO:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(PPO, "learn", interrupted)
+    result = train(load_train_config(_short_recipe(tmp_path)), progress_bar=False)
+    assert result.stopped_because == "interrupted"
+    assert result.model_path.is_file() and (tmp_path / "vecnormalize.pkl").is_file()
+    from agents.common.cards import read_metadata
+
+    assert read_metadata(result.model_path) is not None
