@@ -322,6 +322,8 @@ class World:
         dt = self.dt
         idle = [self.params.omega_min] * 4
         watch_below = self.deck_home_w[2] + self.contact_watch_height_m
+        # nothing in the world stands as high as the watch height (the contacts' own rule)
+        self.drone.surfaces_below_z = float(watch_below)
         # the hot loop works on plain floats: small numpy arrays cost more than the physics
         times: list[float] = []
         rotations: list[tuple[float, ...]] = []
