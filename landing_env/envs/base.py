@@ -76,6 +76,52 @@ def without_nan(value: Any) -> Any:
     return value
 
 
+class BoundedObservation:
+    """Values as a ``spaces.Dict`` of ``Box`` keys observes them: NaN as 0, clipped to each
+    key's bounds, float32.
+
+    All keys in one pass: the values are laid end to end (float64), NaN set to 0, clipped to
+    the bounds laid out alike and cast once, and each key gets its slice.  Element by element
+    this is ``np.clip(np.nan_to_num(value, nan=0.0), low, high).astype(np.float32)`` of each
+    key (an infinity clips to the bound, or stays infinite against an infinite one, either
+    way); a value whose size is not its key's goes that way.
+    """
+
+    def __init__(self) -> None:
+        self._space: spaces.Dict | None = None
+        self._layout: tuple[tuple[str, int, int, tuple[int, ...]], ...] = ()
+        self._low = self._high = np.zeros(0)
+
+    def _lay_out(self, space: spaces.Dict) -> None:
+        layout, lows, highs, offset = [], [], [], 0
+        for key, box in space.spaces.items():
+            size = int(np.prod(box.shape))
+            layout.append((key, offset, offset + size, box.shape))
+            lows.append(np.asarray(box.low, dtype=np.float64).reshape(-1))
+            highs.append(np.asarray(box.high, dtype=np.float64).reshape(-1))
+            offset += size
+        self._layout = tuple(layout)
+        self._low, self._high = np.concatenate(lows), np.concatenate(highs)
+        self._space = space
+
+    def observation(self, values: dict[str, Any], space: spaces.Dict) -> dict[str, np.ndarray]:
+        if space is not self._space:
+            self._lay_out(space)
+        parts = [np.asarray(values[key], dtype=np.float64) for key, *_ in self._layout]
+        if any(
+            part.size != end - start
+            for part, (_, start, end, _) in zip(parts, self._layout, strict=True)
+        ):
+            return {
+                key: np.clip(np.nan_to_num(part, nan=0.0), box.low, box.high).astype(np.float32)
+                for part, (key, box) in zip(parts, space.spaces.items(), strict=True)
+            }
+        flat = np.concatenate([part.reshape(-1) for part in parts])
+        flat[np.isnan(flat)] = 0.0
+        flat = np.clip(flat, self._low, self._high).astype(np.float32)
+        return {key: flat[start:end].reshape(shape) for key, start, end, shape in self._layout}
+
+
 def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -195,6 +241,7 @@ class DeckLandingBaseEnv(gym.Env):
         self._potential = 0.0
         self._reward_terms = zero_terms()
         self._last_image: np.ndarray | None = None
+        self._bounded = BoundedObservation()
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(
