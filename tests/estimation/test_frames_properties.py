@@ -55,6 +55,26 @@ def test_euler_angles_of_any_rotation_rebuild_it(rotation: np.ndarray) -> None:
 
 
 @PROPERTY
+@given(
+    angles=st.tuples(
+        *[st.floats(-1e3, 1e3) | st.sampled_from([0.0, -0.0, np.pi, -np.pi / 2, 1e-300])] * 3
+    )
+)
+def test_the_written_out_zyx_matrix_is_scipy_s_bit_for_bit(
+    angles: tuple[float, float, float],
+) -> None:
+    roll, pitch, yaw = angles
+    expected = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    assert matrix_from_euler_zyx(roll, pitch, yaw).tobytes() == expected.tobytes()
+
+
+def test_a_non_finite_zyx_angle_gives_scipy_s_matrix() -> None:
+    for angles in ((np.nan, 0.0, 0.0), (0.0, np.inf, 0.0), (0.0, 0.0, -np.inf)):
+        expected = Rotation.from_euler("ZYX", angles[::-1]).as_matrix()
+        np.testing.assert_array_equal(matrix_from_euler_zyx(*angles), expected)
+
+
+@PROPERTY
 @given(angles=st.tuples(*[st.floats(-3.1, 3.1)] * 3))
 def test_zyx_euler_is_yaw_then_pitch_then_roll(angles: tuple[float, float, float]) -> None:
     roll, pitch, yaw = angles

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from gymnasium import spaces
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -41,6 +42,7 @@ def observation_values(draw) -> dict:
     }
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered in cast")
 @settings(max_examples=200, deadline=None)
 @given(observation_values())
 def test_bounding_all_keys_at_once_matches_each_key_bounded_alone_bit_for_bit(values) -> None:
