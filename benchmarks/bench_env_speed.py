@@ -244,13 +244,16 @@ def profile(console: Console, sim_seconds: float, top: int) -> None:
         profiler.disable()
         env.close()
         stats = pstats.Stats(profiler)
-        total = max(stats.total_tt, 1e-12)
+        # the outermost call's cumulative time: the whole of the steps
+        total = max(max(entry[3] for entry in stats.stats.values()), 1e-12)
         table = Table(title=f"{label}: {steps} steps, top {top} by cumulative CPU time")
         for column in ("function", "calls/step", "cumulative %", "own %"):
             table.add_column(column, justify="left" if column == "function" else "right")
         entries = sorted(stats.stats.items(), key=lambda item: item[1][3], reverse=True)
         for (path, line, name), (_, calls, own, cumulative, _) in entries[:top]:
-            where = path.removeprefix(root) if path.startswith(root) else Path(path).name
+            where = path.removeprefix(root) if path.startswith(root) else path
+            if "site-packages/" in where:
+                where = where.split("site-packages/", 1)[1]
             site = f"{where}:{line}({name})" if line else name
             table.add_row(
                 site, f"{calls / steps:.1f}", f"{100 * cumulative / total:.1f}",
