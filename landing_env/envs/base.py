@@ -59,10 +59,26 @@ def flags(values: Any) -> np.ndarray:
     return np.asarray(values, dtype=bool).astype(np.float32).reshape(-1)
 
 
+#: the types that never hold a NaN
+_NAN_FREE = frozenset({bool, int, str, type(None), np.bool_})
+
+
 def without_nan(value: Any) -> Any:
     """``info`` without NaN, so that two runs of one seed compare equal (Gymnasium's
     determinism check; NaN != NaN): a float array's NaN entries become 0 (every such array has
     its validity beside it: ``tof_valid``, an estimate's ``valid``), a NaN scalar None."""
+    kind = type(value)
+    # the common leaves first, by exact type (each call of a step's info is one of these)
+    if kind is np.ndarray:
+        if value.dtype.kind == "f" and np.isnan(value).any():
+            return np.nan_to_num(value, nan=0.0)
+        return value
+    if kind is dict:
+        return {key: without_nan(item) for key, item in value.items()}
+    if kind is float:
+        return None if math.isnan(value) else value
+    if kind in _NAN_FREE:
+        return value
     if isinstance(value, dict):
         return {key: without_nan(item) for key, item in value.items()}
     if isinstance(value, list):
