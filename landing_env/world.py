@@ -333,7 +333,7 @@ class World:
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
             if not self.pinned:
-                command = self.controller.update(state, setpoint, dt) if self.armed else idle
+                command = self.controller.update_floats(state, setpoint, dt) if self.armed else idle
                 wind = self.wind.velocity_tuple(self.time, dt)
                 if self._airwake:
                     px, py, pz = state.floats.position_w
