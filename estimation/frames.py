@@ -131,6 +131,30 @@ def matrix_from_euler_zyx(roll: float, pitch: float, yaw: float) -> np.ndarray:
         w * 0.0 + cx * z + (x * 0.0 - y * sx),
         w * cx - x * sx - y * 0.0 - z * 0.0,
     )
+    return _matrix_of_quaternion(x, y, z, w)
+
+
+def matrix_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
+    """Return the rotation matrix of a rotation vector (axis times angle, radians).
+
+    ``Rotation.from_rotvec(rotvec).as_matrix()`` written out in plain floats, operation for
+    operation as scipy computes it (its series below 1 mrad included), so the two agree bit
+    for bit; a non-finite vector goes to scipy.
+    """
+    x, y, z = (float(v) for v in np.asarray(rotvec, dtype=float).reshape(3))
+    angle = math.sqrt(x * x + y * y + z * z)
+    if not math.isfinite(angle):
+        return Rotation.from_rotvec([x, y, z]).as_matrix()
+    if angle <= 1e-3:
+        angle2 = angle * angle
+        scale = 0.5 - angle2 / 48 + angle2 * angle2 / 3840
+    else:
+        scale = math.sin(angle / 2) / angle
+    return _matrix_of_quaternion(scale * x, scale * y, scale * z, math.cos(angle / 2))
+
+
+def _matrix_of_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """The rotation matrix of a unit quaternion, as scipy's ``as_matrix`` computes it."""
     x2, y2, z2, w2 = x * x, y * y, z * z, w * w
     xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
     return np.array(
