@@ -7,6 +7,7 @@ import math
 import os
 import warnings
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -16,7 +17,7 @@ from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
 from estimation.frames import euler_zyx_from_matrix
-from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
+from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig, episode_step_limit, load_config
 from landing_env.envs.actions import BOX_ACTION_FIELDS, setpoint_from_action, validate_action
 from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
@@ -90,6 +91,19 @@ def without_nan(value: Any) -> Any:
     if isinstance(value, float | np.floating) and math.isnan(value):
         return None
     return value
+
+
+def imu_sample_rows(samples: Sequence[ImuSample]) -> np.ndarray:
+    """``info["imu_samples"]``: one row (timestamp, accel xyz, gyro xyz) per sample, (n, 7).
+
+    Filled column block by column block: unpacking each sample's arrays into a row makes a
+    numpy scalar of every value."""
+    rows = np.empty((len(samples), 7))
+    if samples:
+        rows[:, 0] = [s.timestamp for s in samples]
+        rows[:, 1:4] = [s.accel for s in samples]
+        rows[:, 4:7] = [s.gyro for s in samples]
+    return rows
 
 
 class BoundedObservation:
@@ -527,9 +541,7 @@ class DeckLandingBaseEnv(gym.Env):
                 "euler_w": euler_zyx_from_matrix(deck.rotation_wp),
                 "velocity_w": deck.velocity_w.copy(),
             },
-            "imu_samples": np.array(
-                [[s.timestamp, *s.accel, *s.gyro] for s in report.imu_samples]
-            ).reshape(-1, 7),
+            "imu_samples": imu_sample_rows(report.imu_samples),
             "stewart_clamped": report.stewart_clamped,
             "motor_saturated": report.motor_saturated,
             "action_clipped": getattr(self, "_action_clipped", False),

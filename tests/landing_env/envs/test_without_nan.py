@@ -1,4 +1,4 @@
-"""``info``'s NaN removal by exact type against the isinstance chain it replaces."""
+"""``info``'s NaN removal and IMU rows against the code they replace."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from landing_env.envs.base import without_nan
+from estimation.types import ImuSample
+from landing_env.envs.base import imu_sample_rows, without_nan
 
 
 def reference(value):
@@ -55,3 +56,26 @@ TREES = st.recursive(
 def test_info_without_nan_is_the_isinstance_chain_s_result_for_any_nesting(tree) -> None:
     result, expected = without_nan(tree), reference(tree)
     assert pickle.dumps(result) == pickle.dumps(expected)
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0.0, 1e4),
+            hnp.arrays(
+                st.sampled_from([np.float64, np.float32]),
+                3,
+                elements=st.floats(-1e3, 1e3, width=32),
+            ),
+            hnp.arrays(np.float64, 3, elements=st.floats(allow_nan=True)),
+        ),
+        max_size=14,
+    )
+)
+def test_imu_rows_of_info_are_each_sample_unpacked_into_a_row(samples) -> None:
+    imu = [ImuSample(t, accel, gyro) for t, accel, gyro in samples]
+    expected = np.array([[s.timestamp, *s.accel, *s.gyro] for s in imu]).reshape(-1, 7)
+    rows = imu_sample_rows(imu)
+    assert rows.dtype == expected.dtype and rows.shape == expected.shape
+    assert rows.tobytes() == expected.tobytes()
