@@ -19,16 +19,41 @@ over the moving deck at 4, 2, 1, 0.6 and 0.3 m, one environment, for each render
 the time of a step and of a full-frame ``render()`` (``rgb_array``), each as CPU time of this
 process (``time.process_time``, what the run costs when the machine is shared) and wall time.
 Only ``--heights`` runs that table alone.
+
+Each row of the first table is set against the physics ceiling of the same run: the CPU time
+of the bare ``stepSimulation`` calls of the env's own world during the row's steps (the same
+sub-steps, the same states), over the row's CPU time per step (1 would be a step that costs
+its physics alone).  When gym-pybullet-drones or PyFlyt is installed,
+their hover tasks run beside the rows; otherwise the output says they are not installed.
+
+``--profile`` prints, instead of the tables, the top functions by cumulative CPU time of
+``--seconds`` simulated seconds of `project` mode with the truth observed, with `tight`, and
+with `tight` under realistic sensing (cProfile; ``--profile-top`` rows each)::
+
+    .venv/bin/python -m benchmarks.bench_env_speed --profile --seconds 20
+
+``--tight-starts`` prints what each start of ``tight`` costs and gains instead: over
+``--seconds`` of a slow descent in `project` mode (ideal and realistic sensing), every frame
+is estimated by ``tight`` as configured (``previous_start: fallback``: IPPE and ToF-plane
+starts) and with ``previous_start: first``, each timed by CPU, with the Levenberg–Marquardt
+iterations of every start refined, and each compared with the true pose.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
+import cProfile
+import dataclasses
+import importlib.util
 import multiprocessing as mp
+import pstats
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pybullet as p
 from rich.console import Console
 from rich.table import Table
 
@@ -37,7 +62,8 @@ import landing_env  # noqa: F401
 
 def _run(
     mode: str, estimator: str, sim_seconds: float, seed: int, queue=None, sensors: str = "ideal"
-) -> tuple[int, float, float, float]:
+) -> tuple[int, float, float, float, float]:
+    """Steps, wall s, simulated s, CPU s and the CPU s of its ``stepSimulation`` calls."""
     overrides = {
         "camera.mode": mode,
         "estimation.observed": estimator,
@@ -53,14 +79,15 @@ def _run(
     env.step(action)
     start = time.perf_counter()
     cpu_start = time.process_time()
-    for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset(seed=seed)
+    with PhysicsClock() as physics:
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset(seed=seed)
     wall = time.perf_counter() - start
     cpu = time.process_time() - cpu_start
     env.close()
-    result = (steps, wall, steps * env_dt, cpu)
+    result = (steps, wall, steps * env_dt, cpu, physics.cpu_s)
     if queue is not None:
         queue.put(result)
     return result
@@ -68,7 +95,7 @@ def _run(
 
 def _parallel(
     mode: str, estimator: str, sim_seconds: float, n: int, sensors: str = "ideal"
-) -> tuple[int, float, float, float]:
+) -> tuple[int, float, float, float, float]:
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     procs = [
@@ -84,7 +111,237 @@ def _parallel(
     wall = max(r[1] for r in results)
     sim = sum(r[2] for r in results)
     cpu = sum(r[3] for r in results)
-    return steps, wall, sim, cpu
+    physics = sum(r[4] for r in results)
+    return steps, wall, sim, cpu, physics
+
+
+class PhysicsClock:
+    """Times every ``pybullet.stepSimulation`` call of this process (CPU seconds).
+
+    The world calls ``pybullet.stepSimulation`` once per physics sub-step; while the clock is
+    installed each call is timed, so a row's physics is measured in the row's own run: the
+    same world, the same sub-steps, the same states.  Its total over the row's steps is the
+    physics ceiling: what a step would cost if nothing but the physics ran.
+    """
+
+    def __init__(self) -> None:
+        self.cpu_s = 0.0
+        self._step = p.stepSimulation
+
+    def __enter__(self) -> PhysicsClock:
+        step, clock = self._step, time.process_time
+
+        def timed(*args, **kwargs):
+            start = clock()
+            try:
+                return step(*args, **kwargs)
+            finally:
+                self.cpu_s += clock() - start
+
+        p.stepSimulation = timed
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        p.stepSimulation = self._step
+
+
+#: the peers' hover tasks: (package to import, label, env id, module whose import registers it)
+PEERS = (
+    ("gym_pybullet_drones", "gym-pybullet-drones HoverAviary", "hover-aviary-v0", None),
+    ("PyFlyt", "PyFlyt QuadX-Hover-v4", "PyFlyt/QuadX-Hover-v4", "PyFlyt.gym_envs"),
+)
+
+
+def _peer_env(package: str, env_id: str, module: str | None) -> gym.Env:
+    if package == "gym_pybullet_drones":
+        from gym_pybullet_drones.envs.HoverAviary import HoverAviary
+
+        return HoverAviary()
+    if module is not None:
+        importlib.import_module(module)
+    return gym.make(env_id)
+
+
+def peer_rows(sim_seconds: float) -> tuple[list[tuple[str, int, float, float, float]], list[str]]:
+    """The installed peers' rows (label, steps, wall s, simulated s, CPU s) and the names of
+    those not installed."""
+    rows, missing = [], []
+    for package, label, env_id, module in PEERS:
+        if importlib.util.find_spec(package) is None:
+            missing.append(label)
+            continue
+        env = _peer_env(package, env_id, module)
+        env.reset(seed=0)
+        fps = float(env.metadata.get("render_fps") or getattr(env, "CTRL_FREQ", 30))
+        steps = max(1, int(sim_seconds * fps))
+        action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+        if np.issubdtype(env.action_space.dtype, np.floating):
+            action = 0.5 * (env.action_space.low + env.action_space.high)
+        wall, cpu = time.perf_counter(), time.process_time()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset(seed=0)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        env.close()
+        rows.append((label, steps, wall, steps / fps, cpu))
+    return rows, missing
+
+
+#: the timing task measured beside the table: ``step(0)`` (wait) in a loop, reset at each end
+TIMING_IDS = ("DeckLandingTiming-BenchSS4-v6",)
+
+
+def wait_decisions(env_id: str, cpu_seconds: float) -> tuple[int, float, float]:
+    """Wait decisions of the timing task ``env_id`` (default observation, ``step(0)``) over
+    about ``cpu_seconds`` of CPU: (decisions, CPU s, physics CPU s)."""
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    decisions, episodes = 0, 0
+    with PhysicsClock() as physics:
+        start = time.process_time()
+        while time.process_time() - start < cpu_seconds:
+            _, _, terminated, truncated, _ = env.step(0)
+            decisions += 1
+            if terminated or truncated:
+                episodes += 1
+                env.reset(seed=episodes)
+        cpu = time.process_time() - start
+    env.close()
+    return decisions, cpu, physics.cpu_s
+
+
+#: the profiled cases: (label, observed estimator, sensors), all in `project` mode
+PROFILE_CASES = (
+    ("project mode, truth observed", "truth", "ideal"),
+    ("project mode, tight", "tight", "ideal"),
+    ("project mode, tight, realistic sensing", "tight", "realistic"),
+)
+
+
+def profile(console: Console, sim_seconds: float, top: int) -> None:
+    """Print the top functions by cumulative CPU time of each profiled case."""
+    root = str(Path(__file__).resolve().parents[1]) + "/"
+    for label, estimator, sensors in PROFILE_CASES:
+        overrides = {
+            "camera.mode": "project",
+            "estimation.observed": estimator,
+            "simulation.max_episode_s": 1e4,
+            "sensors": sensors,
+        }
+        env = gym.make("DeckLanding-v2", overrides=overrides)
+        env.reset(seed=0)
+        env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
+        steps = max(1, int(sim_seconds / env_dt))
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        env.step(action)
+        profiler = cProfile.Profile(time.process_time)
+        profiler.enable()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset(seed=0)
+        profiler.disable()
+        env.close()
+        stats = pstats.Stats(profiler)
+        # the outermost call's cumulative time: the whole of the steps
+        total = max(max(entry[3] for entry in stats.stats.values()), 1e-12)
+        table = Table(title=f"{label}: {steps} steps, top {top} by cumulative CPU time")
+        for column in ("function", "calls/step", "cumulative %", "own %"):
+            table.add_column(column, justify="left" if column == "function" else "right")
+        entries = sorted(stats.stats.items(), key=lambda item: item[1][3], reverse=True)
+        for (path, line, name), (_, calls, own, cumulative, _) in entries[:top]:
+            where = path.removeprefix(root) if path.startswith(root) else path
+            if "site-packages/" in where:
+                where = where.split("site-packages/", 1)[1]
+            site = f"{where}:{line}({name})" if line else name
+            table.add_row(
+                site, f"{calls / steps:.1f}", f"{100 * cumulative / total:.1f}",
+                f"{100 * own / total:.1f}",
+            )  # fmt: skip
+        console.print(table)
+
+
+def tight_starts(console: Console, sim_seconds: float) -> None:
+    """Per frame: CPU, iterations (all starts) and error of ``tight`` by its start rule."""
+    from estimation.tight_problem import TightProblem
+
+    counts = {"solves": 0, "iterations": 0}
+    solve = TightProblem.solve
+
+    def counted(self, *args, **kwargs):
+        solution = solve(self, *args, **kwargs)
+        counts["solves"] += 1
+        counts["iterations"] += solution.iterations if solution is not None else 0
+        return solution
+
+    table = Table(title=f"tight by start rule, {sim_seconds:g} s of a slow descent per row")
+    for column in (
+        "sensors", "previous_start", "valid", "CPU µs median / mean", "starts", "LM iterations",
+        "kept previous", "position error mm median / p95", "tilt error deg median / p95",
+        "gap to fallback mm / deg",
+    ):  # fmt: skip
+        table.add_column(column, justify="right")
+    TightProblem.solve = counted
+    try:
+        for sensors in ("ideal", "realistic"):
+            overrides = {
+                "camera.mode": "project",
+                "estimation.observed": "tight",
+                "simulation.max_episode_s": 1e4,
+                "sensors": sensors,
+            }
+            env = gym.make("DeckLanding-v2", overrides=overrides)
+            env.reset(seed=0)
+            env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
+            own = env.unwrapped.bank.estimators["tight"]
+            variants = {"fallback": copy.deepcopy(own), "first": copy.deepcopy(own)}
+            variants["first"].config = dataclasses.replace(own.config, previous_start="first")
+            rows = {name: [] for name in variants}
+            action = np.zeros(env.action_space.shape, dtype=np.float32)
+            action[2] = -0.1  # a slow descent: every height from the start's down to the deck
+            for _ in range(max(1, int(sim_seconds / env_dt))):
+                _, _, terminated, truncated, info = env.step(action)
+                if terminated or truncated:
+                    env.reset(seed=0)
+                    for estimator in variants.values():
+                        estimator.reset()
+                    continue
+                sensing = env.unwrapped._sensing
+                truth = np.asarray(info["deck_pose_true"], dtype=float)
+                for name, estimator in variants.items():
+                    counts["solves"] = counts["iterations"] = 0
+                    cpu = time.process_time()
+                    estimate = estimator.estimate(sensing.frame, sensing.ranges)
+                    cpu = time.process_time() - cpu
+                    pose = estimate.as_vector() if estimate.valid else np.full(6, np.nan)
+                    rows[name].append(
+                        (cpu, counts["solves"], counts["iterations"],
+                         estimate.extras.get("start") == "previous", *pose, *truth)
+                    )  # fmt: skip
+            env.close()
+            fallback = np.array(rows["fallback"])
+            for name, data in ((n, np.array(r)) for n, r in rows.items()):
+                # the frames with an estimate (those without one cost no refinement)
+                valid = np.isfinite(data[:, 4])
+                used, pose, truth = data[valid], data[valid, 4:10], data[valid, 10:16]
+                position = 1e3 * np.linalg.norm(pose[:, :3] - truth[:, :3], axis=1)
+                tilt = np.degrees(np.max(np.abs(pose[:, 3:5] - truth[:, 3:5]), axis=1))
+                both = valid & np.isfinite(fallback[:, 4])
+                gap_m = np.abs(data[both, 4:7] - fallback[both, 4:7]).max(initial=0.0)
+                gap_rad = np.abs(data[both, 7:10] - fallback[both, 7:10]).max(initial=0.0)
+                table.add_row(
+                    sensors, name, f"{int(valid.sum())}/{len(data)}",
+                    f"{1e6 * np.median(used[:, 0]):.0f} / {1e6 * np.mean(used[:, 0]):.0f}",
+                    f"{np.mean(used[:, 1]):.2f}", f"{np.mean(used[:, 2]):.1f}",
+                    f"{np.mean(used[:, 3]):.0%}",
+                    f"{np.median(position):.2f} / {np.percentile(position, 95):.2f}",
+                    f"{np.median(tilt):.3f} / {np.percentile(tilt, 95):.3f}",
+                    f"{1e3 * gap_m:.3f} / {np.degrees(gap_rad):.4f}",
+                )  # fmt: skip
+    finally:
+        TightProblem.solve = solve
+    console.print(table)
 
 
 HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
@@ -177,8 +434,21 @@ def main() -> None:
     parser.add_argument(
         "--envs", default="1,2", help="comma-separated environment counts of the first table"
     )
+    parser.add_argument(
+        "--profile", action="store_true", help="print the profile of a step instead of the tables"
+    )
+    parser.add_argument("--profile-top", type=int, default=25, help="functions per profile")
+    parser.add_argument(
+        "--tight-starts", action="store_true", help="print what each start of tight costs"
+    )
     args = parser.parse_args()
-    console = Console(width=140)
+    console = Console(width=180)
+    if args.tight_starts:
+        tight_starts(console, args.seconds)
+        return
+    if args.profile:
+        profile(console, args.seconds, args.profile_top)
+        return
     if not args.no_heights:
         height_table(console, args.height_steps, 10, args.renderers.split(","))
     if args.heights:
@@ -187,7 +457,7 @@ def main() -> None:
     columns = ("sensors", "camera mode", "observed estimator", "envs", "steps/s")
     columns = (*columns, "real-time factor")
     # CPU time per step: what a shared machine inflates least (wall-clock figures need it idle)
-    for column in (*columns, "CPU ms/step", "real-time factor by CPU"):
+    for column in (*columns, "CPU ms/step", "real-time factor by CPU", "of physics ceiling"):
         table.add_column(column, justify="right")
     cases = (
         ("ideal", "project", "truth", args.seconds),
@@ -205,9 +475,9 @@ def main() -> None:
             continue
         for n in (int(count) for count in args.envs.split(",")):
             if n == 1:
-                steps, wall, sim, cpu = _run(mode, estimator, seconds, 0, None, sensors)
+                steps, wall, sim, cpu, physics = _run(mode, estimator, seconds, 0, None, sensors)
             else:
-                steps, wall, sim, cpu = _parallel(mode, estimator, seconds, n, sensors)
+                steps, wall, sim, cpu, physics = _parallel(mode, estimator, seconds, n, sensors)
             table.add_row(
                 sensors,
                 mode,
@@ -217,9 +487,28 @@ def main() -> None:
                 f"{sim / wall:.1f}x",
                 f"{1e3 * cpu / steps:.2f}",
                 f"{sim / cpu:.1f}x",
+                f"{physics / cpu:.2f}",
             )
-            console.print(f"{sensors} {mode}/{estimator} x{n}: {steps} steps in {wall:.1f} s")
+            console.print(
+                f"{sensors} {mode}/{estimator} x{n}: {steps} steps in {wall:.1f} s, "
+                f"{1e3 * cpu / steps:.3f} CPU ms/step, physics {1e3 * physics / steps:.3f} "
+                f"CPU ms/step: {physics / cpu:.2f} of the physics ceiling"
+            )
+    for env_id in TIMING_IDS:
+        decisions, cpu, physics = wait_decisions(env_id, min(args.seconds, 15.0))
+        console.print(
+            f"{env_id}: {decisions / cpu:.0f} wait decisions/s by CPU ({decisions} in "
+            f"{cpu:.1f} CPU s), {physics / cpu:.2f} of the physics ceiling"
+        )
+    peers, missing = peer_rows(args.seconds)
+    for label, steps, wall, sim, cpu in peers:
+        table.add_row(
+            "peer", label, "", "1", f"{steps / wall:.0f}", f"{sim / wall:.1f}x",
+            f"{1e3 * cpu / steps:.2f}", f"{sim / cpu:.1f}x", "",
+        )  # fmt: skip
     console.print(table)
+    if missing:
+        console.print(f"peers not installed (no rows): {', '.join(missing)}")
 
 
 if __name__ == "__main__":

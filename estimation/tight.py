@@ -170,9 +170,11 @@ class TightEstimator(GuardedEstimator):
         except ValueError:
             self._plane_fitter = None
         self._previous: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._previous_cost = 0.0
 
     def reset(self) -> None:
         self._previous = None
+        self._previous_cost = 0.0
 
     # -- inputs ------------------------------------------------------------------------
     def _corners(self, frame: CameraFrame) -> tuple[np.ndarray | None, np.ndarray, str]:
@@ -284,7 +286,12 @@ class TightEstimator(GuardedEstimator):
     ) -> tuple[str, TightSolution, float, bool] | None:
         """The lowest-cost solution over the starts (with ATDA's history rule when
         there are no ranges), its start's name, the ambiguity ratio and whether history
-        decided."""
+        decided; with ``previous_start: first``, the previous estimate's solution alone
+        where it is kept (:meth:`_warm`)."""
+        if self.config.previous_start == "first":
+            warm = self._warm(problem, timestamp)
+            if warm is not None:
+                return "previous", warm, 0.0, False
         if len(starts) > 1 and math.isfinite(self.config.start_cost_margin):
             # only the starts whose cost is near the best start's are refined
             initial = [problem.cost(rotation, translation) for _, rotation, translation in starts]
@@ -331,6 +338,26 @@ class TightEstimator(GuardedEstimator):
                 by_history = closest is not found[0]
                 return closest[0], closest[1], ratio, by_history
         return found[0][0], found[0][1], ratio, by_history
+
+    def _warm(self, problem: TightProblem, timestamp: float) -> TightSolution | None:
+        """The solution from the previous estimate alone, where the frame has four corners
+        and three or more ranges (the ranges tell the planar flip apart) and its whitened
+        cost is within ``start_cost_margin`` of the number of residuals; else None."""
+        previous = self._previous
+        if (
+            previous is None
+            or not 0.0 <= timestamp - previous[0] <= self.config.history_timeout_s
+            or problem.n_corners < len(self._model)
+            or problem.n_ranges < 3
+        ):
+            return None
+        solution = problem.solve(previous[1], previous[2], self.config.max_iterations)
+        # what a pose in the right basin costs: the residuals' count, or the previous
+        # minimum's cost where the model fits this camera less well
+        expected = max(float(problem.m), self._previous_cost)
+        if solution is None or not solution.cost <= expected + self.config.start_cost_margin:
+            return None
+        return solution
 
     def _estimate(self, frame: CameraFrame, reading: RangeReading) -> DeckPoseEstimate:
         timestamp = float(frame.timestamp)
@@ -408,6 +435,7 @@ class TightEstimator(GuardedEstimator):
         if not estimate.valid:
             return estimate
         self._previous = (timestamp, solution.rotation, solution.translation)
+        self._previous_cost = solution.cost
         return DeckPoseEstimate(
             method=self.name,
             timestamp=timestamp,

@@ -18,6 +18,8 @@ from estimation.noise import (
 )
 
 PRINCIPAL_POINT_SOURCES = ("touch_points", "calibrated")
+#: where the previous estimate enters as a start (``TightConfig.previous_start``)
+PREVIOUS_STARTS = ("fallback", "first")
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,13 @@ class TightConfig:
     (as ATDA does).  ``start_cost_margin``: only the starts whose whitened cost is within
     this of the lowest start's are refined (``inf``: all of them); the others start in
     another basin with a cost higher by more than sqrt(50) ≈ 7 sigma.
+    ``previous_start``: ``"fallback"`` starts from the previous estimate (within
+    ``history_timeout_s``) only when neither IPPE nor the ToF plane gives a start;
+    ``"first"`` refines the previous estimate alone first when the frame has four corners
+    and three or more ranges, and keeps it when its whitened cost is within
+    ``start_cost_margin`` of what a pose in the right basin costs (the number of residuals,
+    or the previous estimate's cost where that is higher), else searches from every start
+    as ``"fallback"`` does.
     ``principal_point``: ``"touch_points"`` (with a ToF–camera calibration) moves the
     calibrated principal point by the median offset between the pads' measured touch pixels
     and their projection through the calibrated camera (the calibrations' disagreement,
@@ -85,6 +94,7 @@ class TightConfig:
     )
     history_timeout_s: float = limited(0.5, NON_NEGATIVE, physical=Limit.non_negative(60.0))
     start_cost_margin: float = limited(50.0, NON_NEGATIVE, physical=Limit.non_negative(1e6))
+    previous_start: str = "fallback"
     principal_point: str = "touch_points"
     corner_bias_px: tuple[float, float, float] = limited(
         (0.0, 0.0, 0.0), physical=Limit.symmetric(100.0, "detector edge offset a, b (px), c (px^2)")
@@ -94,6 +104,7 @@ class TightConfig:
     def __post_init__(self) -> None:
         require_limits(self)
         require_choice("principal_point", self.principal_point, PRINCIPAL_POINT_SOURCES)
+        require_choice("previous_start", self.previous_start, PREVIOUS_STARTS)
         if len(self.corner_bias_px) != 3 or not all(
             math.isfinite(float(v)) for v in self.corner_bias_px
         ):

@@ -74,6 +74,15 @@ class DeckState:
         return self.rotation_wp @ R_PD
 
 
+def _deck_state_of(reading: tuple[tuple[float, ...], ...], cid: int) -> DeckState:
+    """The :class:`DeckState` of a :meth:`World._deck_reading` (client ``cid``)."""
+    position, orientation, velocity, angular = reading
+    rotation = np.asarray(p.getMatrixFromQuaternion(orientation, physicsClientId=cid))
+    return DeckState(
+        np.asarray(position), rotation.reshape(3, 3), np.asarray(velocity), np.asarray(angular)
+    )
+
+
 @dataclass
 class PhysicsReport:
     """What happened during one control period."""
@@ -322,6 +331,8 @@ class World:
         dt = self.dt
         idle = [self.params.omega_min] * 4
         watch_below = self.deck_home_w[2] + self.contact_watch_height_m
+        # nothing in the world stands as high as the watch height (the contacts' own rule)
+        self.drone.surfaces_below_z = float(watch_below)
         # the hot loop works on plain floats: small numpy arrays cost more than the physics
         times: list[float] = []
         rotations: list[tuple[float, ...]] = []
@@ -331,7 +342,7 @@ class World:
         for _ in range(self.substeps):
             state = self._state if self._state is not None else self.drone.read_state()
             if not self.pinned:
-                command = self.controller.update(state, setpoint, dt) if self.armed else idle
+                command = self.controller.update_floats(state, setpoint, dt) if self.armed else idle
                 wind = self.wind.velocity_tuple(self.time, dt)
                 if self._airwake:
                     px, py, pz = state.floats.position_w
@@ -344,7 +355,7 @@ class World:
             # contacts need the states just before the touch; nothing in the world stands
             # higher than the deck's reach, so far above it the queries are skipped
             near_deck = monitor_contacts and state.floats.position_w[2] < watch_below
-            deck_before = self.deck_state() if near_deck else None
+            deck_before = self._deck_reading() if near_deck else None
             p.stepSimulation(physicsClientId=cid)
             if self.pinned:
                 p.resetBasePositionAndOrientation(
@@ -368,16 +379,17 @@ class World:
                     report.forbidden_contact = contacts.forbidden_what
                 if contacts.feet_on_deck and report.first_contact is None:
                     assert deck_before is not None
+                    deck = _deck_state_of(deck_before, cid)
                     report.first_contact = metrics = contact_metrics(
                         self.time,
                         state.position_w,
                         state.velocity_w,
                         state.rotation_wb,
-                        deck_before.position_w,
-                        deck_before.rotation_wp,
-                        deck_before.velocity_w,
-                        deck_before.angular_velocity_w,
-                        deck_before.tag_centre_w,
+                        deck.position_w,
+                        deck.rotation_wp,
+                        deck.velocity_w,
+                        deck.angular_velocity_w,
+                        deck.tag_centre_w,
                     )
                     metrics.deck_vertical_accel_g = self._deck_vertical_accel(self.time) / GRAVITY
                     self._touchdown = metrics
@@ -423,7 +435,7 @@ class World:
         return float(motion.velocity(t + h)[2] - motion.velocity(max(0.0, t - h))[2]) / (2 * h)
 
     def contacts(self) -> ContactSummary:
-        points = self.client.getContactPoints(bodyA=self.drone.body_id)
+        points = p.getContactPoints(bodyA=self.drone.body_id, physicsClientId=self.client._client)
         return summarise_contacts(points, self.foot_links, self.deck_id)
 
     def shift_wind_at_drone(self, delta_w: np.ndarray) -> None:
@@ -450,11 +462,14 @@ class World:
         return self._state
 
     def deck_state(self) -> DeckState:
-        c = self.client
-        position, orientation = c.getBasePositionAndOrientation(self.deck_id)
-        velocity, angular = c.getBaseVelocity(self.deck_id)
-        rotation = np.asarray(c.getMatrixFromQuaternion(orientation)).reshape(3, 3)
-        return DeckState(np.asarray(position), rotation, np.asarray(velocity), np.asarray(angular))
+        return _deck_state_of(self._deck_reading(), self.client._client)
+
+    def _deck_reading(self) -> tuple[tuple[float, ...], ...]:
+        """The top plate's pose and velocities as PyBullet gives them (plain tuples)."""
+        cid, deck = self.client._client, self.deck_id
+        position, orientation = p.getBasePositionAndOrientation(deck, physicsClientId=cid)
+        velocity, angular = p.getBaseVelocity(deck, physicsClientId=cid)
+        return position, orientation, velocity, angular
 
     def camera_pose_w(self) -> tuple[np.ndarray, np.ndarray]:
         state = self.drone_state()

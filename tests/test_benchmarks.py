@@ -104,7 +104,32 @@ def test_env_speed_prints_both_tables(tmp_path: Path) -> None:
         "--renderers", "planar", "--sensors", "ideal", "--envs", "1", cwd=tmp_path,
     )  # fmt: skip
     assert "render mode by height" in out and "DeckLanding-v2 speed" in out
-    assert len(re.findall(r"^ideal (project|render)/\w+ x1: 10 steps", out, re.M)) == 4
+    rows = re.findall(
+        r"^ideal (project|render)/\w+ x1: 10 steps.*: ([\d.]+) of the physics", out, re.M
+    )
+    assert len(rows) == 4 and all(0.0 < float(share) < 1.0 for _, share in rows)
+    assert re.search(r"^DeckLandingTiming-BenchSS4-v6: \d+ wait decisions/s by CPU", out, re.M)
+    # the peers are rows of their own when installed, else named as missing
+    for peer in ("gym-pybullet-drones HoverAviary", "PyFlyt QuadX-Hover-v4"):
+        assert re.search(rf"(│ +peer │ +{peer}|not installed.*{peer})", out), peer
+
+
+@pytest.mark.slow
+def test_env_speed_profiles_a_step_in_each_case(tmp_path: Path) -> None:
+    out = run_benchmark(
+        "bench_env_speed", "--profile", "--seconds", "0.5", "--profile-top", "12", cwd=tmp_path
+    )
+    for case in ("truth observed", "tight:", "tight, realistic sensing"):
+        assert re.search(rf"project mode, {case}.*10 steps, top 12", out), case
+    assert re.search(r"│ landing_env/world\.py:\d+\(step\) +│ +1\.0 │", out)
+
+
+@pytest.mark.slow
+def test_env_speed_sets_each_start_rule_of_tight_against_the_truth(tmp_path: Path) -> None:
+    out = run_benchmark("bench_env_speed", "--tight-starts", "--seconds", "0.5", cwd=tmp_path)
+    for sensors in ("ideal", "realistic"):
+        for rule in ("fallback", "first"):
+            assert re.search(rf"│ +{sensors} │ +{rule} │ +\d+/10 │", out), (sensors, rule)
 
 
 @pytest.mark.slow

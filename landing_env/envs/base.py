@@ -7,6 +7,7 @@ import math
 import os
 import warnings
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -16,7 +17,7 @@ from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
 from estimation.frames import euler_zyx_from_matrix
-from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
+from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig, episode_step_limit, load_config
 from landing_env.envs.actions import BOX_ACTION_FIELDS, setpoint_from_action, validate_action
 from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
@@ -59,10 +60,26 @@ def flags(values: Any) -> np.ndarray:
     return np.asarray(values, dtype=bool).astype(np.float32).reshape(-1)
 
 
+#: the types that never hold a NaN
+_NAN_FREE = frozenset({bool, int, str, type(None), np.bool_})
+
+
 def without_nan(value: Any) -> Any:
     """``info`` without NaN, so that two runs of one seed compare equal (Gymnasium's
     determinism check; NaN != NaN): a float array's NaN entries become 0 (every such array has
     its validity beside it: ``tof_valid``, an estimate's ``valid``), a NaN scalar None."""
+    kind = type(value)
+    # the common leaves first, by exact type (each call of a step's info is one of these)
+    if kind is np.ndarray:
+        if value.dtype.kind == "f" and np.isnan(value).any():
+            return np.nan_to_num(value, nan=0.0)
+        return value
+    if kind is dict:
+        return {key: without_nan(item) for key, item in value.items()}
+    if kind is float:
+        return None if math.isnan(value) else value
+    if kind in _NAN_FREE:
+        return value
     if isinstance(value, dict):
         return {key: without_nan(item) for key, item in value.items()}
     if isinstance(value, list):
@@ -74,6 +91,65 @@ def without_nan(value: Any) -> Any:
     if isinstance(value, float | np.floating) and math.isnan(value):
         return None
     return value
+
+
+def imu_sample_rows(samples: Sequence[ImuSample]) -> np.ndarray:
+    """``info["imu_samples"]``: one row (timestamp, accel xyz, gyro xyz) per sample, (n, 7).
+
+    Filled column block by column block: unpacking each sample's arrays into a row makes a
+    numpy scalar of every value."""
+    rows = np.empty((len(samples), 7))
+    if samples:
+        rows[:, 0] = [s.timestamp for s in samples]
+        rows[:, 1:4] = [s.accel for s in samples]
+        rows[:, 4:7] = [s.gyro for s in samples]
+    return rows
+
+
+class BoundedObservation:
+    """Values as a ``spaces.Dict`` of ``Box`` keys observes them: NaN as 0, clipped to each
+    key's bounds, float32.
+
+    All keys in one pass: the values are laid end to end (float64), NaN set to 0, clipped to
+    the bounds laid out alike and cast once, and each key gets its slice.  Element by element
+    this is ``np.clip(np.nan_to_num(value, nan=0.0), low, high).astype(np.float32)`` of each
+    key (an infinity clips to the bound, or stays infinite against an infinite one, either
+    way); a value whose size is not its key's goes that way.
+    """
+
+    def __init__(self) -> None:
+        self._space: spaces.Dict | None = None
+        self._layout: tuple[tuple[str, int, int, tuple[int, ...]], ...] = ()
+        self._low = self._high = np.zeros(0)
+
+    def _lay_out(self, space: spaces.Dict) -> None:
+        layout, lows, highs, offset = [], [], [], 0
+        for key, box in space.spaces.items():
+            size = int(np.prod(box.shape))
+            layout.append((key, offset, offset + size, box.shape))
+            lows.append(np.asarray(box.low, dtype=np.float64).reshape(-1))
+            highs.append(np.asarray(box.high, dtype=np.float64).reshape(-1))
+            offset += size
+        self._layout = tuple(layout)
+        self._low, self._high = np.concatenate(lows), np.concatenate(highs)
+        self._space = space
+
+    def observation(self, values: dict[str, Any], space: spaces.Dict) -> dict[str, np.ndarray]:
+        if space is not self._space:
+            self._lay_out(space)
+        parts = [np.asarray(values[key], dtype=np.float64) for key, *_ in self._layout]
+        if any(
+            part.size != end - start
+            for part, (_, start, end, _) in zip(parts, self._layout, strict=True)
+        ):
+            return {
+                key: np.clip(np.nan_to_num(part, nan=0.0), box.low, box.high).astype(np.float32)
+                for part, (key, box) in zip(parts, space.spaces.items(), strict=True)
+            }
+        flat = np.concatenate([part.reshape(-1) for part in parts])
+        flat[np.isnan(flat)] = 0.0
+        flat = np.clip(flat, self._low, self._high).astype(np.float32)
+        return {key: flat[start:end].reshape(shape) for key, start, end, shape in self._layout}
 
 
 def _has_display() -> bool:
@@ -195,6 +271,7 @@ class DeckLandingBaseEnv(gym.Env):
         self._potential = 0.0
         self._reward_terms = zero_terms()
         self._last_image: np.ndarray | None = None
+        self._bounded = BoundedObservation()
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(
@@ -464,9 +541,7 @@ class DeckLandingBaseEnv(gym.Env):
                 "euler_w": euler_zyx_from_matrix(deck.rotation_wp),
                 "velocity_w": deck.velocity_w.copy(),
             },
-            "imu_samples": np.array(
-                [[s.timestamp, *s.accel, *s.gyro] for s in report.imu_samples]
-            ).reshape(-1, 7),
+            "imu_samples": imu_sample_rows(report.imu_samples),
             "stewart_clamped": report.stewart_clamped,
             "motor_saturated": report.motor_saturated,
             "action_clipped": getattr(self, "_action_clipped", False),

@@ -481,11 +481,7 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
         }
         if self.privileged:
             values[PRIVILEGED_KEY] = self._privileged_values()
-        observation = {}
-        for key, space in self.observation_space.spaces.items():
-            value = np.nan_to_num(np.asarray(values[key], dtype=np.float64), nan=0.0)
-            observation[key] = np.clip(value, space.low, space.high).astype(np.float32)
-        return observation
+        return self._bounded.observation(values, self.observation_space)
 
     def _privileged_values(self) -> np.ndarray:
         """The truth a critic may read: the deck relative to the drone (heading frame), its

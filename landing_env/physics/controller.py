@@ -224,6 +224,12 @@ class CascadeController:
 
     def update(self, state: DroneState, setpoint: VelocitySetpoint, dt: float) -> np.ndarray:
         """One control step of ``dt`` seconds; returns the 4 rotor speed commands (rad/s)."""
+        return np.array(self.update_floats(state, setpoint, dt))
+
+    def update_floats(
+        self, state: DroneState, setpoint: VelocitySetpoint, dt: float
+    ) -> list[float]:
+        """:meth:`update` with the commands as a list of floats (the physics step's form)."""
         g = self.gains
         floats = state.floats
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = floats.rotation_wb
@@ -492,4 +498,4 @@ class CascadeController:
             thrust_shifted,
             yaw_reduced,
         ]
-        return np.array(omegas)
+        return omegas

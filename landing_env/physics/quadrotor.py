@@ -79,6 +79,10 @@ class Quadrotor:
         self._ge_min_denominator = 1.0
         self._ge_max_gain = 1.0
         self._ge_ray_length = 0.0
+        self._ge_reach = 0.0
+        #: no surface of the world stands above this height (m, W); a drone whose rays cannot
+        #: reach below it casts none (the world sets it; infinite: always cast)
+        self.surfaces_below_z: float = math.inf
 
         #: True while the motors respond to commands; disarmed rotors spin down to zero
         self.armed: bool = True
@@ -231,6 +235,8 @@ class Quadrotor:
         self._ge_min_denominator = 1.0 / prm.ground_effect_max_gain
         self._ge_max_gain = float(prm.ground_effect_max_gain)
         self._ge_ray_length = float(prm.ground_effect_ray_length)
+        # the lowest a ray reaches below the body origin: the farthest hub, then the ray
+        self._ge_reach = self._ge_ray_length + max(math.hypot(*hub) for hub in self._rotors)
 
     def apply_rotor_commands(
         self, omega_cmd: np.ndarray | list[float], dt: float, state: DroneState | None = None
@@ -336,6 +342,12 @@ class Quadrotor:
         """
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
         px, py, pz = pos
+        if pz - self._ge_reach > self.surfaces_below_z:
+            # every ray ends above every surface: nothing within reach, without casting
+            self.last_ground_heights = self._nan4
+            self.last_ground_effect_gains = (1.0, 1.0, 1.0, 1.0)
+            self.last_ground_effect_capped = False
+            return None
         length = self._ge_ray_length
         dx = -length * r02
         dy = -length * r12

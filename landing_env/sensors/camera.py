@@ -37,6 +37,9 @@ from landing_env.sensors.tag_view import (
     first_miss,
 )
 
+#: each tag corner's successor round the tag (its sides run from a corner to the next)
+_NEXT_CORNER = [1, 2, 3, 0]
+
 
 class CameraSensor(CameraRenderer):
     """The downward camera of one PyBullet client (see the module docstring)."""
@@ -49,6 +52,8 @@ class CameraSensor(CameraRenderer):
         super().__init__(client, config)
         self.rng = rng
         self._max_radius = max_monotonic_radius(self.intrinsics.dist_coeffs)
+        #: the tag corners in the tag frame by tag size (the same every frame)
+        self._tag_models: dict[float, np.ndarray] = {}
         self._detector: AprilTagDetector | None = None
         if config.mode == "render":
             self._detector = self._make_detector()
@@ -103,13 +108,16 @@ class CameraSensor(CameraRenderer):
         r_wd = np.asarray(r_wd, dtype=float)
         t_cd = r_wc.T @ (np.asarray(t_wd, dtype=float) - np.asarray(t_wc, dtype=float))
         r_cd = r_wc.T @ r_wd
-        corners_c = t_cd + (r_cd @ tag_corners_in_tag_frame(tag_size).T).T
+        model = self._tag_models.get(tag_size)
+        if model is None:
+            model = self._tag_models[tag_size] = tag_corners_in_tag_frame(tag_size)
+        corners_c = t_cd + (r_cd @ model.T).T
         # the tag's visible normal is -z_D (z_D points into the deck); angle to the camera ray
         to_camera = -t_cd / max(float(np.linalg.norm(t_cd)), 1e-12)
         cos_angle = float(np.dot(-r_cd[:, 2], to_camera))
         view_angle = float(np.degrees(np.arccos(np.clip(cos_angle, -1.0, 1.0))))
-        nan_corners = np.full((4, 2), np.nan)
         if np.any(corners_c[:, 2] <= self.config.near):
+            nan_corners = np.full((4, 2), np.nan)
             return ProjectedTag(nan_corners, corners_c, view_angle, float("nan"), MISS_BEHIND)
         normalised = corners_c[:, :2] / corners_c[:, 2:3]
         corners_px = self.intrinsics.project(corners_c)
@@ -121,7 +129,7 @@ class CameraSensor(CameraRenderer):
             & (corners_px[:, 1] <= k.height - 0.5 - margin)
             & (np.linalg.norm(normalised, axis=1) < self._max_radius)
         )
-        sides = np.linalg.norm(corners_px - np.roll(corners_px, -1, axis=0), axis=1)
+        sides = np.linalg.norm(corners_px - corners_px[_NEXT_CORNER], axis=1)
         min_side = float(sides.min())
         if not np.all(inside):
             reason = MISS_OUT_OF_VIEW

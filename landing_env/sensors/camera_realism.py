@@ -38,9 +38,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from estimation.camera_model import CameraIntrinsics
+from estimation.frames import matrix_from_rotvec
 from landing_env.sensors.camera_profiles import CameraProfile
 
 #: sub-exposures per pixel of blur, and their most
@@ -112,7 +112,7 @@ class Glare:
 
 
 def _rotate(omega: np.ndarray, t: float, rotation: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(np.asarray(omega, dtype=float) * t).as_matrix() @ rotation
+    return matrix_from_rotvec(np.asarray(omega, dtype=float) * t) @ rotation
 
 
 class ImageFormation:

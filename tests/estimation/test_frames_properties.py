@@ -19,6 +19,7 @@ from estimation.frames import (
     invert_transform,
     make_transform,
     matrix_from_euler_zyx,
+    matrix_from_rotvec,
 )
 
 PROPERTY = settings(max_examples=150, deadline=None)
@@ -52,6 +53,38 @@ def test_euler_angles_of_any_rotation_rebuild_it(rotation: np.ndarray) -> None:
     assert -np.pi <= roll <= np.pi and -np.pi / 2 <= pitch <= np.pi / 2 and -np.pi <= yaw <= np.pi
     # within 1e-5 at gimbal lock (pitch +-90 deg), where roll is taken as 0
     np.testing.assert_allclose(matrix_from_euler_zyx(roll, pitch, yaw), rotation, atol=1e-5)
+
+
+@PROPERTY
+@given(
+    angles=st.tuples(
+        *[st.floats(-1e3, 1e3) | st.sampled_from([0.0, -0.0, np.pi, -np.pi / 2, 1e-300])] * 3
+    )
+)
+def test_the_written_out_zyx_matrix_is_scipy_s_bit_for_bit(
+    angles: tuple[float, float, float],
+) -> None:
+    roll, pitch, yaw = angles
+    expected = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    assert matrix_from_euler_zyx(roll, pitch, yaw).tobytes() == expected.tobytes()
+
+
+@PROPERTY
+@given(rotvec=st.tuples(*[st.floats(-20.0, 20.0) | st.sampled_from([0.0, -0.0, 1e-4, 1e-300])] * 3))
+def test_the_written_out_rotation_vector_matrix_is_scipy_s_bit_for_bit(
+    rotvec: tuple[float, float, float],
+) -> None:
+    expected = Rotation.from_rotvec(rotvec).as_matrix()
+    assert matrix_from_rotvec(np.array(rotvec)).tobytes() == expected.tobytes()
+
+
+def test_non_finite_angles_give_scipy_s_matrix() -> None:
+    for angles in ((np.nan, 0.0, 0.0), (0.0, np.inf, 0.0), (0.0, 0.0, -np.inf)):
+        expected = Rotation.from_euler("ZYX", angles[::-1]).as_matrix()
+        np.testing.assert_array_equal(matrix_from_euler_zyx(*angles), expected)
+    for rotvec in ((np.nan, 0.0, 0.0), (0.0, np.inf, 1.0)):
+        expected = Rotation.from_rotvec(rotvec).as_matrix()
+        np.testing.assert_array_equal(matrix_from_rotvec(np.array(rotvec)), expected)
 
 
 @PROPERTY

@@ -381,3 +381,53 @@ def test_the_touch_pixels_correct_a_chessboard_principal_point_error() -> None:
         config=TightConfig(principal_point="calibrated"),
     )
     assert np.linalg.norm(kept.estimate(m.frame, m.ranges).translation - translation) > 1e-3
+
+
+def _moving_deck_frames(rng: np.random.Generator, count: int):
+    """Frames 50 ms apart of a deck that heaves and tilts slowly, 1.2 m below the camera."""
+    scene = SyntheticScene(LENSES["pinhole"], TAG_SIZE)
+    base, _ = random_pose(rng, 1.2)
+    for i in range(count):
+        t = 0.05 * i
+        tilt = Rotation.from_euler("xy", [0.05 * math.sin(t), 0.04 * math.cos(0.7 * t)])
+        translation = np.array([0.03 * math.sin(0.5 * t), -0.02, 1.2 + 0.1 * math.sin(t)])
+        frame, reading = noisy(scene, tilt.as_matrix() @ base, translation, rng)
+        yield (
+            dataclasses.replace(frame, timestamp=t),
+            dataclasses.replace(reading, timestamp=t),
+        )
+
+
+def test_previous_first_keeps_the_previous_solution_and_finds_the_full_search_s_pose() -> None:
+    fallback, first = tight(), tight(previous_start="first")
+    kept = 0
+    for frame, reading in _moving_deck_frames(np.random.default_rng(21), 40):
+        full, warm = fallback.estimate(frame, reading), first.estimate(frame, reading)
+        assert full.valid and warm.valid
+        kept += warm.extras["start"] == "previous"
+        np.testing.assert_allclose(warm.translation, full.translation, atol=1e-5)
+        np.testing.assert_allclose(warm.rotation, full.rotation, atol=1e-4)
+    assert kept >= 35  # every frame after the first, but for a start the gate sent back
+
+
+def test_previous_first_searches_every_start_when_the_previous_pose_is_off_or_unranged() -> None:
+    frames = list(_moving_deck_frames(np.random.default_rng(22), 2))
+    # two iterations cannot bring a pose flipped over back: its cost fails the gate, and the
+    # search from every start then runs as it does without the previous start first
+    first = tight(previous_start="first", max_iterations=2)
+    first.estimate(*frames[0])
+    flipped = Rotation.from_euler("x", math.pi).as_matrix() @ first._previous[1]
+    first._previous = (first._previous[0], flipped, first._previous[2] * 3.0)
+    estimate = first.estimate(*frames[1])
+    reference = tight(max_iterations=2).estimate(*frames[1])
+    assert estimate.extras["start"] == reference.extras["start"] != "previous"
+    np.testing.assert_array_equal(estimate.as_vector(), reference.as_vector())
+    # without ranges the planar flip is the corners' alone to tell: never the previous alone
+    unranged = RangeReading(frames[1][1].timestamp, np.full(4, np.nan), np.zeros(4, bool))
+    first.estimate(*frames[0])
+    assert first.estimate(frames[1][0], unranged).extras["start"] != "previous"
+
+
+def test_previous_start_must_be_a_known_rule() -> None:
+    with pytest.raises(ValueError, match="previous_start"):
+        TightConfig(previous_start="always")

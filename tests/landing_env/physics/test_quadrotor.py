@@ -453,6 +453,35 @@ def test_ground_effect_cap_is_flagged(params: QuadrotorParams) -> None:
     assert drone.last_ground_effect_gains[1:] == (1.0, 1.0, 1.0)
 
 
+def test_a_drone_out_of_reach_of_every_surface_casts_no_ray_and_gets_the_same_thrust(
+    params: QuadrotorParams, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    client = make_world()
+    add_box(client, (0.0, 0.0, 0.5), (0.5, 0.5, 0.5))  # top at z = 1 m
+    drone = Quadrotor(client, params)
+    cast = []
+    ray_test_batch = p.rayTestBatch
+    monkeypatch.setattr(
+        p, "rayTestBatch", lambda *a, **k: cast.append(1) or ray_test_batch(*a, **k)
+    )
+    hub_z = params.rotor_positions_b[0, 2]
+    for z in (1.0 + 0.1 - hub_z, 1.3, 1.7, 2.5):  # in reach of the box's top, then not
+        drone.surfaces_below_z = math.inf  # always cast
+        cast.clear()
+        thrust = _hover_thrust_at(drone, client, (0.0, 0.0, z))
+        heights, gains = drone.last_ground_heights, drone.last_ground_effect_gains
+        assert cast
+        drone.surfaces_below_z = 1.0
+        cast.clear()
+        assert _hover_thrust_at(drone, client, (0.0, 0.0, z)) == thrust
+        np.testing.assert_array_equal(drone.last_ground_heights, heights)
+        assert drone.last_ground_effect_gains == gains
+        assert bool(cast) == (z - drone._ge_reach <= 1.0)
+    assert drone._ge_reach == pytest.approx(
+        params.ground_effect_ray_length + math.hypot(*params.rotor_positions_b[0])
+    )
+
+
 # ---------------------------------------------------------------- wind
 
 
