@@ -255,7 +255,8 @@ def _checked(rec: Recommendation) -> Figure:
 def default_figures() -> list[Figure]:
     """Every scenario's default policy (what ``evaluate landing --scenario S`` flies) with its
     figure: the recommendation's for a recommended scenario (realistic sensing where there are
-    several), else the one summary of the scenario with a row for it."""
+    several), else the summary of the scenario with a row for it on the latest seeds (the
+    held-out ones, which follow the selection seeds); two on the same seeds are refused."""
     recommended = {}
     for figure in recommended_figures():
         scenario = figure.result.scenario
@@ -267,14 +268,15 @@ def default_figures() -> list[Figure]:
             figures.append(Figure(scenario, policy, recommended[scenario].result))
             continue
         found = [s for s in summaries().values() if s.scenario == scenario and s.has(policy)]
-        if len(found) != 1:
-            names = [s.name for s in found] or "none"
+        latest = [s for s in found if s.first_seed == max(r.first_seed for r in found)]
+        if len(latest) != 1:
+            names = [s.name for s in latest] or "none"
             raise ConfigError(
                 "DEFAULT_POLICY",
                 f"{scenario} flies {policy}, which needs one summary in configs/results "
-                f"with its figure (found: {names})",
+                f"with its figure on the latest seeds (found: {names})",
             )
-        figures.append(Figure(scenario, policy, found[0]))
+        figures.append(Figure(scenario, policy, latest[0]))
     return figures
 
 

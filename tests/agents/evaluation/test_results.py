@@ -139,3 +139,21 @@ def test_a_summary_written_from_an_evaluation_keeps_its_counts_seeds_and_command
     assert data["command"].endswith("--seed 5000000 --workers 1")
     assert data["estimator"] == "tight" and data["first_seed"] == 5_000_000
     assert parse_summary("new", json.loads(json.dumps(data))).row("predictive").successes == 165
+
+
+def test_a_default_figure_is_the_one_on_the_latest_seeds_and_a_tie_there_is_refused(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    figures = {figure.label: figure for figure in default_figures()}
+    # paper-stewart has its selection (from 1 000 000) and its held-out (5 000 000) summaries
+    assert figures["paper-stewart"].result.first_seed == 5_000_000
+    table = dict(summaries())
+    twin = parse_summary(
+        "twin",
+        {**SUMMARY, "scenario": "paper-stewart"}
+        | {"rows": [{**SUMMARY["rows"][0], "policy": "quiescent"}]},
+    )
+    table["twin"] = twin
+    monkeypatch.setattr(results, "summaries", lambda: table)
+    with pytest.raises(ConfigError, match=r"paper-stewart flies quiescent.*twin"):
+        default_figures()
