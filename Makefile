@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test docs lint bench calibrate mutation clean-venv
+.PHONY: demo test docs pages lint bench calibrate mutation clean-venv
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -24,6 +24,11 @@ test: $(STAMP)
 # the documentation site in docs/_build/html; warnings (a broken reference) are errors
 docs: $(STAMP)
 	$(PY) -m sphinx -b html -W --keep-going docs docs/_build/html
+
+# the README's and the docs' generated tables (ids, policies, results), from the registries
+# and configs/results/*.json; tests/agents/cli/test_pages.py fails when they are stale
+pages: $(STAMP)
+	$(PY) -m agents.cli.pages --write
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -1,8 +1,8 @@
 """Sphinx configuration of the deck-landing documentation (MyST Markdown, furo theme).
 
-Build: ``make docs`` (warnings are errors).  The pages generated from the code (one page per
-task environment, the id catalogue, the policies, the results tables and the configuration
-reference) come from the directives of ``docs/_ext/``.
+Build: ``make docs`` (warnings are errors).  The task environments' pages and the
+configuration reference come from the directives of ``docs/_ext/``; the tables of ids,
+policies and results are committed Markdown written by ``python -m agents.cli.pages --write``.
 """
 
 from __future__ import annotations

@@ -124,17 +124,18 @@ def test_unknown_policies_and_scenarios_are_refused_naming_the_choices() -> None
 
 
 def test_the_readmes_which_to_use_table_is_the_registrys_recommendation() -> None:
-    from agents.policies.registry import RECOMMENDED
+    from agents.evaluation.results import recommended_figures
 
     readme = (ROOT / "README.md").read_text()
     rows = [line for line in readme.splitlines() if line.startswith("| ") and "% (" in line]
-    assert len(rows) == len(RECOMMENDED)
-    for rec, row in zip(RECOMMENDED, rows, strict=True):
-        env_id, _ = env_settings(rec.policy, rec.scenario)
-        assert rec.setting in row and f"`{rec.policy}`" in row and f"`{env_id}`" in row
-        low, high = rec.ci95_pct
-        assert f"{rec.success_pct:.1f} % ({low:.1f}-{high:.1f})" in row
-        assert f"--seed {rec.first_seed}" in row and f"--scenario {rec.scenario}" in row
+    figures = recommended_figures()
+    assert len(rows) == len(figures)
+    for figure, row in zip(figures, rows, strict=True):
+        result = figure.result
+        env_id, _ = env_settings(figure.policy, result.scenario)
+        assert figure.label in row and f"`{figure.policy}`" in row and f"`{env_id}`" in row
+        assert figure.row.cell() in row
+        assert f"--seed {result.first_seed}" in row and f"--scenario {result.scenario}" in row
 
 
 def test_a_section_keyword_is_laid_over_the_ids_settings_and_overrides_over_both() -> None:

@@ -12,23 +12,12 @@ import argparse
 
 from agents.common.cards import read_metadata
 from agents.common.user_input import UserError
-from agents.policies.registry import (
-    DEFAULT_POLICY,
-    MODEL_DIR,
-    POLICIES,
-    RECOMMENDED,
-    Recommendation,
-    find_model,
-)
+from agents.evaluation.results import Figure, recommended_figures
+from agents.evaluation.summary import markdown_rows
+from agents.policies.registry import DEFAULT_POLICY, MODEL_DIR, POLICIES, find_model
 from landing_env.scenarios import SCENARIO_IDS, TASKS
 
 WHAT = ("ids", "policies", "models")
-
-
-def _table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def ids_table() -> str:
@@ -39,15 +28,12 @@ def ids_table() -> str:
     for env_id, entry in SCENARIO_IDS.items():
         status = f"superseded by {entry.superseded_by}" if entry.superseded_by else "current"
         rows.append((env_id, status, entry.scenario, entry.description))
-    return _table(("id", "status", "scenario", "what it builds"), rows)
+    return markdown_rows(("id", "status", "scenario", "what it builds"), rows)
 
 
-def recommendation_cell(rec: Recommendation) -> str:
-    low, high = rec.ci95_pct
-    return (
-        f"{rec.success_pct:.1f} % ({low:.1f}-{high:.1f}) on {rec.episodes} seeds "
-        f"from {rec.first_seed}"
-    )
+def recommendation_cell(figure: Figure) -> str:
+    """``82.5 % (76.6-87.1) on 200 seeds from 5 000 000``."""
+    return f"{figure.row.cell()} on {figure.result.seeds}"
 
 
 def policies_table() -> str:
@@ -56,27 +42,33 @@ def policies_table() -> str:
     for spec in POLICIES.values():
         scenarios = ", ".join(spec.scenarios) or "all"
         defaults = ", ".join(
-            f"{k}={v}" for k, v in (("estimator", spec.estimator), ("sensing", spec.sensing)) if v
+            f"{k}={v}"
+            for k, v in (
+                ("estimator", spec.estimator),
+                ("sensing", spec.sensing),
+                ("model", spec.model),
+            )
+            if v
         )
         rows.append(
             (spec.name, spec.kind, spec.status, spec.task, scenarios, defaults or "-", spec.summary)
         )
-    text = _table(
+    text = markdown_rows(
         ("policy", "kind", "status", "task", "scenarios", "defaults", "what it does"), rows
     )
     recommended = [
         (
-            rec.setting,
-            rec.policy,
-            rec.scenario,
-            rec.sensing,
-            recommendation_cell(rec),
-            rec.chosen_by,
+            figure.label,
+            figure.policy,
+            figure.result.scenario,
+            figure.result.sensing,
+            recommendation_cell(figure),
+            figure.result.chosen_by or "-",
         )
-        for rec in RECOMMENDED
+        for figure in recommended_figures()
     ]
     text += "\n\nRecommended, setting by setting (reported on seeds held out from the choice):\n\n"
-    text += _table(
+    text += markdown_rows(
         ("setting", "policy", "scenario", "sensing", "success (95% CI)", "chosen by"), recommended
     )
     defaults = ", ".join(f"{s}: {p}" for s, p in DEFAULT_POLICY.items())
@@ -98,7 +90,7 @@ def models_table() -> str:
         rows.append(
             (path.name, policy, ", ".join(card.env_ids()), card.estimator, ", ".join(card.sensing))
         )
-    return _table(("model", "policy", "trained on", "estimator", "sensing"), rows)
+    return markdown_rows(("model", "policy", "trained on", "estimator", "sensing"), rows)
 
 
 # ------------------------------------------------------------------------- the commands

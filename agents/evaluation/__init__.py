@@ -8,6 +8,8 @@ the errors against height, ToF noise, deck tilt and lens distortion.  The comman
 seeds: two configurations of one pipeline (:mod:`~agents.evaluation.pipeline`: one record in
 :mod:`~agents.evaluation.records`, one episode loop, one summary and table in
 :mod:`~agents.evaluation.summary`), run by :mod:`~agents.evaluation.runner` (serial or Ray).
+The committed figures are the result summaries of :mod:`~agents.evaluation.results`
+(``configs/results/*.json``).
 """
 
 from __future__ import annotations

@@ -285,15 +285,22 @@ def columns(*headers: str) -> tuple[Column, ...]:
     return tuple(COLUMNS[h] for h in headers)
 
 
+def markdown_rows(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """A Markdown table: one cell per value, on one line, ``|`` escaped."""
+
+    def cell(value: Any) -> str:
+        return " ".join(str(value).split()).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(cell(value) for value in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
 def markdown_table(summaries: Sequence[Any], columns: Sequence[Column]) -> str:
     """One row per summary."""
-    lines = [
-        "| " + " | ".join(c.header for c in columns) + " |",
-        "|" + "|".join("---" for _ in columns) + "|",
-    ]
-    for summary in summaries:
-        lines.append("| " + " | ".join(c.fill(summary) for c in columns) + " |")
-    return "\n".join(lines)
+    return markdown_rows(
+        [c.header for c in columns], ([c.fill(summary) for c in columns] for summary in summaries)
+    )
 
 
 __all__ = [
@@ -307,6 +314,7 @@ __all__ = [
     "finite_mean",
     "finite_p95",
     "is_timing",
+    "markdown_rows",
     "markdown_table",
     "success_cell",
     "success_fields",

@@ -8,10 +8,12 @@ the config, e.g. the timing task's wave-off), its shipped model, and its builder
 ``module:function`` entry point, loaded only when the policy is built (as Gymnasium's
 registry loads environments), so that this registry imports no policy module.
 
-:data:`RECOMMENDED` says which policy to use in each setting, with the measured figure that
-chose it; :func:`default_policy` is what ``deck-landing evaluate landing --scenario S`` runs
-without ``--policy``.  :func:`make_env_and_policy` builds a scenario's registered id
-(:mod:`landing_env.scenarios`) with the policy's settings, and the policy in it.
+:data:`RECOMMENDED` says which policy to use in each setting and names the committed result
+summary that measures it (``configs/results/<name>.json``, read by
+:mod:`agents.evaluation.results`: the registry holds no figure); :func:`default_policy` is
+what ``deck-landing evaluate landing --scenario S`` runs without ``--policy``.
+:func:`make_env_and_policy` builds a scenario's registered id (:mod:`landing_env.scenarios`)
+with the policy's settings, and the policy in it.
 """
 
 from __future__ import annotations
@@ -187,7 +189,7 @@ POLICIES: dict[str, PolicySpec] = {
         _timing(
             "timing-dqn-predictive",
             kind="trained",
-            status="supported",
+            status="recommended",
             builder="agents.policies.timing:build_trained",
             summary="a DQN observing what `predictive` weighs (the predictor's chances and "
             "the value of waiting on)",
@@ -265,127 +267,67 @@ POLICY_NAMES: tuple[str, ...] = tuple(POLICIES)
 
 @dataclass(frozen=True)
 class Recommendation:
-    """The policy to use in one setting, and the measurement that says so."""
+    """The policy to use in one setting, and the committed summary that measures it
+    (``configs/results/<summary>.json``: the figure on seeds held out from the choice, the
+    seeds, commit, command and what chose it; :mod:`agents.evaluation.results` reads it)."""
 
     setting: str
     scenario: str
     sensing: str
     policy: str
-    #: landings and episodes on the reporting seeds (held out from the choice)
-    successes: int
-    episodes: int
-    first_seed: int
-    ci95_pct: tuple[float, float]
-    #: what chose it (the candidates on other seeds, with the paired test)
-    chosen_by: str
-    #: when and at which commit the reporting run was made
-    date: str
-    commit: str
-
-    @property
-    def success_pct(self) -> float:
-        return 100.0 * self.successes / self.episodes
-
-    @property
-    def command(self) -> str:
-        return (
-            f"deck-landing evaluate landing --scenario {self.scenario} --sensors {self.sensing} "
-            f"--episodes {self.episodes} --seed {self.first_seed} --workers 2"
-        )
+    summary: str
 
 
-_BENCH_CHOICE = (
-    "level with timing-dqn-predictive on the 200 seeds from 2 000 000 ({}): the simpler rule"
-)
-
-#: what to use, setting by setting: each figure on held-out seeds that did not choose it
-#: (bench from 4 000 000, ship from 5 000 000), reproduced by its ``command``.  The bench and
-#: ship sea states 3-5 were run at 9e299ca and at 27aa20d, before and after the ids, the
-#: registry and the timing task's homes of 1.0.0, with the same outcome and touchdown metrics
-#: seed by seed in all 1 000 episodes
-
+#: what to use, setting by setting; each figure is in its summary
 RECOMMENDED: tuple[Recommendation, ...] = (
     Recommendation(
-        "bench, ideal sensing",
+        "bench, sea state 4, ideal",
         "bench-ss4",
         "ideal",
         "predictive",
-        200,
-        200,
-        4_000_000,
-        (98.1, 100.0),
-        _BENCH_CHOICE.format("100 % each"),
-        "2026-11-27",
-        "27aa20d",
+        "bench-ss4-ideal-heldout",
     ),
     Recommendation(
-        "bench, realistic sensing",
+        "bench, sea state 4, realistic",
         "bench-ss4",
         "realistic",
         "predictive",
-        200,
-        200,
-        4_000_000,
-        (98.1, 100.0),
-        _BENCH_CHOICE.format("99.5 % against 100 %"),
-        "2026-11-27",
-        "27aa20d",
+        "bench-ss4-realistic-heldout",
+    ),
+    Recommendation(
+        "bench, sea state 5, realistic",
+        "bench-ss5",
+        "realistic",
+        "timing-dqn-predictive",
+        "bench-ss5-realistic-heldout",
     ),
     Recommendation(
         "ship, sea state 3, realistic",
         "ship-ss3",
         "realistic",
         "quiescent",
-        200,
-        200,
-        5_000_000,
-        (98.1, 100.0),
-        "the look-ahead DQN, quiescent and land-now all landed 100 % on 100 seeds from "
-        "1 000 000: the simplest timing rule",
-        "2026-11-27",
-        "27aa20d",
+        "ship-ss3-realistic-heldout",
     ),
     Recommendation(
         "ship, sea state 4, realistic",
         "ship-ss4",
         "realistic",
         "quiescent",
-        200,
-        200,
-        5_000_000,
-        (98.1, 100.0),
-        "level with the look-ahead DQN on 400 seeds from 1 000 000 (99.25 % against 99.0 %, "
-        "exact McNemar p = 1.0): the simpler rule",
-        "2026-11-27",
-        "27aa20d",
+        "ship-ss4-realistic-heldout",
     ),
     Recommendation(
         "ship, sea state 5, realistic",
         "ship-ss5",
         "realistic",
         "quiescent",
-        165,
-        200,
-        5_000_000,
-        (76.6, 87.1),
-        "level with the look-ahead DQN on 100 seeds from 7 600 000 (85.0 % against 86.0 %): "
-        "the simpler rule",
-        "2026-11-27",
-        "27aa20d",
+        "ship-ss5-realistic-heldout",
     ),
     Recommendation(
         "ship, sea state 6, realistic",
         "ship-ss6",
         "realistic",
         "timing-dqn-lookahead",
-        150,
-        200,
-        5_000_000,
-        (68.6, 80.5),
-        "above quiescent (67.0 %) and land-now (62.5 %) on the 200 seeds from 1 000 000 "
-        "(74.0 % there)",
-        "2026-11-28",
-        "9530a9b",
+        "ship-ss6-realistic-heldout",
     ),
 )
 
@@ -393,7 +335,7 @@ RECOMMENDED: tuple[Recommendation, ...] = (
 DEFAULT_POLICY: dict[str, str] = {
     "bench-ss3": "predictive",
     "bench-ss4": "predictive",
-    "bench-ss5": "predictive",
+    "bench-ss5": "timing-dqn-predictive",
     "paper-stewart": "quiescent",
     "ship-ss3": "quiescent",
     "ship-ss4": "quiescent",

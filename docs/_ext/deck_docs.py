@@ -1,18 +1,15 @@
-"""Pages generated from the code: task environment cards, the id catalogue, the policies.
+"""Pages generated from the code as the site builds: the task environment cards.
 
-Directives (MyST: ```` ```{deck-env} DeckLanding-v2 ```` and so on):
+Directive (MyST: ```` ```{deck-env} DeckLanding-v2 ````):
 
 * ``deck-env ID``: the task environment's page from its class docstring, in Gymnasium's
   fixed template (the rubrics of :data:`CARD_SECTIONS`, in that order; a docstring that
-  lacks one fails the build);
-* ``deck-ids``: every registered scenario id, current ones first, superseded ones in a table
-  of their own naming the replacement;
-* ``deck-policies``: the policy registry ``agents.policies.registry.POLICIES`` with kind and
-  status.
+  lacks one fails the build).
 
-The results tables and the configuration reference are in :mod:`deck_results` and
-:mod:`config_reference`.  Each directive writes reStructuredText and parses it in place, so
-the roles in the docstrings become links.
+The configuration reference is in :mod:`config_reference`.  Each directive writes
+reStructuredText and parses it in place, so the roles in the docstrings become links.  The
+tables of ids, policies and results are committed Markdown (``python -m agents.cli.pages``), so
+that they read the same on the repository host.
 """
 
 from __future__ import annotations
@@ -146,115 +143,9 @@ class EnvCardDirective(GeneratedDirective):
         return list_table(["", env_id], rows, "20 80")
 
 
-# ------------------------------------------------------------------------ the id catalogue
-class IdCatalogueDirective(GeneratedDirective):
-    """``deck-ids``: the scenario table, current ids first."""
-
-    def lines(self) -> list[str]:
-        import gymnasium as gym
-
-        from landing_env.scenarios import SCENARIO_IDS, TASKS
-
-        current, superseded = [], []
-        for env_id, scenario in SCENARIO_IDS.items():
-            steps = gym.spec(env_id).max_episode_steps
-            replacement = getattr(scenario, "superseded_by", None)
-            row = [f"``{env_id}``", scenario.task, f"``{scenario.config}``", steps]
-            if replacement:
-                superseded.append([*row[:2], f"``{replacement}``", scenario.description])
-            else:
-                current.append([*row, scenario.description])
-        tasks = [[f"``{t}``", f"``{entry}``"] for t, entry in TASKS.items()]
-        lines = ["The task environments (any config through ``config=`` / ``overrides=``):", ""]
-        lines += list_table(["id", "entry point"], tasks, "30 70")
-        lines += [
-            f"**Current scenario ids** ({len(current)}): a task on a shipped config with its "
-            "overrides built in. ``gym.make(id, overrides={...})`` applies on top.",
-            "",
-        ]
-        lines += list_table(
-            ["id", "task", "config", "max_episode_steps", "what it builds"],
-            current,
-            "28 18 12 10 32",
-        )
-        if superseded:
-            lines += [
-                f"**Superseded ids** ({len(superseded)}): kept registered for a shipped model "
-                "or a documented figure; making one warns and names its replacement.",
-                "",
-            ]
-            lines += list_table(
-                ["id", "task", "replaced by", "what it builds"], superseded, "30 18 25 27"
-            )
-        return lines
-
-
-# ------------------------------------------------------------------------ the policies
-#: the registry module and the order its statuses are listed in
-POLICY_REGISTRY = "agents.policies.registry"
-STATUS_ORDER = ("recommended", "supported", "research", "legacy")
-
-
-class PoliciesDirective(GeneratedDirective):
-    """``deck-policies``: every registered policy, by status, then what to use where."""
-
-    def lines(self) -> list[str]:
-        registry = importlib.import_module(POLICY_REGISTRY)
-        order = {status: i for i, status in enumerate(STATUS_ORDER)}
-        specs = sorted(registry.POLICIES.values(), key=lambda s: (order[s.status], s.name))
-        rows = [
-            [
-                f"``{spec.name}``",
-                spec.status,
-                spec.kind,
-                ", ".join(f"``{task}``" for task in spec.tasks),
-                spec.estimator,
-                spec.sensing,
-                f"``{spec.model}``" if spec.model else None,
-                spec.summary,
-            ]
-            for spec in specs
-        ]
-        header = ["name", "status", "kind", "runs on", "estimator", "sensing", "model", "what"]
-        lines = list_table(header, rows, "14 10 9 17 9 9 14 18")
-        recommended = [
-            [
-                rec.setting,
-                f"``{rec.policy}``",
-                f"{rec.success_pct:.1f} % ({rec.ci95_pct[0]:.1f}-{rec.ci95_pct[1]:.1f})",
-                f"{rec.episodes} from {rec.first_seed}",
-                rec.chosen_by,
-                f"``{rec.command}``",
-            ]
-            for rec in registry.RECOMMENDED
-        ]
-        lines += [
-            "",
-            "**What to use**, setting by setting: the recommended policy's success with its 95 %",
-            "Wilson interval on held-out seeds that did not choose it, and how it was chosen.",
-            "",
-        ]
-        lines += list_table(
-            ["setting", "policy", "success", "seeds", "chosen by", "how to replicate"],
-            recommended,
-            "12 14 14 12 24 24",
-        )
-        defaults = ", ".join(f"``{s}``: ``{p}``" for s, p in registry.DEFAULT_POLICY.items())
-        lines += [
-            "",
-            f"Without ``--policy``, ``evaluate landing --scenario S`` flies {defaults}.",
-            "",
-        ]
-        return lines
-
-
 def setup(app: Any) -> dict[str, Any]:
     import config_reference
-    import deck_results
 
     app.add_directive("deck-env", EnvCardDirective)
-    app.add_directive("deck-ids", IdCatalogueDirective)
-    app.add_directive("deck-policies", PoliciesDirective)
-    deck_results.setup(app)
     config_reference.setup(app)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -160,3 +160,48 @@ def test_wilson_interval_and_summary() -> None:
     assert summary.outcomes == {"success": 1, "hard_landing": 1, "crash": 1}
     table = markdown_table([summary], LANDING_EVALUATION.columns)
     assert "33.3%" in table and table.count("\n") == 2
+
+
+#: shipped configs of the Box(5) task: the ship at sea states 5-6, the held-out seas, the approach
+BOX5_CONFIGS = ("ship-ss5", "ship-ss6", "ship-unseen-4", "ship-unseen-5", "svgs-100m")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", [*BOX5_CONFIGS, "svgs-100m-irlock"])
+def test_every_landing_policy_and_random_actions_fly_120_steps_on_the_box5_configs(
+    config: str,
+) -> None:
+    """Each landing policy made for the config (align-descend everywhere, the SVGS routine
+    and the beacon baseline on their approach configs) and actions drawn from the space give
+    actions of the space's shape, in the project camera mode, 120 steps each."""
+    import gymnasium as gym
+
+    import landing_env  # noqa: F401  (registers the ids)
+    from agents.policies.registry import POLICIES
+
+    names = ["align-descend"]
+    names += [n for n in ("svgs-routine", "beacon-range") if config in POLICIES[n].scenarios]
+    for name in [*names, "random"]:
+        overrides = {"camera.mode": "project"}
+        estimator = POLICIES[name].estimator if name != "random" else None
+        if estimator:
+            overrides["estimation.observed"] = estimator
+        env = gym.make("DeckLanding-v2", config=config, overrides=overrides)
+        try:
+            assert env.action_space.shape == (5,)
+            policy = None if name == "random" else make_policy(name, env)
+            env.action_space.seed(0)
+            observation, _ = env.reset(seed=3)
+            if policy is not None and hasattr(policy, "reset"):
+                policy.reset()
+            for _ in range(120):
+                action = env.action_space.sample() if policy is None else policy(observation)
+                assert np.shape(action) == (5,), (name, config)
+                observation, _, terminated, truncated, _ = env.step(action)
+                assert env.observation_space.contains(observation)
+                if terminated or truncated:
+                    observation, _ = env.reset()
+                    if policy is not None and hasattr(policy, "reset"):
+                        policy.reset()
+        finally:
+            env.close()
