@@ -428,6 +428,15 @@ def _observation_mismatch(
             changed = sorted(
                 key for key in set(trained) | set(have) if trained.get(key) != have.get(key)
             )
+            old, new = trained.get(changed[0]), have.get(changed[0])
+            if isinstance(old, dict) and isinstance(new, dict):
+                # the observation's keys: name the entries that differ, not the whole space
+                entries = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+                return ConfigError(
+                    f"observation.{changed[0]}.{entries[0]}",
+                    f"{model} was trained on another observation ({', '.join(entries)} "
+                    f"differ: {old.get(entries[0])!r} against {new.get(entries[0])!r})",
+                )
             return ConfigError(
                 f"observation.{changed[0]}",
                 f"{model} was trained on another observation ({', '.join(changed)} differ: "

@@ -86,6 +86,15 @@ class TrainedLanderPolicy:
         """Refuse ``env`` unless it is what the model was trained on (its card)."""
         signature = env_signature(env, frame_stack=self.frame_stack)
         check_compatible(self.card, signature, self.path.name, allow_mismatch)
+        # no mismatch to allow here: a model cannot act in another action space
+        trained, have = self.model.action_space.shape, env.action_space.shape
+        if trained != have:
+            raise ConfigError(
+                "model",
+                f"{self.path.name} acts with {trained[0]} entries, the environment takes "
+                f"{have[0]}: a DeckLanding-v2 lander trained with action.land_trigger "
+                f"{'false' if trained[0] == 4 else 'true'} flies only an environment built so",
+            )
 
     def reset(self) -> None:
         """Forget the stacked steps (a new episode starts from zeros, as ``VecFrameStack``)."""

@@ -22,6 +22,7 @@ from agents.training.trainer import load_train_config, train
 from landing_env.config import RewardConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.envs.rewards import touchdown_terms
+from landing_env.errors import ConfigError
 from landing_env.touchdown import Outcome, TouchdownMetrics
 from tests.paths import ROOT
 
@@ -250,6 +251,22 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
         assert all(normalization_path(checkpoint).is_file() for checkpoint in checkpoints)
     finally:
         env.close()
+    # a model of the land action refuses the pure velocity task, whose actions have 4 entries
+    velocity = gym.make(
+        "DeckLanding-BenchSS4-v2", overrides={**overrides, "action.land_trigger": False}
+    )
+    try:
+        # the observation's previous action is named, one entry, not the whole space
+        with pytest.raises(ConfigError) as refused:
+            build_lander(velocity, str(result.model_path), ())
+        message = str(refused.value)
+        assert message.startswith("observation.keys.previous_action: ")
+        assert "{'shape': [5]" in message and "against {'shape': [4]" in message
+        assert "attitude" not in message
+        with pytest.raises(ConfigError, match="acts with 5 entries, the environment takes 4"):
+            build_lander(velocity, str(result.model_path), ("observation",))
+    finally:
+        velocity.close()
 
 
 def data_overrides(path: Path) -> dict:
