@@ -474,7 +474,7 @@ def _base_env(vec_env: Any) -> Any:
     return vec_env.envs[0]
 
 
-def _start_from(model: Any, path: str, env: Any, train_env: Any) -> None:
+def _start_from(model: Any, path: str, env: Any, train_env: Any = None) -> None:
     """Load ``path``'s weights into ``model`` after checking its card against ``env`` (the
     sensing may differ: a randomised training draws several), and, where the training
     normalises, the ``VecNormalize`` statistics the model was saved with (as rl-zoo3 does
