@@ -17,9 +17,10 @@ from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from estimation.frames import camera_to_heading_xy
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.anticipation.deck_history import DeckMotionHistory
+from landing_env.anticipation.onboard_tilt_prediction import commit_by_prediction
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
-from landing_env.errors import require_range
+from landing_env.errors import ConfigError, require_range
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.sensors.tof import TofConfig
@@ -73,6 +74,9 @@ class AlignDescendConfig:
     rate_window_s: float = 0.5
     calm: CalmConfig = field(default_factory=_flare_calm)
     guidance: GuidanceGains = field(default_factory=GuidanceGains)
+    #: fly its own final descent after the flare; False: the flare holds until the
+    #: environment's ``land`` action descends (:class:`AlignPredictivePolicy`)
+    own_descent: bool = True
 
     def __post_init__(self) -> None:
         require_limits(self)
@@ -156,7 +160,7 @@ class AlignDescendPolicy:
         if self.phase is Phase.APPROACH and self.guidance.aligned(observation):
             if abs(height - c.hold_height_m) < c.hold_tolerance_m:
                 self.phase, self._flare_s = Phase.FLARE, 0.0
-        if self.phase is Phase.FLARE:
+        if self.phase is Phase.FLARE and c.own_descent:
             self._flare_s += self.dt
             if self._flare_s >= c.calm.window_s:
                 self.last = predict_calm(self.history.rows(), self.dt, c.calm)
@@ -202,6 +206,39 @@ class AlignDescendPolicy:
         return vector / norm if norm > 0.0 else None
 
 
+class AlignPredictivePolicy(AlignDescendPolicy):
+    """``align-predictive``: ``align-descend``'s approach to the ``DeckLanding-v2`` hold band,
+    its flare held at the band's height (the timing task's ``hold_height_m``), and ``land``
+    sent when ``predictive``'s stopping rule holds on the observation's ``prediction`` (the
+    deck-tilt predictor's best chance of a level deck at the contact at least the value of
+    waiting on, :func:`~landing_env.anticipation.onboard_tilt_prediction.commit_by_prediction`).
+    The environment then flies the timing task's descent, with its wave-off, inside the step.
+    The teacher of the lander's imitation stage (:mod:`agents.training.imitation`)."""
+
+    name = "align-predictive"
+
+    def __init__(
+        self,
+        action: ActionConfig,
+        hold_height_m: float,
+        dt: float = 0.05,
+        tof_mounts_c: np.ndarray | None = None,
+    ) -> None:
+        if not action.land_trigger:
+            raise ConfigError(
+                "action.land_trigger",
+                "align-predictive commits through the land action: build the environment "
+                "with action.land_trigger true (DeckLanding-v2's default)",
+            )
+        config = AlignDescendConfig(hold_height_m=hold_height_m, own_descent=False)
+        super().__init__(action, config, dt=dt, tof_mounts_c=tof_mounts_c)
+
+    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        command = super().act(observation)
+        command[-1] = 1.0 if commit_by_prediction(observation["prediction"]) else -1.0
+        return command
+
+
 #: the Box(4) encoding of a set-point lives with the actions (kept here under its old name)
 normalise_setpoint = action_from_setpoint
 
@@ -211,4 +248,23 @@ def build_align_descend(env: Any, model_path: str | None, allow: tuple[str, ...]
     base = env.unwrapped
     return AlignDescendPolicy(
         base.config.action, dt=base.env_dt, tof_mounts_c=base.config.tof.mount_offsets_c
+    )
+
+
+def build_align_predictive(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:
+    """``align-predictive`` for ``env`` (a ``DeckLanding-v2`` environment with the land action
+    and the deck-tilt predictor's ``prediction`` observation)."""
+    base = env.unwrapped
+    prediction = getattr(base, "deck_prediction", None)
+    if prediction is None or prediction.tilt_predictor is None:
+        raise ConfigError(
+            "timing.observation",
+            "align-predictive reads the deck-tilt predictor's chances: fly it on a scenario "
+            "with timing.observation prediction (bench-ss3, bench-ss4, bench-ss5)",
+        )
+    return AlignPredictivePolicy(
+        base.config.action,
+        base.timing.hold_height_m,
+        dt=base.env_dt,
+        tof_mounts_c=base.config.tof.mount_offsets_c,
     )

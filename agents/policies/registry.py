@@ -138,6 +138,17 @@ POLICIES: dict[str, PolicySpec] = {
             "window, land",
         ),
         PolicySpec(
+            "align-predictive",
+            "heuristic",
+            "supported",
+            LANDING_TASK,
+            "agents.policies.align_descend:build_align_predictive",
+            "align-descend's approach to the hold band, then `land` when predictive's "
+            "stopping rule holds on the observed chances: the lander's imitation teacher",
+            estimator="tight",
+            scenarios=("bench-ss3", "bench-ss4", "bench-ss5"),
+        ),
+        PolicySpec(
             "svgs-routine",
             "heuristic",
             "supported",

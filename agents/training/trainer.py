@@ -46,6 +46,7 @@ from agents.common.cards import (
 from agents.policies.lander import model_normalization, normalization_path, shipped_lander_model
 from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
 from agents.policies.timing import shipped_timing_model
+from agents.training.imitation import ImitationSettings, imitate
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
 from agents.training.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
@@ -114,6 +115,10 @@ class TrainSettings:
     #: (:class:`agents.policies.lookahead.LookaheadSettings`: draws, check_every_s, min_margin,
     #: checks, seed) instead of the task's observation
     lookahead: dict[str, Any] | None = None
+    #: imitate a scripted teacher before the algorithm learns
+    #: (:class:`agents.training.imitation.ImitationSettings`: teacher, iterations, episodes,
+    #: epochs, ...); the student is saved as ``imitation_model.zip``
+    imitation: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         require_choice("algo", self.algo, ALGOS)
@@ -128,6 +133,8 @@ class TrainSettings:
                     "looks ahead in one scenario's environment; drop deck_landing.randomise",
                 )
             build_dataclass(LookaheadSettings, self.lookahead, "deck_landing.lookahead")
+        if self.imitation is not None:
+            build_dataclass(ImitationSettings, self.imitation, "deck_landing.imitation")
 
 
 @dataclass
@@ -497,6 +504,49 @@ def _start_from(model: Any, path: str, env: Any, train_env: Any = None) -> None:
         train_env.ret_rms = saved.ret_rms
 
 
+def _card(config: TrainConfig, eval_env: Any) -> Any:
+    """The card of the models ``config`` trains: what they were trained on (checked when a
+    model is loaded)."""
+    settings = config.settings
+    sensing = None
+    if settings.randomise is not None:
+        sensing = sensing_signatures(
+            build_dataclass(RandomiseSettings, settings.randomise, "deck_landing.randomise")
+        )
+    lookahead = None
+    if settings.lookahead is not None:
+        lookahead = build_dataclass(LookaheadSettings, settings.lookahead, "deck_landing.lookahead")
+    return card_for_training(
+        _base_env(eval_env),
+        config,
+        sensing=sensing,
+        lookahead=lookahead,
+        frame_stack=config.frame_stack,
+    )
+
+
+def _imitate(model: Any, config: TrainConfig, train_env: Any, eval_env: Any, out: Path) -> Path:
+    """The imitation stage (``deck_landing.imitation``) on ``model``; the student saved as
+    ``imitation_model.zip`` with its normalisation.  Returns its path."""
+    settings = build_dataclass(
+        ImitationSettings, config.settings.imitation or {}, "deck_landing.imitation"
+    )
+    imitate(
+        model,
+        train_env,
+        _base_env(eval_env),
+        settings,
+        gamma=float(model.gamma),
+        seed=config.settings.seed,
+        out=out,
+    )
+    path = out / "imitation_model.zip"
+    model.save(path)
+    if hasattr(train_env, "obs_rms"):
+        train_env.save(str(normalization_path(path)))
+    return path
+
+
 def install_path(config: TrainConfig) -> Path:
     """Where ``--install`` copies the model ``config`` trains (its task's and algorithm's)."""
     algo = config.settings.algo
@@ -558,6 +608,11 @@ def train(
         model.set_logger(configure(str(out / "tb" / _model_name(config)), ["csv", "tensorboard"]))
         if settings.init_model:
             _start_from(model, settings.init_model, _base_env(eval_env), train_env)
+        card = _card(config, eval_env)
+        saved_models = [out / "best_model.zip"]
+        if settings.imitation is not None:
+            saved_models.append(_imitate(model, config, train_env, eval_env, out))
+            write_metadata(saved_models[-1], card)
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():
@@ -579,24 +634,6 @@ def train(
         if hasattr(train_env, "obs_rms"):
             # the normalisation the model was trained under (rl-zoo3's file name)
             train_env.save(str(out / "vecnormalize.pkl"))
-        # the model's card: what it was trained on (checked when it is loaded)
-        sensing = None
-        if settings.randomise is not None:
-            sensing = sensing_signatures(
-                build_dataclass(RandomiseSettings, settings.randomise, "deck_landing.randomise")
-            )
-        lookahead = None
-        if settings.lookahead is not None:
-            lookahead = build_dataclass(
-                LookaheadSettings, settings.lookahead, "deck_landing.lookahead"
-            )
-        card = card_for_training(
-            _base_env(eval_env),
-            config,
-            sensing=sensing,
-            lookahead=lookahead,
-            frame_stack=config.frame_stack,
-        )
     finally:
         for env in (train_env, eval_env):
             try:
@@ -605,7 +642,7 @@ def train(
                 pass  # a subprocess environment already ended by Ctrl-C
     wall = time.perf_counter() - started
     best = out / "best_model.zip"
-    for saved in (model_path, best):
+    for saved in (model_path, *saved_models):
         if saved.is_file():
             write_metadata(saved, card)
     evaluations = [

@@ -28,6 +28,15 @@ _ROLL, _PITCH, _ROLL_RATE, _PITCH_RATE, _VALID = (
 )
 
 
+def commit_by_prediction(values: np.ndarray) -> bool:
+    """The stopping rule over :meth:`DeckPrediction.prediction_values`: commit when the
+    values are valid and the best contact time's chance of a level deck is at least the
+    value of waiting on (``predictive``'s rule, read off the observation)."""
+    values = np.asarray(values, dtype=float).reshape(-1)
+    chances, value, valid = values[:-2], values[-2], values[-1]
+    return bool(valid > 0.5 and chances.size > 0 and float(chances.max()) >= float(value))
+
+
 class DeckPrediction:
     """The deck-tilt predictor of a timing task and what it foresees.
 
