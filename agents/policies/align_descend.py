@@ -105,8 +105,10 @@ class AlignDescendPolicy:
     no ToF sees anything: every surface is then beyond its range).  Flare: hold
     there, aligned, until :func:`predict_calm` predicts a calm window as long as the descent
     (or ``max_flare_s`` has passed).  Descent: the final descent of
-    :class:`~landing_env.timing.guidance.DeckGuidance` down to touchdown.  Output: the Box(4)
-    action, normalised by :class:`ActionConfig`.
+    :class:`~landing_env.timing.guidance.DeckGuidance` down to touchdown.  Output: the Box
+    action of :func:`~landing_env.envs.actions.action_from_setpoint` under the environment's
+    :class:`ActionConfig` (``land`` at -1 where it has that entry: the policy flies its own
+    descent).
     """
 
     name = "align-descend"
@@ -188,7 +190,7 @@ class AlignDescendPolicy:
             else:
                 # nothing within the ToF range below: high above the sea, safe to come down
                 setpoint = VelocitySetpoint(np.array([0.0, 0.0, -c.search_climb_speed]), 0.0)
-        return normalise_setpoint(setpoint, self.action)
+        return action_from_setpoint(setpoint, self.action)
 
     def _deck_direction(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
         """Unit heading-frame direction towards the deck when the ToF ranges straddle its edge.
@@ -237,10 +239,6 @@ class AlignPredictivePolicy(AlignDescendPolicy):
         command = super().act(observation)
         command[-1] = 1.0 if commit_by_prediction(observation["prediction"]) else -1.0
         return command
-
-
-#: the Box(4) encoding of a set-point lives with the actions (kept here under its old name)
-normalise_setpoint = action_from_setpoint
 
 
 def build_align_descend(env: Any, model_path: str | None, allow: tuple[str, ...]) -> Any:

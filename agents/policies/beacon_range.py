@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 
-from agents.policies.align_descend import normalise_setpoint
 from agents.policies.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
 from estimation.landing_target import (
     ACCEPTED,
@@ -45,6 +44,7 @@ from estimation.landing_target import (
 )
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.config import ActionConfig
+from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import ConfigError
 from landing_env.physics.controller import VelocitySetpoint
 
@@ -169,7 +169,7 @@ class BeaconRangePolicy:
         setpoint = self._command(offset, height)
         self.time_s += self.dt
         self._state_s += self.dt
-        return normalise_setpoint(setpoint, self.action)
+        return action_from_setpoint(setpoint, self.action)
 
     def _transition(self, offset: tuple[float, float, float] | None, height: float) -> None:
         c = self.config

@@ -41,13 +41,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from agents.common.cards import observation_signature
-from agents.policies.align_descend import normalise_setpoint
 from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.anticipation.deck_history import DeckMotionHistory
 from landing_env.config import ActionConfig
+from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import VelocitySetpoint
@@ -393,7 +393,7 @@ class SvgsRoutinePolicy:
         self.odometry.advance(setpoint, self.attitude.yaw)
         self.time_s += self.dt
         self._state_s += self.dt
-        return normalise_setpoint(setpoint, self.action)
+        return action_from_setpoint(setpoint, self.action)
 
     def _transition(
         self, observation: dict[str, np.ndarray], seen: bool, locked: bool, height: float

@@ -205,3 +205,44 @@ def test_every_landing_policy_and_random_actions_fly_40_steps_on_the_box5_config
                         policy.reset()
         finally:
             env.close()
+
+
+def _landing_policies_and_their_scenarios() -> list[tuple[str, str]]:
+    """(policy, scenario) for every registered policy of the landing task that flies without
+    a model of the user's, on every scenario it is made for (all of its task's where it names
+    none)."""
+    from agents.policies.registry import POLICIES
+    from landing_env.scenarios import APPROACH_SCENARIOS, LANDING_TASK, SCENARIOS
+
+    of_the_task = [
+        name for name, s in {**SCENARIOS, **APPROACH_SCENARIOS}.items() if LANDING_TASK in s.ids
+    ]
+    return [
+        (name, scenario)
+        for name, spec in POLICIES.items()
+        if spec.task == LANDING_TASK and (spec.kind != "trained" or spec.model is not None)
+        for scenario in (spec.scenarios or of_the_task)
+    ]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("policy_name", "scenario"), _landing_policies_and_their_scenarios())
+def test_every_landing_policy_built_by_the_registry_acts_inside_its_scenarios_action_space(
+    policy_name: str, scenario: str
+) -> None:
+    """What ``evaluate landing --policy P --scenario S`` and ``evaluate approach`` build: the
+    scenario's id with the policy's settings, and the policy in it; its first actions lie in
+    that environment's action space (the land entry included)."""
+    env, policy = make_env_and_policy(policy_name, scenario)
+    try:
+        observation, _ = env.reset(seed=1)
+        policy.reset()
+        for _ in range(3):
+            action = policy(observation)
+            assert np.shape(action) == env.action_space.shape, (policy_name, scenario)
+            assert env.action_space.contains(np.asarray(action, dtype=np.float32))
+            observation, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
