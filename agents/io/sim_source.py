@@ -33,10 +33,11 @@ import landing_env  # noqa: F401  (registers the environments)
 from agents.io.landing_target import CameraMount, VehiclePose
 from agents.io.pacing import StampPacer
 from agents.policies.align_descend import AlignDescendPolicy
+from agents.policies.registry import make_env_and_policy
 from estimation.errors import ConfigError, require_choice
 from estimation.registry import ESTIMATOR_NAMES
 from estimation.types import DeckPoseEstimate
-from landing_env.scenarios import LANDING_TASK, landing_overrides
+from landing_env.scenarios import LANDING_TASK
 
 #: how many captures' vehicle poses are kept (the vision link delivers up to ~1 s late)
 POSE_HISTORY = 256
@@ -45,8 +46,9 @@ POSE_HISTORY = 256
 class SimulatorSource:
     """Seeded ``DeckLanding-v2`` episodes as a stream of observed estimates.
 
-    ``config``: a config name or path, flown as it is; ``scenario``: a shipped config made a
-    landing run (the drone flying, as the landing evaluations do); give one of the two.
+    ``config``: a config name or path, flown as it is; ``scenario``: a scenario's landing id
+    with its own starts (:func:`agents.policies.registry.make_env_and_policy`, as the landing
+    evaluations fly it); give one of the two.
     ``overrides`` (dotted keys) apply last.
     """
 
@@ -67,12 +69,18 @@ class SimulatorSource:
             raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
         self.pacer = StampPacer(speed)
         if scenario is not None:
-            chosen = dict(landing_overrides(LANDING_TASK, estimator, camera_mode))
-            config = scenario
+            # the scenario's own landing id and starts, as the landing evaluations fly it
+            self.env, _ = make_env_and_policy(
+                "align-descend",
+                scenario,
+                estimator,
+                camera_mode,
+                extra_overrides=overrides,
+            )
         else:
             chosen = {"estimation.observed": estimator, "camera.mode": camera_mode}
-        chosen.update(overrides or {})
-        self.env = gym.make(LANDING_TASK, config=config, overrides=chosen)
+            chosen.update(overrides or {})
+            self.env = gym.make(LANDING_TASK, config=config, overrides=chosen)
         base = self.env.unwrapped
         self.base = base
         self.estimator = estimator

@@ -362,6 +362,27 @@ def test_the_simulators_stamps_run_on_across_episodes() -> None:
     assert stamps[5] == pytest.approx(0.2 + 0.05)
 
 
+@pytest.mark.parametrize(("scenario", "low_m"), [("svgs-100m", 100.0), ("bench-ss4", 1.0)])
+def test_the_simulator_flies_a_scenario_from_its_own_starts(scenario: str, low_m: float) -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    with SimulatorSource(
+        scenario=scenario,
+        estimator="truth",
+        speed=0.0,
+        overrides={"simulation.max_episode_s": 0.1},
+    ) as source:
+        heights, stamps = [], []
+        for stamp, _ in source:
+            world = source.base.world
+            heights.append(world.drone_state().position_w[2] - world.deck_state().tag_centre_w[2])
+            stamps.append(stamp)
+    start_m = heights[0]
+    # svgs-100m starts 101.65-106.65 m over its pad, not at the bench's 1.5-4 m
+    assert start_m > low_m
+    assert len(stamps) == 3 and len(source.outcomes) == 1
+
+
 def test_the_bridge_command_flies_an_episode_and_sends_it(listener: socket.socket, capsys) -> None:
     port = listener.getsockname()[1]
     argv = ["bridge", "--to", f"udpout:127.0.0.1:{port}", "--autopilot", "ardupilot"]
