@@ -347,3 +347,19 @@ def imitate(
         steps=int(sum(len(a) for a in steps.actions)),
         wall_time_s=time.perf_counter() - started,
     )
+
+
+def imitate_and_save(
+    model: Any, venv: Any, env: Any, settings: ImitationSettings, seed: int, out: Path
+) -> Path:
+    """:func:`imitate` (the model's own discount), then the student saved as
+    ``out/imitation_model.zip`` with its ``VecNormalize`` statistics beside it
+    (:func:`agents.policies.lander.normalization_path`).  Returns its path."""
+    from agents.policies.lander import normalization_path
+
+    imitate(model, venv, env, settings, gamma=float(model.gamma), seed=seed, out=out)
+    path = out / "imitation_model.zip"
+    model.save(path)
+    if hasattr(venv, "obs_rms"):
+        venv.save(str(normalization_path(path)))
+    return path

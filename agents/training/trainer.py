@@ -46,7 +46,7 @@ from agents.common.cards import (
 from agents.policies.lander import model_normalization, normalization_path, shipped_lander_model
 from agents.policies.lookahead import LookaheadSettings, LookaheadTimingWrapper
 from agents.policies.timing import shipped_timing_model
-from agents.training.imitation import ImitationSettings, imitate
+from agents.training.imitation import ImitationSettings, imitate_and_save
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
 from agents.training.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
@@ -525,28 +525,6 @@ def _card(config: TrainConfig, eval_env: Any) -> Any:
     )
 
 
-def _imitate(model: Any, config: TrainConfig, train_env: Any, eval_env: Any, out: Path) -> Path:
-    """The imitation stage (``deck_landing.imitation``) on ``model``; the student saved as
-    ``imitation_model.zip`` with its normalisation.  Returns its path."""
-    settings = build_dataclass(
-        ImitationSettings, config.settings.imitation or {}, "deck_landing.imitation"
-    )
-    imitate(
-        model,
-        train_env,
-        _base_env(eval_env),
-        settings,
-        gamma=float(model.gamma),
-        seed=config.settings.seed,
-        out=out,
-    )
-    path = out / "imitation_model.zip"
-    model.save(path)
-    if hasattr(train_env, "obs_rms"):
-        train_env.save(str(normalization_path(path)))
-    return path
-
-
 def install_path(config: TrainConfig) -> Path:
     """Where ``--install`` copies the model ``config`` trains (its task's and algorithm's)."""
     algo = config.settings.algo
@@ -611,7 +589,14 @@ def train(
         card = _card(config, eval_env)
         saved_models = [out / "best_model.zip"]
         if settings.imitation is not None:
-            saved_models.append(_imitate(model, config, train_env, eval_env, out))
+            imitation = build_dataclass(
+                ImitationSettings, settings.imitation, "deck_landing.imitation"
+            )
+            saved_models.append(
+                imitate_and_save(
+                    model, train_env, _base_env(eval_env), imitation, settings.seed, out
+                )
+            )
             write_metadata(saved_models[-1], card)
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
