@@ -12,12 +12,21 @@ SET_HELP = "dotted config overrides applied last, e.g. tof.noise=vl53l1x camera.
 
 def positive_int(text: str) -> int:
     """An argparse type: an integer >= 1."""
+    return _int_at_least(text, 1)
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    return _int_at_least(text, 0)
+
+
+def _int_at_least(text: str, low: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [1, inf]")
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [{low}, inf]")
     return value
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.cli.args import positive_float, positive_int
+from agents.cli.args import non_negative_int, positive_float, positive_int
 from agents.training.trainer import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK
@@ -60,7 +60,12 @@ def _add_task(which: Any, name: str, help_text: str, default_config: str, model:
     algos = TASK_ALGOS[TASK_OF[name]]
     parser.add_argument("--config", default=default_config, help="training YAML")
     parser.add_argument("--algo", choices=algos, default=None, help="default: the YAML's")
-    parser.add_argument("--timesteps", type=positive_int, default=None, help="default: n_timesteps")
+    parser.add_argument(
+        "--timesteps",
+        type=non_negative_int,
+        default=None,
+        help="default: n_timesteps; 0: the imitation stage alone (deck_landing.imitation)",
+    )
     parser.add_argument("--seed", type=int, default=None, help="default: the YAML's")
     parser.add_argument(
         "--n-envs", type=positive_int, default=None, help="default: the YAML's n_envs"

@@ -222,6 +222,19 @@ POLICIES: dict[str, PolicySpec] = {
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
         ),
         PolicySpec(
+            "lander",
+            "trained",
+            "supported",
+            LANDING_TASK,
+            "agents.policies.lander:build_lander",
+            "the shipped SB3 lander of DeckLanding-v2: the PPO recipe's policy taught by "
+            "DAgger from align-predictive; flies the approach, the hold and the land trigger",
+            estimator="tight",
+            sensing="realistic",
+            model="lander_ppo.zip",
+            scenarios=("bench-ss4",),
+        ),
+        PolicySpec(
             "lander-model",
             "trained",
             "research",

@@ -169,3 +169,26 @@ def test_a_model_reads_its_own_normalisation_and_a_checkpoint_sb3s() -> None:
         normalization_path(run / "checkpoints/lander_ppo_200000_steps.zip")
         == run / "checkpoints/lander_ppo_vecnormalize_200000_steps.pkl"
     )
+
+
+def test_the_shipped_lander_flies_the_bench_to_touchdowns_on_its_own_land_trigger() -> None:
+    from agents.policies.registry import make_env_and_policy
+
+    env, policy = make_env_and_policy("lander", "bench-ss4")
+    assert policy.card.env_id == "DeckLanding-BenchSS4-v2"
+    assert "privileged" not in env.observation_space.spaces  # the actor flies without it
+    landed = 0
+    try:
+        for seed in (4_000_000, 4_000_001, 4_000_002):
+            observation, _ = env.reset(seed=seed)
+            policy.reset()
+            while True:
+                action = policy.act(observation)
+                assert env.action_space.contains(action)
+                observation, _, terminated, truncated, info = env.step(action)
+                if terminated or truncated:
+                    break
+            landed += info["outcome"] == "success" and not info["forced_commit"]
+    finally:
+        env.close()
+    assert landed == 3
