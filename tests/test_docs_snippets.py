@@ -21,9 +21,9 @@ What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for i
     ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen`` ``--duration 10`` in
     front of their own flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
-  * ``configs/train/*.yaml`` -> copies with 64 steps, an evaluation every 32 steps of one episode
-    and small buffers, so ``train`` still writes ``best_model.zip``, and an imitation stage of
-    one teacher episode and one pass of each fit;
+  * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
+    episode and one checkpoint at the end, and small buffers, so ``train`` still writes
+    ``best_model.zip``, and an imitation stage of one teacher episode and one pass of each fit;
   * placeholders name small files made once per run: ``DIR`` (the chessboard photos of
     tests/data and the simulated camera's calibration folder), ``photos/`` (the photos),
     ``my_camera/`` (the calibration folder), ``REC`` and
@@ -145,7 +145,7 @@ def shrink_train_config(source: Path, target: Path) -> None:
     for key, value in doc.items():
         if key == "deck_landing":
             value["eval"] = {**value.get("eval", {}), "freq": 32, "episodes": 1}
-            value["checkpoint_freq"] = 64
+            value["checkpoint_freq"] = 32
             value["vec_env"] = "dummy"
             if value.get("imitation") is not None:
                 # one teacher episode, one pass of each fit
@@ -155,7 +155,7 @@ def shrink_train_config(source: Path, target: Path) -> None:
                     "value_epochs": 1,
                 }
         elif isinstance(value, dict):
-            value.update(n_envs=1, n_timesteps=64)
+            value.update(n_envs=1, n_timesteps=32)
             for name, small in (("learning_starts", 16), ("buffer_size", 1000), ("n_steps", 32)):
                 if name in value:
                     value[name] = small

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import re
 import subprocess
@@ -84,16 +85,40 @@ def test_the_howto_installs_an_estimator_that_the_command_line_evaluates(
     assert "11/11" in rows[0]  # every frame of the 0.5 s estimated
 
 
+#: runs each command line of ``COMMANDS`` through the CLI's ``main`` in one fresh process and
+#: prints a line "exit-code<TAB>stdout<TAB>stderr" (repr'd) for each
+_PARSE_EACH = """
+import contextlib, io
+from agents.cli import main
+for argv in COMMANDS:
+    out, err, code = io.StringIO(), io.StringIO(), None
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as exit:
+            code = exit.code
+    print("RESULT", repr((code, out.getvalue(), err.getvalue())))
+"""
+
+
 def test_the_installed_estimator_is_among_the_commands_choices(site: Path, tmp_path: Path) -> None:
-    for command in (["estimate"], ["evaluate", "landing"]):
-        done = _run(["-m", "agents.cli", *command, "--help"], [site], tmp_path)
-        assert done.returncode == 0, done.stderr
-        assert "tag_only" in done.stdout, command
-    # the bridge's simulator names what it allows when refusing a name
     bridge = ["bridge", "--to", "udpout:127.0.0.1:14599", "--autopilot", "ardupilot"]
-    done = _run(["-m", "agents.cli", *bridge, "--estimator", "nope"], [site], tmp_path)
-    assert done.returncode == 2
-    assert "'nope' is not allowed" in done.stderr and "'tag_only'" in done.stderr
+    commands = [["estimate", "--help"], ["evaluate", "landing", "--help"]]
+    # the bridge's simulator names what it allows when refusing a name
+    commands.append([*bridge, "--estimator", "nope"])
+    done = _run(["-c", f"COMMANDS = {commands!r}\n{_PARSE_EACH}"], [site], tmp_path)
+    assert done.returncode == 0, done.stderr
+    results = [
+        ast.literal_eval(line.removeprefix("RESULT "))
+        for line in done.stdout.splitlines()
+        if line.startswith("RESULT ")
+    ]
+    assert len(results) == len(commands), done.stdout
+    for command, (code, out, _) in zip(commands[:2], results, strict=False):
+        assert code == 0 and "tag_only" in out, command
+    code, _, err = results[2]
+    assert code == 2
+    assert "'nope' is not allowed" in err and "'tag_only'" in err
 
 
 def test_gym_make_observes_the_installed_estimator(site: Path, tmp_path: Path) -> None:

@@ -207,6 +207,13 @@ def test_gaps_are_filled_so_a_few_dropouts_barely_move_the_prediction(predictor)
     assert gapped.valid and abs(gapped.roll - full.roll) < math.radians(0.3)
 
 
+@pytest.fixture(scope="module")
+def small_predictor() -> LinearTiltPredictor:
+    """A predictor fitted on two series: fitted once, for every example drawn below."""
+    histories, future, groups = _examples(range(2))
+    return LinearTiltPredictor.fit(histories, future, groups, HORIZONS_S, WINDOW_S, DT)
+
+
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(
     arrays(
@@ -216,9 +223,8 @@ def test_gaps_are_filled_so_a_few_dropouts_barely_move_the_prediction(predictor)
     ),
     st.floats(allow_nan=True, allow_infinity=True),
 )
-def test_prediction_never_raises_on_any_input(history, horizon):
-    histories, future, groups = _examples(range(2))
-    small = LinearTiltPredictor.fit(histories, future, groups, HORIZONS_S, WINDOW_S, DT)
+def test_prediction_never_raises_on_any_input(small_predictor, history, horizon):
+    small = small_predictor
     valid = np.isfinite(history).all(axis=1) if history.ndim == 2 else np.ones(0, dtype=bool)
     p = small.predict(history, valid, horizon)
     assert p.valid or p.reason

@@ -32,6 +32,7 @@ from agents.io.recording_source import RecordingSource
 from agents.policies.align_descend import AlignDescendPolicy
 from estimation.frames import R_BC
 from landing_env.config import SHIPPED_INTRINSICS_FILE, load_config
+from landing_env.physics.quadrotor_params import QuadrotorParams
 
 F32 = np.float32
 EPISODE_S = 3.0
@@ -75,7 +76,7 @@ def estimated(recording: Path, tmp_path_factory: pytest.TempPathFactory) -> list
 def _recorded(path: Path) -> tuple[list[int], dict[int, tuple], np.ndarray]:
     """The camera frames' stamps (ns, in order), the tf world -> body per stamp (ns) as
     (position, quaternion xyzw), and the tf body -> camera translation."""
-    stamps, poses, t_bc = [], {}, None
+    stamps, poses, mounts = [], {}, []
     with AnyReader([path]) as reader:
         wanted = [c for c in reader.connections if c.topic in ("/camera/tag_detections", "/tf")]
         for connection, _, raw in reader.messages(connections=wanted):
@@ -89,9 +90,11 @@ def _recorded(path: Path) -> tuple[list[int], dict[int, tuple], np.ndarray]:
                 if (tf.header.frame_id, tf.child_frame_id) == ("world", "body"):
                     poses[ns] = (np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w]))
                 elif (tf.header.frame_id, tf.child_frame_id) == ("body", "camera"):
-                    t_bc = np.array([p.x, p.y, p.z])
-    assert t_bc is not None
-    return stamps, poses, t_bc
+                    mounts.append(np.array([p.x, p.y, p.z]))
+    # every recorded tf body -> camera is the vehicle's camera mount
+    t_bc = QuadrotorParams.from_yaml(None).camera_offset_b
+    assert len(mounts) >= len(stamps) and np.array_equal(np.unique(mounts, axis=0), [t_bc])
+    return stamps, poses, mounts[0]
 
 
 def _receive(sock: socket.socket, count: int) -> list:
@@ -318,11 +321,11 @@ def test_the_vehicle_pose_is_a_recorded_one_within_the_tolerance_or_none(
     if not near:
         assert found is None
         return
-    assert found is not None
+    # a pose of a stamp within the tolerance: nearest to the query, or between two stamps
+    assert found is not None and min(near) - 1e-9 <= found[1][0] <= max(near) + 1e-9
     r_wb, t_wb = found
     assert np.allclose(r_wb @ r_wb.T, np.eye(3), atol=1e-9) and np.linalg.det(r_wb) > 0
     # the position is that of a recorded stamp, or between two: on the line x = -y = z / 2
     assert t_wb[0] == pytest.approx(-t_wb[1]) and t_wb[2] == pytest.approx(2.0 * t_wb[0])
-    assert min(near) - 1e-9 <= t_wb[0] <= max(near) + 1e-9
     if mode == "nearest":
         assert abs(t_wb[0] - query) == pytest.approx(min(abs(t - query) for t in near))

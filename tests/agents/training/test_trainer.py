@@ -88,16 +88,16 @@ def test_a_short_training_run_updates_and_saves_a_policy_that_loads_again(tmp_pa
         "wait_limit_s": 2.0,
     }
     settings.env_kwargs["overrides"] = {"touchdown.settle_time_s": 0.1}
-    settings.eval.freq = 256
-    settings.eval.episodes = 2
-    settings.checkpoint_freq = 256
+    settings.eval.freq = 128
+    settings.eval.episodes = 1
+    settings.checkpoint_freq = 128
     # no worker processes to start (SubprocVecEnv: tests/landing_env/envs/test_deck_landing.py)
     settings.vec_env = "dummy"
     settings.target_success_rate = 1.1  # run every step: no early stop on a lucky evaluation
-    config.hyperparams.update(n_steps=128, batch_size=64, n_epochs=4)
+    config.hyperparams.update(n_steps=64, batch_size=32, n_epochs=4)
     config.hyperparams["policy_kwargs"] = "dict(net_arch=[32, 32])"
-    result = train(config, out_dir=tmp_path, total_timesteps=512, progress_bar=False)
-    assert result.timesteps >= 512
+    result = train(config, out_dir=tmp_path, total_timesteps=256, progress_bar=False)
+    assert result.timesteps >= 256
     assert result.model_path.is_file() and result.best_model_path is not None
     assert len(result.evaluations) == 2
     checkpoints = sorted((tmp_path / "checkpoints").glob("*.zip"), key=lambda p: p.stat().st_mtime)

@@ -191,17 +191,20 @@ def test_the_actor_never_sees_the_privileged_key_and_the_critic_does() -> None:
         plain.close()
 
 
-def _short_recipe(tmp_path: Path) -> Path:
+def _short_recipe(tmp_path: Path, timesteps: int = 256) -> Path:
+    """The PPO recipe cut to ``timesteps`` steps, evaluated and saved halfway and at the end."""
     tmp_path.mkdir(parents=True, exist_ok=True)
     data = yaml.safe_load(RECIPE.read_text())
     zoo = data["DeckLanding-BenchSS4-v2"]
-    zoo.update({"n_envs": 1, "n_timesteps": 256, "n_steps": 64, "batch_size": 32, "n_epochs": 1})
+    zoo.update(
+        {"n_envs": 1, "n_timesteps": timesteps, "n_steps": 64, "batch_size": 32, "n_epochs": 1}
+    )
     zoo["env_kwargs"]["overrides"]["simulation.max_episode_s"] = 3.0
     data["deck_landing"].update(
         {
             "vec_env": "dummy",
-            "eval": {"freq": 128, "episodes": 1},
-            "checkpoint_freq": 128,
+            "eval": {"freq": timesteps // 2, "episodes": 1},
+            "checkpoint_freq": timesteps // 2,
             "out_dir": str(tmp_path),
         }
     )
@@ -295,8 +298,9 @@ def test_rl_zoo3_trains_the_ppo_recipe_unmodified(tmp_path: Path) -> None:
 
 
 def test_a_run_started_from_a_model_goes_on_from_its_normalisation(tmp_path: Path) -> None:
-    first = train(load_train_config(_short_recipe(tmp_path / "first")), progress_bar=False)
-    recipe = yaml.safe_load(_short_recipe(tmp_path / "second").read_text())
+    # one rollout each: the statistics' count is what is compared
+    first = train(load_train_config(_short_recipe(tmp_path / "first", 64)), progress_bar=False)
+    recipe = yaml.safe_load(_short_recipe(tmp_path / "second", 64).read_text())
     recipe["deck_landing"]["init_model"] = str(first.model_path)
     (tmp_path / "second" / "lander_ppo.yaml").write_text(yaml.safe_dump(recipe))
     second = train(load_train_config(tmp_path / "second" / "lander_ppo.yaml"), progress_bar=False)

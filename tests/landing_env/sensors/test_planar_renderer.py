@@ -146,7 +146,7 @@ def test_planar_tag_corners_agree_with_egl_opengl_where_it_loads() -> None:
                 pytest.skip(
                     "PyBullet's EGL renderer plugin did not load here (no EGL driver or GPU, "
                     "or another client of this process holds it); the planar renderer is "
-                    "checked against TinyRenderer only"
+                    "checked against supersampled TinyRenderer only (the tests above)"
                 )
             for pose in standard_poses():
                 if pose.height_m in heights:
