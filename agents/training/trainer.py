@@ -367,6 +367,42 @@ def _callbacks(config: TrainConfig, out: Path, eval_env: Any, started: float) ->
     return CallbackList([checkpoints, evaluation, WallClockBudget()]), evaluation
 
 
+def _student_as_best(
+    model: Any, train_env: Any, eval_env: Any, evaluation: Any, episodes: int, out: Path
+) -> None:
+    """The imitation's student evaluated as the ``EvalCallback`` evaluates and saved as the
+    best model so far (with its statistics): the algorithm's evaluations replace it only with
+    a better mean return."""
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import sync_envs_normalization
+
+    if hasattr(train_env, "obs_rms"):
+        sync_envs_normalization(train_env, eval_env)
+    landed: list[bool] = []
+
+    def count(local: dict[str, Any], _: dict[str, Any]) -> None:
+        if local["done"]:
+            landed.append(bool(local["info"].get("is_success", False)))
+
+    returns, _ = evaluate_policy(
+        model,
+        eval_env,
+        n_eval_episodes=episodes,
+        deterministic=True,
+        return_episode_rewards=True,
+        callback=count,
+    )
+    evaluation.best_mean_reward = float(np.mean(returns))
+    model.save(out / "best_model.zip")
+    if hasattr(train_env, "obs_rms"):
+        train_env.save(str(normalization_path(out / "best_model.zip")))
+    print(
+        f"imitation: the student lands {np.mean(landed):.0%} of {episodes} evaluation episodes "
+        f"(mean return {np.mean(returns):.2f}): the best model until a better one",
+        flush=True,
+    )
+
+
 def _model_name(config: TrainConfig) -> str:
     task = "lander" if config.task == LANDING_TASK else "timing"
     return f"{task}_{config.settings.algo}"
@@ -599,6 +635,8 @@ def train(
             )
             write_metadata(saved_models[-1], card)
         callbacks, evaluation = _callbacks(config, out, eval_env, started)
+        if settings.imitation is not None:
+            _student_as_best(model, train_env, eval_env, evaluation, settings.eval.episodes, out)
         model._stopped_because = "all timesteps done"  # type: ignore[attr-defined]
         with warnings.catch_warnings():
             # the evaluation env runs in this process on purpose (a DummyVecEnv of one)

@@ -24,7 +24,9 @@ def _short_recipe(tmp_path: Path, **imitation: object) -> Path:
     section = data["DeckLanding-BenchSS4-v2"]
     section.update(n_envs=1, n_timesteps=0)
     section["policy_kwargs"] = "dict(net_arch=dict(pi=[32, 32], vf=[32, 32]), log_std_init=-1.6)"
-    data["deck_landing"].update(vec_env="dummy", out_dir=str(tmp_path / "run"))
+    data["deck_landing"].update(
+        vec_env="dummy", out_dir=str(tmp_path / "run"), eval={"episodes": 1, "seed": 900_000}
+    )
     data["deck_landing"]["imitation"] = {"iterations": 2, "episodes": 2, "epochs": 4, **imitation}
     path = tmp_path / "lander.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -147,7 +149,10 @@ def test_a_short_imitation_run_saves_a_student_with_its_card_and_statistics(
     assert records[0]["success"] == 1.0
     assert 0.0 < records[0]["commit_share"] < 0.1
     assert records[1]["steps"] > records[0]["steps"]
-    # no PPO step was asked for: the final model is the student
+    # no PPO step was asked for: the final model is the student, and so is the best one
     assert result.timesteps == 0
+    assert result.best_model_path is not None
+    assert normalization_path(result.best_model_path).is_file()
+    assert TrainedLanderPolicy(result.best_model_path).card.env_id == "DeckLanding-BenchSS4-v2"
     policy = TrainedLanderPolicy(student)
     assert policy.card.observation.get("task") == "DeckLanding"
