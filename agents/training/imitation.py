@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from agents.policies.lander import normalization_path
+from agents.policies.registry import make_policy
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.errors import require_choice
 
@@ -296,8 +298,6 @@ def imitate(
         def log(line: str) -> None:
             print(line, flush=True)
 
-    from agents.policies.registry import make_policy
-
     teachers = [make_policy(settings.teacher, env) for _ in range(venv.num_envs)]
     steps = _Steps()
     records: list[dict[str, float]] = []
@@ -355,8 +355,6 @@ def imitate_and_save(
     """:func:`imitate` (the model's own discount), then the student saved as
     ``out/imitation_model.zip`` with its ``VecNormalize`` statistics beside it
     (:func:`agents.policies.lander.normalization_path`).  Returns its path."""
-    from agents.policies.lander import normalization_path
-
     imitate(model, venv, env, settings, gamma=float(model.gamma), seed=seed, out=out)
     path = out / "imitation_model.zip"
     model.save(path)
