@@ -38,7 +38,7 @@ import inspect
 import json
 import math
 import platform
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict
 from functools import cache
 from pathlib import Path
@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from estimation.anticipation.linear_predictors import LinearMotionPredictor
+from estimation.array_files import locked
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import cache_dir
@@ -227,7 +228,7 @@ def cached_deck_forecast(*args: Any, **kwargs: Any) -> LinearMotionPredictor:
     is fitted again and replaced."""
     arguments = _fit_arguments(*args, **kwargs)
     path = forecast_cache_path(**arguments)
-    with _locked(path):
+    with locked(path):
         if path.is_file():
             with contextlib.suppress(ValueError):
                 return LinearMotionPredictor.load(path)
@@ -275,23 +276,6 @@ def _code_digest() -> str:
             digest.update(f"{name}/{file.name}".encode())
             digest.update(file.read_bytes())
     return digest.hexdigest()
-
-
-@contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    """Hold an exclusive lock on ``path``'s lock file (where the OS offers ``fcntl``)."""
-    try:
-        import fcntl
-    except ImportError:  # Windows: concurrent fits each write the same file, whole
-        yield
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path.with_suffix(".lock"), "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 class EpisodeForecast:
