@@ -53,6 +53,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from estimation.array_files import locked
 from tests.paths import ROOT
 
 #: the pages whose blocks run: the README and the docs, less the dated experiment records
@@ -270,7 +271,7 @@ for name in ("intrinsics.json", "tof_camera.json", "extrinsics.json"):
     shutil.copy(f"my_camera/{name}", f"DIR/{name}")
 """
 
-#: the placeholders' small data, made once per test process: shell steps run in the seed folder
+#: the placeholders' small data, made once per run: shell steps run in the seed folder
 SEED_DATA = (
     "mkdir -p photos DIR my_camera results",
     "cp tests/data/opencv_chessboard/*.jpg photos/",
@@ -282,14 +283,30 @@ SEED_DATA = (
 _SEEDS = ("photos", "DIR", "my_camera", "results", "REC.mcap", "rig", "rig.mcap", "rig.json")
 
 
-@pytest.fixture(scope="session")
-def seed_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The placeholders' data, made by the CLI in a folder of this test process."""
-    folder = tmp_path_factory.mktemp("doc-seed")
+def _make_seed_data(folder: Path) -> None:
     _link_repository(folder)
     (folder / "seed_rig.py").write_text(_SEED_SCRIPT, encoding="utf-8")
     _run(["bash", "-euo", "pipefail", "-c", "\n".join(SEED_DATA)], folder, "the seed data")
     shutil.copy(folder / "rig.json", folder / "rig_stages.json")
+
+
+@pytest.fixture(scope="session")
+def seed_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The placeholders' data, made by the CLI once per run: under pytest-xdist by the first
+    worker that asks, in the run's shared temporary folder, while the others wait for it (the
+    blocks only copy from it)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        folder = tmp_path_factory.mktemp("doc-seed")
+        _make_seed_data(folder)
+        return folder
+    folder = tmp_path_factory.getbasetemp().parent / "doc-seed"
+    made = folder / ".made"
+    with locked(folder):
+        if not made.is_file():
+            shutil.rmtree(folder, ignore_errors=True)  # a worker's failed attempt
+            folder.mkdir()
+            _make_seed_data(folder)
+            made.touch()
     return folder
 
 

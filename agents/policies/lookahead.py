@@ -261,7 +261,7 @@ class LookaheadTimingWrapper(gym.Wrapper):
     early if the episode does: the wait limit forces the commit); 1 commits.  The reward
     terms of the last step are in ``info`` as the task gives them.  ``settings`` are
     :class:`LookaheadSettings`' keys; ``forecast``: the helideck forecast to use (default: the
-    scenario's, fitted once per process).
+    scenario's, fitted once per machine).
     """
 
     def __init__(self, env: gym.Env, forecast: Any = None, **settings: Any) -> None:

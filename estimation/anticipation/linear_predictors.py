@@ -360,8 +360,10 @@ class LinearMotionPredictor:
         return ("roll", "pitch")
 
     # ---------------------------------------------------------------- files
-    def save(self, path: str | Path) -> Path:
-        """Write to ``path`` (``.npz``; the metadata as JSON inside)."""
+    def save(self, path: str | Path, exact: bool = False) -> Path:
+        """Write to ``path`` (``.npz``; the metadata as JSON inside).  The held-out predictions
+        are kept as float32 (half the file) unless ``exact``: then :meth:`load` gives back an
+        equal predictor, every array to the bit (a cache of a fit)."""
         arrays = {
             "window_s": self.window_s,
             "dt_s": self.dt_s,
@@ -373,7 +375,7 @@ class LinearMotionPredictor:
             "max_gap_s": self.max_gap_s,
             "channels": json.dumps(list(self.channels)),
             "scales": self.scales,
-            "heldout_means": self.heldout_means.astype(np.float32),
+            "heldout_means": self.heldout_means.astype(np.float64 if exact else np.float32),
             "targets": json.dumps(list(self.targets)),
         }
         return save_arrays(path, arrays, self.metadata)

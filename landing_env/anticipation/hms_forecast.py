@@ -18,21 +18,39 @@ realisations of the sea, ``docs/experiments/ship-timing.md``); a training family
 member.  A held-out sea's config must name one of these: :func:`deck_forecast_for` refuses to
 fit on a held-out sea.
 
+The fit is deterministic given its inputs and takes tens of seconds, so
+:func:`deck_forecast_for` fits each forecast once per machine: :func:`cached_deck_forecast`
+keeps it in the user cache directory (:func:`~landing_env.resources.cache_dir`,
+``DECK_LANDING_CACHE_DIR`` overrides it), keyed by a hash of everything the fit reads (the
+seas, the HMS, the sizes, the seed, the fitting code's source and NumPy's version), and gives
+back the fitted forecast to the bit; one process fits while the others wait for its file.
+
 Read by the ``deck-forecast`` policies (:mod:`agents.policies.deck_forecast`) and by the
 timing task's ``forecast`` observation (:mod:`landing_env.envs.timing`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import importlib
+import inspect
+import json
 import math
+import platform
 from collections.abc import Sequence
+from dataclasses import asdict
 from functools import cache
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from estimation.anticipation.linear_predictors import LinearMotionPredictor
+from estimation.array_files import locked
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.resources import cache_dir
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitor, HelideckMonitorConfig
 from landing_env.sea.training_seas import TRAINING_FAMILIES, member_config
@@ -55,6 +73,18 @@ EXAMPLE_EVERY_S = 1.0
 FIT_SEED = 9000
 #: motion kinds whose sources are a fixed function of time with a past (sums of waves)
 FORECAST_KINDS: tuple[str, ...] = ("ship", "sea_state")
+
+#: the modules (a package: each of its files) whose code the fit runs: a cached forecast
+#: (:func:`cached_deck_forecast`) is keyed by their source, so an edit to any of them refits
+FIT_CODE: tuple[str, ...] = (
+    __name__,
+    "estimation.anticipation.linear_predictors",
+    "landing_env.sea.hms",
+    "landing_env.stewart.motion",
+    "landing_env.waves",
+)
+#: the folder of the cached forecasts, under :func:`~landing_env.resources.cache_dir`
+CACHE_FOLDER = "deck-forecasts"
 
 _FITTED: dict[str, LinearMotionPredictor] = {}
 
@@ -91,6 +121,9 @@ def fit_deck_forecast(
         records.append((measured, sample_poses(source, times)[:, : len(HMS_CHANNELS)]))
     metadata = {"realizations": realizations, "record_s": record_s, "seed": seed}
     return _fit(records, hms.dt_s, {**metadata, "seas": len(motions)})
+
+
+_FIT_SIGNATURE = inspect.signature(fit_deck_forecast)
 
 
 def _fit(
@@ -162,10 +195,10 @@ def deck_forecast_for(
     config: DeckLandingConfig, hms: HelideckMonitorConfig
 ) -> LinearMotionPredictor | None:
     """The helideck forecast of ``config`` (:func:`fit_deck_forecast` with the defaults, once
-    per sea and HMS in a process): on the training family its ``deck_forecast`` names, else on
-    its own sea, which must not be a held-out sea (refused, naming ``deck_forecast``); None for
-    ``deck_forecast: online``, where each episode identifies its own
-    (:class:`EpisodeForecast`)."""
+    per sea and HMS on a machine: :func:`cached_deck_forecast`): on the training family its
+    ``deck_forecast`` names, else on its own sea, which must not be a held-out sea (refused,
+    naming ``deck_forecast``); None for ``deck_forecast: online``, where each episode
+    identifies its own (:class:`EpisodeForecast`)."""
     family = config.deck_forecast
     if family == ONLINE:
         return None
@@ -184,8 +217,65 @@ def deck_forecast_for(
         motions = (config.motion,)
     key = repr((motions, hms))
     if key not in _FITTED:
-        _FITTED[key] = fit_deck_forecast(motions, hms)
+        _FITTED[key] = cached_deck_forecast(motions, hms)
     return _FITTED[key]
+
+
+def cached_deck_forecast(*args: Any, **kwargs: Any) -> LinearMotionPredictor:
+    """:func:`fit_deck_forecast` of the same arguments, fitted once and then read from its
+    file (:func:`forecast_cache_path`), equal to a fresh fit to the bit.  Processes that ask
+    for the same forecast at once wait for the first one's fit; an entry that cannot be read
+    is fitted again and replaced."""
+    arguments = _fit_arguments(*args, **kwargs)
+    path = forecast_cache_path(**arguments)
+    with locked(path):
+        if path.is_file():
+            with contextlib.suppress(ValueError):
+                return LinearMotionPredictor.load(path)
+        forecast = fit_deck_forecast(**arguments)
+        forecast.save(path, exact=True)
+    return forecast
+
+
+def forecast_cache_path(*args: Any, **kwargs: Any) -> Path:
+    """The file :func:`cached_deck_forecast` keeps the forecast of these arguments (those of
+    :func:`fit_deck_forecast`) in: named by a hash of every argument, the fit's constants, the
+    source of :data:`FIT_CODE`, NumPy's version and the machine's architecture (what a fresh
+    fit's last bits depend on)."""
+    inputs: dict[str, Any] = _fit_arguments(*args, **kwargs)
+    motion = inputs["motion"]
+    motions = [motion] if isinstance(motion, MotionConfig) else list(motion)
+    inputs["motion"] = [asdict(each) for each in motions]
+    inputs["hms"] = asdict(inputs["hms"] or HelideckMonitorConfig())
+    inputs.update(
+        constants=[HORIZONS_S.tolist(), WINDOW_S, BLOCK, EXAMPLE_EVERY_S],
+        code=_code_digest(),
+        numpy=np.__version__,
+        machine=platform.machine(),
+    )
+    text = json.dumps(inputs, sort_keys=True, default=repr)
+    name = hashlib.sha256(text.encode()).hexdigest()[:24]
+    return cache_dir() / CACHE_FOLDER / f"forecast_{name}.npz"
+
+
+def _fit_arguments(*args: Any, **kwargs: Any) -> dict[str, Any]:
+    """:func:`fit_deck_forecast`'s arguments by name, defaults included."""
+    bound = _FIT_SIGNATURE.bind(*args, **kwargs)
+    bound.apply_defaults()
+    return dict(bound.arguments)
+
+
+@cache
+def _code_digest() -> str:
+    """A hash of the source of :data:`FIT_CODE`."""
+    digest = hashlib.sha256()
+    for name in FIT_CODE:
+        path = Path(str(importlib.import_module(name).__file__))
+        files = sorted(path.parent.glob("*.py")) if path.name == "__init__.py" else [path]
+        for file in files:
+            digest.update(f"{name}/{file.name}".encode())
+            digest.update(file.read_bytes())
+    return digest.hexdigest()
 
 
 class EpisodeForecast:

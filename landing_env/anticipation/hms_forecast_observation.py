@@ -2,7 +2,7 @@
 state.
 
 :class:`ForecastObservation` holds the helideck forecast of the scenario's sea
-(:func:`~landing_env.anticipation.hms_forecast.deck_forecast_for`, fitted once per process) and each
+(:func:`~landing_env.anticipation.hms_forecast.deck_forecast_for`, fitted once per machine) and each
 episode's HMS record (:class:`~landing_env.sea.hms.HelideckMonitor`), and gives the values the
 observation carries after the history's newest row
 (:class:`~landing_env.timing.layout.TimingObservationLayout`): the deck's surge, sway, heave,
@@ -38,7 +38,7 @@ class ForecastObservation:
                 f"'forecast' needs a sea to forecast (motion.kind one of {FORECAST_KINDS}), "
                 f"not {kind!r}",
             )
-        #: the helideck forecast of this scenario's sea, fitted once per process (None:
+        #: the helideck forecast of this scenario's sea, fitted once per machine (None:
         #: each episode identifies its own, ``deck_forecast: online``)
         self.deck_forecast = deck_forecast_for(config, HelideckMonitorConfig())
         #: this episode's HMS record and forecast (None before the first reset)

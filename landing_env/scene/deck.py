@@ -16,8 +16,6 @@ describe no drawn tag.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -26,6 +24,7 @@ import numpy as np
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
+from estimation.array_files import write_atomic
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.landmarks import Landmark, LandmarkLayout
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
@@ -278,15 +277,6 @@ def _config_key(config: DeckSurfaceConfig) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Write a file so a concurrent reader never sees it half-written (parallel envs)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as handle:
-        handle.write(data)
-        temp = Path(handle.name)
-    os.replace(temp, path)
-
-
 def _deck_obj(config: DeckSurfaceConfig) -> str:
     """An OBJ box in P (top face at z = 0) whose top face maps the whole texture.
 
@@ -346,9 +336,9 @@ def deck_asset_files(config: DeckSurfaceConfig, cache_dir: Path | None = None) -
         ok, encoded = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
         if not ok:
             raise RuntimeError(f"could not encode the deck texture for {png_path}")
-        _write_atomic(png_path, encoded.tobytes())
+        write_atomic(png_path, encoded.tobytes())
     if not obj_path.is_file():
-        _write_atomic(obj_path, _deck_obj(config).encode())
+        write_atomic(obj_path, _deck_obj(config).encode())
     return obj_path, png_path
 
 
