@@ -107,7 +107,6 @@ class ZPlaneFitter:
         sing = np.linalg.svd(design, compute_uv=False)
         if len(xy) < 3 or sing[2] <= _RANK_TOL * sing[0]:
             raise ValueError("the (x, y) sites are collinear: they do not fix a plane")
-        self._xy = xy
         self._pinv = np.linalg.pinv(design)
         # plain floats for the per-frame fit: with a handful of sites it is all call overhead
         self._pinv_rows = [row.tolist() for row in self._pinv]

@@ -10,7 +10,7 @@ functions here are its builders.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -46,16 +46,6 @@ _VALID = HISTORY_FEATURES.index("valid")
 
 
 # ------------------------------------------------------------------------------ timing policies
-class TimingPolicy(Protocol):
-    """A policy of the timing task: 0 = wait, 1 = commit."""
-
-    name: str
-
-    def reset(self) -> None: ...
-
-    def act(self, observation: np.ndarray) -> int: ...
-
-
 class LandNowPolicy:
     """Commit at the first decision: the lower bar."""
 
@@ -175,10 +165,6 @@ class PredictivePolicy:
     def reset(self) -> None:
         self.last = None
         self.last_probability = 0.0
-
-    def probability(self, observation: np.ndarray) -> float:
-        """The predicted chance that a commit now meets a deck within the tilt limit."""
-        return self._chance(self.layout.decode(observation).history)
 
     def threshold(self, wait_fraction: float) -> float:
         """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of

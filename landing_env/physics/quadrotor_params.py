@@ -172,16 +172,6 @@ class QuadrotorParams:
         require_range("tof_arm_distance", self.tof_arm_distance, 0.0, low_inclusive=False)
 
     @property
-    def kf(self) -> float:
-        """Alias of :attr:`k_f` (the name landing_env.world uses)."""
-        return self.k_f
-
-    @property
-    def camera_offset(self) -> np.ndarray:
-        """Alias of :attr:`camera_offset_b`, the camera origin t_bc in B (m)."""
-        return self.camera_offset_b
-
-    @property
     def weight(self) -> float:
         """Weight (N)."""
         return self.mass * GRAVITY
