@@ -27,6 +27,7 @@ from agents.evaluation.records import EpisodeRecord
 from agents.policies.registry import default_policy
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import LANDING_TASK
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 
 @dataclass
@@ -177,7 +178,7 @@ def run_demo(
     """
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
-    require_choice("mode", camera_mode, ("render", "project"))
+    require_choice("mode", camera_mode, CAMERA_MODES)
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)

@@ -41,6 +41,7 @@ from agents.evaluation.records import (  # noqa: F401  (re-exported: their home 
 )
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, PinnedDroneWarning, require_choice, require_range
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 #: the command-line option that sets each key the evaluation forces
 _FORCED_BY = {
@@ -98,7 +99,7 @@ class RunSettings:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        require_choice("camera_mode", self.camera_mode, ("render", "project"))
+        require_choice("camera_mode", self.camera_mode, CAMERA_MODES)
         if self.duration_s is not None:
             require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
         if self.seed is not None:

@@ -54,6 +54,7 @@ from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrat
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.quadrotor_params import QuadrotorParams
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 #: axis labels of the sweep figures
 PARAMETER_LABELS: dict[str, str] = {
@@ -98,7 +99,7 @@ class SweepSettings:
     def __post_init__(self) -> None:
         require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
         require_range("seed", self.seed, 0)
-        require_choice("camera_mode", self.camera_mode, ("render", "project"))
+        require_choice("camera_mode", self.camera_mode, CAMERA_MODES)
         if self.parameters is None:
             self.parameters = tuple(
                 p for p in SWEEP_PARAMETERS if p != "pixel_noise" or self.camera_mode == "project"

@@ -16,6 +16,9 @@ from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_li
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera_profiles import PROFILES
 
+#: the camera's modes: render the scene and detect the tag, or project the tag's corners
+CAMERA_MODES = ("render", "project")
+
 
 @dataclass
 class CameraConfig:
@@ -107,7 +110,7 @@ class CameraConfig:
     light_specular: float = limited(0.0, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
-        require_choice("mode", self.mode, ("render", "project"))
+        require_choice("mode", self.mode, CAMERA_MODES)
         require_limits(self)
         if self.cx is not None:
             require_range(
