@@ -23,7 +23,7 @@ from estimation import geometry
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
-from estimation.limits import Limit, limited
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
@@ -263,19 +263,17 @@ class RangeFusionConfig:
 
     plane_fit: str = "lstsq"
     max_plane_rms_m: float = limited(
-        0.05, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+        0.05, POSITIVE, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
     )
     max_rigid_rms_rel: float = limited(
-        0.25, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+        0.25, POSITIVE, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
     )
-    min_corner_area_px: float = limited(4.0, physical=Limit.non_negative(1e7))
+    min_corner_area_px: float = limited(4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7))
     undistort: bool = True
 
     def __post_init__(self) -> None:
         require_choice("plane_fit", self.plane_fit, geometry.PLANE_METHODS)
-        require_range("max_plane_rms_m", self.max_plane_rms_m, 0.0, low_inclusive=False)
-        require_range("max_rigid_rms_rel", self.max_rigid_rms_rel, 0.0, low_inclusive=False)
-        require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
+        require_limits(self)
 
 
 @dataclass(frozen=True)

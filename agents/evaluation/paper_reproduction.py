@@ -37,6 +37,7 @@ from agents.evaluation.estimators import (
 )
 from agents.evaluation.records import AXES, ScenarioRecord
 from estimation.frames import euler_zyx_from_matrix, matrix_from_euler_zyx
+from estimation.limits import Limit, limited, require_limits
 from landing_env.calibration.paper_setup import STATED_TOF_MOUNTS_C
 from landing_env.errors import ConfigError, require_range
 
@@ -61,12 +62,11 @@ class ErrorModel:
 
     label: str
     overrides: dict[str, Any] = field(default_factory=dict)
-    time_skew_s: float = 0.0
-    truth_yaw_deg: float = 0.0
+    time_skew_s: float = limited(0.0, Limit(-5.0, 5.0))
+    truth_yaw_deg: float = limited(0.0, Limit(-45.0, 45.0))
 
     def __post_init__(self) -> None:
-        require_range("time_skew_s", self.time_skew_s, -5.0, 5.0)
-        require_range("truth_yaw_deg", self.truth_yaw_deg, -45.0, 45.0)
+        require_limits(self)
 
 
 def range_noise(sigma_m: float) -> dict[str, Any]:

@@ -85,7 +85,7 @@ class DeckSurfaceConfig:
     tag_family: str = TAG_FAMILY
     tag_id: int = limited(0, Limit(0, 586))
     #: edge of the tag's black border, metres (pupil-apriltags' ``tag_size``)
-    tag_size: float = limited(0.30, physical=Limit.positive(1e3))
+    tag_size: float = limited(0.30, POSITIVE, physical=Limit.positive(1e3))
     #: draw the tag; with pads on the tag may be left out, as pads sit on its area
     tag: bool = True
     #: width of the white quiet zone round the tag, in tag cells (tag_size / 8)
@@ -109,7 +109,6 @@ class DeckSurfaceConfig:
         require_choice("tag_family", self.tag_family, (TAG_FAMILY,))
         # tag36h11 has 587 codes
         outer = self.tag_size * (TAG_CELLS + 2 * self.quiet_zone_cells) / TAG_CELLS
-        require_range("tag_size", self.tag_size, 0.0, low_inclusive=False)
         if outer > self.size:
             raise ConfigError(
                 "tag_size",
