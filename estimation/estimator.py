@@ -287,6 +287,24 @@ class FusionInputs:
     extrapolated: bool
 
 
+def tof_sensor_positions(
+    tof_positions_c: np.ndarray | None, tof_calibration: TofCameraCalibration | None
+) -> np.ndarray:
+    """The ToF sensors' positions in C, (N, 3) (None: the standard layout); ConfigError when
+    ``tof_calibration`` holds another number of sensors."""
+    positions = (
+        tof_positions_in_camera_frame()
+        if tof_positions_c is None
+        else np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
+    )
+    if tof_calibration is not None and tof_calibration.n_sensors != len(positions):
+        raise ConfigError(
+            "tof_calibration",
+            f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
+        )
+    return positions
+
+
 class RangeFusionEstimator(GuardedEstimator):
     """Shared front end of IHRCF and CRHF: tag corners, ranges, touch points and the plane.
 
@@ -308,20 +326,11 @@ class RangeFusionEstimator(GuardedEstimator):
     ) -> None:
         config = config or self.config_class()
         require_range("tag_size", tag_size, 0.0, low_inclusive=False)
-        positions = (
-            tof_positions_in_camera_frame()
-            if tof_positions_c is None
-            else np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
-        )
+        positions = tof_sensor_positions(tof_positions_c, tof_calibration)
         if len(positions) < 4:
             raise ConfigError("tof_positions_c", f"need at least 4 sensors, got {len(positions)}")
         if not np.allclose(positions[:, 2], 0.0):
             raise ConfigError("tof_positions_c", "sensors must lie in the camera plane z = 0")
-        if tof_calibration.n_sensors != len(positions):
-            raise ConfigError(
-                "tof_calibration",
-                f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
-            )
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
         self.tof_calibration = tof_calibration
