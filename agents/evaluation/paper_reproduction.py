@@ -24,7 +24,7 @@ A paper row counts as reproduced on an axis when our MAE is within 25 % of it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,15 +37,9 @@ from agents.evaluation.estimators import (
 )
 from agents.evaluation.records import AXES, ScenarioRecord
 from estimation.frames import euler_zyx_from_matrix, matrix_from_euler_zyx
-from estimation.limits import Limit, limited, require_limits
 from landing_env.calibration.paper_setup import STATED_TOF_MOUNTS_C
 from landing_env.errors import ConfigError, require_range
 
-#: the scenario each paper's rows are reproduced on
-SETUP_SCENARIOS = {
-    "IHRCF paper, Table 2": "paper-setup-ihrcf",
-    "CRHF paper, Table 5": "paper-setup-crhf",
-}
 #: the one run that scores every method (CRHF tracked, IHRCF not: the crhf scenario's rule)
 SWEEP_SCENARIO = "paper-setup-crhf"
 SWEEP_ESTIMATORS = ("atda", "ihrcf", "crhf")
@@ -54,19 +48,6 @@ TOLERANCE = 0.25
 #: directions (about the optical axis, from +x_C) in which ``beam_tilt_deg`` turns each
 #: sensor's beam: drawn once, ``np.random.default_rng(0).uniform(0, 360, 4)``, and fixed
 BEAM_AZIMUTHS_DEG = (229.3, 97.1, 14.8, 5.9)
-
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """One modelled error: run-level config overrides and post-hoc truth changes."""
-
-    label: str
-    overrides: dict[str, Any] = field(default_factory=dict)
-    time_skew_s: float = limited(0.0, Limit(-5.0, 5.0))
-    truth_yaw_deg: float = limited(0.0, Limit(-45.0, 45.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 def range_noise(sigma_m: float) -> dict[str, Any]:
@@ -206,10 +187,8 @@ def run_setup(
 
 __all__ = [
     "BEAM_AZIMUTHS_DEG",
-    "SETUP_SCENARIOS",
     "TOLERANCE",
     "AxisStatus",
-    "ErrorModel",
     "beam_tilts",
     "compare_row",
     "range_noise",
