@@ -29,6 +29,7 @@ from pybullet_utils.bullet_client import BulletClient
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.landmarks import Landmark, LandmarkLayout
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env._quiet import client_id
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import cache_dir
 
@@ -54,12 +55,6 @@ _ASSET_VERSION = 1
 #: Where generated meshes and textures are cached: the user cache directory, never the
 #: installed package (``DECK_LANDING_CACHE_DIR`` overrides it; see landing_env/resources.py).
 GENERATED_DIR = cache_dir() / f"assets-v{_ASSET_VERSION}"
-
-
-def _client_id(client: int | BulletClient) -> int:
-    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
-    ``_client``; it has no public accessor)."""
-    return int(getattr(client, "_client", client))
 
 
 def default_pad_centres_p() -> tuple[tuple[float, float], ...]:
@@ -366,7 +361,7 @@ def create_deck_body(
     """
     if mass <= 0.0:
         raise ValueError(f"mass must be > 0 for a dynamic deck body, got {mass}")
-    client = _client_id(client)
+    client = client_id(client)
     obj_path, png_path = deck_asset_files(config, cache_dir)
     half = 0.5 * config.size
     collision = p.createCollisionShape(
