@@ -42,7 +42,7 @@ from estimation.landing_target import (
     LandingTargetConfig,
     LandingTargetFilter,
 )
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import ConfigError
@@ -60,7 +60,7 @@ class PrecLandState(str, Enum):
 
 
 @dataclass
-class BeaconRangeConfig:
+class BeaconRangeConfig(Limited):
     """Settings of the baseline (PX4 parameter names in the comments)."""
 
     #: horizontal acceptance radius before the descent, metres (PLD_HACC_RAD)
@@ -90,9 +90,6 @@ class BeaconRangeConfig:
     attitude_gain: float = limited(0.2, POSITIVE)
     #: the landing-target filter (gate in standard deviations: 10, the paper's)
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 class BeaconRangePolicy:
