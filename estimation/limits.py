@@ -89,11 +89,14 @@ def limited(
 
 def require_limits(config: Any) -> None:
     """Raise ConfigError, keyed by the field's name, for the first field of the dataclass
-    ``config`` that is outside the limit it declares with :func:`limited`."""
+    ``config`` that is outside the limit it declares with :func:`limited` (a field whose
+    default is None may be None)."""
     for item in fields(config):
         limit = item.metadata.get("limit")
-        if limit is not None:
-            limit.check(item.name, getattr(config, item.name))
+        value = getattr(config, item.name)
+        # None is an optional setting's "unset" where it is the default
+        if limit is not None and not (value is None and item.default is None):
+            limit.check(item.name, value)
 
 
 class Limited:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from scipy.stats import chi2
 
-from estimation.errors import ConfigError, require_choice, require_range
+from estimation.errors import ConfigError, require_choice
 from estimation.fusion.model import TwoWaves, deck_spectrum
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import (
@@ -76,7 +76,7 @@ class FusionConfig:
     )
     #: the gate as a Mahalanobis distance in standard deviations (replaces gate_probability
     #: when set; PAPER_GATE_SD = 10 is the SVGS paper's); None: the chi-square gate above
-    gate_sd: float | None = None
+    gate_sd: float | None = limited(None, Limit(0.0, 1e3, low_inclusive=False))
     #: no accepted pose update for this long: the estimate is invalid and the filter
     #: re-initialises from the next pose measurement, seconds
     reset_timeout_s: float = limited(1.0, POSITIVE, physical=Limit.positive(60.0))
@@ -202,8 +202,6 @@ class FusionConfig:
         for name in self.covariance_sources:
             require_choice("covariance_sources", name, POSE_SOURCES)
         require_limits(self)
-        if self.gate_sd is not None:
-            require_range("gate_sd", self.gate_sd, 0.0, 1e3, low_inclusive=False)
         self.deck_roll_periods_s = tuple(float(v) for v in self.deck_roll_periods_s)
         self.deck_pitch_periods_s = tuple(float(v) for v in self.deck_pitch_periods_s)
         self.deck_attitude_rms_deg = tuple(float(v) for v in self.deck_attitude_rms_deg)

@@ -90,7 +90,7 @@ class CameraConfig:
     #: (rolling shutter); the others add exposure blur, noise, vignetting and response
     profile: str = "ideal"
     #: exposure time, seconds; None = the profile's
-    exposure_s: float | None = None
+    exposure_s: float | None = limited(None, Limit(0.0, 0.1))
     #: analog gain (1 = the sensor's 0 dB, where full well meets the ADC's top)
     gain: float = limited(1.0, Limit(0.0, 64.0, low_inclusive=False))
     #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
@@ -135,8 +135,6 @@ class CameraConfig:
         require_choice("render_region", self.render_region, ("tag", "full"))
         require_choice("renderer", self.renderer, ("planar", "bullet"))
         require_choice("profile", self.profile, tuple(PROFILES))
-        if self.exposure_s is not None:
-            require_range("exposure_s", self.exposure_s, 0.0, 0.1)
         if self.sun_direction_w is not None:
             sun = np.asarray(self.sun_direction_w, dtype=float)
             if sun.shape != (3,) or not np.all(np.isfinite(sun)) or np.linalg.norm(sun) == 0:
