@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.policies.base import Policy
 from agents.policies.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
 from estimation.landing_target import (
     ACCEPTED,
@@ -92,7 +93,7 @@ class BeaconRangeConfig(Limited):
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
 
 
-class BeaconRangePolicy:
+class BeaconRangePolicy(Policy):
     """PX4-style precision landing on the beacon estimate (see the module docstring)."""
 
     name = "beacon-range"
@@ -132,9 +133,6 @@ class BeaconRangePolicy:
             self.transitions.append((self.time_s, state.value, reason))
         self.state, self.reason, self._state_s = state, reason, 0.0
         self._hover_s = 0.0
-
-    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        return self.act(observation)
 
     def height_m(self, observation: dict[str, np.ndarray]) -> float:
         """The rangefinder's range (the last one when it has none), else the beacon's z."""

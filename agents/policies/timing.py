@@ -21,6 +21,7 @@ from agents.common.cards import (
     model_class,
     read_metadata,
 )
+from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.registry import MODEL_DIR, find_model
 from estimation.anticipation.linear_predictors import LinearTiltPredictor
@@ -46,7 +47,7 @@ _VALID = HISTORY_FEATURES.index("valid")
 
 
 # ------------------------------------------------------------------------------ timing policies
-class LandNowPolicy:
+class LandNowPolicy(Policy):
     """Commit at the first decision: the lower bar."""
 
     name = "land-now"
@@ -57,11 +58,8 @@ class LandNowPolicy:
     def act(self, observation: np.ndarray) -> int:
         return 1
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class QuiescentPolicy:
+class QuiescentPolicy(Policy):
     """Commit when :func:`predict_calm` predicts a calm window as long as the descent."""
 
     name = "quiescent"
@@ -82,11 +80,8 @@ class QuiescentPolicy:
         self.last = predict_calm(parts.history, self.dt, self.config)
         return int(self.last.calm)
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class PredictivePolicy:
+class PredictivePolicy(Policy):
     """Commit when the chance of a good contact is worth more than waiting for a better one.
 
     The chance: that the deck's tilt at the contact is within the limit, by a
@@ -184,11 +179,8 @@ class PredictivePolicy:
         chance = self._chance(parts.history)
         return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class TrainedTimingPolicy:
+class TrainedTimingPolicy(Policy):
     """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
 
     The model's card (:mod:`agents.common.cards`: env id and version, observation layout,
@@ -266,9 +258,6 @@ class TrainedTimingPolicy:
         else:
             action, _ = self.model.predict(observation, deterministic=True)
         return int(np.asarray(action).reshape(-1)[0])
-
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
 
 # ------------------------------------------------------------------------------ builders
