@@ -201,6 +201,23 @@ class ATDAConfig:
         require_limits(self)
 
 
+def _deciding_rotation(
+    config: ATDAConfig,
+    previous: tuple[float, np.ndarray] | None,
+    ratio: float,
+    timestamp: float,
+) -> np.ndarray | None:
+    """The previous estimate's rotation where it decides between the two best solutions (an
+    ambiguity ``ratio`` at the threshold or above, the estimate recent enough), else None."""
+    if (
+        ratio >= config.ambiguity_ratio_threshold
+        and previous is not None
+        and 0.0 <= timestamp - previous[0] <= config.history_timeout_s
+    ):
+        return previous[1]
+    return None
+
+
 class AtdaEstimator(GuardedEstimator):
     """AprilTag-only pose by IPPE: needs the calibrated intrinsics, ignores the ranges."""
 
@@ -253,14 +270,10 @@ class AtdaEstimator(GuardedEstimator):
         if len(solutions) > 1:
             second = solutions[1][0]
             ratio = 1.0 if second <= 0.0 else chosen[0] / second
-            previous = self._previous
-            if (
-                ratio >= self.config.ambiguity_ratio_threshold
-                and previous is not None
-                and 0.0 <= timestamp - previous[0] <= self.config.history_timeout_s
-            ):
+            rotation = _deciding_rotation(self.config, self._previous, ratio, timestamp)
+            if rotation is not None:
                 # trace(R_prevᵀ R) grows as the angle between the rotations shrinks
-                closest = max(solutions[:2], key=lambda s: float(np.sum(previous[1] * s[1])))
+                closest = max(solutions[:2], key=lambda s: float(np.sum(rotation * s[1])))
                 by_history = closest is not chosen
                 chosen = closest
         if not chosen[0] <= self.config.max_reprojection_error_px:
@@ -322,13 +335,9 @@ class JointAtdaEstimator(GuardedEstimator):
             return order[0], math.nan, False
         best, second = solutions[order[0]], solutions[order[1]]
         ratio = 1.0 if second[0] <= 0.0 else best[0] / second[0]
-        previous = self._previous
-        if (
-            ratio >= self.config.ambiguity_ratio_threshold
-            and previous is not None
-            and 0.0 <= timestamp - previous[0] <= self.config.history_timeout_s
-        ):
-            closest = max(order[:2], key=lambda i: float(np.sum(previous[1] * solutions[i][1])))
+        rotation = _deciding_rotation(self.config, self._previous, ratio, timestamp)
+        if rotation is not None:
+            closest = max(order[:2], key=lambda i: float(np.sum(rotation * solutions[i][1])))
             return closest, ratio, closest != order[0]
         return order[0], ratio, False
 

@@ -36,7 +36,7 @@ from estimation.estimator import (
     target_corners,
 )
 from estimation.geometry import Undistorter
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 #: Reason of an invalid estimate whose bearing misses the range plane (beyond the horizon).
@@ -102,7 +102,7 @@ def beacon_position(
 
 
 @dataclass(frozen=True)
-class BeaconConfig:
+class BeaconConfig(Limited):
     """Settings of the beacon estimator (``estimation.beacon.*``)."""
 
     #: the tag's quadrilateral must have at least this area to give a bearing, pixels²
@@ -119,9 +119,6 @@ class BeaconConfig:
         POSITIVE,
         physical=Limit.positive(1e4, "m; the paper's COTS beacon: 40 m"),
     )
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 class BeaconEstimator(GuardedEstimator):

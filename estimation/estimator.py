@@ -23,7 +23,7 @@ from estimation import geometry
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError, require_choice, require_range
 from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
-from estimation.limits import Limit, limited
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 if TYPE_CHECKING:
@@ -263,19 +263,17 @@ class RangeFusionConfig:
 
     plane_fit: str = "lstsq"
     max_plane_rms_m: float = limited(
-        0.05, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+        0.05, POSITIVE, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
     )
     max_rigid_rms_rel: float = limited(
-        0.25, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
+        0.25, POSITIVE, physical=Limit(0.0, 100.0, low_inclusive=False, allow_inf=True)
     )
-    min_corner_area_px: float = limited(4.0, physical=Limit.non_negative(1e7))
+    min_corner_area_px: float = limited(4.0, NON_NEGATIVE, physical=Limit.non_negative(1e7))
     undistort: bool = True
 
     def __post_init__(self) -> None:
         require_choice("plane_fit", self.plane_fit, geometry.PLANE_METHODS)
-        require_range("max_plane_rms_m", self.max_plane_rms_m, 0.0, low_inclusive=False)
-        require_range("max_rigid_rms_rel", self.max_rigid_rms_rel, 0.0, low_inclusive=False)
-        require_range("min_corner_area_px", self.min_corner_area_px, 0.0)
+        require_limits(self)
 
 
 @dataclass(frozen=True)
@@ -287,6 +285,24 @@ class FusionInputs:
     ranges: np.ndarray
     plane: geometry.PlaneFit
     extrapolated: bool
+
+
+def tof_sensor_positions(
+    tof_positions_c: np.ndarray | None, tof_calibration: TofCameraCalibration | None
+) -> np.ndarray:
+    """The ToF sensors' positions in C, (N, 3) (None: the standard layout); ConfigError when
+    ``tof_calibration`` holds another number of sensors."""
+    positions = (
+        tof_positions_in_camera_frame()
+        if tof_positions_c is None
+        else np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
+    )
+    if tof_calibration is not None and tof_calibration.n_sensors != len(positions):
+        raise ConfigError(
+            "tof_calibration",
+            f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
+        )
+    return positions
 
 
 class RangeFusionEstimator(GuardedEstimator):
@@ -310,20 +326,11 @@ class RangeFusionEstimator(GuardedEstimator):
     ) -> None:
         config = config or self.config_class()
         require_range("tag_size", tag_size, 0.0, low_inclusive=False)
-        positions = (
-            tof_positions_in_camera_frame()
-            if tof_positions_c is None
-            else np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
-        )
+        positions = tof_sensor_positions(tof_positions_c, tof_calibration)
         if len(positions) < 4:
             raise ConfigError("tof_positions_c", f"need at least 4 sensors, got {len(positions)}")
         if not np.allclose(positions[:, 2], 0.0):
             raise ConfigError("tof_positions_c", "sensors must lie in the camera plane z = 0")
-        if tof_calibration.n_sensors != len(positions):
-            raise ConfigError(
-                "tof_calibration",
-                f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
-            )
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
         self.tof_calibration = tof_calibration

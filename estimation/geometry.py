@@ -107,7 +107,6 @@ class ZPlaneFitter:
         sing = np.linalg.svd(design, compute_uv=False)
         if len(xy) < 3 or sing[2] <= _RANK_TOL * sing[0]:
             raise ValueError("the (x, y) sites are collinear: they do not fix a plane")
-        self._xy = xy
         self._pinv = np.linalg.pinv(design)
         # plain floats for the per-frame fit: with a handful of sites it is all call overhead
         self._pinv_rows = [row.tolist() for row in self._pinv]
@@ -222,19 +221,14 @@ def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
     n = len(src)
     a = np.zeros((2 * n, 9))
     x, y = xs[:, 0], xs[:, 1]
-    u, v = xd[:, 0], xd[:, 1]
-    a[0::2, 0] = x
-    a[0::2, 1] = y
-    a[0::2, 2] = 1.0
-    a[0::2, 6] = -u * x
-    a[0::2, 7] = -u * y
-    a[0::2, 8] = -u
-    a[1::2, 3] = x
-    a[1::2, 4] = y
-    a[1::2, 5] = 1.0
-    a[1::2, 6] = -v * x
-    a[1::2, 7] = -v * y
-    a[1::2, 8] = -v
+    # the rows of u (even) and v (odd): (x, y, 1) in columns 0-2 or 3-5, -w (x, y, 1) in 6-8
+    for row, w in enumerate((xd[:, 0], xd[:, 1])):
+        a[row::2, 3 * row] = x
+        a[row::2, 3 * row + 1] = y
+        a[row::2, 3 * row + 2] = 1.0
+        a[row::2, 6] = -w * x
+        a[row::2, 7] = -w * y
+        a[row::2, 8] = -w
     _, sing, vt = np.linalg.svd(a)
     # rank 8 is needed for a unique H; degenerate configurations drop the 8th value
     if sing[7] <= _RANK_TOL * sing[0]:

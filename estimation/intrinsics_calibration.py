@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -258,12 +258,5 @@ def calibrate_from_images(
         "photos_used": used,
         "photos_rejected": [{"photo": n, "reason": r} for n, r in rejected],
     }
-    result = IntrinsicsCalibrationResult(
-        K=result.K,
-        dist=result.dist,
-        rms_reprojection_error=result.rms_reprojection_error,
-        per_view_errors=result.per_view_errors,
-        image_size=result.image_size,
-        metadata=metadata,
-    )
+    result = replace(result, metadata=metadata)
     return PhotoCalibration(result=result, used=tuple(used), rejected=tuple(rejected))

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.fusion.config import PAPER_GATE_SD
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 
 #: What :meth:`LandingTargetFilter.update` did with a fix.
 INITIALISED = "initialised"
@@ -41,7 +41,7 @@ INVALID_INPUT = "invalid_input"
 
 
 @dataclass(frozen=True)
-class LandingTargetConfig:
+class LandingTargetConfig(Limited):
     """Settings of the landing-target filter (PX4's ``LTEST_*`` in the comments)."""
 
     #: innovation gate, standard deviations (the SVGS paper's 10 for the IR beacon)
@@ -58,9 +58,6 @@ class LandingTargetConfig:
     initial_velocity_sigma: float = limited(math.sqrt(0.1), POSITIVE)
     #: the estimate is invalid this long after the last accepted fix, seconds
     timeout_s: float = limited(2.0, POSITIVE)
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 def _finite(*values: np.ndarray | float) -> bool:

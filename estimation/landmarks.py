@@ -38,9 +38,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from estimation.errors import ConfigError, require_choice, require_range
+from estimation.errors import ConfigError, require_choice
 from estimation.frames import tag_corners_in_tag_frame
-from estimation.limits import NON_NEGATIVE, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 
 #: Cells across a tag36h11 tag including its black border (the data bits are 6 x 6).
@@ -57,14 +57,13 @@ NO_LANDMARK = "no_detection"
 class Landmark:
     """One tag on the deck: its id, black-border edge (m) and centre ``(x, y)`` in D (m)."""
 
-    tag_id: int
-    size: float
+    tag_id: int = limited(limit=Limit(0, MAX_TAG_ID))
+    size: float = limited(limit=POSITIVE)
     x: float = 0.0
     y: float = 0.0
 
     def __post_init__(self) -> None:
-        require_range("tag_id", self.tag_id, 0, MAX_TAG_ID)
-        require_range("size", self.size, 0.0, low_inclusive=False)
+        require_limits(self)
         for name in ("x", "y"):
             if not math.isfinite(getattr(self, name)):
                 raise ConfigError(name, f"{getattr(self, name)!r} is not finite")

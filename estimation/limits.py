@@ -5,8 +5,9 @@ A config dataclass declares a field's bounds where it declares the field::
     fx: float = limited(458.5, POSITIVE, physical=Limit.positive(1e5, "pixels"))
 
 ``limit`` is what the code can run with: :func:`require_limits`, called from the
-dataclass's ``__post_init__``, refuses a value outside it whenever the dataclass is built,
-naming the field.  ``physical`` is the range a config file may give (a datasheet's, a
+dataclass's ``__post_init__`` (a dataclass with no other checks derives from
+:class:`Limited`), refuses a value outside it whenever the dataclass is built, naming the
+field.  ``physical`` is the range a config file may give (a datasheet's, a
 standard's, or where larger values only broke runs): the loader checks it on every value it
 reads (:data:`landing_env.config_limits.LIMITS` collects them by dotted key), so an absurd
 value is refused with its key before it reaches the physics.
@@ -88,8 +89,19 @@ def limited(
 
 def require_limits(config: Any) -> None:
     """Raise ConfigError, keyed by the field's name, for the first field of the dataclass
-    ``config`` that is outside the limit it declares with :func:`limited`."""
+    ``config`` that is outside the limit it declares with :func:`limited` (a field whose
+    default is None may be None)."""
     for item in fields(config):
         limit = item.metadata.get("limit")
-        if limit is not None:
-            limit.check(item.name, getattr(config, item.name))
+        value = getattr(config, item.name)
+        # None is an optional setting's "unset" where it is the default
+        if limit is not None and not (value is None and item.default is None):
+            limit.check(item.name, value)
+
+
+class Limited:
+    """A dataclass base whose ``__post_init__`` is :func:`require_limits`: its fields' limits
+    are checked whenever it is built."""
+
+    def __post_init__(self) -> None:
+        require_limits(self)

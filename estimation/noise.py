@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.limits import NON_NEGATIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, Limit, Limited, limited
 
 #: VL53L1X-class ToF ranging noise (long-distance mode): sigma = SIGMA_0 + SIGMA_PER_M * r.
 #: 2 mm + 2.5 mm/m is a few mm up close and 12 mm at 4 m, of the order of the +-20 mm
@@ -40,7 +40,7 @@ DEFAULT_PIXEL_SIGMA_PX = 0.2
 
 
 @dataclass(frozen=True)
-class TofNoiseModel:
+class TofNoiseModel(Limited):
     """Gaussian range noise ``sigma(r) = max(sigma_min_m, sigma_0_m + sigma_per_m * r)``,
     plus the uniform quantisation of a sensor that reports in steps of ``resolution_m``
     (variance step²/12).  ``sigma_min_m`` (default 0) gives a floor, e.g. ``max(5 mm, 0.5 %
@@ -54,9 +54,6 @@ class TofNoiseModel:
     sigma_per_m: float = limited(VL53L1X_SIGMA_PER_M, NON_NEGATIVE)
     resolution_m: float = limited(VL53L1X_RESOLUTION_M, NON_NEGATIVE)
     sigma_min_m: float = limited(0.0, NON_NEGATIVE)
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
     @classmethod
     def exact(cls) -> TofNoiseModel:

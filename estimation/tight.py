@@ -58,8 +58,9 @@ from estimation.estimator import (
     GuardedEstimator,
     corners_degenerate,
     finish_pose,
+    tof_sensor_positions,
 )
-from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
+from estimation.frames import tag_corners_in_tag_frame
 from estimation.tight_config import TightConfig
 from estimation.tight_problem import TightProblem, TightSolution, euler_jacobian
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
@@ -130,18 +131,9 @@ class TightEstimator(GuardedEstimator):
         config: TightConfig | None = None,
     ) -> None:
         require_range("tag_size", tag_size, 0.0, low_inclusive=False)
-        positions = (
-            tof_positions_in_camera_frame()
-            if tof_positions_c is None
-            else np.asarray(tof_positions_c, dtype=float).reshape(-1, 3)
-        )
+        positions = tof_sensor_positions(tof_positions_c, tof_calibration)
         if not np.isfinite(positions).all():
             raise ConfigError("tof_positions_c", "sensor positions must be finite")
-        if tof_calibration is not None and tof_calibration.n_sensors != len(positions):
-            raise ConfigError(
-                "tof_calibration",
-                f"has {tof_calibration.n_sensors} sensors, tof_positions_c has {len(positions)}",
-            )
         self.tag_size = float(tag_size)
         self.tag_id = int(tag_id)
         self.tof_positions_c = positions

@@ -14,14 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.estimator import DeckPoseEstimator, GuardedEstimator, target_corners
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 
 TAG_LOST = "tag_lost"
 
 
 @dataclass(frozen=True)
-class CornerTrackerConfig:
+class CornerTrackerConfig(Limited):
     """Corner tracker settings.
 
     ``dt`` (s): step used when ``update`` gets no timestamp.  ``process_noise``
@@ -40,9 +40,6 @@ class CornerTrackerConfig:
     max_bridged_frames: int = limited(3, Limit(0))
     initial_velocity_std: float = limited(500.0, NON_NEGATIVE)
     smooth: bool = False
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""Silence what PyBullet's C code prints on import and connect (its build time on stderr,
-``argv[0]=`` on stdout).
+"""PyBullet's glue: silence what its C code prints on import and connect (its build time on
+stderr, ``argv[0]=`` on stdout), and a physics client's id.
 
 PyBullet writes with C ``printf``/``fprintf``, past ``sys.stdout``; only pointing file
 descriptors 1 and 2 at the null device around the import and the connection hides it.
@@ -11,6 +11,10 @@ import contextlib
 import os
 import sys
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # importing it here would import PyBullet before it is quietened
+    from pybullet_utils.bullet_client import BulletClient
 
 
 def _flush_all() -> None:
@@ -49,3 +53,9 @@ def quiet_stdout() -> Iterator[None]:
             os.dup2(copy, fd)
             os.close(copy)
         os.close(null)
+
+
+def client_id(client: int | BulletClient) -> int:
+    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
+    ``_client``; it has no public accessor)."""
+    return int(getattr(client, "_client", client))

@@ -20,7 +20,7 @@ from estimation.beacon import BeaconConfig
 from estimation.crhf import CRHFConfig
 from estimation.fusion import FusionConfig
 from estimation.ihrcf import IHRCFConfig
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited, require_limits
 from estimation.pipeline import needs_intrinsics, needs_tof_calibration
 from estimation.registry import ESTIMATOR_NAMES, load_plugins
 from estimation.tight_config import TightConfig
@@ -112,7 +112,7 @@ class SimulationConfig:
 
 
 @dataclass
-class ActionConfig:
+class ActionConfig(Limited):
     """Scaling of the Box action in [-1, 1] to velocity set-points of the heading frame, and
     ``DeckLanding``'s land trigger (its fifth entry; see the env card's "Action space")."""
 
@@ -127,9 +127,6 @@ class ActionConfig:
     land_trigger: bool = True
     land_threshold: float = limited(0.5, Limit(-1.0, 1.0), physical=Limit(-1.0, 1.0))
     land_band_m: float = limited(0.2, Limit.positive(2.0), physical=Limit.positive(2.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 @dataclass
@@ -171,7 +168,7 @@ class StartConfig:
 
 
 @dataclass
-class TouchdownConfig:
+class TouchdownConfig(Limited):
     """Success thresholds of a touchdown; every measured value is reported in ``info``."""
 
     max_normal_speed: float = limited(0.5, POSITIVE, physical=Limit.positive(20.0))
@@ -183,9 +180,6 @@ class TouchdownConfig:
     max_bounce_m: float = limited(0.01, Limit(0.0, 1.0))
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
     tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 #: the physical range of a reward weight

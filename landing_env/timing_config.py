@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from estimation.limits import Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.guidance_gains import GuidanceGains
 
@@ -41,17 +42,17 @@ class TimingConfig:
     ``gym.make("DeckLandingTiming-v0", overrides={"timing.hold_height_m": 1.0})``)."""
 
     #: camera height above the deck (along the tag's z / the ToF mean) while waiting, metres
-    hold_height_m: float = 0.7
+    hold_height_m: float = limited(0.7, Limit(0.3, 3.0))
     #: length of the pose history in the observation, seconds
-    history_s: float = 2.0
+    history_s: float = limited(2.0, Limit(0.1, 10.0))
     #: window of the least-squares rates, seconds
     rate_window_s: float = 0.5
     #: control periods per decision (a wait lasts this many periods)
-    steps_per_decision: int = 2
+    steps_per_decision: int = limited(2, Limit(1, 20))
     #: the descent is committed regardless once the drone has waited this long, seconds
-    wait_limit_s: float = 15.0
+    wait_limit_s: float = limited(15.0, Limit(0.0, 600.0, low_inclusive=False))
     #: a descent that has not touched down after this long ends the episode (timeout), seconds
-    descent_timeout_s: float = 6.0
+    descent_timeout_s: float = limited(6.0, Limit(0.5, 120.0))
     #: the history holds the deck pose as a level camera sees it (the drone's roll and pitch,
     #: from its attitude, removed), so that the deck's tilt relative to gravity, which the
     #: touchdown judges, is not confused with the drone's own tilt in wind; False keeps the
@@ -67,8 +68,8 @@ class TimingConfig:
     #: 5 cm, at most 1.5 s) in the same step, which ends without a touchdown, and the agent
     #: decides again (``info["wave_offs"]``; the aborted descent and the climb count as
     #: waiting).  0 turns it off
-    wave_off_tilt_deg: float = 0.0
-    wave_off_from_s: float = 0.4
+    wave_off_tilt_deg: float = limited(0.0, Limit(0.0, 45.0))
+    wave_off_from_s: float = limited(0.4, Limit(0.0, 10.0))
     wave_off_until_s: float = 0.7
     #: how the wave-off predicts the deck: ``linear`` (the newest row carried along its 0.5 s
     #: least-squares rates) or ``quadratic`` (a parabola fitted to roll and pitch over the last
@@ -79,8 +80,8 @@ class TimingConfig:
     #: contact is within ``wave_off_tilt_deg`` is below what ``wave_off_rule`` asks (its error
     #: measured on held-out episodes: the chance is honest where a straight line's is not)
     wave_off_predictor: str = "linear"
-    wave_off_window_s: float = 1.0
-    wave_off_probability: float = 0.8
+    wave_off_window_s: float = limited(1.0, Limit(0.2, 10.0))
+    wave_off_probability: float = limited(0.8, Limit(0.0, 1.0))
     #: what the ``model`` wave-off compares the chance with: ``fixed``
     #: (``wave_off_probability``) or ``value``: the value of waiting on, i.e. the
     #: optimal-stopping value (:mod:`estimation.anticipation.stopping`) of the chance a commit
@@ -93,7 +94,7 @@ class TimingConfig:
     #: wave-off and the ``predictive`` policy; 1 s was chosen offline on the predictors'
     #: fitting episodes at bench sea states 4 and 5 and checked on the tuning seeds, README
     #: "Predicting the deck a descent ahead")
-    opportunity_s: float = 1.0
+    opportunity_s: float = limited(1.0, Limit(0.05, 60.0))
     #: the deck-tilt predictor of this scenario: ``scenario`` (the one its config names,
     #: ``deck_predictor``: the bench scenarios' are shipped), a shipped one by name
     #: (``bench-ss4``: landing_env/assets/predictors/deck_tilt_bench-ss4.npz, fitted by
@@ -101,7 +102,7 @@ class TimingConfig:
     #: the ``predictive`` policy; empty: none
     tilt_model: str = ""
     #: the timed descent's contact, seconds after the commit (1.2 s reference: 1.30 s measured)
-    expected_contact_s: float = 1.3
+    expected_contact_s: float = limited(1.3, Limit(0.1, 10.0))
     #: the contact time chosen at each commit: with a window ``[first, last]`` (seconds after
     #: the commit) the deck-tilt predictor ``tilt_model`` predicts the deck at every
     #: ``contact_step_s`` of it, and the timed descent is given the duration that meets the
@@ -111,7 +112,7 @@ class TimingConfig:
     #: Empty: every descent takes ``guidance.descent_time_s`` (contact at
     #: ``expected_contact_s``)
     contact_window_s: list[float] = field(default_factory=list)
-    contact_step_s: float = 0.1
+    contact_step_s: float = limited(0.1, Limit(0.05, 1.0))
     #: what the observation holds: ``history`` (the deck-pose history, as every id up to the
     #: bench's v4) or ``prediction``: instead of the history, what the ``predictive`` rule
     #: weighs, for a learned policy to weigh: the chance ``tilt_model`` gives of a deck within
@@ -124,8 +125,7 @@ class TimingConfig:
     observation: str = "history"
 
     def __post_init__(self) -> None:
-        require_range("hold_height_m", self.hold_height_m, 0.3, 3.0)
-        require_range("history_s", self.history_s, 0.1, 10.0)
+        require_limits(self)
         require_range(
             "rate_window_s",
             self.rate_window_s,
@@ -133,11 +133,6 @@ class TimingConfig:
             self.history_s,
             bounds_from=f"history_s = {self.history_s}",
         )
-        require_range("steps_per_decision", self.steps_per_decision, 1, 20)
-        require_range("wait_limit_s", self.wait_limit_s, 0.0, 600.0, low_inclusive=False)
-        require_range("descent_timeout_s", self.descent_timeout_s, 0.5, 120.0)
-        require_range("wave_off_tilt_deg", self.wave_off_tilt_deg, 0.0, 45.0)
-        require_range("wave_off_from_s", self.wave_off_from_s, 0.0, 10.0)
         require_range(
             "wave_off_until_s",
             self.wave_off_until_s,
@@ -145,13 +140,9 @@ class TimingConfig:
             10.0,
             bounds_from=f"wave_off_from_s = {self.wave_off_from_s}",
         )
-        require_range("expected_contact_s", self.expected_contact_s, 0.1, 10.0)
         require_choice("wave_off_predictor", self.wave_off_predictor, WAVE_OFF_PREDICTORS)
-        require_range("wave_off_window_s", self.wave_off_window_s, 0.2, 10.0)
-        require_range("wave_off_probability", self.wave_off_probability, 0.0, 1.0)
         require_choice("wave_off_rule", self.wave_off_rule, WAVE_OFF_RULES)
         require_choice("observation", self.observation, OBSERVATION_KINDS)
-        require_range("opportunity_s", self.opportunity_s, 0.05, 60.0)
         if self.wave_off_rule == "value" and self.wave_off_predictor != "model":
             raise ConfigError(
                 "wave_off_rule",
@@ -177,7 +168,6 @@ class TimingConfig:
             )
 
     def _check_contact_window(self) -> None:
-        require_range("contact_step_s", self.contact_step_s, 0.05, 1.0)
         window = list(self.contact_window_s)
         if not window:
             return

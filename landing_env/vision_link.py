@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -142,17 +142,7 @@ class VisionLink:
             return DeckPoseEstimate(
                 name, held.timestamp, False, reason="vision_link_stale", extras=extras
             )
-        return DeckPoseEstimate(
-            method=held.method,
-            timestamp=held.timestamp,
-            valid=held.valid,
-            rotation=held.rotation,
-            translation=held.translation,
-            reason=held.reason,
-            covariance=held.covariance,
-            predicted=held.predicted,
-            extras=extras,
-        )
+        return replace(held, extras=extras)
 
 
 class VisionStage:

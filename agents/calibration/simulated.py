@@ -197,22 +197,9 @@ def plot_curves(tof: TofSimReport, path: Path) -> None:
             ax.plot(samples[:, 0], samples[:, 1 + axis], ".", color=colour, ms=4)
             ax.plot(dense, pchip_px[:, i, axis], "-", color=colour, lw=1.0)
             ax.plot(dense, hyper_px[:, i, axis], "--", color="k", lw=0.7)
-        axes[2].plot(
-            dense,
-            np.linalg.norm(pchip_px[:, i] - exact_px[:, i], axis=1),
-            "-",
-            color=colour,
-            lw=1.0,
-            label=f"sensor {i + 1} PCHIP",
-        )
-        axes[2].plot(
-            dense,
-            np.linalg.norm(hyper_px[:, i] - exact_px[:, i], axis=1),
-            ":",
-            color=colour,
-            lw=1.0,
-            label=f"sensor {i + 1} hyperbola",
-        )
+        for looked_up, style, name in ((pchip_px, "-", "PCHIP"), (hyper_px, ":", "hyperbola")):
+            error = np.linalg.norm(looked_up[:, i] - exact_px[:, i], axis=1)
+            axes[2].plot(dense, error, style, color=colour, lw=1.0, label=f"sensor {i + 1} {name}")
     for axis, ax in enumerate(axes[:2]):
         name = "u (column)" if axis == 0 else "v (row)"
         ax.set_xlabel("range (m)")

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.cli.approach import add_approach_parser
-from agents.cli.args import add_set_argument, positive_int
+from agents.cli.args import add_mode_argument, add_set_argument, positive_int
 from agents.cli.bridge import add_bridge_parser
 from agents.cli.calibrate import add_calibrate_parser
 from agents.cli.catalogue import add_list_parser, add_model_parser
@@ -74,12 +74,7 @@ def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--config", default="default", help="a config name in configs/ or a path")
     demo.add_argument("--seed", type=int, default=0, help="the first episode's seed")
     demo.add_argument("--episodes", type=positive_int, default=1, help="episodes (seeds on)")
-    demo.add_argument(
-        "--mode",
-        choices=("render", "project"),
-        default="render",
-        help="camera: render and detect the tag, or project it (faster)",
-    )
+    add_mode_argument(demo)
     demo.add_argument(
         "--no-timing",
         action="store_true",
@@ -151,7 +146,7 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
     )
     est.add_argument("--out", default=None, help="output directory (default: results/SCENARIO)")
     est.add_argument("--seed", type=int, default=None, help="default: the scenario's seed")
-    est.add_argument("--mode", choices=("render", "project"), default="render", help="camera mode")
+    add_mode_argument(est)
     est.add_argument(
         "--estimators", nargs="+", default=None, help="default: the scenario's (truth excluded)"
     )
@@ -165,9 +160,7 @@ def _add_evaluate_parser(sub: argparse._SubParsersAction) -> argparse._SubParser
     sweep.add_argument("--scenario", default="paper-stewart", help="the base scenario")
     sweep.add_argument("--duration", type=float, default=10.0, help="simulated s per point")
     sweep.add_argument("--seed", type=int, default=0, help="seeds the scenario at every point")
-    sweep.add_argument(
-        "--mode", choices=("render", "project"), default="render", help="camera mode"
-    )
+    add_mode_argument(sweep)
     sweep.add_argument(
         "--parameters",
         nargs="+",

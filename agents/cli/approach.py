@@ -4,19 +4,17 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from pathlib import Path
 from typing import Any
 
-from agents.cli.args import add_batch_arguments, positive_int
+from agents.cli.args import add_batch_arguments, add_set_argument, command_line, positive_int
 from agents.common.user_input import parse_overrides as _parse_overrides
 from agents.evaluation.approach import APPROACH_POLICIES, ROUTINE_TIMINGS, evaluate_approach
 from agents.evaluation.pipeline import HELD_OUT_SEED
 
 
 def _evaluate_approach(args: argparse.Namespace) -> int:
-    command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = command_line()
     evaluation = evaluate_approach(
         list(args.policy),
         args.scenario,
@@ -69,5 +67,5 @@ def add_approach_parser(evaluate_group: Any) -> None:
     )
     approach.add_argument("--out", default="results/approach", help="output directory")
     add_batch_arguments(approach)
-    approach.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
+    add_set_argument(approach)
     approach.set_defaults(func=_evaluate_approach)

@@ -1,11 +1,15 @@
-"""Argument types of the ``deck-landing`` command (a leaf module); the user-error type and
-the ``--set`` overrides' parser are :mod:`agents.common.user_input`'s.
+"""Argument types and shared options of the ``deck-landing`` command; the user-error type
+and the ``--set`` overrides' parser are :mod:`agents.common.user_input`'s.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import shlex
+import sys
+
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 SET_HELP = "dotted config overrides applied last, e.g. tof.noise=vl53l1x camera.k1=-0.05"
 
@@ -32,13 +36,37 @@ def _int_at_least(text: str, low: int) -> int:
 
 def positive_float(text: str) -> float:
     """An argparse type: a finite number > 0."""
+    return _finite_float(text, zero_allowed=False)
+
+
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number >= 0."""
+    return _finite_float(text, zero_allowed=True)
+
+
+def _finite_float(text: str, zero_allowed: bool) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed (0, inf)")
+    if not (math.isfinite(value) and (value > 0.0 or (zero_allowed and value == 0.0))):
+        low = "[0" if zero_allowed else "(0"
+        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed {low}, inf)")
     return value
+
+
+def command_line() -> str:
+    """This run's command as a shell line, for the records it writes."""
+    return "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+def add_mode_argument(
+    parser: argparse.ArgumentParser,
+    default: str | None = "render",
+    help: str = "camera: render and detect the tag, or project it (faster)",
+) -> None:
+    """``--mode``: the camera's mode (:data:`~landing_env.sensors.camera_config.CAMERA_MODES`)."""
+    parser.add_argument("--mode", choices=CAMERA_MODES, default=default, help=help)
 
 
 def add_set_argument(parser: argparse.ArgumentParser) -> None:

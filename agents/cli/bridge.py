@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 
-from agents.cli.args import add_set_argument, positive_int
+from agents.cli.args import add_mode_argument, add_set_argument, non_negative_float, positive_int
 from agents.cli.recording_args import (
     add_alignment_arguments,
     add_topic_arguments,
@@ -29,17 +28,6 @@ from agents.common.user_input import UserError, parse_overrides
 from agents.io.autopilot_listener import AutopilotListener
 from agents.io.landing_target import AUTOPILOTS, ardupilot_parameters
 from agents.io.sim_source import SimulatorSource
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value < 0.0:
-        raise argparse.ArgumentTypeError(f"{value} is out of range; allowed [0, inf)")
-    return value
-
 
 #: the simulator's options, refused with --input: destination, flag
 SIMULATOR_OPTIONS = {"mode": "--mode", "episodes": "--episodes", "seed": "--seed"}
@@ -186,16 +174,14 @@ def add_bridge_parser(sub: argparse._SubParsersAction) -> None:
         help="a recording (folder, .mcap or rosbag2 folder) instead of the simulator; its "
         "estimates as `deck-landing estimate` gives them (the default config, --set applies)",
     )
-    bridge.add_argument(
-        "--mode", choices=("project", "render"), default=None, help="camera mode (default project)"
-    )
+    add_mode_argument(bridge, None, "camera mode (default project)")
     bridge.add_argument(
         "--episodes", type=positive_int, default=None, help="episodes, seeds on (default 1)"
     )
     bridge.add_argument("--seed", type=int, default=None, help="the first episode's seed (0)")
     bridge.add_argument(
         "--speed",
-        type=_non_negative_float,
+        type=non_negative_float,
         default=1.0,
         help="simulated (or recorded) seconds per wall second (1: real time; 0: as fast as it "
         "goes)",

@@ -7,10 +7,6 @@ from pathlib import Path
 from typing import Any
 
 import imageio.v2 as imageio
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from rich.console import Console
 from rich.table import Table
@@ -23,10 +19,12 @@ from agents.evaluation.pipeline import (
     make_episode,
     run_episode,
 )
+from agents.evaluation.plots import plt, save_figure
 from agents.evaluation.records import EpisodeRecord
 from agents.policies.registry import default_policy
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import LANDING_TASK
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 
 @dataclass
@@ -98,10 +96,7 @@ def plot_trajectory(log: EpisodeLog, path: Path) -> None:
     axes[2].plot(t[valid], observed[valid, 2], ".", ms=3, label="observed")
     axes[2].set(xlabel="time (s)", ylabel="z_C (m)", title="Deck pose seen by the policy")
     axes[2].legend()
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def summarise(log: EpisodeLog, console: Console) -> None:
@@ -177,7 +172,7 @@ def run_demo(
     """
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
-    require_choice("mode", camera_mode, ("render", "project"))
+    require_choice("mode", camera_mode, CAMERA_MODES)
     console = Console()
     out_dir.mkdir(parents=True, exist_ok=True)
     # the demo renders the camera and detects the tag for real (training uses `project`)
@@ -265,10 +260,7 @@ def plot_timing(log: TimingDemoLog, path: Path, limit_deg: float) -> None:
     ax_height.set(xlabel="time (s)", ylabel="height (m)")
     ax_tilt.legend(fontsize=8)
     ax_height.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def run_timing_demo(

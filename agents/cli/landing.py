@@ -4,12 +4,10 @@
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 from pathlib import Path
 from typing import Any
 
-from agents.cli.args import add_batch_arguments, positive_int
+from agents.cli.args import add_batch_arguments, add_mode_argument, command_line, positive_int
 from agents.common.user_input import parse_overrides as _parse_overrides
 from agents.evaluation.landing import ESTIMATORS, HELD_OUT_SEED, evaluate_landing
 from agents.policies.registry import (
@@ -20,7 +18,7 @@ from landing_env.scenarios import SCENARIOS
 
 
 def _evaluate_landing(args: argparse.Namespace) -> int:
-    command = "deck-landing " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = command_line()
     for n, scenario in enumerate(args.scenario):
         if args.policy is None:
             policies = [default_policy(scenario)]
@@ -79,12 +77,7 @@ def add_landing_parser(evaluate_group: Any) -> None:
         help="the estimate in the observation (default: the policy's own, else the "
         "scenario's: ihrcf on the bench, tight on the ship decks)",
     )
-    landing.add_argument(
-        "--mode",
-        choices=("project", "render"),
-        default="project",
-        help="camera: project the tag (fast) or render and detect it",
-    )
+    add_mode_argument(landing, "project")
     landing.add_argument(
         "--model", default=None, help="a trained model (timing-model, lander-model)"
     )

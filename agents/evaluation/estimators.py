@@ -39,8 +39,10 @@ from agents.evaluation.records import (  # noqa: F401  (re-exported: their home 
     to_table_units,
     wrap_degrees,
 )
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.config import DeckLandingConfig, load_config
-from landing_env.errors import ConfigError, PinnedDroneWarning, require_choice, require_range
+from landing_env.errors import ConfigError, PinnedDroneWarning, require_choice
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 #: the command-line option that sets each key the evaluation forces
 _FORCED_BY = {
@@ -84,9 +86,9 @@ class RunSettings:
     #: a config name in ``configs/`` or a YAML path
     scenario: str = "paper-stewart"
     #: simulated seconds; None: the scenario's ``simulation.max_episode_s``
-    duration_s: float | None = None
+    duration_s: float | None = limited(None, POSITIVE)
     #: None: the scenario's seed, else 0
-    seed: int | None = None
+    seed: int | None = limited(None, Limit(0))
     #: the papers' experiments render and detect; ``project`` is the fast analytic camera
     camera_mode: Literal["render", "project"] = "render"
     #: the estimators to score (sets ``estimation.compare``); None: the scenario's observed
@@ -98,11 +100,8 @@ class RunSettings:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        require_choice("camera_mode", self.camera_mode, ("render", "project"))
-        if self.duration_s is not None:
-            require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
-        if self.seed is not None:
-            require_range("seed", self.seed, 0)
+        require_choice("camera_mode", self.camera_mode, CAMERA_MODES)
+        require_limits(self)
         if self.estimators is not None:
             self.estimators = tuple(self.estimators)
             if not self.estimators:

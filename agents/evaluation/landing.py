@@ -57,8 +57,6 @@ from landing_env.scenarios import SCENARIOS
 #: the estimators the observation can carry (the registry's names, ``tight`` and ``fused``
 #: included)
 ESTIMATORS = ESTIMATOR_NAMES
-#: the former name of the one episode record
-EpisodeResult = EpisodeRecord
 
 
 def plot_results(evaluated: Evaluated, path: Path, title: str) -> None:
@@ -255,7 +253,6 @@ __all__ = [
     "ESTIMATORS",
     "HELD_OUT_SEED",
     "LANDING_EVALUATION",
-    "EpisodeResult",
     "evaluate_landing",
     "evaluate_policy",
     "landing_task",

@@ -24,7 +24,7 @@ A paper row counts as reproduced on an axis when our MAE is within 25 % of it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,11 +40,6 @@ from estimation.frames import euler_zyx_from_matrix, matrix_from_euler_zyx
 from landing_env.calibration.paper_setup import STATED_TOF_MOUNTS_C
 from landing_env.errors import ConfigError, require_range
 
-#: the scenario each paper's rows are reproduced on
-SETUP_SCENARIOS = {
-    "IHRCF paper, Table 2": "paper-setup-ihrcf",
-    "CRHF paper, Table 5": "paper-setup-crhf",
-}
 #: the one run that scores every method (CRHF tracked, IHRCF not: the crhf scenario's rule)
 SWEEP_SCENARIO = "paper-setup-crhf"
 SWEEP_ESTIMATORS = ("atda", "ihrcf", "crhf")
@@ -53,20 +48,6 @@ TOLERANCE = 0.25
 #: directions (about the optical axis, from +x_C) in which ``beam_tilt_deg`` turns each
 #: sensor's beam: drawn once, ``np.random.default_rng(0).uniform(0, 360, 4)``, and fixed
 BEAM_AZIMUTHS_DEG = (229.3, 97.1, 14.8, 5.9)
-
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """One modelled error: run-level config overrides and post-hoc truth changes."""
-
-    label: str
-    overrides: dict[str, Any] = field(default_factory=dict)
-    time_skew_s: float = 0.0
-    truth_yaw_deg: float = 0.0
-
-    def __post_init__(self) -> None:
-        require_range("time_skew_s", self.time_skew_s, -5.0, 5.0)
-        require_range("truth_yaw_deg", self.truth_yaw_deg, -45.0, 45.0)
 
 
 def range_noise(sigma_m: float) -> dict[str, Any]:
@@ -206,10 +187,8 @@ def run_setup(
 
 __all__ = [
     "BEAM_AZIMUTHS_DEG",
-    "SETUP_SCENARIOS",
     "TOLERANCE",
     "AxisStatus",
-    "ErrorModel",
     "beam_tilts",
     "compare_row",
     "range_noise",

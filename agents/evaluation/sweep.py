@@ -49,11 +49,13 @@ from agents.evaluation.estimators import (
     score_record,
 )
 from agents.evaluation.plots import COLOURS, save_figure
+from estimation.limits import POSITIVE, Limit, limited, require_limits
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.physics.quadrotor_params import QuadrotorParams
+from landing_env.sensors.camera_config import CAMERA_MODES
 
 #: axis labels of the sweep figures
 PARAMETER_LABELS: dict[str, str] = {
@@ -73,8 +75,8 @@ class SweepSettings:
 
     scenario: str = "paper-stewart"
     #: simulated seconds per point
-    duration_s: float = 10.0
-    seed: int = 0
+    duration_s: float = limited(10.0, POSITIVE)
+    seed: int = limited(0, Limit(0))
     camera_mode: Literal["render", "project"] = "render"
     #: None: every condition (pixel_noise only in project mode)
     parameters: tuple[str, ...] | None = None
@@ -87,7 +89,7 @@ class SweepSettings:
     #: where the k1 sweep's chessboard calibrations are written; empty: a temporary directory
     calibration_dir: str = ""
     #: ToF maximum range during the height sweep, metres
-    tof_max_range_m: float = 5.0
+    tof_max_range_m: float = limited(5.0, POSITIVE)
     #: extra dotted-key overrides for every point
     overrides: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
@@ -96,9 +98,8 @@ class SweepSettings:
     address: str | None = None
 
     def __post_init__(self) -> None:
-        require_range("duration_s", self.duration_s, 0.0, low_inclusive=False)
-        require_range("seed", self.seed, 0)
-        require_choice("camera_mode", self.camera_mode, ("render", "project"))
+        require_limits(self)
+        require_choice("camera_mode", self.camera_mode, CAMERA_MODES)
         if self.parameters is None:
             self.parameters = tuple(
                 p for p in SWEEP_PARAMETERS if p != "pixel_noise" or self.camera_mode == "project"
@@ -128,7 +129,6 @@ class SweepSettings:
             raise ConfigError("k1_variants", f"is empty; choose from {', '.join(K1_VARIANTS)}")
         for variant in self.k1_variants:
             require_choice("k1_variants", variant, tuple(K1_VARIANTS))
-        require_range("tof_max_range_m", self.tof_max_range_m, 0.0, low_inclusive=False)
 
     def plan(self) -> list[tuple[str, float, str]]:
         """Every point as (condition, value, variant); the variant is empty but for k1."""

@@ -52,6 +52,7 @@ from estimation.types import CameraFrame, DeckPoseEstimate
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.estimators import estimation_options, fusion_settings
 from landing_env.physics.quadrotor_params import QuadrotorParams
+from landing_env.sensors.camera import tag_detector
 from landing_env.vision_link import VisionLinkConfig, VisionStage
 
 EXTRINSICS_FORMAT = "deck-landing/camera-extrinsics"
@@ -192,13 +193,7 @@ class RecordingEstimator:
         if recorded.detections is not None:
             return CameraFrame(recorded.timestamp, recorded.detections, None, recorded.miss_reason)
         if self._detector is None:
-            c = self._camera
-            self._detector = AprilTagDetector(
-                quad_decimate=c.quad_decimate,
-                quad_sigma=c.quad_sigma,
-                refine_edges=c.refine_edges,
-                decode_sharpening=c.decode_sharpening,
-            )
+            self._detector = tag_detector(self._camera)
         detections = self._detector.detect(recorded.image)
         return CameraFrame(
             recorded.timestamp, detections, None, "" if detections else "not_detected"

@@ -141,8 +141,21 @@ def quaternion_wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return (sign * float(w), sign * float(x), sign * float(y), sign * float(z))
 
 
-def _image_angles(t_cd: np.ndarray) -> tuple[float, float]:
-    return math.atan2(float(t_cd[0]), float(t_cd[2])), math.atan2(float(t_cd[1]), float(t_cd[2]))
+def _fields(
+    frame: int, point: np.ndarray, r_axes_c: np.ndarray, r_cd: np.ndarray, t_cd: np.ndarray
+) -> LandingTargetFields:
+    """The fields of the tag centre at ``point`` in ``frame``, whose axes are ``r_axes_c``
+    from the camera's: q is the deck frame F in them; distance and angles from ``t_cd``."""
+    return LandingTargetFields(
+        frame=frame,
+        x=float(point[0]),
+        y=float(point[1]),
+        z=float(point[2]),
+        q=quaternion_wxyz(r_axes_c @ np.asarray(r_cd, dtype=float) @ R_DF),
+        distance=float(np.linalg.norm(t_cd)),
+        angle_x=math.atan2(float(t_cd[0]), float(t_cd[2])),
+        angle_y=math.atan2(float(t_cd[1]), float(t_cd[2])),
+    )
 
 
 def ardupilot_fields(r_cd: np.ndarray, t_cd: np.ndarray, mount: CameraMount) -> LandingTargetFields:
@@ -150,18 +163,7 @@ def ardupilot_fields(r_cd: np.ndarray, t_cd: np.ndarray, mount: CameraMount) -> 
     ``distance = |t_CD|``; q is the deck frame F in body FRD (ArduPilot does not read it)."""
     t_cd = np.asarray(t_cd, dtype=float)
     r_frd_c = S_FLIP @ mount.r_bc
-    line_of_sight = r_frd_c @ t_cd
-    angle_x, angle_y = _image_angles(t_cd)
-    return LandingTargetFields(
-        frame=MAV_FRAME_BODY_FRD,
-        x=float(line_of_sight[0]),
-        y=float(line_of_sight[1]),
-        z=float(line_of_sight[2]),
-        q=quaternion_wxyz(r_frd_c @ np.asarray(r_cd, dtype=float) @ R_DF),
-        distance=float(np.linalg.norm(t_cd)),
-        angle_x=angle_x,
-        angle_y=angle_y,
-    )
+    return _fields(MAV_FRAME_BODY_FRD, r_frd_c @ t_cd, r_frd_c, r_cd, t_cd)
 
 
 def px4_fields(
@@ -172,17 +174,7 @@ def px4_fields(
     t_cd = np.asarray(t_cd, dtype=float)
     r_ned_b = vehicle.rotation_ned_frd @ S_FLIP  # FLU body axes in NED
     position = vehicle.position_ned_m + r_ned_b @ (mount.t_bc + mount.r_bc @ t_cd)
-    angle_x, angle_y = _image_angles(t_cd)
-    return LandingTargetFields(
-        frame=MAV_FRAME_LOCAL_NED,
-        x=float(position[0]),
-        y=float(position[1]),
-        z=float(position[2]),
-        q=quaternion_wxyz(r_ned_b @ mount.r_bc @ np.asarray(r_cd, dtype=float) @ R_DF),
-        distance=float(np.linalg.norm(t_cd)),
-        angle_x=angle_x,
-        angle_y=angle_y,
-    )
+    return _fields(MAV_FRAME_LOCAL_NED, position, r_ned_b @ mount.r_bc, r_cd, t_cd)
 
 
 def landing_target_fields(

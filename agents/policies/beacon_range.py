@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.policies.base import Policy
 from agents.policies.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
 from estimation.landing_target import (
     ACCEPTED,
@@ -42,7 +43,7 @@ from estimation.landing_target import (
     LandingTargetConfig,
     LandingTargetFilter,
 )
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from landing_env.config import ActionConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import ConfigError
@@ -60,7 +61,7 @@ class PrecLandState(str, Enum):
 
 
 @dataclass
-class BeaconRangeConfig:
+class BeaconRangeConfig(Limited):
     """Settings of the baseline (PX4 parameter names in the comments)."""
 
     #: horizontal acceptance radius before the descent, metres (PLD_HACC_RAD)
@@ -91,11 +92,8 @@ class BeaconRangeConfig:
     #: the landing-target filter (gate in standard deviations: 10, the paper's)
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
 
-    def __post_init__(self) -> None:
-        require_limits(self)
 
-
-class BeaconRangePolicy:
+class BeaconRangePolicy(Policy):
     """PX4-style precision landing on the beacon estimate (see the module docstring)."""
 
     name = "beacon-range"
@@ -135,9 +133,6 @@ class BeaconRangePolicy:
             self.transitions.append((self.time_s, state.value, reason))
         self.state, self.reason, self._state_s = state, reason, 0.0
         self._hover_s = 0.0
-
-    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        return self.act(observation)
 
     def height_m(self, observation: dict[str, np.ndarray]) -> float:
         """The rangefinder's range (the last one when it has none), else the beacon's z."""

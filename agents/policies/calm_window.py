@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.frames import tilt_deg
-from estimation.limits import POSITIVE, Limit, limited, require_limits
+from estimation.limits import POSITIVE, Limit, Limited, limited
 from landing_env.anticipation.deck_history import HISTORY_FEATURES
 
 _Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
@@ -20,7 +20,7 @@ _VALID = HISTORY_FEATURES.index("valid")
 
 # ------------------------------------------------------------------------------ calm windows
 @dataclass
-class CalmConfig:
+class CalmConfig(Limited):
     """When the deck counts as calm enough to start the final descent."""
 
     #: sliding window of estimated deck motion that must have been calm, seconds (as long as
@@ -41,9 +41,6 @@ class CalmConfig:
     max_heave_rate: float = limited(0.15, POSITIVE)
     #: fewer valid estimates than this fraction of the window: not calm (nothing to judge by)
     min_valid_fraction: float = limited(0.8, Limit(0.0, 1.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 @dataclass

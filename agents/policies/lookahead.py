@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.common.cards import check_compatible, env_signature
+from agents.policies.base import Policy
 from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.oracle import TriedCommit
 from agents.policies.timing import TrainedTimingPolicy
@@ -298,7 +299,7 @@ class LookaheadTimingWrapper(gym.Wrapper):
         return self.observer.observe(self._decisions), total, terminated, truncated, info
 
 
-class LookaheadTimingPolicy:
+class LookaheadTimingPolicy(Policy):
     """A model trained on :class:`LookaheadTimingWrapper`, acting in the bare timing task.
 
     Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
@@ -353,9 +354,6 @@ class LookaheadTimingPolicy:
         action = self.trained.act(features)
         self.checks.append((decision, features, action))
         return action
-
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
 
 def find_lookahead(env: Any) -> LookaheadTimingWrapper | None:

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.policies.base import Policy
 from landing_env.config import TouchdownConfig
 from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.errors import require_range
@@ -90,7 +91,7 @@ def choose(candidates: list[Candidate]) -> Candidate:
     return max(pool, key=lambda c: (c.margin, -c.waits))
 
 
-class OracleTimingPolicy:
+class OracleTimingPolicy(Policy):
     """Commit at the best moment, found by trying every commit in a saved copy of the episode.
 
     Acts in ``DeckLandingTiming-v0`` like the other timing policies (0 = wait, 1 = commit), but
@@ -114,9 +115,6 @@ class OracleTimingPolicy:
     def reset(self) -> None:
         self.last_plan = None
         self._decisions = 0
-
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
     def act(self, observation: np.ndarray) -> int:
         del observation  # the oracle reads the environment
@@ -179,7 +177,7 @@ class TriedCommit:
     margin: float
 
 
-class DeckOracleTimingPolicy:
+class DeckOracleTimingPolicy(Policy):
     """``deck-oracle``: the bound of deck prediction in the strict sense, the timing that
     **knows the deck's future motion** and nothing else to come.
 
@@ -241,9 +239,6 @@ class DeckOracleTimingPolicy:
     def reset(self) -> None:
         self._decisions = 0
         self.chances = []
-
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
     def act(self, observation: np.ndarray) -> int:
         del observation  # the oracle reads the environment

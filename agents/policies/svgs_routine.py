@@ -41,6 +41,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from agents.common.cards import observation_signature
+from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from estimation.frames import R_BC, levelled_deck_pose
@@ -265,7 +266,7 @@ def _load_timing_model(config: RoutineConfig) -> TrainedTimingPolicy | None:
 
 
 # ------------------------------------------------------------------------------ the routine
-class SvgsRoutinePolicy:
+class SvgsRoutinePolicy(Policy):
     """The SVGS routine as a ``DeckLanding-v2`` policy (see the module docstring)."""
 
     name = "svgs-routine"
@@ -338,9 +339,6 @@ class SvgsRoutinePolicy:
         if state is RoutineState.HOLD:
             self._hold_s = self._waited_s = 0.0
             self._decision_countdown = 0
-
-    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        return self.act(observation)
 
     # -------------------------------------------------------------- sensing helpers
     def height_m(self, observation: dict[str, np.ndarray]) -> float:

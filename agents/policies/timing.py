@@ -10,7 +10,7 @@ functions here are its builders.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from agents.common.cards import (
     model_class,
     read_metadata,
 )
+from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.registry import MODEL_DIR, find_model
 from estimation.anticipation.linear_predictors import LinearTiltPredictor
@@ -46,17 +47,7 @@ _VALID = HISTORY_FEATURES.index("valid")
 
 
 # ------------------------------------------------------------------------------ timing policies
-class TimingPolicy(Protocol):
-    """A policy of the timing task: 0 = wait, 1 = commit."""
-
-    name: str
-
-    def reset(self) -> None: ...
-
-    def act(self, observation: np.ndarray) -> int: ...
-
-
-class LandNowPolicy:
+class LandNowPolicy(Policy):
     """Commit at the first decision: the lower bar."""
 
     name = "land-now"
@@ -67,11 +58,8 @@ class LandNowPolicy:
     def act(self, observation: np.ndarray) -> int:
         return 1
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class QuiescentPolicy:
+class QuiescentPolicy(Policy):
     """Commit when :func:`predict_calm` predicts a calm window as long as the descent."""
 
     name = "quiescent"
@@ -92,11 +80,8 @@ class QuiescentPolicy:
         self.last = predict_calm(parts.history, self.dt, self.config)
         return int(self.last.calm)
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class PredictivePolicy:
+class PredictivePolicy(Policy):
     """Commit when the chance of a good contact is worth more than waiting for a better one.
 
     The chance: that the deck's tilt at the contact is within the limit, by a
@@ -176,10 +161,6 @@ class PredictivePolicy:
         self.last = None
         self.last_probability = 0.0
 
-    def probability(self, observation: np.ndarray) -> float:
-        """The predicted chance that a commit now meets a deck within the tilt limit."""
-        return self._chance(self.layout.decode(observation).history)
-
     def threshold(self, wait_fraction: float) -> float:
         """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of
         waiting on."""
@@ -198,11 +179,8 @@ class PredictivePolicy:
         chance = self._chance(parts.history)
         return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
 
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
-
-class TrainedTimingPolicy:
+class TrainedTimingPolicy(Policy):
     """A trained SB3 model (PPO or DQN) of the timing task, acting deterministically.
 
     The model's card (:mod:`agents.common.cards`: env id and version, observation layout,
@@ -280,9 +258,6 @@ class TrainedTimingPolicy:
         else:
             action, _ = self.model.predict(observation, deterministic=True)
         return int(np.asarray(action).reshape(-1)[0])
-
-    def __call__(self, observation: np.ndarray) -> int:
-        return self.act(observation)
 
 
 # ------------------------------------------------------------------------------ builders

@@ -101,24 +101,15 @@ class RandomiseSettings:
 
     def __post_init__(self) -> None:
 
-        if not self.scenarios:
-            raise ConfigError("scenarios", "needs at least one scenario")
-        for name in self.scenarios:
-            if name not in SCENARIOS:
-                raise ConfigError(
-                    "scenarios", f"{name!r} is not allowed; choose from {list(SCENARIOS)}"
-                )
-        if not self.sensing:
-            raise ConfigError("sensing", "needs at least one sensing profile")
-        for name in self.sensing:
-            if name not in SENSING_PROFILES:
-                raise ConfigError(
-                    "sensing", f"{name!r} is not allowed; choose from {list(SENSING_PROFILES)}"
-                )
-        if self.estimator not in ESTIMATOR_NAMES:
-            raise ConfigError(
-                "estimator", f"{self.estimator!r} is not allowed; choose {ESTIMATOR_NAMES}"
-            )
+        for key, what, allowed in (
+            ("scenarios", "scenario", SCENARIOS),
+            ("sensing", "sensing profile", SENSING_PROFILES),
+        ):
+            if not getattr(self, key):
+                raise ConfigError(key, f"needs at least one {what}")
+            for name in getattr(self, key):
+                require_choice(key, name, allowed)
+        require_choice("estimator", self.estimator, ESTIMATOR_NAMES)
         self.wind_speed_mps = list(_pair("wind_speed_mps", self.wind_speed_mps, 0.0, 20.0))
         if self.start_height_m:
             self.start_height_m = list(_pair("start_height_m", self.start_height_m, 0.3, 3.0))

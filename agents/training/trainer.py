@@ -49,7 +49,7 @@ from agents.policies.timing import shipped_timing_model
 from agents.training.imitation import ImitationSettings, imitate_and_save
 from agents.training.learning_curve import read_learning_curve, write_learning_curve
 from agents.training.sampler import RandomiseSettings, make_randomised_env, sensing_signatures
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited, require_limits
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, SCENARIOS, TASKS, TIMING_TASK
@@ -68,7 +68,7 @@ TASK_ALGOS: dict[str, tuple[str, ...]] = {
 
 
 @dataclass
-class EvalSettings:
+class EvalSettings(Limited):
     """The evaluation during training (``EvalCallback``) on held-out seeds."""
 
     #: evaluate every this many environment steps (summed over the parallel environments)
@@ -76,9 +76,6 @@ class EvalSettings:
     episodes: int = limited(40, Limit(1))
     #: seed of the evaluation environment; far from the training seeds
     seed: int = 900_000
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 @dataclass

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from scipy.stats import chi2
 
-from estimation.errors import ConfigError, require_choice, require_range
+from estimation.errors import ConfigError, require_choice
 from estimation.fusion.model import TwoWaves, deck_spectrum
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import (
@@ -50,6 +50,10 @@ def _check_sigmas(key: str, sigmas: tuple[float, ...]) -> None:
             raise ConfigError(key, f"{sigmas!r}: every sigma must be > 0 (or .inf: unused)")
 
 
+#: the identification's windows and refit interval, seconds
+_WINDOW_S = Limit(0.0, 1e4, low_inclusive=False)
+
+
 @dataclass
 class FusionConfig:
     """The EKF of the relative drone–deck state (see :mod:`estimation.fusion`).
@@ -72,7 +76,7 @@ class FusionConfig:
     )
     #: the gate as a Mahalanobis distance in standard deviations (replaces gate_probability
     #: when set; PAPER_GATE_SD = 10 is the SVGS paper's); None: the chi-square gate above
-    gate_sd: float | None = None
+    gate_sd: float | None = limited(None, Limit(0.0, 1e3, low_inclusive=False))
     #: no accepted pose update for this long: the estimate is invalid and the filter
     #: re-initialises from the next pose measurement, seconds
     reset_timeout_s: float = limited(1.0, POSITIVE, physical=Limit.positive(60.0))
@@ -109,10 +113,10 @@ class FusionConfig:
     identify_deck_motion: bool = True
     #: the window of the latest motion the fit uses, the minimum before the first fit, the
     #: interval between fits and the spacing of the (block-averaged) samples, s
-    identify_window_s: float = 90.0
-    identify_min_window_s: float = 15.0
-    identify_refit_s: float = 1.0
-    identify_sample_s: float = 0.5
+    identify_window_s: float = limited(90.0, _WINDOW_S)
+    identify_min_window_s: float = limited(15.0, _WINDOW_S)
+    identify_refit_s: float = limited(1.0, _WINDOW_S)
+    identify_sample_s: float = limited(0.5, Limit(0.01, 5.0))
     #: the order of the autoregressive fit (even: pole pairs; 4 is the two components alone)
     identify_ar_order: int = 8
     #: the identified factors are held inside these periods (s) and damping ratios
@@ -122,11 +126,11 @@ class FusionConfig:
     #: window's RMS: room for what a 90 s window leaves uncertain.  On the tuning motions
     #: (4 runs of 120 s) gain 1 gave roll/pitch NEES 2.47 and MAE 0.62 / 0.55 deg, gain 2
     #: NEES 2.15 (chi-square mean 2) and 0.61 / 0.57
-    identify_noise_gain: float = 2.0
+    identify_noise_gain: float = limited(2.0, Limit(0.0, 1e3, low_inclusive=False))
     #: the broad model before the first fit without a prior: both axes two factors at these
     #: periods (s) with this damping ratio, at deck_attitude_rms_deg
     identify_initial_periods_s: tuple[float, ...] = (10.0, 5.0)
-    identify_initial_damping: float = 0.5
+    identify_initial_damping: float = limited(0.5, Limit(0.005, 10.0))
     #: the pose sources' roll and pitch errors are not independent from frame to frame
     #: (tight's on realistic sensing: autocorrelation 0.5-0.75 at a lag of one frame, still
     #: 0.07-0.34 at five, and 1.25-1.6 times its own sigma).  They are modelled as a white
@@ -139,9 +143,9 @@ class FusionConfig:
     #: sigma, at sea state 3 (slower, so longer-lived pose-dependent errors) 0.93 with rho
     #: 0.8 and 1.6 times; pooled: 0.85, 170 ms (rho 0.75), 1.45.  0: independent errors,
     #: no extra states
-    tilt_error_correlation_s: float = 0.17
-    tilt_error_coloured_share: float = 0.85
-    tilt_error_sigma_scale: float = 1.45
+    tilt_error_correlation_s: float = limited(0.17, Limit(0.0, 10.0))
+    tilt_error_coloured_share: float = limited(0.85, Limit(0.0, 1.0, high_inclusive=False))
+    tilt_error_sigma_scale: float = limited(1.45, Limit(0.0, 100.0, low_inclusive=False))
     #: IMU accelerometer white-noise density, m/s^2/sqrt(Hz) and bias random walk, m/s^3/sqrt(Hz)
     accel_noise_density: float = limited(1.0e-3, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
     accel_bias_random_walk: float = limited(4.0e-4, NON_NEGATIVE, physical=IMU_NOISE_DENSITY)
@@ -198,8 +202,6 @@ class FusionConfig:
         for name in self.covariance_sources:
             require_choice("covariance_sources", name, POSE_SOURCES)
         require_limits(self)
-        if self.gate_sd is not None:
-            require_range("gate_sd", self.gate_sd, 0.0, 1e3, low_inclusive=False)
         self.deck_roll_periods_s = tuple(float(v) for v in self.deck_roll_periods_s)
         self.deck_pitch_periods_s = tuple(float(v) for v in self.deck_pitch_periods_s)
         self.deck_attitude_rms_deg = tuple(float(v) for v in self.deck_attitude_rms_deg)
@@ -224,9 +226,6 @@ class FusionConfig:
             _check_sigmas(key, getattr(self, key))
 
     def _check_identification(self) -> None:
-        for name in ("identify_window_s", "identify_min_window_s", "identify_refit_s"):
-            require_range(name, getattr(self, name), 0.0, 1e4, low_inclusive=False)
-        require_range("identify_sample_s", self.identify_sample_s, 0.01, 5.0)
         if self.identify_ar_order not in range(4, 17, 2):
             raise ConfigError("identify_ar_order", f"{self.identify_ar_order!r}: 4, 6, ..., 16")
         if self.identify_min_window_s > self.identify_window_s:
@@ -236,21 +235,6 @@ class FusionConfig:
                 "identify_min_window_s",
                 "needs 3 * identify_ar_order samples (identify_sample_s apart) or more",
             )
-        require_range(
-            "identify_noise_gain", self.identify_noise_gain, 0.0, 1e3, low_inclusive=False
-        )
-        require_range("identify_initial_damping", self.identify_initial_damping, 0.005, 10.0)
-        require_range("tilt_error_correlation_s", self.tilt_error_correlation_s, 0.0, 10.0)
-        require_range(
-            "tilt_error_coloured_share",
-            self.tilt_error_coloured_share,
-            0.0,
-            1.0,
-            high_inclusive=False,
-        )
-        require_range(
-            "tilt_error_sigma_scale", self.tilt_error_sigma_scale, 0.0, 100.0, low_inclusive=False
-        )
         for key, low, high in (
             ("identify_period_range_s", 0.5, 1e3),
             ("identify_initial_periods_s", 0.5, 1e3),

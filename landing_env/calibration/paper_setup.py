@@ -187,10 +187,6 @@ def climb_rig() -> TofRigConfig:
     )
 
 
-#: where the paper-setup scenarios' calibration files live (relative to the project root)
-CALIBRATION_SUBDIR = Path("configs") / "calibration" / "paper-setup"
-
-
 def rig_source_config(scenario: str = "paper-setup-crhf") -> DeckLandingConfig:
     """The scenario with the exact models, for making its calibration files (the files to
     be made cannot be read yet)."""

@@ -29,11 +29,10 @@ from landing_env.world import PhysicsReport, World
 
 #: bounds of the deck-pose observation: metres for x, y, z and radians for the angles
 POSE_LOW = np.array([-50.0, -50.0, -50.0, -math.pi, -math.pi / 2, -math.pi], dtype=np.float32)
-POSE_HIGH = -POSE_LOW
 
 
 def pose_bounds(arena_max_height_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """The deck pose's observation bounds: POSE_LOW/POSE_HIGH, the positions widened to
+    """The deck pose's observation bounds: POSE_LOW and its negative, the positions widened to
     20 m beyond the arena's ceiling where that is higher (an approach from 100 m)."""
     low = POSE_LOW.copy()
     low[:3] = -max(float(-POSE_LOW[0]), float(arena_max_height_m) + 20.0)
@@ -270,7 +269,6 @@ class DeckLandingBaseEnv(gym.Env):
         self._touchdown: TouchdownMetrics | None = None
         self._potential = 0.0
         self._reward_terms = zero_terms()
-        self._last_image: np.ndarray | None = None
         self._bounded = BoundedObservation()
 
     # ------------------------------------------------------------------ Gymnasium API

@@ -75,7 +75,9 @@ class ControllerGains:
     max_climb_rate: float = limited(3.0, physical=Limit.positive(50.0))
     max_descent_rate: float = limited(2.0, physical=Limit.positive(50.0))
     # acceleration and tilt limits
-    max_tilt: float = math.radians(35.0)
+    max_tilt: float = limited(
+        math.radians(35.0), Limit(0.0, math.radians(80.0), low_inclusive=False)
+    )
     max_accel_up: float = limited(6.0, physical=Limit.positive(100.0))
     max_accel_down: float = limited(
         5.0, Limit(0.0, GRAVITY, high_inclusive=False), physical=Limit.positive(100.0)
@@ -84,7 +86,7 @@ class ControllerGains:
     att_p_rp: float = limited(6.5, physical=PID_GAIN)
     att_p_yaw: float = limited(2.8, physical=PID_GAIN)
     #: the yaw set-point is kept within this of the actual yaw (rad)
-    max_yaw_error: float = 0.5
+    max_yaw_error: float = limited(0.5, Limit(0.0, math.pi, low_inclusive=False))
     # rate limits (rad/s)
     max_rate_rp: float = limited(math.radians(220.0), POSITIVE, physical=Limit.positive(100.0))
     max_rate_yaw: float = limited(math.radians(200.0), POSITIVE, physical=Limit.positive(100.0))
@@ -107,9 +109,7 @@ class ControllerGains:
             require_range(f.name, value, 0.0)
             if not math.isfinite(value):
                 raise ConfigError(f.name, f"{value!r} is not finite")
-        require_range("max_tilt", self.max_tilt, 0.0, math.radians(80.0), low_inclusive=False)
         require_limits(self)
-        require_range("max_yaw_error", self.max_yaw_error, 0.0, math.pi, low_inclusive=False)
 
 
 @dataclass(frozen=True)

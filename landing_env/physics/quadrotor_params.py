@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_choice, require_range
 
 #: the vehicle YAML shipped with the package
@@ -42,46 +43,46 @@ class QuadrotorParams:
     name: str
     urdf_path: Path
     #: total mass (kg) and principal inertia about the CoM (kg m^2, body axes)
-    mass: float
+    mass: float = limited(limit=Limit(0.0, 100.0, low_inclusive=False))
     inertia_diag: np.ndarray
     #: horizontal distance from the CoM to each rotor hub (m)
-    arm_length: float
+    arm_length: float = limited(limit=Limit(0.0, 5.0, low_inclusive=False))
     #: 4x3 rotor hub positions in B (m), order front-left, front-right, back-right, back-left
     rotor_positions_b: np.ndarray
     #: rotation sense of each rotor about body +z (+1 counter-clockwise seen from above)
     spin_directions: np.ndarray
     rotor_radius: float
     #: thrust k_f w^2 (N) and yaw reaction torque k_m w^2 (N m) of one rotor at w rad/s
-    k_f: float
-    k_m: float
-    motor_time_constant: float
-    omega_min: float
+    k_f: float = limited(limit=POSITIVE)
+    k_m: float = limited(limit=POSITIVE)
+    motor_time_constant: float = limited(limit=Limit(0.0, 1.0, low_inclusive=False))
+    omega_min: float = limited(limit=NON_NEGATIVE)
     omega_max: float
     #: linear body drag: force_b = -diag(linear_drag_b) v_air_b (N per m/s)
     linear_drag_b: np.ndarray
     ground_effect_enabled: bool
     ground_effect_model: str
-    ground_effect_coefficient: float
-    ground_effect_max_gain: float
-    ground_effect_ray_length: float
+    ground_effect_coefficient: float = limited(limit=Limit(0.0, 10.0))
+    ground_effect_max_gain: float = limited(limit=Limit(1.0, 10.0))
+    ground_effect_ray_length: float = limited(limit=Limit(0.0, 100.0, low_inclusive=False))
     #: body-lift coefficient K_b of the sanchez_cuevas model
-    ground_effect_body_coefficient: float
+    ground_effect_body_coefficient: float = limited(limit=Limit(0.0, 10.0))
     #: landing gear: contact stiffness (N/m) and damping (N s/m) of each foot, friction
     #: coefficient foot-deck (see quadrotor.yaml for the sources)
-    gear_stiffness: float
-    gear_damping: float
-    gear_friction: float
+    gear_stiffness: float = limited(limit=Limit(0.0, 1e7))
+    gear_damping: float = limited(limit=Limit(0.0, 1e5))
+    gear_friction: float = limited(limit=Limit(0.0, 5.0))
     #: camera origin in B (m); the camera looks down body -z
     camera_offset_b: np.ndarray
     #: body z of the ToF sensors (m) and their distance from the camera axis (m)
     tof_mount_z: float
-    tof_arm_distance: float
+    tof_arm_distance: float = limited(limit=POSITIVE)
     #: the part of ``linear_drag_b`` that is the airframe's own (arms, body, gear: it acts
     #: whatever the rotors do); the rest is rotor drag (blade flapping and induced drag), which
     #: grows with the rotor speed, so it is scaled by the mean rotor speed over the hover speed
     #: (at hover the whole ``linear_drag_b`` acts; with the motors cut to idle, little of the
     #: rotor part does).  1 keeps the whole drag whatever the rotor speed
-    drag_airframe_fraction: float = 1.0
+    drag_airframe_fraction: float = limited(1.0, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
         for name in ("inertia_diag", "rotor_positions_b", "spin_directions"):
@@ -94,14 +95,13 @@ class QuadrotorParams:
     def _validate(self) -> None:
         if not self.urdf_path.is_file():
             raise ConfigError("urdf_path", f"{self.urdf_path} is not a file")
-        require_range("mass", self.mass, 0.0, 100.0, low_inclusive=False)
+        require_limits(self)
         _require_shape("inertia_diag", self.inertia_diag, (3,))
         ixx, iyy, izz = self.inertia_diag
         if min(ixx, iyy, izz) <= 0.0:
             raise ConfigError("inertia_diag", "all three moments must be > 0")
         if ixx + iyy < izz or iyy + izz < ixx or izz + ixx < iyy:
             raise ConfigError("inertia_diag", "moments violate the triangle inequality")
-        require_range("arm_length", self.arm_length, 0.0, 5.0, low_inclusive=False)
         _require_shape("rotor_positions_b", self.rotor_positions_b, (4, 3))
         radii = np.hypot(self.rotor_positions_b[:, 0], self.rotor_positions_b[:, 1])
         if np.max(np.abs(radii - self.arm_length)) > 1e-3:
@@ -125,12 +125,6 @@ class QuadrotorParams:
             low_inclusive=False,
             bounds_from=f"arm_length = {self.arm_length}",
         )
-        require_range("k_f", self.k_f, 0.0, low_inclusive=False)
-        require_range("k_m", self.k_m, 0.0, low_inclusive=False)
-        require_range(
-            "motor_time_constant", self.motor_time_constant, 0.0, 1.0, low_inclusive=False
-        )
-        require_range("omega_min", self.omega_min, 0.0)
         require_range(
             "omega_max",
             self.omega_max,
@@ -146,40 +140,13 @@ class QuadrotorParams:
         _require_shape("linear_drag_b", self.linear_drag_b, (3,))
         if np.any(self.linear_drag_b < 0.0):
             raise ConfigError("linear_drag_b", "drag coefficients must be >= 0")
-        require_range("drag_airframe_fraction", self.drag_airframe_fraction, 0.0, 1.0)
         require_choice("ground_effect_model", self.ground_effect_model, _GROUND_EFFECT_MODELS)
-        require_range("ground_effect_coefficient", self.ground_effect_coefficient, 0.0, 10.0)
-        require_range("ground_effect_max_gain", self.ground_effect_max_gain, 1.0, 10.0)
-        require_range(
-            "ground_effect_ray_length",
-            self.ground_effect_ray_length,
-            0.0,
-            100.0,
-            low_inclusive=False,
-        )
-        require_range(
-            "ground_effect_body_coefficient", self.ground_effect_body_coefficient, 0.0, 10.0
-        )
         # 0 = PyBullet's rigid contact; otherwise a few mm under a touchdown load
-        require_range("gear_stiffness", self.gear_stiffness, 0.0, 1e7)
-        require_range("gear_damping", self.gear_damping, 0.0, 1e5)
         if (self.gear_stiffness > 0.0) != (self.gear_damping > 0.0):
             raise ConfigError(
                 "gear_damping", "stiffness and damping are both 0 (rigid) or both > 0"
             )
-        require_range("gear_friction", self.gear_friction, 0.0, 5.0)
         _require_shape("camera_offset_b", self.camera_offset_b, (3,))
-        require_range("tof_arm_distance", self.tof_arm_distance, 0.0, low_inclusive=False)
-
-    @property
-    def kf(self) -> float:
-        """Alias of :attr:`k_f` (the name landing_env.world uses)."""
-        return self.k_f
-
-    @property
-    def camera_offset(self) -> np.ndarray:
-        """Alias of :attr:`camera_offset_b`, the camera origin t_bc in B (m)."""
-        return self.camera_offset_b
 
     @property
     def weight(self) -> float:

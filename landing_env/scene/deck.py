@@ -28,6 +28,7 @@ from estimation.array_files import write_atomic
 from estimation.frames import R_PD, tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.landmarks import Landmark, LandmarkLayout
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from landing_env._quiet import client_id
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.resources import cache_dir
 
@@ -55,12 +56,6 @@ _ASSET_VERSION = 1
 GENERATED_DIR = cache_dir() / f"assets-v{_ASSET_VERSION}"
 
 
-def _client_id(client: int | BulletClient) -> int:
-    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
-    ``_client``; it has no public accessor)."""
-    return int(getattr(client, "_client", client))
-
-
 def default_pad_centres_p() -> tuple[tuple[float, float], ...]:
     """Pad centres in P (x, y): the ToF touch points of a level drone centred over a level deck.
 
@@ -84,7 +79,7 @@ class DeckSurfaceConfig:
     tag_family: str = TAG_FAMILY
     tag_id: int = limited(0, Limit(0, 586))
     #: edge of the tag's black border, metres (pupil-apriltags' ``tag_size``)
-    tag_size: float = limited(0.30, physical=Limit.positive(1e3))
+    tag_size: float = limited(0.30, POSITIVE, physical=Limit.positive(1e3))
     #: draw the tag; with pads on the tag may be left out, as pads sit on its area
     tag: bool = True
     #: width of the white quiet zone round the tag, in tag cells (tag_size / 8)
@@ -108,7 +103,6 @@ class DeckSurfaceConfig:
         require_choice("tag_family", self.tag_family, (TAG_FAMILY,))
         # tag36h11 has 587 codes
         outer = self.tag_size * (TAG_CELLS + 2 * self.quiet_zone_cells) / TAG_CELLS
-        require_range("tag_size", self.tag_size, 0.0, low_inclusive=False)
         if outer > self.size:
             raise ConfigError(
                 "tag_size",
@@ -357,7 +351,7 @@ def create_deck_body(
     """
     if mass <= 0.0:
         raise ValueError(f"mass must be > 0 for a dynamic deck body, got {mass}")
-    client = _client_id(client)
+    client = client_id(client)
     obj_path, png_path = deck_asset_files(config, cache_dir)
     half = 0.5 * config.size
     collision = p.createCollisionShape(

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.limits import Limit, limited, require_limits
+from estimation.limits import Limit, Limited, limited
 from landing_env.errors import require_range
 from landing_env.stewart.motion import MotionSource, sample_poses
 
@@ -49,7 +49,7 @@ _CHUNK_OFFSET = 1 << 32
 
 
 @dataclass(frozen=True)
-class HelideckMonitorConfig:
+class HelideckMonitorConfig(Limited):
     """What the ship's HMS reports to the drone, and how well (sources in the module's doc)."""
 
     #: samples per second on the link (HCA: at least 2; an MRU gives up to 200)
@@ -60,9 +60,6 @@ class HelideckMonitorConfig:
     position_noise_m: float = limited(0.05, Limit(0.0, 10.0))
     #: ... or this fraction of the channel's standard deviation, whichever is larger
     position_noise_fraction: float = limited(0.05, Limit(0.0, 1.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
     @property
     def dt_s(self) -> float:

@@ -41,6 +41,17 @@ from landing_env.sensors.tag_view import (
 _NEXT_CORNER = [1, 2, 3, 0]
 
 
+def tag_detector(c: CameraConfig) -> AprilTagDetector:
+    """The AprilTag detector the camera settings ``c`` ask for."""
+    return AprilTagDetector(
+        quad_decimate=c.quad_decimate,
+        quad_sigma=c.quad_sigma,
+        refine_edges=c.refine_edges,
+        decode_sharpening=c.decode_sharpening,
+        nthreads=c.detector_threads,
+    )
+
+
 class CameraSensor(CameraRenderer):
     """The downward camera of one PyBullet client (see the module docstring)."""
 
@@ -56,17 +67,7 @@ class CameraSensor(CameraRenderer):
         self._tag_models: dict[float, np.ndarray] = {}
         self._detector: AprilTagDetector | None = None
         if config.mode == "render":
-            self._detector = self._make_detector()
-
-    def _make_detector(self) -> AprilTagDetector:
-        c = self.config
-        return AprilTagDetector(
-            quad_decimate=c.quad_decimate,
-            quad_sigma=c.quad_sigma,
-            refine_edges=c.refine_edges,
-            decode_sharpening=c.decode_sharpening,
-            nthreads=c.detector_threads,
-        )
+            self._detector = tag_detector(config)
 
     def close(self) -> None:
         """Free the detector and unload the EGL plugin if this sensor loaded it."""
@@ -184,46 +185,30 @@ class CameraSensor(CameraRenderer):
         """
         if len(tags) > 1:
             return self._capture_many(timestamp, t_wc, r_wc, tags)
-        only = tags[0]
-        t_wd, r_wd, tag_size, tag_id = only.t_wl, only.r_wl, only.size, only.tag_id
         if self.config.mode == "render":
-            return self._capture_render(timestamp, t_wc, r_wc, t_wd, r_wd, tag_size, tag_id)
-        return self._capture_project(timestamp, t_wc, r_wc, t_wd, r_wd, tag_size, tag_id)
+            return self._capture_render(timestamp, t_wc, r_wc, tags[0])
+        return self._capture_project(timestamp, t_wc, r_wc, tags[0])
 
     def _capture_project(
-        self,
-        timestamp: float,
-        t_wc: np.ndarray,
-        r_wc: np.ndarray,
-        t_wd: np.ndarray,
-        r_wd: np.ndarray,
-        tag_size: float,
-        tag_id: int,
+        self, timestamp: float, t_wc: np.ndarray, r_wc: np.ndarray, tag: TagPlacement
     ) -> CameraFrame:
         # draw the random numbers every frame so the stream does not depend on visibility
         dropped = self.rng.random() < self.config.dropout_prob
         unit = self.rng.normal(0.0, 1.0, size=(4, 2))
-        view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
+        view = self.project_tag(t_wc, r_wc, tag.t_wl, tag.r_wl, tag.size)
         if view.miss_reason:
             return CameraFrame(timestamp, (), None, view.miss_reason)
         if dropped:
             return CameraFrame(timestamp, (), None, MISS_DROPOUT)
         noise = unit * self.corner_sigma_px(t_wc, r_wc, view)
-        detection = TagDetection(tag_id=tag_id, corners_px=view.corners_px + noise)
+        detection = TagDetection(tag_id=tag.tag_id, corners_px=view.corners_px + noise)
         return CameraFrame(timestamp, (detection,), None, "")
 
     def _capture_render(
-        self,
-        timestamp: float,
-        t_wc: np.ndarray,
-        r_wc: np.ndarray,
-        t_wd: np.ndarray,
-        r_wd: np.ndarray,
-        tag_size: float,
-        tag_id: int,
+        self, timestamp: float, t_wc: np.ndarray, r_wc: np.ndarray, tag: TagPlacement
     ) -> CameraFrame:
         dropped = self.rng.random() < self.config.dropout_prob
-        view = self.project_tag(t_wc, r_wc, t_wd, r_wd, tag_size)
+        view = self.project_tag(t_wc, r_wc, tag.t_wl, tag.r_wl, tag.size)
         k = self.intrinsics
         # EGL re-creates its framebuffer whenever the size changes, so windows cost more there
         if self.config.render_region == "full" or self.active_renderer == "egl":
@@ -242,7 +227,7 @@ class CameraSensor(CameraRenderer):
             origin = np.array([x0, y0], dtype=float)
         if self._detector is None:
             raise RuntimeError("the camera has been closed")
-        found = [d for d in self._detector.detect(patch) if d.tag_id == tag_id]
+        found = [d for d in self._detector.detect(patch) if d.tag_id == tag.tag_id]
         if not found:
             # say why when the geometry explains it, else the detector simply missed it
             return CameraFrame(timestamp, (), image, view.miss_reason or MISS_NOT_DETECTED)

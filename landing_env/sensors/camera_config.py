@@ -16,6 +16,9 @@ from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_li
 from landing_env.errors import ConfigError, require_choice, require_range
 from landing_env.sensors.camera_profiles import PROFILES
 
+#: the camera's modes: render the scene and detect the tag, or project the tag's corners
+CAMERA_MODES = ("render", "project")
+
 
 @dataclass
 class CameraConfig:
@@ -87,7 +90,7 @@ class CameraConfig:
     #: (rolling shutter); the others add exposure blur, noise, vignetting and response
     profile: str = "ideal"
     #: exposure time, seconds; None = the profile's
-    exposure_s: float | None = None
+    exposure_s: float | None = limited(None, Limit(0.0, 0.1))
     #: analog gain (1 = the sensor's 0 dB, where full well meets the ADC's top)
     gain: float = limited(1.0, Limit(0.0, 64.0, low_inclusive=False))
     #: direction towards the sun in the world (x, y, z) for specular glare on the deck;
@@ -107,7 +110,7 @@ class CameraConfig:
     light_specular: float = limited(0.0, Limit(0.0, 1.0))
 
     def __post_init__(self) -> None:
-        require_choice("mode", self.mode, ("render", "project"))
+        require_choice("mode", self.mode, CAMERA_MODES)
         require_limits(self)
         if self.cx is not None:
             require_range(
@@ -132,8 +135,6 @@ class CameraConfig:
         require_choice("render_region", self.render_region, ("tag", "full"))
         require_choice("renderer", self.renderer, ("planar", "bullet"))
         require_choice("profile", self.profile, tuple(PROFILES))
-        if self.exposure_s is not None:
-            require_range("exposure_s", self.exposure_s, 0.0, 0.1)
         if self.sun_direction_w is not None:
             sun = np.asarray(self.sun_direction_w, dtype=float)
             if sun.shape != (3,) or not np.all(np.isfinite(sun)) or np.linalg.norm(sun) == 0:

@@ -17,6 +17,7 @@ import numpy as np
 import pybullet as p
 from pybullet_utils.bullet_client import BulletClient
 
+from landing_env._quiet import client_id
 from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.camera_profiles import camera_profile
 from landing_env.sensors.camera_realism import Glare, ImageFormation, RelativeMotion
@@ -38,12 +39,6 @@ _EGL_CLIENTS: set[int] = set()
 
 #: OpenGL camera axes in the OpenCV camera frame: x right, y up, looking along -z.
 _CV_FROM_GL = np.diag([1.0, -1.0, -1.0])
-
-
-def _client_id(client: int | BulletClient) -> int:
-    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
-    ``_client``; it has no public accessor)."""
-    return int(getattr(client, "_client", client))
 
 
 def opengl_projection(
@@ -95,7 +90,7 @@ class CameraRenderer:
     _BUILDER_STACKLEVEL = 3
 
     def __init__(self, client: int | BulletClient, config: CameraConfig) -> None:
-        self.client = _client_id(client)
+        self.client = client_id(client)
         self.config = config
         self.intrinsics = config.intrinsics
         self._warp = DistortionWarp(self.intrinsics) if self.intrinsics.has_distortion else None

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.limits import NON_NEGATIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, Limit, Limited, limited
 from estimation.noise import IMU_NOISE_DENSITY
 from estimation.types import ImuSample
 from landing_env.physics.quadrotor_params import GRAVITY
@@ -27,7 +27,7 @@ GRAVITY_W = np.array([0.0, 0.0, -GRAVITY])
 
 
 @dataclass
-class ImuConfig:
+class ImuConfig(Limited):
     """IMU noise model (continuous-time densities, as datasheets and Kalibr give them)."""
 
     #: whether the environment creates an IMU at all (the model itself ignores it)
@@ -43,9 +43,6 @@ class ImuConfig:
     #: standard deviation of the bias drawn at each reset (after a factory calibration)
     accel_bias_sigma: float = limited(0.05, NON_NEGATIVE, physical=Limit.non_negative(100.0))
     gyro_bias_sigma: float = limited(0.002, NON_NEGATIVE, physical=Limit.non_negative(100.0))
-
-    def __post_init__(self) -> None:
-        require_limits(self)
 
 
 class ImuModel:

@@ -368,15 +368,7 @@ class PlanarScene:
         """Planes (n, d) in camera coordinates, towards the camera positive, of the plates
         that cover every pixel of the window (seen from above, one pixel of margin)."""
         hiders = []
-        corners = np.array(
-            [
-                [-1.5, -1.5, 1],
-                [width + 0.5, -1.5, 1],
-                [width + 0.5, height + 0.5, 1],
-                [-1.5, height + 0.5, 1],
-            ]
-        )
-        rays_c = corners @ np.linalg.inv(k).T
+        rays_c = _window_corner_rays(k, width, height)
         for plate in self.plates:
             position, rotation = self._pose(plate.body_id, -1)
             normal_c = r_wc.T @ rotation[:, 2]
@@ -469,22 +461,27 @@ class PlanarScene:
     ) -> np.ndarray:
         """Planes (n, d) with n.x + d >= 0 inside: near, far and the window's four sides
         (one pixel beyond, so anti-aliased edges are drawn)."""
-        inverse = np.linalg.inv(k)
-        corners = np.array(
-            [
-                [-1.5, -1.5, 1],
-                [width + 0.5, -1.5, 1],
-                [width + 0.5, height + 0.5, 1],
-                [-1.5, height + 0.5, 1],
-            ]
-        )
-        rays = corners @ inverse.T
+        rays = _window_corner_rays(k, width, height)
         planes = [np.array([0.0, 0.0, 1.0, -near]), np.array([0.0, 0.0, -1.0, far])]
         for i in range(4):
             normal = np.cross(rays[i], rays[(i + 1) % 4])
             normal /= np.linalg.norm(normal)
             planes.append(np.append(normal, 0.0))
         return np.array(planes)
+
+
+def _window_corner_rays(k: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Rays (z = 1 in C) through the corners of a ``width`` x ``height`` window, one pixel
+    beyond its edge."""
+    corners = np.array(
+        [
+            [-1.5, -1.5, 1],
+            [width + 0.5, -1.5, 1],
+            [width + 0.5, height + 0.5, 1],
+            [-1.5, height + 0.5, 1],
+        ]
+    )
+    return corners @ np.linalg.inv(k).T
 
 
 def _sphere_in_frustum(centre_c: np.ndarray, radius: float, planes: np.ndarray) -> bool:

@@ -28,6 +28,7 @@ from estimation.frames import R_BC, tof_positions_in_camera_frame
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
 from estimation.noise import VL53L1X_RESOLUTION_M, VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from estimation.types import RangeReading
+from landing_env._quiet import client_id
 from landing_env.errors import ConfigError, require_choice
 
 #: Re-casts allowed per ray past the drone's own shapes (arms, legs, propeller guards...).
@@ -37,12 +38,6 @@ MAX_SELF_HITS = 8
 #: hit (at fraction 0) from a start up to about 0.1 mm inside it (measured), so the step is
 #: larger and doubles whenever a re-cast makes no progress.
 _SELF_HIT_STEP = 1e-3
-
-
-def _client_id(client: int | BulletClient) -> int:
-    """The physics-client id of an id or a ``pybullet_utils`` BulletClient (which keeps it in
-    ``_client``; it has no public accessor)."""
-    return int(getattr(client, "_client", client))
 
 
 def _default_mounts() -> tuple[tuple[float, float, float], ...]:
@@ -134,7 +129,7 @@ class TofArray:
         rng: np.random.Generator,
         t_bc: np.ndarray,
     ) -> None:
-        self.client = _client_id(client)
+        self.client = client_id(client)
         self.config = config
         self.rng = rng
         mounts_c = np.asarray(config.mount_offsets_c, dtype=float)

@@ -86,18 +86,9 @@ class DeckGuidance:
             g.tracker_model,
             g.tracker_jerk_psd,
         )
-        self._last_range = math.inf
-        self._lean = np.zeros(2)
-        self._lean_started = False
-        self._tag_unseen_s = math.inf
-        self._flare_wait_s = 0.0
-        #: searching for the lost deck (``lost_deck = "search"``)
-        self._search_on = False
-        #: the timed descent's clock and start height (None: not descending)
-        self._descent_clock_s: float | None = None
+        #: the timed descent's start height
         self._descent_start_m = 0.0
-        #: the timed descent's duration (``plan_descent``; the gains' by default)
-        self.descent_time_s = self.gains.descent_time_s
+        self.reset()
 
     def reset(self) -> None:
         self._last_range = math.inf
@@ -105,8 +96,11 @@ class DeckGuidance:
         self._lean_started = False
         self._tag_unseen_s = math.inf
         self._flare_wait_s = 0.0
-        self._descent_clock_s = None
+        #: the timed descent's clock (None: not descending)
+        self._descent_clock_s: float | None = None
+        #: searching for the lost deck (``lost_deck = "search"``)
         self._search_on = False
+        #: the timed descent's duration (``plan_descent``; the gains' by default)
         self.descent_time_s = self.gains.descent_time_s
         self.tracker.reset()
 

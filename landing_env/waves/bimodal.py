@@ -48,9 +48,6 @@ from scipy.special import gamma as gamma_function
 
 GRAVITY = 9.80665
 
-#: the wave systems a part belongs to (each gets its own direction in the generator)
-SYSTEMS: tuple[str, ...] = ("wind", "swell")
-
 
 @dataclass(frozen=True)
 class SpectralPart:

@@ -42,7 +42,7 @@ from typing import Literal
 import numpy as np
 
 from estimation.limits import Limit, limited, require_limits
-from landing_env.errors import ConfigError, require_choice, require_range
+from landing_env.errors import ConfigError, require_choice
 from landing_env.waves.bimodal import (
     SpectralPart,
     fully_developed_period_s,
@@ -68,7 +68,7 @@ class SeaGeneratorConfig:
     #: "jonswap" (the scenario's), "torsethaugen" or "ochi_hubble" (two systems)
     spectrum: Literal["jonswap", "torsethaugen", "ochi_hubble"] = "jonswap"
     #: direction the swell travels towards, deg; None: with the wind sea
-    swell_direction_deg: float | None = None
+    swell_direction_deg: float | None = limited(None, Limit(-360.0, 360.0))
     #: half-width of the uniform spread of the swell's directions, deg
     swell_spread_deg: float = limited(10.0, Limit(0.0, 180.0))
     #: ochi_hubble: share of the variance (m0) in the swell, 0-1
@@ -82,21 +82,15 @@ class SeaGeneratorConfig:
     #: the ship's speed ahead through the water, m/s (the bench's stand-in vessel as well)
     speed_m_s: float = limited(0.0, Limit(0.0, 20.0))
     #: the sea state at the end of the ramp: Hs (m) and Tp (s); None: unchanged
-    hs_end_m: float | None = None
-    tp_end_s: float | None = None
+    hs_end_m: float | None = limited(None, Limit(0.0, 16.0))
+    tp_end_s: float | None = limited(None, Limit(2.0, 25.0))
     #: when the ramp starts (s after the reset) and how long it lasts (s)
     ramp_start_s: float = limited(0.0, Limit(0.0, 1e5))
     ramp_duration_s: float = limited(60.0, Limit(0.0, 1e5, low_inclusive=False))
 
     def __post_init__(self) -> None:
         require_choice("spectrum", self.spectrum, SPECTRA)
-        if self.swell_direction_deg is not None:
-            require_range("swell_direction_deg", self.swell_direction_deg, -360.0, 360.0)
         require_limits(self)
-        if self.hs_end_m is not None:
-            require_range("hs_end_m", self.hs_end_m, 0.0, 16.0)
-        if self.tp_end_s is not None:
-            require_range("tp_end_s", self.tp_end_s, 2.0, 25.0)
 
     @property
     def ramped(self) -> bool:

@@ -79,7 +79,7 @@ class ShipMotionConfig(SeaConfig):
     block_coefficient: float = limited(0.45, Limit(0.3, 1.0))
     metacentric_height_m: float = limited(1.2, Limit(0.2, 5.0))
     #: roll natural period (s); None: the IMO 2008 IS Code formula from the hull
-    roll_period_s: float | None = None
+    roll_period_s: float | None = limited(None, Limit(2.0, 30.0))
     roll_damping_ratio: float = limited(0.1, Limit(0.01, 1.0))
     #: effective wave-slope factor of roll (IMO weather criterion's r, order 0.7)
     roll_slope_factor: float = limited(0.7, Limit(0.0, 1.5))
@@ -105,8 +105,6 @@ class ShipMotionConfig(SeaConfig):
             0.6 * self.beam_m,
             bounds_from=f"beam_m = {self.beam_m}",
         )
-        if self.roll_period_s is not None:
-            require_range("roll_period_s", self.roll_period_s, 2.0, 30.0)
         position = tuple(float(v) for v in self.helideck_position_m)
         if len(position) != 3:
             raise ConfigError("helideck_position_m", f"needs 3 values, got {len(position)}")

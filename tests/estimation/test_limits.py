@@ -8,7 +8,7 @@ import typing
 import pytest
 
 from estimation.errors import ConfigError
-from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
+from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from landing_env.config import DeckLandingConfig
 
 
@@ -56,14 +56,13 @@ def test_the_config_tree_declares_its_limits_on_its_fields() -> None:
 
 
 @dataclasses.dataclass
-class _Rig:
+class _Rig(Limited):
     speed_mps: float = limited(1.0, POSITIVE)
     count: int = limited(3, Limit(1, 10))
     margin_m: float = limited(0.0, NON_NEGATIVE)
     free: float = -5.0
-
-    def __post_init__(self) -> None:
-        require_limits(self)
+    #: optional: None leaves it unset
+    gap_m: float | None = limited(None, POSITIVE)
 
 
 @pytest.mark.parametrize(
@@ -85,6 +84,13 @@ def test_require_limits_refuses_the_field_outside_its_limit_with_the_range(
 def test_fields_without_a_limit_and_values_on_a_bound_are_accepted() -> None:
     rig = _Rig(speed_mps=1e-9, count=10, margin_m=0.0, free=-1e9)
     assert (rig.count, rig.margin_m, rig.free) == (10, 0.0, -1e9)
+
+
+def test_an_optional_field_may_be_left_none_and_a_value_given_to_it_is_checked() -> None:
+    assert _Rig().gap_m is None and _Rig(gap_m=0.5).gap_m == 0.5
+    with pytest.raises(ConfigError) as error:
+        _Rig(gap_m=0.0)
+    assert str(error.value) == "gap_m: 0.0 is out of range; allowed (0.0, inf]"
 
 
 def test_the_loaders_table_is_the_physical_range_each_field_declares() -> None:
