@@ -136,6 +136,23 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
     }
 
 
+def test_the_pure_velocity_recipe_trains_four_set_points_with_the_privileged_critic() -> None:
+    from agents.training.trainer import make_envs
+
+    config = load_train_config("configs/train/lander_velocity_ppo.yaml")
+    assert config.env_id == "DeckLanding-BenchSS4-v2"
+    assert config.settings.imitation is None
+    config.settings.vec_env = "dummy"  # the environments in this process
+    train_env, eval_env = make_envs(config)
+    try:
+        assert train_env.action_space.shape == (4,)
+        assert "privileged" in train_env.observation_space.spaces
+        assert eval_env.action_space.shape == (4,)
+    finally:
+        train_env.close()
+        eval_env.close()
+
+
 def test_rl_zoos_env_wrapper_wraps_the_training_environments_not_the_evaluation(
     tmp_path: Path,
 ) -> None:
