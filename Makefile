@@ -19,7 +19,7 @@ demo: $(STAMP)
 	$(VENV)/bin/deck-landing demo
 
 test: $(STAMP)
-	$(PY) -m pytest -n 2 -q
+	$(PY) -m pytest -n 2 --dist worksteal -q
 
 # the documentation site in docs/_build/html; warnings (a broken reference) are errors
 docs: $(STAMP)

@@ -4,6 +4,11 @@ Hypothesis runs derandomized by default, so that a CI run is reproducible: the s
 every time, chosen from the test's own strategies. ``HYPOTHESIS_PROFILE=explore`` draws fresh
 random examples (and more of them) to search for new failures; ``benchmarks/fuzz_soak.py``
 is the long search.
+
+The long tests run first (:func:`pytest_collection_modifyitems`): under ``make test``
+(``pytest -n 2 --dist worksteal``) the worker that runs out of tests takes half of the
+other's queue, so the short ones fill the end rather than one worker running the last long
+blocks while the other idles.
 """
 
 from __future__ import annotations
@@ -18,6 +23,22 @@ from hypothesis import settings
 settings.register_profile("deterministic", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
+
+#: the documented blocks, each run in a fresh process (5-60 s each)
+_FRESH_PROCESS_TESTS = "tests/test_docs_snippets.py::test_the_documented_block_runs"
+
+
+def _runs_long(item: pytest.Item) -> bool:
+    return item.get_closest_marker("slow") is not None or item.nodeid.startswith(
+        _FRESH_PROCESS_TESTS
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The long tests first, each group in its collected order (the same on every worker)."""
+    items[:] = [item for item in items if _runs_long(item)] + [
+        item for item in items if not _runs_long(item)
+    ]
 
 
 @pytest.fixture(scope="session")

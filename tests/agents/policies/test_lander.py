@@ -136,18 +136,27 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
     }
 
 
-def test_the_pure_velocity_recipe_trains_four_set_points_with_the_privileged_critic() -> None:
+@pytest.mark.parametrize(
+    ("recipe", "env_id", "actions"),
+    [
+        ("lander_velocity_ppo", "DeckLanding-BenchSS4-v2", 4),
+        ("lander_ship_ppo", "DeckLanding-ShipSS4-v5", 5),
+    ],
+)
+def test_the_research_recipes_train_ppo_alone_with_the_privileged_critic(
+    recipe: str, env_id: str, actions: int
+) -> None:
     from agents.training.trainer import make_envs
 
-    config = load_train_config("configs/train/lander_velocity_ppo.yaml")
-    assert config.env_id == "DeckLanding-BenchSS4-v2"
+    config = load_train_config(f"configs/train/{recipe}.yaml")
+    assert config.env_id == env_id
     assert config.settings.imitation is None
     config.settings.vec_env = "dummy"  # the environments in this process
     train_env, eval_env = make_envs(config)
     try:
-        assert train_env.action_space.shape == (4,)
+        assert train_env.action_space.shape == (actions,)
+        assert eval_env.action_space.shape == (actions,)
         assert "privileged" in train_env.observation_space.spaces
-        assert eval_env.action_space.shape == (4,)
     finally:
         train_env.close()
         eval_env.close()
