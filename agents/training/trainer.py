@@ -218,7 +218,31 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
         raise ConfigError(
             f"{keys[0]}.frame_stack", "the timing task's observation has its own history"
         )
+    _check_stopping_rule_feature(hyperparams, keys[0])
     return config
+
+
+def _check_stopping_rule_feature(hyperparams: dict[str, Any], section: str) -> None:
+    """The stopping rule's margin feature (:class:`landing_env.privileged.DeckFeatures`) reads
+    its key as the environment gives it: one frame, not normalised."""
+    extractor = parse_policy_kwargs(hyperparams.get("policy_kwargs", {})).get(
+        "features_extractor_kwargs", {}
+    )
+    key = extractor.get("stopping_rule_key") if isinstance(extractor, dict) else None
+    if key is None:
+        return
+    if hyperparams.get("frame_stack", 1) != 1:
+        raise ConfigError(
+            f"{section}.frame_stack",
+            f"the stopping rule's feature reads {key!r} as one frame: stack none (1)",
+        )
+    normalize = normalize_kwargs(hyperparams)
+    if normalize is not None and key in (normalize.get("norm_obs_keys") or [key]):
+        raise ConfigError(
+            f"{section}.normalize",
+            f"the stopping rule's feature reads {key!r} unnormalised: list the other keys "
+            "in dict(norm_obs_keys=[...])",
+        )
 
 
 def _trainable_ids() -> tuple[str, ...]:

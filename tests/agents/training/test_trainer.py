@@ -236,3 +236,27 @@ def test_the_randomised_predictive_yaml_flies_the_policys_settings_over_each_own
     assert set(config.settings.randomise["scenarios"]) == {"bench-ss4", "bench-ss5"}
     second_stage = "timing_dqn_predictive_finetune/timing_dqn_final.zip"
     assert config.settings.init_model.endswith(second_stage)
+
+
+@pytest.mark.parametrize(
+    ("change", "named"),
+    [
+        ({"normalize": True}, "normalize"),
+        ({"normalize": "dict(norm_obs_keys=['prediction', 'velocity'])"}, "normalize"),
+        ({"frame_stack": 2}, "frame_stack"),
+    ],
+)
+def test_a_recipe_that_would_feed_the_stopping_rule_feature_altered_input_is_refused(
+    tmp_path: Path, change: dict, named: str
+) -> None:
+    recipe = yaml.safe_load((ROOT / "configs" / "train" / "lander_ppo.yaml").read_text())
+    zoo = recipe["DeckLanding-BenchSS4-v2"]
+    zoo["policy_kwargs"] = "dict(features_extractor_kwargs=dict(stopping_rule_key='prediction'))"
+    zoo["normalize"] = "dict(norm_obs_keys=['velocity'])"
+    path = tmp_path / "recipe.yaml"
+    path.write_text(yaml.safe_dump(recipe))
+    assert load_train_config(path).frame_stack == 1  # unnormalised, one frame: accepted
+    zoo.update(change)
+    path.write_text(yaml.safe_dump(recipe))
+    with pytest.raises(ConfigError, match=rf"DeckLanding-BenchSS4-v2\.{named}.*'prediction'"):
+        load_train_config(path)

@@ -18,7 +18,7 @@ import yaml
 import landing_env  # noqa: F401
 from agents.policies.align_descend import AlignDescendPolicy
 from agents.policies.lander import build_lander, normalization_path
-from agents.training.trainer import load_train_config, train
+from agents.training.trainer import load_train_config, normalize_kwargs, train
 from landing_env.config import RewardConfig
 from landing_env.envs.actions import action_from_setpoint
 from landing_env.envs.rewards import touchdown_terms
@@ -219,7 +219,13 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
     recipe = yaml.safe_load(RECIPE.read_text())["DeckLanding-BenchSS4-v2"]
     episode_steps = 40 * 20
     assert 1.0 / (1.0 - recipe["gamma"]) >= episode_steps
-    assert recipe["normalize"] is True and recipe["n_envs"] == 2
+    assert recipe["n_envs"] == 2
+    # every key normalised but the prediction, which the stopping rule's feature reads raw
+    normalised = normalize_kwargs(recipe)["norm_obs_keys"]
+    env = gym.make("DeckLanding-BenchSS4-v2", privileged=True)
+    keys = set(env.observation_space.spaces)
+    env.close()
+    assert sorted(normalised) == sorted(keys - {"prediction"})
     config = load_train_config(_short_recipe(tmp_path))
     result = train(config, progress_bar=False)
     assert result.timesteps >= 256 and result.evaluations
@@ -229,6 +235,7 @@ def test_the_ppo_recipe_trains_with_vecnormalize_and_the_privileged_critic(tmp_p
 
     model = PPO.load(result.model_path, device="cpu")
     assert type(model.policy).__name__ == "PrivilegedCriticPolicy"
+    assert model.policy.pi_features_extractor.stopping_rule_key == "prediction"
     # lander-model flies it on the task built without the privileged key, normalised
     overrides = data_overrides(RECIPE)
     env = gym.make("DeckLanding-BenchSS4-v2", overrides=overrides)
@@ -296,6 +303,7 @@ def test_rl_zoo3_trains_the_ppo_recipe_unmodified(tmp_path: Path) -> None:
 
     model = PPO.load(saved[0], device="cpu")
     assert type(model.policy).__name__ == "PrivilegedCriticPolicy"
+    assert model.policy.pi_features_extractor.stopping_rule_key == "prediction"
     assert model.num_timesteps >= 256
 
 
