@@ -1,11 +1,10 @@
 """The onboard look-ahead as an observation: a learned timing that weighs what it foresees.
 
-``deck-forecast-onboard`` (:mod:`agents.policies.deck_forecast`) tries a commit now in a handful of
-futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
-and wind estimate with their errors, its airframe's uncertain drag and thrust) and commits
-by a fixed rule: all of them land with 15 % slack, the standard falling over the last 5 s.
-Whether a look-ahead's verdict is worth acting on now or worth waiting for a better one
-is what a learned policy can weigh instead, as ``timing-dqn-predictive`` weighs the
+The onboard look-ahead (:mod:`agents.policies.deck_forecast`) tries a commit now in a handful
+of futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
+and wind estimate with their errors, its airframe's uncertain drag and thrust).  Whether a
+look-ahead's verdict is worth acting on now or worth waiting for a better one is what a
+learned policy weighs here, as ``timing-dqn-predictive`` weighs the
 deck-tilt predictor's chances.
 
 :class:`LookaheadTimingWrapper` turns the timing task into that decision.  Every

@@ -484,23 +484,12 @@ def sign_card(config: Any, data: dict[str, np.ndarray], scenario: str | None = N
     return merge_cards(cards)
 
 
-def _relaxed(observations: np.ndarray, relax_share: float = 1.0 / 3.0) -> np.ndarray:
-    """deck-forecast-onboard's registered rule on the same draws: all of them land, the
-    standard falling to half of them over the last ``relax_share`` of the wait (its 5 s of
-    15; the wait used is the observation's last entry, a share of the limit)."""
-    waited = observations[:, -1]
-    share = np.clip((waited - (1.0 - relax_share)) / relax_share, 0.0, 1.0)
-    return (observations[:, 1] >= 1.0 - 0.5 * share - 1e-9).astype(int)
-
-
 #: fixed rules on the same features, replayed beside the model: a commit at the first check,
-#: deck-forecast-onboard's standard on the same draws (all of them land with the margin), a
-#: looser one (three in four), and its standard relaxed towards the wait limit as registered
+#: all draws land with the margin, and a looser standard (three in four)
 RULES: dict[str, Any] = {
     "commit_at_once": lambda obs: np.ones(len(obs), dtype=int),
     "all_draws_land": lambda obs: (obs[:, 1] >= 1.0 - 1e-9).astype(int),
     "three_quarters_land": lambda obs: (obs[:, 1] >= 0.75 - 1e-9).astype(int),
-    "all_land_relaxed_to_half": _relaxed,
 }
 
 

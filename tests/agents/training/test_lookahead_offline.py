@@ -423,16 +423,6 @@ def test_a_fit_on_two_scenarios_reports_each_ones_and_each_sensing_profiles_repl
     assert card.sensing == ["realistic", "realistic-2x"]
 
 
-def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> None:
-    from agents.training.lookahead_training import RULES
-
-    rule = RULES["all_land_relaxed_to_half"]
-    observations = np.zeros((4, LookaheadSettings().size), np.float32)
-    observations[:, 1] = [0.9, 0.9, 0.5, 1.0]  # the check's chance
-    observations[:, -1] = [0.5, 0.95, 1.0, 0.0]  # the wait used, a share of the limit
-    assert rule(observations).tolist() == [0, 1, 1, 1]
-
-
 def test_records_on_a_training_sea_fly_its_sea_with_the_forecast_identified_online(
     tmp_path,
 ) -> None:
