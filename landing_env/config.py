@@ -342,7 +342,7 @@ class DeckLandingConfig:
     #: reads it.  Empty: none fitted
     deck_predictor: str = ""
     #: the seas the ship's helideck forecast (:mod:`landing_env.anticipation.hms_forecast`, read by
-    #: the ``deck-forecast`` policies, the look-ahead and the ``forecast`` observation) is fitted
+    #: the onboard look-ahead) is fitted
     #: on: empty, other realisations of this config's own sea; or a training family of seas
     #: (:data:`landing_env.sea.training_seas.TRAINING_FAMILIES`, e.g. ``ship-broad``), as a held-out
     #: sea's config must name (nothing is fitted on a held-out sea)

@@ -324,8 +324,9 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "v4: the scenario's lens, the view gate from the camera.",
         "v5: v4 observing the helideck forecast and the drone's own state.",
         "v6: v5 started in trim with the mean wind, the autopilots' limits.",
-        "v7: v6 observing the deck-pose history by default; the forecast observation is the "
-        "setting ``timing.observation: forecast`` (current).",
+        "v7: v6 observing the deck-pose history by default; the forecast observation was the "
+        "setting ``timing.observation: forecast`` until it left the package after 1.0.0 "
+        "(current).",
     ],
     "DeckLandingTiming-PaperStewart": ["v0: the range-scheduled descent (current)."],
     "DeckLanding-HighApproach": [

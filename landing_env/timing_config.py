@@ -24,7 +24,7 @@ WAVE_OFF_CLIMB_S = 1.5
 #: the shortest timed descent a contact window may ask for, seconds
 MIN_CHOSEN_DESCENT_S = 1.0
 #: what the observation holds (``TimingConfig.observation``)
-OBSERVATION_KINDS = ("history", "prediction", "forecast")
+OBSERVATION_KINDS = ("history", "prediction")
 
 #: the camera sits this far below the drone's centre of mass (body z), metres; the start
 #: height puts the *camera* at the hold height
@@ -118,10 +118,7 @@ class TimingConfig:
     #: weighs, for a learned policy to weigh: the chance ``tilt_model`` gives of a deck within
     #: the touchdown limit at each of ``contact_times_s``, the value of waiting on (the
     #: optimal-stopping value of such chances over the wait left, one opportunity per
-    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`);
-    #: or ``forecast``: the history's newest row, and after it the ship's helideck forecast
-    #: (its HMS record 0-8 s ahead, :mod:`landing_env.anticipation.hms_forecast`; a sea scenario's)
-    #: and the drone's own velocity and lean, what the deck oracle weighs against each other
+    #: ``opportunity_s``) and the prediction's validity (:class:`TimingObservationLayout`)
     observation: str = "history"
 
     def __post_init__(self) -> None:

@@ -23,18 +23,13 @@ from typing import Any
 import gymnasium as gym
 
 from landing_env.anticipation.deck_history import HISTORY_FEATURES
-from landing_env.anticipation.hms_forecast import HORIZONS_S, REALIZATIONS, RECORD_S, WINDOW_S
 from landing_env.config import SENSOR_SETS
 from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
 from landing_env.scenarios import LANDING_TASK, TIMING_TASK
-from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
 from landing_env.timing.layout import (
-    FORECAST_SCALES,
     HISTORY_SCALES,
     OBSERVATION_LIMIT,
-    OWN_STATE_FEATURES,
-    OWN_STATE_SCALES,
     TOF_SCALE,
     timing_layout,
 )
@@ -234,22 +229,6 @@ def observation_signature(timing: Any, env_hz: float) -> dict[str, Any]:
             "tilt_model": timing.tilt_model,
             "contact_times_s": [float(c) for c in timing.contact_times_s],
             "opportunity_s": float(timing.opportunity_s),
-        }
-    elif timing.observation == "forecast":
-        # the forecast's horizons, window and record, and the own state's features
-        prediction = {
-            "observation": timing.observation,
-            "forecast": {
-                "channels": list(HMS_CHANNELS),
-                # the HMS's rate and errors: what the forecast reads
-                "hms": asdict(HelideckMonitorConfig()),
-                "horizons_s": [float(h) for h in HORIZONS_S],
-                "window_s": float(WINDOW_S),
-                "fitted_on": f"{REALIZATIONS} records of {RECORD_S:g} s",
-                "scales": [float(v) for v in FORECAST_SCALES],
-                "own_state": list(OWN_STATE_FEATURES),
-                "own_state_scales": [float(v) for v in OWN_STATE_SCALES],
-            },
         }
     return {
         **prediction,

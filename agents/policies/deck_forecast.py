@@ -1,53 +1,38 @@
-"""``deck-forecast``: timing by a forecast of the ship's helideck, tried in a look-ahead.
+"""The onboard look-ahead: commits tried in futures of the ship's deck that the drone's own
+model draws, the planner behind ``timing-dqn-lookahead`` (:mod:`agents.policies.lookahead`).
 
 The deck oracle (:class:`agents.policies.oracle.DeckOracleTimingPolicy`) shows what knowing the
-deck's future is worth: at sea state 5 it lands 90 % where the best rule on the drone's own deck
-estimate lands 78.5 %.  A drone landing on a ship can know much of that future: the ship's
+deck's future is worth.  A drone landing on a ship can know much of that future: the ship's
 helideck monitoring system (:mod:`landing_env.sea.hms`, required on moving helidecks by
 CAP 437) measures the helideck's motion and passes it on, and ship motion a few seconds ahead
 is predictable from its recent past (the classical ship-motion prediction of
-:mod:`estimation.anticipation.linear_predictors`).  This policy is the deck oracle with the deck's
-true future replaced by that forecast:
+:mod:`estimation.anticipation.linear_predictors`).  :class:`DeckForecastTimingPolicy` is the
+deck oracle with the deck's true future replaced by that forecast, played as a model the
+drone carries:
 
-* **The forecast** (:mod:`landing_env.anticipation.hms_forecast`, which the timing task's
-  ``forecast`` observation reads too). A direct multi-horizon linear predictor
-  (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`) maps the HMS's
-  last ``WINDOW_S`` of surge, sway, heave, roll and pitch at the helideck to the same five
-  every 0.5 s up to ``HORIZONS_S``'s 8 s.  By default it is fitted, when the policy is built,
-  on ``REALIZATIONS`` HMS records of the scenario's own sea drawn with other seeds (other days
-  in the same sea state); the config's ``deck_forecast: online`` identifies it in each
-  episode from the HMS's own record of the last 20 min instead, as the held-out seas do.
-* **The look-ahead.** Every ``check_every_s`` of the wait it tries a commit now in ``draws``
-  futures (the gusts and the sensors' noise drawn anew, as the deck oracle does) in which the
-  deck follows the forecast (:class:`~landing_env.stewart.motion.ForecastMotion`), and commits
-  when all of them land with ``min_margin`` of slack on every graded criterion (the
-  forecast's error eats into the margin the deck oracle can spend to the last bit).
-
-What ``deck-forecast`` still shares with the oracles: the look-ahead flies a saved copy of the
-simulation (:mod:`landing_env.envs.snapshot`), so the drone's side of the prediction (its own
-state, the guidance, the touchdown's physics) is a perfect model; it measures how much of the
-deck oracle's lead a realistic deck forecast keeps.
-
-``deck-forecast-onboard`` (:class:`OnboardModelConfig`) plays the same look-ahead as a model
-the drone carries would: it knows only what the drone knows of the present.
-
-* **Where it is over the deck**: its deck-pose estimate (the observed estimator's), not the
-  truth.  Each look-ahead moves the drone so that the deck is where the estimate puts it
-  plus a draw of the estimate's own error (its covariance), a sample of where the deck may
-  truly be; the estimators keep what they believed.  With no valid estimate it waits.
-* **The present gust**: the drone's wind estimate (the truth plus an error drawn once per
-  decision, :attr:`OnboardModelConfig.gust_error_mps`), and in each look-ahead a draw around
-  that estimate with the same spread.
-* **Its own airframe**: each look-ahead scales the linear drag and the rotors' thrust by
-  draws within :class:`OnboardModelConfig`'s fractions (an identified drag is known to a few
-  tens of percent; thrust goes with the day's air density).
+* **The forecast** (:mod:`landing_env.anticipation.hms_forecast`).  A direct multi-horizon
+  linear predictor (:class:`~estimation.anticipation.linear_predictors.LinearMotionPredictor`)
+  maps the HMS's last ``WINDOW_S`` of surge, sway, heave, roll and pitch at the helideck to the
+  same five every 0.5 s up to ``HORIZONS_S``'s 8 s.  By default it is fitted on ``REALIZATIONS``
+  HMS records of the scenario's own sea drawn with other seeds (other days in the same sea
+  state); the config's ``deck_forecast: online`` identifies it in each episode from the HMS's
+  own record of the last 20 min instead, as the held-out seas do.
+* **The look-ahead.**  At a check it tries a commit now in ``draws`` futures (the gusts and
+  the sensors' noise drawn anew, as the deck oracle does) in which the deck follows the
+  forecast (:class:`~landing_env.stewart.motion.ForecastMotion`); a draw lands with
+  ``min_margin`` of slack on every graded criterion (the forecast's error eats into the
+  margin the deck oracle can spend to the last bit).
+* **What the drone knows of the present** (:class:`OnboardModelConfig`).  Where it is over the
+  deck: its deck-pose estimate (the observed estimator's), not the truth; each look-ahead moves
+  the drone so that the deck is where the estimate puts it plus a draw of the estimate's
+  error, and with no valid estimate it waits.  The present gust: the drone's wind estimate
+  (the truth plus an error drawn once per decision), and in each look-ahead a draw around it.
+  Its own airframe: each look-ahead scales the linear drag and the rotors' thrust by draws
+  within :class:`OnboardModelConfig`'s fractions.
 
 The guidance, the controller, the touchdown's physics and the estimators' software are the
-drone's own code and stay exact; so do its own attitude and velocity (its navigation).
-Registered as a policy, it also lowers its standard over the last 5 s of the wait, to half
-the look-aheads at the wait limit (``deadline_chance``,
-:meth:`~agents.policies.oracle.DeckOracleTimingPolicy.required_chance`): a moment that half of them
-land beats the blind one the limit would force.
+drone's own code and stay exact (the look-ahead flies a saved copy of the simulation,
+:mod:`landing_env.envs.snapshot`); so do its own attitude and velocity (its navigation).
 """
 
 from __future__ import annotations
@@ -77,7 +62,7 @@ _MODEL_STREAM = 0x30D
 
 @dataclass(frozen=True)
 class OnboardModelConfig:
-    """What ``deck-forecast-onboard``'s look-ahead does not know of the present, 1 sigma.
+    """What the onboard look-ahead does not know of the present, 1 sigma.
 
     * ``gust_error_mps`` (x, y, z in the world frame): the error of the drone's estimate of
       the present wind.  Yu et al. (2025, *Design and implementation of a high-precision
@@ -93,7 +78,7 @@ class OnboardModelConfig:
       uniform draw in 1 +- this: thrust goes with the air's density, and a 30 degC day at
       sea is 5 % thinner than the ISA's 15 degC (ideal gas law) that the model assumes.
     * ``position_from_estimate``: start from the deck-pose estimate (False: the true
-      relative position, as ``deck-forecast``), moved by a draw of its error,
+      relative position), moved by a draw of its error,
       ``position_error_m`` (camera axes x, y, z).  The defaults round up `tight`'s measured
       RMS error at the 2 m hold of ``ship-ss5`` with realistic sensing, 2.5, 2.5 and
       10.4 mm (``git show 4d17a9e:benchmarks/bench_onboard_estimate_error.py``); its own
@@ -154,16 +139,16 @@ def episode_monitor(
 
 
 class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
-    """Commit when a commit now lands in every look-ahead whose deck follows the HMS forecast.
+    """Commit when a commit now lands in every look-ahead of the drone's onboard model, whose
+    deck follows the HMS forecast (the look-ahead :mod:`agents.policies.lookahead` observes).
 
     ``last_forecast`` holds the latest forecast: (H, 5) poses at the forecast's horizons
     (:data:`~landing_env.anticipation.hms_forecast.HORIZONS_S`), or the reason there was
     none.  ``rule`` are the commit rule's settings, as the deck oracle's (``draws``,
-    ``min_chance``, ``check_every_s``, ``seed``, ``deadline_chance``, ``relax_s``); its
-    ``min_margin`` is 0.15 here.
+    ``min_chance``, ``check_every_s``, ``seed``); its ``min_margin`` is 0.15 here.
     """
 
-    name = "deck-forecast"
+    name = "onboard-look-ahead"
 
     def __init__(
         self,
@@ -176,10 +161,7 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         **rule: Any,
     ) -> None:
         super().__init__(env, min_margin=min_margin, **rule)
-        #: None: the look-ahead knows the present exactly (``deck-forecast``)
-        self.onboard = onboard
-        if onboard is not None:
-            self.name = "deck-forecast-onboard"
+        self.onboard = onboard or OnboardModelConfig()
         #: this decision's (estimate - truth) of the deck's position in C, the factor of the
         #: estimate's error, and the drone's wind estimate (world, m/s)
         self._belief: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -216,13 +198,12 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
     def deck_future(self, decision: int = 0) -> Any:
         world = self.env.world
         t0 = float(world.time)
-        if self.onboard is not None:
-            belief = self._onboard_belief(decision)
-            self._belief = None
-            if isinstance(belief, str):
-                self.last_forecast = belief
-                return None
-            self._belief = belief
+        belief = self._onboard_belief(decision)
+        self._belief = None
+        if isinstance(belief, str):
+            self.last_forecast = belief
+            return None
+        self._belief = belief
         if self._episode_forecast is None:
             self._episode_forecast = EpisodeForecast(self.forecast, self.monitor())
         forecast = self._episode_forecast.at(t0)
@@ -247,7 +228,6 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         estimated less the truth, the factor of that estimate's error (1 sigma), and its wind
         estimate; or why it cannot say."""
         env = self.env
-        assert self.onboard is not None
         sensing = getattr(env, "_sensing", None)
         if sensing is None:
             return "no sensing yet"
@@ -268,11 +248,11 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         return t_est - np.asarray(t_true, dtype=float), factor, wind_estimate
 
     def model_draw(self, decision: int, draw: int) -> None:
-        """Make the restored copy the drone's model of the present (``deck-forecast-onboard``):
+        """Make the restored copy the drone's model of the present:
         the drone where its estimate (and a draw of its error) puts it over the deck, the
         present gust drawn around its wind estimate, the drag and the thrust scaled by
         draws (the plant; the controller keeps its nominal model)."""
-        if self.onboard is None or self._belief is None:
+        if self._belief is None:
             return
         env = self.env
         world = env.world
@@ -308,18 +288,3 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             world.shift_wind_at_drone(air_w * (1.0 - 1.0 / drag_scale))
             world.controller.scale_thrust_model(float(thrust_scale))
             world.drone.set_rotor_speeds(world.drone.rotor_speeds / math.sqrt(thrust_scale))
-
-
-def build_deck_forecast(
-    env: Any, model_path: str | None, allow: tuple[str, ...]
-) -> DeckForecastTimingPolicy:
-    """``deck-forecast`` for ``env`` (:mod:`agents.policies.registry`'s builder)."""
-    return DeckForecastTimingPolicy(env)
-
-
-def build_deck_forecast_onboard(
-    env: Any, model_path: str | None, allow: tuple[str, ...]
-) -> DeckForecastTimingPolicy:
-    """``deck-forecast-onboard``: the look-ahead as the drone's own model, its standard
-    falling to half the look-aheads over the wait's last 5 s."""
-    return DeckForecastTimingPolicy(env, onboard=OnboardModelConfig(), deadline_chance=0.5)

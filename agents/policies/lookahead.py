@@ -1,11 +1,10 @@
 """The onboard look-ahead as an observation: a learned timing that weighs what it foresees.
 
-``deck-forecast-onboard`` (:mod:`agents.policies.deck_forecast`) tries a commit now in a handful of
-futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
-and wind estimate with their errors, its airframe's uncertain drag and thrust) and commits
-by a fixed rule: all of them land with 15 % slack, the standard falling over the last 5 s.
-Whether a look-ahead's verdict is worth acting on now or worth waiting for a better one
-is what a learned policy can weigh instead, as ``timing-dqn-predictive`` weighs the
+The onboard look-ahead (:mod:`agents.policies.deck_forecast`) tries a commit now in a handful
+of futures its onboard model draws (the ship's helideck forecast, its own deck-pose estimate
+and wind estimate with their errors, its airframe's uncertain drag and thrust).  Whether a
+look-ahead's verdict is worth acting on now or worth waiting for a better one is what a
+learned policy weighs here, as ``timing-dqn-predictive`` weighs the
 deck-tilt predictor's chances.
 
 :class:`LookaheadTimingWrapper` turns the timing task into that decision.  Every
@@ -43,7 +42,6 @@ from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import validate_action
 from landing_env.errors import ConfigError
 from landing_env.scenarios import TIMING_TASK
-from landing_env.sea.hms import REPORT_FIELDS
 from landing_env.touchdown import Outcome
 
 #: per check, in order: whether a look-ahead was made (a deck-pose estimate and a forecast
@@ -54,15 +52,6 @@ LOOKAHEAD_FEATURES: tuple[str, ...] = ("valid", "chance", "success", "mean_score
 
 #: the score of a tried commit that did not succeed
 FAILED_SCORE = -1.0
-
-#: the ship's HMS report the observation may carry (``hms_report_s``), each field by the value
-#: that reads 1 (the observation clips it there): the peak inclination of the deck over the
-#: window by 20 deg, its total heave by 15 m (the 5 m sea of ship-ss6 reports 11-15 deg and
-#: 7-9 m over ten minutes; :data:`landing_env.sea.hms.REPORT_FIELDS`)
-HMS_REPORT_FEATURES: dict[str, float] = {
-    "peak_inclination": math.radians(20.0),
-    "total_heave": 15.0,
-}
 
 
 @dataclass(frozen=True)
@@ -76,9 +65,6 @@ class LookaheadSettings:
       (:func:`agents.policies.oracle.touchdown_margin`);
     * ``checks``: how many checks the observation holds (this one first);
     * ``seed``: the look-ahead's own streams (with the episode's seed and the decision);
-    * ``hms_report_s``: with a window (CAP 437's is 600 s), the observation also carries the
-      ship's HMS report over it (:data:`HMS_REPORT_FEATURES`, before the wait used): how
-      hard the sea moves the deck, which the look-ahead's draws do not say; 0: no report.
     * ``airframe_in_trim``: the onboard model's drawn airframes start in their own trim
       (:attr:`~agents.policies.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
       shipped look-ahead's draws.
@@ -89,7 +75,6 @@ class LookaheadSettings:
     min_margin: float = limited(0.15, Limit(0.0, 1.0))
     checks: int = limited(2, Limit(1, 16))
     seed: int = 0
-    hms_report_s: float = limited(0.0, Limit(0.0, 3600.0))
     airframe_in_trim: bool = False
 
     def __post_init__(self) -> None:
@@ -105,26 +90,16 @@ class LookaheadSettings:
 
     @property
     def size(self) -> int:
-        """The observation's length: the features of each check, the HMS report's (if any),
-        then the wait fraction."""
-        return self.checks * len(LOOKAHEAD_FEATURES) + self.report_size + 1
-
-    @property
-    def report_size(self) -> int:
-        """How many of the observation's values are the HMS report's."""
-        return len(HMS_REPORT_FEATURES) if self.hms_report_s > 0 else 0
+        """The observation's length: the features of each check, then the wait fraction."""
+        return self.checks * len(LOOKAHEAD_FEATURES) + 1
 
     def signature(self) -> dict[str, Any]:
         """What the observation's values mean, for a model's card."""
 
         fields = asdict(self)
-        if not self.hms_report_s:
-            # a look-ahead without the report signs as before the report existed
-            del fields["hms_report_s"]
-        else:
-            fields["hms_report"] = {k: round(v, 6) for k, v in HMS_REPORT_FEATURES.items()}
         if not self.airframe_in_trim:
-            del fields["airframe_in_trim"]  # likewise
+            # a look-ahead without it signs as before it existed
+            del fields["airframe_in_trim"]
         return {
             **fields,
             "features": list(LOOKAHEAD_FEATURES),
@@ -142,15 +117,6 @@ class LookaheadSettings:
         """The onboard model the look-ahead plays (:class:`OnboardModelConfig`)."""
 
         return OnboardModelConfig(airframe_in_trim=self.airframe_in_trim)
-
-
-def hms_report_features(monitor: Any, t_s: float, window_s: float) -> np.ndarray:
-    """:data:`HMS_REPORT_FEATURES` of ``monitor``'s standard report over ``window_s`` up to
-    ``t_s``, each scaled to its reading of 1 and clipped to [0, 1]."""
-
-    report = monitor.standard_report(t_s, window_s)
-    values = [report[REPORT_FIELDS.index(k)] / scale for k, scale in HMS_REPORT_FEATURES.items()]
-    return np.clip(np.nan_to_num(np.asarray(values, float), nan=1.0), 0.0, 1.0)
 
 
 def in_flight(env: Any) -> bool:
@@ -241,14 +207,7 @@ class LookaheadObserver:
         invalid = check_features(None)
         checks = self._history + [invalid] * (self.settings.checks - len(self._history))
         wait = min(max(float(env._wait_s) / float(env.timing.wait_limit_s), 0.0), 1.0)
-        report = self.report(float(env.world.time))
-        return np.concatenate([*checks, report, [wait]]).astype(np.float32)
-
-    def report(self, t_s: float) -> np.ndarray:
-        """The HMS report's features at ``t_s`` (none without ``hms_report_s``)."""
-        if not self.settings.hms_report_s:
-            return np.zeros(0)
-        return hms_report_features(self.planner.monitor(), t_s, self.settings.hms_report_s)
+        return np.concatenate([*checks, [wait]]).astype(np.float32)
 
     @property
     def observation_space(self) -> gym.spaces.Box:

@@ -189,8 +189,7 @@ class DeckOracleTimingPolicy(Policy):
     the deck's motion (a fixed function of time) and the present state (the drone, the gust,
     the estimates) but draw the gusts' innovations and the sensors' noise anew
     (:meth:`~landing_env.world.World.redraw_unknowable_future`), and commits at the
-    first moment where at least ``min_chance`` of them land (or, with ``deadline_chance``,
-    the standard of :meth:`required_chance`, falling towards the wait limit).  The episode
+    first moment where at least ``min_chance`` of them land.  The episode
     itself then goes on with its own future.  Its success is what a timing policy with
     perfect deck prediction reaches with this rule: the part of the full oracle's lead that
     better deck sensing and prediction could win; the rest is the wind's.
@@ -206,8 +205,6 @@ class DeckOracleTimingPolicy(Policy):
         check_every_s: float = 0.2,
         seed: int = 0,
         min_margin: float = 0.0,
-        deadline_chance: float | None = None,
-        relax_s: float = 5.0,
     ) -> None:
         self.env = env.unwrapped
         if not hasattr(self.env, "layout"):
@@ -221,14 +218,6 @@ class DeckOracleTimingPolicy(Policy):
         require_range("check_every_s", check_every_s, decision_s - 1e-9, 10.0)
         self.draws = int(draws)
         self.min_chance = float(min_chance)
-        if deadline_chance is not None:
-            require_range("deadline_chance", deadline_chance, 0.0, min_chance, low_inclusive=False)
-        require_range("relax_s", relax_s, 0.0, 3600.0)
-        #: the chance accepted at the wait limit (None: ``min_chance`` to the end, then the
-        #: environment forces the commit); the standard falls to it linearly over ``relax_s``
-        self.deadline_chance = None if deadline_chance is None else float(deadline_chance)
-        self.relax_s = float(relax_s)
-        self.decision_s = decision_s
         #: decisions between two look-aheads
         self.stride = max(1, round(check_every_s / decision_s))
         self.seed = int(seed)
@@ -248,27 +237,13 @@ class DeckOracleTimingPolicy(Policy):
             return 0
         chance = self.chance(decision)
         self.chances.append((decision, chance))
-        return int(chance >= self.required_chance(decision) - 1e-12)
-
-    def required_chance(self, decision: int) -> float:
-        """The share of look-aheads that must land to commit at ``decision``: ``min_chance``,
-        falling linearly to ``deadline_chance`` over the last ``relax_s`` of the wait (a
-        moment half the look-aheads land beats the blind one the wait limit forces)."""
-        if self.deadline_chance is None:
-            return self.min_chance
-        limit_s = float(self.env.timing.wait_limit_s)
-        waited_s = decision * self.decision_s
-        if self.relax_s <= 0.0:
-            share = 1.0 if waited_s >= limit_s else 0.0
-        else:
-            share = min(1.0, max(0.0, (waited_s - (limit_s - self.relax_s)) / self.relax_s))
-        return self.min_chance + share * (self.deadline_chance - self.min_chance)
+        return int(chance >= self.min_chance - 1e-12)
 
     def chance(self, decision: int = 0) -> float:
         """The share of ``draws`` futures (the deck's own, the rest drawn anew) in which a
         commit now lands; the environment is left as found.  It stops trying once
-        :meth:`required_chance` is out of reach."""
-        tries = self.try_commits(decision, self.required_chance(decision) * self.draws - 1e-9)
+        ``min_chance`` is out of reach."""
+        tries = self.try_commits(decision, self.min_chance * self.draws - 1e-9)
         if tries is None:
             return 0.0  # no future to try (a forecast that cannot be made): wait
         return sum(t.lands for t in tries) / self.draws

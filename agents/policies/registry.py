@@ -266,24 +266,6 @@ POLICIES: dict[str, PolicySpec] = {
             summary="the timing that knows the deck's future and nothing else (gusts and noise "
             "drawn anew): the bar for timing by deck prediction",
         ),
-        _timing(
-            "deck-forecast",
-            kind="bound",
-            status="research",
-            builder="agents.policies.deck_forecast:build_deck_forecast",
-            summary="the deck oracle with the deck's future replaced by the ship's helideck "
-            "forecast",
-            scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
-        ),
-        _timing(
-            "deck-forecast-onboard",
-            kind="heuristic",
-            status="research",
-            builder="agents.policies.deck_forecast:build_deck_forecast_onboard",
-            summary="the helideck forecast's look-ahead as a model the drone carries (its own "
-            "estimates, uncertain drag and thrust)",
-            scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
-        ),
     )
 }
 POLICY_NAMES: tuple[str, ...] = tuple(POLICIES)

@@ -3,8 +3,8 @@
 :func:`collect_transitions` flies whole episodes of the timing task under the look-ahead
 (:class:`~agents.policies.lookahead.LookaheadTimingWrapper`) and records, at every check, the
 observation with the outcome of a commit now (tried in a saved copy of the episode) and of a
-wait; :func:`load_transitions` reads such files back (with fewer draws, or the HMS report
-added, where the look-ahead asked for differs), and :func:`replay_success` scores a policy on
+wait; :func:`load_transitions` reads such files back (with fewer draws where the look-ahead
+asked for has fewer), and :func:`replay_success` scores a policy on
 them exactly.  The data of the offline DQN (:mod:`agents.training.lookahead_training`).
 ``python -m agents.training.lookahead_data collect`` records a file.
 """
@@ -19,13 +19,11 @@ from typing import Any
 import numpy as np
 
 from agents.common.cards import sensing_profile
-from agents.policies.deck_forecast import episode_monitor
 from agents.policies.lookahead import (
     LOOKAHEAD_FEATURES,
     LookaheadSettings,
     LookaheadTimingWrapper,
     check_features,
-    hms_report_features,
     in_flight,
 )
 from agents.policies.oracle import TriedCommit
@@ -213,7 +211,7 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
     )
     invalid = check_features(None)
     episodes = data["episode"]
-    # what follows the checks (the HMS report, if recorded, and the wait used) is kept
+    # what follows the checks (the wait used) is kept
     tail_from = checks * len(LOOKAHEAD_FEATURES)
 
     def stack(row: int, newest: np.ndarray | None, tail: np.ndarray) -> np.ndarray:
@@ -244,56 +242,6 @@ def with_draws(data: dict[str, np.ndarray], settings: LookaheadSettings) -> dict
     return out
 
 
-def with_hms_report(
-    data: dict[str, np.ndarray], settings: LookaheadSettings, progress: bool = False
-) -> dict[str, np.ndarray]:
-    """The records as a look-ahead of ``settings`` (with ``hms_report_s``) sees them when they
-    were recorded without the HMS report: each observation gets the report its check would
-    have read, before its wait used.  The report is the ship's record, a fixed function of the
-    episode's seed and the time, whatever the drone does: each episode of each ``scenario`` is
-    reset again and its k-th check read at the reset's time plus k checks (a warm-up that ended
-    the episode gives its one check the report at the time the warm-up ended)."""
-    from tqdm import tqdm
-
-    if not settings.hms_report_s:
-        raise ConfigError("lookahead.hms_report_s", "no report asked: 0 s")
-    tail_from = settings.checks * len(LOOKAHEAD_FEATURES)
-    if data["observation"].shape[1] != tail_from + 1:
-        raise ConfigError("data", "the transitions hold an HMS report already or another layout")
-    episodes, scenarios = data["episode"], data["scenario"]
-    reports = np.zeros((len(episodes), settings.report_size))
-    next_reports = np.zeros_like(reports)
-    for scenario in np.unique(scenarios).tolist():
-        if scenario not in SCENARIOS:
-            raise ConfigError(
-                "data", f"records of scenario {scenario!r}: the report needs a known scenario"
-            )
-        env, _ = make_env_and_policy("land-now", scenario, SCENARIOS[scenario].estimator)
-        base = env.unwrapped
-        try:
-            seeds = np.unique(episodes[scenarios == scenario]).tolist()
-            for seed in tqdm(seeds, desc=f"HMS reports @ {scenario}", disable=not progress):
-                base.reset(seed=int(seed))
-                monitor = episode_monitor(base, settings.seed)
-                t0 = float(base.world.time)
-                rows = np.flatnonzero((episodes == seed) & (scenarios == scenario))
-                for k, row in enumerate(rows):
-                    t = t0 + k * settings.check_every_s
-                    reports[row] = hms_report_features(monitor, t, settings.hms_report_s)
-                    next_reports[row] = hms_report_features(
-                        monitor, t + settings.check_every_s, settings.hms_report_s
-                    )
-        finally:
-            env.close()
-    out = dict(data)
-    for key, values in (("observation", reports), ("next_observation", next_reports)):
-        observed = data[key]
-        out[key] = np.concatenate(
-            [observed[:, :tail_from], values, observed[:, tail_from:]], axis=1
-        ).astype(np.float32)
-    return out
-
-
 def open_record(path: str | Path) -> Any:
     """A look-ahead record (:func:`collect_transitions`' ``.npz``), opened; anything else is
     refused naming ``data`` and the file."""
@@ -315,15 +263,14 @@ def open_record(path: str | Path) -> Any:
 
 
 def load_transitions(
-    paths: list[str | Path], settings: LookaheadSettings | None = None, progress: bool = False
+    paths: list[str | Path], settings: LookaheadSettings | None = None
 ) -> dict[str, np.ndarray]:
     """The transitions of several files, concatenated; they must share their look-ahead, and
     an episode (its seed) may be in one file only, whatever its scenario.  Each record also
     gets its file's ``scenario``, the ``estimator`` observed (a file without one: the
     scenario's own) and the ``sensing`` profile (:func:`agents.common.cards.sensing_profile`;
     a file without one: ``unknown``).  ``settings``: the look-ahead to see them with, the
-    files' or the same with fewer draws (:func:`with_draws`), or with the HMS report where
-    the files have none (:func:`with_hms_report`)."""
+    files' or the same with fewer draws (:func:`with_draws`)."""
 
     parts: list[dict[str, np.ndarray]] = []
     signature = None
@@ -367,25 +314,13 @@ def load_transitions(
     wanted = json.loads(json.dumps(settings.signature()))
     if recorded == wanted:
         return merged
-    report_keys = ("hms_report_s", "hms_report")
-    recorded_report = {k: recorded.pop(k) for k in report_keys if k in recorded}
-    wanted_report = {k: wanted.pop(k) for k in report_keys if k in wanted}
-    if (
-        {**recorded, "draws": settings.draws} != wanted
-        or settings.draws > recorded["draws"]
-        or (recorded_report and recorded_report != wanted_report)
-    ):
+    if {**recorded, "draws": settings.draws} != wanted or settings.draws > recorded["draws"]:
         raise ConfigError(
             "data",
             "the transitions were collected with another look-ahead than the one asked "
-            f"(recorded {recorded['draws']} draws; only fewer draws can be taken from them, "
-            "and an HMS report added to records without one)",
+            f"(recorded {recorded['draws']} draws; only fewer draws can be taken from them)",
         )
-    if settings.draws != recorded["draws"]:
-        merged = with_draws(merged, settings)
-    if wanted_report and not recorded_report:
-        merged = with_hms_report(merged, settings, progress=progress)
-    return merged
+    return with_draws(merged, settings)
 
 
 def replay_success(data: dict[str, np.ndarray], decide: Any) -> tuple[float, np.ndarray]:

@@ -191,7 +191,6 @@ def train_offline(
     data_paths: list[str | Path],
     out_dir: str | Path,
     progress: bool = True,
-    hms_report_s: float | None = None,
     airframe_in_trim: bool | None = None,
 ) -> dict[str, Any]:
     """Fit the YAML's DQN on the transitions and write the chosen model with its card; returns
@@ -211,9 +210,6 @@ def train_offline(
     s = config.settings
     if s.algo != "dqn" or s.lookahead is None:
         raise ConfigError("deck_landing", "an offline look-ahead DQN needs algo: dqn and lookahead")
-    if hms_report_s is not None:
-        # the YAML's look-ahead with the HMS report's window set (the card signs it too)
-        s.lookahead["hms_report_s"] = float(hms_report_s)
     if airframe_in_trim is not None:
         # the YAML's look-ahead with its drawn airframes in their own trim (the card signs it)
         s.lookahead["airframe_in_trim"] = bool(airframe_in_trim)
@@ -224,7 +220,7 @@ def train_offline(
         raise ConfigError("offline", f"unknown keys {unknown}; allowed: {list(OFFLINE_KEYS)}")
     settings = LookaheadSettings(**s.lookahead)
     # the YAML's look-ahead: the files' own, or theirs with fewer draws
-    data = load_transitions(list(data_paths), settings, progress=progress)
+    data = load_transitions(list(data_paths), settings)
     every = int(offline.get("holdout_every", 5))
     cross_validate = offline.get("cross_validate", False)
     if not isinstance(cross_validate, bool):
@@ -484,23 +480,12 @@ def sign_card(config: Any, data: dict[str, np.ndarray], scenario: str | None = N
     return merge_cards(cards)
 
 
-def _relaxed(observations: np.ndarray, relax_share: float = 1.0 / 3.0) -> np.ndarray:
-    """deck-forecast-onboard's registered rule on the same draws: all of them land, the
-    standard falling to half of them over the last ``relax_share`` of the wait (its 5 s of
-    15; the wait used is the observation's last entry, a share of the limit)."""
-    waited = observations[:, -1]
-    share = np.clip((waited - (1.0 - relax_share)) / relax_share, 0.0, 1.0)
-    return (observations[:, 1] >= 1.0 - 0.5 * share - 1e-9).astype(int)
-
-
 #: fixed rules on the same features, replayed beside the model: a commit at the first check,
-#: deck-forecast-onboard's standard on the same draws (all of them land with the margin), a
-#: looser one (three in four), and its standard relaxed towards the wait limit as registered
+#: all draws land with the margin, and a looser standard (three in four)
 RULES: dict[str, Any] = {
     "commit_at_once": lambda obs: np.ones(len(obs), dtype=int),
     "all_draws_land": lambda obs: (obs[:, 1] >= 1.0 - 1e-9).astype(int),
     "three_quarters_land": lambda obs: (obs[:, 1] >= 0.75 - 1e-9).astype(int),
-    "all_land_relaxed_to_half": _relaxed,
 }
 
 
@@ -531,12 +516,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", nargs="+", required=True)
     parser.add_argument("--out", required=True)
     parser.add_argument(
-        "--hms-report-s",
-        type=float,
-        default=None,
-        help="the look-ahead's hms_report_s (the YAML's unless given; 600: CAP 437's report)",
-    )
-    parser.add_argument(
         "--airframe-in-trim",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -548,7 +527,6 @@ def main(argv: list[str] | None = None) -> int:
         args.config,
         args.data,
         args.out,
-        hms_report_s=args.hms_report_s,
         airframe_in_trim=args.airframe_in_trim,
     )
     print(yaml.safe_dump(summary, sort_keys=False))

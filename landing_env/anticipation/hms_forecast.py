@@ -25,8 +25,7 @@ keeps it in the user cache directory (:func:`~landing_env.resources.cache_dir`,
 seas, the HMS, the sizes, the seed, the fitting code's source and NumPy's version), and gives
 back the fitted forecast to the bit; one process fits while the others wait for its file.
 
-Read by the ``deck-forecast`` policies (:mod:`agents.policies.deck_forecast`) and by the
-timing task's ``forecast`` observation (:mod:`landing_env.envs.timing`).
+Read by the onboard look-ahead of ``timing-dqn-lookahead`` (:mod:`agents.policies.deck_forecast`).
 """
 
 from __future__ import annotations

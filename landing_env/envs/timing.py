@@ -10,9 +10,7 @@ the learner.  The settings are the config's ``timing`` section
 (:class:`~landing_env.timing_config.TimingConfig`); the observation is laid out by
 :class:`~landing_env.timing.layout.TimingObservationLayout`.  The scenario's deck-tilt predictor
 (the wave-off, the contact window, the prediction observation) is read through
-:class:`~landing_env.anticipation.onboard_tilt_prediction.DeckPrediction`, the helideck forecast
-of the ``forecast`` observation through
-:class:`~landing_env.anticipation.hms_forecast_observation.ForecastObservation`.
+:class:`~landing_env.anticipation.onboard_tilt_prediction.DeckPrediction`.
 """
 
 from __future__ import annotations
@@ -22,7 +20,6 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from landing_env.anticipation.hms_forecast_observation import ForecastObservation
 from landing_env.config import episode_step_limit
 from landing_env.envs.actions import WAIT, validate_action
 from landing_env.envs.base import DeckLandingBaseEnv
@@ -76,11 +73,6 @@ class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
          - the scenario's deck-tilt predictor's chance of a deck within 5° at each contact
            time, the value of waiting on, and the prediction's validity, all in [0, 1]
          - as above
-       * - ``forecast``
-         - the history's newest row only
-         - as above, then the ship's helideck forecast 0-8 s ahead (surge, sway, heave,
-           roll, pitch at each horizon), 1 when it was made, and the drone's own velocity
-           and lean
 
     A value beyond ±50 is clipped and flagged; :meth:`TimingObservationLayout.decode` undoes
     the scaling.
@@ -146,8 +138,9 @@ class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
       the view gate from the camera's calibration; ``v5`` v4 observing the helideck forecast
       and the drone's own state; ``v6`` v5 started in trim with the mean wind, with the
       autopilots' stock limits.  **v7** (current, 1.0.0): v6 observing the deck-pose history by
-      default (what ``evaluate landing --scenario ship-ssN`` flies); the forecast is the
-      setting ``timing.observation: forecast``.
+      default (what ``evaluate landing --scenario ship-ssN`` flies); the forecast observation
+      of v5 and v6 was the setting ``timing.observation: forecast`` until it left the package
+      after 1.0.0.
 
     The ids before the current ones are no longer registered; their settings are reached
     through the current id's ``overrides`` (``timing.guidance.descent_profile: range`` for v0).
@@ -169,15 +162,6 @@ class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
             )
         self.layout = timing_layout(self.timing, self.config.simulation.env_hz)
         self._build_descent(self.layout.n_history)
-        try:
-            #: the helideck forecast and own state of the forecast observation (None when
-            #: the observation holds none)
-            self.forecast_observation = (
-                ForecastObservation(self.config) if self.timing.observation == "forecast" else None
-            )
-        except ConfigError:
-            self.world.close()
-            raise
         self.action_space = spaces.Discrete(2)
         self.observation_space = self.layout.space
         self._reset_episode_state()
@@ -204,10 +188,6 @@ class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
         base_observation, _ = super().reset(seed=seed, options=options)
         self._reset_episode_state()
         self._start_descent_episode(base_observation)
-        if self.forecast_observation is not None:
-            # the ship's HMS record of this episode (its errors drawn from the episode's seed)
-            hms_seed = int(self.np_random.integers(2**31))
-            self.forecast_observation.reset(self.world.stewart.motion, hms_seed)
         # warm-up: hold until the history is full; the agent decides only from then on.  A
         # warm-up that ends the episode (a ship deck heaving into the hold, a gust) does not
         # raise: reset returns (``info["hold_failed"]``) and the first step, whatever its
@@ -270,19 +250,8 @@ class DeckLandingTimingEnv(CommittedDescent, DeckLandingBaseEnv):
             None
             if self.layout.history_observed
             else self.deck_prediction.prediction_values(self._wait_s),
-            *self._forecast_observation(),
         )
         return observation
-
-    def _forecast_observation(self) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """The forecast observation's helideck forecast (None: none could be made) and the
-        drone's own state; (None, None) when the observation holds none."""
-        if self.forecast_observation is None:
-            return None, None
-        state = self.world.drone_state()
-        return self.forecast_observation.values(
-            float(self.world.time), state.velocity_w, state.rotation_wb
-        )
 
     def _start_pose(self, options: dict[str, Any]) -> tuple[np.ndarray, float]:
         """At the hold height over the deck, offset and yawed within ``start``'s limits."""

@@ -27,19 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.limits import Limit, Limited, limited
-from landing_env.errors import require_range
 from landing_env.stewart.motion import MotionSource, sample_poses
 
 #: the pose values the HMS reports, in this order (m and rad, the motion source's axes)
 HMS_CHANNELS: tuple[str, ...] = ("x", "y", "z", "roll", "pitch")
-#: the motion part of the HMS's standard report to the helicopter, in this order (rad, rad,
-#: rad, m): the peak roll, pitch and inclination (the deck's angle to the horizontal) and the
-#: total heave (the highest less the lowest point) over the report's window.  CAP 437 (8th
-#: ed., Ch. 6, "Helideck motion reporting"; earlier editions' "vessel movement") asks for the
-#: peaks over the ten minutes before the operation (:data:`REPORT_WINDOW_S`)
-REPORT_FIELDS: tuple[str, ...] = ("peak_roll", "peak_pitch", "peak_inclination", "total_heave")
-#: CAP 437's window of the standard report, s
-REPORT_WINDOW_S = 600.0
 #: their columns in a motion source's (x, y, z, roll, pitch, yaw) pose
 _COLUMNS = [0, 1, 2, 3, 4]
 #: samples per noise chunk (each drawn from its own seeded stream)
@@ -116,20 +107,3 @@ class HelideckMonitor:
         times = index * self.dt_s
         truth = sample_poses(self.motion, times)[:, _COLUMNS]
         return times, truth + self._noise(index) * self.noise_std
-
-    def standard_report(self, t_end_s: float, window_s: float = REPORT_WINDOW_S) -> np.ndarray:
-        """:data:`REPORT_FIELDS` of the record's samples in (``t_end_s - window_s``,
-        ``t_end_s``], as the HMS passes them to the helicopter (with the record's errors)."""
-        require_range("window_s", window_s, 0.0, 24 * 3600.0, low_inclusive=False)
-        _, values = self.window(t_end_s, window_s)
-        roll, pitch, heave = values[:, 3], values[:, 4], values[:, 2]
-        # the deck's normal tilted by roll then pitch: its angle to the vertical
-        inclination = np.arccos(np.clip(np.cos(roll) * np.cos(pitch), -1.0, 1.0))
-        return np.array(
-            [
-                float(np.max(np.abs(roll))),
-                float(np.max(np.abs(pitch))),
-                float(np.max(inclination)),
-                float(np.max(heave) - np.min(heave)),
-            ]
-        )

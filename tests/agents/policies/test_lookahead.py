@@ -92,8 +92,6 @@ def test_any_tried_commits_give_features_inside_the_observation_bounds(draws) ->
         ("min_margin", 1.5),
         ("checks", 0),
         ("checks", True),
-        ("hms_report_s", -1.0),
-        ("hms_report_s", 7200.0),
         ("airframe_in_trim", "yes"),
     ],
 )
@@ -191,16 +189,14 @@ def test_the_lookahead_leaves_the_episode_as_it_found_it(small_forecast) -> None
         wrapped.close()
 
 
-@pytest.mark.parametrize("hms_report_s", [0.0, 600.0])
-def test_random_decisions_stay_in_the_space_to_the_wait_limit(small_forecast, hms_report_s) -> None:
+def test_random_decisions_stay_in_the_space_to_the_wait_limit(small_forecast) -> None:
     env = LookaheadTimingWrapper(
         gym.make(SHIP_ID, overrides={"timing.wait_limit_s": 1.2}),
         forecast=small_forecast,
         draws=1,
         check_every_s=0.4,
-        hms_report_s=hms_report_s,
     )
-    assert env.observation_space.shape == (11 + (2 if hms_report_s else 0),)
+    assert env.observation_space.shape == (11,)
     rng = np.random.default_rng(0)
     try:
         for seed in range(3):
@@ -261,40 +257,6 @@ def test_the_policy_plays_the_wrappers_checks_in_the_bare_task(wrapped, tmp_path
         assert len(policy.checks) == 1
         assert actions[1:] == [0] * (len(actions) - 1)
     finally:
-        env.close()
-
-
-def test_a_model_that_reads_the_hms_report_gets_it_in_the_bare_task_too(
-    small_forecast, tmp_path
-) -> None:
-    reporting = LookaheadTimingWrapper(
-        gym.make(SHIP_ID), forecast=small_forecast, draws=1, check_every_s=0.3, hms_report_s=600.0
-    )
-    env = gym.make(SHIP_ID)
-    try:
-        path = _model(tmp_path, reporting)
-        first, _ = reporting.reset(seed=8)
-        policy = LookaheadTimingPolicy(path, env, forecast=small_forecast)
-        assert policy.settings.hms_report_s == 600.0
-        observation, _ = env.reset(seed=8)
-        policy.reset()
-        policy(observation)
-        np.testing.assert_array_equal(policy.checks[0][1], first)
-        assert np.all(first[10:12] > 0.0)  # the report, before the wait used
-        # a look-ahead without the report signs its card as before the report existed
-        plain = LookaheadSettings(draws=1, check_every_s=0.3).signature()
-        assert "hms_report_s" not in plain and "hms_report" not in plain
-        from agents.common.cards import check_compatible, read_metadata
-
-        with pytest.raises(ConfigError) as error:
-            check_compatible(
-                read_metadata(path),
-                env_signature(env, LookaheadSettings(draws=1, check_every_s=0.3)),
-                path.name,
-            )
-        assert error.value.key.startswith("observation")
-    finally:
-        reporting.close()
         env.close()
 
 

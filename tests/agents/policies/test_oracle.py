@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -330,17 +329,10 @@ def test_evaluating_with_the_deck_oracle_runs_it_and_fills_its_gap() -> None:
     min_chance=st.floats(-1.0, 2.0) | st.just(math.nan),
     check_every_s=st.floats(-1.0, 20.0) | st.just(math.nan),
     min_margin=st.floats(-1.0, 2.0) | st.just(math.nan),
-    deadline_chance=st.none() | st.floats(-1.0, 2.0) | st.just(math.nan),
-    relax_s=st.floats(-5.0, 20.0) | st.just(math.nan),
 )
 @settings(max_examples=60, deadline=None)
 def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
-    draws: int,
-    min_chance: float,
-    check_every_s: float,
-    min_margin: float,
-    deadline_chance: float | None,
-    relax_s: float,
+    draws: int, min_chance: float, check_every_s: float, min_margin: float
 ) -> None:
     from types import SimpleNamespace
 
@@ -351,51 +343,11 @@ def test_the_deck_oracle_builds_or_names_the_setting_for_any_values(
     env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))
     try:
         oracle = DeckOracleTimingPolicy(
-            env,
-            draws,
-            min_chance,
-            check_every_s,
-            min_margin=min_margin,
-            deadline_chance=deadline_chance,
-            relax_s=relax_s,
+            env, draws, min_chance, check_every_s, min_margin=min_margin
         )
     except ConfigError as error:
-        keys = {"draws", "min_chance", "check_every_s", "min_margin", "deadline_chance", "relax_s"}
-        assert error.key in keys
+        assert error.key in {"draws", "min_chance", "check_every_s", "min_margin"}
         return
     assert 1 <= oracle.draws <= 64 and 0.0 < oracle.min_chance <= 1.0
     assert 0.0 <= oracle.min_margin <= 1.0
-    # the standard never rises, stays within (0, min_chance] and ends at the deadline's
-    standards = [oracle.required_chance(d) for d in range(0, 200, 7)]
-    assert all(0.0 < v <= oracle.min_chance + 1e-12 for v in standards)
-    assert all(b <= a + 1e-12 for a, b in itertools.pairwise(standards))
-    final = oracle.required_chance(150)  # 15 s at 0.1 s per decision: the limit
-    assert final == pytest.approx(oracle.deadline_chance or oracle.min_chance)
     assert oracle.stride >= 1 and oracle.chances == []
-
-
-def test_the_deck_oracle_lowers_its_standard_towards_the_wait_limit(monkeypatch) -> None:
-    """With a deadline chance, the share of look-aheads that must land falls linearly over
-    the last relax_s of the wait, and a check commits once its chance meets the standard
-    of its moment."""
-    from types import SimpleNamespace
-
-    from agents.policies.oracle import DeckOracleTimingPolicy
-
-    timing = SimpleNamespace(steps_per_decision=2, wait_limit_s=15.0)
-    env = SimpleNamespace(unwrapped=SimpleNamespace(layout=None, env_dt=0.05, timing=timing))
-    strict = DeckOracleTimingPolicy(env, draws=16, check_every_s=0.1)
-    relaxed = DeckOracleTimingPolicy(
-        env, draws=16, check_every_s=0.1, deadline_chance=0.5, relax_s=5.0
-    )
-    assert [strict.required_chance(d) for d in (0, 100, 125, 150)] == [1.0] * 4
-    assert relaxed.required_chance(0) == relaxed.required_chance(100) == 1.0  # before 10 s
-    assert relaxed.required_chance(125) == pytest.approx(0.75)  # halfway through the relax
-    assert relaxed.required_chance(150) == pytest.approx(0.5)
-    # a policy whose every look-ahead lands 10 of 16 commits only once 10/16 is enough
-    monkeypatch.setattr(DeckOracleTimingPolicy, "chance", lambda self, decision=0: 10 / 16)
-    actions = [relaxed.act(np.zeros(1)) for _ in range(150)]
-    first = actions.index(1)
-    assert relaxed.required_chance(first) <= 10 / 16 < relaxed.required_chance(first - 1)
-    strict.reset()
-    assert not any(strict.act(np.zeros(1)) for _ in range(150))

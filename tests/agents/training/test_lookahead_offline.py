@@ -243,46 +243,6 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_
         assert error.value.key == key
 
 
-def test_an_hms_report_added_to_records_without_one_is_the_one_read_in_flight(
-    small_forecast, tmp_path
-) -> None:
-    live = LookaheadSettings(draws=1, check_every_s=1.0, hms_report_s=600.0)
-    assert live.size == 2 * 5 + 2 + 1
-    path = collect_transitions(
-        "ship-ss4", [5001], tmp_path / "live.npz", live, progress=False, forecast=small_forecast
-    )
-    recorded = load_transitions([path])
-    assert recorded["observation"].shape[1] == live.size
-    report = recorded["observation"][:, 10:12]
-    # ship-ss4 reports a few degrees and metres: inside (0, 1) once scaled, and the same
-    # sea through the 15 s wait (its ten minutes move on by the wait)
-    assert np.all((report > 0.05) & (report < 0.6)) and np.ptp(report, axis=0).max() < 0.05
-    # the same records without the report, as a file recorded before the report existed
-    plain_settings = LookaheadSettings(draws=1, check_every_s=1.0)
-    plain = dict(recorded)
-    for key in ("observation", "next_observation"):
-        plain[key] = np.delete(recorded[key], [10, 11], axis=1)
-    np.savez_compressed(
-        tmp_path / "plain.npz",
-        settings=json.dumps(plain_settings.signature()),
-        scenario="ship-ss4",
-        **{k: v for k, v in plain.items() if k != "scenario"},
-    )
-    added = load_transitions([tmp_path / "plain.npz"], live)
-    np.testing.assert_array_equal(added["observation"], recorded["observation"])
-    inside = ~recorded["wait_terminal"].astype(bool)
-    np.testing.assert_array_equal(
-        added["next_observation"][inside], recorded["next_observation"][inside]
-    )
-    # records with a report are seen only with the same report
-    with pytest.raises(ConfigError) as error:
-        load_transitions([path], LookaheadSettings(draws=1, check_every_s=1.0, hms_report_s=60))
-    assert error.value.key == "data"
-    with pytest.raises(ConfigError) as error:
-        load_transitions([path], plain_settings)
-    assert error.value.key == "data"
-
-
 def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_path) -> None:
     settings = LookaheadSettings()
     data_path = _episodes(tmp_path / "d.npz", range(100), settings, np.random.default_rng(3))
@@ -421,16 +381,6 @@ def test_a_fit_on_two_scenarios_reports_each_ones_and_each_sensing_profiles_repl
     card = read_metadata(tmp_path / "out" / "best_model.zip")
     assert card is not None and "60 of ship-ss5, 40 of ship-ss6" in card.note
     assert card.sensing == ["realistic", "realistic-2x"]
-
-
-def test_the_relaxed_rule_asks_all_draws_early_and_half_at_the_wait_limit() -> None:
-    from agents.training.lookahead_training import RULES
-
-    rule = RULES["all_land_relaxed_to_half"]
-    observations = np.zeros((4, LookaheadSettings().size), np.float32)
-    observations[:, 1] = [0.9, 0.9, 0.5, 1.0]  # the check's chance
-    observations[:, -1] = [0.5, 0.95, 1.0, 0.0]  # the wait used, a share of the limit
-    assert rule(observations).tolist() == [0, 1, 1, 1]
 
 
 def test_records_on_a_training_sea_fly_its_sea_with_the_forecast_identified_online(

@@ -1,27 +1,19 @@
-"""The helideck forecast's examples and the timing task's own state, by numbers: a forecast
-target at horizon h is the HMS record h seconds after the window's last row, and the drone's
-velocity is turned into its heading frame by its yaw alone."""
+"""The helideck forecast's examples, by numbers: a forecast target at horizon h is the HMS
+record h seconds after the window's last row."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
-from estimation.frames import matrix_from_euler_zyx
 from landing_env.anticipation.hms_forecast import (
     EXAMPLE_EVERY_S,
     HORIZONS_S,
     WINDOW_S,
     _examples,
 )
-from landing_env.anticipation.hms_forecast_observation import ForecastObservation
-from landing_env.config import load_config
-from landing_env.scenarios import SCENARIOS
 from landing_env.sea.hms import HelideckMonitor, HelideckMonitorConfig
 
 DT_S = 0.1  # the HMS at 10 Hz
@@ -132,48 +124,3 @@ def test_overlapping_hms_windows_agree_on_the_samples_they_share(
     )
     np.testing.assert_array_equal(first[i], second[j])
     assert len(common) == max(0, len(first_t) - abs(shift))
-
-
-# ------------------------------------------------------------------ the own state
-@pytest.fixture(scope="module")
-def observation() -> ForecastObservation:
-    # identified online: no forecast is fitted to build it (the own state needs none)
-    config = load_config(SCENARIOS["ship-ss5"].config, overrides={"deck_forecast": "online"})
-    return ForecastObservation(config)
-
-
-@pytest.mark.parametrize(
-    ("velocity_w", "heading"),
-    [
-        ((1.0, 0.0, 0.2), (0.0, -1.0, 0.2)),  # north: to the right of a drone facing west
-        ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0)),  # west: ahead
-        ((-2.0, -1.0, 0.0), (-1.0, 2.0, 0.0)),  # south-east: behind and to the left
-    ],
-)
-def test_a_drone_yawed_90_degrees_left_sees_north_to_its_right(
-    observation: ForecastObservation, velocity_w: tuple, heading: tuple
-) -> None:
-    # W: x north, y west (left), z up; yaw 90 deg turns the nose from north to west
-    rotation_wb = matrix_from_euler_zyx(0.1, -0.05, math.pi / 2.0)
-    forecast, own = observation.values(0.0, np.array(velocity_w), rotation_wb)
-    assert forecast is None  # before a reset there is no HMS record to forecast from
-    np.testing.assert_allclose(own[:3], heading, atol=1e-12)
-    np.testing.assert_allclose(own[3:], [0.1, -0.05], atol=1e-12)
-
-
-@settings(max_examples=100, deadline=None)
-@given(
-    angles=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-math.pi, math.pi)),
-    velocity=st.tuples(*[st.floats(-20.0, 20.0)] * 3),
-)
-def test_the_own_velocity_is_the_world_velocity_seen_from_the_heading_frame(
-    observation: ForecastObservation, angles: tuple, velocity: tuple
-) -> None:
-    roll, pitch, yaw = angles
-    rotation_wb = matrix_from_euler_zyx(roll, pitch, yaw)
-    _, own = observation.values(0.0, np.array(velocity), rotation_wb)
-    # the heading frame H: the world turned by the body's yaw (SciPy's, not the module's)
-    yaw_scipy = Rotation.from_matrix(rotation_wb).as_euler("ZYX")[0]
-    expected = Rotation.from_euler("z", yaw_scipy).inv().apply(velocity)
-    np.testing.assert_allclose(own[:3], expected, atol=1e-9)
-    np.testing.assert_allclose(own[3:], [roll, pitch], atol=1e-9)
