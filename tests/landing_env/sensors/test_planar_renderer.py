@@ -22,6 +22,7 @@ from tests.renderer_agreement import (
     place,
     planar_image,
     standard_poses,
+    supersampled_cache_path,
 )
 
 
@@ -197,3 +198,20 @@ def test_an_unknown_shape_makes_the_world_fall_back_to_the_reference_renderer() 
         assert any("planar renderer" in str(c.message) for c in caught)
     finally:
         w.close()
+
+
+def test_a_kept_supersampled_reference_is_found_again_only_by_the_same_plain_image(
+    tmp_path, monkeypatch
+) -> None:
+    """The cache of supersampled TinyRenderer images is named by the pose's plain image: a
+    one-grey-level change anywhere in it (a moved tag, another texture, another camera) or
+    another factor names another file."""
+    monkeypatch.setenv("DECK_LANDING_CACHE_DIR", str(tmp_path))
+    plain = np.random.default_rng(0).integers(0, 256, (512, 512, 3), dtype=np.uint8)
+    path = supersampled_cache_path(plain, 6)
+    assert path.parent.parent == tmp_path
+    assert supersampled_cache_path(plain.copy(), 6) == path
+    changed = plain.copy()
+    changed[300, 200, 1] ^= 1
+    assert supersampled_cache_path(changed, 6) != path
+    assert supersampled_cache_path(plain, 4) != path
