@@ -24,8 +24,9 @@ from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
 from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.physics.drone_state import DroneState
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
-from landing_env.world import PhysicsReport, World
+from landing_env.world import DeckState, PhysicsReport, World
 
 #: bounds of the deck-pose observation: metres for x, y, z and radians for the angles
 POSE_LOW = np.array([-50.0, -50.0, -50.0, -math.pi, -math.pi / 2, -math.pi], dtype=np.float32)
@@ -403,9 +404,12 @@ class DeckLandingBaseEnv(gym.Env):
         return self._steps >= self.max_steps
 
     def _shaping_potential(self) -> float:
+        return self._distance_potential(self.world.drone_state(), self.world.deck_state())
+
+    def _distance_potential(self, state: DroneState, deck: DeckState) -> float:
+        """Φ of the distance from the drone (``state``) to the tag's centre (``deck``)."""
         r = self.config.reward
-        drone = self.world.drone_state().position_w
-        deck = self.world.deck_state()
+        drone = state.position_w
         offset = drone - deck.tag_centre_w
         horizontal = math.hypot(offset[0], offset[1])
         return -r.shaping_weight * (horizontal + r.vertical_weight * abs(offset[2]))
@@ -459,7 +463,7 @@ class DeckLandingBaseEnv(gym.Env):
             samples = self._report.imu_samples
             imu[:3] = np.mean([s.accel for s in samples], axis=0)
             imu[3:] = np.mean([s.gyro for s in samples], axis=0)
-        self._imu_saturated = bool(np.any(np.abs(imu) > IMU_HIGH))
+        self._imu_saturated = bool((np.abs(imu) > IMU_HIGH).any())
         imu = np.clip(imu, -IMU_HIGH, IMU_HIGH)
         down = self._sensing.range_down
         assert down is not None
@@ -509,7 +513,7 @@ class DeckLandingBaseEnv(gym.Env):
         world = self.world
         state = world.drone_state()
         deck = world.deck_state()
-        r_cd, t_cd = world.true_deck_pose_c()
+        r_cd, t_cd = world.true_deck_pose_c(deck)
         report = self._report
         info: dict[str, Any] = {
             "time_s": world.time,
