@@ -71,11 +71,21 @@ def without_nan(value: Any) -> Any:
     kind = type(value)
     # the common leaves first, by exact type (each call of a step's info is one of these)
     if kind is np.ndarray:
-        if value.dtype.kind == "f" and np.isnan(value).any():
-            return np.nan_to_num(value, nan=0.0)
-        return value
+        return _array_without_nan(value)
     if kind is dict:
-        return {key: without_nan(item) for key, item in value.items()}
+        # a dict's plain leaves in place, without a call each
+        out = {}
+        for key, item in value.items():
+            item_kind = type(item)
+            if item_kind is float:
+                out[key] = None if item != item else item
+            elif item_kind in _NAN_FREE:
+                out[key] = item
+            elif item_kind is np.ndarray:
+                out[key] = _array_without_nan(item)
+            else:
+                out[key] = without_nan(item)
+        return out
     if kind is float:
         return None if math.isnan(value) else value
     if kind in _NAN_FREE:
@@ -86,10 +96,17 @@ def without_nan(value: Any) -> Any:
         return [without_nan(item) for item in value]
     if isinstance(value, tuple):
         return tuple(without_nan(item) for item in value)
-    if isinstance(value, np.ndarray) and value.dtype.kind == "f" and np.isnan(value).any():
-        return np.nan_to_num(value, nan=0.0)
+    if isinstance(value, np.ndarray):
+        return _array_without_nan(value)
     if isinstance(value, float | np.floating) and math.isnan(value):
         return None
+    return value
+
+
+def _array_without_nan(value: np.ndarray) -> np.ndarray:
+    """:func:`without_nan` of an array (``count_nonzero`` is the cheapest test of a mask)."""
+    if value.dtype.kind == "f" and np.count_nonzero(np.isnan(value)):
+        return np.nan_to_num(value, nan=0.0)
     return value
 
 
