@@ -26,9 +26,11 @@ sub-steps, the same states), over the row's CPU time per step (1 would be a step
 its physics alone).  When gym-pybullet-drones or PyFlyt is installed,
 their hover tasks run beside the rows; otherwise the output says they are not installed.
 
-``--profile`` prints, instead of the tables, the top functions by cumulative CPU time of
-``--seconds`` simulated seconds of `project` mode with the truth observed, with `tight`, and
-with `tight` under realistic sensing (cProfile; ``--profile-top`` rows each)::
+``--profile`` prints, instead of the tables, the top functions by cumulative and by own CPU
+time of ``--seconds`` simulated seconds of `project` mode with the truth observed, with
+`tight`, and with `tight` under realistic sensing (cProfile; ``--profile-top`` rows each),
+and the CPU time of a step of each case without the profiler and under it (cProfile's own
+cost, with CPU time as its clock, is several times the step's)::
 
     .venv/bin/python -m benchmarks.bench_env_speed --profile --seconds 20
 
@@ -235,6 +237,15 @@ def profile(console: Console, sim_seconds: float, top: int) -> None:
         steps = max(1, int(sim_seconds / env_dt))
         action = np.zeros(env.action_space.shape, dtype=np.float32)
         env.step(action)
+        # the same steps without the profiler first: what a step costs unobserved
+        unobserved = time.process_time()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset(seed=0)
+        unobserved = time.process_time() - unobserved
+        env.reset(seed=0)
+        env.step(action)
         profiler = cProfile.Profile(time.process_time)
         profiler.enable()
         for _ in range(steps):
@@ -246,20 +257,26 @@ def profile(console: Console, sim_seconds: float, top: int) -> None:
         stats = pstats.Stats(profiler)
         # the outermost call's cumulative time: the whole of the steps
         total = max(max(entry[3] for entry in stats.stats.values()), 1e-12)
-        table = Table(title=f"{label}: {steps} steps, top {top} by cumulative CPU time")
-        for column in ("function", "calls/step", "cumulative %", "own %"):
-            table.add_column(column, justify="left" if column == "function" else "right")
-        entries = sorted(stats.stats.items(), key=lambda item: item[1][3], reverse=True)
-        for (path, line, name), (_, calls, own, cumulative, _) in entries[:top]:
-            where = path.removeprefix(root) if path.startswith(root) else path
-            if "site-packages/" in where:
-                where = where.split("site-packages/", 1)[1]
-            site = f"{where}:{line}({name})" if line else name
-            table.add_row(
-                site, f"{calls / steps:.1f}", f"{100 * cumulative / total:.1f}",
-                f"{100 * own / total:.1f}",
-            )  # fmt: skip
-        console.print(table)
+        console.print(
+            f"{label}: {1e3 * unobserved / steps:.3f} CPU ms/step without the profiler, "
+            f"{1e3 * total / steps:.3f} under it"
+        )
+        # by cumulative time (where the step's time goes) and by own time (what to rewrite)
+        for order, column in (("cumulative", 3), ("own", 2)):
+            table = Table(title=f"{label}: {steps} steps, top {top} by {order} CPU time")
+            for heading in ("function", "calls/step", "cumulative %", "own %"):
+                table.add_column(heading, justify="left" if heading == "function" else "right")
+            entries = sorted(stats.stats.items(), key=lambda item: item[1][column], reverse=True)
+            for (path, line, name), (_, calls, own, cumulative, _) in entries[:top]:
+                where = path.removeprefix(root) if path.startswith(root) else path
+                if "site-packages/" in where:
+                    where = where.split("site-packages/", 1)[1]
+                site = f"{where}:{line}({name})" if line else name
+                table.add_row(
+                    site, f"{calls / steps:.1f}", f"{100 * cumulative / total:.1f}",
+                    f"{100 * own / total:.1f}",
+                )  # fmt: skip
+            console.print(table)
 
 
 def tight_starts(console: Console, sim_seconds: float) -> None:
@@ -435,7 +452,9 @@ def main() -> None:
         "--envs", default="1,2", help="comma-separated environment counts of the first table"
     )
     parser.add_argument(
-        "--profile", action="store_true", help="print the profile of a step instead of the tables"
+        "--profile",
+        action="store_true",
+        help="print the profile of a step (by cumulative and by own time) instead of the tables",
     )
     parser.add_argument("--profile-top", type=int, default=25, help="functions per profile")
     parser.add_argument(

@@ -68,14 +68,14 @@ class CameraIntrinsics:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist_coeffs != 0.0))
+        return any(d != 0.0 for d in self.dist)
 
     def project(self, points_c: np.ndarray, distort: bool = True) -> np.ndarray:
         """Project Nx3 points in the camera frame to Nx2 pixels (NaN behind the camera)."""
         points_c = np.atleast_2d(np.asarray(points_c, dtype=float))
         pixels = np.full((len(points_c), 2), np.nan)
         in_front = points_c[:, 2] > 1e-9
-        if not np.any(in_front):
+        if not in_front.any():
             return pixels
         if distort and self.has_distortion:
             projected, _ = cv2.projectPoints(

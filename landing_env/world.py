@@ -475,10 +475,12 @@ class World:
         state = self.drone_state()
         return state.position_w + state.rotation_wb @ self.t_bc, state.rotation_wb @ R_BC
 
-    def true_deck_pose_c(self) -> tuple[np.ndarray, np.ndarray]:
-        """Ground truth ``(R_CD, t_CD)``: the tag frame in the camera frame."""
+    def true_deck_pose_c(self, deck: DeckState | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Ground truth ``(R_CD, t_CD)``: the tag frame in the camera frame (``deck``: the
+        :meth:`deck_state` already read now, if any)."""
         state = self.drone_state()
-        deck = self.deck_state()
+        if deck is None:
+            deck = self.deck_state()
         return deck_pose_in_camera(
             state.position_w, state.rotation_wb, deck.position_w, deck.rotation_wp, self.t_bc
         )

@@ -120,8 +120,12 @@ def test_env_speed_profiles_a_step_in_each_case(tmp_path: Path) -> None:
         "bench_env_speed", "--profile", "--seconds", "0.5", "--profile-top", "12", cwd=tmp_path
     )
     for case in ("truth observed", "tight:", "tight, realistic sensing"):
-        assert re.search(rf"project mode, {case}.*10 steps, top 12", out), case
+        for order in ("cumulative", "own"):
+            assert re.search(rf"project mode, {case}.*10 steps, top 12 by {order}", out), case
+        assert re.search(rf"project mode, {case}.*[\d.]+ CPU ms/step without the profiler", out)
     assert re.search(r"│ landing_env/world\.py:\d+\(step\) +│ +1\.0 │", out)
+    # the controller runs once a physics sub-step: 12 calls a step, high in the own-time table
+    assert re.search(r"│ landing_env/physics/controller\.py:\d+\(update_floats\) +│ +12\.0 │", out)
 
 
 @pytest.mark.slow

@@ -38,15 +38,20 @@ class DeckMotionHistory:
         self._rows: deque[np.ndarray] = deque(maxlen=length)
         self._recent: deque[tuple[float, np.ndarray | None]] = deque(maxlen=rate_window)
         self._t = 0.0
+        #: the rate window's valid samples (centred times, poses, the times' sum of squares),
+        #: stacked once per sample for every :meth:`slope` of it
+        self._window: tuple[np.ndarray | None, np.ndarray | None, float] | None = None
 
     def reset(self) -> None:
         self._rows.clear()
         self._recent.clear()
         self._t = 0.0
+        self._window = None
 
     def push(self, pose: np.ndarray | None) -> None:
         """Add the next sample: ``(x, y, z, roll, pitch, yaw)`` or None when invalid."""
         self._t += self.dt
+        self._window = None
         row = np.zeros(len(HISTORY_FEATURES))
         if pose is not None and np.all(np.isfinite(pose)):
             pose = np.asarray(pose, dtype=float)
@@ -62,13 +67,21 @@ class DeckMotionHistory:
         """The least-squares rate of the pose's ``columns`` (indices of x, y, z, roll, pitch,
         yaw) over the valid samples of the rate window, per second; zeros with fewer than two
         samples."""
-        samples = [(t, p) for t, p in self._recent if p is not None]
-        if len(samples) < 2:
+        window = self._window
+        if window is None:
+            samples = [(t, p) for t, p in self._recent if p is not None]
+            if len(samples) < 2:
+                window = self._window = (None, None, 0.0)
+            else:
+                t = np.array([s[0] for s in samples])
+                t = t - t.mean()
+                poses = np.array([s[1] for s in samples])
+                window = self._window = (t, poses, float(t @ t))
+        t, poses, t_squares = window
+        if t is None:
             return np.zeros(len(columns))
-        t = np.array([s[0] for s in samples])
-        values = np.array([s[1][list(columns)] for s in samples])
-        t = t - t.mean()
-        return (t @ (values - values.mean(axis=0))) / float(t @ t)
+        values = poses[:, list(columns)]
+        return (t @ (values - values.mean(axis=0))) / t_squares
 
     def newest(self) -> np.ndarray:
         """The newest row (an invalid row of zeros before the first sample)."""

@@ -24,8 +24,9 @@ from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
 from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
 from landing_env.physics.controller import VelocitySetpoint
+from landing_env.physics.drone_state import DroneState
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
-from landing_env.world import PhysicsReport, World
+from landing_env.world import DeckState, PhysicsReport, World
 
 #: bounds of the deck-pose observation: metres for x, y, z and radians for the angles
 POSE_LOW = np.array([-50.0, -50.0, -50.0, -math.pi, -math.pi / 2, -math.pi], dtype=np.float32)
@@ -70,11 +71,21 @@ def without_nan(value: Any) -> Any:
     kind = type(value)
     # the common leaves first, by exact type (each call of a step's info is one of these)
     if kind is np.ndarray:
-        if value.dtype.kind == "f" and np.isnan(value).any():
-            return np.nan_to_num(value, nan=0.0)
-        return value
+        return _array_without_nan(value)
     if kind is dict:
-        return {key: without_nan(item) for key, item in value.items()}
+        # a dict's plain leaves in place, without a call each
+        out = {}
+        for key, item in value.items():
+            item_kind = type(item)
+            if item_kind is float:
+                out[key] = None if item != item else item
+            elif item_kind in _NAN_FREE:
+                out[key] = item
+            elif item_kind is np.ndarray:
+                out[key] = _array_without_nan(item)
+            else:
+                out[key] = without_nan(item)
+        return out
     if kind is float:
         return None if math.isnan(value) else value
     if kind in _NAN_FREE:
@@ -85,10 +96,17 @@ def without_nan(value: Any) -> Any:
         return [without_nan(item) for item in value]
     if isinstance(value, tuple):
         return tuple(without_nan(item) for item in value)
-    if isinstance(value, np.ndarray) and value.dtype.kind == "f" and np.isnan(value).any():
-        return np.nan_to_num(value, nan=0.0)
+    if isinstance(value, np.ndarray):
+        return _array_without_nan(value)
     if isinstance(value, float | np.floating) and math.isnan(value):
         return None
+    return value
+
+
+def _array_without_nan(value: np.ndarray) -> np.ndarray:
+    """:func:`without_nan` of an array (``count_nonzero`` is the cheapest test of a mask)."""
+    if value.dtype.kind == "f" and np.count_nonzero(np.isnan(value)):
+        return np.nan_to_num(value, nan=0.0)
     return value
 
 
@@ -403,9 +421,12 @@ class DeckLandingBaseEnv(gym.Env):
         return self._steps >= self.max_steps
 
     def _shaping_potential(self) -> float:
+        return self._distance_potential(self.world.drone_state(), self.world.deck_state())
+
+    def _distance_potential(self, state: DroneState, deck: DeckState) -> float:
+        """Φ of the distance from the drone (``state``) to the tag's centre (``deck``)."""
         r = self.config.reward
-        drone = self.world.drone_state().position_w
-        deck = self.world.deck_state()
+        drone = state.position_w
         offset = drone - deck.tag_centre_w
         horizontal = math.hypot(offset[0], offset[1])
         return -r.shaping_weight * (horizontal + r.vertical_weight * abs(offset[2]))
@@ -459,7 +480,7 @@ class DeckLandingBaseEnv(gym.Env):
             samples = self._report.imu_samples
             imu[:3] = np.mean([s.accel for s in samples], axis=0)
             imu[3:] = np.mean([s.gyro for s in samples], axis=0)
-        self._imu_saturated = bool(np.any(np.abs(imu) > IMU_HIGH))
+        self._imu_saturated = bool((np.abs(imu) > IMU_HIGH).any())
         imu = np.clip(imu, -IMU_HIGH, IMU_HIGH)
         down = self._sensing.range_down
         assert down is not None
@@ -509,7 +530,7 @@ class DeckLandingBaseEnv(gym.Env):
         world = self.world
         state = world.drone_state()
         deck = world.deck_state()
-        r_cd, t_cd = world.true_deck_pose_c()
+        r_cd, t_cd = world.true_deck_pose_c(deck)
         report = self._report
         info: dict[str, Any] = {
             "time_s": world.time,

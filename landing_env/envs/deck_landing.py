@@ -407,19 +407,24 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
         settings = self.config.action
         land = settings.land_trigger and float(action[-1]) > settings.land_threshold
         self._land_refused = land and not self._in_band
+        # the band as judged on the last observation; None once a descent has moved on
+        in_band: bool | None = None
         if land and self._in_band:
             # the chosen descent, waved off where the timing settings ask and time is left
             self._descend(wave_off=self._wait_s < self.timing.wait_limit_s)
         else:
             self._advance(self._action_to_setpoint(action))
-            self._in_band = self._band()
-            if self._in_band:
+            in_band = self._in_band = self._band()
+            if in_band:
                 self._wait_s += self.env_dt
                 forced = settings.land_trigger and self._wait_s >= self.timing.wait_limit_s
                 if forced and self._outcome is Outcome.IN_FLIGHT:
                     self._forced = True
                     self._descend(wave_off=False)
-        self._in_band = self._outcome is Outcome.IN_FLIGHT and self._band()
+                    in_band = None
+        self._in_band = self._outcome is Outcome.IN_FLIGHT and (
+            self._band() if in_band is None else in_band
+        )
         reward = self._step_reward(action, self.world.time - started_s)
         self._previous_action = action.astype(np.float32)
         terminated = self._terminated()
@@ -504,9 +509,9 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
     def _shaping_potential(self) -> float:
         """Φ: the distance's potential, less ``velocity_weight`` per m/s of the drone's
         speed relative to the deck."""
-        relative = self.world.drone_state().velocity_w - self.world.deck_state().velocity_w
-        speed = float(np.linalg.norm(relative))
-        return super()._shaping_potential() - self.config.reward.velocity_weight * speed
+        state, deck = self.world.drone_state(), self.world.deck_state()
+        speed = float(np.linalg.norm(state.velocity_w - deck.velocity_w))
+        return self._distance_potential(state, deck) - self.config.reward.velocity_weight * speed
 
     def _step_reward(self, action: np.ndarray, flown_s: float) -> float:
         r = self.config.reward

@@ -125,7 +125,6 @@ class WindModel:
         self._next_normal = 0
         self._gust = [0.0, 0.0, 0.0]
         self._last_time = -math.inf
-        self._last_value = np.zeros(3)
         self._decay_dt = -1.0
         self._decay = (0.0, 0.0, 0.0)
         self._drive = (0.0, 0.0, 0.0)
@@ -143,7 +142,6 @@ class WindModel:
             self._gust = [s * self._normal() for s in self._sigma]
         else:
             self._gust = [0.0, 0.0, 0.0]
-        self._last_value = self._compose()
 
     def redraw(self, rng: np.random.Generator) -> None:
         """Draw the gusts' future innovations from ``rng``, keeping the present gust: the wind
@@ -166,7 +164,6 @@ class WindModel:
         cx, sx = self._axes
         gx, gy, gz = (float(v) for v in gust)
         self._gust = [cx * gx + sx * gy, -sx * gx + cx * gy, gz]
-        self._last_value = self._compose()
 
     @property
     def gust_w(self) -> np.ndarray:
@@ -186,13 +183,11 @@ class WindModel:
         """
         if not self.config.enabled:
             return np.zeros(3)
-        if t == self._last_time:
-            return self._last_value.copy()
-        self._last_time = t
-        if dt > 0.0:
-            self._advance(dt)
-        self._last_value = self._compose()
-        return self._last_value.copy()
+        if t != self._last_time:
+            self._last_time = t
+            if dt > 0.0:
+                self._advance(dt)
+        return self._compose()
 
     def velocity_tuple(self, t: float, dt: float) -> tuple[float, float, float]:
         """As :meth:`velocity` but as plain floats (the physics hot path avoids arrays)."""
@@ -202,7 +197,6 @@ class WindModel:
             self._last_time = t
             if dt > 0.0:
                 self._advance(dt)
-            self._last_value = self._compose()
         g = self._gust_world()
         m = self._mean
         return (m[0] + g[0], m[1] + g[1], m[2] + g[2])

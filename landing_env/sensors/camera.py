@@ -116,8 +116,8 @@ class CameraSensor(CameraRenderer):
         # the tag's visible normal is -z_D (z_D points into the deck); angle to the camera ray
         to_camera = -t_cd / max(float(np.linalg.norm(t_cd)), 1e-12)
         cos_angle = float(np.dot(-r_cd[:, 2], to_camera))
-        view_angle = float(np.degrees(np.arccos(np.clip(cos_angle, -1.0, 1.0))))
-        if np.any(corners_c[:, 2] <= self.config.near):
+        view_angle = float(np.degrees(np.arccos(min(max(cos_angle, -1.0), 1.0))))
+        if (corners_c[:, 2] <= self.config.near).any():
             nan_corners = np.full((4, 2), np.nan)
             return ProjectedTag(nan_corners, corners_c, view_angle, float("nan"), MISS_BEHIND)
         normalised = corners_c[:, :2] / corners_c[:, 2:3]
@@ -132,7 +132,7 @@ class CameraSensor(CameraRenderer):
         )
         sides = np.linalg.norm(corners_px - corners_px[_NEXT_CORNER], axis=1)
         min_side = float(sides.min())
-        if not np.all(inside):
+        if not inside.all():
             reason = MISS_OUT_OF_VIEW
         elif view_angle > self.config.max_view_angle_deg:
             reason = MISS_OBLIQUE

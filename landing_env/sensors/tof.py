@@ -17,8 +17,9 @@ both a sensor inside the drone's box and a leg right under a sensor.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pybullet as p
@@ -38,6 +39,8 @@ MAX_SELF_HITS = 8
 #: hit (at fraction 0) from a start up to about 0.1 mm inside it (measured), so the step is
 #: larger and doubles whenever a re-cast makes no progress.
 _SELF_HIT_STEP = 1e-3
+#: the hit point of a ray that hits nothing
+_NAN_POINT = (math.nan, math.nan, math.nan)
 
 
 def _default_mounts() -> tuple[tuple[float, float, float], ...]:
@@ -151,16 +154,17 @@ class TofArray:
         origins = np.asarray(t_wb, dtype=float) + (r_wb @ self.origins_b.T).T
         directions = (r_wb @ self.directions_b.T).T
         max_range = self.config.max_range
-        ranges = np.full(self.count, np.nan)
-        points = np.full((self.count, 3), np.nan)
+        count = len(origins)
+        # plain floats per ray: a handful of rays costs less as lists than as small arrays
+        ranges = [math.nan] * count
+        points: list[Any] = [_NAN_POINT] * count
         # distance along each ray at which its current cast starts
-        start = np.zeros(self.count)
-        step = np.full(self.count, _SELF_HIT_STEP)
-        pending = np.arange(self.count)
+        start = [0.0] * count
+        step = [_SELF_HIT_STEP] * count
+        pending = list(range(count))
+        froms, tos = origins.tolist(), (origins + max_range * directions).tolist()
         for _ in range(MAX_SELF_HITS + 1):
-            froms = origins[pending] + start[pending, None] * directions[pending]
-            tos = origins[pending] + max_range * directions[pending]
-            results = p.rayTestBatch(froms.tolist(), tos.tolist(), physicsClientId=self.client)
+            results = p.rayTestBatch(froms, tos, physicsClientId=self.client)
             again: list[int] = []
             for index, result in zip(pending, results, strict=True):
                 body, fraction = result[0], result[2]
@@ -175,11 +179,15 @@ class TofArray:
                         again.append(index)
                     continue
                 ranges[index] = distance
-                points[index] = np.asarray(result[3], dtype=float)
+                points[index] = result[3]
             if not again:
                 break
-            pending = np.asarray(again)
-        return ranges, points
+            pending = again
+            rays = np.asarray(again)
+            starts = np.array([start[index] for index in again])
+            froms = (origins[rays] + starts[:, None] * directions[rays]).tolist()
+            tos = (origins[rays] + max_range * directions[rays]).tolist()
+        return np.array(ranges), np.array(points, dtype=float)
 
     def measure(
         self, timestamp: float, t_wb: np.ndarray, r_wb: np.ndarray, exclude_body: int

@@ -130,8 +130,8 @@ class CommittedDescent:
     def _record_period(self) -> None:
         assert self._sensing is not None and self._base_observation is not None
         world = self.world
-        r_cd, t_cd = world.true_deck_pose_c()
         deck = world.deck_state()
+        r_cd, t_cd = world.true_deck_pose_c(deck)
         self.periods_of_last_step.append(
             {
                 "time_s": world.time,
