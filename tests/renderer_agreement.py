@@ -24,9 +24,15 @@ The references are therefore:
   the anti-aliased image it converges to; ``supersample=1`` is its plain output.  x4 is
   0.04 px from x6 in the mean over the standard poses (0.13 px at worst), x3 0.09 px (0.55 px
   at the level pose at 0.3 m), and only x6 keeps the planar corners within 0.1 px of it at
-  every pose (2026-11-29, at 4797a9c): the tests use x6, 2.6 s of CPU a pose, kept in the
-  user cache (:func:`supersampled_cache_path`).  Near the deck (0.3 m) its texels are magnified
-  (1.7 px a texel) and point-sampled, which leaves 0.2-0.3 px of its own error there.
+  every pose (2026-11-29, at 4797a9c): the tests use x6, 2.6 s of CPU a pose.  The standard
+  poses' x6 images are committed in ``tests/data/renderer-references/`` (150 kB), each named by
+  its pose's plain TinyRenderer image (:func:`committed_reference_path`): a change to the
+  scene, the camera, the poses or the rendering code names other files, which
+  ``python -m tests.renderer_agreement`` writes again (a test fails until it has, naming the
+  command, and another renders one pose live and finds its committed image to the byte); any
+  other pose's is kept in the user cache (:func:`supersampled_cache_path`).  Near the deck
+  (0.3 m) its texels are magnified (1.7 px a texel) and point-sampled, which leaves 0.2-0.3 px
+  of its own error there.
 * OpenGL through PyBullet's EGL plugin, where it loads (a GPU, or Mesa's software llvmpipe):
   it filters textures, and the planar renderer agrees with its *plain* output to 0.04 px
   mean with no offset (mean vector under 0.01 px), 0.008 px at 0.3 m.
@@ -49,14 +55,26 @@ import numpy as np
 from estimation.array_files import locked, write_atomic
 from estimation.detection import AprilTagDetector
 from estimation.frames import matrix_from_euler_zyx
+from landing_env.config import DeckLandingConfig, load_config
 from landing_env.resources import cache_dir
 from landing_env.sensors.camera import CameraSensor
+from landing_env.world import World
+from tests.paths import DATA_DIR, ROOT
 
 #: the user cache directory's folder of supersampled TinyRenderer images
 REFERENCE_CACHE_FOLDER = "renderer-references"
+#: the committed supersampled TinyRenderer images of the standard poses
+COMMITTED_REFERENCES = DATA_DIR / REFERENCE_CACHE_FOLDER
+#: the supersampling factor of the committed references (and of the corner tests)
+COMMITTED_SUPERSAMPLE = 6
 
 #: heights (drone centre above the deck's home surface, m) the agreement is checked at
 HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
+#: poses below this height (m) view a smaller tag: the default 0.30 m tag is larger than the
+#: view at 0.3 m
+SMALL_TAG_BELOW_M = 0.5
+#: the smaller tag's size, m
+SMALL_TAG_M = 0.12
 
 
 @dataclass(frozen=True)
@@ -93,6 +111,21 @@ def standard_poses() -> list[Pose]:
     return poses
 
 
+def render_config(small_tag: bool = False) -> DeckLandingConfig:
+    """The default config with the camera rendering (the planar renderer attached), with
+    the smaller tag where ``small_tag`` (the poses :func:`uses_small_tag`)."""
+    overrides: dict[str, object] = {"camera.mode": "render"}
+    if small_tag:
+        overrides["deck.tag_size"] = SMALL_TAG_M
+    return load_config("default", overrides=overrides)
+
+
+def uses_small_tag(pose: Pose) -> bool:
+    """Whether ``pose`` is rendered with the smaller tag (it is below
+    :data:`SMALL_TAG_BELOW_M`)."""
+    return pose.height_m < SMALL_TAG_BELOW_M
+
+
 def place(world, pose: Pose) -> None:
     """Put the drone and the deck of a :class:`~landing_env.world.World` in ``pose``."""
     c = world.client
@@ -119,9 +152,10 @@ def reference_image(world, supersample: int = 3, renderer: str | None = None) ->
 
     ``renderer``: "tiny" (TinyRenderer) or "egl" (the EGL plugin, which the world's camera
     must have loaded: ``camera.use_egl``); None = the world's own reference renderer.
-    A supersampled TinyRenderer image is kept in the user cache directory
-    (:func:`supersampled_cache_path`) and read back while the plain image of the same pose is
-    the same to the byte.
+    A supersampled TinyRenderer image is read from the committed references
+    (:func:`committed_reference_path`) when one is named by the pose's plain image, else kept
+    in the user cache directory (:func:`supersampled_cache_path`) and read back while the
+    plain image of the same pose is the same to the byte.
     """
     s = int(supersample)
     renderer = world.camera.renderer if renderer is None else renderer
@@ -134,7 +168,12 @@ def reference_image(world, supersample: int = 3, renderer: str | None = None) ->
         )
     if renderer != "tiny" or s == 1:
         return _render_reference(world, s, renderer)
-    path = supersampled_cache_path(_render_reference(world, 1, renderer), s)
+    plain = _render_reference(world, 1, renderer)
+    committed = committed_reference_path(plain, s)
+    if committed.is_file():
+        with np.load(committed) as stored:
+            return stored["image"]
+    path = supersampled_cache_path(plain, s)
     with locked(path):
         with contextlib.suppress(OSError, ValueError, KeyError, zipfile.BadZipFile):
             with np.load(path) as stored:
@@ -151,16 +190,65 @@ def supersampled_cache_path(plain: np.ndarray, supersample: int) -> Path:
     pose's plain TinyRenderer image (the scene, its textures, the camera and the pose all
     show in it), the factor, the code that renders and filters it, and PyBullet's and
     OpenCV's versions."""
+    name = _reference_name(plain, supersample, metadata.version("pybullet"), cv2.__version__)
+    return cache_dir() / REFERENCE_CACHE_FOLDER / name
+
+
+def committed_reference_path(plain: np.ndarray, supersample: int) -> Path:
+    """Where the committed supersampled TinyRenderer image of a pose is: named as in the
+    user cache but for the libraries' versions (a release that renders or filters otherwise
+    is caught by the test that renders a committed pose live)."""
+    return COMMITTED_REFERENCES / _reference_name(plain, supersample)
+
+
+def _reference_name(plain: np.ndarray, supersample: int, *versions: str) -> str:
     digest = hashlib.sha256(plain.tobytes())
     for part in (
         repr((plain.shape, plain.dtype.str, int(supersample))),
         inspect.getsource(_render_reference),
-        metadata.version("pybullet"),
-        cv2.__version__,
+        *versions,
     ):
         digest.update(part.encode())
-    name = f"tiny_x{int(supersample)}_{digest.hexdigest()[:24]}.npz"
-    return cache_dir() / REFERENCE_CACHE_FOLDER / name
+    return f"tiny_x{int(supersample)}_{digest.hexdigest()[:24]}.npz"
+
+
+def committed_reference_of(world, pose: Pose) -> tuple[Path, np.ndarray]:
+    """The committed reference's path of ``pose`` in ``world`` (placed there), and the pose's
+    plain TinyRenderer image that names it."""
+    place(world, pose)
+    plain = _render_reference(world, 1, "tiny")
+    return committed_reference_path(plain, COMMITTED_SUPERSAMPLE), plain
+
+
+def render_supersampled(world, pose: Pose, supersample: int = COMMITTED_SUPERSAMPLE) -> np.ndarray:
+    """The supersampled TinyRenderer image of ``pose`` in ``world``, rendered now (neither
+    the committed references nor the user cache are read)."""
+    place(world, pose)
+    return _render_reference(world, int(supersample), "tiny")
+
+
+def write_committed_references() -> list[Path]:
+    """Render the standard poses' supersampled TinyRenderer images into
+    :data:`COMMITTED_REFERENCES` (about 40 s of CPU) and remove the files no pose names any
+    more; the written paths."""
+    worlds = {small: World(render_config(small)) for small in (False, True)}
+    written = []
+    try:
+        for pose in standard_poses():
+            world = worlds[uses_small_tag(pose)]
+            path, _ = committed_reference_of(world, pose)
+            image = render_supersampled(world, pose)
+            buffer = io.BytesIO()
+            np.savez_compressed(buffer, image=image)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(buffer.getvalue())
+            written.append(path)
+    finally:
+        for world in worlds.values():
+            world.close()
+    for stale in set(COMMITTED_REFERENCES.glob("tiny_x*.npz")) - set(written):
+        stale.unlink()
+    return written
 
 
 def _render_reference(world, s: int, renderer: str) -> np.ndarray:
@@ -316,16 +404,29 @@ def corner_statistics(
 
 
 __all__ = [
+    "COMMITTED_REFERENCES",
+    "COMMITTED_SUPERSAMPLE",
     "HEIGHTS_M",
     "Agreement",
     "CornerStatistics",
     "Pose",
+    "committed_reference_of",
+    "committed_reference_path",
     "compare",
     "corner_norms",
     "corner_sets",
     "corner_statistics",
     "place",
     "reference_image",
+    "render_config",
+    "render_supersampled",
     "standard_poses",
     "supersampled_cache_path",
+    "uses_small_tag",
+    "write_committed_references",
 ]
+
+
+if __name__ == "__main__":
+    for written in write_committed_references():
+        print(written.relative_to(ROOT))

@@ -13,22 +13,27 @@ from estimation.detection import AprilTagDetector
 from landing_env.config import load_config
 from landing_env.world import World
 from tests.renderer_agreement import (
+    COMMITTED_REFERENCES,
     HEIGHTS_M,
     Pose,
+    committed_reference_of,
     compare,
     corner_norms,
     corner_sets,
     corner_statistics,
     place,
     planar_image,
+    render_config,
+    render_supersampled,
     standard_poses,
     supersampled_cache_path,
+    uses_small_tag,
 )
 
 
 @pytest.fixture(scope="module")
 def world() -> Iterator[World]:
-    w = World(load_config("default", overrides={"camera.mode": "render"}))
+    w = World(render_config())
     yield w
     w.close()
 
@@ -36,7 +41,7 @@ def world() -> Iterator[World]:
 @pytest.fixture(scope="module")
 def small_tag_world() -> Iterator[World]:
     """A 0.12 m tag: the default 0.30 m tag is larger than the view at 0.3 m."""
-    w = World(load_config("default", overrides={"camera.mode": "render", "deck.tag_size": 0.12}))
+    w = World(render_config(small_tag=True))
     yield w
     w.close()
 
@@ -57,11 +62,40 @@ def tinyrenderer_corners(world: World, small_tag_world: World) -> list[tuple[Pos
     detector = AprilTagDetector()
     out = []
     for pose in standard_poses():
-        chosen = small_tag_world if pose.height_m < 0.5 else world
+        chosen = small_tag_world if uses_small_tag(pose) else world
         found = corner_sets(chosen, detector, pose, (("tiny", 1), ("tiny", 6)))
         assert all(c is not None for c in found.values()), f"tag not detected at {pose}"
         out.append((pose, found))
     return out
+
+
+def test_every_standard_pose_has_its_committed_supersampled_reference_and_no_other(
+    world: World, small_tag_world: World
+) -> None:
+    """The corner tests read the standard poses' TinyRenderer x6 images from the committed
+    references, each named by its pose's plain image: a change that moves any plain image
+    (the scene, the camera, a pose, the rendering code) leaves a pose without its file."""
+    named = set()
+    for pose in standard_poses():
+        path, _ = committed_reference_of(small_tag_world if uses_small_tag(pose) else world, pose)
+        assert path.is_file(), (
+            f"no committed TinyRenderer x6 reference for {pose} ({path.name}): "
+            "write them again with `python -m tests.renderer_agreement`"
+        )
+        named.add(path)
+    assert set(COMMITTED_REFERENCES.glob("*.npz")) == named
+
+
+def test_a_committed_supersampled_reference_is_what_tinyrenderer_renders_now(world: World) -> None:
+    """One standard pose (tilted drone and deck, off centre) rendered x6 live: its committed
+    image is the same to the grey level, so a PyBullet or OpenCV release that renders or
+    filters otherwise is caught."""
+    pose = standard_poses()[8]
+    assert pose.height_m == 1.0 and pose.offset_m != (0.0, 0.0) and pose.deck_rp_deg != (0, 0)
+    path, _ = committed_reference_of(world, pose)
+    with np.load(path) as stored:
+        committed = stored["image"]
+    np.testing.assert_array_equal(render_supersampled(world, pose), committed)
 
 
 def _diffs(results, a: str, b: str, heights=None) -> list[np.ndarray]:
