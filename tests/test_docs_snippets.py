@@ -17,9 +17,10 @@ How a block runs
 What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for it)
   * ``--episodes N`` -> 1, ``--workers N`` -> 1, ``--seeds N`` -> 1, ``--duration N`` -> 1,
     ``--seconds N`` -> 2, rl-zoo3 given ``-n 64`` (its step budget);
-  * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1``, ``evaluate landing``
-    ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen`` ``--duration 10`` in
-    front of their own flags (the written ones, reduced, win);
+  * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1`` (the sweep also
+    ``--parameters tilt``: every condition runs in ``tests/agents/evaluation``),
+    ``evaluate landing`` ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen``
+    ``--duration 10`` in front of their own flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
   * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
     episode and one checkpoint at the end, and small buffers, so ``train`` still writes
@@ -86,7 +87,9 @@ REDUCTIONS: tuple[tuple[str, str], ...] = (
     (r"(python -m rl_zoo3\.train\b)", r"\1 -n 64"),
     (r"--input REC\b(?!\.)", "--input REC.mcap"),
     # the flags a command's default makes long, given first (a written value still wins)
-    (r"(deck-landing evaluate (?:estimators|sweep))\b", r"\1 --duration 1"),
+    (r"(deck-landing evaluate estimators)\b", r"\1 --duration 1"),
+    # one condition's four points (the k1 condition calibrates a camera at each of its twelve)
+    (r"(deck-landing evaluate sweep)\b", r"\1 --duration 1 --parameters tilt"),
     (r"(deck-landing evaluate landing)\b", r"\1 --workers 1 --episodes 1"),
     (r"(-m benchmarks\.bench_fused_unseen)\b", r"\1 --duration 10"),
 )

@@ -21,6 +21,7 @@ from estimation.frames import (
     tof_positions_in_camera_frame,
 )
 from estimation.fusion import DeckFusion, FusionConfig
+from estimation.fusion.config import nis_gate
 from estimation.fusion.model import N_STATE, TH, deck_normal, rotation_zyx, tof_model, wrap_angle
 from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
 
@@ -299,6 +300,16 @@ def test_config_errors_name_the_field() -> None:
     with pytest.raises(ConfigError, match="atda_sigma"):
         FusionConfig(atda_sigma=(0.1, 0.1))
     assert FusionConfig(ihrcf_sigma=(0.002, 0.002, math.inf, math.inf, math.inf, 0.3)).sources
+
+
+@given(
+    dof=st.integers(1, 12),
+    probability=st.floats(1e-6, 1.0 - 1e-9, allow_nan=False),
+)
+@settings(max_examples=60, deadline=None)
+def test_the_chi_square_gate_is_scipys_chi_square_quantile(dof: int, probability: float) -> None:
+    assert nis_gate(dof, probability, None) == pytest.approx(chi2.ppf(probability, dof), rel=1e-12)
+    assert nis_gate(dof, probability, 3.0) == 9.0
 
 
 def _as_tight(frame: Frame, rng: np.random.Generator, sigma_cd: np.ndarray) -> DeckPoseEstimate:
