@@ -19,7 +19,7 @@ from agents.evaluation.pipeline import (
     make_episode,
     run_episode,
 )
-from agents.evaluation.plots import plt, save_figure
+from agents.evaluation.plots import pyplot, save_figure
 from agents.evaluation.records import EpisodeRecord
 from agents.policies.registry import default_policy
 from landing_env.errors import ConfigError, require_choice
@@ -79,7 +79,7 @@ def plot_trajectory(log: EpisodeLog, path: Path) -> None:
     t = np.asarray(log.time)
     drone = np.asarray(log.drone)
     deck = np.asarray(log.deck)
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    fig, axes = pyplot().subplots(1, 3, figsize=(14, 4))
     axes[0].plot(t, drone[:, 2], label="drone centre")
     axes[0].plot(t, deck[:, 2], label="deck surface")
     axes[0].set(xlabel="time (s)", ylabel="z (m)", title="Height")
@@ -246,7 +246,7 @@ def plot_timing(log: TimingDemoLog, path: Path, limit_deg: float) -> None:
     valid = np.array([p["deck_pose_valid"] for p in log.periods])
     seen_tilt = np.degrees(np.arccos(np.cos(observed[:, 3]) * np.cos(observed[:, 4])))
     height = np.array([p["drone_position_w"][2] - p["deck_position_w"][2] for p in log.periods])
-    fig, (ax_tilt, ax_height) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, (ax_tilt, ax_height) = pyplot().subplots(2, 1, figsize=(10, 6), sharex=True)
     ax_tilt.plot(t, true_tilt, "k-", label="deck tilt (truth)")
     ax_tilt.plot(t[valid], seen_tilt[valid], ".", ms=3, label="deck relative to camera (observed)")
     ax_tilt.axhline(limit_deg, color="r", linestyle="--", linewidth=1, label="touchdown limit")

@@ -40,6 +40,7 @@ from agents.evaluation.pipeline import (
     held_out_seeds,
     make_episode,
 )
+from agents.evaluation.plots import pyplot
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import EpisodeTask
 from agents.evaluation.summary import columns
@@ -129,10 +130,7 @@ class ApproachWatch(Watch):
 
 def plot_trajectories(results: dict[str, list[EpisodeRecord]], path: Path, title: str) -> None:
     """Top view (x, y from the deck's home) and height against time of the first episodes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax_top, ax_h) = plt.subplots(1, 2, figsize=(13, 5.5))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]

@@ -10,13 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.evaluation.plots import _colour, save_figure
+from agents.evaluation.plots import _colour, pyplot, save_figure
 from agents.evaluation.records import ScenarioRecord, display_name, to_table_units
 
 #: (axis index, label, scale from m / degrees to the plotted unit)
@@ -63,7 +59,7 @@ def plot_fusion_dropout(
     hi = min(float(time[-1]), lo + window_s)
     frames = (time >= lo) & (time <= hi)
     truth = to_table_units(record.truth)
-    fig, axes = plt.subplots(len(_PANELS), 1, figsize=(9, 6.5), sharex=True)
+    fig, axes = pyplot().subplots(len(_PANELS), 1, figsize=(9, 6.5), sharex=True)
     for ax, (axis, label, scale) in zip(axes, _PANELS, strict=True):
         ax.axvspan(*gap, color="lightsteelblue", alpha=0.35, lw=0, zorder=0, label="no delivery")
         for index, name in enumerate(delayed):

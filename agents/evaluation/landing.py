@@ -46,6 +46,7 @@ from agents.evaluation.pipeline import (
     run_episode,
     run_task,
 )
+from agents.evaluation.plots import pyplot
 from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import EpisodeTask, RunResult
 from agents.evaluation.summary import columns, is_timing
@@ -62,10 +63,7 @@ ESTIMATORS = ESTIMATOR_NAMES
 def plot_results(evaluated: Evaluated, path: Path, title: str) -> None:
     """Histograms of the touchdown's relative normal speed and deck tilt per policy (with the
     touchdown checks' limits), and success rates with their intervals."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     results, summaries = evaluated.results, evaluated.summaries
     limits = TouchdownConfig()

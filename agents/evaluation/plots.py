@@ -6,11 +6,9 @@ Ground truth in green, as in the papers; invalid frames are gaps in the lines.
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from agents.evaluation.records import (
@@ -20,6 +18,9 @@ from agents.evaluation.records import (
     pose_errors,
     to_table_units,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 #: the papers' colours: ground truth green, IHRCF blue, ATDA red; CRHF gets purple here
 COLOURS: dict[str, str] = {
@@ -52,12 +53,23 @@ def _series(record: ScenarioRecord) -> dict[str, np.ndarray]:
     return series
 
 
-def save_figure(fig: plt.Figure, path: Path) -> Path:
+def pyplot() -> ModuleType:
+    """``matplotlib.pyplot`` drawing to files (the Agg backend), imported when a figure is
+    first drawn: a command that draws none does not load it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
     """Lay ``fig`` out, write it to ``path`` (its folder made if missing) and close it."""
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    pyplot().close(fig)
     return path
 
 
@@ -67,7 +79,7 @@ def plot_against_time(record: ScenarioRecord, path: Path, angles: bool) -> Path:
     t = record.time_s
     columns = range(3, 6) if angles else range(3)
     unit = "deg" if angles else "m"
-    fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True)
+    fig, axes = pyplot().subplots(3, 1, figsize=(10, 7.5), sharex=True)
     for ax, k in zip(axes, columns, strict=True):
         for i, (name, values) in enumerate(series.items()):
             label = "GT" if name == "truth" else display_name(name)
@@ -84,7 +96,7 @@ def plot_against_time(record: ScenarioRecord, path: Path, angles: bool) -> Path:
 def plot_trajectories(record: ScenarioRecord, path: Path) -> Path:
     """The tag's track in the camera frame: XZ, YZ, XY views and the XYZ view."""
     series = _series(record)
-    fig = plt.figure(figsize=(11, 9))
+    fig = pyplot().figure(figsize=(11, 9))
     views = ((0, 2, "XZ view"), (1, 2, "YZ view"), (0, 1, "XY view"))
     for panel, (a, b, title) in enumerate(views, start=1):
         ax = fig.add_subplot(2, 2, panel)
@@ -109,7 +121,7 @@ def plot_errors(record: ScenarioRecord, path: Path) -> Path:
     """Absolute errors per axis against time: per estimator, translations and angles."""
     names = list(record.estimates)
     t = record.time_s
-    fig, axes = plt.subplots(
+    fig, axes = pyplot().subplots(
         len(names), 2, figsize=(12, 2.6 * len(names) + 0.6), sharex=True, squeeze=False
     )
     for row, name in enumerate(names):

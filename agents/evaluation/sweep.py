@@ -31,10 +31,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from agents.common.parallel import map_tasks
@@ -48,7 +44,7 @@ from agents.evaluation.estimators import (
     run_scenario,
     score_record,
 )
-from agents.evaluation.plots import COLOURS, save_figure
+from agents.evaluation.plots import COLOURS, pyplot, save_figure
 from estimation.limits import POSITIVE, Limit, limited, require_limits
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim
@@ -386,7 +382,7 @@ def _style(name: str, variant: str, index: int) -> dict[str, Any]:
 def plot_parameter(points: list[SweepPoint], parameter: str, path: Path) -> Path:
     """Six panels (one per axis): each estimator's MAE against the condition."""
     keys = _series_keys(points, parameter)
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
+    fig, axes = pyplot().subplots(2, 3, figsize=(13, 7), sharex=True)
     for k, ax in enumerate(axes.ravel()):
         for i, (name, variant) in enumerate(keys):
             x, mae = _series(points, parameter, name, variant)
@@ -403,7 +399,9 @@ def plot_parameter(points: list[SweepPoint], parameter: str, path: Path) -> Path
 def plot_overview(points: list[SweepPoint], path: Path) -> Path:
     """One column per condition: mean translation MAE (top) and mean angle MAE (bottom)."""
     parameters = list(dict.fromkeys(p.parameter for p in points))
-    fig, axes = plt.subplots(2, len(parameters), figsize=(4.2 * len(parameters), 7), squeeze=False)
+    fig, axes = pyplot().subplots(
+        2, len(parameters), figsize=(4.2 * len(parameters), 7), squeeze=False
+    )
     for col, parameter in enumerate(parameters):
         for i, (name, variant) in enumerate(_series_keys(points, parameter)):
             x, mae = _series(points, parameter, name, variant)
@@ -443,7 +441,9 @@ def plot_tight_ratio(points: list[SweepPoint], path: Path) -> Path | None:
     parameters = list(dict.fromkeys(r[0] for r in rows))
     if not parameters:
         return None
-    fig, axes = plt.subplots(1, len(parameters), figsize=(5 * len(parameters), 4), squeeze=False)
+    fig, axes = pyplot().subplots(
+        1, len(parameters), figsize=(5 * len(parameters), 4), squeeze=False
+    )
     for ax, parameter in zip(axes[0], parameters, strict=True):
         chosen = [r for r in rows if r[0] == parameter]
         x = np.array([r[1] for r in chosen])
