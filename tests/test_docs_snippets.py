@@ -19,7 +19,10 @@ What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for i
     ``--seconds N`` -> 2, rl-zoo3 given ``-n 64`` (its step budget);
   * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1`` (the sweep also
     ``--parameters tilt``: every condition runs in ``tests/agents/evaluation``),
-    ``evaluate landing`` ``--workers 1 --episodes 1`` and ``benchmarks.bench_fused_unseen``
+    ``evaluate landing`` ``--workers 1 --episodes 1`` (at ``ship-ss5`` and ``ship-ss6`` also
+    ``--seed 1000007``: there ``deck-oracle`` commits within a second and
+    ``timing-dqn-lookahead`` within five, where the first seed has them wait up to ten, each
+    second of the wait a few look-ahead descents) and ``benchmarks.bench_fused_unseen``
     ``--duration 10`` in front of their own flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
   * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
@@ -91,6 +94,8 @@ REDUCTIONS: tuple[tuple[str, str], ...] = (
     # one condition's four points (the k1 condition calibrates a camera at each of its twelve)
     (r"(deck-landing evaluate sweep)\b", r"\1 --duration 1 --parameters tilt"),
     (r"(deck-landing evaluate landing)\b", r"\1 --workers 1 --episodes 1"),
+    # at the ship's sea states 5 and 6, a seed where the look-ahead policies commit soon
+    (r"(deck-landing evaluate landing)\b(?=[^\n]*--scenario ship-ss[56]\b)", r"\1 --seed 1000007"),
     (r"(-m benchmarks\.bench_fused_unseen)\b", r"\1 --duration 10"),
 )
 
@@ -419,3 +424,17 @@ def test_a_block_is_found_between_its_fences_with_its_line_and_marker() -> None:
 def test_the_reductions_shrink_counts_and_pick_the_first_alternative() -> None:
     block = Block("p.md", 1, "bash", "x --episodes 200 --workers 2 --estimator tight|crhf\n", None)
     assert shell_of(block) == "x --episodes 1 --workers 1 --estimator tight\n"
+
+
+def test_a_commands_own_flags_follow_the_reductions_it_gets_so_that_they_win() -> None:
+    written = (
+        "deck-landing evaluate sweep --parameters k1\n"
+        "deck-landing evaluate landing --scenario ship-ss6 --seed 5000000\n"
+        "deck-landing evaluate landing --scenario ship-ss4\n"
+    )
+    assert shell_of(Block("p.md", 1, "bash", written, None)).splitlines() == [
+        "deck-landing evaluate sweep --duration 1 --parameters tilt --parameters k1",
+        "deck-landing evaluate landing --seed 1000007 --workers 1 --episodes 1"
+        " --scenario ship-ss6 --seed 5000000",
+        "deck-landing evaluate landing --workers 1 --episodes 1 --scenario ship-ss4",
+    ]
