@@ -16,7 +16,7 @@ How a block runs
 
 What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for it)
   * ``--episodes N`` -> 1, ``--workers N`` -> 1, ``--seeds N`` -> 1, ``--duration N`` -> 1,
-    ``--seconds N`` -> 2, rl-zoo3 given ``-n 64`` (its step budget);
+    ``--seconds N`` -> 2, rl-zoo3 given ``-n 32`` (its step budget: one rollout);
   * ``evaluate estimators`` and ``evaluate sweep`` get ``--duration 1`` (the sweep also
     ``--parameters tilt``: every condition runs in ``tests/agents/evaluation``),
     ``evaluate landing`` ``--workers 1 --episodes 1`` (at ``ship-ss5`` and ``ship-ss6`` also
@@ -28,6 +28,7 @@ What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for i
   * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
     episode and one checkpoint at the end, and small buffers, so ``train`` still writes
     ``best_model.zip``, and an imitation stage of one teacher episode and one pass of each fit;
+    a lander's episodes end after 8 simulated seconds;
   * placeholders name small files made once per run: ``DIR`` (the chessboard photos of
     tests/data and the simulated camera's calibration folder), ``photos/`` (the photos),
     ``my_camera/`` (the calibration folder), ``REC`` and
@@ -87,7 +88,7 @@ REDUCTIONS: tuple[tuple[str, str], ...] = (
     (r"--duration \d+(\.\d+)?", "--duration 1"),
     (r"--seconds \d+", "--seconds 2"),
     (r"\b(\w+)(?:\|\w+)+\b", r"\1"),  # tight|ihrcf|crhf -> tight
-    (r"(python -m rl_zoo3\.train\b)", r"\1 -n 64"),
+    (r"(python -m rl_zoo3\.train\b)", r"\1 -n 32"),
     (r"--input REC\b(?!\.)", "--input REC.mcap"),
     # the flags a command's default makes long, given first (a written value still wins)
     (r"(deck-landing evaluate estimators)\b", r"\1 --duration 1"),
@@ -165,6 +166,13 @@ def shrink_train_config(source: Path, target: Path) -> None:
                 }
         elif isinstance(value, dict):
             value.update(n_envs=1, n_timesteps=32)
+            if key.startswith("DeckLanding-"):
+                # a lander's episodes (the teacher's, the evaluations') end after 8 s
+                kwargs = value.setdefault("env_kwargs", {})
+                kwargs["overrides"] = {
+                    **kwargs.get("overrides", {}),
+                    "simulation.max_episode_s": 8.0,
+                }
             for name, small in (("learning_starts", 16), ("buffer_size", 1000), ("n_steps", 32)):
                 if name in value:
                     value[name] = small
