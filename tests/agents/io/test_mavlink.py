@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import socket
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from agents.cli import main
 from agents.common.user_input import UserError
 from agents.io.landing_target import (
     CameraMount,
+    LandingTargetFields,
     VehiclePose,
     ardupilot_fields,
     ardupilot_parameters,
@@ -238,6 +240,45 @@ def test_a_pymavlink_listener_decodes_every_field_as_the_estimate_gives_it(
         assert (message.size_x, message.size_y) == (0.0, 0.0)
         assert np.array_equal(np.asarray(message.q, F32), np.asarray(expected.q, F32))
         assert (message.get_srcSystem(), message.get_srcComponent()) == (7, 191)
+
+
+@pytest.fixture(scope="module")
+def wire() -> Iterator[tuple[MavlinkLink, socket.socket]]:
+    """A link as system 9, component 190, sending to a loopback socket: one for every
+    example of a property."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(2.0)
+    link = MavlinkLink(url_of(sock), system_id=9, component_id=190)
+    try:
+        yield link, sock
+    finally:
+        link.close()
+        sock.close()
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    time_usec=st.integers(0, 2**64 - 1),
+    frame=st.sampled_from([mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_FRAME_BODY_FRD]),
+    values=st.lists(
+        st.floats(width=32, allow_nan=False, allow_infinity=False), min_size=10, max_size=10
+    ),
+)
+def test_any_landing_target_is_unpacked_with_the_float32_fields_it_was_packed_with(
+    wire: tuple[MavlinkLink, socket.socket], time_usec: int, frame: int, values: list[float]
+) -> None:
+    link, sock = wire
+    x, y, z, w, qx, qy, qz, distance, angle_x, angle_y = values
+    fields = LandingTargetFields(frame, x, y, z, (w, qx, qy, qz), distance, angle_x, angle_y)
+    link.send_landing_target(time_usec, fields)
+    (message,) = receive(sock, 1)
+    assert message.get_type() == "LANDING_TARGET"
+    assert (message.get_srcSystem(), message.get_srcComponent()) == (9, 190)
+    assert (message.time_usec, message.frame, message.position_valid) == (time_usec, frame, 1)
+    for name in ("x", "y", "z", "distance", "angle_x", "angle_y"):
+        assert F32(getattr(message, name)) == F32(getattr(fields, name)), name
+    assert np.array_equal(np.asarray(message.q, F32), np.asarray(fields.q, F32))
 
 
 def test_invalid_and_stale_estimates_are_never_sent_as_valid(listener: socket.socket) -> None:
