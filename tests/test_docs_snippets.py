@@ -22,8 +22,9 @@ What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for i
     ``evaluate landing`` ``--workers 1 --episodes 1`` (at ``ship-ss5`` and ``ship-ss6`` also
     ``--seed 1000007``: there ``deck-oracle`` commits within a second and
     ``timing-dqn-lookahead`` within five, where the first seed has them wait up to ten, each
-    second of the wait a few look-ahead descents) and ``benchmarks.bench_fused_unseen``
-    ``--duration 10`` in front of their own flags (the written ones, reduced, win);
+    second of the wait a few look-ahead descents), ``benchmarks.bench_fused_unseen``
+    ``--duration 10`` and ``bridge`` ``--speed 0`` (not in real time) in front of their own
+    flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
   * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
     episode and one checkpoint at the end, and small buffers, so ``train`` still writes
@@ -98,6 +99,8 @@ REDUCTIONS: tuple[tuple[str, str], ...] = (
     # at the ship's sea states 5 and 6, a seed where the look-ahead policies commit soon
     (r"(deck-landing evaluate landing)\b(?=[^\n]*--scenario ship-ss[56]\b)", r"\1 --seed 1000007"),
     (r"(-m benchmarks\.bench_fused_unseen)\b", r"\1 --duration 10"),
+    # the bridge as fast as it goes, not in real time
+    (r"(deck-landing bridge)\b", r"\1 --speed 0"),
 )
 
 
@@ -439,10 +442,12 @@ def test_a_commands_own_flags_follow_the_reductions_it_gets_so_that_they_win() -
         "deck-landing evaluate sweep --parameters k1\n"
         "deck-landing evaluate landing --scenario ship-ss6 --seed 5000000\n"
         "deck-landing evaluate landing --scenario ship-ss4\n"
+        "deck-landing bridge --input REC --speed 2\n"
     )
     assert shell_of(Block("p.md", 1, "bash", written, None)).splitlines() == [
         "deck-landing evaluate sweep --duration 1 --parameters tilt --parameters k1",
         "deck-landing evaluate landing --seed 1000007 --workers 1 --episodes 1"
         " --scenario ship-ss6 --seed 5000000",
         "deck-landing evaluate landing --workers 1 --episodes 1 --scenario ship-ss4",
+        "deck-landing bridge --speed 0 --input REC.mcap --speed 2",
     ]
