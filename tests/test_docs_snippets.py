@@ -26,10 +26,10 @@ What is reduced (``REDUCTIONS`` and ``shrink_train_config``, the one place for i
     ``--duration 10`` and ``bridge`` ``--speed 0`` (not in real time) in front of their own
     flags (the written ones, reduced, win);
   * a list of alternatives as the docs write them (``tight|ihrcf|crhf``) -> its first;
-  * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout), one evaluation of one
-    episode and one checkpoint at the end, and small buffers, so ``train`` still writes
-    ``best_model.zip``, and an imitation stage of one teacher episode and one pass of each fit;
-    a lander's episodes end after 8 simulated seconds;
+  * ``configs/train/*.yaml`` -> copies with 32 steps (one rollout; 16 off policy), one
+    evaluation of one episode and one checkpoint at the end, and small buffers, so ``train``
+    still writes ``best_model.zip``, and an imitation stage of one teacher episode and one
+    pass of each fit; a lander's episodes end after 8 simulated seconds;
   * placeholders name small files made once per run: ``DIR`` (the chessboard photos of
     tests/data and the simulated camera's calibration folder), ``photos/`` (the photos),
     ``my_camera/`` (the calibration folder), ``REC`` and
@@ -153,12 +153,15 @@ def shell_of(block: Block) -> str:
 
 
 def shrink_train_config(source: Path, target: Path) -> None:
-    """A training YAML cut to a few steps that still evaluates once and saves its best model."""
+    """A training YAML cut to a few steps that still evaluates once and saves its best model:
+    one rollout of 32 steps on policy, 16 steps (8 before learning starts) off policy."""
     doc = yaml.safe_load(source.read_text(encoding="utf-8"))
+    algos = [v for k, v in doc.items() if k != "deck_landing" and isinstance(v, dict)]
+    steps = 16 if any("learning_starts" in v for v in algos) else 32
     for key, value in doc.items():
         if key == "deck_landing":
-            value["eval"] = {**value.get("eval", {}), "freq": 32, "episodes": 1}
-            value["checkpoint_freq"] = 32
+            value["eval"] = {**value.get("eval", {}), "freq": steps, "episodes": 1}
+            value["checkpoint_freq"] = steps
             value["vec_env"] = "dummy"
             if value.get("imitation") is not None:
                 # one teacher episode, one pass of each fit
@@ -168,7 +171,7 @@ def shrink_train_config(source: Path, target: Path) -> None:
                     "value_epochs": 1,
                 }
         elif isinstance(value, dict):
-            value.update(n_envs=1, n_timesteps=32)
+            value.update(n_envs=1, n_timesteps=steps)
             if key.startswith("DeckLanding-"):
                 # a lander's episodes (the teacher's, the evaluations') end after 8 s
                 kwargs = value.setdefault("env_kwargs", {})
@@ -176,7 +179,8 @@ def shrink_train_config(source: Path, target: Path) -> None:
                     **kwargs.get("overrides", {}),
                     "simulation.max_episode_s": 8.0,
                 }
-            for name, small in (("learning_starts", 16), ("buffer_size", 1000), ("n_steps", 32)):
+            small_values = (("learning_starts", steps // 2), ("buffer_size", 1000), ("n_steps", 32))
+            for name, small in small_values:
                 if name in value:
                     value[name] = small
             if "batch_size" in value:
