@@ -327,7 +327,6 @@ class SvgsRoutinePolicy(Policy):
         self._scan_centre = (0.0, 0.0)
         self._scan_height: float | None = None
         self._goal: np.ndarray | None = None
-        self.scans_exhausted = False
 
     def _enter(self, state: RoutineState, reason: str) -> None:
         if state is not self.state:
@@ -554,7 +553,6 @@ class SvgsRoutinePolicy(Policy):
             self._scan_square += 1
             if self._scan_square >= c.scan_squares:
                 # SVGS's COTS fallback: after the last search, land in place
-                self.scans_exhausted = True
                 self.reason = "scan exhausted: descending in place"
                 return VelocitySetpoint(np.array([0.0, 0.0, -c.descent_min_speed]), 0.0)
             self._load_square()
