@@ -91,20 +91,6 @@ def lawnmower_square(
     return points
 
 
-def expanding_scan(
-    centre: tuple[float, float],
-    first_side_m: float,
-    growth_m: float,
-    lane_spacing_m: float,
-    squares: int,
-) -> list[list[tuple[float, float]]]:
-    """``squares`` lawn-mower squares about ``centre``, each ``growth_m`` wider than the last."""
-    return [
-        lawnmower_square(centre, first_side_m + k * growth_m, lane_spacing_m)
-        for k in range(squares)
-    ]
-
-
 # ------------------------------------------------------------------------------ dead reckoning
 class DeadReckoning:
     """The drone's position in the local frame L from its own set-points and the IMU's yaw rate.
