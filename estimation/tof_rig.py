@@ -388,21 +388,3 @@ def calibrate_rig(
         image_size=size,
     )
     return RigCalibration(calibration, ranges, pixels, skipped)
-
-
-__all__ = [
-    "PAD_CLIPPED",
-    "PAD_NOT_FOUND",
-    "RANGE_INVALID",
-    "RIG_FILE",
-    "SKIP_REASONS",
-    "RigCalibration",
-    "RigFrame",
-    "RigStage",
-    "StageWindow",
-    "TofRigDescription",
-    "TofRigError",
-    "calibrate_rig",
-    "pad_centroid_in_image",
-    "reading_rows",
-]
