@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import cv2
 import numpy as np
@@ -22,15 +22,7 @@ class CameraIntrinsics:
 
     def as_dict(self) -> dict:
         """The model as plain data (the ``camera`` entry of the calibration files)."""
-        return {
-            "width": self.width,
-            "height": self.height,
-            "fx": self.fx,
-            "fy": self.fy,
-            "cx": self.cx,
-            "cy": self.cy,
-            "dist": list(self.dist),
-        }
+        return {**asdict(self), "dist": list(self.dist)}
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "camera") -> CameraIntrinsics:

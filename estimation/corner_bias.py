@@ -233,12 +233,3 @@ def fit_corner_bias(detected: Sequence[np.ndarray], true: Sequence[np.ndarray]) 
         math.sqrt(max(float(d2), floor)),
         math.sqrt(max(float(d2 + slope), floor)),
     )
-
-
-__all__ = [
-    "CornerBias",
-    "CornerBiasFit",
-    "corner_design",
-    "edge_axis_alignment",
-    "fit_corner_bias",
-]

@@ -166,23 +166,6 @@ def _matrix_of_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
     )
 
 
-def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """Return the 4x4 homogeneous transform of a rotation and a translation."""
-    transform = np.eye(4)
-    transform[:3, :3] = rotation
-    transform[:3, 3] = translation
-    return transform
-
-
-def invert_transform(transform: np.ndarray) -> np.ndarray:
-    """Return the inverse of a 4x4 rigid transform."""
-    rotation = transform[:3, :3]
-    inverse = np.eye(4)
-    inverse[:3, :3] = rotation.T
-    inverse[:3, 3] = -rotation.T @ transform[:3, 3]
-    return inverse
-
-
 def deck_pose_in_camera(
     t_wb: np.ndarray,
     r_wb: np.ndarray,

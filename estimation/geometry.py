@@ -20,7 +20,6 @@ _RANK_TOL = 1e-9
 _SQRT2 = float(np.sqrt(2.0))
 
 PLANE_METHODS = ("lstsq", "cross3")
-HOMOGRAPHY_METHODS = ("dlt", "opencv")
 
 
 @dataclass(frozen=True)
@@ -243,40 +242,6 @@ def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
 def _degenerate_four(points: np.ndarray) -> bool:
     xs, ys, _, _, scale = _normalised_floats(points)
     return scale == 0.0 or _three_collinear(xs, ys)
-
-
-def homography_opencv(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
-    """``cv2.findHomography(src, dst, 0)`` (all points, least squares), canonically scaled.
-
-    Measured with OpenCV 5.0: its result reproduces exact correspondences only to about
-    1e-4 px (its refinement stops early), against 1e-12 px for :func:`homography_dlt`.
-    """
-    src = np.asarray(src, dtype=float)
-    dst = np.asarray(dst, dtype=float)
-    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 2 or len(src) < 4:
-        return None
-    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
-        return None
-    # OpenCV returns one of the many solutions of a degenerate configuration (e.g. three
-    # collinear points of four): judge degeneracy with the DLT's rank test instead
-    if homography_dlt(src, dst) is None:
-        return None
-    try:
-        h, _ = cv2.findHomography(src, dst, 0)
-    except cv2.error:
-        return None
-    if h is None or h.shape != (3, 3):
-        return None
-    return _canonical_homography(h)
-
-
-def homography(src: np.ndarray, dst: np.ndarray, method: str = "dlt") -> np.ndarray | None:
-    """Dispatch to :func:`homography_dlt` or :func:`homography_opencv`."""
-    if method == "dlt":
-        return homography_dlt(src, dst)
-    if method == "opencv":
-        return homography_opencv(src, dst)
-    raise ValueError(f"homography method {method!r} is not one of {HOMOGRAPHY_METHODS}")
 
 
 def _canonical_homography(h: np.ndarray) -> np.ndarray | None:

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation import geometry
-from estimation.errors import require_choice
 from estimation.estimator import (
     DEGENERATE_HOMOGRAPHY,
     RangeFusionConfig,
@@ -37,14 +36,8 @@ from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading
 
 @dataclass(frozen=True)
 class IHRCFConfig(RangeFusionConfig):
-    """IHRCF settings: ``homography`` is ``"dlt"`` (normalised DLT) or ``"opencv"``
-    (``cv2.findHomography``, method 0); both are exact with four noise-free points."""
-
-    homography: str = "dlt"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_choice("homography", self.homography, geometry.HOMOGRAPHY_METHODS)
+    """IHRCF settings: the range-fusion ones (the homography is the normalised DLT, exact
+    with four noise-free points)."""
 
 
 class IhrcfEstimator(RangeFusionEstimator):
@@ -55,7 +48,6 @@ class IhrcfEstimator(RangeFusionEstimator):
     config: IHRCFConfig
 
     def _configure(self) -> None:
-        self._homography_method = self.config.homography
         self._sensors_xy = self.tof_positions_c[:, :2].copy()
 
     def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
@@ -67,7 +59,7 @@ class IhrcfEstimator(RangeFusionEstimator):
         # pixels back to the deck's (X, Y) in C.  Four exact correspondences fix a
         # homography uniquely, so H⁻¹ is estimated directly from the pixels to the (X, Y):
         # the same map, without a matrix inversion per frame
-        h_inv = geometry.homography(inputs.touch_px, self._sensors_xy, self._homography_method)
+        h_inv = geometry.homography_dlt(inputs.touch_px, self._sensors_xy)
         if h_inv is None:
             return DeckPoseEstimate.invalid(self.name, timestamp, DEGENERATE_HOMOGRAPHY)
         corners_xy = geometry.apply_homography(h_inv, inputs.corners_px)

@@ -60,15 +60,6 @@ class TofNoiseModel(Limited):
         """Noise-free ranges (the papers' bench)."""
         return cls(0.0, 0.0, 0.0)
 
-    def scaled(self, factor: float) -> TofNoiseModel:
-        """The model with its Gaussian part multiplied by ``factor`` (sweeps)."""
-        return TofNoiseModel(
-            self.sigma_0_m * factor,
-            self.sigma_per_m * factor,
-            self.resolution_m,
-            self.sigma_min_m * factor,
-        )
-
     def gaussian_sigma(self, ranges: np.ndarray | float) -> np.ndarray:
         """1-sigma of the Gaussian part at ``ranges`` metres (no quantisation, no floor for
         exact ranges): what a simulator draws before rounding to ``resolution_m``."""

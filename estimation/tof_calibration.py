@@ -103,33 +103,17 @@ def segment_pad(image_rgb: np.ndarray, colour: str) -> np.ndarray:
     return mask
 
 
-def pad_centroid(mask: np.ndarray) -> tuple[float, float] | None:
-    """Centroid (u, v) in OpenCV pixels of the convex hull of the mask's largest blob.
-
-    Returns ``None`` for an empty mask.  The hull closes holes and notches (IHRCF Eq. 3–6);
-    its centroid comes from the polygon's moments (the filled-hull mean of Eq. 7).
-    """
-    found = largest_blob_hull(mask)
-    if found is None:
-        return None
-    largest, _, moments = found
-    if moments["m00"] > 0.0:
-        return moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]
-    # a one-pixel-wide blob has a zero-area hull: fall back to its points' mean
-    points = largest.reshape(-1, 2).astype(float)
-    return float(points[:, 0].mean()), float(points[:, 1].mean())
-
-
-def largest_blob_hull(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict] | None:
-    """The mask's largest blob (its outer contour), that blob's convex hull and the hull's
-    moments; ``None`` for an empty mask."""
+def largest_blob_hull(mask: np.ndarray) -> tuple[np.ndarray, dict] | None:
+    """The convex hull of the mask's largest blob (its outer contour) and the hull's moments;
+    ``None`` for an empty mask.  The hull closes holes and notches (IHRCF Eq. 3–6); its
+    centroid comes from the polygon's moments (the filled-hull mean of Eq. 7)."""
     mask8 = (np.asarray(mask) > 0).astype(np.uint8)
     contours, _ = cv2.findContours(mask8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return None
     largest = max(contours, key=lambda c: (cv2.contourArea(c), len(c)))
     hull = cv2.convexHull(largest)
-    return largest, hull, cv2.moments(hull)
+    return hull, cv2.moments(hull)
 
 
 @dataclass(frozen=True)

@@ -264,7 +264,7 @@ def pad_centroid_in_image(mask: np.ndarray, min_area_px: float) -> tuple[np.ndar
     found = largest_blob_hull(mask)
     if found is None:
         return None, PAD_NOT_FOUND
-    _, hull, moments = found
+    hull, moments = found
     if moments["m00"] < min_area_px:
         return None, PAD_NOT_FOUND
     x, y, w, h = cv2.boundingRect(hull)
@@ -388,21 +388,3 @@ def calibrate_rig(
         image_size=size,
     )
     return RigCalibration(calibration, ranges, pixels, skipped)
-
-
-__all__ = [
-    "PAD_CLIPPED",
-    "PAD_NOT_FOUND",
-    "RANGE_INVALID",
-    "RIG_FILE",
-    "SKIP_REASONS",
-    "RigCalibration",
-    "RigFrame",
-    "RigStage",
-    "StageWindow",
-    "TofRigDescription",
-    "TofRigError",
-    "calibrate_rig",
-    "pad_centroid_in_image",
-    "reading_rows",
-]

@@ -426,7 +426,8 @@ def available_configs() -> list[str]:
     return sorted(p.stem for p in CONFIG_DIR.glob("*.yaml"))
 
 
-def _read_yaml(name_or_path: str | Path) -> dict[str, Any]:
+def read_config_data(name_or_path: str | Path) -> dict[str, Any]:
+    """A config's YAML data with its ``extends`` chain merged (no validation)."""
     path = Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
         path = CONFIG_DIR / f"{name_or_path}.yaml"
@@ -439,13 +440,8 @@ def _read_yaml(name_or_path: str | Path) -> dict[str, Any]:
         raise ConfigError("config", f"{path} does not hold a mapping")
     parent = data.pop("extends", None)
     if parent is not None:
-        data = deep_merge(_read_yaml(parent), data)
+        data = deep_merge(read_config_data(parent), data)
     return data
-
-
-def read_config_data(name_or_path: str | Path) -> dict[str, Any]:
-    """A config's YAML data with its ``extends`` chain merged (no validation)."""
-    return _read_yaml(name_or_path)
 
 
 def load_config(
@@ -463,7 +459,7 @@ def load_config(
         data: dict[str, Any] = {}
     else:
         base = None
-        data = _read_yaml(config) if config is not None else {}
+        data = read_config_data(config) if config is not None else {}
     user = dotted_to_nested(sections)
     if overrides:
         user = deep_merge(user, dotted_to_nested(overrides))

@@ -163,13 +163,3 @@ def register_policy_aliases() -> None:
             **algorithm.policy_aliases,
             POLICY_ALIAS: PrivilegedCriticPolicy,
         }
-
-
-__all__ = [
-    "POLICY_ALIAS",
-    "ActorFeatures",
-    "DeckFeatures",
-    "PrivilegedCriticPolicy",
-    "register_policy_aliases",
-    "without_privileged",
-]

@@ -82,11 +82,6 @@ def landing_overrides(
     }
 
 
-def dotted(prefix: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """``{"a": {"b": 1}}`` under ``prefix`` as dotted keys: ``{"prefix.a.b": 1}``."""
-    return nested_to_dotted(settings, prefix)
-
-
 # ------------------------------------------------------------------------------ timing presets
 #: the bench's timing task: the **timed** final descent (the height over the deck tracks a
 #: 1.2 s reference, so the feet touch 1.30 +- 0.06 s after the commit) and the scenario's own
@@ -182,10 +177,10 @@ class Scenario:
             **self.extra,
         }
         if task == TIMING_TASK:
-            result.update(dotted("timing", self.timing))
+            result.update(nested_to_dotted(self.timing, "timing"))
         elif self.timing:
             predicted = LANDER_TIMING if "tilt_model" in self.timing else {}
-            result.update(dotted("timing", {**self.timing, **predicted}))
+            result.update(nested_to_dotted({**self.timing, **predicted}, "timing"))
         return result
 
 
@@ -364,7 +359,7 @@ class ScenarioId:
                 k: v
                 for key, value in sections.items()
                 for k, v in (
-                    dotted(key, value) if isinstance(value, dict) else {key: value}
+                    nested_to_dotted(value, key) if isinstance(value, dict) else {key: value}
                 ).items()
             },
             **(overrides or {}),
@@ -477,7 +472,6 @@ __all__ = [
     "VERSION_HISTORY",
     "Scenario",
     "ScenarioId",
-    "dotted",
     "landing_overrides",
     "register_all",
     "scenario_id",

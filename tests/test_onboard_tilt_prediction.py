@@ -15,9 +15,10 @@ from agents.training.tilt_predictor_fit import CHANNELS, HORIZONS_S, futures
 from estimation.anticipation.linear_predictors import LinearTiltPredictor, TiltPrediction
 from estimation.anticipation.stopping import predictor_stopping_values
 from landing_env.config import load_config
+from landing_env.config_loading import nested_to_dotted
 from landing_env.errors import ConfigError
 from landing_env.resources import PREDICTOR_DIR, tilt_predictor_path
-from landing_env.scenarios import PREDICTIVE_TIMING, dotted
+from landing_env.scenarios import PREDICTIVE_TIMING
 from landing_env.sea.heldout import HELD_OUT_SEAS
 from landing_env.sea.training_seas import training_family
 from tests.paths import ROOT
@@ -27,7 +28,7 @@ WINDOW_S = 4.0
 
 #: the ``predictive`` policy's timing settings over the bench ids', and with the prediction
 #: observation (``timing-dqn-predictive``'s)
-PREDICTIVE = dotted("timing", PREDICTIVE_TIMING)
+PREDICTIVE = nested_to_dotted(PREDICTIVE_TIMING, "timing")
 PREDICTION = {**PREDICTIVE, "timing.observation": "prediction"}
 
 
@@ -942,14 +943,14 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
     for n in (3, 5):
         env = DeckLandingTimingEnv(
             f"bench-ss{n}",
-            overrides=dotted(
-                "timing",
+            overrides=nested_to_dotted(
                 {
                     "history_s": 8.0,
                     "observation": "prediction",
                     "tilt_model": "scenario",
                     "guidance": {"descent_profile": "timed"},
                 },
+                "timing",
             ),
         )
         try:
@@ -967,9 +968,9 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
             "paper-stewart",
             overrides={
                 "simulation.drone_fixed": False,
-                **dotted(
-                    "timing",
+                **nested_to_dotted(
                     {"history_s": 8.0, "observation": "prediction", "tilt_model": "scenario"},
+                    "timing",
                 ),
             },
         )

@@ -9,11 +9,12 @@ from typing import Any
 
 from agents.cli.args import add_batch_arguments, add_mode_argument, command_line, positive_int
 from agents.common.user_input import parse_overrides as _parse_overrides
-from agents.evaluation.landing import ESTIMATORS, HELD_OUT_SEED, evaluate_landing
+from agents.evaluation.landing import HELD_OUT_SEED, evaluate_landing
 from agents.policies.registry import (
     POLICY_NAMES,
     default_policy,
 )
+from estimation.registry import ESTIMATOR_NAMES
 from landing_env.scenarios import SCENARIOS
 
 
@@ -72,7 +73,7 @@ def add_landing_parser(evaluate_group: Any) -> None:
     landing.add_argument("--seed", type=int, default=HELD_OUT_SEED, help="first held-out seed")
     landing.add_argument(
         "--estimator",
-        choices=ESTIMATORS,
+        choices=ESTIMATOR_NAMES,
         default=None,
         help="the estimate in the observation (default: the policy's own, else the "
         "scenario's: ihrcf on the bench, tight on the ship decks)",

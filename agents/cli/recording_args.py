@@ -128,15 +128,3 @@ def fill_alignment_defaults(args: argparse.Namespace) -> None:
         args.tolerance = DEFAULT_TOLERANCE_S
     if args.align is None:
         args.align = DEFAULT_ALIGN
-
-
-__all__ = [
-    "DEFAULT_ALIGN",
-    "DEFAULT_TOLERANCE_S",
-    "RECORDING_OPTIONS",
-    "add_alignment_arguments",
-    "add_topic_arguments",
-    "fill_alignment_defaults",
-    "recording_options_given",
-    "tolerance_seconds",
-]

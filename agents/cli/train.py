@@ -5,12 +5,12 @@ from __future__ import annotations
 from typing import Any
 
 from agents.cli.args import non_negative_int, positive_float, positive_int
-from agents.training.trainer import ENV_ID, TASK_ALGOS, install_path, load_train_config, train
+from agents.training.trainer import TASK_ALGOS, install_path, load_train_config, train
 from landing_env.errors import ConfigError
-from landing_env.scenarios import LANDING_TASK
+from landing_env.scenarios import LANDING_TASK, TIMING_TASK
 
 #: the subcommand of each task
-TASK_OF = {"timing": ENV_ID, "landing": LANDING_TASK}
+TASK_OF = {"timing": TIMING_TASK, "landing": LANDING_TASK}
 
 
 def _train(args: Any) -> int:

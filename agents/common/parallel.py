@@ -164,14 +164,3 @@ def user_error_behind(exc: BaseException) -> BaseException | None:
             return current
         current = current.__cause__
     return None
-
-
-__all__ = [
-    "batch_session",
-    "ensure_ray",
-    "keep_idle_actor",
-    "map_tasks",
-    "release_idle_actors",
-    "take_idle_actor",
-    "user_error_behind",
-]

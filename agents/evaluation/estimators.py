@@ -27,17 +27,14 @@ from tqdm import tqdm
 import landing_env  # noqa: F401  (registers the environments)
 from agents.evaluation.fusion_plot import plot_fusion_dropout
 from agents.evaluation.plots import plot_all
-from agents.evaluation.records import (  # noqa: F401  (re-exported: their home is records.py)
+from agents.evaluation.records import (
     AXES,
     AXIS_UNITS,
-    DISPLAY_NAMES,
     TRUTH,
     EstimatorTrace,
     ScenarioRecord,
     display_name,
     pose_errors,
-    to_table_units,
-    wrap_degrees,
 )
 from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.config import DeckLandingConfig, load_config

@@ -51,13 +51,8 @@ from agents.evaluation.records import EpisodeRecord
 from agents.evaluation.runner import EpisodeTask, RunResult
 from agents.evaluation.summary import columns, is_timing
 from agents.policies.registry import make_env_and_policy
-from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import TouchdownConfig
 from landing_env.scenarios import SCENARIOS
-
-#: the estimators the observation can carry (the registry's names, ``tight`` and ``fused``
-#: included)
-ESTIMATORS = ESTIMATOR_NAMES
 
 
 def plot_results(evaluated: Evaluated, path: Path, title: str) -> None:
@@ -248,7 +243,6 @@ def _observed(policy: str, scenario: str, estimator: str | None) -> str:
 
 
 __all__ = [
-    "ESTIMATORS",
     "HELD_OUT_SEED",
     "LANDING_EVALUATION",
     "evaluate_landing",

@@ -342,18 +342,3 @@ def held_out_seeds(first_seed: int, episodes: int) -> list[int]:
     if episodes < 1:
         raise ConfigError("episodes", f"{episodes} is out of range; allowed [1, inf]")
     return for_each_seed(first_seed, episodes)
-
-
-__all__ = [
-    "HELD_OUT_SEED",
-    "Evaluated",
-    "PolicyEvaluation",
-    "Watch",
-    "env_config",
-    "evaluate",
-    "held_out_seeds",
-    "is_scenario",
-    "make_episode",
-    "run_episode",
-    "run_task",
-]

@@ -22,7 +22,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-R = TypeVar("R", bound="EpisodeRecord")
+_R = TypeVar("_R", bound="EpisodeRecord")
 
 #: the metadata of a record's or summary's field that one evaluation alone fills
 LANDING = {"evaluation": "landing"}
@@ -107,7 +107,7 @@ class EpisodeRecord:
         }
 
     @classmethod
-    def from_json(cls: type[R], data: dict[str, Any]) -> R:
+    def from_json(cls: type[_R], data: dict[str, Any]) -> _R:
         """The record back from :meth:`to_json` (null as NaN, tuples restored)."""
         fields = {f.name: f for f in dataclasses.fields(cls)}
         kwargs: dict[str, Any] = {}
@@ -250,21 +250,3 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     error = to_table_units(estimate) - to_table_units(truth)
     error[..., 3:] = wrap_degrees(error[..., 3:])
     return error
-
-
-__all__ = [
-    "APPROACH",
-    "AXES",
-    "AXIS_UNITS",
-    "DISPLAY_NAMES",
-    "LANDING",
-    "TRUTH",
-    "EpisodeRecord",
-    "EstimatorTrace",
-    "ScenarioRecord",
-    "display_name",
-    "own_fields",
-    "pose_errors",
-    "to_table_units",
-    "wrap_degrees",
-]

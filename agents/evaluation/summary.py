@@ -301,23 +301,3 @@ def markdown_table(summaries: Sequence[Any], columns: Sequence[Column]) -> str:
     return markdown_rows(
         [c.header for c in columns], ([c.fill(summary) for c in columns] for summary in summaries)
     )
-
-
-__all__ = [
-    "COLUMNS",
-    "Column",
-    "Summary",
-    "columns",
-    "compare_with_oracle",
-    "counts_cell",
-    "finite",
-    "finite_mean",
-    "finite_p95",
-    "is_timing",
-    "markdown_rows",
-    "markdown_table",
-    "success_cell",
-    "success_fields",
-    "summarise",
-    "wilson_interval",
-]

@@ -35,16 +35,9 @@ import numpy as np
 
 from agents.common.parallel import map_tasks
 from agents.evaluation import SWEEP_PARAMETERS
-from agents.evaluation.estimators import (
-    AXES,
-    AXIS_UNITS,
-    EstimatorMetrics,
-    RunSettings,
-    display_name,
-    run_scenario,
-    score_record,
-)
+from agents.evaluation.estimators import EstimatorMetrics, RunSettings, run_scenario, score_record
 from agents.evaluation.plots import COLOURS, pyplot, save_figure
+from agents.evaluation.records import AXES, AXIS_UNITS, display_name
 from estimation.limits import POSITIVE, Limit, limited, require_limits
 from estimation.noise import VL53L1X_SIGMA_0_M, VL53L1X_SIGMA_PER_M
 from landing_env.calibration.intrinsics_sim import ChessboardRigConfig, calibrate_intrinsics_in_sim

@@ -212,21 +212,3 @@ def ardupilot_parameters(mount: CameraMount) -> dict[str, float]:
         "PLND_CAM_POS_Y": y,
         "PLND_CAM_POS_Z": z,
     }
-
-
-__all__ = [
-    "AUTOPILOTS",
-    "LANDING_TARGET_TYPE_VISION_FIDUCIAL",
-    "MAV_FRAME_BODY_FRD",
-    "MAV_FRAME_LOCAL_NED",
-    "R_DF",
-    "S_FLIP",
-    "CameraMount",
-    "LandingTargetFields",
-    "VehiclePose",
-    "ardupilot_fields",
-    "ardupilot_parameters",
-    "landing_target_fields",
-    "px4_fields",
-    "quaternion_wxyz",
-]

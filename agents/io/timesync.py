@@ -140,16 +140,3 @@ class ClockSync:
     def to_autopilot_s(self, companion_s: float) -> float:
         """A companion stamp on the autopilot's clock (NaN before the first sample)."""
         return companion_s + self.offset_s
-
-
-__all__ = [
-    "CONVERGENCE_WINDOW",
-    "GAIN_FINAL",
-    "GAIN_INITIAL",
-    "MAX_DEVIATION_S",
-    "MAX_HIGH_DEVIATIONS",
-    "MAX_RTT_S",
-    "USED",
-    "ClockSync",
-    "smoothing_gain",
-]

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from estimation.frames import camera_to_heading_xy
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
@@ -96,7 +97,7 @@ class AlignDescendConfig:
         )
 
 
-class AlignDescendPolicy:
+class AlignDescendPolicy(Policy):
     """Visual servoing for ``DeckLanding-v2`` on the estimated deck pose.
 
     Approach: centre over the tag and descend while aligned to the hold height; without a
@@ -146,9 +147,6 @@ class AlignDescendPolicy:
         self._flare_s = 0.0
         self._unseen_s = 0.0
         self.last: CalmPrediction | None = None
-
-    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        return self.act(observation)
 
     def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         c = self.config

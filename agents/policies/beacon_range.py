@@ -35,8 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.policies.base import Policy
-from agents.policies.svgs_routine import GRAVITY, AttitudeFilter, levelled_offset
+from agents.policies.svgs_routine import GRAVITY, ApproachStateMachine, levelled_offset
 from estimation.landing_target import (
     ACCEPTED,
     INITIALISED,
@@ -45,7 +44,6 @@ from estimation.landing_target import (
 )
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, Limited, limited
 from landing_env.config import ActionConfig
-from landing_env.envs.actions import action_from_setpoint
 from landing_env.errors import ConfigError
 from landing_env.physics.controller import VelocitySetpoint
 
@@ -93,13 +91,10 @@ class BeaconRangeConfig(Limited):
     target_filter: LandingTargetConfig = field(default_factory=LandingTargetConfig)
 
 
-class BeaconRangePolicy(Policy):
+class BeaconRangePolicy(ApproachStateMachine):
     """PX4-style precision landing on the beacon estimate (see the module docstring)."""
 
     name = "beacon-range"
-    #: the commanded landing point, x and y in the deck frame D, metres: the landing point
-    #: itself (the paper's final offset off the beacon is not flown)
-    landing_point_d: tuple[float, float] = (0.0, 0.0)
 
     def __init__(
         self,
@@ -107,31 +102,20 @@ class BeaconRangePolicy(Policy):
         config: BeaconRangeConfig | None = None,
         dt: float = 0.05,
     ) -> None:
-        self.action = action or ActionConfig()
-        self.config = config or BeaconRangeConfig()
-        self.dt = dt
-        self.attitude = AttitudeFilter(dt, self.config.attitude_gain)
+        super().__init__(action, config or BeaconRangeConfig(), dt)
         self.target = LandingTargetFilter(self.config.target_filter)
         self.reset()
 
     def reset(self) -> None:
-        self.state = PrecLandState.HORIZONTAL_APPROACH
-        self.reason = "start"
-        self.attitude.reset()
+        self._start(PrecLandState.HORIZONTAL_APPROACH)
         self.target.reset()
         self.searches = 0
-        self.transitions: list[tuple[float, str, str]] = []
-        self.time_s = 0.0
-        self._unseen_s = 0.0
-        self._state_s = 0.0
         self._height = math.nan
         self._hover_s = 0.0
         self._search_from_m = math.nan
 
     def _enter(self, state: PrecLandState, reason: str) -> None:
-        if state is not self.state:
-            self.transitions.append((self.time_s, state.value, reason))
-        self.state, self.reason, self._state_s = state, reason, 0.0
+        super()._enter(state, reason)
         self._hover_s = 0.0
 
     def height_m(self, observation: dict[str, np.ndarray]) -> float:
@@ -161,10 +145,7 @@ class BeaconRangePolicy(Policy):
             (*(float(v) for v in self.target.position_xy), height) if self.target.valid else None
         )
         self._transition(offset, height)
-        setpoint = self._command(offset, height)
-        self.time_s += self.dt
-        self._state_s += self.dt
-        return action_from_setpoint(setpoint, self.action)
+        return self._act(self._command(offset, height))
 
     def _transition(self, offset: tuple[float, float, float] | None, height: float) -> None:
         c = self.config

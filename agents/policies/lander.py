@@ -27,6 +27,7 @@ from agents.common.cards import (
     model_class,
     read_metadata,
 )
+from agents.policies.base import Policy
 from agents.policies.registry import MODEL_DIR, find_model
 from landing_env.envs.deck_landing import PRIVILEGED_KEY
 from landing_env.errors import ConfigError
@@ -53,7 +54,7 @@ def shipped_lander_model(algo: str) -> Path:
     return MODEL_DIR / f"lander_{algo}.zip"
 
 
-class TrainedLanderPolicy:
+class TrainedLanderPolicy(Policy):
     """A trained SB3 lander acting deterministically on ``DeckLanding`` observations."""
 
     def __init__(self, path: str | Path, device: str = "cpu") -> None:
@@ -127,9 +128,6 @@ class TrainedLanderPolicy:
             stacked = self.normalize.normalize_obs(stacked)
         action, _ = self.model.predict(stacked, deterministic=True)
         return np.asarray(action, dtype=np.float32).reshape(-1)
-
-    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        return self.act(observation)
 
 
 def model_normalization(model: Path) -> Any:

@@ -29,6 +29,7 @@ import gymnasium as gym
 
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import SENSORS_ENV
+from landing_env.config_loading import nested_to_dotted
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import (
     APPROACH_SCENARIOS,
@@ -36,7 +37,6 @@ from landing_env.scenarios import (
     PREDICTIVE_TIMING,
     SCENARIOS,
     TIMING_TASK,
-    dotted,
     scenario_id,
     step_limit_on,
 )
@@ -194,7 +194,7 @@ POLICIES: dict[str, PolicySpec] = {
             "deck at the contact worth more than waiting on (optimal stopping); chooses the "
             "contact time and waves off by the same predictor",
             estimator="tight",
-            overrides=dotted("timing", PREDICTIVE_TIMING),
+            overrides=nested_to_dotted(PREDICTIVE_TIMING, "timing"),
             scenarios=("bench-ss3", "bench-ss4", "bench-ss5", "bench-unseen"),
         ),
         _timing(
@@ -205,7 +205,9 @@ POLICIES: dict[str, PolicySpec] = {
             summary="a DQN observing what `predictive` weighs (the predictor's chances and "
             "the value of waiting on)",
             estimator="tight",
-            overrides=dotted("timing", {**PREDICTIVE_TIMING, "observation": "prediction"}),
+            overrides=nested_to_dotted(
+                {**PREDICTIVE_TIMING, "observation": "prediction"}, "timing"
+            ),
             model="timing_dqn_predictive.zip",
             scenarios=("bench-ss3", "bench-ss4", "bench-ss5"),
         ),

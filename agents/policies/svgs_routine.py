@@ -91,20 +91,6 @@ def lawnmower_square(
     return points
 
 
-def expanding_scan(
-    centre: tuple[float, float],
-    first_side_m: float,
-    growth_m: float,
-    lane_spacing_m: float,
-    squares: int,
-) -> list[list[tuple[float, float]]]:
-    """``squares`` lawn-mower squares about ``centre``, each ``growth_m`` wider than the last."""
-    return [
-        lawnmower_square(centre, first_side_m + k * growth_m, lane_spacing_m)
-        for k in range(squares)
-    ]
-
-
 # ------------------------------------------------------------------------------ dead reckoning
 class DeadReckoning:
     """The drone's position in the local frame L from its own set-points and the IMU's yaw rate.
@@ -192,6 +178,44 @@ def levelled_offset(deck_pose: np.ndarray, r_hb: np.ndarray) -> tuple[float, flo
     return float(p_h[0]), float(p_h[1]), float(-p_h[2])
 
 
+class ApproachStateMachine(Policy):
+    """A high-approach policy as a state machine on the levelled estimate (the SVGS routine and
+    the beacon baseline): its state, the reason of the last change, every change as (time,
+    state, reason) in ``transitions`` (which the approach evaluation counts) and the time in
+    the state."""
+
+    #: the commanded landing point, x and y in the deck frame D, metres: the landing point
+    #: itself (the paper's final offset off the beacon is not flown)
+    landing_point_d: tuple[float, float] = (0.0, 0.0)
+
+    def __init__(self, action: ActionConfig | None, config: Any, dt: float) -> None:
+        self.action = action or ActionConfig()
+        self.config = config
+        self.dt = dt
+        self.attitude = AttitudeFilter(dt, config.attitude_gain)
+
+    def _start(self, state: Enum) -> None:
+        """Back to ``state`` at time 0 with no history (the start of :meth:`reset`)."""
+        self.state = state
+        self.reason = "start"
+        self.attitude.reset()
+        self.transitions: list[tuple[float, str, str]] = []
+        self.time_s = 0.0
+        self._unseen_s = 0.0
+        self._state_s = 0.0
+
+    def _enter(self, state: Any, reason: str) -> None:
+        if state is not self.state:
+            self.transitions.append((self.time_s, state.value, reason))
+        self.state, self.reason, self._state_s = state, reason, 0.0
+
+    def _act(self, setpoint: VelocitySetpoint) -> np.ndarray:
+        """The step's action, the clocks moved on by one step."""
+        self.time_s += self.dt
+        self._state_s += self.dt
+        return action_from_setpoint(setpoint, self.action)
+
+
 # ------------------------------------------------------------------------------ configuration
 @dataclass
 class RoutineConfig:
@@ -266,13 +290,10 @@ def _load_timing_model(config: RoutineConfig) -> TrainedTimingPolicy | None:
 
 
 # ------------------------------------------------------------------------------ the routine
-class SvgsRoutinePolicy(Policy):
+class SvgsRoutinePolicy(ApproachStateMachine):
     """The SVGS routine as a ``DeckLanding-v2`` policy (see the module docstring)."""
 
     name = "svgs-routine"
-    #: the commanded landing point, x and y in the deck frame D, metres: the landing point
-    #: itself (the paper's final offset off the beacon is not flown)
-    landing_point_d: tuple[float, float] = (0.0, 0.0)
 
     def __init__(
         self,
@@ -281,9 +302,7 @@ class SvgsRoutinePolicy(Policy):
         dt: float = 0.05,
         timing_model: TrainedTimingPolicy | str | None = "auto",
     ) -> None:
-        self.action = action or ActionConfig()
-        self.config = config or RoutineConfig()
-        self.dt = dt
+        super().__init__(action, config or RoutineConfig(), dt)
         c = self.config
         self.guidance = DeckGuidance(c.guidance)
         t = c.timing
@@ -296,24 +315,17 @@ class SvgsRoutinePolicy(Policy):
         #: what chooses the moment of the final descent
         self.timing_source = self.timing_model.name if self.timing_model else "quiescent"
         self.odometry = DeadReckoning(dt, c.dead_reckoning_lag_s)
-        self.attitude = AttitudeFilter(dt, c.attitude_gain)
         self.reset()
 
     # -------------------------------------------------------------- bookkeeping
     def reset(self) -> None:
-        self.state = RoutineState.SCAN
-        self.reason = "start"
+        self._start(RoutineState.SCAN)
         self.guidance.reset()
         self.history.reset()
         self.odometry.reset()
-        self.attitude.reset()
         self._offset: tuple[float, float, float] | None = None
-        self.transitions: list[tuple[float, str, str]] = []
-        self.time_s = 0.0
-        self._unseen_s = 0.0
         self._lock_count = 0
         self._aligned_s = 0.0
-        self._state_s = 0.0
         self._hold_s = 0.0
         self._waited_s = 0.0
         self._decision_countdown = 0
@@ -327,12 +339,9 @@ class SvgsRoutinePolicy(Policy):
         self._scan_centre = (0.0, 0.0)
         self._scan_height: float | None = None
         self._goal: np.ndarray | None = None
-        self.scans_exhausted = False
 
     def _enter(self, state: RoutineState, reason: str) -> None:
-        if state is not self.state:
-            self.transitions.append((self.time_s, state.value, reason))
-        self.state, self.reason, self._state_s = state, reason, 0.0
+        super()._enter(state, reason)
         self._aligned_s = 0.0
         if state is RoutineState.SCAN:
             self._start_scan()
@@ -389,9 +398,7 @@ class SvgsRoutinePolicy(Policy):
         self._transition(observation, seen, locked, height)
         setpoint = self._command(observation, seen, height)
         self.odometry.advance(setpoint, self.attitude.yaw)
-        self.time_s += self.dt
-        self._state_s += self.dt
-        return action_from_setpoint(setpoint, self.action)
+        return self._act(setpoint)
 
     def _transition(
         self, observation: dict[str, np.ndarray], seen: bool, locked: bool, height: float
@@ -554,7 +561,6 @@ class SvgsRoutinePolicy(Policy):
             self._scan_square += 1
             if self._scan_square >= c.scan_squares:
                 # SVGS's COTS fallback: after the last search, land in place
-                self.scans_exhausted = True
                 self.reason = "scan exhausted: descending in place"
                 return VelocitySetpoint(np.array([0.0, 0.0, -c.descent_min_speed]), 0.0)
             self._load_square()

@@ -34,9 +34,9 @@ import numpy as np
 from agents.common.cards import sensing_profile
 from estimation.registry import ESTIMATOR_NAMES
 from landing_env.config import load_config, sensing_profiles
-from landing_env.config_loading import build_dataclass
+from landing_env.config_loading import build_dataclass, nested_to_dotted
 from landing_env.errors import ConfigError, require_choice, require_range
-from landing_env.scenarios import SCENARIOS, TIMING_TASK, dotted, landing_overrides
+from landing_env.scenarios import SCENARIOS, TIMING_TASK, landing_overrides
 from landing_env.timing_config import CAMERA_BELOW_COM_M
 
 #: sensing profile name -> the dotted overrides that make it: the presets of
@@ -175,7 +175,7 @@ class RandomisedTimingEnv(gym.Env):
             env = gym.make(
                 TIMING_TASK,
                 config=SCENARIOS[scenario].config,
-                overrides={**overrides, **dotted("timing", self.timing or {})},
+                overrides={**overrides, **nested_to_dotted(self.timing or {}, "timing")},
             )
             if self._space is not None and env.observation_space != self._space:
                 env.close()

@@ -54,7 +54,6 @@ from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import LANDING_TASK, SCENARIO_IDS, SCENARIOS, TASKS, TIMING_TASK
 
-ENV_ID = TIMING_TASK
 #: the shipped training scenario: the timing task over a bench-ss4 deck, built into the id
 SCENARIO_ENV_ID = SCENARIOS["bench-ss4"].ids[TIMING_TASK]
 #: keys of the rl-zoo3 section that are not keyword arguments of the algorithm
@@ -62,7 +61,7 @@ ZOO_META_KEYS = ("n_envs", "n_timesteps", "policy", "normalize", "env_wrapper", 
 ALGOS = ("ppo", "dqn", "recurrentppo", "sac", "tqc")
 #: the algorithms of each task (Discrete actions for the timing task, Box for the lander)
 TASK_ALGOS: dict[str, tuple[str, ...]] = {
-    ENV_ID: ("ppo", "dqn", "recurrentppo"),
+    TIMING_TASK: ("ppo", "dqn", "recurrentppo"),
     LANDING_TASK: ("sac", "tqc", "ppo"),
 }
 
@@ -142,7 +141,7 @@ class TrainConfig:
     settings: TrainSettings
     source: str = ""
     #: the registered id the YAML's rl-zoo3 section is keyed by (the scenario built in)
-    env_id: str = ENV_ID
+    env_id: str = TIMING_TASK
 
     @property
     def task(self) -> str:
@@ -214,7 +213,7 @@ def load_train_config(path: str | Path, algo: str | None = None) -> TrainConfig:
     frame_stack = hyperparams.get("frame_stack", 1)
     if not isinstance(frame_stack, int) or isinstance(frame_stack, bool) or frame_stack < 1:
         raise ConfigError(f"{keys[0]}.frame_stack", f"{frame_stack!r} is not an integer >= 1")
-    if config.task == ENV_ID and frame_stack != 1:
+    if config.task == TIMING_TASK and frame_stack != 1:
         raise ConfigError(
             f"{keys[0]}.frame_stack", "the timing task's observation has its own history"
         )

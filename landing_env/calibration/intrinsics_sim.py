@@ -33,7 +33,6 @@ from estimation.camera_model import CameraIntrinsics
 from estimation.intrinsics_calibration import (
     IntrinsicsCalibrationResult,
     calibrate,
-    chessboard_object_points,
     find_chessboard,
 )
 from estimation.limits import NON_NEGATIVE, POSITIVE, Limit, limited, require_limits
@@ -358,16 +357,3 @@ def calibrate_intrinsics_in_sim(
         views_used=len(found),
         views_rejected=rig.views - len(found),
     )
-
-
-__all__ = [
-    "DISTORTION_FLAGS",
-    "ChessboardRigConfig",
-    "ChessboardScene",
-    "IntrinsicsSimReport",
-    "calibrate_intrinsics_in_sim",
-    "camera_metadata",
-    "chessboard_object_points",
-    "chessboard_texture",
-    "sample_board_poses",
-]

@@ -25,21 +25,6 @@ from landing_env.touchdown import Outcome
 
 #: the observation key only a critic may read (``gym.make(id, privileged=True)``)
 PRIVILEGED_KEY = "privileged"
-#: what the privileged key holds, in order
-PRIVILEGED_FIELDS: tuple[str, ...] = (
-    "relative_x",
-    "relative_y",
-    "relative_z",
-    "relative_vx",
-    "relative_vy",
-    "relative_vz",
-    "deck_roll",
-    "deck_pitch",
-    "deck_rate_x",
-    "deck_rate_y",
-    "deck_rate_z",
-    "deck_tilt_ahead",
-)
 #: the true deck tilt in the privileged key is this far ahead, seconds
 PRIVILEGED_LOOKAHEAD_S = 1.0
 #: the age of the last valid deck estimate is observed up to this, seconds

@@ -189,10 +189,6 @@ class CascadeController:
         self._rate_beta = 0.0
         self.yaw_setpoint = 0.0
         self._flags = [False] * 9
-        #: last desired acceleration in W (m/s^2), collective thrust (N), body-rate set-point
-        self.last_acceleration_w: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self.last_collective_thrust = 0.0
-        self.last_rate_setpoint_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
         #: last torque demanded of the mixer (N m, body frame), before any mixer reduction
         self.last_torque_setpoint_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
@@ -309,7 +305,6 @@ class CascadeController:
             scale = horizontal_room / a_h
             ax *= scale
             ay *= scale
-        self.last_acceleration_w = (ax, ay, az)
 
         # ---- thrust vector -> collective thrust on the current body z, desired body z
         m = self._mass
@@ -324,7 +319,6 @@ class CascadeController:
         elif thrust < t_min:
             thrust = t_min
             thrust_limited = -1
-        self.last_collective_thrust = thrust
 
         # Velocity integrators: conditional integration (no growth into an active limit).
         int_limited = False
@@ -395,7 +389,6 @@ class CascadeController:
             pz_sp, rate_limited = lim, True
         elif pz_sp < -lim:
             pz_sp, rate_limited = -lim, True
-        self.last_rate_setpoint_b = (px_sp, py_sp, pz_sp)
 
         # ---- body-rate PID -> angular acceleration -> torque
         beta = self._rate_beta

@@ -10,7 +10,7 @@ the centre of mass).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -181,56 +181,29 @@ class QuadrotorParams:
             data = yaml.safe_load(stream)
         if not isinstance(data, dict):
             raise ConfigError(str(path), "the file must hold a mapping")
-        reader = _SectionReader(data, "")
-        body = reader.section("body")
-        rotors = reader.section("rotors")
-        motors = reader.section("motors")
-        drag = reader.section("drag")
-        ground = reader.section("ground_effect")
-        gear = reader.section("landing_gear")
-        sensors = reader.section("sensors")
+        kwargs = {f.name: _read(data, _YAML_KEYS[f.name], f.type) for f in fields(cls)}
+        kwargs["urdf_path"] = path.parent / kwargs["urdf_path"]
         try:
-            params = cls(
-                name=str(reader.get("name")),
-                urdf_path=path.parent / str(reader.get("urdf")),
-                mass=body.number("mass"),
-                inertia_diag=body.get("inertia_diag"),
-                arm_length=body.number("arm_length"),
-                rotor_positions_b=rotors.get("positions_b"),
-                spin_directions=rotors.get("spin_directions"),
-                rotor_radius=rotors.number("radius"),
-                k_f=motors.number("k_f"),
-                k_m=motors.number("k_m"),
-                motor_time_constant=motors.number("time_constant"),
-                omega_min=motors.number("omega_min"),
-                omega_max=motors.number("omega_max"),
-                linear_drag_b=drag.get("linear_b"),
-                drag_airframe_fraction=drag.number("airframe_fraction"),
-                ground_effect_enabled=bool(ground.get("enabled")),
-                ground_effect_model=str(ground.get("model")),
-                ground_effect_coefficient=ground.number("coefficient"),
-                ground_effect_max_gain=ground.number("max_gain"),
-                ground_effect_ray_length=ground.number("ray_length"),
-                ground_effect_body_coefficient=ground.number("body_coefficient"),
-                gear_stiffness=gear.number("contact_stiffness"),
-                gear_damping=gear.number("contact_damping"),
-                gear_friction=gear.number("friction"),
-                camera_offset_b=sensors.get("camera_offset_b"),
-                tof_mount_z=sensors.number("tof_mount_z"),
-                tof_arm_distance=sensors.number("tof_arm_distance"),
-            )
+            params = cls(**kwargs)
         except ConfigError as error:
             # Name the key as it is spelt in the YAML, not the dataclass field.
             raise ConfigError(_YAML_KEYS.get(error.key, error.key), error.detail) from error
         except (TypeError, ValueError) as error:
             raise ConfigError(str(path), f"malformed value: {error}") from error
-        for section in (reader, body, rotors, motors, drag, ground, gear, sensors):
-            section.reject_unused()
+        sections = dict.fromkeys(key.rpartition(".")[0] for key in _YAML_KEYS.values())
+        for section in sections:
+            keys = (key.rpartition(".") for key in _YAML_KEYS.values())
+            known = {name for within, _, name in keys if within == section}
+            mapping = data[section] if section else data
+            unknown = sorted(set(mapping) - known - (set(sections) if not section else set()))
+            if unknown:
+                raise ConfigError(_join(section, unknown[0]), "is not a known key")
         return params
 
 
-#: dataclass field -> dotted YAML key, for error messages
+#: dataclass field -> dotted YAML key (the file's layout), for reading and for error messages
 _YAML_KEYS: dict[str, str] = {
+    "name": "name",
     "urdf_path": "urdf",
     "mass": "body.mass",
     "inertia_diag": "body.inertia_diag",
@@ -244,7 +217,7 @@ _YAML_KEYS: dict[str, str] = {
     "omega_min": "motors.omega_min",
     "omega_max": "motors.omega_max",
     "linear_drag_b": "drag.linear_b",
-    "drag_airframe_fraction": "drag.airframe_fraction",
+    "ground_effect_enabled": "ground_effect.enabled",
     "ground_effect_model": "ground_effect.model",
     "ground_effect_coefficient": "ground_effect.coefficient",
     "ground_effect_max_gain": "ground_effect.max_gain",
@@ -254,44 +227,37 @@ _YAML_KEYS: dict[str, str] = {
     "gear_damping": "landing_gear.contact_damping",
     "gear_friction": "landing_gear.friction",
     "camera_offset_b": "sensors.camera_offset_b",
+    "tof_mount_z": "sensors.tof_mount_z",
     "tof_arm_distance": "sensors.tof_arm_distance",
+    "drag_airframe_fraction": "drag.airframe_fraction",
 }
+
+
+def _join(section: str, key: str) -> str:
+    return f"{section}.{key}" if section else key
+
+
+def _read(data: dict, key: str, kind: str) -> Any:
+    """The value at the dotted ``key`` as the field's type ``kind`` (numbers checked, paths
+    and names as strings, arrays as given), naming a missing key or a non-mapping section."""
+    section, _, name = key.rpartition(".")
+    mapping = data
+    if section:
+        if section not in data:
+            raise ConfigError(section, "is missing")
+        mapping = data[section]
+        if not isinstance(mapping, dict):
+            raise ConfigError(section, "must be a mapping")
+    if name not in mapping:
+        raise ConfigError(key, "is missing")
+    value = mapping[name]
+    if kind == "float":
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(key, f"{value!r} is not a number")
+        return float(value)
+    return {"str": str, "Path": str, "bool": bool}.get(kind, lambda v: v)(value)
 
 
 def _require_shape(key: str, value: np.ndarray, shape: tuple[int, ...]) -> None:
     if value.shape != shape or not np.all(np.isfinite(value)):
         raise ConfigError(key, f"needs finite values of shape {shape}, got shape {value.shape}")
-
-
-class _SectionReader:
-    """Reads one YAML mapping, naming missing or unknown keys by their dotted path."""
-
-    def __init__(self, data: Any, prefix: str) -> None:
-        if not isinstance(data, dict):
-            raise ConfigError(prefix or "<root>", "must be a mapping")
-        self._data = data
-        self._prefix = prefix
-        self._used: set[str] = set()
-
-    def _key(self, key: str) -> str:
-        return f"{self._prefix}.{key}" if self._prefix else key
-
-    def get(self, key: str) -> Any:
-        if key not in self._data:
-            raise ConfigError(self._key(key), "is missing")
-        self._used.add(key)
-        return self._data[key]
-
-    def number(self, key: str) -> float:
-        value = self.get(key)
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(self._key(key), f"{value!r} is not a number")
-        return float(value)
-
-    def section(self, key: str) -> _SectionReader:
-        return _SectionReader(self.get(key), self._key(key))
-
-    def reject_unused(self) -> None:
-        unknown = sorted(set(self._data) - self._used)
-        if unknown:
-            raise ConfigError(self._key(unknown[0]), "is not a known key")

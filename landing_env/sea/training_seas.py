@@ -25,9 +25,7 @@ from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import require_choice
 
 _SEA = "motion.sea_state."
-_GEN = _SEA + "generator."
 _SHIP = "motion.ship."
-_SHIP_GEN = _SHIP + "generator."
 
 
 @dataclass(frozen=True)
@@ -43,20 +41,39 @@ class TrainingSea:
     description: str = ""
 
 
-def _bench(name: str, description: str, **keys: Any) -> TrainingSea:
+def _member(
+    name: str,
+    scenario: str,
+    description: str,
+    sea: tuple[float, float, float] | None = None,
+    swell: tuple[float, float, float] | None = None,
+    **keys: Any,
+) -> TrainingSea:
+    """A member whose sea is the scenario's (the bench's ``motion.sea_state``, a ship's
+    ``motion.ship``) with ``keys`` changed (``gen_``: a key of its ``generator``); ``sea``:
+    (Hs m, Tp s, wave direction deg) in place of its sea state; ``swell``: an Ochi-Hubble
+    spectrum's swell (peak period s, share of the variance, direction deg)."""
+    root = _SHIP if scenario.startswith("ship") else _SEA
+    head: dict[str, Any] = {}
+    if sea is not None:
+        head["sea_state"] = None
+        head.update(
+            zip(("significant_height_m", "peak_period_s", "wave_direction_deg"), sea, strict=True)
+        )
+    if swell is not None:
+        head["gen_spectrum"] = "ochi_hubble"
+        swell_keys = ("peak_period_s", "energy_fraction", "direction_deg")
+        head.update(zip((f"gen_swell_{key}" for key in swell_keys), swell, strict=True))
+    keys = {**head, **keys}
     overrides = {
-        (_GEN + key[4:] if key.startswith("gen_") else _SEA + key): value
-        for key, value in keys.items()
-    }
-    return TrainingSea(name, "bench-ss4", overrides, description)
-
-
-def _ship(name: str, scenario: str, description: str, **keys: Any) -> TrainingSea:
-    overrides = {
-        (_SHIP_GEN + key[4:] if key.startswith("gen_") else _SHIP + key): value
+        (root + "generator." + key[4:] if key.startswith("gen_") else root + key): value
         for key, value in keys.items()
     }
     return TrainingSea(name, scenario, overrides, description)
+
+
+def _bench(name: str, description: str, **keys: Any) -> TrainingSea:
+    return _member(name, "bench-ss4", description, **keys)
 
 
 #: family name -> its members (each member's episodes are seeded as the fit's seeds)
@@ -75,36 +92,21 @@ TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
         _bench(
             "torsethaugen-following",
             "Torsethaugen sea, Hs 2.2 m, Tp 10 s, from the starboard quarter, at rest",
-            sea_state=None,
-            significant_height_m=2.2,
-            peak_period_s=10.0,
-            wave_direction_deg=45.0,
+            sea=(2.2, 10.0, 45.0),
             gen_spectrum="torsethaugen",
         ),
         _bench(
             "ochi-hubble-bow",
             "wind sea 5 s with a 10 s swell (40 % of the variance) on the port bow, 3 m/s",
-            sea_state=None,
-            significant_height_m=1.6,
-            peak_period_s=5.0,
-            wave_direction_deg=170.0,
-            gen_spectrum="ochi_hubble",
-            gen_swell_peak_period_s=10.0,
-            gen_swell_energy_fraction=0.4,
-            gen_swell_direction_deg=150.0,
+            sea=(1.6, 5.0, 170.0),
+            swell=(10.0, 0.4, 150.0),
             gen_speed_m_s=3.0,
         ),
         _bench(
             "ochi-hubble-quarter-building",
             "wind sea 7 s with a 14 s following swell (60 %), 1 m/s, Hs 2.0 -> 2.4 m",
-            sea_state=None,
-            significant_height_m=2.0,
-            peak_period_s=7.0,
-            wave_direction_deg=60.0,
-            gen_spectrum="ochi_hubble",
-            gen_swell_peak_period_s=14.0,
-            gen_swell_energy_fraction=0.6,
-            gen_swell_direction_deg=30.0,
+            sea=(2.0, 7.0, 60.0),
+            swell=(14.0, 0.6, 30.0),
             gen_speed_m_s=1.0,
             gen_hs_end_m=2.4,
             gen_ramp_start_s=10.0,
@@ -113,14 +115,8 @@ TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
         _bench(
             "ochi-hubble-beam-decaying",
             "wind sea 6.5 s with a 9 s beam swell from port (30 %), at rest, Hs 2.2 -> 1.6 m",
-            sea_state=None,
-            significant_height_m=2.2,
-            peak_period_s=6.5,
-            wave_direction_deg=240.0,
-            gen_spectrum="ochi_hubble",
-            gen_swell_peak_period_s=9.0,
-            gen_swell_energy_fraction=0.3,
-            gen_swell_direction_deg=270.0,
+            sea=(2.2, 6.5, 240.0),
+            swell=(9.0, 0.3, 270.0),
             gen_hs_end_m=1.6,
             gen_ramp_start_s=5.0,
             gen_ramp_duration_s=40.0,
@@ -140,7 +136,7 @@ TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
         TrainingSea("ss4", "ship-ss4", {}, "the ship-ss4 scenario's JONSWAP sea, hove-to"),
         TrainingSea("ss5", "ship-ss5", {}, "the ship-ss5 scenario's JONSWAP sea, hove-to"),
         TrainingSea("ss6", "ship-ss6", {}, "the ship-ss6 scenario's JONSWAP sea, hove-to"),
-        _ship(
+        _member(
             "torsethaugen-head",
             "ship-ss4",
             "Torsethaugen sea of sea state 4 from ahead, under way at 2 m/s",
@@ -148,49 +144,34 @@ TRAINING_FAMILIES: dict[str, tuple[TrainingSea, ...]] = {
             gen_spectrum="torsethaugen",
             gen_speed_m_s=2.0,
         ),
-        _ship(
+        _member(
             "torsethaugen-quarter",
             "ship-ss5",
             "Torsethaugen sea, Hs 3.0 m, Tp 10 s, from the starboard quarter, 1 m/s",
-            sea_state=None,
-            significant_height_m=3.0,
-            peak_period_s=10.0,
-            wave_direction_deg=45.0,
+            sea=(3.0, 10.0, 45.0),
             gen_spectrum="torsethaugen",
             gen_speed_m_s=1.0,
         ),
-        _ship(
+        _member(
             "ochi-hubble-bow",
             "ship-ss4",
             "wind sea 5.5 s with a 10 s swell (35 % of the variance) off the starboard bow, 5 m/s",
-            sea_state=None,
-            significant_height_m=1.8,
-            peak_period_s=5.5,
-            wave_direction_deg=190.0,
-            gen_spectrum="ochi_hubble",
-            gen_swell_peak_period_s=10.0,
-            gen_swell_energy_fraction=0.35,
-            gen_swell_direction_deg=160.0,
+            sea=(1.8, 5.5, 190.0),
+            swell=(10.0, 0.35, 160.0),
             gen_speed_m_s=5.0,
         ),
-        _ship(
+        _member(
             "ochi-hubble-beam-building",
             "ship-ss5",
             "wind sea 7.5 s with a 15 s beam swell (55 %), 2 m/s, Hs 2.8 -> 3.5 m",
-            sea_state=None,
-            significant_height_m=2.8,
-            peak_period_s=7.5,
-            wave_direction_deg=120.0,
-            gen_spectrum="ochi_hubble",
-            gen_swell_peak_period_s=15.0,
-            gen_swell_energy_fraction=0.55,
-            gen_swell_direction_deg=90.0,
+            sea=(2.8, 7.5, 120.0),
+            swell=(15.0, 0.55, 90.0),
             gen_speed_m_s=2.0,
             gen_hs_end_m=3.5,
             gen_ramp_start_s=10.0,
             gen_ramp_duration_s=30.0,
         ),
-        _ship(
+        _member(
             "jonswap-following-decaying",
             "ship-ss5",
             "JONSWAP sea of sea state 5 from astern, under way at 3 m/s, Hs 3.25 -> 2.6 m",

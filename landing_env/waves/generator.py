@@ -280,11 +280,6 @@ class GeneratedSea:
         amplitudes = self.amplitudes(times)
         return carrier * (self.amplitude_rates(times) + 1j * self.encounter_omega * amplitudes)
 
-    @property
-    def significant_height(self) -> float:
-        """4 sqrt(m0) at t = 0, metres."""
-        return 4.0 * math.sqrt(self.m0)
-
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
         """Sea-surface elevation (m) met by the ship (at its centre) at a time or times."""
         t = np.asarray(t, dtype=float)

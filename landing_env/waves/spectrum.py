@@ -134,11 +134,6 @@ class WaveComponents:
         self.steady = True
         self.encounter_omega = self.omega
 
-    @property
-    def significant_height(self) -> float:
-        """4 sqrt(m0) of the synthesised elevation spectrum, metres."""
-        return 4.0 * math.sqrt(self.m0)
-
     def elevation(self, t: float | np.ndarray) -> np.ndarray:
         """Sea-surface elevation (m) at the origin for a time or an array of times."""
         t = np.asarray(t, dtype=float)

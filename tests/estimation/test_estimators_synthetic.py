@@ -302,14 +302,13 @@ def test_the_papers_three_point_plane_works_too() -> None:
         intrinsics=k,
         tag_size=TAG_SIZE,
         tof_calibration=cal,
-        config=IHRCFConfig(plane_fit="cross3", homography="opencv"),
+        config=IHRCFConfig(plane_fit="cross3"),
     )
     rotation, translation = deck_pose(2.2, 18.0, 2.0, -2.5, 0.4, 0.2)
     m = SCENES["pinhole"].measure(rotation, translation)
     estimate = estimator.estimate(m.frame, m.ranges)
     dt, da = pose_errors(estimate, rotation, translation)
-    # OpenCV's homography is only good to ~1e-4 px (see test_geometry)
-    assert dt < 1e-4 and da < 1e-2
+    assert dt < 1e-9 and da < 1e-7
 
 
 def test_atda_resolves_an_ambiguous_frame_with_its_history() -> None:
@@ -368,8 +367,6 @@ def test_factory_and_configs_reject_bad_settings() -> None:
         make_estimator("apriltag", intrinsics=k, tag_size=0.1)
     with pytest.raises(ValueError, match="tof_calibration"):
         make_estimator("ihrcf", intrinsics=k, tag_size=0.1)
-    with pytest.raises(ConfigError, match=r"homography.*'dlt', 'opencv'"):
-        IHRCFConfig(homography="ransac")
     with pytest.raises(ConfigError, match="plane_fit"):
         CRHFConfig(plane_fit="ransac")
     with pytest.raises(ConfigError, match="tag_size"):

@@ -24,22 +24,19 @@ def _random_homography(rng: np.random.Generator) -> np.ndarray:
 
 @pytest.mark.parametrize("n_points", [4, 9])
 @pytest.mark.parametrize("seed", range(5))
-def test_dlt_and_opencv_homographies_agree_and_reproduce_the_map(n_points: int, seed: int) -> None:
+def test_the_dlt_homography_reproduces_the_map(n_points: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     h_true = _random_homography(rng)
     src = rng.uniform(-1.0, 1.0, size=(n_points, 2))
     dst = geometry.apply_homography(h_true, src)
     h_dlt = geometry.homography_dlt(src, dst)
-    h_cv = geometry.homography_opencv(src, dst)
-    assert h_dlt is not None and h_cv is not None
+    assert h_dlt is not None
     canonical = geometry._canonical_homography(h_true)
     assert canonical is not None
     np.testing.assert_allclose(h_dlt, canonical, atol=1e-12)
     probe = rng.uniform(-1.0, 1.0, size=(20, 2))
     truth = geometry.apply_homography(h_true, probe)
     np.testing.assert_allclose(geometry.apply_homography(h_dlt, probe), truth, atol=1e-9)
-    # OpenCV 5.0's findHomography stops refining at ~1e-4 px (measured); agreement to 1e-2 px
-    np.testing.assert_allclose(geometry.apply_homography(h_cv, probe), truth, atol=1e-2)
 
 
 def test_sensor_plane_to_pixel_homography_is_exact_for_a_tilted_deck() -> None:
@@ -62,14 +59,13 @@ def test_sensor_plane_to_pixel_homography_is_exact_for_a_tilted_deck() -> None:
     )
 
 
-@pytest.mark.parametrize("method", geometry.HOMOGRAPHY_METHODS)
-def test_degenerate_homographies_are_rejected(method: str) -> None:
+def test_degenerate_homographies_are_rejected() -> None:
     src = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])  # three collinear
     dst = np.array([[10.0, 10.0], [20.0, 10.0], [30.0, 10.0], [10.0, 20.0]])
-    assert geometry.homography(src, dst, method) is None
+    assert geometry.homography_dlt(src, dst) is None
     coincident = np.zeros((4, 2))
-    assert geometry.homography(coincident, dst, method) is None
-    assert geometry.homography(src, np.full((4, 2), np.nan), method) is None
+    assert geometry.homography_dlt(coincident, dst) is None
+    assert geometry.homography_dlt(src, np.full((4, 2), np.nan)) is None
 
 
 def test_plane_fit_is_exact_on_a_plane_and_its_residual_exposes_one_bad_range() -> None:

@@ -12,19 +12,16 @@ import pytest
 
 from agents.cli import main
 from agents.evaluation.estimators import (
-    AXES,
     PAPER_RESULTS,
-    EstimatorTrace,
     RunSettings,
-    ScenarioRecord,
     comparison_rows,
     evaluate_estimators,
     markdown_table,
     run_scenario,
     score_record,
-    wrap_degrees,
     write_csv_table,
 )
+from agents.evaluation.records import AXES, EstimatorTrace, ScenarioRecord, wrap_degrees
 from agents.evaluation.sweep import SweepSettings, run_sweep, write_sweep
 from landing_env.errors import ConfigError
 

@@ -18,7 +18,6 @@ from agents.policies.svgs_routine import (
     RoutineConfig,
     RoutineState,
     SvgsRoutinePolicy,
-    expanding_scan,
     lawnmower_square,
     levelled_offset,
 )
@@ -66,12 +65,17 @@ def test_lawnmower_square_covers_its_square_in_lanes() -> None:
     assert points[1, 1] > points[0, 1] and points[3, 1] < points[2, 1]
 
 
-def test_expanding_scan_squares_grow_about_the_same_centre() -> None:
-    squares = expanding_scan((0.5, 0.5), 4.0, 3.0, 1.5, squares=4)
-    extents = [np.ptp(np.array(sq), axis=0) for sq in squares]
-    sides = [e[0] for e in extents]
-    assert sides == pytest.approx([4.0, 7.0, 10.0, 13.0])
-    assert all(np.allclose((np.array(sq).min(0) + np.array(sq).max(0)) / 2, 0.5) for sq in squares)
+def test_each_scan_square_is_wider_by_the_growth_about_the_same_centre() -> None:
+    config = RoutineConfig(scan_first_side_m=4.0, scan_growth_m=3.0, scan_lane_spacing_m=1.5)
+    policy = SvgsRoutinePolicy(config=config, timing_model=None)
+    policy._scan_centre = (0.5, 0.5)
+    squares = []
+    for k in range(4):
+        policy._scan_square = k
+        policy._load_square()
+        squares.append(np.array(policy._scan))
+    assert [np.ptp(sq, axis=0)[0] for sq in squares] == pytest.approx([4.0, 7.0, 10.0, 13.0])
+    assert all(np.allclose((sq.min(0) + sq.max(0)) / 2, 0.5) for sq in squares)
 
 
 def test_routine_scans_outwards_until_the_landmark_is_found() -> None:

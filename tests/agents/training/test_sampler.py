@@ -16,9 +16,10 @@ from agents.training.sampler import (
     register_sensing_profile,
     sensing_signatures,
 )
-from agents.training.trainer import ENV_ID, ZOO_META_KEYS, load_train_config, train
+from agents.training.trainer import ZOO_META_KEYS, load_train_config, train
 from landing_env.config_loading import build_dataclass
 from landing_env.errors import ConfigError
+from landing_env.scenarios import TIMING_TASK
 from tests.paths import ROOT
 
 RANDOMISED = ROOT / "configs/train/timing_randomised.yaml"
@@ -174,7 +175,7 @@ def test_the_randomised_yaml_is_rl_zoo_style_and_loads() -> None:
 
     data = yaml.safe_load(RANDOMISED.read_text())
     algo_args = set(inspect.signature(RecurrentPPO.__init__).parameters)
-    assert set(data[ENV_ID]) <= set(ZOO_META_KEYS) | algo_args
+    assert set(data[TIMING_TASK]) <= set(ZOO_META_KEYS) | algo_args
     config = load_train_config(RANDOMISED)
     assert config.settings.algo == "recurrentppo"
     assert config.settings.randomise is not None

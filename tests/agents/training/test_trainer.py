@@ -12,7 +12,6 @@ import yaml
 from agents.evaluation.landing import evaluate_policy
 from agents.policies.timing import SHIPPED_TIMING_MODEL, TrainedTimingPolicy
 from agents.training.trainer import (
-    ENV_ID,
     SCENARIO_ENV_ID,
     ZOO_META_KEYS,
     algorithm_kwargs,
@@ -21,6 +20,7 @@ from agents.training.trainer import (
     train,
 )
 from landing_env.errors import ConfigError
+from landing_env.scenarios import TIMING_TASK
 from tests.paths import ROOT
 
 #: the range-scheduled descent the shipped timing_dqn.zip was trained on
@@ -66,7 +66,7 @@ def test_zoo_policy_kwargs_strings_are_parsed_without_eval() -> None:
 
 def test_bad_settings_name_the_key(tmp_path: Path) -> None:
     path = tmp_path / "bad.yaml"
-    path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 1}, "deck_landing": {"algo": "sac"}}))
+    path.write_text(yaml.safe_dump({TIMING_TASK: {"n_envs": 1}, "deck_landing": {"algo": "sac"}}))
     with pytest.raises(ConfigError, match=r"deck_landing\.algo"):
         load_train_config(path)
     path.write_text(yaml.safe_dump({"CartPole-v1": {}}))

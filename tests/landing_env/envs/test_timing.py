@@ -10,8 +10,8 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 import landing_env  # noqa: F401  (registers the environments)
 from estimation.frames import level_from_body, levelled_deck_pose, matrix_from_euler_zyx
 from landing_env.anticipation.deck_history import HISTORY_FEATURES, DeckMotionHistory
+from landing_env.config_loading import nested_to_dotted
 from landing_env.errors import ConfigError
-from landing_env.scenarios import dotted
 from landing_env.timing.guidance import DeckGuidance
 from landing_env.timing.layout import TimingObservationLayout
 
@@ -34,7 +34,7 @@ def make(timing: dict | None = None, config: str = "bench-ss4", **overrides) -> 
         overrides={
             **FLYING,
             "touchdown.settle_time_s": 0.3,
-            **dotted("timing", timing if timing is not None else QUICK),
+            **nested_to_dotted(timing if timing is not None else QUICK, "timing"),
             **overrides,
         },
     )

@@ -246,7 +246,8 @@ def _land_now(track: bool, seeds: range, version: int = 1) -> list[dict]:
     import gymnasium as gym
 
     import landing_env  # noqa: F401
-    from landing_env.scenarios import SCENARIOS, TIMING_TASK, dotted
+    from landing_env.config_loading import nested_to_dotted
+    from landing_env.scenarios import SCENARIOS, TIMING_TASK
 
     timing = {
         "hold_height_m": 2.0,
@@ -262,7 +263,7 @@ def _land_now(track: bool, seeds: range, version: int = 1) -> list[dict]:
     env = gym.make(
         "DeckLandingTiming-v0",
         config="ship-ss4",
-        overrides={**overrides, **dotted("timing", timing)},
+        overrides={**overrides, **nested_to_dotted(timing, "timing")},
     )
     touchdowns = []
     try:

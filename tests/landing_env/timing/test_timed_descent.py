@@ -17,9 +17,10 @@ from agents.common.cards import (
 )
 from agents.policies.timing import SHIPPED_TIMING_MODEL
 from landing_env.config import load_config
+from landing_env.config_loading import nested_to_dotted
 from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
-from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS, dotted
+from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS
 from landing_env.timing.guidance import DeckGuidance
 from landing_env.timing.timed_descent import timed_descent_reference
 
@@ -163,7 +164,7 @@ def _bench_timing(**timing) -> gym.Env:
             "estimation.observed": "tight",
             "estimation.compare": [],
             "touchdown.settle_time_s": 0.3,
-            **dotted("timing", settings),
+            **nested_to_dotted(settings, "timing"),
         },
     )
 
