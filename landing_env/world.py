@@ -271,6 +271,11 @@ class World:
         self.drone.reset(position_w, yaw)
         self._state = self.drone.read_state()
 
+    @property
+    def foot_radius_m(self) -> float:
+        """The radius of the drone's feet (their collision spheres), m."""
+        return self._foot_radius
+
     def shift_drone(self, shift_w: np.ndarray) -> None:
         """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
         without stepping time: a look-ahead's model of where the drone is
