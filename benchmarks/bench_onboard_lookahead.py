@@ -17,6 +17,12 @@ scenario and over all, the share of draws with the same verdict, the confusion c
 thread): the reduced model's whole check (forecast, draws, flight, verdicts) at p50 / p95,
 and the replay's.  ``--out`` writes one JSON line per check (both models' verdicts and
 margins per draw, the CPU times).
+
+The replay's own verdicts are not fixed by a draw: each replayed future also draws the gusts'
+innovations and the sensors' noise anew, which no onboard model can know.  ``--repeat`` replays
+each check a second time with those drawn from another stream (the draws' airframe, gust and
+position unchanged) and reports how often the replay agrees with itself: the agreement that
+a model without them can be expected to reach.
 """
 
 from __future__ import annotations
@@ -75,8 +81,24 @@ def _verdicts(tries: list[TriedCommit] | None) -> list[dict[str, Any]] | None:
     ]
 
 
+def replay_again(planner: Any, decision: int) -> list[TriedCommit] | None:
+    """``planner``'s check replayed with the unknowable future (gust innovations, sensor
+    noise) drawn from another stream than its own."""
+    world = planner.env.world
+    redraw = world.redraw_unknowable_future
+
+    def other(rng: np.random.Generator) -> None:
+        redraw(np.random.default_rng([int(rng.integers(2**63)), 0x5EED]))
+
+    world.redraw_unknowable_future = other
+    try:
+        return type(planner).try_commits(planner, decision, 0.0)
+    finally:
+        del world.redraw_unknowable_future
+
+
 def record_scenario(
-    scenario: str, episodes: int, first_seed: int, checks: int
+    scenario: str, episodes: int, first_seed: int, checks: int, repeat: bool = False
 ) -> list[dict[str, Any]]:
     """Both models' verdicts at the first ``checks`` checks of each episode."""
     env, policy = make_env_and_policy(POLICY, scenario, extra_overrides={"sensors": "realistic"})
@@ -109,17 +131,18 @@ def record_scenario(
                     start = time.process_time()
                     reduced = twin.try_commits(pending["decision"])
                     reduced_cpu = time.process_time() - start
-                    rows.append(
-                        {
-                            "scenario": scenario,
-                            "seed": seed,
-                            "decision": pending["decision"],
-                            "replay": _verdicts(pending["replay"]),
-                            "reduced": _verdicts(reduced),
-                            "replay_cpu_s": pending["replay_cpu_s"],
-                            "reduced_cpu_s": reduced_cpu,
-                        }
-                    )
+                    row = {
+                        "scenario": scenario,
+                        "seed": seed,
+                        "decision": pending["decision"],
+                        "replay": _verdicts(pending["replay"]),
+                        "reduced": _verdicts(reduced),
+                        "replay_cpu_s": pending["replay_cpu_s"],
+                        "reduced_cpu_s": reduced_cpu,
+                    }
+                    if repeat:
+                        row["replay_again"] = _verdicts(replay_again(planner, pending["decision"]))
+                    rows.append(row)
                     seen += 1
                 observation, _, terminated, truncated, _ = env.step(action)
                 done = terminated or truncated
@@ -128,21 +151,21 @@ def record_scenario(
     return rows
 
 
-def agreement(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per verdict: the share of draws alike and the confusion counts (replay, reduced);
-    checks where either model made no look-ahead are counted apart."""
+def agreement(rows: list[dict[str, Any]], other: str = "reduced") -> dict[str, Any]:
+    """Per verdict: the share of draws alike and the confusion counts (the replay, ``other``:
+    ``reduced`` or ``replay_again``); checks where either made no look-ahead are counted
+    apart."""
+    rows = [row for row in rows if other in row]
     pairs = [
         (a, b)
         for row in rows
-        if row["replay"] is not None and row["reduced"] is not None
-        for a, b in zip(row["replay"], row["reduced"], strict=True)
+        if row["replay"] is not None and row[other] is not None
+        for a, b in zip(row["replay"], row[other], strict=True)
     ]
     summary: dict[str, Any] = {
         "checks": len(rows),
         "draws": len(pairs),
-        "checks_valid_alike": sum(
-            (row["replay"] is None) == (row["reduced"] is None) for row in rows
-        ),
+        "checks_valid_alike": sum((row["replay"] is None) == (row[other] is None) for row in rows),
     }
     for verdict in ("success", "lands"):
         counts = {"both": 0, "replay_only": 0, "reduced_only": 0, "neither": 0}
@@ -166,14 +189,14 @@ def agreement(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return summary
 
 
-def _print(name: str, summary: dict[str, Any]) -> None:
-    print(f"{name}: {summary['checks']} checks, {summary['draws']} draws")
+def _print(name: str, summary: dict[str, Any], other: str = "reduced") -> None:
+    print(f"{name}, replay against {other}: {summary['checks']} checks, {summary['draws']} draws")
     for verdict in ("success", "lands"):
         s = summary[verdict]
         print(
             f"  {verdict:8s} agreement {100 * s['agreement']:.1f} %  "
             f"both {s['both']}  replay only {s['replay_only']}  "
-            f"reduced only {s['reduced_only']}  neither {s['neither']}"
+            f"{other} only {s['reduced_only']}  neither {s['neither']}"
         )
     for key in ("reduced_check_ms", "replay_check_ms"):
         if key in summary:
@@ -187,12 +210,17 @@ def main() -> None:
     parser.add_argument("--checks", type=int, default=4, help="checks recorded per episode")
     parser.add_argument("--first-seed", type=int, default=1_000_000)
     parser.add_argument("--out", type=Path, default=None, help="one JSON line per check")
+    parser.add_argument(
+        "--repeat", action="store_true", help="replay each check again with other innovations"
+    )
     args = parser.parse_args()
     scenarios = args.scenario or ["ship-ss6"]
     rows: list[dict[str, Any]] = []
     for scenario in scenarios:
-        mine = record_scenario(scenario, args.episodes, args.first_seed, args.checks)
+        mine = record_scenario(scenario, args.episodes, args.first_seed, args.checks, args.repeat)
         _print(scenario, agreement(mine))
+        if args.repeat:
+            _print(scenario, agreement(mine, "replay_again"), "replay_again")
         rows += mine
         if args.out is not None:
             args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -201,6 +229,8 @@ def main() -> None:
                     handle.write(json.dumps(row) + "\n")
     if len(scenarios) > 1:
         _print("all", agreement(rows))
+        if args.repeat:
+            _print("all", agreement(rows, "replay_again"), "replay_again")
 
 
 if __name__ == "__main__":

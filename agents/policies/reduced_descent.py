@@ -51,7 +51,7 @@ from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
 GRAVITY_MPS2 = 9.81
 
 #: the reduced model's integration step, s (the guidance runs at the task's control period)
-MODEL_DT_S = 1.0 / 60.0
+MODEL_DT_S = 1.0 / 40.0
 
 #: how long after the commit the reduced model flies before a draw without a contact counts
 #: as no touchdown, s
@@ -295,6 +295,13 @@ class ReducedDescentModel:
 
     def fly(self, start: DescentStart, deck: DeckTrack, draws: DrawSet) -> ReducedTouchdown:
         """Each draw's commit now, flown to its first contact (or the model's horizon)."""
+        if (
+            len(deck.times_s) < 2
+            or abs(float(deck.times_s[1] - deck.times_s[0]) - self.dt_s) > 1e-9
+        ):
+            raise ValueError(
+                f"the deck track must be sampled every {self.dt_s:g} s, the model's step"
+            )
         g = self.gains
         c = self.controller
         n = len(draws)

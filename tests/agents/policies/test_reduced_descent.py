@@ -13,6 +13,7 @@ import landing_env  # noqa: F401  (registers the ids)
 from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.lookahead import LookaheadSettings, check_features
 from agents.policies.reduced_descent import (
+    MODEL_DT_S,
     DeckTrack,
     DescentStart,
     DrawSet,
@@ -29,7 +30,7 @@ from landing_env.scenarios import SHIP_TIMING
 from landing_env.timing.timed_descent import timed_descent_reference, timed_descent_references
 from landing_env.touchdown import Outcome
 
-DT_S = 1.0 / 60.0
+DT_S = MODEL_DT_S
 THRESHOLDS = TouchdownConfig(max_relative_attitude_deg=40.0)
 FEET_B = np.array(
     [[0.1, 0.0, -0.068], [0.0, 0.1, -0.068], [-0.1, 0.0, -0.068], [0.0, -0.1, -0.068]]
