@@ -15,8 +15,9 @@ look-ahead's ``min_margin`` (the ``chance`` feature's verdict).  The output give
 scenario and over all, the share of draws with the same verdict, the confusion counts
 (replay / reduced), and the CPU time of a check (``time.process_time`` of this process, one
 thread): the reduced model's whole check (forecast, draws, flight, verdicts) at p50 / p95,
-and the replay's.  ``--out`` writes one JSON line per check (both models' verdicts and
-margins per draw, the CPU times).
+over all checks and over those after an episode's first (which also sets up the episode's
+HMS record and forecast), and the replay's.  ``--out`` writes one JSON line per check (both
+models' verdicts and margins per draw, the CPU times).
 
 The replay's own verdicts are not fixed by a draw: each replayed future also draws the gusts'
 innovations and the sensors' noise anew, which no onboard model can know.  ``--repeat`` replays
@@ -83,18 +84,19 @@ def _verdicts(tries: list[TriedCommit] | None) -> list[dict[str, Any]] | None:
 
 def replay_again(planner: Any, decision: int) -> list[TriedCommit] | None:
     """``planner``'s check replayed with the unknowable future (gust innovations, sensor
-    noise) drawn from another stream than its own."""
-    world = planner.env.world
-    redraw = world.redraw_unknowable_future
+    noise) drawn from another stream than its own (the world class's method is wrapped: each
+    draw restores a copy of the world)."""
+    world_class = type(planner.env.world)
+    redraw = world_class.redraw_unknowable_future
 
-    def other(rng: np.random.Generator) -> None:
-        redraw(np.random.default_rng([int(rng.integers(2**63)), 0x5EED]))
+    def other(world: Any, rng: np.random.Generator) -> None:
+        redraw(world, np.random.default_rng([int(rng.integers(2**63)), 0x5EED]))
 
-    world.redraw_unknowable_future = other
+    world_class.redraw_unknowable_future = other
     try:
         return type(planner).try_commits(planner, decision, 0.0)
     finally:
-        del world.redraw_unknowable_future
+        world_class.redraw_unknowable_future = redraw
 
 
 def record_scenario(
@@ -135,6 +137,8 @@ def record_scenario(
                         "scenario": scenario,
                         "seed": seed,
                         "decision": pending["decision"],
+                        # the episode's first check also sets up its HMS record and forecast
+                        "first": seen == 0,
                         "replay": _verdicts(pending["replay"]),
                         "reduced": _verdicts(reduced),
                         "replay_cpu_s": pending["replay_cpu_s"],
@@ -177,10 +181,32 @@ def agreement(rows: list[dict[str, Any]], other: str = "reduced") -> dict[str, A
             )
             counts[key] += 1
         alike = counts["both"] + counts["neither"]
-        summary[verdict] = {"agreement": alike / max(len(pairs), 1), **counts}
+        # the feature the policy reads: the share of a check's draws with the verdict
+        gaps = [
+            abs(
+                float(np.mean([d[verdict] for d in row["replay"]]))
+                - float(np.mean([d[verdict] for d in row[other]]))
+            )
+            for row in rows
+            if row["replay"] is not None and row[other] is not None
+        ]
+        summary[verdict] = {
+            "agreement": alike / max(len(pairs), 1),
+            **counts,
+            "share_gap_mean": float(np.mean(gaps)) if gaps else math.nan,
+        }
     reduced_ms = [1000.0 * row["reduced_cpu_s"] for row in rows if row["reduced"] is not None]
+    later_ms = [
+        1000.0 * row["reduced_cpu_s"]
+        for row in rows
+        if row["reduced"] is not None and not row.get("first", False)
+    ]
     replay_ms = [1000.0 * row["replay_cpu_s"] for row in rows if row["replay"] is not None]
-    for name, values in (("reduced_check_ms", reduced_ms), ("replay_check_ms", replay_ms)):
+    for name, values in (
+        ("reduced_check_ms", reduced_ms),
+        ("reduced_later_check_ms", later_ms),
+        ("replay_check_ms", replay_ms),
+    ):
         if values:
             summary[name] = {
                 "p50": float(np.percentile(values, 50)),
@@ -196,9 +222,10 @@ def _print(name: str, summary: dict[str, Any], other: str = "reduced") -> None:
         print(
             f"  {verdict:8s} agreement {100 * s['agreement']:.1f} %  "
             f"both {s['both']}  replay only {s['replay_only']}  "
-            f"{other} only {s['reduced_only']}  neither {s['neither']}"
+            f"{other} only {s['reduced_only']}  neither {s['neither']}  "
+            f"mean gap of a check's share {s['share_gap_mean']:.3f}"
         )
-    for key in ("reduced_check_ms", "replay_check_ms"):
+    for key in ("reduced_check_ms", "reduced_later_check_ms", "replay_check_ms"):
         if key in summary:
             print(f"  {key}: p50 {summary[key]['p50']:.1f}  p95 {summary[key]['p95']:.1f}")
 

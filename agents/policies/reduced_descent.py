@@ -101,8 +101,10 @@ class DescentStart:
     """What the reduced model starts a check's descent from (shared by its draws), world frame.
 
     ``velocity_integral_w``: the velocity loop's integrators (m/s^2); ``wind_w``: the air at the
-    drone less the present gust (the mean wind and the ship's airwake); ``lean``: the
-    guidance's low-passed lean; ``feet_b`` (F, 3): the feet's centres in the body frame.
+    drone less the present gust's share of it (the mean wind and the ship's airwake), of which
+    the gust reaches the drone ``gust_gain`` times (the airwake's turbulence factor);
+    ``lean``: the guidance's low-passed lean; ``feet_b`` (F, 3): the feet's centres in the
+    body frame.
     """
 
     position_w: np.ndarray
@@ -121,6 +123,7 @@ class DescentStart:
     tracker: Any = None
     #: the rotors' hubs in the body frame (4, 3), for the ground effect
     rotor_hubs_b: np.ndarray | None = None
+    gust_gain: float = 1.0
 
     def finite(self) -> bool:
         """Every state the flight starts from is finite."""
@@ -131,7 +134,7 @@ class DescentStart:
             self.velocity_integral_w,
             self.wind_w,
             self.lean,
-            np.array([self.descent_time_s]),
+            np.array([self.descent_time_s, self.gust_gain]),
         )
 
 
@@ -314,7 +317,7 @@ class ReducedDescentModel:
         z_b = np.repeat(rotation0[:, 2][None, :], n, axis=0)
         heading = rotation0[:, 0].copy()
         integral = np.repeat(np.asarray(start.velocity_integral_w, dtype=float)[None, :], n, axis=0)
-        wind = np.asarray(start.wind_w, dtype=float)[None, :] + draws.gust_w
+        wind = np.asarray(start.wind_w, dtype=float)[None, :] + start.gust_gain * draws.gust_w
         lean = np.repeat(np.asarray(start.lean, dtype=float)[None, :], n, axis=0)
         drag_xy = self.drag_xy * draws.drag_scale[:, None]
         drag_z = self.drag_z * draws.drag_scale[:, None]
@@ -517,12 +520,13 @@ def descent_start(env: Any) -> DescentStart:
     feet = world.client.getLinkStates(world.drone.body_id, sorted(world.foot_links))
     feet_b = (np.array([f[0] for f in feet], dtype=float) - position) @ rotation
     timing = env.timing
+    gain = float(world.gust_gain_at_drone())
     return DescentStart(
         position_w=position,
         velocity_w=np.asarray(state.velocity_w, dtype=float),
         rotation_wb=rotation,
         velocity_integral_w=np.asarray(world.controller.velocity_integral_w, dtype=float),
-        wind_w=np.asarray(world.drone.last_wind_w, dtype=float) - world.wind.gust_w,
+        wind_w=np.asarray(world.drone.last_wind_w, dtype=float) - gain * world.wind.gust_w,
         lean=np.asarray(env.guidance.lean, dtype=float),
         descent_time_s=float(timing.descent_time_for(env.deck_prediction.plan_contact())),
         feet_b=feet_b,
@@ -531,6 +535,7 @@ def descent_start(env: Any) -> DescentStart:
         camera_rotation_bc=np.asarray(R_BC, dtype=float),
         tracker=copy.deepcopy(env.guidance.tracker),
         rotor_hubs_b=np.asarray(world.drone.params.rotor_positions_b, dtype=float),
+        gust_gain=gain,
     )
 
 
@@ -559,14 +564,24 @@ class ReducedLookahead(DeckForecastTimingPolicy):
         self.last_touchdowns: ReducedTouchdown | None = None
 
     def drawn_set(self, decision: int) -> DrawSet:
-        """This decision's draws (after :meth:`deck_future`), as rows."""
+        """This decision's draws (after :meth:`deck_future`), as rows.
+
+        With :attr:`~agents.policies.deck_forecast.OnboardModelConfig.airframe_in_trim` a drawn
+        airframe starts in its own trim, as :meth:`model_draw` makes it: the air goes past it
+        ``1 / drag_scale`` as fast (the gust shifted by the difference, as much of it as
+        reaches the drone), and the controller's thrust model is the drawn rotors' (the
+        thrust it commands is the thrust it gets)."""
         rows = [self.drawn_unknowns(decision, k) for k in range(self.draws)]
-        return DrawSet(
-            np.array([r[0] for r in rows]),
-            np.array([r[1] for r in rows]),
-            np.array([r[2] for r in rows]),
-            np.array([r[3] for r in rows]),
-        )
+        gust = np.array([r[1] for r in rows])
+        drag_scale = np.array([r[2] for r in rows])
+        thrust_scale = np.array([r[3] for r in rows])
+        if self.onboard.airframe_in_trim:
+            world = self.env.world
+            air_w = world.drone_state().velocity_w - np.asarray(world.drone.last_wind_w)
+            gain = max(float(world.gust_gain_at_drone()), 1e-9)
+            gust = gust + np.outer(1.0 - 1.0 / drag_scale, air_w) / gain
+            thrust_scale = np.ones_like(thrust_scale)
+        return DrawSet(np.array([r[0] for r in rows]), gust, drag_scale, thrust_scale)
 
     def deck_track(self, motion: Any) -> DeckTrack:
         """The deck's predicted motion ``motion`` (the forecast) at the model's steps."""
