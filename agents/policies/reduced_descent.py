@@ -44,11 +44,10 @@ from agents.policies.deck_forecast import DeckForecastTimingPolicy
 from agents.policies.oracle import TriedCommit, touchdown_margin
 from estimation.frames import R_BC
 from landing_env.config import TouchdownConfig
+from landing_env.physics.quadrotor_params import GRAVITY as GRAVITY_MPS2
 from landing_env.stewart.kinematics import rotation_matrix_zyx
 from landing_env.timing.timed_descent import timed_descent_references
 from landing_env.touchdown import Outcome, TouchdownMetrics, evaluate_touchdown
-
-GRAVITY_MPS2 = 9.81
 
 #: the reduced model's integration step, s (the guidance runs at the task's control period)
 MODEL_DT_S = 1.0 / 40.0
