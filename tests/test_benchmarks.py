@@ -218,12 +218,12 @@ def test_onboard_lookahead_sets_the_reduced_models_verdicts_against_the_replays(
 ) -> None:
     out = tmp_path / "onboard.jsonl"
     printed = run_benchmark(
-        "bench_onboard_lookahead", "--scenario", "ship-ss4", "--episodes", "1", "--checks", "1",
+        "bench_onboard_lookahead", "--scenario", "ship-ss5", "--episodes", "1", "--checks", "1",
         "--out", str(out), cwd=tmp_path,
     )  # fmt: skip
-    assert "ship-ss4, replay against reduced: 1 checks" in printed
+    assert "ship-ss5, replay against reduced: 1 checks" in printed
     for verdict in ("success", "lands"):
         assert re.search(rf"^  {verdict} +agreement \d+\.\d %", printed, re.M), printed
     (row,) = [json.loads(line) for line in out.read_text().splitlines()]
-    assert row["scenario"] == "ship-ss4" and row["first"]
+    assert row["scenario"] == "ship-ss5" and row["first"]
     assert row["replay"] is None or len(row["replay"]) == len(row["reduced"]) == 16
