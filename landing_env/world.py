@@ -271,6 +271,11 @@ class World:
         self.drone.reset(position_w, yaw)
         self._state = self.drone.read_state()
 
+    @property
+    def foot_radius_m(self) -> float:
+        """The radius of the drone's feet (their collision spheres), m."""
+        return self._foot_radius
+
     def shift_drone(self, shift_w: np.ndarray) -> None:
         """Move the drone by ``shift_w`` (m, world frame) keeping its attitude and velocities,
         without stepping time: a look-ahead's model of where the drone is
@@ -438,6 +443,17 @@ class World:
         points = p.getContactPoints(bodyA=self.drone.body_id, physicsClientId=self.client._client)
         return summarise_contacts(points, self.foot_links, self.deck_id)
 
+    def gust_gain_at_drone(self) -> float:
+        """How much of the present gust reaches the drone where it is: 1, and inside the ship's
+        airwake its turbulence factor there."""
+        if not self._airwake:
+            return 1.0
+        offset = tuple((self.drone_state().position_w - self.deck_home_w).tolist())
+        return (
+            self.wind.airwake((1.0, 0.0, 0.0), offset)[0]
+            - self.wind.airwake((0.0, 0.0, 0.0), offset)[0]
+        )
+
     def shift_wind_at_drone(self, delta_w: np.ndarray) -> None:
         """Change the present gust so that the wind at the drone changes by ``delta_w`` (m/s,
         world): inside the ship's airwake a gust reaches the drone scaled by its turbulence
@@ -445,13 +461,7 @@ class World:
         delta = np.asarray(delta_w, dtype=float).reshape(-1)
         if delta.shape != (3,) or not np.all(np.isfinite(delta)):
             raise ValueError(f"delta_w must be 3 finite m/s values, got {delta_w!r}")
-        gain = 1.0
-        if self._airwake:
-            offset = tuple((self.drone_state().position_w - self.deck_home_w).tolist())
-            gain = (
-                self.wind.airwake((1.0, 0.0, 0.0), offset)[0]
-                - self.wind.airwake((0.0, 0.0, 0.0), offset)[0]
-            )
+        gain = self.gust_gain_at_drone()
         if gain > 1e-9:
             self.wind.set_present_gust_w(self.wind.gust_w + delta / gain)
 

@@ -31,6 +31,7 @@ MAINTAINED = (
     "bench_fused_unseen",
     "bench_paper_setup",
     "fuzz_soak",
+    "bench_onboard_lookahead",
 )
 #: modules of benchmarks/ that a maintained benchmark imports (not run on their own)
 HELPERS = ("fused_motions", "fused_replay")
@@ -209,3 +210,20 @@ def test_a_fuzz_prefix_that_names_no_key_is_refused_naming_keys(tmp_path: Path) 
         "fuzz_soak", "--parts", "config", "--keys", "no_such.", cwd=tmp_path, expect_rc=2
     )
     assert "--keys: no config key starts with 'no_such.'" in out
+
+
+@pytest.mark.slow
+def test_onboard_lookahead_sets_the_reduced_models_verdicts_against_the_replays(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "onboard.jsonl"
+    printed = run_benchmark(
+        "bench_onboard_lookahead", "--scenario", "ship-ss5", "--episodes", "1", "--checks", "1",
+        "--out", str(out), cwd=tmp_path,
+    )  # fmt: skip
+    assert "ship-ss5, replay against reduced: 1 checks" in printed
+    for verdict in ("success", "lands"):
+        assert re.search(rf"^  {verdict} +agreement \d+\.\d %", printed, re.M), printed
+    (row,) = [json.loads(line) for line in out.read_text().splitlines()]
+    assert row["scenario"] == "ship-ss5" and row["first"]
+    assert row["replay"] is None or len(row["replay"]) == len(row["reduced"]) == 16

@@ -247,15 +247,16 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
         wind_estimate = env.world.wind.gust_w + error
         return t_est - np.asarray(t_true, dtype=float), factor, wind_estimate
 
-    def model_draw(self, decision: int, draw: int) -> None:
-        """Make the restored copy the drone's model of the present:
-        the drone where its estimate (and a draw of its error) puts it over the deck, the
-        present gust drawn around its wind estimate, the drag and the thrust scaled by
-        draws (the plant; the controller keeps its nominal model)."""
-        if self._belief is None:
-            return
+    def drawn_unknowns(
+        self, decision: int, draw: int
+    ) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Draw ``draw`` of ``decision``'s unknowns of the present (after :meth:`deck_future`
+        made this decision's belief): the drone's shift from where it is (m, world: the deck,
+        seen from the camera, where the estimate puts it less a draw of the estimate's error;
+        zero without ``position_from_estimate``), the present gust (world, m/s) and the drag
+        and thrust scales."""
+        assert self._belief is not None
         env = self.env
-        world = env.world
         offset_c, factor, wind_estimate = self._belief
         episode_seed = int(env.np_random_seed) % 2**32
         rng = np.random.default_rng(
@@ -266,12 +267,25 @@ class DeckForecastTimingPolicy(DeckOracleTimingPolicy):
             self.onboard.drag_error_fraction,
             self.onboard.thrust_error_fraction,
         )
+        shift_w = np.zeros(3)
         if self.onboard.position_from_estimate:
-            # the deck, seen from the camera, where the estimate puts it less a draw of the
-            # estimate's error: move the drone by the opposite, keeping its velocities
-            _, rotation_wc = world.camera_pose_w()
-            world.shift_drone(-(rotation_wc @ (offset_c - factor @ normals[:3])))
+            _, rotation_wc = env.world.camera_pose_w()
+            shift_w = -(rotation_wc @ (offset_c - factor @ normals[:3]))
         gust = wind_estimate + np.asarray(self.onboard.gust_error_mps) * normals[3:6]
+        return shift_w, gust, float(drag_scale), float(thrust_scale)
+
+    def model_draw(self, decision: int, draw: int) -> None:
+        """Make the restored copy the drone's model of the present:
+        the drone where its estimate (and a draw of its error) puts it over the deck, the
+        present gust drawn around its wind estimate, the drag and the thrust scaled by
+        draws (the plant; the controller keeps its nominal model)."""
+        if self._belief is None:
+            return
+        env = self.env
+        world = env.world
+        shift_w, gust, drag_scale, thrust_scale = self.drawn_unknowns(decision, draw)
+        if self.onboard.position_from_estimate:
+            world.shift_drone(shift_w)
         world.wind.set_present_gust_w(gust)
         params = world.drone.params
         world.drone.params = dataclasses.replace(

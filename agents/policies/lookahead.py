@@ -25,7 +25,7 @@ for an offline DQN, are :mod:`agents.training.lookahead_data`'s.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,11 +36,12 @@ from agents.common.cards import check_compatible, env_signature
 from agents.policies.base import Policy
 from agents.policies.deck_forecast import DeckForecastTimingPolicy, OnboardModelConfig
 from agents.policies.oracle import TriedCommit
+from agents.policies.reduced_descent import ReducedLookahead
 from agents.policies.timing import TrainedTimingPolicy
 from estimation.limits import Limit, limited, require_limits
 from landing_env.config_loading import build_dataclass
 from landing_env.envs.actions import validate_action
-from landing_env.errors import ConfigError
+from landing_env.errors import ConfigError, require_choice
 from landing_env.scenarios import TIMING_TASK
 from landing_env.touchdown import Outcome
 
@@ -52,6 +53,13 @@ LOOKAHEAD_FEATURES: tuple[str, ...] = ("valid", "chance", "success", "mean_score
 
 #: the score of a tried commit that did not succeed
 FAILED_SCORE = -1.0
+
+#: the onboard models that fly the look-ahead's futures (``LookaheadSettings.model``):
+#: ``replay`` restores a copy of the whole simulation for each draw
+#: (:class:`~agents.policies.deck_forecast.DeckForecastTimingPolicy`), ``reduced`` flies all of
+#: a check's draws at once through a point-mass model of the drone's own closed loop
+#: (:class:`~agents.policies.reduced_descent.ReducedLookahead`)
+ONBOARD_MODELS: tuple[str, ...] = ("replay", "reduced")
 
 
 @dataclass(frozen=True)
@@ -68,6 +76,8 @@ class LookaheadSettings:
     * ``airframe_in_trim``: the onboard model's drawn airframes start in their own trim
       (:attr:`~agents.policies.deck_forecast.OnboardModelConfig.airframe_in_trim`); False: the
       shipped look-ahead's draws.
+    * ``model``: what flies the futures (:data:`ONBOARD_MODELS`): ``replay`` (~0.17 s a draw)
+      or ``reduced`` (a check's draws in one vectorised flight of a few tens of ms).
     """
 
     draws: int = limited(4, Limit(1, 64))
@@ -76,9 +86,11 @@ class LookaheadSettings:
     checks: int = limited(2, Limit(1, 16))
     seed: int = 0
     airframe_in_trim: bool = False
+    model: str = "replay"
 
     def __post_init__(self) -> None:
         require_limits(self)
+        require_choice("lookahead.model", self.model, ONBOARD_MODELS)
         if not isinstance(self.airframe_in_trim, bool):
             raise ConfigError(
                 "airframe_in_trim", f"must be true or false, got {self.airframe_in_trim!r}"
@@ -100,6 +112,9 @@ class LookaheadSettings:
         if not self.airframe_in_trim:
             # a look-ahead without it signs as before it existed
             del fields["airframe_in_trim"]
+        if self.model == "replay":
+            # the replay signs as before the reduced model existed
+            del fields["model"]
         return {
             **fields,
             "features": list(LOOKAHEAD_FEATURES),
@@ -166,7 +181,8 @@ class LookaheadObserver:
             raise ConfigError("env", f"the look-ahead acts in {TIMING_TASK}")
         self.env = base
         s = self.settings
-        self.planner = DeckForecastTimingPolicy(
+        planner = ReducedLookahead if s.model == "reduced" else DeckForecastTimingPolicy
+        self.planner = planner(
             base,
             draws=s.draws,
             min_chance=1.0,
@@ -263,7 +279,10 @@ class LookaheadTimingPolicy(Policy):
 
     Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
     waits.  The card is checked as :class:`~agents.policies.timing.TrainedTimingPolicy` checks
-    one, the look-ahead's settings included.
+    one, the look-ahead's settings included.  ``onboard_model`` (one of
+    :data:`ONBOARD_MODELS`) flies the futures with another onboard model than the card's: the
+    features keep their meaning (the same draws, the same touchdown criteria), the card is
+    checked for the rest of its settings.
     """
 
     def __init__(
@@ -272,6 +291,7 @@ class LookaheadTimingPolicy(Policy):
         env: Any,
         allow_mismatch: tuple[str, ...] = (),
         forecast: Any = None,
+        onboard_model: str | None = None,
     ) -> None:
 
         self.trained = TrainedTimingPolicy(path)
@@ -282,17 +302,22 @@ class LookaheadTimingPolicy(Policy):
                 f"{Path(path).name} was not trained on the look-ahead's features "
                 "(its card has no observation.lookahead): use timing-dqn with it",
             )
-        self.settings = LookaheadSettings.from_signature(card)
+        signed = LookaheadSettings.from_signature(card)
+        self.settings = signed
+        if onboard_model is not None:
+            self.settings = replace(signed, model=onboard_model)
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.trained.check_layout(self.settings.size)
 
         check_compatible(
             self.trained.metadata,
-            env_signature(env, self.settings),
+            env_signature(env, signed),
             self.trained.path.name,
             allow_mismatch,
         )
         self.name = "timing-dqn-lookahead"
+        if self.settings.model != signed.model:
+            self.name += f"-{self.settings.model}"
         self._decisions = 0
         #: (decision, observation, action) of each check of the episode
         self.checks: list[tuple[int, np.ndarray, int]] = []
@@ -333,3 +358,15 @@ def build_lookahead_policy(
             "model", "timing-dqn-lookahead needs a model (the shipped one by default)"
         )
     return LookaheadTimingPolicy(model_path, env, tuple(allow))
+
+
+def build_lookahead_reduced_policy(
+    env: Any, model_path: str | None, allow: tuple[str, ...]
+) -> LookaheadTimingPolicy:
+    """``timing-dqn-lookahead-reduced``: the shipped look-ahead DQN on the features of the
+    reduced onboard model (:mod:`agents.policies.reduced_descent`)."""
+    if model_path is None:
+        raise ConfigError(
+            "model", "timing-dqn-lookahead-reduced needs a model (the shipped one by default)"
+        )
+    return LookaheadTimingPolicy(model_path, env, tuple(allow), onboard_model="reduced")

@@ -21,6 +21,7 @@ import numpy as np
 from agents.common.cards import sensing_profile
 from agents.policies.lookahead import (
     LOOKAHEAD_FEATURES,
+    ONBOARD_MODELS,
     LookaheadSettings,
     LookaheadTimingWrapper,
     check_features,
@@ -365,6 +366,13 @@ def main(argv: list[str] | None = None) -> int:
         help="the onboard model's drawn airframes start in their own trim",
     )
     collect.add_argument(
+        "--onboard-model",
+        choices=ONBOARD_MODELS,
+        default=LookaheadSettings.model,
+        help="what flies the look-ahead's futures: the replay of the simulation or the reduced "
+        "model of the drone's closed loop (agents.policies.reduced_descent)",
+    )
+    collect.add_argument(
         "--estimator",
         default=None,
         help="the estimate observed (default: the scenario's; the bench's policies observe tight)",
@@ -389,6 +397,7 @@ def main(argv: list[str] | None = None) -> int:
             draws=args.draws,
             check_every_s=args.check_every_s,
             airframe_in_trim=args.airframe_in_trim,
+            model=args.onboard_model,
         )
         seeds = list(range(args.seed, args.seed + args.episodes))
         sea = training_sea(args.sea) if args.sea else None

@@ -202,6 +202,11 @@ class CascadeController:
             ax, ay = ax * limit / norm, ay * limit / norm
         self._vel_int[0], self._vel_int[1] = ax, ay
 
+    @property
+    def velocity_integral_w(self) -> np.ndarray:
+        """The velocity loop's integrators now (world x, y, z; m/s^2 of acceleration)."""
+        return np.array(self._vel_int, dtype=float)
+
     def scale_thrust_model(self, factor: float) -> None:
         """Scale the thrust the controller expects of a rotor speed (``k_f``, and with it the
         rotors' thrust range) by ``factor``: what a hover-thrust estimator learns of rotors

@@ -25,6 +25,25 @@ from landing_env.physics.quadrotor_params import QuadrotorParams
 from landing_env.physics.wind import WindModel
 
 
+def ground_effect_denominator(h: Any, const: float, terms: tuple[float, ...] | None) -> Any:
+    """T_OGE/T_IGE of a rotor whose hub is ``h`` > 0 above a surface (a float or an array).
+
+    Cheeseman-Bennett: T_IGE/T_OGE = 1/(1 - c (R/4h)^2) (``const`` = c (R/4)^2), which diverges
+    at h = R/4 (c = 1); with ``terms`` (d^2, 2 d^2, b^2, R^2, R^2 / 2, 2 K_b R^2), Sanchez-Cuevas
+    et al. (2017): the neighbours' and the body's images too.
+    """
+    denominator = 1.0 - const / (h * h)
+    if terms is not None:
+        d2, d2x2, b2, r2, r2_half, body = terms
+        four_h2 = 4.0 * h * h
+        denominator -= (
+            r2 * h / (d2 + four_h2) ** 1.5
+            + r2_half * h / (d2x2 + four_h2) ** 1.5
+            + body * h / (b2 + four_h2) ** 1.5
+        )
+    return denominator
+
+
 class Quadrotor:
     """One quadrotor body in a PyBullet world, driven by rotor speed commands."""
 
@@ -335,6 +354,31 @@ class Quadrotor:
         )
         p.applyExternalTorque(self.body_id, -1, (tx, ty, tz), p.LINK_FRAME, physicsClientId=cid)
 
+    def ground_effect_gains(self, heights_m: np.ndarray) -> np.ndarray:
+        """T_IGE/T_OGE of rotors whose hubs are ``heights_m`` above a surface (any shape; NaN
+        or beyond the ray's reach: no surface, gain 1), as :meth:`apply_rotor_commands` applies
+        them (capped at ``ground_effect_max_gain``); all 1 with the ground effect off."""
+        heights = np.asarray(heights_m, dtype=float)
+        gains = np.ones_like(heights)
+        if not self._ground_effect_on:
+            return gains
+        near = np.isfinite(heights) & (heights <= self._ge_ray_length)
+        h = np.where(near & (heights > 0.0), heights, 1.0)
+        terms = self._ge_terms if self._ge_multirotor else None
+        denominator = np.where(
+            near & (heights > 0.0), ground_effect_denominator(h, self._ge_const, terms), -1.0
+        )
+        capped = denominator <= self._ge_min_denominator
+        gains = np.where(
+            near, np.where(capped, self._ge_max_gain, 1.0 / np.where(capped, 1.0, denominator)), 1.0
+        )
+        return gains
+
+    @property
+    def ground_effect_reach_m(self) -> float:
+        """How far below a rotor hub the ground effect's ray looks, m."""
+        return self._ge_ray_length
+
     def _ground_effect(self, pos: Any, rot: Any) -> list[float] | None:
         """Per-rotor T_IGE/T_OGE from one ray batch down body -z from the four hubs.
 
@@ -386,18 +430,11 @@ class Quadrotor:
                 continue
             h = hit[2] * length
             heights.append(h)
-            # Cheeseman–Bennett: T_IGE/T_OGE = 1/(1 - c (R/4h)^2), which diverges at h = R/4
-            # (c = 1); the gain is capped at max_gain and the cap is flagged.
-            denominator = 1.0 - const / (h * h) if h > 0.0 else -1.0
-            if self._ge_multirotor and h > 0.0:
-                # Sanchez-Cuevas et al. (2017): the neighbours' and the body's images too
-                d2, d2x2, b2, r2, r2_half, body = self._ge_terms
-                four_h2 = 4.0 * h * h
-                denominator -= (
-                    r2 * h / (d2 + four_h2) ** 1.5
-                    + r2_half * h / (d2x2 + four_h2) ** 1.5
-                    + body * h / (b2 + four_h2) ** 1.5
-                )
+            denominator = (
+                ground_effect_denominator(h, const, self._ge_terms if self._ge_multirotor else None)
+                if h > 0.0
+                else -1.0
+            )
             if denominator <= min_den:
                 gains.append(self._ge_max_gain)
                 capped = True

@@ -107,8 +107,12 @@ class DeckTracker:
 
     def update(self, observation: dict[str, np.ndarray], own: OwnState, dt: float) -> None:
         """Predict by ``dt`` and correct with whatever this observation measures."""
+        self.update_measured(self.measure(observation, own), dt)
+
+    def update_measured(self, measured: np.ndarray, dt: float) -> None:
+        """Predict by ``dt`` and correct with a measured deck position (world; NaN where an
+        axis is not measured), as :meth:`update` does with an observation's."""
         self._predict(dt)
-        measured = self.measure(observation, own)
         for axis in range(3):
             value = measured[axis]
             if math.isfinite(value):

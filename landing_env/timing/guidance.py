@@ -128,6 +128,12 @@ class DeckGuidance:
             alpha = self.dt / (self.gains.lean_filter_s + self.dt)
             self._lean = self._lean + alpha * (lean - self._lean)
 
+    @property
+    def lean(self) -> np.ndarray:
+        """The low-passed lean (the body z axis' horizontal slope, world x, y) the camera's aim
+        allows for."""
+        return np.array(self._lean, dtype=float)
+
     def _tracking(self, own: OwnState | None) -> bool:
         return self.gains.track_deck and own is not None and self.tracker.valid
 

@@ -10,6 +10,8 @@ must predict.
 
 from __future__ import annotations
 
+import numpy as np
+
 
 def timed_descent_reference(
     t_s: float, start_m: float, duration_s: float, end_speed: float, end_m: float = 0.0
@@ -26,4 +28,20 @@ def timed_descent_reference(
     # Hermite basis: h00 = 2s^3 - 3s^2 + 1 (start height), h11 = s^3 - s^2 (end slope)
     height = end_m + drop * (2 * s**3 - 3 * s**2 + 1) - end_speed * duration_s * (s**3 - s**2)
     rate = (drop * (6 * s**2 - 6 * s) - end_speed * duration_s * (3 * s**2 - 2 * s)) / duration_s
+    return height, rate
+
+
+def timed_descent_references(
+    t_s: np.ndarray, start_m: np.ndarray, duration_s: float, end_speed: float, end_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`timed_descent_reference` of many descents at once (``t_s`` and ``start_m`` arrays
+    of one shape): the same heights and rates, element by element."""
+    t = np.asarray(t_s, dtype=float)
+    drop = np.asarray(start_m, dtype=float) - end_m
+    s = np.clip(t, 0.0, None) / duration_s
+    height = end_m + drop * (2 * s**3 - 3 * s**2 + 1) - end_speed * duration_s * (s**3 - s**2)
+    rate = (drop * (6 * s**2 - 6 * s) - end_speed * duration_s * (3 * s**2 - 2 * s)) / duration_s
+    after = t >= duration_s
+    height = np.where(after, end_m - end_speed * (t - duration_s), height)
+    rate = np.where(after, -end_speed, rate)
     return height, rate

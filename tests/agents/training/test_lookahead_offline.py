@@ -243,6 +243,31 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_
         assert error.value.key == key
 
 
+def test_records_flown_by_the_reduced_model_say_so_and_are_not_mixed_with_the_replays(
+    small_forecast, tmp_path
+) -> None:
+    reduced = LookaheadSettings(draws=3, check_every_s=1.0, model="reduced")
+    path = collect_transitions(
+        "ship-ss4", [5001], tmp_path / "r.npz", reduced, progress=False, forecast=small_forecast
+    )
+    recorded = load_transitions([path])
+    tried = np.flatnonzero(recorded["check_tried"])
+    assert len(tried) >= 3 and recorded["draw_lands"].shape[1] == 3
+    # a check flown is a valid look-ahead, its features inside the observation's bounds
+    assert np.all(recorded["observation"][tried, 0] == 1.0)
+    assert np.all(np.abs(recorded["observation"]) <= 1.0)
+    replayed = collect_transitions(
+        "ship-ss4",
+        [5002],
+        tmp_path / "p.npz",
+        LookaheadSettings(draws=3, check_every_s=1.0),
+        progress=False,
+        forecast=small_forecast,
+    )
+    with pytest.raises(ConfigError, match="another look-ahead"):
+        load_transitions([path, replayed])
+
+
 def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_path) -> None:
     settings = LookaheadSettings()
     data_path = _episodes(tmp_path / "d.npz", range(100), settings, np.random.default_rng(3))

@@ -343,6 +343,13 @@ def _hover_thrust_at(drone: Quadrotor, client: BulletClient, position) -> float:
     return sum(drone.last_thrusts)
 
 
+def _over_the_ground(params: QuadrotorParams) -> tuple[BulletClient, Quadrotor, float, float]:
+    """A drone over the ground plane, its hubs' height in the body, its thrust out of reach."""
+    client = make_world()
+    drone = Quadrotor(client, params)
+    return client, drone, params.rotor_positions_b[0, 2], _hover_thrust_at(drone, client, (0, 0, 2))
+
+
 def _cheeseman_bennett(params: QuadrotorParams, h: float) -> float:
     return 1.0 / (1.0 - (params.rotor_radius / (4.0 * h)) ** 2)
 
@@ -365,10 +372,7 @@ def _four_rotor_model(params: QuadrotorParams, h: float) -> float:
 def test_ground_effect_thrust_at_a_tenth_of_a_metre_matches_the_four_rotor_model(
     params: QuadrotorParams,
 ) -> None:
-    client = make_world()
-    drone = Quadrotor(client, params)
-    hub_z = params.rotor_positions_b[0, 2]
-    far = _hover_thrust_at(drone, client, (0.0, 0.0, 2.0))
+    client, drone, hub_z, far = _over_the_ground(params)
     near = _hover_thrust_at(drone, client, (0.0, 0.0, 0.1 - hub_z))  # hubs 0.10 m up
     np.testing.assert_allclose(drone.last_ground_heights, 0.1, atol=1e-4)
     assert near / far == pytest.approx(_four_rotor_model(params, 0.1), rel=1e-4)
@@ -381,6 +385,24 @@ def test_ground_effect_thrust_at_a_tenth_of_a_metre_matches_the_four_rotor_model
     assert _hover_thrust_at(drone, client, (0.0, 0.0, 0.1 - hub_z)) / far == pytest.approx(
         _cheeseman_bennett(params, 0.1), rel=1e-4
     )
+
+
+def test_the_ground_effect_gains_of_given_hub_heights_are_the_ones_the_drone_flies_with(
+    params: QuadrotorParams,
+) -> None:
+    client, drone, hub_z, far = _over_the_ground(params)
+    heights = np.array([0.08, 0.1, 0.15, 0.3])
+    gains = drone.ground_effect_gains(heights)
+    for height, gain in zip(heights, gains, strict=True):
+        near = _hover_thrust_at(drone, client, (0.0, 0.0, height - hub_z))
+        assert gain == pytest.approx(near / far, rel=1e-9)
+    # beyond the ray's reach, with no surface, or with the effect off: no gain
+    reach = params.ground_effect_ray_length
+    assert np.all(drone.ground_effect_gains(np.array([reach + 0.01, np.nan])) == 1.0)
+    assert drone.ground_effect_gains(np.array([0.001]))[0] == params.ground_effect_max_gain
+    drone.params = dataclasses.replace(params, ground_effect_enabled=False)
+    _hover_thrust_at(drone, client, (0.0, 0.0, 2.0))
+    assert np.all(drone.ground_effect_gains(heights) == 1.0)
 
 
 def test_ground_effect_raises_thrust_over_a_raised_box(params: QuadrotorParams) -> None:
