@@ -25,7 +25,7 @@ for an offline DQN, are :mod:`agents.training.lookahead_data`'s.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -279,10 +279,7 @@ class LookaheadTimingPolicy(Policy):
 
     Every ``check_every_s`` (its card's) it looks ahead and asks the model; between checks it
     waits.  The card is checked as :class:`~agents.policies.timing.TrainedTimingPolicy` checks
-    one, the look-ahead's settings included.  ``onboard_model`` (one of
-    :data:`ONBOARD_MODELS`) flies the futures with another onboard model than the card's: the
-    features keep their meaning (the same draws, the same touchdown criteria), the card is
-    checked for the rest of its settings.
+    one, the look-ahead's settings included (its onboard model among them).
     """
 
     def __init__(
@@ -291,7 +288,6 @@ class LookaheadTimingPolicy(Policy):
         env: Any,
         allow_mismatch: tuple[str, ...] = (),
         forecast: Any = None,
-        onboard_model: str | None = None,
     ) -> None:
 
         self.trained = TrainedTimingPolicy(path)
@@ -302,22 +298,17 @@ class LookaheadTimingPolicy(Policy):
                 f"{Path(path).name} was not trained on the look-ahead's features "
                 "(its card has no observation.lookahead): use timing-dqn with it",
             )
-        signed = LookaheadSettings.from_signature(card)
-        self.settings = signed
-        if onboard_model is not None:
-            self.settings = replace(signed, model=onboard_model)
+        self.settings = LookaheadSettings.from_signature(card)
         self.observer = LookaheadObserver(env, self.settings, forecast)
         self.trained.check_layout(self.settings.size)
 
         check_compatible(
             self.trained.metadata,
-            env_signature(env, signed),
+            env_signature(env, self.settings),
             self.trained.path.name,
             allow_mismatch,
         )
         self.name = "timing-dqn-lookahead"
-        if self.settings.model != signed.model:
-            self.name += f"-{self.settings.model}"
         self._decisions = 0
         #: (decision, observation, action) of each check of the episode
         self.checks: list[tuple[int, np.ndarray, int]] = []
@@ -358,15 +349,3 @@ def build_lookahead_policy(
             "model", "timing-dqn-lookahead needs a model (the shipped one by default)"
         )
     return LookaheadTimingPolicy(model_path, env, tuple(allow))
-
-
-def build_lookahead_reduced_policy(
-    env: Any, model_path: str | None, allow: tuple[str, ...]
-) -> LookaheadTimingPolicy:
-    """``timing-dqn-lookahead-reduced``: the shipped look-ahead DQN on the features of the
-    reduced onboard model (:mod:`agents.policies.reduced_descent`)."""
-    if model_path is None:
-        raise ConfigError(
-            "model", "timing-dqn-lookahead-reduced needs a model (the shipped one by default)"
-        )
-    return LookaheadTimingPolicy(model_path, env, tuple(allow), onboard_model="reduced")

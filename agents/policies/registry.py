@@ -223,19 +223,6 @@ POLICIES: dict[str, PolicySpec] = {
             model="timing_dqn_lookahead.zip",
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
         ),
-        _timing(
-            "timing-dqn-lookahead-reduced",
-            kind="trained",
-            status="research",
-            builder="agents.policies.lookahead:build_lookahead_reduced_policy",
-            summary="timing-dqn-lookahead with its futures flown by a reduced model of the "
-            "drone's closed loop (all 16 draws of a check in one vectorised flight) instead "
-            "of a replay of the simulation",
-            estimator="tight",
-            sensing="realistic",
-            model="timing_dqn_lookahead.zip",
-            scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
-        ),
         PolicySpec(
             "lander",
             "trained",
