@@ -19,7 +19,7 @@ from gymnasium.envs.registration import EnvSpec
 from estimation.frames import euler_zyx_from_matrix
 from estimation.types import CameraFrame, DeckPoseEstimate, ImuSample, RangeReading
 from landing_env.config import DeckLandingConfig, episode_step_limit, load_config
-from landing_env.envs.actions import BOX_ACTION_FIELDS, setpoint_from_action, validate_action
+from landing_env.envs.actions import setpoint_from_action
 from landing_env.envs.rewards import reward_info, touchdown_terms, zero_terms
 from landing_env.errors import PinnedDroneWarning
 from landing_env.estimators import EstimatorBank, describe_estimate
@@ -212,7 +212,8 @@ class Sensing:
 class DeckLandingBaseEnv(gym.Env):
     """A quadrotor over a moving deck; the observation carries the *estimated* deck pose.
 
-    Subclasses define the task through ``_reward``, ``_terminated`` and friends.
+    Subclasses define the task: its ``action_space`` and ``step``, through ``_reward``,
+    ``_terminated`` and friends.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
@@ -257,7 +258,6 @@ class DeckLandingBaseEnv(gym.Env):
         self.env_dt = 1.0 / sim.env_hz
 
         tof_max = float(self.config.tof.max_range)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         self.observation_space = spaces.Dict(
             {
                 "deck_pose": spaces.Box(pose_low, pose_high, dtype=np.float32),
@@ -305,23 +305,6 @@ class DeckLandingBaseEnv(gym.Env):
         self._potential = self._shaping_potential()
         self._reward_terms = zero_terms()
         return self._observation(), self._info()
-
-    def step(
-        self, action: np.ndarray
-    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        if self._sensing is None:
-            raise RuntimeError("call reset() before step()")
-        if self._outcome is not Outcome.IN_FLIGHT:
-            raise RuntimeError("the episode has ended; call reset()")
-        action = validate_action(action, self.action_space, ", ".join(BOX_ACTION_FIELDS))
-        self._action_clipped = bool(np.any(np.abs(action) > 1.0))
-        self._control_period(self._action_to_setpoint(np.clip(action, -1.0, 1.0)))
-        reward = self._reward()
-        terminated = self._terminated()
-        truncated = not terminated and self._truncated()
-        if truncated:
-            self._outcome = Outcome.TIMEOUT
-        return self._observation(), reward, terminated, truncated, self._info()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
