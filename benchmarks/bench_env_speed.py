@@ -23,7 +23,10 @@ Only ``--heights`` runs that table alone.
 Each row of the first table is set against the physics ceiling of the same run: the CPU time
 of the bare ``stepSimulation`` calls of the env's own world during the row's steps (the same
 sub-steps, the same states), over the row's CPU time per step (1 would be a step that costs
-its physics alone).  When gym-pybullet-drones or PyFlyt is installed,
+its physics alone).  The timing task (``DeckLandingTiming-BenchSS4-v6``, ``step(0)`` in a loop,
+reset at each end) is a row of its own: its steps are wait decisions, each some two control
+periods of the hold, its CPU time is per decision, and its ceiling is its own physics.  When
+gym-pybullet-drones or PyFlyt is installed,
 their hover tasks run beside the rows; otherwise the output says they are not installed.
 
 ``--profile`` prints, instead of the tables, the top functions by cumulative and by own CPU
@@ -194,13 +197,14 @@ def peer_rows(sim_seconds: float) -> tuple[list[tuple[str, int, float, float, fl
 TIMING_IDS = ("DeckLandingTiming-BenchSS4-v6",)
 
 
-def wait_decisions(env_id: str, cpu_seconds: float) -> tuple[int, float, float]:
+def wait_decisions(env_id: str, cpu_seconds: float) -> tuple[int, float, float, float]:
     """Wait decisions of the timing task ``env_id`` (default observation, ``step(0)``) over
-    about ``cpu_seconds`` of CPU: (decisions, CPU s, physics CPU s)."""
+    about ``cpu_seconds`` of CPU: (decisions, CPU s, physics CPU s, wall s)."""
     env = gym.make(env_id)
     env.reset(seed=0)
     decisions, episodes = 0, 0
     with PhysicsClock() as physics:
+        wall = time.perf_counter()
         start = time.process_time()
         while time.process_time() - start < cpu_seconds:
             _, _, terminated, truncated, _ = env.step(0)
@@ -209,8 +213,9 @@ def wait_decisions(env_id: str, cpu_seconds: float) -> tuple[int, float, float]:
                 episodes += 1
                 env.reset(seed=episodes)
         cpu = time.process_time() - start
+        wall = time.perf_counter() - wall
     env.close()
-    return decisions, cpu, physics.cpu_s
+    return decisions, cpu, physics.cpu_s, wall
 
 
 #: the profiled cases: (label, observed estimator, sensors), all in `project` mode
@@ -514,11 +519,17 @@ def main() -> None:
                 f"CPU ms/step: {physics / cpu:.2f} of the physics ceiling"
             )
     for env_id in TIMING_IDS:
-        decisions, cpu, physics = wait_decisions(env_id, min(args.seconds, 15.0))
+        decisions, cpu, physics, wall = wait_decisions(env_id, min(args.seconds, 15.0))
         console.print(
             f"{env_id}: {decisions / cpu:.0f} wait decisions/s by CPU ({decisions} in "
             f"{cpu:.1f} CPU s), {physics / cpu:.2f} of the physics ceiling"
         )
+        # a row of its own: a step is a wait decision (its control periods inside it), so
+        # its steps/s are decisions/s and its CPU time is per decision; no real-time factor
+        table.add_row(
+            "ideal", env_id, "default (wait decisions)", "1", f"{decisions / wall:.0f}", "",
+            f"{1e3 * cpu / decisions:.2f}", "", f"{physics / cpu:.2f}",
+        )  # fmt: skip
     peers, missing = peer_rows(args.seconds)
     for label, steps, wall, sim, cpu in peers:
         table.add_row(

@@ -110,6 +110,9 @@ def test_env_speed_prints_both_tables(tmp_path: Path) -> None:
     )
     assert len(rows) == 4 and all(0.0 < float(share) < 1.0 for _, share in rows)
     assert re.search(r"^DeckLandingTiming-BenchSS4-v6: \d+ wait decisions/s by CPU", out, re.M)
+    timing_row = r"│ +DeckLandingTiming-BenchSS4-v6 │ +default \(wait decisions\) │.*│ +([\d.]+) │$"
+    timing = re.search(timing_row, out, re.M)
+    assert timing is not None and 0.0 < float(timing.group(1)) < 1.0
     # the peers are rows of their own when installed, else named as missing
     for peer in ("gym-pybullet-drones HoverAviary", "PyFlyt QuadX-Hover-v4"):
         assert re.search(rf"(│ +peer │ +{peer}|not installed.*{peer})", out), peer
