@@ -28,6 +28,7 @@ the AprilTag/IPPE_SQUARE order of :data:`TAG_CORNER_SIGNS`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -90,17 +91,21 @@ def euler_zyx_from_matrix(rotation: np.ndarray) -> np.ndarray:
     general conversion costs ~100 µs); agrees with ``Rotation.as_euler("ZYX")`` away from
     gimbal lock, where roll is set to 0 as scipy does.
     """
-    r = rotation
-    sin_pitch = -float(r[2, 0])
+    return np.array(euler_zyx_from_rows(np.asarray(rotation).ravel().tolist()))
+
+
+def euler_zyx_from_rows(rotation: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`euler_zyx_from_matrix` of a rotation matrix given as its 9 entries, row by row
+    (as plain floats: what the per-step code holds)."""
+    r00, r01, _, r10, r11, _, r20, r21, r22 = rotation
+    sin_pitch = -float(r20)
     if abs(sin_pitch) >= 1.0 - 1e-12:
         pitch = math.copysign(math.pi / 2.0, sin_pitch)
-        return np.array([0.0, pitch, math.atan2(-float(r[0, 1]), float(r[1, 1]))])
-    return np.array(
-        [
-            math.atan2(float(r[2, 1]), float(r[2, 2])),
-            math.asin(sin_pitch),
-            math.atan2(float(r[1, 0]), float(r[0, 0])),
-        ]
+        return (0.0, pitch, math.atan2(-float(r01), float(r11)))
+    return (
+        math.atan2(float(r21), float(r22)),
+        math.asin(sin_pitch),
+        math.atan2(float(r10), float(r00)),
     )
 
 

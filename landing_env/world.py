@@ -344,33 +344,43 @@ class World:
         accels: list[tuple[float, float, float]] = []
         rates: list[tuple[float, float, float]] = []
         probe = self._probe
+        # the loop's callees and flags looked up once (nothing in the loop replaces them)
+        drone, body = self.drone, self.drone.body_id
+        read_state = drone.read_state
+        update = self.controller.update_floats
+        apply_rotor_commands = drone.apply_rotor_commands
+        wind_velocity = self.wind.velocity_tuple
+        airwake = self.wind.airwake if self._airwake else None
+        advance = self.stewart.advance
+        step_simulation = p.stepSimulation
+        flying, armed = not self.pinned, self.armed
+        saturated = report.motor_saturated
+        clamped = report.stewart_clamped
         for _ in range(self.substeps):
-            state = self._state if self._state is not None else self.drone.read_state()
-            if not self.pinned:
-                command = self.controller.update_floats(state, setpoint, dt) if self.armed else idle
-                wind = self.wind.velocity_tuple(self.time, dt)
-                if self._airwake:
+            state = self._state if self._state is not None else read_state()
+            if flying:
+                command = update(state, setpoint, dt) if armed else idle
+                wind = wind_velocity(self.time, dt)
+                if airwake is not None:
                     px, py, pz = state.floats.position_w
                     hx, hy, hz = self._deck_home_floats
-                    wind = self.wind.airwake(wind, (px - hx, py - hy, pz - hz))
-                self.drone.wind_velocity_w = wind
-                self.drone.apply_rotor_commands(command, dt, state)
-                report.motor_saturated |= self.drone.last_saturated
-            report.stewart_clamped |= self.stewart.advance(self.time + dt)
+                    wind = airwake(wind, (px - hx, py - hy, pz - hz))
+                drone.wind_velocity_w = wind
+                apply_rotor_commands(command, dt, state)
+                saturated |= drone.last_saturated
+            clamped |= advance(self.time + dt)
             # contacts need the states just before the touch; nothing in the world stands
             # higher than the deck's reach, so far above it the queries are skipped
             near_deck = monitor_contacts and state.floats.position_w[2] < watch_below
             deck_before = self._deck_reading() if near_deck else None
-            p.stepSimulation(physicsClientId=cid)
-            if self.pinned:
-                p.resetBasePositionAndOrientation(
-                    self.drone.body_id, *self._pinned_pose, physicsClientId=cid
-                )
-                p.resetBaseVelocity(self.drone.body_id, [0.0] * 3, [0.0] * 3, physicsClientId=cid)
+            step_simulation(physicsClientId=cid)
+            if not flying:
+                p.resetBasePositionAndOrientation(body, *self._pinned_pose, physicsClientId=cid)
+                p.resetBaseVelocity(body, [0.0] * 3, [0.0] * 3, physicsClientId=cid)
             self.time += dt
             if probe is not None:
                 probe.update()
-            new_state = self.drone.read_state()
+            new_state = read_state()
             v0, new = state.floats.velocity_w, new_state.floats
             v1 = new.velocity_w
             times.append(self.time)
@@ -400,6 +410,8 @@ class World:
                     self._touchdown = metrics
                 if report.first_contact is not None or report.forbidden_contact:
                     break
+        report.motor_saturated = saturated
+        report.stewart_clamped = clamped
         report.imu_samples = self.imu.sample_many(times, rotations, accels, rates)
         report.stewart = self.stewart.last_status
         return report

@@ -190,3 +190,39 @@ class ImuModel:
         self._gyro_bias = [bg0, bg1, bg2]
         self._last_timestamp = last
         return samples
+
+
+def mean_reading(samples: Sequence[ImuSample]) -> tuple[float, ...]:
+    """The samples' mean specific force and angular rate: (accel x, y, z, gyro x, y, z).
+
+    Bit for bit ``np.mean`` of the stacked float64 readings over the samples: summed from 0
+    in the samples' order, then divided by the count (NumPy's reduction over the outer axis
+    adds the rows one after another to its identity, so that a sum of -0.0 is 0.0).  Plain
+    floats cost a third of stacking the arrays; readings that are not float64 arrays go
+    through ``np.mean`` itself.
+    """
+    for sample in samples:
+        accel, gyro = sample.accel, sample.gyro
+        if not (
+            type(accel) is np.ndarray
+            and type(gyro) is np.ndarray
+            and accel.dtype == np.float64
+            and gyro.dtype == np.float64
+            and accel.shape == gyro.shape == (3,)
+        ):
+            return (
+                *np.mean([s.accel for s in samples], axis=0).tolist(),
+                *np.mean([s.gyro for s in samples], axis=0).tolist(),
+            )
+    a0 = a1 = a2 = g0 = g1 = g2 = 0.0
+    for sample in samples:
+        x, y, z = sample.accel.tolist()
+        a0 += x
+        a1 += y
+        a2 += z
+        x, y, z = sample.gyro.tolist()
+        g0 += x
+        g1 += y
+        g2 += z
+    count = len(samples)
+    return (a0 / count, a1 / count, a2 / count, g0 / count, g1 / count, g2 / count)

@@ -4,6 +4,8 @@ round trips, composition, and lengths kept."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
@@ -16,6 +18,7 @@ from estimation.frames import (
     R_PD,
     deck_pose_in_camera,
     euler_zyx_from_matrix,
+    euler_zyx_from_rows,
     matrix_from_euler_zyx,
     matrix_from_rotvec,
 )
@@ -81,6 +84,48 @@ def test_the_written_out_rotation_vector_matrix_is_scipy_s_bit_for_bit(
 ) -> None:
     expected = Rotation.from_rotvec(rotvec).as_matrix()
     assert matrix_from_rotvec(np.array(rotvec)).tobytes() == expected.tobytes()
+
+
+def _euler_of_indexed_entries(r: np.ndarray) -> np.ndarray:
+    """The closed form as it read each entry of the array (``float(r[i, j])``)."""
+    sin_pitch = -float(r[2, 0])
+    if abs(sin_pitch) >= 1.0 - 1e-12:
+        pitch = math.copysign(math.pi / 2.0, sin_pitch)
+        return np.array([0.0, pitch, math.atan2(-float(r[0, 1]), float(r[1, 1]))])
+    return np.array(
+        [
+            math.atan2(float(r[2, 1]), float(r[2, 2])),
+            math.asin(sin_pitch),
+            math.atan2(float(r[1, 0]), float(r[0, 0])),
+        ]
+    )
+
+
+@PROPERTY
+@given(
+    st.one_of(
+        rotations(),
+        st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=9, max_size=9).map(
+            lambda v: np.array(v).reshape(3, 3)
+        ),
+        st.sampled_from(
+            [
+                matrix_from_euler_zyx(0.3, np.pi / 2, -0.2),
+                matrix_from_euler_zyx(-0.1, -np.pi / 2, 1.0),
+            ]
+        ),
+    )
+)
+def test_euler_angles_from_a_matrix_s_rows_are_the_matrix_s_bit_for_bit(
+    rotation: np.ndarray,
+) -> None:
+    rows = euler_zyx_from_rows(tuple(rotation.ravel().tolist()))
+    expected = _euler_of_indexed_entries(rotation)
+    assert np.array(rows).tobytes() == expected.tobytes()
+    assert euler_zyx_from_matrix(rotation).tobytes() == expected.tobytes()
+    assert euler_zyx_from_matrix(rotation.astype(np.float32)).tobytes() == (
+        _euler_of_indexed_entries(rotation.astype(np.float32)).tobytes()
+    )
 
 
 def test_non_finite_angles_give_scipy_s_matrix() -> None:

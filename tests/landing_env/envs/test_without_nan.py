@@ -1,4 +1,5 @@
-"""``info``'s NaN removal and IMU rows against the code they replace."""
+"""``info``'s NaN removal, IMU rows and the observation's NaN conversion against the code they
+replace."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from estimation.types import ImuSample
-from landing_env.envs.base import imu_sample_rows, without_nan
+from landing_env.envs.base import finite_or_nan_to_num, imu_sample_rows, without_nan
 
 
 def reference(value):
@@ -79,3 +80,20 @@ def test_imu_rows_of_info_are_each_sample_unpacked_into_a_row(samples) -> None:
     rows = imu_sample_rows(imu)
     assert rows.dtype == expected.dtype and rows.shape == expected.shape
     assert rows.tobytes() == expected.tobytes()
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    hnp.arrays(
+        st.sampled_from([np.float64, np.float32]),
+        hnp.array_shapes(min_dims=1, max_dims=2, min_side=0, max_side=5),
+        elements=st.floats(allow_nan=True, allow_infinity=True, width=32),
+    )
+)
+def test_an_observation_s_nan_conversion_equals_nan_to_num_for_any_array(values) -> None:
+    before = values.tobytes()
+    result = finite_or_nan_to_num(values)
+    expected = np.nan_to_num(values, nan=0.0)
+    assert result.dtype == expected.dtype and result.shape == expected.shape
+    assert result.tobytes() == expected.tobytes()
+    assert values.tobytes() == before  # the input is never written

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from estimation.frames import matrix_from_euler_zyx
+from estimation.types import ImuSample
 from landing_env.errors import ConfigError
-from landing_env.sensors.imu import ImuConfig, ImuModel
+from landing_env.sensors.imu import ImuConfig, ImuModel, mean_reading
 
 QUIET = {"accel_bias_sigma": 0.0, "gyro_bias_sigma": 0.0}
 NO_DRIFT = {"accel_bias_random_walk": 0.0, "gyro_bias_random_walk": 0.0}
@@ -143,3 +147,37 @@ def test_backwards_timestamp_in_a_batch_leaves_the_model_unchanged() -> None:
         model.sample_many([1.01, 0.5], [np.eye(3)] * 2, [np.zeros(3)] * 2, [np.zeros(3)] * 2)
     np.testing.assert_array_equal(model.accel_bias, bias)
     assert model.rng.bit_generator.state == state
+
+
+READINGS = hnp.arrays(
+    st.sampled_from([np.float64, np.float64, np.float32]),
+    3,
+    elements=st.floats(-1e6, 1e6, width=32) | st.sampled_from([0.0, -0.0, 1e-300, -5e-324]),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(READINGS, READINGS), min_size=1, max_size=14))
+def test_the_mean_reading_is_numpy_s_mean_of_the_stacked_samples_bit_for_bit(pairs) -> None:
+    samples = [ImuSample(0.01 * i, accel, gyro) for i, (accel, gyro) in enumerate(pairs)]
+    expected = np.zeros(6, dtype=np.float32)
+    expected[:3] = np.mean([s.accel for s in samples], axis=0)
+    expected[3:] = np.mean([s.gyro for s in samples], axis=0)
+    mean = np.array(mean_reading(samples), dtype=np.float32)
+    assert mean.tobytes() == expected.tobytes()
+    float64 = [s for s in samples if s.accel.dtype == s.gyro.dtype == np.float64]
+    if float64:
+        accel = np.mean([s.accel for s in float64], axis=0)
+        exact = np.concatenate([accel, np.mean([s.gyro for s in float64], axis=0)])
+        assert np.array(mean_reading(float64)).tobytes() == exact.tobytes()
+
+
+def test_the_mean_reading_of_the_world_s_samples_is_their_mean() -> None:
+    model = ImuModel(ImuConfig(), np.random.default_rng(3), rate_hz=240.0)
+    rotation = matrix_from_euler_zyx(0.1, -0.2, 0.3)
+    samples = model.sample_many(
+        [i / 240.0 for i in range(12)], [rotation] * 12, [np.ones(3)] * 12, [np.full(3, 0.5)] * 12
+    )
+    mean = mean_reading(samples)
+    assert mean[:3] == tuple(np.mean([s.accel for s in samples], axis=0).tolist())
+    assert mean[3:] == tuple(np.mean([s.gyro for s in samples], axis=0).tolist())
