@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Iterator
@@ -10,13 +11,16 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from scipy.spatial.transform import Rotation
 
 from estimation.detection import AprilTagDetector
 from estimation.frames import R_BC, TAG_CORNER_SIGNS, matrix_from_euler_zyx
 from landing_env.errors import ConfigError
 from landing_env.scene.deck import DeckSurfaceConfig, create_deck_body, tag_pose_w
-from landing_env.sensors.camera import CameraSensor
+from landing_env.sensors.camera import CameraSensor, _row_norms
 from landing_env.sensors.camera_config import CameraConfig
 from landing_env.sensors.camera_render import opengl_projection
 from landing_env.sensors.detection_overlay import draw_detections
@@ -329,3 +333,20 @@ def test_detectors_can_be_created_and_freed_repeatedly() -> None:
     closed.close()  # idempotent
     with pytest.raises(RuntimeError, match="closed"):
         closed.detect(image)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    hnp.arrays(
+        np.float64,
+        hnp.array_shapes(min_dims=2, max_dims=2, min_side=0, max_side=6),
+        elements=st.floats(allow_nan=True, allow_infinity=True),
+    )
+)
+def test_the_projection_s_row_norms_are_numpy_s_bit_for_bit(rows: np.ndarray) -> None:
+    with np.errstate(all="ignore"):
+        assert _row_norms(rows).tobytes() == np.linalg.norm(rows, axis=1).tobytes()
+        for row in rows:
+            # the view angle's ray length: the norm's dot product and square root
+            expected, got = float(np.linalg.norm(row)), math.sqrt(float(row.dot(row)))
+            assert got == expected or (math.isnan(got) and math.isnan(expected))
