@@ -145,14 +145,16 @@ class BoundedObservation:
 
     def __init__(self) -> None:
         self._space: spaces.Dict | None = None
-        self._layout: tuple[tuple[str, int, int, tuple[int, ...]], ...] = ()
+        self._layout: tuple[tuple[str, int, int, tuple[int, ...] | None], ...] = ()
         self._low = self._high = np.zeros(0)
 
     def _lay_out(self, space: spaces.Dict) -> None:
         layout, lows, highs, offset = [], [], [], 0
         for key, box in space.spaces.items():
             size = int(np.prod(box.shape))
-            layout.append((key, offset, offset + size, box.shape))
+            # a key of one axis keeps its slice as it is (None: no reshape needed)
+            shape = None if tuple(box.shape) == (size,) else box.shape
+            layout.append((key, offset, offset + size, shape))
             lows.append(np.asarray(box.low, dtype=np.float64).reshape(-1))
             highs.append(np.asarray(box.high, dtype=np.float64).reshape(-1))
             offset += size
@@ -172,10 +174,13 @@ class BoundedObservation:
                 key: np.clip(np.nan_to_num(part, nan=0.0), box.low, box.high).astype(np.float32)
                 for part, (key, box) in zip(parts, space.spaces.items(), strict=True)
             }
-        flat = np.concatenate([part.reshape(-1) for part in parts])
+        flat = np.concatenate(parts, axis=None)
         flat[np.isnan(flat)] = 0.0
         flat = np.clip(flat, self._low, self._high).astype(np.float32)
-        return {key: flat[start:end].reshape(shape) for key, start, end, shape in self._layout}
+        return {
+            key: flat[start:end] if shape is None else flat[start:end].reshape(shape)
+            for key, start, end, shape in self._layout
+        }
 
 
 def _has_display() -> bool:
