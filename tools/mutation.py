@@ -190,7 +190,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         run_dir = prepare(module, test_files)
         started = time.monotonic()
         names = args.mutants or [f"{module_name(module)}*"]
-        print(f"== {module}: mutmut over {len(test_files)} test files", flush=True)
+        what = "chosen tests" if args.tests else "test files"
+        print(f"== {module}: mutmut over {len(test_files)} {what}", flush=True)
         result = mutmut(run_dir, "run", "--max-children", str(args.workers), *names)
         failed += result.returncode != 0
         print(f"== {module}: {time.monotonic() - started:.0f} s", flush=True)
