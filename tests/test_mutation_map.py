@@ -41,3 +41,13 @@ def test_a_module_not_in_the_map_is_refused_naming_it() -> None:
     tool = mutation_tool()
     with pytest.raises(SystemExit, match=r"agents/io/nowhere\.py"):
         tool.chosen(["agents/io/nowhere.py"], {"agents/io/timesync.py": []})
+
+
+def test_a_run_on_chosen_tests_takes_only_the_modules_own_test_files_or_their_tests() -> None:
+    tool = mutation_tool()
+    mapped = ["tests/a/test_x.py", "tests/a/test_y.py"]
+    assert tool.chosen_tests("m.py", None, mapped) == mapped
+    picked = ["tests/a/test_y.py", "tests/a/test_x.py::test_one"]
+    assert tool.chosen_tests("m.py", picked, mapped) == picked
+    with pytest.raises(SystemExit, match=r"^--tests: tests/b/test_z\.py not among .* of m\.py"):
+        tool.chosen_tests("m.py", ["tests/a/test_x.py", "tests/b/test_z.py"], mapped)

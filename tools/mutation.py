@@ -12,6 +12,8 @@ the mutated function. The report of a run is ``docs/reference/mutation.md``.
     python tools/mutation.py run agents/io/timesync.py agents/io/mavlink.py --workers 2
     python tools/mutation.py run 'agents/io/*'            # every mapped module under agents/io
     python tools/mutation.py summary 'agents/io/*'        # score and survivors with their diffs
+    python tools/mutation.py run agents/policies/registry.py \
+        --tests tests/agents/policies/test_registry.py        # a lower bound, from chosen tests
 """
 
 from __future__ import annotations
@@ -162,6 +164,21 @@ def mutmut(run_dir: Path, *argv: str, capture: bool = False) -> subprocess.Compl
     )
 
 
+def chosen_tests(module: str, picked: list[str] | None, mapped: list[str]) -> list[str]:
+    """The tests ``--tests`` picks (files or pytest node ids of the module's mapped files), or
+    the mapped files; a test outside them is refused, so that a run on a choice stays a lower
+    bound of the run on all of them."""
+    if not picked:
+        return mapped
+    outside = [test for test in picked if test.split("::")[0] not in mapped]
+    if outside:
+        raise SystemExit(
+            f"--tests: {', '.join(outside)} not among the test files of {module} "
+            f"({', '.join(mapped)})"
+        )
+    return picked
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     tests = load_map()["tests"]
     failed = 0
@@ -169,10 +186,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         if not tests[module]:
             print(f"{module}: no test imports it; not run")
             continue
-        run_dir = prepare(module, tests[module])
+        test_files = chosen_tests(module, args.tests, tests[module])
+        run_dir = prepare(module, test_files)
         started = time.monotonic()
         names = args.mutants or [f"{module_name(module)}*"]
-        print(f"== {module}: mutmut over {len(tests[module])} test files", flush=True)
+        what = "chosen tests" if args.tests else "test files"
+        print(f"== {module}: mutmut over {len(test_files)} {what}", flush=True)
         result = mutmut(run_dir, "run", "--max-children", str(args.workers), *names)
         failed += result.returncode != 0
         print(f"== {module}: {time.monotonic() - started:.0f} s", flush=True)
@@ -226,6 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
     p.add_argument("--workers", type=int, default=2, help="mutants tested at once (default 2)")
     p.add_argument("--mutants", nargs="+", help="only these mutant names (mutmut's, globs)")
+    p.add_argument(
+        "--tests",
+        nargs="+",
+        help="run against these of the module's mapped test files (or pytest node ids in "
+        "them) alone: a lower bound of the score, since a mutant they kill all the mapped "
+        "files kill too (quicker where the mapped files run episodes); a module's folder "
+        "keeps one selection, so remove results/mutation/<module>/ before changing it",
+    )
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("summary", help="score and the diff of each mutant not killed")
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")

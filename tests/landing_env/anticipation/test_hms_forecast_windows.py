@@ -124,3 +124,52 @@ def test_overlapping_hms_windows_agree_on_the_samples_they_share(
     )
     np.testing.assert_array_equal(first[i], second[j])
     assert len(common) == max(0, len(first_t) - abs(shift))
+
+
+class StillMotion(RampMotion):
+    """A deck at rest."""
+
+    RATES = np.zeros(6)
+
+
+def test_the_hms_samples_at_its_rate() -> None:
+    assert HelideckMonitorConfig(rate_hz=4.0).dt_s == 0.25
+    hms = HelideckMonitor(StillMotion(), HelideckMonitorConfig(rate_hz=4.0), spread_record_s=10.0)
+    times, _ = hms.window(10.0, 1.0)
+    np.testing.assert_allclose(times, [9.25, 9.5, 9.75, 10.0])
+    # a window ending on a sample's time holds it, though 0.3 / 0.1 falls short of 3
+    tenth = HelideckMonitor(StillMotion(), spread_record_s=1.0)
+    np.testing.assert_allclose(tenth.window(0.3, 0.3)[0], [0.1, 0.2, 0.3])
+
+
+def test_the_hms_errors_are_5_cm_or_5_percent_of_the_channels_spread_and_a_tenth_of_a_degree(
+    noisy_hms: HelideckMonitor,
+) -> None:
+    # the ramp's spread over the 10 s before the start: that of a uniform ramp, times each rate
+    spread = np.std(np.arange(-100, 0) * 0.1) * RampMotion.RATES[:3]
+    angle = np.radians(0.1)
+    np.testing.assert_allclose(noisy_hms.noise_std, [*(0.05 * spread), angle, angle])
+    # by default over the 600 s before the start
+    long_spread = np.std(np.arange(-6000, 0) * 0.1) * RampMotion.RATES[:3]
+    np.testing.assert_allclose(HelideckMonitor(RampMotion()).noise_std[:3], 0.05 * long_spread)
+    still = HelideckMonitor(StillMotion(), seed=7, spread_record_s=10.0)  # the default config
+    np.testing.assert_allclose(still.noise_std, [0.05, 0.05, 0.05, angle, angle])
+    # the errors drawn have those deviations (10 000 samples, across chunks of the record)
+    _, values = still.window(1000.0, 1000.0)
+    errors = values / still.noise_std
+    np.testing.assert_allclose(errors.std(axis=0), 1.0, atol=0.03)
+    np.testing.assert_allclose(errors.mean(axis=0), 0.0, atol=0.03)
+
+
+def test_the_hms_errors_are_its_seeds_draws_and_any_integer_seeds_it() -> None:
+    def errors(**seed: int) -> np.ndarray:
+        return HelideckMonitor(StillMotion(), spread_record_s=1.0, **seed).window(5.0, 5.0)[1]
+
+    # sample i's errors: row i of the seed's stream for the record's first 4096 samples
+    hms = HelideckMonitor(StillMotion(), seed=7, spread_record_s=1.0)
+    draws = np.random.default_rng([7, 2**32]).standard_normal((4096, 5))
+    np.testing.assert_array_equal(errors(seed=7), draws[1:51] * hms.noise_std)
+    np.testing.assert_array_equal(errors(), errors(seed=0))
+    for other in (8, 9):
+        assert not np.array_equal(errors(seed=7), errors(seed=other))
+    np.testing.assert_array_equal(errors(seed=-1), errors(seed=2**63 - 1))

@@ -1,5 +1,6 @@
 """The training families of seas: each member is a real sea of its scenario, none is a held-out
-sea, and a fit takes a family but refuses a held-out sea."""
+sea, and a fit takes a family but refuses a held-out sea; how a member's overrides are built and
+how a member is named."""
 
 from __future__ import annotations
 
@@ -12,7 +13,15 @@ from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scenarios import SCENARIOS
 from landing_env.sea.heldout import HELD_OUT_SEAS
-from landing_env.sea.training_seas import TRAINING_FAMILIES, member_config, training_family
+from landing_env.sea.training_seas import (
+    TRAINING_FAMILIES,
+    TrainingSea,
+    _bench,
+    _member,
+    member_config,
+    training_family,
+    training_sea,
+)
 
 
 def _sea(config):
@@ -103,3 +112,56 @@ def test_an_unknown_family_is_refused_naming_the_families() -> None:
 def test_a_fit_refuses_a_held_out_sea(name) -> None:
     with pytest.raises(ConfigError, match=r"scenario: .* is a held-out sea"):
         fit_family([name], "ideal", 1, progress=False)
+
+
+def test_a_members_sea_and_swell_are_laid_over_its_scenarios_sea_under_its_root() -> None:
+    ship = _member(
+        "mine", "ship-ss4", "mine", sea=(1.5, 6.0, 90.0), swell=(12.0, 0.3, 45.0), gen_speed_m_s=2.0
+    )
+    assert ship == TrainingSea(
+        "mine",
+        "ship-ss4",
+        {
+            "motion.ship.sea_state": None,
+            "motion.ship.significant_height_m": 1.5,
+            "motion.ship.peak_period_s": 6.0,
+            "motion.ship.wave_direction_deg": 90.0,
+            "motion.ship.generator.spectrum": "ochi_hubble",
+            "motion.ship.generator.swell_peak_period_s": 12.0,
+            "motion.ship.generator.swell_energy_fraction": 0.3,
+            "motion.ship.generator.swell_direction_deg": 45.0,
+            "motion.ship.generator.speed_m_s": 2.0,
+        },
+        "mine",
+    )
+    # a sea or a swell of other than three values is refused
+    for short in ({"sea": (1.5, 6.0)}, {"swell": (12.0, 0.3, 45.0, 1.0)}):
+        with pytest.raises(ValueError, match="zip"):
+            _member("mine", "ship-ss4", "mine", **short)
+    bench = _bench("calm", "calm", wave_direction_deg=10.0)
+    assert bench == TrainingSea(
+        "calm", "bench-ss4", {"motion.sea_state.wave_direction_deg": 10.0}, "calm"
+    )
+
+
+def test_a_member_is_named_family_slash_member_and_an_unknown_one_is_refused() -> None:
+    assert (
+        training_sea("ship-broad/ochi-hubble-bow").overrides
+        == next(m for m in TRAINING_FAMILIES["ship-broad"] if m.name == "ochi-hubble-bow").overrides
+    )
+    with pytest.raises(ConfigError, match=r"^family: 'bench-everything' is not allowed; "):
+        training_family("bench-everything")
+    with pytest.raises(ConfigError, match=r"^sea: 'nope' is not allowed; choose one of 'ss3', "):
+        training_sea("ship-broad/nope")
+    with pytest.raises(ConfigError, match=r"^sea: 'ss3/ss4' is not allowed; "):
+        training_sea("ship-broad/ss3/ss4")
+
+
+def test_a_members_config_takes_further_sections() -> None:
+    member = training_family("bench-broad")[3]
+    assert member_config(member).camera.mode == "render"
+    config = member_config(member, camera={"mode": "project"})
+    assert config.camera.mode == "project"
+    assert config == load_config(
+        member.scenario, overrides=member.overrides, camera={"mode": "project"}
+    )

@@ -12,9 +12,10 @@ import pytest
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
+from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import ControllerGains
-from landing_env.timing.deck_tracker import OwnState
+from landing_env.timing.deck_tracker import DeckTracker, OwnState
 from landing_env.timing.guidance import DeckGuidance
 
 DT = 0.05
@@ -87,14 +88,115 @@ def test_the_acceleration_tracker_leads_a_heaving_deck_s_velocity_by_the_loop_s_
 
 
 def test_a_bad_tracker_setting_is_refused_naming_its_key() -> None:
-    from landing_env.errors import ConfigError
-
     with pytest.raises(ConfigError, match="tracker_model"):
         GuidanceGains(tracker_model="kalman")
     with pytest.raises(ConfigError, match="deck_lead_s"):
         GuidanceGains(deck_lead_s=-0.1)
     with pytest.raises(ConfigError, match="tracker_jerk_psd"):
         GuidanceGains(tracker_jerk_psd=0.0)
+
+
+def _textbook_track(order: int, psd: float, r: float, values: list[float], dt: float):
+    """One axis of a constant-velocity (order 2) or constant-acceleration (order 3) Kalman
+    filter, written out from Bar-Shalom, Li & Kirubarajan (2001), Sec. 6.2.2-6.2.3: the state
+    and covariance after each measurement."""
+    if order == 2:
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        q = psd * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    else:
+        f = np.array([[1.0, dt, dt**2 / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+        q = psd * np.array(
+            [
+                [dt**5 / 20, dt**4 / 8, dt**3 / 6],
+                [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                [dt**3 / 6, dt**2 / 2, dt],
+            ]
+        )
+    h = np.zeros((1, order))
+    h[0, 0] = 1.0
+    x = np.zeros(order)
+    x[0] = values[0]
+    p = np.diag([r, 4.0, 1.0][:order])  # a deck at up to ~2 m/s and ~1 m/s^2
+    for z in values[1:]:
+        x, p = f @ x, f @ p @ f.T + q
+        k = p @ h.T / (h @ p @ h.T + r)
+        x = x + (k * (z - h @ x)).ravel()
+        p = (np.eye(order) - k @ h) @ p
+    return x, p
+
+
+@pytest.mark.parametrize("model", ["velocity", "acceleration"])
+def test_each_axis_is_the_textbook_kalman_filter_of_its_model(model: str) -> None:
+    # the jerk's density by default 2 m^2/s^5
+    tracker = DeckTracker(accel_psd=0.3, position_sigma_m=0.02, coast_s=1.0, model=model)
+    rng = np.random.default_rng(3)
+    heights = list(0.4 * np.sin(np.arange(30) * DT) + rng.normal(0.0, 0.02, 30))
+    for z in heights:
+        tracker.update_measured(np.array([2.0 * z, -z, z]), DT)
+    order = 3 if model == "acceleration" else 2
+    psd = 2.0 if model == "acceleration" else 0.3
+    x, p = _textbook_track(order, psd, 0.02**2, heights, DT)
+    np.testing.assert_allclose(tracker.state[2], x, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(tracker.cov[2], p, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(tracker.position_w, [2.0 * x[0], -x[0], x[0]], rtol=1e-9)
+    np.testing.assert_allclose(tracker.velocity_w, [2.0 * x[1], -x[1], x[1]], rtol=1e-9)
+    expected_acceleration = x[2] * np.array([2.0, -1.0, 1.0]) if order == 3 else np.zeros(3)
+    np.testing.assert_allclose(tracker.acceleration_w, expected_acceleration, rtol=1e-9)
+    assert tracker.valid and tracker.horizontal_valid
+    assert tracker.last_height_w == pytest.approx(x[0], rel=1e-12)
+
+
+def test_the_tag_is_placed_by_the_drones_heading_and_the_ranges_by_its_tilt() -> None:
+    own = np.array([1.0, 2.0, 3.0])
+    seen = _observation((0.3, -0.2, 1.5))
+    ahead = DeckTracker.measure(seen, _level(tuple(own)))
+    turned = DeckTracker.measure(
+        seen, OwnState(own, np.zeros(3), matrix_from_euler_zyx(0.0, 0.0, math.pi / 2))
+    )
+    assert ahead[2] == pytest.approx(3.0 - 1.5)
+    assert np.hypot(*(ahead[:2] - own[:2])) == pytest.approx(np.hypot(0.3, 0.2))
+    # a quarter turn of the drone turns the offset seen a quarter turn in the world
+    np.testing.assert_allclose(turned[:2] - own[:2], [own[1] - ahead[1], ahead[0] - own[0]])
+    assert OwnState(own, np.zeros(3), matrix_from_euler_zyx(0.1, 0.2, 0.7)).yaw == pytest.approx(
+        0.7
+    )
+    # no tag: the mean of the valid ranges, times the cosine of the tilt, down to cos 60 deg
+    ranges = _observation(None, tof_m=2.0)
+    ranges["tof_range"][:] = [2.0, 9.0, 2.2, 9.0]
+    ranges["tof_valid"][:] = [1, 0, 1, 0]
+    for roll_deg, cos_tilt in ((30.0, math.cos(math.radians(30.0))), (70.0, 0.5)):
+        tilted = OwnState(own, np.zeros(3), matrix_from_euler_zyx(math.radians(roll_deg), 0, 0))
+        measured = DeckTracker.measure(ranges, tilted)
+        assert measured.shape == (3,) and np.isnan(measured[:2]).all()
+        assert measured[2] == pytest.approx(3.0 - 2.1 * cos_tilt)
+    ranges["tof_valid"][:] = 0
+    assert np.isnan(DeckTracker.measure(ranges, _level(tuple(own)))).all()
+
+
+def test_without_a_range_the_height_track_is_dropped_after_coast_s_and_the_others_slow_down() -> (
+    None
+):
+    dt = 0.25
+    tracker = DeckTracker(accel_psd=0.3, position_sigma_m=0.02, coast_s=0.5, velocity_decay_s=2.0)
+    for k in range(8):
+        tracker.update_measured(np.array([0.1 * k, 0.0, 0.05 * k]), dt)
+    height = tracker.last_height_w
+    velocity = tracker.velocity_w
+    for step in (1, 2):  # unseen for 0.25 s, then exactly coast_s
+        tracker.update_measured(np.full(3, np.nan), dt)
+        assert tracker.valid
+        np.testing.assert_allclose(tracker.velocity_w, velocity * math.exp(-step * dt / 2.0))
+    tracker.update_measured(np.full(3, np.nan), dt)
+    assert not tracker.valid and tracker.horizontal_valid
+    assert tracker.last_height_w == height
+    tracker.reset()
+    assert tracker.last_height_w is None and not tracker.horizontal_valid
+    np.testing.assert_array_equal(tracker.position_w, np.zeros(3))
+
+
+def test_a_tracker_refuses_an_unknown_model_naming_its_key() -> None:
+    with pytest.raises(ConfigError, match=r"^tracker_model: 'kalman' is not allowed; "):
+        DeckTracker(accel_psd=0.3, position_sigma_m=0.02, coast_s=0.5, model="kalman")
 
 
 def test_the_ship_timing_ids_track_lead_and_go_around_the_deck() -> None:
@@ -210,8 +312,6 @@ def test_a_track_lost_close_to_the_deck_keeps_descending_on_the_last_range() -> 
 
 
 def test_a_bad_lost_deck_setting_is_refused_naming_its_key_and_choices() -> None:
-    from landing_env.errors import ConfigError
-
     with pytest.raises(ConfigError, match=r"lost_deck.*search"):
         GuidanceGains(lost_deck="climb")
 

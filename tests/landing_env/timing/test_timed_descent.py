@@ -22,7 +22,7 @@ from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.scenarios import BENCH_TIMING, SCENARIO_IDS
 from landing_env.timing.guidance import DeckGuidance
-from landing_env.timing.timed_descent import timed_descent_reference
+from landing_env.timing.timed_descent import timed_descent_reference, timed_descent_references
 
 REALISTIC = {"sensors": "realistic", "estimation.observed": "tight"}
 RANGE_DESCENT = {"timing.guidance.descent_profile": "range"}
@@ -44,6 +44,24 @@ def test_the_reference_leaves_the_hold_at_rest_and_meets_the_deck_at_the_touchdo
     rates = np.array([timed_descent_reference(s, start, duration, speed, end)[1] for s in t])
     assert np.all(np.diff(heights) < 0.0)
     np.testing.assert_allclose(np.gradient(heights, t)[1:-1], rates[1:-1], atol=2e-3)
+
+
+def test_the_reference_of_many_descents_is_the_reference_of_each() -> None:
+    duration, speed, end = 1.2, 0.25, 0.05
+    t = np.array([[-0.3, 0.0, 0.4], [0.9, 1.2, 1.7]])
+    start = np.array([[0.7, 0.9, 0.6], [0.8, 0.7, 1.1]])
+    heights, rates = timed_descent_references(t, start, duration, speed, end)
+    for i, j in np.ndindex(t.shape):
+        one = timed_descent_reference(t[i, j], start[i, j], duration, speed, end)
+        assert (heights[i, j], rates[i, j]) == pytest.approx(one, abs=1e-12)
+    # without an end height the reference ends on the deck
+    assert timed_descent_reference(duration, 0.7, duration, speed) == pytest.approx((0.0, -speed))
+    assert timed_descent_references(np.array([duration]), np.array([0.7]), duration, speed) == (
+        pytest.approx([0.0]),
+        pytest.approx([-speed]),
+    )
+    # before the commit the reference waits at the start, at rest
+    assert timed_descent_reference(-0.3, 0.7, duration, speed, end) == pytest.approx((0.7, 0.0))
 
 
 def _contact_times(
