@@ -167,10 +167,6 @@ class StartConfig:
         )
 
 
-#: what a land sequence aims the thrust along (:attr:`TouchdownConfig.spool_down_attitude`)
-SPOOL_DOWN_ATTITUDES = ("velocity", "deck")
-
-
 @dataclass
 class TouchdownConfig(Limited):
     """Success thresholds of a touchdown; every measured value is reported in ``info``."""
@@ -184,27 +180,20 @@ class TouchdownConfig(Limited):
     max_bounce_m: float = limited(0.01, Limit(0.0, 1.0))
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
     tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
-    #: the land sequence after the first contact, seconds: the controller stays armed this
-    #: long, its collective thrust capped on a ramp from the weight down to
-    #: ``spool_down_final_thrust`` of it, and then disarms for ``settle_time_s``; 0 cuts the
-    #: motors at the first contact (:meth:`landing_env.world.World.settle`)
+    #: the land sequence after the first contact, seconds (PX4's land detector: ground
+    #: contact, thrust lowered, landed, disarm): the controller stays armed this long,
+    #: aiming the thrust along the deck's normal (the drone levels onto its gear) with the
+    #: collective thrust capped on a ramp from the weight down to
+    #: ``spool_down_final_thrust`` of it, then disarms for ``settle_time_s``; 0 cuts the
+    #: motors at the first contact.  At ``ship-ss6`` 0.15 s kept more touchdowns on the
+    #: deck than the cut, 0.4 s and longer fewer (docs/experiments/ship-timing.md)
     spool_down_s: float = limited(0.0, Limit(0.0, 2.0), physical=Limit.non_negative(10.0))
     #: the thrust cap at the end of the land sequence, a fraction of the drone's weight
-    spool_down_final_thrust: float = limited(0.2, Limit(0.0, 1.0))
-    #: what the land sequence aims the thrust along: ``"velocity"`` (the velocity loop's
-    #: direction, flying the guidance's last set-point) or ``"deck"`` (the deck's normal:
-    #: the drone levels onto its gear)
-    spool_down_attitude: str = "velocity"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_choice(
-            "touchdown.spool_down_attitude", self.spool_down_attitude, SPOOL_DOWN_ATTITUDES
-        )
-
-    #: a deck-securing device (a harpoon engaging a deck grid): at the first contact the
-    #: drone's centre is held where it is on the deck with at most this force, newtons;
-    #: 0: none.  An aid a deck must be fitted with, reported apart from the unaided landing
+    spool_down_final_thrust: float = limited(0.0, Limit(0.0, 1.0))
+    #: a deck-securing device (a harpoon under the drone engaging a deck grid): from the
+    #: first contact it pulls the drone down onto the deck with at most this force, newtons;
+    #: 0: none.  An aid the deck and the drone must be fitted with, reported apart from the
+    #: unaided landing (:meth:`landing_env.world.World.secure_to_deck`)
     harpoon_force_n: float = limited(0.0, Limit(0.0, 200.0), physical=Limit.non_negative(1e4))
 
 

@@ -422,13 +422,14 @@ class World:
         disarmed for ``duration_s``; return feet seen on deck, on-deck-at-end, crash.
 
         With ``spool_down_s`` 0 (the default) the motors are cut at the first contact.
-        Otherwise the controller stays armed that long after it, flying ``setpoint`` (the
-        last one the guidance gave; none: hold still) while the collective thrust it may ask
-        for falls linearly from the weight to ``spool_down_final_thrust`` of it, and then
-        disarms: PX4's land detector sequence (ground contact, thrust lowered, landed,
-        disarm) rather than a cut at the first touch.  With ``harpoon_force_n`` above 0 a
-        deck-securing device holds the drone's centre where it was at the contact, with at
-        most that force (:meth:`secure_to_deck`).
+        Otherwise the controller stays armed that long after it: PX4's land detector
+        sequence (ground contact, thrust lowered, landed, disarm) rather than a cut at the
+        first touch.  The attitude loop aims the thrust along the deck's normal (the drone's
+        attitude relative to the deck is what its camera measures of the tag; here the
+        world's), the velocity loop flies ``setpoint`` (the guidance's last; none: hold
+        still), and the collective thrust it may ask for falls linearly from the weight to
+        ``spool_down_final_thrust`` of it.  With ``harpoon_force_n`` above 0 a deck-securing
+        device holds the drone down from the contact on (:meth:`secure_to_deck`).
         """
         touchdown = self.config.touchdown
         feet_seen: set[int] = set()
@@ -454,13 +455,12 @@ class World:
                 self.controller.thrust_cap_n = spool_down_thrust_n(
                     (i + 1) / spool_steps, self.params.weight, touchdown.spool_down_final_thrust
                 )
-                if touchdown.spool_down_attitude == "deck":
-                    normal = self.deck_state().rotation_wp[:, 2]
-                    self.controller.thrust_axis_w = (
-                        float(normal[0]),
-                        float(normal[1]),
-                        float(normal[2]),
-                    )
+                normal = self.deck_state().rotation_wp[:, 2]
+                self.controller.thrust_axis_w = (
+                    float(normal[0]),
+                    float(normal[1]),
+                    float(normal[2]),
+                )
             elif self.armed:
                 self.disarm()
             report = self.step(hold if i < spool_steps else zero, monitor_contacts=False)

@@ -1,6 +1,10 @@
-"""What follows the first contact: the motors cut (the default), the land sequence (thrust
-lowered, then disarmed, ``touchdown.spool_down_s``) and the deck-securing harpoon
-(``touchdown.harpoon_force_n``)."""
+"""What follows the first contact: the motors cut (the default), the land sequence (levelled
+onto the deck while the thrust falls, then disarmed: ``touchdown.spool_down_s``) and the
+deck-securing harpoon (``touchdown.harpoon_force_n``).
+
+The drone touches a deck 10 m above its roll axis (still, or rolling sinusoidally) at
+0.3 m/s with the controller armed and pressing down, as the guidance's final descent does.
+"""
 
 from __future__ import annotations
 
@@ -11,37 +15,47 @@ import pytest
 
 from landing_env.config import ConfigError, load_config
 from landing_env.physics.controller import VelocitySetpoint
-from landing_env.touchdown import spool_down_thrust_n
+from landing_env.touchdown import Outcome, TouchdownMetrics, spool_down_thrust_n
 from landing_env.world import World
-from tests.landing_env.test_touchdown_compliance import RollingDeck, drop
+from tests.landing_env.test_touchdown_compliance import RollingDeck, touch_and_settle
+
+PRESS = VelocitySetpoint(np.array([0.0, 0.0, -0.3]), 0.0)
 
 
-def settle_steps(**touchdown: float) -> tuple[list[tuple[bool, float]], World]:
-    """Touch a still deck at 0.3 m/s with the controller armed, then settle; return the
-    (armed, thrust cap) each settle step flew with."""
+def touch_down(
+    roll_rate_deg_s: float = 0.0, watch: list | None = None, **touchdown: float
+) -> tuple[Outcome, TouchdownMetrics, World]:
+    """An armed touchdown at 0.3 m/s, yawed 45 deg, on feet that grip (friction 1); with
+    ``watch`` each settle step's (armed, thrust cap, thrust axis, deck normal) is kept."""
     overrides = {f"touchdown.{k}": v for k, v in touchdown.items()}
     config = load_config(
         "ship-ss4", overrides={"motion.kind": "static", "wind.enabled": False, **overrides}
     )
     world = World(config)
+    for foot in world.foot_links:
+        world.client.changeDynamics(world.drone.body_id, foot, lateralFriction=1.0)
     world.reset(np.random.default_rng(0), world.deck_home_w + np.array([0, 0, 2.0]), 0.0)
+    if roll_rate_deg_s:
+        world.stewart.motion = RollingDeck(roll_rate_deg_s, omega=1.0, arm_m=10.0)
+        world.stewart.reset(0.0)
     start = world.deck_state().position_w + np.array([0.0, 0.0, 0.084])
-    world.drone.reset(start, 0.0, (0.0, 0.0, -0.3))
+    world.drone.reset(start, math.pi / 4, velocity_w=(0.0, 0.0, -0.3))
     world._state = world.drone.read_state()
-    press = VelocitySetpoint(np.array([0.0, 0.0, -0.3]), 0.0)
-    for _ in range(20):
-        if world.step(press).first_contact is not None:
-            break
-    seen: list[tuple[bool, float]] = []
-    step = world.step
+    if watch is not None:
+        step = world.step
 
-    def watched(setpoint, monitor_contacts=True):
-        seen.append((world.armed, world.controller.thrust_cap_n))
-        return step(setpoint, monitor_contacts)
+        def watched(setpoint, monitor_contacts=True):
+            if world._touchdown is not None:  # after the first contact: the settle
+                controller = world.controller
+                normal = world.deck_state().rotation_wp[:, 2]
+                watch.append(
+                    (world.armed, controller.thrust_cap_n, controller.thrust_axis_w, normal)
+                )
+            return step(setpoint, monitor_contacts)
 
-    world.step = watched  # type: ignore[method-assign]
-    world.settle(config.touchdown.settle_time_s, press)
-    return seen, world
+        world.step = watched  # type: ignore[method-assign]
+    outcome, metrics = touch_and_settle(world, PRESS)
+    return outcome, metrics, world
 
 
 def test_the_land_sequence_cap_falls_linearly_from_the_weight_to_its_final_share() -> None:
@@ -52,34 +66,50 @@ def test_the_land_sequence_cap_falls_linearly_from_the_weight_to_its_final_share
 
 
 def test_by_default_the_motors_are_cut_at_the_first_contact() -> None:
-    seen, world = settle_steps()
+    seen: list = []
+    _, _, world = touch_down(watch=seen)
     world.close()
     assert len(seen) == 20  # settle_time_s 1 s at 20 Hz
-    assert all(not armed for armed, _ in seen)
+    assert all(not armed for armed, *_ in seen)
 
 
-def test_the_land_sequence_lowers_the_thrust_then_disarms_for_the_whole_settle() -> None:
-    seen, world = settle_steps(spool_down_s=0.4, spool_down_final_thrust=0.25)
+def test_the_land_sequence_levels_onto_the_deck_lowers_the_thrust_then_disarms() -> None:
+    seen: list = []
+    _, _, world = touch_down(6.0, watch=seen, spool_down_s=0.15)
     weight = world.params.weight
-    assert not world.armed and math.isinf(world.controller.thrust_cap_n)
+    assert not world.armed and world.controller.thrust_axis_w is None
     world.close()
-    spool, settle = seen[:8], seen[8:]
-    assert all(armed for armed, _ in spool)
-    caps = [cap / weight for _, cap in spool]
-    assert caps == pytest.approx([1.0 - 0.75 * (i + 1) / 8 for i in range(8)])
-    assert len(settle) == 20 and all(not armed for armed, _ in settle)
+    sequence, settle = seen[:3], seen[3:]
+    assert all(armed for armed, *_ in sequence)
+    assert [cap / weight for _, cap, _, _ in sequence] == pytest.approx([2 / 3, 1 / 3, 0.0])
+    for _, _, axis, normal in sequence:
+        assert axis == pytest.approx(normal.tolist())  # the deck's normal, not the vertical
+        assert math.degrees(math.acos(axis[2])) > 0.05
+    assert len(settle) == 20 and all(not armed for armed, *_ in settle)  # the whole settle
+
+
+def test_a_short_land_sequence_lands_where_the_cut_tips_over_and_a_long_one_bounces() -> None:
+    _, cut_metrics, world = touch_down(8.0)
+    world.close()
+    assert "tip_over" in cut_metrics.failed_checks
+    short, metrics, world = touch_down(8.0, spool_down_s=0.15)
+    world.close()
+    assert short is Outcome.SUCCESS, metrics.failed_checks
+    # a thrust near the weight for longer lifts the levelled drone off again
+    _, long_metrics, world = touch_down(8.0, spool_down_s=0.4)
+    world.close()
+    assert long_metrics.failed_checks == ("bounce",)
 
 
 def test_a_harpoon_keeps_a_drone_on_a_fast_rolling_deck_from_tipping_over() -> None:
-    rolling = RollingDeck(rate_deg_s=10.0, omega=1.0, arm_m=10.0)
-    _, free, world = drop(0.3, rolling, yaw=math.pi / 4, friction=1.0)
+    _, free, world = touch_down(10.0)
     world.close()
     assert free.tipped_over
-    _, held, world = drop(0.3, rolling, yaw=math.pi / 4, friction=1.0, harpoon_force_n=50.0)
+    outcome, held, world = touch_down(10.0, harpoon_force_n=40.0)
     world.close()
-    assert not held.tipped_over and held.on_deck_after_settle, held.failed_checks
+    assert outcome is Outcome.SUCCESS, held.failed_checks
 
 
-def test_a_harpoon_force_beyond_its_range_is_refused_naming_the_key() -> None:
+def test_a_negative_harpoon_force_is_refused_naming_the_key() -> None:
     with pytest.raises(ConfigError, match=r"touchdown\.harpoon_force_n"):
         load_config("ship-ss4", overrides={"touchdown.harpoon_force_n": -1.0})
