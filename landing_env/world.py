@@ -236,7 +236,7 @@ class World:
         self.controller.reset()
         self._touchdown = None
         self._probe = None
-        self._release_from_deck()
+        self.release_from_deck()
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
@@ -509,7 +509,8 @@ class World:
         )
         c.changeConstraint(self._harpoon, maxForce=max_force_n)
 
-    def _release_from_deck(self) -> None:
+    def release_from_deck(self) -> None:
+        """Let go of the deck (:meth:`secure_to_deck`); nothing when not held."""
         if self._harpoon is not None:
             self.client.removeConstraint(self._harpoon)
             self._harpoon = None

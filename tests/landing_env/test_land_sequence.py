@@ -9,11 +9,13 @@ The drone touches a deck 10 m above its roll axis (still, or rolling sinusoidall
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from landing_env.config import ConfigError, load_config
+from landing_env.envs.snapshot import restore_snapshot, save_snapshot
 from landing_env.physics.controller import VelocitySetpoint
 from landing_env.touchdown import Outcome, TouchdownMetrics, spool_down_thrust_n
 from landing_env.world import World
@@ -113,3 +115,16 @@ def test_a_harpoon_keeps_a_drone_on_a_fast_rolling_deck_from_tipping_over() -> N
 def test_a_negative_harpoon_force_is_refused_naming_the_key() -> None:
     with pytest.raises(ConfigError, match=r"touchdown\.harpoon_force_n"):
         load_config("ship-ss4", overrides={"touchdown.harpoon_force_n": -1.0})
+
+
+def test_a_look_ahead_whose_harpoon_fired_leaves_no_hold_after_the_restore() -> None:
+    config = load_config("ship-ss4", overrides={"touchdown.harpoon_force_n": 40.0})
+    env = SimpleNamespace(world=World(config), config=config)
+    env.world.reset(np.random.default_rng(0), env.world.deck_home_w + np.array([0, 0, 2.0]), 0.0)
+    before = env.world.client.getNumConstraints()
+    snapshot = save_snapshot(env)
+    env.world.secure_to_deck(40.0)  # what a look-ahead's touchdown does
+    assert env.world.client.getNumConstraints() == before + 1
+    restore_snapshot(env, snapshot, keep=False)
+    assert env.world.client.getNumConstraints() == before
+    env.world.close()
