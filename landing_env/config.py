@@ -180,6 +180,21 @@ class TouchdownConfig(Limited):
     max_bounce_m: float = limited(0.01, Limit(0.0, 1.0))
     #: the drone tipped over when its z axis passed this angle from the deck normal, degrees
     tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
+    #: the land sequence after the first contact, seconds (PX4's land detector: ground
+    #: contact, thrust lowered, landed, disarm): the controller stays armed this long,
+    #: aiming the thrust along the deck's normal (the drone levels onto its gear) with the
+    #: collective thrust capped on a ramp from the weight down to
+    #: ``spool_down_final_thrust`` of it, then disarms for ``settle_time_s``; 0 cuts the
+    #: motors at the first contact.  At ``ship-ss6`` 0.15 s kept more touchdowns on the
+    #: deck than the cut, 0.4 s and longer fewer (docs/experiments/ship-timing.md)
+    spool_down_s: float = limited(0.0, Limit(0.0, 2.0), physical=Limit.non_negative(10.0))
+    #: the thrust cap at the end of the land sequence, a fraction of the drone's weight
+    spool_down_final_thrust: float = limited(0.0, Limit(0.0, 1.0))
+    #: a deck-securing device (a harpoon under the drone engaging a deck grid): from the
+    #: first contact it pulls the drone down onto the deck with at most this force, newtons;
+    #: 0: none.  An aid the deck and the drone must be fitted with, reported apart from the
+    #: unaided landing (:meth:`landing_env.world.World.secure_to_deck`)
+    harpoon_force_n: float = limited(0.0, Limit(0.0, 200.0), physical=Limit.non_negative(1e4))
 
 
 #: the physical range of a reward weight

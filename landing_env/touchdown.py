@@ -176,6 +176,13 @@ class TouchdownProbe:
         metrics.tipped_over = self.body_contact or self.max_attitude_deg > self._tip_over_deg
 
 
+def spool_down_thrust_n(progress: float, weight_n: float, final_fraction: float) -> float:
+    """The land sequence's thrust cap, N: the weight at the contact (``progress`` 0), falling
+    linearly to ``final_fraction`` of it at the end (``progress`` 1)."""
+    progress = min(max(progress, 0.0), 1.0)
+    return weight_n * (1.0 - progress * (1.0 - final_fraction))
+
+
 def contact_metrics(
     time_s: float,
     drone_position_w: np.ndarray,

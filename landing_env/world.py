@@ -43,6 +43,7 @@ from landing_env.touchdown import (
     TouchdownMetrics,
     TouchdownProbe,
     contact_metrics,
+    spool_down_thrust_n,
     summarise_contacts,
 )
 
@@ -93,6 +94,11 @@ class PhysicsReport:
     stewart: StewartStatus | None = None
     stewart_clamped: bool = False
     motor_saturated: bool = False
+
+
+#: how far under the deck surface a harpoon's tension pulls the point between the feet, m:
+#: more than the gear deflects under its force, so the harpoon presses the drone down
+HARPOON_DRAW_M = 0.01
 
 
 class World:
@@ -196,6 +202,8 @@ class World:
         #: the touchdown being settled, and its per-physics-step probe (None in flight)
         self._touchdown: TouchdownMetrics | None = None
         self._probe: TouchdownProbe | None = None
+        #: the deck-securing device's constraint while it holds the drone (None otherwise)
+        self._harpoon: int | None = None
         self._foot_radius = float(
             c.getCollisionShapeData(self.drone.body_id, min(self.foot_links))[0][3][0]
         )
@@ -228,6 +236,7 @@ class World:
         self.controller.reset()
         self._touchdown = None
         self._probe = None
+        self.release_from_deck()
         self.armed = True
         self._state = self.drone.read_state()
         self._hover_rotors()
@@ -327,6 +336,8 @@ class World:
     def disarm(self) -> None:
         """Cut the motors to idle (after touchdown, as a land detector does)."""
         self.armed = False
+        self.controller.thrust_cap_n = math.inf
+        self.controller.thrust_axis_w = None
 
     # ------------------------------------------------------------------ stepping
     def step(self, setpoint: VelocitySetpoint, monitor_contacts: bool = True) -> PhysicsReport:
@@ -416,24 +427,55 @@ class World:
         report.stewart = self.stewart.last_status
         return report
 
-    def settle(self, duration_s: float) -> tuple[set[int], bool, str, set[int]]:
-        """Run disarmed for ``duration_s``; return feet seen on deck, on-deck-at-end, crash."""
-        self.disarm()
+    def settle(
+        self, duration_s: float, setpoint: VelocitySetpoint | None = None
+    ) -> tuple[set[int], bool, str, set[int]]:
+        """Run the touchdown's settle: the land sequence (``touchdown.spool_down_s``), then
+        disarmed for ``duration_s``; return feet seen on deck, on-deck-at-end, crash.
+
+        With ``spool_down_s`` 0 (the default) the motors are cut at the first contact.
+        Otherwise the controller stays armed that long after it: PX4's land detector
+        sequence (ground contact, thrust lowered, landed, disarm) rather than a cut at the
+        first touch.  The attitude loop aims the thrust along the deck's normal (the drone's
+        attitude relative to the deck is what its camera measures of the tag; here the
+        world's), the velocity loop flies ``setpoint`` (the guidance's last; none: hold
+        still), and the collective thrust it may ask for falls linearly from the weight to
+        ``spool_down_final_thrust`` of it.  With ``harpoon_force_n`` above 0 a deck-securing
+        device holds the drone down from the contact on (:meth:`secure_to_deck`).
+        """
+        touchdown = self.config.touchdown
         feet_seen: set[int] = set()
         forbidden = ""
         end_feet: set[int] = set()
-        zero = VelocitySetpoint(np.zeros(3), 0.0)
-        steps = max(1, round(duration_s * self.config.simulation.env_hz))
         self._probe = TouchdownProbe(
             self.client._client,
             self.drone.body_id,
             self.deck_id,
             self.foot_links,
             self._foot_radius,
-            self.config.touchdown.tip_over_deg,
+            touchdown.tip_over_deg,
         )
-        for _ in range(steps):
-            report = self.step(zero, monitor_contacts=False)
+        if touchdown.harpoon_force_n > 0.0:
+            self.secure_to_deck(touchdown.harpoon_force_n)
+        env_hz = self.config.simulation.env_hz
+        spool_steps = round(touchdown.spool_down_s * env_hz) if self.armed else 0
+        hold = setpoint if setpoint is not None else VelocitySetpoint(np.zeros(3), 0.0)
+        zero = VelocitySetpoint(np.zeros(3), 0.0)
+        steps = max(1, round(duration_s * env_hz))
+        for i in range(spool_steps + steps):
+            if i < spool_steps:
+                self.controller.thrust_cap_n = spool_down_thrust_n(
+                    (i + 1) / spool_steps, self.params.weight, touchdown.spool_down_final_thrust
+                )
+                normal = self.deck_state().rotation_wp[:, 2]
+                self.controller.thrust_axis_w = (
+                    float(normal[0]),
+                    float(normal[1]),
+                    float(normal[2]),
+                )
+            elif self.armed:
+                self.disarm()
+            report = self.step(hold if i < spool_steps else zero, monitor_contacts=False)
             del report
             contacts = self.contacts()
             feet_seen |= set(contacts.feet_on_deck)
@@ -445,6 +487,45 @@ class World:
             self._probe.fill(self._touchdown, self.params.weight)
         self._probe = None
         return feet_seen, len(end_feet) >= 3 and not forbidden, forbidden, end_feet
+
+    def secure_to_deck(self, max_force_n: float) -> None:
+        """Hold the drone down on the deck with at most ``max_force_n`` (a harpoon under its
+        centre engaging a deck grid): a point-to-point constraint that pulls the point
+        between its feet, at their soles, towards the deck under it (``HARPOON_DRAW_M``
+        below the surface); the attitude is left to the gear."""
+        c = self.client
+        deck_position, deck_orientation = c.getBasePositionAndOrientation(self.deck_id)
+        drone_position, drone_orientation = c.getBasePositionAndOrientation(self.drone.body_id)
+        rotation = np.asarray(c.getMatrixFromQuaternion(drone_orientation)).reshape(3, 3)
+        feet_w = np.array(
+            [f[0] for f in c.getLinkStates(self.drone.body_id, sorted(self.foot_links))]
+        )
+        sole_w = feet_w.mean(axis=0) - self._foot_radius * rotation[:, 2]
+        in_body = rotation.T @ (sole_w - np.asarray(drone_position))
+        deck_rotation = np.asarray(c.getMatrixFromQuaternion(deck_orientation)).reshape(3, 3)
+        feet_deck = (feet_w - np.asarray(deck_position)) @ deck_rotation
+        anchor = deck_rotation.T @ (sole_w - np.asarray(deck_position))
+        # the deck's surface: where the lowest sole touches it at the first contact; the
+        # harpoon's tension pulls towards a point HARPOON_DRAW_M under it (held short by
+        # the gear), so it presses the drone down with up to its force
+        anchor[2] = float(feet_deck[:, 2].min()) - self._foot_radius - HARPOON_DRAW_M
+        self._harpoon = c.createConstraint(
+            self.deck_id,
+            -1,
+            self.drone.body_id,
+            -1,
+            p.JOINT_POINT2POINT,
+            [0.0, 0.0, 0.0],
+            anchor.tolist(),
+            in_body.tolist(),
+        )
+        c.changeConstraint(self._harpoon, maxForce=max_force_n)
+
+    def release_from_deck(self) -> None:
+        """Let go of the deck (:meth:`secure_to_deck`); nothing when not held."""
+        if self._harpoon is not None:
+            self.client.removeConstraint(self._harpoon)
+            self._harpoon = None
 
     def _deck_vertical_accel(self, t: float, h: float = 0.01) -> float:
         """Vertical acceleration of the deck's commanded motion at ``t`` (m/s^2)."""

@@ -338,7 +338,7 @@ class DeckLandingBaseEnv(gym.Env):
             # the legs are visual only: move them when someone (or the camera) looks
             self.world.stewart.update_leg_visuals()
         self._steps += 1
-        self._outcome = self._outcome_after(self._report)
+        self._outcome = self._outcome_after(self._report, setpoint)
         self._sensing = self._sense()
 
     # ------------------------------------------------------------------ spec
@@ -382,11 +382,15 @@ class DeckLandingBaseEnv(gym.Env):
         position = self.world.deck_home_w + np.array([offset[0], offset[1], height])
         return position, yaw
 
-    def _outcome_after(self, report: PhysicsReport) -> Outcome:
+    def _outcome_after(
+        self, report: PhysicsReport, setpoint: VelocitySetpoint | None = None
+    ) -> Outcome:
         if report.forbidden_contact:
             return Outcome.CRASH
         if report.first_contact is not None:
-            feet, on_deck, forbidden, _ = self.world.settle(self.config.touchdown.settle_time_s)
+            feet, on_deck, forbidden, _ = self.world.settle(
+                self.config.touchdown.settle_time_s, setpoint
+            )
             metrics = report.first_contact
             metrics.all_feet_touched = feet == set(self.world.foot_links)
             metrics.on_deck_after_settle = on_deck

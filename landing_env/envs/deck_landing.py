@@ -253,7 +253,10 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
 
     * **Touchdown** (terminated): at the first contact of a foot with the deck the metrics are
       taken (relative normal speed, deck tilt, drone-to-deck attitude, lateral offset), the
-      motors idle and the simulation runs on for ``touchdown.settle_time_s`` (1 s).  Success
+      motors idle (or, with ``touchdown.spool_down_s``, idle after a land sequence that
+      levels the drone onto its gear while the thrust falls) and the simulation runs on for
+      ``touchdown.settle_time_s`` (1 s); ``touchdown.harpoon_force_n`` fits a deck-securing
+      harpoon (off by default).  Success
       when the relative normal speed is at most 0.5 m/s, the deck tilt at most 5°, the
       drone-to-deck attitude at most 10°, all four feet touched and the drone still stands on
       the deck after the settle without a bounce above 1 cm or a tip-over; otherwise the

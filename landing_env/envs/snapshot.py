@@ -42,6 +42,9 @@ def restore_snapshot(env: Any, snapshot: EnvSnapshot, keep: bool = True) -> None
     again, otherwise it is released."""
     if snapshot.released:
         raise ValueError("this snapshot has been released; save a new one")
+    # a constraint the look-ahead made (a harpoon fired at its touchdown) is not in the
+    # snapshot, and restoreState keeps it: let go of it first
+    env.world.release_from_deck()
     env.world.client.restoreState(stateId=snapshot.bullet_state_id)
     state = copy.deepcopy(snapshot.python_state, _shared(env)) if keep else snapshot.python_state
     env.__dict__.update(state)

@@ -191,6 +191,14 @@ class CascadeController:
         self._flags = [False] * 9
         #: last torque demanded of the mixer (N m, body frame), before any mixer reduction
         self.last_torque_setpoint_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        #: the most collective thrust the velocity loop may ask for, N (a land sequence
+        #: lowers it after the first contact, :meth:`~landing_env.world.World.settle`);
+        #: the rotors' own range bounds it too
+        self.thrust_cap_n = math.inf
+        #: the thrust direction (a world unit vector) the attitude loop aims the body z at in
+        #: place of the velocity loop's (a land sequence levelling the drone on the deck);
+        #: None: the velocity loop's
+        self.thrust_axis_w: tuple[float, float, float] | None = None
 
     def preload_acceleration(self, acceleration_w: np.ndarray) -> None:
         """Start the horizontal velocity integrators at ``acceleration_w``'s horizontal part
@@ -324,6 +332,9 @@ class CascadeController:
         elif thrust < t_min:
             thrust = t_min
             thrust_limited = -1
+        if thrust > self.thrust_cap_n:
+            thrust = max(self.thrust_cap_n, t_min)
+            thrust_limited = 1
 
         # Velocity integrators: conditional integration (no growth into an active limit).
         int_limited = False
@@ -349,6 +360,8 @@ class CascadeController:
         dzx = fx / norm
         dzy = fy / norm
         dzz = fz / norm
+        if self.thrust_axis_w is not None:
+            dzx, dzy, dzz = self.thrust_axis_w
         cx = r12 * dzz - r22 * dzy  # z_B x z_d, world frame
         cyw = r22 * dzx - r02 * dzz
         cz = r02 * dzy - r12 * dzx

@@ -37,7 +37,8 @@ Two laws, chosen by ``GuidanceGains.track_deck``:
   (Marconi, Isidori & Serrani 2002, *Automatica* 38:21-32: vertical landing on an
   oscillating platform with an internal model of its motion; Herissé et al. 2012, *IEEE
   T-RO* 28:77-89: landing on a moving platform from the relative motion the camera sees).
-  The motors are cut at the first contact (``World.settle``), as a land detector does.
+  The motors are cut at the first contact (``World.settle``), as a land detector does, or
+  after a short land sequence (``touchdown.spool_down_s``).
 
 The final descent's speed has two profiles (``GuidanceGains.descent_profile``): ``range``
 schedules it on the range (fast high up, ``touchdown_speed`` near the deck), and ``timed``

@@ -73,18 +73,23 @@ def drop(
     world._state = world.drone.read_state()  # the world caches the state between its steps
     world.disarm()
     world.drone.set_rotor_speeds(np.full(4, world.params.omega_min))
-    zero = VelocitySetpoint(np.zeros(3), 0.0)
+    outcome, metrics = touch_and_settle(world, VelocitySetpoint(np.zeros(3), 0.0))
+    return outcome, metrics, world
+
+
+def touch_and_settle(world: World, setpoint: VelocitySetpoint) -> tuple[Outcome, TouchdownMetrics]:
+    """Fly ``setpoint`` down to the first contact (within 20 control periods), settle and
+    judge the touchdown as the environment does."""
     for _ in range(20):
-        report = world.step(zero)
+        report = world.step(setpoint)
         if report.first_contact is not None:
             break
     metrics = report.first_contact
     assert metrics is not None
-    feet, on_deck, _, _ = world.settle(config.touchdown.settle_time_s)
+    feet, on_deck, _, _ = world.settle(world.config.touchdown.settle_time_s, setpoint)
     metrics.all_feet_touched = feet == set(world.foot_links)
     metrics.on_deck_after_settle = on_deck
-    outcome, metrics = evaluate_touchdown(metrics, config.touchdown)
-    return outcome, metrics, world
+    return evaluate_touchdown(metrics, world.config.touchdown)
 
 
 def test_a_gentle_touchdown_on_a_still_deck_succeeds_with_millimetres_of_compression() -> None:
