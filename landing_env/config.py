@@ -182,7 +182,8 @@ class TouchdownConfig(Limited):
     tip_over_deg: float = limited(45.0, Limit(1.0, 180.0))
     #: the land sequence after the first contact, seconds (PX4's land detector: ground
     #: contact, thrust lowered, landed, disarm): the controller stays armed this long,
-    #: aiming the thrust along the deck's normal (the drone levels onto its gear) with the
+    #: aiming the thrust along the deck's normal as its ToF ranges measure it (the drone
+    #: levels onto its gear; ``World.deck_normal_measured_w``) with the
     #: collective thrust capped on a ramp from the weight down to
     #: ``spool_down_final_thrust`` of it, then disarms for ``settle_time_s``; 0 cuts the
     #: motors at the first contact.  At ``ship-ss6`` 0.15 s kept more touchdowns on the

@@ -18,6 +18,7 @@ from pybullet_utils.bullet_client import BulletClient
 from scipy.spatial.transform import Rotation
 
 from estimation.frames import R_BC, R_PD, deck_pose_in_camera
+from estimation.geometry import fit_plane
 from estimation.landmarks import landmark_pose_w
 from estimation.types import CameraFrame, ImuSample, RangeReading
 from landing_env._quiet import quiet_stdout
@@ -436,9 +437,8 @@ class World:
         With ``spool_down_s`` 0 (the default) the motors are cut at the first contact.
         Otherwise the controller stays armed that long after it: PX4's land detector
         sequence (ground contact, thrust lowered, landed, disarm) rather than a cut at the
-        first touch.  The attitude loop aims the thrust along the deck's normal (the drone's
-        attitude relative to the deck is what its camera measures of the tag; here the
-        world's), the velocity loop flies ``setpoint`` (the guidance's last; none: hold
+        first touch.  The attitude loop aims the thrust along the deck's normal as the drone's
+        ToF ranges measure it each step (:meth:`deck_normal_measured_w`), the velocity loop flies ``setpoint`` (the guidance's last; none: hold
         still), and the collective thrust it may ask for falls linearly from the weight to
         ``spool_down_final_thrust`` of it.  With ``harpoon_force_n`` above 0 a deck-securing
         device holds the drone down from the contact on (:meth:`secure_to_deck`).
@@ -467,12 +467,9 @@ class World:
                 self.controller.thrust_cap_n = spool_down_thrust_n(
                     (i + 1) / spool_steps, self.params.weight, touchdown.spool_down_final_thrust
                 )
-                normal = self.deck_state().rotation_wp[:, 2]
-                self.controller.thrust_axis_w = (
-                    float(normal[0]),
-                    float(normal[1]),
-                    float(normal[2]),
-                )
+                measured = self.deck_normal_measured_w()
+                if measured is not None:  # else the last measured one (none: the loop's)
+                    self.controller.thrust_axis_w = measured
             elif self.armed:
                 self.disarm()
             report = self.step(hold if i < spool_steps else zero, monitor_contacts=False)
@@ -487,6 +484,31 @@ class World:
             self._probe.fill(self._touchdown, self.params.weight)
         self._probe = None
         return feet_seen, len(end_feet) >= 3 and not forbidden, forbidden, end_feet
+
+    def deck_normal_measured_w(self) -> tuple[float, float, float] | None:
+        """The deck's upward normal in W as the drone measures it: the plane through its ToF
+        ranges (a reading now, with its noise), placed at the sensors' nominal origins along
+        the camera's axis (``tof.mount_offsets_c``; a misaligned beam is not known to the
+        drone), fitted by :func:`~estimation.geometry.fit_plane` in C and turned into W by the
+        drone's attitude (its autopilot's estimate, the truth here as everywhere the
+        simulated autopilot is read).  None with fewer than three valid ranges or a
+        degenerate layout."""
+        state = self.drone_state()
+        reading = self.tof.measure(
+            self.time, state.position_w, state.rotation_wb, self.drone.body_id
+        )
+        valid = np.asarray(reading.valid, dtype=bool)
+        if int(valid.sum()) < 3:
+            return None
+        points_c = np.asarray(self.config.tof.mount_offsets_c, dtype=float)[valid]
+        points_c[:, 2] += np.asarray(reading.ranges, dtype=float)[valid]
+        plane = fit_plane(points_c)
+        if plane is None:
+            return None
+        # the plane's normal points along +z_C, away from the camera: the deck's up is its
+        # opposite
+        up_w = state.rotation_wb @ (R_BC @ -plane.normal)
+        return (float(up_w[0]), float(up_w[1]), float(up_w[2]))
 
     def secure_to_deck(self, max_force_n: float) -> None:
         """Hold the drone down on the deck with at most ``max_force_n`` (a harpoon under its
