@@ -150,3 +150,18 @@ def test_a_scenarios_forecast_is_read_from_the_cache_by_a_new_process(
     monkeypatch.setattr(hms_forecast, "_FITTED", {})  # as a new process starts
     assert_identical(deck_forecast_for(config, hms), first)
     assert len(calls) == 1
+
+
+def test_one_sea_given_alone_or_in_a_list_names_one_entry_of_one_numpy_and_one_machine(
+    cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    motion = ss4_motion()
+    base = forecast_cache_path(motion, **SMALL)
+    assert forecast_cache_path([motion], **SMALL) == base == forecast_cache_path((motion,), **SMALL)
+    with monkeypatch.context() as patch:
+        patch.setattr(hms_forecast.np, "__version__", "0.0.0")
+        other_numpy = forecast_cache_path(motion, **SMALL)
+    with monkeypatch.context() as patch:
+        patch.setattr(hms_forecast.platform, "machine", lambda: "another architecture")
+        other_machine = forecast_cache_path(motion, **SMALL)
+    assert len({base, other_numpy, other_machine}) == 3
