@@ -437,9 +437,10 @@ class World:
         With ``spool_down_s`` 0 (the default) the motors are cut at the first contact.
         Otherwise the controller stays armed that long after it: PX4's land detector
         sequence (ground contact, thrust lowered, landed, disarm) rather than a cut at the
-        first touch.  The attitude loop aims the thrust along the deck's normal as the drone's
-        ToF ranges measure it each step (:meth:`deck_normal_measured_w`), the velocity loop flies ``setpoint`` (the guidance's last; none: hold
-        still), and the collective thrust it may ask for falls linearly from the weight to
+        first touch.  The attitude loop aims the thrust along the deck's normal as the
+        drone's ToF ranges measure it each step (:meth:`deck_normal_measured_w`), the
+        velocity loop flies ``setpoint`` (the guidance's last; none: hold still), and the
+        collective thrust it may ask for falls linearly from the weight to
         ``spool_down_final_thrust`` of it.  With ``harpoon_force_n`` above 0 a deck-securing
         device holds the drone down from the contact on (:meth:`secure_to_deck`).
         """
