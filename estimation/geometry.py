@@ -93,6 +93,15 @@ def fit_plane(points: np.ndarray, method: str = "lstsq") -> PlaneFit | None:
     return PlaneFit(normal=normal, offset=offset, rms_residual=rms)
 
 
+def plane_of_ranges(sensors_c: np.ndarray, ranges: np.ndarray) -> PlaneFit | None:
+    """The least-squares plane of ToF ranges: sensor i's touch point lies ``ranges[i]``
+    along the camera's axis from its origin ``sensors_c[i]`` (C), whatever the deck's tilt;
+    ``None`` as :func:`fit_plane` gives it (fewer than three sites, collinear, not finite)."""
+    touch = np.array(sensors_c, dtype=float)
+    touch[:, 2] += ranges
+    return fit_plane(touch, "lstsq")
+
+
 class ZPlaneFitter:
     """Least-squares planes ``z = a x + b y + c`` over fixed (x, y) sites (the ToF sensors).
 

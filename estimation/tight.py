@@ -224,9 +224,7 @@ class TightEstimator(GuardedEstimator):
         if len(ranges) == len(self.tof_positions_c) and self._plane_fitter is not None:
             plane = self._plane_fitter.fit(ranges + self.tof_positions_c[:, 2])
         else:
-            touch = sensors.copy()
-            touch[:, 2] += ranges
-            plane = geometry.fit_plane(touch, "lstsq")
+            plane = geometry.plane_of_ranges(sensors, ranges)
         if plane is None:
             return None
         k = self.intrinsics

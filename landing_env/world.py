@@ -18,7 +18,7 @@ from pybullet_utils.bullet_client import BulletClient
 from scipy.spatial.transform import Rotation
 
 from estimation.frames import R_BC, R_PD, deck_pose_in_camera
-from estimation.geometry import fit_plane
+from estimation.geometry import plane_of_ranges
 from estimation.landmarks import landmark_pose_w
 from estimation.types import CameraFrame, ImuSample, RangeReading
 from landing_env._quiet import quiet_stdout
@@ -490,7 +490,7 @@ class World:
         """The deck's upward normal in W as the drone measures it: the plane through its ToF
         ranges (a reading now, with its noise), placed at the sensors' nominal origins along
         the camera's axis (``tof.mount_offsets_c``; a misaligned beam is not known to the
-        drone), fitted by :func:`~estimation.geometry.fit_plane` in C and turned into W by the
+        drone), fitted in C (:func:`~estimation.geometry.plane_of_ranges`) and turned into W by the
         drone's attitude (its autopilot's estimate, the truth here as everywhere the
         simulated autopilot is read).  None with fewer than three valid ranges or a
         degenerate layout."""
@@ -501,9 +501,8 @@ class World:
         valid = np.asarray(reading.valid, dtype=bool)
         if int(valid.sum()) < 3:
             return None
-        points_c = np.asarray(self.config.tof.mount_offsets_c, dtype=float)[valid]
-        points_c[:, 2] += np.asarray(reading.ranges, dtype=float)[valid]
-        plane = fit_plane(points_c)
+        sensors_c = np.asarray(self.config.tof.mount_offsets_c, dtype=float)[valid]
+        plane = plane_of_ranges(sensors_c, np.asarray(reading.ranges, dtype=float)[valid])
         if plane is None:
             return None
         # the plane's normal points along +z_C, away from the camera: the deck's up is its

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -154,3 +156,19 @@ def test_undistort_pixels_inverts_the_lens_model_tightly() -> None:
     ideal = k.project(points, distort=False)
     recovered = geometry.undistort_pixels(k.project(points), k)
     np.testing.assert_allclose(recovered, ideal, atol=1e-6)
+
+
+def test_the_plane_of_ranges_is_the_deck_under_sensors_off_the_camera_plane() -> None:
+    # a deck tilted 10 deg about x_C, 0.5 m along the axis under the camera's centre: each
+    # sensor's range runs from its own origin (one of them 2 cm above the camera plane)
+    sensors = np.array([[-0.1, -0.1, 0.0], [0.1, -0.1, 0.0], [0.1, 0.1, -0.02], [-0.1, 0.1, 0.0]])
+    slope = math.tan(math.radians(10.0))
+    ranges = 0.5 + slope * sensors[:, 1] - sensors[:, 2]
+    plane = geometry.plane_of_ranges(sensors, ranges)
+    assert plane is not None
+    assert plane.normal == pytest.approx(
+        [0.0, -math.sin(math.radians(10.0)), math.cos(math.radians(10.0))]
+    )
+    assert plane.offset == pytest.approx(0.5 * math.cos(math.radians(10.0)))
+    assert sensors[2, 2] == -0.02  # the sites are not changed
+    assert geometry.plane_of_ranges(sensors[:2], ranges[:2]) is None
