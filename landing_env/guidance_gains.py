@@ -131,6 +131,12 @@ class GuidanceGains:
     #: constant (``controller.vel_p_z`` = 5/s: 0.2 s), so a set-point of the present deck
     #: velocity meets an accelerating deck late; 0 turns it off, seconds
     deck_lead_s: float = limited(0.0, Limit(0.0, 2.0))
+    #: in the deck-frame descent, the relative vertical speed the drone measures (its own
+    #: vertical velocity minus the tracked deck's: the rate of the tracked range) fed back:
+    #: the set-point adds this gain times the planned minus the measured relative speed, so
+    #: a vertical gust or the ship's airwake that pushes the drone down faster than planned
+    #: is met by the guidance as well as by the velocity loop; 0 turns it off
+    descent_rate_gain: float = limited(0.0, Limit(0.0, 10.0))
     #: what the deck-frame guidance does once neither the tag nor a ToF range has measured
     #: the deck for ``tracker_coast_s`` (the height track dropped) while the drone was above
     #: ``blind_range_m``: ``"descend"`` flies the plain law on (nothing seen: straight down

@@ -380,7 +380,12 @@ class DeckGuidance:
             if speed < 0.0 and height >= g.max_search_range_m:
                 speed = 0.0  # climb to widen the view, but no higher than this
             yaw_rate = self._yaw_rate(observation) if centre else 0.0
-            return self._deck_frame_setpoint(own, -speed, yaw_rate)
+            vertical = -speed
+            if g.descent_rate_gain > 0.0:
+                # the relative speed as measured (the tracked range's rate) held to the plan
+                measured = float(own.velocity_w[2]) - float(self.tracker.velocity_w[2])
+                vertical += g.descent_rate_gain * (vertical - measured)
+            return self._deck_frame_setpoint(own, vertical, yaw_rate)
         if self._searching(own):
             assert own is not None
             return self._search(own)

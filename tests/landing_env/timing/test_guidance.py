@@ -225,6 +225,28 @@ def test_the_descent_meets_a_rising_deck_at_the_touchdown_speed_relative_to_it()
     assert plain.descend(_observation((0.0, 0.0, 0.1))).velocity_h[2] == pytest.approx(-0.25)
 
 
+def test_the_descent_holds_the_measured_relative_speed_to_its_plan_by_the_rate_gain() -> None:
+    def setpoint(rate_gain: float, drone_vz: float) -> float:
+        gains = GuidanceGains(track_deck=True, touchdown_speed=0.25, descent_rate_gain=rate_gain)
+        guidance = DeckGuidance(gains, DT)
+        for _ in range(100):  # a deck at rest 2 m under a drone that holds its height
+            guidance.observe(_observation((0.0, 0.0, 2.0)), _level((0.0, 0.0, 2.0)))
+        # near the deck the plan is the touchdown speed, 0.25 m/s down; the drone sinks at
+        # drone_vz (a downdraft), which the deck's track, still at rest, measures as relative
+        own = _level((0.0, 0.0, 2.0), velocity=(0.0, 0.0, drone_vz))
+        return float(guidance.descend(_observation((0.0, 0.0, 0.1)), own).velocity_h[2])
+
+    # off: the plan alone, whatever the drone does
+    assert setpoint(0.0, -0.65) == pytest.approx(-0.25, abs=0.01)
+    # sinking 0.4 m/s faster than planned: the set-point rises by the gain times that
+    assert setpoint(1.0, -0.65) == pytest.approx(-0.25 + 0.4, abs=0.01)
+    assert setpoint(0.5, -0.65) == pytest.approx(-0.25 + 0.2, abs=0.01)
+    # descending slower than planned: it pushes down
+    assert setpoint(1.0, 0.0) == pytest.approx(-0.5, abs=0.01)
+    # on plan: no correction
+    assert setpoint(2.0, -0.25) == pytest.approx(-0.25, abs=0.01)
+
+
 def test_a_drone_leaning_into_the_wind_holds_upwind_of_the_tag_so_the_camera_sees_it() -> None:
     guidance = DeckGuidance(GuidanceGains(track_deck=True), DT)
     # leaning 15 deg nose-down into a wind from ahead (+x): body z tilts towards +x
