@@ -129,7 +129,25 @@ SHIP_TIMING: dict[str, Any] = {
         "deck_lead_s": 0.2,
         "lost_deck": "search",
         "view_from_camera": True,
+        "descent_rate_gain": 1.0,
     },
+}
+
+#: the ship's timing settings up to ``DeckLandingTiming-ShipSS<n>-v7`` (kept registered for the
+#: model trained on them): the descent without the relative speed's feedback
+SHIP_TIMING_V7: dict[str, Any] = {
+    **SHIP_TIMING,
+    "guidance": {k: v for k, v in SHIP_TIMING["guidance"].items() if k != "descent_rate_gain"},
+}
+
+#: the ship's touchdown: at the first contact a 0.15 s land sequence instead of cutting the
+#: motors, the thrust falling to nothing along the deck's normal as the ToF ranges measure it
+#: (``World.settle``; PX4's land detector: ground contact, thrust lowered, landed, disarm);
+#: with the descent's relative speed held to its plan (``descent_rate_gain``), ``land-now``
+#: at ``ship-ss6`` lands 77.5 % of 400 seeds against 63.0 % (docs/experiments/ship-timing.md)
+SHIP_TOUCHDOWN: dict[str, Any] = {
+    "touchdown.spool_down_s": 0.15,
+    "touchdown.spool_down_final_thrust": 0.0,
 }
 
 #: the estimate observed over a ship deck: ``tight`` uses the ToF rays that hit the pad (1-3 of
@@ -221,11 +239,12 @@ SCENARIOS: dict[str, Scenario] = {
             f"ship-ss{n}",
             f"30 m vessel's helideck, {sea}, wind and gusts; the drone starts in trim",
             {
-                LANDING_TASK: f"DeckLanding-ShipSS{n}-v5",
-                TIMING_TASK: f"DeckLandingTiming-ShipSS{n}-v7",
+                LANDING_TASK: f"DeckLanding-ShipSS{n}-v6",
+                TIMING_TASK: f"DeckLandingTiming-ShipSS{n}-v8",
             },
             estimator=SHIP_ESTIMATOR,
             timing=SHIP_TIMING,
+            extra=SHIP_TOUCHDOWN,
         )
         for n, sea in _SHIP_SEAS.items()
     },
@@ -241,6 +260,7 @@ HELD_OUT_SCENARIOS: dict[str, Scenario] = {
         SCENARIOS[sibling].ids,
         estimator=SCENARIOS[sibling].estimator,
         timing=SCENARIOS[sibling].timing,
+        extra=SCENARIOS[sibling].extra,
         held_out=True,
     )
     for name, sibling in (
@@ -280,7 +300,9 @@ APPROACH_SCENARIOS: dict[str, Scenario] = {
     ),
 }
 
-#: what each id family's versions were (the ids before the current ones are not registered)
+#: what each id family's versions were (the ids before the current ones are not registered,
+#: but for a superseded one kept for a shipped model trained on it:
+#: :attr:`ScenarioId.superseded_by`)
 VERSION_HISTORY: dict[str, list[str]] = {
     "DeckLanding-<Scenario>": [
         "v0: the scenario's config made a landing run, IHRCF observed on the bench.",
@@ -298,7 +320,8 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "v4: every observation key a float32 Box, the drone's velocity and attitude observed, "
         "a touchdown bonus.",
         "v5: DeckLanding-v2's land action, observation and reward, the ship's timing settings "
-        "(a 2 m hold) (current).",
+        "(a 2 m hold).",
+        "v6: the touchdown control of the timing task's v8 (current).",
     ],
     "DeckLandingTiming-BenchSS<n>": [
         "v0: the range-scheduled final descent.",
@@ -320,8 +343,11 @@ VERSION_HISTORY: dict[str, list[str]] = {
         "v5: v4 observing the helideck forecast and the drone's own state.",
         "v6: v5 started in trim with the mean wind, the autopilots' limits.",
         "v7: v6 observing the deck-pose history by default; the forecast observation was the "
-        "setting ``timing.observation: forecast`` until it left the package after 1.0.0 "
-        "(current).",
+        "setting ``timing.observation: forecast`` until it left the package after 1.0.0; "
+        "kept registered for ``timing_dqn_lookahead.zip``, which was trained on it.",
+        "v8: the touchdown control: the descent holds its measured relative speed to the plan "
+        "(``timing.guidance.descent_rate_gain``) and a 0.15 s land sequence along the "
+        "measured deck normal follows the contact (``touchdown.spool_down_s``) (current).",
     ],
     "DeckLandingTiming-PaperStewart": ["v0: the range-scheduled descent (current)."],
     "DeckLanding-HighApproach": [
@@ -384,6 +410,20 @@ def _ids() -> dict[str, ScenarioId]:
                 scenario.overrides(task),
                 scenario.name,
             )
+    # the ship's timing ids before the touchdown control, kept for the model trained on them
+    for n in _SHIP_SEAS:
+        scenario = SCENARIOS[f"ship-ss{n}"]
+        ids[f"DeckLandingTiming-ShipSS{n}-v7"] = ScenarioId(
+            TIMING_TASK,
+            scenario.config,
+            f"{_task_phrase(TIMING_TASK)} without the touchdown control: {scenario.description}",
+            {
+                **landing_overrides(TIMING_TASK, scenario.estimator, "project"),
+                **nested_to_dotted(SHIP_TIMING_V7, "timing"),
+            },
+            scenario.name,
+            superseded_by=scenario.ids[TIMING_TASK],
+        )
     # the high approach flies as its config says (from altitude, in gusts): no landing overrides
     approach = APPROACH_SCENARIOS["high-approach"]
     ids[approach.ids[LANDING_TASK]] = ScenarioId(

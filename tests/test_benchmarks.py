@@ -32,6 +32,7 @@ MAINTAINED = (
     "bench_paper_setup",
     "fuzz_soak",
     "bench_onboard_lookahead",
+    "bench_decision_latency",
 )
 #: modules of benchmarks/ that a maintained benchmark imports (not run on their own)
 HELPERS = ("fused_motions", "fused_replay")
@@ -230,3 +231,25 @@ def test_onboard_lookahead_sets_the_reduced_models_verdicts_against_the_replays(
     (row,) = [json.loads(line) for line in out.read_text().splitlines()]
     assert row["scenario"] == "ship-ss5" and row["first"]
     assert row["replay"] is None or len(row["replay"]) == len(row["reduced"]) == 16
+
+
+def test_decision_latency_times_every_decision_of_the_recommended_policy(tmp_path: Path) -> None:
+    printed = run_benchmark(
+        "bench_decision_latency", "--scenario", "ship-ss4", "--episodes", "1", cwd=tmp_path
+    )
+    number = r" \| ([\d.]+)"
+    row = re.search(rf"^\| ship-ss4 \| `(\S+)` \| (\d+){number * 3} \| (\d+) \|$", printed, re.M)
+    assert row is not None, printed
+    assert row.group(1) == "quiescent"
+    assert int(row.group(2)) >= 1
+    p50, p95, top = (float(row.group(i)) for i in (3, 4, 5))
+    assert 0.0 <= p50 <= p95 <= top
+    assert int(row.group(6)) == 100  # two 20 Hz control periods a decision
+
+
+def test_decision_latency_refuses_no_episodes(tmp_path: Path) -> None:
+    out = run_benchmark(
+        "bench_decision_latency", "--scenario", "ship-ss4", "--episodes", "0", cwd=tmp_path,
+        expect_rc=2,
+    )  # fmt: skip
+    assert "--episodes must be at least 1, got 0" in out

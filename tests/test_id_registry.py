@@ -111,7 +111,7 @@ def test_a_policy_brings_its_estimator_and_settings_and_the_user_overrides_them(
     )
     assert mine["estimation.observed"] == "ihrcf" and mine["timing.wait_limit_s"] == 30.0
     env_id, _ = env_settings("align-descend", "ship-ss5")
-    assert env_id == "DeckLanding-ShipSS5-v5"
+    assert env_id == "DeckLanding-ShipSS5-v6"
 
 
 def test_unknown_policies_and_scenarios_are_refused_naming_the_choices() -> None:

@@ -186,6 +186,9 @@ def descent_signature(
     # the go-around with the deck lost, where not the default (the ship's guidance from v3)
     if getattr(gains, "lost_deck", "descend") != "descend":
         tracking["lost_deck"] = gains.lost_deck
+    # the relative speed held to the plan, where on (the ship's guidance from v8)
+    if getattr(gains, "descent_rate_gain", 0.0):
+        tracking["descent_rate_gain"] = float(gains.descent_rate_gain)
     if gains.descent_profile == "range":
         return {"profile": "range", **tracking}
     signature: dict[str, Any] = {

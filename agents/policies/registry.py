@@ -109,6 +109,9 @@ class PolicySpec:
     model: str | None = None
     #: the scenarios it is made for (empty: every scenario of its task)
     scenarios: tuple[str, ...] = ()
+    #: scenario -> the superseded id it flies there instead of the scenario's current one:
+    #: the version its shipped model was trained on, kept registered for it
+    env_ids: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         require_choice(f"{self.name}.kind", self.kind, KINDS)
@@ -214,7 +217,7 @@ POLICIES: dict[str, PolicySpec] = {
         _timing(
             "timing-dqn-lookahead",
             kind="trained",
-            status="recommended",
+            status="supported",
             builder="agents.policies.lookahead:build_lookahead_policy",
             summary="a DQN deciding every 0.5 s on 16 commits tried in an onboard model's "
             "futures of the ship deck",
@@ -222,6 +225,10 @@ POLICIES: dict[str, PolicySpec] = {
             sensing="realistic",
             model="timing_dqn_lookahead.zip",
             scenarios=("ship-ss3", "ship-ss4", "ship-ss5", "ship-ss6"),
+            env_ids={
+                **{f"ship-ss{n}": f"DeckLandingTiming-ShipSS{n}-v7" for n in (3, 4, 5, 6)},
+                **{f"ship-unseen-{n}": f"DeckLandingTiming-ShipSS{n}-v7" for n in (4, 5)},
+            },
         ),
         PolicySpec(
             "lander",
@@ -334,7 +341,7 @@ RECOMMENDED: tuple[Recommendation, ...] = (
         "ship, sea state 6, realistic",
         "ship-ss6",
         "realistic",
-        "timing-dqn-lookahead",
+        "quiescent",
         "ship-ss6-realistic-heldout",
     ),
 )
@@ -348,7 +355,7 @@ DEFAULT_POLICY: dict[str, str] = {
     "ship-ss3": "quiescent",
     "ship-ss4": "quiescent",
     "ship-ss5": "quiescent",
-    "ship-ss6": "timing-dqn-lookahead",
+    "ship-ss6": "quiescent",
     "bench-unseen": "predictive",
     "ship-unseen-4": "quiescent",
     "ship-unseen-5": "quiescent",
@@ -394,7 +401,7 @@ def env_settings(
     spec = policy_spec(policy)
     table = {**SCENARIOS, **APPROACH_SCENARIOS}
     require_choice("scenario", scenario, tuple(table))
-    env_id = scenario_id(scenario, spec.task)
+    env_id = spec.env_ids.get(scenario) or scenario_id(scenario, spec.task)
     overrides: dict[str, Any] = {}
     chosen = estimator or spec.estimator
     if chosen is not None:

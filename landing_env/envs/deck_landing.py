@@ -278,7 +278,7 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
     allowed.  ``privileged=True`` adds the ``privileged`` key (training only: a policy that
     flies reads the env built without it).  ``render_mode="rgb_array"`` returns the camera
     image with the detections drawn; ``"human"`` opens the PyBullet window.  The scenario
-    ids (``DeckLanding-BenchSS4-v2``, ``DeckLanding-ShipSS5-v5``, ...) build a shipped config
+    ids (``DeckLanding-BenchSS4-v2``, ``DeckLanding-ShipSS5-v6``, ...) build a shipped config
     with its landing overrides and its timing settings (the bench's: the timed descent, an
     8 s history, the ``predictive`` wave-off and contact window, and
     ``timing.observation: prediction``; the ship's: its deck-frame guidance) and take the

@@ -87,7 +87,7 @@ def test_the_ship_ids_see_through_the_scenarios_lens_and_gate_on_its_view() -> N
     standard = {"lens": "standard", "timing.guidance.view_from_camera": False}
     for overrides, lens, half_tan in ((standard, "standard", 0.558), ({}, "wide", None)):
         env = gym.make(
-            "DeckLandingTiming-ShipSS5-v7", overrides={"sensors": "realistic", **overrides}
+            "DeckLandingTiming-ShipSS5-v8", overrides={"sensors": "realistic", **overrides}
         )
         try:
             unwrapped = env.unwrapped
@@ -102,14 +102,14 @@ def test_the_ship_ids_see_through_the_scenarios_lens_and_gate_on_its_view() -> N
         finally:
             env.close()
     # the ship ids fly their scenario's own lens
-    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v5"].overrides
+    assert "lens" not in SCENARIO_IDS["DeckLanding-ShipSS5-v6"].overrides
     assert load_config("ship-ss6").lens == "wide"
     # at sea state 4 the standard lens's finer pixels win (README "A wider lens for the ship")
     assert load_config("ship-ss4").lens == load_config("ship-ss3").lens == "standard"
 
 
 def test_a_wide_lens_ship_episode_runs_to_an_outcome_with_every_observation_in_its_space() -> None:
-    env = gym.make("DeckLandingTiming-ShipSS5-v7", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-ShipSS5-v8", overrides={"sensors": "realistic"})
     try:
         observation, _ = env.reset(seed=3)
         assert env.observation_space.contains(observation)

@@ -64,7 +64,7 @@ def test_it_is_refused_where_there_is_no_land_action_or_no_prediction_naming_the
             make_policy("align-predictive", env)
     finally:
         env.close()
-    env = gym.make("DeckLanding-ShipSS4-v5")
+    env = gym.make("DeckLanding-ShipSS4-v6")
     try:
         with pytest.raises(ConfigError, match=r"timing\.observation"):
             make_policy("align-predictive", env)

@@ -140,7 +140,7 @@ def test_the_shipped_recipe_trains_the_scenario_id_with_realistic_tight_sensing(
     ("recipe", "env_id", "actions"),
     [
         ("lander_velocity_ppo", "DeckLanding-BenchSS4-v2", 4),
-        ("lander_ship_ppo", "DeckLanding-ShipSS4-v5", 5),
+        ("lander_ship_ppo", "DeckLanding-ShipSS4-v6", 5),
     ],
 )
 def test_the_research_recipes_train_ppo_alone_with_the_privileged_critic(

@@ -170,7 +170,7 @@ def test_the_ship_ids_start_in_trim_with_the_autopilots_limits() -> None:
     from landing_env.scenarios import SCENARIO_IDS
 
     for n in (3, 4, 5, 6):
-        for env_id in (f"DeckLandingTiming-ShipSS{n}-v7", f"DeckLanding-ShipSS{n}-v5"):
+        for env_id in (f"DeckLandingTiming-ShipSS{n}-v8", f"DeckLanding-ShipSS{n}-v6"):
             scenario = SCENARIO_IDS[env_id]
             config = load_config(scenario.config, scenario.overrides)
             assert config.start.trim_to_wind is True, env_id
@@ -187,7 +187,7 @@ def test_random_decisions_on_ship_ss6_started_in_trim_never_leave_the_space() ->
 
     import landing_env  # noqa: F401  (registers the environments)
 
-    env = gym.make("DeckLandingTiming-ShipSS6-v7", overrides={"sensors": "realistic"})
+    env = gym.make("DeckLandingTiming-ShipSS6-v8", overrides={"sensors": "realistic"})
     rng = np.random.default_rng(11)
     try:
         for episode in range(3):

@@ -203,7 +203,25 @@ def test_the_ship_timing_ids_track_lead_and_go_around_the_deck() -> None:
     from landing_env.scenarios import SCENARIO_IDS
 
     for n in (3, 4, 5, 6):
-        overrides = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v7"].overrides
+        overrides = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v8"].overrides
+        # the touchdown control: the relative speed held to the plan, then the land sequence
+        assert overrides["timing.guidance.descent_rate_gain"] == 1.0
+        assert overrides["touchdown.spool_down_s"] == 0.15
+        assert overrides["touchdown.spool_down_final_thrust"] == 0.0
+        landing = SCENARIO_IDS[f"DeckLanding-ShipSS{n}-v6"].overrides
+        assert landing["timing.guidance.descent_rate_gain"] == 1.0
+        assert landing["touchdown.spool_down_s"] == 0.15
+        # the superseded v7, kept for the model trained on it, flies as it did
+        old = SCENARIO_IDS[f"DeckLandingTiming-ShipSS{n}-v7"]
+        assert old.superseded_by == f"DeckLandingTiming-ShipSS{n}-v8"
+        assert "timing.guidance.descent_rate_gain" not in old.overrides
+        assert "touchdown.spool_down_s" not in old.overrides
+        assert {k: v for k, v in overrides.items() if k not in old.overrides} == {
+            "timing.guidance.descent_rate_gain": 1.0,
+            "touchdown.spool_down_s": 0.15,
+            "touchdown.spool_down_final_thrust": 0.0,
+        }
+        assert all(overrides[k] == v for k, v in old.overrides.items())
         assert overrides["timing.guidance.track_deck"] is True
         assert overrides["timing.guidance.tracker_model"] == "acceleration"
         assert overrides["timing.guidance.deck_lead_s"] == 0.2
