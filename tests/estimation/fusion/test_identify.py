@@ -325,3 +325,12 @@ def test_a_refinement_that_merges_the_components_or_fails_keeps_the_start(
     # the start: the peaks with their damping held at the band's floor
     assert (w1, z1, w2, z2) == pytest.approx((SWELL[0], 0.05, WIND_SEA[0], 0.05))
     assert (v1, v2) == pytest.approx((var1, var2))
+
+
+def test_a_pole_at_zero_is_taken_at_a_millionth() -> None:
+    # y[n] = 0.999 y[n-1]: poles 0.999 and 0 (the order-2 fit's second lag unused); the two
+    # real poles pair into one overdamped factor, the pole at 0 taken at 1e-6
+    (w, zeta), _ = factors_from_ar(np.array([0.999, 0.0]), SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    a, b = math.log(0.999) / SAMPLE_S, math.log(1e-6) / SAMPLE_S
+    assert w == pytest.approx(math.sqrt(a * b), rel=1e-9)
+    assert zeta == DAMPING_RANGE[1]  # -(a + b) / 2w is far above the band
