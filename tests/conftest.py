@@ -43,13 +43,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def small_forecast():
-    """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit)."""
-    from landing_env.anticipation.hms_forecast import fit_deck_forecast
+    """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit),
+    through the forecasts' cache as the scenarios' own: the first test worker that asks fits
+    it, the other reads it back (the same to the bit)."""
+    from landing_env.anticipation.hms_forecast import cached_deck_forecast
     from landing_env.config import load_config
     from landing_env.scenarios import SCENARIOS
 
     motion = load_config(SCENARIOS["ship-ss4"].config).motion
-    return fit_deck_forecast(motion, realizations=3, record_s=400.0)
+    return cached_deck_forecast(motion, realizations=3, record_s=400.0)
 
 
 @pytest.fixture

@@ -1,6 +1,7 @@
 """Every command of the README and the docs runs: each ```bash/```sh/```shell/```console and
 ```python block of README.md and docs/**/*.md (not the dated records in docs/experiments/) runs
-in a fresh process, at reduced size, and a failing block fails the suite under its page:line.
+in a fresh process, at reduced size, and a failing block fails the suite under its page:line
+(a block whose reduced commands repeat an earlier block's runs once, under both page:lines).
 
 How a block runs
   * Shell blocks run as ``bash -euo pipefail -c BLOCK`` with the test's virtualenv first on PATH
@@ -189,13 +190,54 @@ def shrink_train_config(source: Path, target: Path) -> None:
 
 
 ALL_BLOCKS = [block for page in PAGES for block in blocks_of((ROOT / page).read_text(), page)]
+
+
+def _earlier_blocks(block: Block) -> list[Block]:
+    """The Python blocks of the same page before ``block`` that define a module by path."""
+    return [
+        b
+        for b in ALL_BLOCKS
+        if b.page == block.page
+        and b.line < block.line
+        and b.lang == "python"
+        and _PATH_COMMENT.match(b.code)
+    ]
+
+
+#: a shell comment to the end of its line (no quote after it)
+_COMMENT = re.compile(r"(?:^|\s)#[^'\"\n]*$", re.MULTILINE)
+
+
+def _commands(shell: str) -> tuple[str, ...]:
+    """A shell block's commands without their comments, continued lines joined and blanks
+    collapsed: what two blocks compare by."""
+    joined = _COMMENT.sub("", shell).replace("\\\n", " ")
+    return tuple(" ".join(line.split()) for line in joined.splitlines() if line.strip())
+
+
+def runs_of(blocks: list[Block]) -> list[list[Block]]:
+    """The blocks grouped by what runs, in their order: shell blocks whose reduced commands,
+    modules written before them and marker are the same (a page repeating the README's
+    commands) form one group, run once under all their ids; a Python block is its own."""
+    groups: dict[object, list[Block]] = {}
+    for block in blocks:
+        if block.lang == "python":
+            key: object = block.id
+        else:
+            earlier = tuple(b.code for b in _earlier_blocks(block))
+            key = (_commands(shell_of(block)), earlier, block.not_run)
+        groups.setdefault(key, []).append(block)
+    return list(groups.values())
+
+
 _CASES = [
     pytest.param(
-        block,
-        id=block.id,
-        marks=[pytest.mark.skip(reason=f"not-run: {block.not_run}")] if block.not_run else [],
+        group[0],
+        "+".join(block.id for block in group),
+        id="+".join(block.id for block in group),
+        marks=[pytest.mark.skip(reason=f"not-run: {group[0].not_run}")] if group[0].not_run else [],
     )
-    for block in ALL_BLOCKS
+    for group in runs_of(ALL_BLOCKS)
 ]
 
 
@@ -346,18 +388,6 @@ def page_folder(seed_folder: Path, tmp_path: Path) -> Path:
     return tmp_path
 
 
-def _earlier_blocks(block: Block) -> list[Block]:
-    """The Python blocks of the same page before ``block`` that define a module by path."""
-    return [
-        b
-        for b in ALL_BLOCKS
-        if b.page == block.page
-        and b.line < block.line
-        and b.lang == "python"
-        and _PATH_COMMENT.match(b.code)
-    ]
-
-
 _PROJECT_NAME = re.compile(r'^name = "(?P<name>[\w.-]+)"$', re.MULTILINE)
 _ENTRY_POINTS = re.compile(
     r'^\[project\.entry-points\."(?P<group>[\w.-]+)"\]\n(?P<body>(?:\w+ = ".*"\n)+)', re.MULTILINE
@@ -387,8 +417,10 @@ def install_page_package(page: str, folder: Path) -> None:
 _WARNINGS_AS_ERRORS = "import warnings\nwarnings.simplefilter('error', DeprecationWarning)\n"
 
 
-@pytest.mark.parametrize("block", _CASES)
-def test_the_documented_block_runs_in_a_fresh_process(block: Block, page_folder: Path) -> None:
+@pytest.mark.parametrize(("block", "where"), _CASES)
+def test_the_documented_block_runs_in_a_fresh_process(
+    block: Block, where: str, page_folder: Path
+) -> None:
     for earlier in _earlier_blocks(block):
         path = page_folder / _PATH_COMMENT.match(earlier.code)["path"]
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -406,9 +438,9 @@ def test_the_documented_block_runs_in_a_fresh_process(block: Block, page_folder:
             + f"import runpy\nrunpy.run_path({str(path)!r}, run_name='__main__')\n",
             encoding="utf-8",
         )
-        _run([sys.executable, str(runner)], page_folder, block.id)
+        _run([sys.executable, str(runner)], page_folder, where)
     else:
-        _run(["bash", "-euo", "pipefail", "-c", shell_of(block)], page_folder, block.id)
+        _run(["bash", "-euo", "pipefail", "-c", shell_of(block)], page_folder, where)
 
 
 # ------------------------------------------------------------------ the collector itself
@@ -434,6 +466,27 @@ def test_a_block_is_found_between_its_fences_with_its_line_and_marker() -> None:
         (17, "console", None),
     ]
     assert shell_of(found[3]) == "a \\\n  b\nc\n"
+
+
+def test_blocks_that_run_the_same_commands_run_once_under_each_ones_place() -> None:
+    command = "deck-landing evaluate landing --scenario bench-ss4 --episodes 200\n"
+    blocks = [
+        Block("README.md", 5, "bash", command, None),
+        Block("b.md", 9, "console", "$ " + command.replace("200", "20 # twenty"), None),
+        Block("b.md", 12, "bash", command, "runs until stopped"),
+        Block("b.md", 15, "python", "print(1)\n", None),
+        Block("c.md", 3, "python", "print(1)\n", None),
+    ]
+    groups = runs_of(blocks)
+    assert [[block.id for block in group] for group in groups] == [
+        ["README.md:5", "b.md:9"],
+        ["b.md:12"],
+        ["b.md:15"],
+        ["c.md:3"],
+    ]
+    # every block of the pages is in exactly one test's id
+    places = [place for case in _CASES for place in case.id.split("+")]
+    assert sorted(places) == sorted(block.id for block in ALL_BLOCKS)
 
 
 def test_the_reductions_shrink_counts_and_pick_the_first_alternative() -> None:

@@ -190,19 +190,29 @@ def test_a_fit_on_ship_and_bench_records_is_signed_by_both_timing_tasks(tmp_path
         sign_card(load_train_config(config_path), load_transitions([ship, mixed]))
 
 
-def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_a_named_profile(
-    small_forecast, tmp_path
-) -> None:
-    settings = LookaheadSettings(draws=3, check_every_s=1.0)
-    path = collect_transitions(
+#: the look-ahead of the collected records: three draws a check, a check a second
+DRAWS_3 = LookaheadSettings(draws=3, check_every_s=1.0)
+
+
+@pytest.fixture(scope="module")
+def replayed_record(small_forecast, tmp_path_factory) -> Path:
+    """One ship-ss4 episode collected by the replays of ``DRAWS_3`` under the named profile
+    realistic-2x (read, never written, by the tests that share it)."""
+    return collect_transitions(
         "ship-ss4",
         [5000],
-        tmp_path / "t.npz",
-        settings,
+        tmp_path_factory.mktemp("replayed") / "t.npz",
+        DRAWS_3,
         progress=False,
         forecast=small_forecast,
         sensing="realistic-2x",
     )
+
+
+def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_a_named_profile(
+    replayed_record, tmp_path
+) -> None:
+    settings, path = DRAWS_3, replayed_record
     recorded = load_transitions([path])
     # the records say the profile they were flown under, by its name
     assert set(recorded["sensing"].tolist()) == {"realistic-2x"}
@@ -244,7 +254,7 @@ def test_recorded_draws_rebuild_the_observations_and_those_of_fewer_draws_under_
 
 
 def test_records_flown_by_the_reduced_model_say_so_and_are_not_mixed_with_the_replays(
-    small_forecast, tmp_path
+    small_forecast, replayed_record, tmp_path
 ) -> None:
     reduced = LookaheadSettings(draws=3, check_every_s=1.0, model="reduced")
     path = collect_transitions(
@@ -256,16 +266,9 @@ def test_records_flown_by_the_reduced_model_say_so_and_are_not_mixed_with_the_re
     # a check flown is a valid look-ahead, its features inside the observation's bounds
     assert np.all(recorded["observation"][tried, 0] == 1.0)
     assert np.all(np.abs(recorded["observation"]) <= 1.0)
-    replayed = collect_transitions(
-        "ship-ss4",
-        [5002],
-        tmp_path / "p.npz",
-        LookaheadSettings(draws=3, check_every_s=1.0),
-        progress=False,
-        forecast=small_forecast,
-    )
+    # the replays' records of the same draws and checks are another look-ahead's
     with pytest.raises(ConfigError, match="another look-ahead"):
-        load_transitions([path, replayed])
+        load_transitions([path, replayed_record])
 
 
 def test_cross_validation_scores_every_episode_held_out_and_refits_on_all(tmp_path) -> None:

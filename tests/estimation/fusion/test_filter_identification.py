@@ -221,7 +221,9 @@ def test_correlated_tilt_errors_keep_nees_and_nis_in_their_chi2_bands() -> None:
     measured factor): on the bimodal sea the roll/pitch NEES and NIS stay in their 95 %
     chi² bands with the coloured-error states, and the NEES leaves its band when the errors
     are taken as independent; on the narrow swell the NEES is not above its band (the
-    identified two-component model is then cautious, never overconfident)."""
+    identified two-component model is then cautious, never overconfident).  Taken as
+    independent, each run's NEES is several times the band's top (7-17 against 2.75 over the
+    runs from seed 7 000 200): four runs tell it."""
     nees, nis = _monte_carlo(make_config(), BIMODAL, 8)
     low, high = chi2.ppf([0.025, 0.975], 2 * len(nees)) / len(nees)
     assert low <= float(np.mean(nees)) <= high, (np.mean(nees), low, high)
@@ -229,7 +231,7 @@ def test_correlated_tilt_errors_keep_nees_and_nis_in_their_chi2_bands() -> None:
     low_nis, high_nis = chi2.ppf([0.005, 0.995], 2 * len(nis)) / len(nis)
     assert low_nis <= float(np.mean(nis)) <= high_nis, (np.mean(nis), low_nis, high_nis)
     independent = make_config(tilt_error_correlation_s=0.0, tilt_error_sigma_scale=1.0)
-    nees_white, _ = _monte_carlo(independent, BIMODAL, 8)
+    nees_white, _ = _monte_carlo(independent, BIMODAL, 4)
     assert float(np.mean(nees_white)) > high, np.mean(nees_white)
     nees_swell, _ = _monte_carlo(make_config(), SWELL, 8)
     assert float(np.mean(nees_swell)) <= high, np.mean(nees_swell)
