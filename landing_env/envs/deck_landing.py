@@ -306,8 +306,10 @@ class DeckLandingEnv(CommittedDescent, DeckLandingBaseEnv):
       standard lens, started level and at rest with the bench's controller limits; ``v2`` the
       scenario's own lens (the wide 80° lens at sea states 5 and 6); ``v3`` started in trim
       with the mean wind, flying with the autopilots' stock limits (a 10 m/s² velocity
-      integrator, 45° of tilt); ``v4`` ``DeckLanding-v1``'s observation.  **v5** (current):
-      ``DeckLanding-v2``'s task, the ship's timing settings (a 2 m hold).  v1-v4 are no
+      integrator, 45° of tilt); ``v4`` ``DeckLanding-v1``'s observation; ``v5``
+      ``DeckLanding-v2``'s task, the ship's timing settings (a 2 m hold).  **v6** (current):
+      the touchdown control of ``DeckLandingTiming-ShipSS<n>-v8`` (the descent's relative
+      speed held to its plan, a 0.15 s land sequence after the contact).  v1-v5 are no
       longer registered.
     """
 
