@@ -46,6 +46,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench_paper_setup
 	$(PY) -m benchmarks.bench_onboard_lookahead
 	$(PY) -m benchmarks.bench_decision_latency
+	$(PY) -m benchmarks.bench_deck_forecast
 	$(PY) -m benchmarks.fuzz_soak
 
 # mutation testing (mutmut) of the modules in tools/mutation.yaml, each against the test files

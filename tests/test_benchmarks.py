@@ -33,6 +33,7 @@ MAINTAINED = (
     "fuzz_soak",
     "bench_onboard_lookahead",
     "bench_decision_latency",
+    "bench_deck_forecast",
 )
 #: modules of benchmarks/ that a maintained benchmark imports (not run on their own)
 HELPERS = ("fused_motions", "fused_replay")
@@ -253,3 +254,41 @@ def test_decision_latency_refuses_no_episodes(tmp_path: Path) -> None:
         expect_rc=2,
     )  # fmt: skip
     assert "--episodes must be at least 1, got 0" in out
+
+
+def test_the_deck_forecast_benchmark_sets_the_measured_error_beside_the_claimed(
+    tmp_path: Path,
+) -> None:
+    printed = run_benchmark(
+        "bench_deck_forecast",
+        "--scenario",
+        "ship-ss4",
+        "--forecast",
+        "online",
+        "--horizon",
+        "2",
+        "--record-s",
+        "300",
+        cwd=tmp_path,
+    )
+    cell = r"([\d.]+) / ([\d.]+) \(([\d.]+)\)"
+    line = rf"^\| `ship-ss4` \| online \| 2 \| {cell} \| {cell} \| {cell} \|$"
+    row = re.search(line, printed, re.M)
+    assert row is not None, printed
+    values = [float(v) for v in row.groups()]
+    for measured, claimed, ratio in zip(values[0::3], values[1::3], values[2::3], strict=True):
+        assert measured > 0.0 and claimed > 0.0
+        # each printed to two decimals
+        low, high = (measured - 0.005) / (claimed + 0.005), (measured + 0.005) / (claimed - 0.005)
+        assert low - 0.005 <= ratio <= high + 0.005
+    # an online forecast identified on the sea's own past is honest within a factor of two
+    assert all(0.5 < r < 2.0 for r in values[2::3])
+
+
+def test_the_deck_forecast_benchmark_refuses_a_bench_scenario_naming_the_argument(
+    tmp_path: Path,
+) -> None:
+    printed = run_benchmark(
+        "bench_deck_forecast", "--scenario", "bench-ss4", cwd=tmp_path, expect_rc=1
+    )
+    assert "scenario" in printed and "ship-ss4" in printed

@@ -216,6 +216,124 @@ class LinearMotionPredictor:
         w = 0.0 if j == k else float(np.clip((horizon_s - h[k]) / (h[j] - h[k]), 0.0, 1.0))
         return k, j, w
 
+    # ---------------------------------------------------------------- the deck's tilt
+    def _tilt_columns(self) -> list[int] | str:
+        """The columns of roll and pitch among the ``targets``, or why there are none."""
+        if "roll" not in self.targets or "pitch" not in self.targets:
+            return f"the predictor predicts {', '.join(self.targets)}, not roll and pitch"
+        return [self.targets.index("roll"), self.targets.index("pitch")]
+
+    def predict(self, values: np.ndarray, valid: np.ndarray, horizon_s: float) -> TiltPrediction:
+        """Roll and pitch ``horizon_s`` ahead from a history of the ``channels`` (coefficients
+        and covariance interpolated linearly between the fitted horizons); never raises on
+        data."""
+        phi = self.features(values, valid)
+        if isinstance(phi, str):
+            return _invalid(phi, horizon_s)
+        return self._from_features(phi, horizon_s)
+
+    def _from_features(self, phi: np.ndarray, horizon_s: float) -> TiltPrediction:
+        columns = self._tilt_columns()
+        if isinstance(columns, str):
+            return _invalid(columns, horizon_s)
+        h = self.horizons_s
+        if not (math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9):
+            return _invalid(f"horizon {horizon_s} s outside the fitted {h[0]}-{h[-1]} s")
+        k, j, w = self._bracket(horizon_s)
+        coefficients = (1.0 - w) * self.coefficients[k] + w * self.coefficients[j]
+        covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
+        mean = phi @ coefficients[:, columns]
+        if not np.all(np.isfinite(mean)):
+            return _invalid("non-finite prediction", horizon_s)
+        return TiltPrediction(
+            True,
+            "",
+            horizon_s,
+            float(mean[0]),
+            float(mean[1]),
+            covariance[np.ix_(columns, columns)],
+        )
+
+    def best_within(
+        self,
+        values: np.ndarray,
+        valid: np.ndarray,
+        horizons_s: Sequence[float],
+        limit_deg: float,
+    ) -> TiltPrediction:
+        """Of the predictions at ``horizons_s`` (the contact times a descent can be given),
+        the one with the best chance that the tilt is within ``limit_deg`` (the earliest of
+        equal ones); invalid, with the reason, when none can be made.  Never raises on data."""
+        phi = self.features(values, valid)
+        if isinstance(phi, str):
+            return _invalid(phi)
+        best, best_chance = _invalid("no contact time given"), -1.0
+        for horizon_s in horizons_s:
+            prediction = self._from_features(phi, float(horizon_s))
+            if not prediction.valid:
+                best = best if best.valid else prediction
+                continue
+            chance = prediction.probability_within(limit_deg)
+            if chance > best_chance:
+                best, best_chance = prediction, chance
+        return best
+
+    def mean_within(
+        self,
+        values: np.ndarray,
+        valid: np.ndarray,
+        horizons_s: Sequence[float],
+        limit_deg: float,
+    ) -> tuple[float, list[TiltPrediction]]:
+        """The chance that the tilt is within ``limit_deg`` at a contact equally likely to come
+        at each of ``horizons_s`` (a descent whose contact time is not chosen but spread: the
+        mean of the chances), and the predictions; 0 and the invalid predictions (with their
+        reasons) when any cannot be made.  Never raises on data."""
+        phi = self.features(values, valid)
+        if isinstance(phi, str):
+            return 0.0, [_invalid(phi)]
+        predictions = [self._from_features(phi, float(h)) for h in horizons_s]
+        if not predictions:
+            return 0.0, [_invalid("no contact time given")]
+        if not all(p.valid for p in predictions):
+            return 0.0, predictions
+        chance = float(np.mean([p.probability_within(limit_deg) for p in predictions]))
+        return chance, predictions
+
+    def chances(
+        self, horizons_s: float | Sequence[float], limit_deg: float, combine: str = "best"
+    ) -> np.ndarray:
+        """The chance that the tilt ``horizons_s`` ahead is within ``limit_deg`` for each of the
+        held-out examples recorded at fitting: how such chances are distributed over the sea
+        (empty when none were recorded, a horizon is outside the fitted ones or the predictor
+        predicts no tilt).  With several horizons, ``combine`` says how they make one chance:
+        ``best`` (a descent whose contact time is chosen among them) or ``mean`` (a contact
+        equally likely at each)."""
+        if combine not in ("best", "mean"):
+            raise ValueError(f"combine must be 'best' or 'mean', not {combine!r}")
+        horizons = np.atleast_1d(np.asarray(horizons_s, dtype=float))
+        h = self.horizons_s
+        columns = self._tilt_columns()
+        if (
+            isinstance(columns, str)
+            or self.heldout_means.size == 0
+            or horizons.size == 0
+            or not np.all(np.isfinite(horizons))
+            or horizons.min() < h[0] - 1e-9
+            or horizons.max() > h[-1] + 1e-9
+        ):
+            return np.zeros(0)
+        out = np.zeros(self.heldout_means.shape[1])
+        for horizon_s in horizons:
+            k, j, w = self._bracket(float(horizon_s))
+            means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
+            covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
+            chance = _probabilities_within(
+                means[:, columns], covariance[np.ix_(columns, columns)], limit_deg
+            )
+            out = np.maximum(out, chance) if combine == "best" else out + chance
+        return out if combine == "best" else out / len(horizons)
+
     # ---------------------------------------------------------------- fitting
     @classmethod
     def fit(
@@ -437,72 +555,3 @@ class LinearTiltPredictor(LinearMotionPredictor):
         super().__post_init__()
         if self.targets != ("roll", "pitch"):
             raise ValueError(f"a tilt predictor predicts roll and pitch, not {self.targets}")
-
-    # ---------------------------------------------------------------- prediction
-    def predict(self, values: np.ndarray, valid: np.ndarray, horizon_s: float) -> TiltPrediction:
-        """Roll and pitch ``horizon_s`` ahead from a history of the ``channels`` (coefficients
-        and covariance interpolated linearly between the fitted horizons); never raises on
-        data."""
-        phi = self.features(values, valid)
-        if isinstance(phi, str):
-            return _invalid(phi, horizon_s)
-        return self._from_features(phi, horizon_s)
-
-    def _from_features(self, phi: np.ndarray, horizon_s: float) -> TiltPrediction:
-        h = self.horizons_s
-        if not (math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9):
-            return _invalid(f"horizon {horizon_s} s outside the fitted {h[0]}-{h[-1]} s")
-        k, j, w = self._bracket(horizon_s)
-        coefficients = (1.0 - w) * self.coefficients[k] + w * self.coefficients[j]
-        covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
-        mean = phi @ coefficients
-        if not np.all(np.isfinite(mean)):
-            return _invalid("non-finite prediction", horizon_s)
-        return TiltPrediction(True, "", horizon_s, float(mean[0]), float(mean[1]), covariance)
-
-    def best_within(
-        self,
-        values: np.ndarray,
-        valid: np.ndarray,
-        horizons_s: Sequence[float],
-        limit_deg: float,
-    ) -> TiltPrediction:
-        """Of the predictions at ``horizons_s`` (the contact times a descent can be given),
-        the one with the best chance that the tilt is within ``limit_deg`` (the earliest of
-        equal ones); invalid, with the reason, when none can be made.  Never raises on data."""
-        phi = self.features(values, valid)
-        if isinstance(phi, str):
-            return _invalid(phi)
-        best, best_chance = _invalid("no contact time given"), -1.0
-        for horizon_s in horizons_s:
-            prediction = self._from_features(phi, float(horizon_s))
-            if not prediction.valid:
-                best = best if best.valid else prediction
-                continue
-            chance = prediction.probability_within(limit_deg)
-            if chance > best_chance:
-                best, best_chance = prediction, chance
-        return best
-
-    def chances(self, horizons_s: float | Sequence[float], limit_deg: float) -> np.ndarray:
-        """The chance that the tilt ``horizons_s`` ahead is within ``limit_deg`` (with several
-        horizons, the best of them: a descent whose contact time is chosen among them), for
-        each of the held-out examples recorded at fitting: how such chances are distributed
-        over the sea (empty when none were recorded or a horizon is outside the fitted ones)."""
-        horizons = np.atleast_1d(np.asarray(horizons_s, dtype=float))
-        h = self.horizons_s
-        if (
-            self.heldout_means.size == 0
-            or horizons.size == 0
-            or not np.all(np.isfinite(horizons))
-            or horizons.min() < h[0] - 1e-9
-            or horizons.max() > h[-1] + 1e-9
-        ):
-            return np.zeros(0)
-        best = np.zeros(self.heldout_means.shape[1])
-        for horizon_s in horizons:
-            k, j, w = self._bracket(float(horizon_s))
-            means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
-            covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
-            best = np.maximum(best, _probabilities_within(means, covariance, limit_deg))
-        return best
