@@ -241,7 +241,7 @@ def test_decision_latency_times_every_decision_of_the_recommended_policy(tmp_pat
     number = r" \| ([\d.]+)"
     row = re.search(rf"^\| ship-ss4 \| `(\S+)` \| (\d+){number * 3} \| (\d+) \|$", printed, re.M)
     assert row is not None, printed
-    assert row.group(1) == "quiescent"
+    assert row.group(1) == "predictive"
     assert int(row.group(2)) >= 1
     p50, p95, top = (float(row.group(i)) for i in (3, 4, 5))
     assert 0.0 <= p50 <= p95 <= top
