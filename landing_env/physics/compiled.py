@@ -45,7 +45,7 @@ def why_not_compiled() -> str:
 
 def cpython_remainder(x: float, y: float) -> float:
     """``math.remainder(x, y)`` as CPython computes it (``m_remainder``: from ``fmod``),
-    for finite ``y`` other than 0; a NaN ``x`` or an infinite one gives NaN."""
+    for finite ``y`` other than 0 (a NaN ``x`` gives itself, an infinite one NaN)."""
     if math.isfinite(x):
         absx = abs(x)
         absy = abs(y)
@@ -59,7 +59,9 @@ def cpython_remainder(x: float, y: float) -> float:
         else:
             r = m - 2.0 * ((0.5 * (absx - m)) % absy)
         return math.copysign(1.0, x) * r
-    return math.nan
+    if math.isnan(x):
+        return x
+    return math.nan  # CPython raises ValueError here; the loop's angles are never infinite
 
 
 def _fast_sum(a: float, b: float) -> tuple[float, float]:
