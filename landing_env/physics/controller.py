@@ -25,13 +25,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from math import hypot, remainder
 
 import numpy as np
 
 from estimation.limits import POSITIVE, Limit, limited, require_limits
 from landing_env.errors import ConfigError, require_range
-from landing_env.physics.compiled import compiled, compiled_available, why_not_compiled
 from landing_env.physics.drone_state import DroneState
 from landing_env.physics.quadrotor_params import GRAVITY, QuadrotorParams
 
@@ -151,15 +149,7 @@ class ControllerStatus:
 class CascadeController:
     """Velocity/yaw-rate set-point to rotor speed commands (rad/s), PX4 style."""
 
-    def __init__(
-        self,
-        params: QuadrotorParams,
-        gains: ControllerGains | None = None,
-        *,
-        compiled_step: bool | None = None,
-    ) -> None:
-        """``compiled_step``: run the cascade's arithmetic compiled (Numba, the same floats);
-        None: where Numba is installed (:func:`~landing_env.physics.compiled.compiled`)."""
+    def __init__(self, params: QuadrotorParams, gains: ControllerGains | None = None) -> None:
         self.params = params
         self.gains = ControllerGains() if gains is None else gains
         prm = params
@@ -183,26 +173,22 @@ class CascadeController:
         )
         self._mix = tuple(tuple(row) for row in np.linalg.inv(allocation).tolist())
         self._tan_tilt = math.tan(self.gains.max_tilt)
-        #: the cascade's arithmetic: compiled where Numba is installed, else as written
-        if compiled_step and not compiled_available():
-            raise ValueError(f"compiled_step=True, but {why_not_compiled()}")
-        self._step = cascade_step if compiled_step is False else compiled(cascade_step)
-        self._compiled = self._step is not cascade_step
-        self._sync_terms()
         self.reset()
 
     def reset(self) -> None:
         """Clear integrators, filters and the yaw set-point (taken from the next state)."""
         self._initialised = False
-        # cascade_step's memory (MEMORY_SIZE floats): velocity and rate integrators, their
-        # derivative filters, the last velocity and rates, the yaw set-point; an array for
-        # the compiled form, a list for Python's
-        zeros = [0.0] * MEMORY_SIZE
-        self._memory = np.array(zeros) if self._compiled else zeros
+        self._vel_int = [0.0, 0.0, 0.0]
+        self._rate_int = [0.0, 0.0, 0.0]
+        self._vel_prev = (0.0, 0.0, 0.0)
+        self._rate_prev = (0.0, 0.0, 0.0)
+        self._vel_deriv = [0.0, 0.0, 0.0]
+        self._rate_deriv = [0.0, 0.0, 0.0]
         self._filter_dt = -1.0
         self._vel_beta = 0.0
         self._rate_beta = 0.0
-        self._flags = (False,) * 9
+        self.yaw_setpoint = 0.0
+        self._flags = [False] * 9
         #: last torque demanded of the mixer (N m, body frame), before any mixer reduction
         self.last_torque_setpoint_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
         #: the most collective thrust the velocity loop may ask for, N (a land sequence
@@ -222,18 +208,12 @@ class CascadeController:
         limit = self.gains.vel_i_limit_xy
         if norm > limit:
             ax, ay = ax * limit / norm, ay * limit / norm
-        self._memory[0] = ax
-        self._memory[1] = ay
+        self._vel_int[0], self._vel_int[1] = ax, ay
 
     @property
     def velocity_integral_w(self) -> np.ndarray:
         """The velocity loop's integrators now (world x, y, z; m/s^2 of acceleration)."""
-        return np.array(self._memory[0:3], dtype=float)
-
-    @property
-    def yaw_setpoint(self) -> float:
-        """The yaw set-point the attitude loop holds (rad, about world z)."""
-        return float(self._memory[YAW_SETPOINT])
+        return np.array(self._vel_int, dtype=float)
 
     def scale_thrust_model(self, factor: float) -> None:
         """Scale the thrust the controller expects of a rotor speed (``k_f``, and with it the
@@ -245,28 +225,6 @@ class CascadeController:
         self._k_f *= factor
         self._f_min *= factor
         self._f_max *= factor
-        self._sync_terms()
-
-    def _sync_terms(self) -> None:
-        """Gather the gains and the vehicle's constants :func:`cascade_step` reads, in its
-        ``constants``' order (a tuple for Python, an array for the compiled form)."""
-        self._terms_for = gains = self.gains
-        jx, jy, jz = self._inertia
-        constants = (
-            *(getattr(gains, name) for name in CASCADE_GAINS),
-            self._mass,
-            jx,
-            jy,
-            jz,
-            self._f_min,
-            self._f_max,
-            self._k_f,
-            self._omega_min,
-            self._omega_max,
-            self._tan_tilt,
-            *(value for row in self._mix for value in row),
-        )
-        self._constants = np.array(constants, dtype=float) if self._compiled else constants
 
     @property
     def status(self) -> ControllerStatus:
@@ -279,505 +237,276 @@ class CascadeController:
 
     def update_floats(
         self, state: DroneState, setpoint: VelocitySetpoint, dt: float
-    ) -> tuple[float, float, float, float]:
-        """:meth:`update` with the commands as floats (the physics step's form)."""
+    ) -> list[float]:
+        """:meth:`update` with the commands as a list of floats (the physics step's form)."""
         g = self.gains
         floats = state.floats
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = floats.rotation_wb
+        vx, vy, vz = floats.velocity_w
+        wx, wy, wz = floats.angular_velocity_b
         yaw = state.yaw
-        memory = self._memory
         if not self._initialised:
             self._initialised = True
-            memory[YAW_SETPOINT] = yaw
-            memory[12], memory[13], memory[14] = floats.velocity_w
-            memory[15], memory[16], memory[17] = floats.angular_velocity_b
+            self.yaw_setpoint = yaw
+            self._vel_prev = (vx, vy, vz)
+            self._rate_prev = (wx, wy, wz)
         if dt != self._filter_dt:
             self._filter_dt = dt
             self._vel_beta = 1.0 - math.exp(-2.0 * math.pi * g.vel_d_cutoff_hz * dt)
             self._rate_beta = 1.0 - math.exp(-2.0 * math.pi * g.rate_d_cutoff_hz * dt)
-        if g is not self._terms_for:
-            self._sync_terms()
+
+        # ---- set-point limits, heading frame -> world
         sx, sy, sz = setpoint.velocity_h.tolist()
-        axis = self.thrust_axis_w
-        if axis is None:
-            has_axis, (ax, ay, az) = False, (0.0, 0.0, 0.0)
-        else:
-            has_axis, (ax, ay, az) = True, axis
-        omegas, self._flags, self.last_torque_setpoint_b = self._step(
-            self._constants,
-            memory,
-            floats.rotation_wb,
-            floats.velocity_w,
-            floats.angular_velocity_b,
-            yaw,
-            sx,
-            sy,
-            sz,
-            setpoint.yaw_rate,
-            dt,
-            self._vel_beta,
-            self._rate_beta,
-            self.thrust_cap_n,
-            has_axis,
-            ax,
-            ay,
-            az,
+        yaw_rate = setpoint.yaw_rate
+        sp_limited = False
+        speed = math.hypot(sx, sy)
+        if speed > g.max_horizontal_speed:
+            scale = g.max_horizontal_speed / speed
+            sx *= scale
+            sy *= scale
+            sp_limited = True
+        if sz > g.max_climb_rate:
+            sz = g.max_climb_rate
+            sp_limited = True
+        elif sz < -g.max_descent_rate:
+            sz = -g.max_descent_rate
+            sp_limited = True
+        if yaw_rate > g.max_rate_yaw:
+            yaw_rate = g.max_rate_yaw
+            sp_limited = True
+        elif yaw_rate < -g.max_rate_yaw:
+            yaw_rate = -g.max_rate_yaw
+            sp_limited = True
+        cy = math.cos(yaw)
+        sn = math.sin(yaw)
+        ex = cy * sx - sn * sy - vx
+        ey = sn * sx + cy * sy - vy
+        ez = sz - vz
+
+        # ---- velocity PID -> acceleration (derivative on measurement: no set-point kick)
+        beta = self._vel_beta
+        pvx, pvy, pvz = self._vel_prev
+        dv = self._vel_deriv
+        dv[0] += beta * ((vx - pvx) / dt - dv[0])
+        dv[1] += beta * ((vy - pvy) / dt - dv[1])
+        dv[2] += beta * ((vz - pvz) / dt - dv[2])
+        self._vel_prev = (vx, vy, vz)
+        vi = self._vel_int
+        ax = g.vel_p_xy * ex + vi[0] - g.vel_d_xy * dv[0]
+        ay = g.vel_p_xy * ey + vi[1] - g.vel_d_xy * dv[1]
+        az = g.vel_p_z * ez + vi[2] - g.vel_d_z * dv[2]
+
+        vert_limited = 0  # +1 limited from above, -1 from below
+        if az > g.max_accel_up:
+            az = g.max_accel_up
+            vert_limited = 1
+        elif az < -g.max_accel_down:
+            az = -g.max_accel_down
+            vert_limited = -1
+        # Vertical first: the horizontal acceleration gets what the tilt limit and the
+        # remaining thrust allow.
+        lift = az + GRAVITY
+        t_max = 4.0 * self._f_max
+        t_min = 4.0 * self._f_min
+        a_max = t_max / self._mass
+        horizontal_room = min(
+            lift * self._tan_tilt, math.sqrt(max(a_max * a_max - lift * lift, 0.0))
         )
-        return omegas
+        a_h = math.hypot(ax, ay)
+        tilt_limited = a_h > horizontal_room
+        if tilt_limited:
+            scale = horizontal_room / a_h
+            ax *= scale
+            ay *= scale
 
-
-#: the gains :func:`cascade_step` reads, in its ``gains``' order (:class:`ControllerGains`' fields)
-CASCADE_GAINS = (
-    "max_horizontal_speed",
-    "max_climb_rate",
-    "max_descent_rate",
-    "max_rate_yaw",
-    "vel_p_xy",
-    "vel_i_xy",
-    "vel_d_xy",
-    "vel_p_z",
-    "vel_i_z",
-    "vel_d_z",
-    "vel_i_limit_xy",
-    "vel_i_limit_z",
-    "max_accel_up",
-    "max_accel_down",
-    "att_p_rp",
-    "att_p_yaw",
-    "max_yaw_error",
-    "max_rate_rp",
-    "rate_p_rp",
-    "rate_i_rp",
-    "rate_d_rp",
-    "rate_p_yaw",
-    "rate_i_yaw",
-    "rate_d_yaw",
-    "rate_i_limit_rp",
-    "rate_i_limit_yaw",
-)
-
-
-Vector3 = tuple[float, float, float]
-
-#: the floats of the controller's memory between steps (:func:`cascade_step`'s ``memory``)
-MEMORY_SIZE = 19
-#: where the yaw set-point is in it
-YAW_SETPOINT = 18
-
-
-def cascade_step(
-    constants,
-    memory,
-    rotation_wb: tuple[float, ...],
-    velocity_w: Vector3,
-    rates_b: Vector3,
-    yaw: float,
-    sx: float,
-    sy: float,
-    sz: float,
-    yaw_rate: float,
-    dt: float,
-    vel_beta: float,
-    rate_beta: float,
-    thrust_cap_n: float,
-    has_axis: bool,
-    axis_x: float,
-    axis_y: float,
-    axis_z: float,
-) -> tuple[tuple[float, float, float, float], tuple[bool, ...], Vector3]:
-    """One step of the cascade in plain floats: :meth:`CascadeController.update_floats`'s
-    arithmetic (compiled by :func:`landing_env.physics.compiled.compiled` where Numba is
-    installed).
-
-    ``constants``: the gains named in :data:`CASCADE_GAINS`, then the mass, the inertia's
-    diagonal, the rotor thrust range, ``k_f``, the rotor speed range, the tangent of the tilt
-    limit and the mixer's 4 x 4 rows; ``memory``: the :data:`MEMORY_SIZE` floats the
-    controller keeps between steps (integrators, derivative filters, the last velocity and
-    rates, the yaw set-point), updated in place.  ``rotation_wb``: R_WB's 9 row-major floats;
-    ``sx, sy, sz, yaw_rate``: the set-point (velocity in H, yaw rate); ``vel_beta``,
-    ``rate_beta``: the derivative filters' gains; ``axis_*``: the thrust direction the
-    attitude loop aims at when ``has_axis``.  Returns the four rotor speeds (rad/s), the
-    nine status flags and the torque demanded of the mixer.
-    """
-    (
-        max_horizontal_speed,
-        max_climb_rate,
-        max_descent_rate,
-        max_rate_yaw,
-        vel_p_xy,
-        vel_i_xy,
-        vel_d_xy,
-        vel_p_z,
-        vel_i_z,
-        vel_d_z,
-        vel_i_limit_xy,
-        vel_i_limit_z,
-        max_accel_up,
-        max_accel_down,
-        att_p_rp,
-        att_p_yaw,
-        max_yaw_error,
-        max_rate_rp,
-        rate_p_rp,
-        rate_i_rp,
-        rate_d_rp,
-        rate_p_yaw,
-        rate_i_yaw,
-        rate_d_yaw,
-        rate_i_limit_rp,
-        rate_i_limit_yaw,
-        mass,
-        jx,
-        jy,
-        jz,
-        f_min,
-        f_max,
-        k_f,
-        omega_min,
-        omega_max,
-        tan_tilt,
-        a0,
-        b0,
-        c0,
-        d0,
-        a1,
-        b1,
-        c1,
-        d1,
-        a2,
-        b2,
-        c2,
-        d2,
-        a3,
-        b3,
-        c3,
-        d3,
-    ) = constants
-    (
-        vi0,
-        vi1,
-        vi2,
-        ri0,
-        ri1,
-        ri2,
-        dv0,
-        dv1,
-        dv2,
-        dw0,
-        dw1,
-        dw2,
-        pvx,
-        pvy,
-        pvz,
-        pwx,
-        pwy,
-        pwz,
-        yaw_setpoint,
-    ) = memory
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_wb
-    vx, vy, vz = velocity_w
-    wx, wy, wz = rates_b
-
-    # ---- set-point limits, heading frame -> world
-    sp_limited = False
-    speed = hypot(sx, sy)
-    if speed > max_horizontal_speed:
-        scale = max_horizontal_speed / speed
-        sx *= scale
-        sy *= scale
-        sp_limited = True
-    if sz > max_climb_rate:
-        sz = max_climb_rate
-        sp_limited = True
-    elif sz < -max_descent_rate:
-        sz = -max_descent_rate
-        sp_limited = True
-    if yaw_rate > max_rate_yaw:
-        yaw_rate = max_rate_yaw
-        sp_limited = True
-    elif yaw_rate < -max_rate_yaw:
-        yaw_rate = -max_rate_yaw
-        sp_limited = True
-    cy = math.cos(yaw)
-    sn = math.sin(yaw)
-    ex = cy * sx - sn * sy - vx
-    ey = sn * sx + cy * sy - vy
-    ez = sz - vz
-
-    # ---- velocity PID -> acceleration (derivative on measurement: no set-point kick)
-    beta = vel_beta
-    dv0 += beta * ((vx - pvx) / dt - dv0)
-    dv1 += beta * ((vy - pvy) / dt - dv1)
-    dv2 += beta * ((vz - pvz) / dt - dv2)
-    ax = vel_p_xy * ex + vi0 - vel_d_xy * dv0
-    ay = vel_p_xy * ey + vi1 - vel_d_xy * dv1
-    az = vel_p_z * ez + vi2 - vel_d_z * dv2
-
-    vert_limited = 0  # +1 limited from above, -1 from below
-    if az > max_accel_up:
-        az = max_accel_up
-        vert_limited = 1
-    elif az < -max_accel_down:
-        az = -max_accel_down
-        vert_limited = -1
-    # Vertical first: the horizontal acceleration gets what the tilt limit and the
-    # remaining thrust allow.
-    lift = az + GRAVITY
-    t_max = 4.0 * f_max
-    t_min = 4.0 * f_min
-    a_max = t_max / mass
-    # min() and max() as Python's builtins pick (the first unless the second is smaller or
-    # larger): the same float, -0.0 and NaN included, compiled or not
-    room_sq = a_max * a_max - lift * lift
-    if 0.0 > room_sq:
-        room_sq = 0.0
-    horizontal_room = lift * tan_tilt
-    thrust_room = math.sqrt(room_sq)
-    if thrust_room < horizontal_room:
-        horizontal_room = thrust_room
-    a_h = hypot(ax, ay)
-    tilt_limited = a_h > horizontal_room
-    if tilt_limited:
-        scale = horizontal_room / a_h
-        ax *= scale
-        ay *= scale
-
-    # ---- thrust vector -> collective thrust on the current body z, desired body z
-    m = mass
-    fx = m * ax
-    fy = m * ay
-    fz = m * lift
-    thrust = fx * r02 + fy * r12 + fz * r22
-    thrust_limited = 0
-    if thrust > t_max:
-        thrust = t_max
-        thrust_limited = 1
-    elif thrust < t_min:
-        thrust = t_min
-        thrust_limited = -1
-    if thrust > thrust_cap_n:
-        thrust = thrust_cap_n
-        if t_min > thrust:
+        # ---- thrust vector -> collective thrust on the current body z, desired body z
+        m = self._mass
+        fx = m * ax
+        fy = m * ay
+        fz = m * lift
+        thrust = fx * r02 + fy * r12 + fz * r22
+        thrust_limited = 0
+        if thrust > t_max:
+            thrust = t_max
+            thrust_limited = 1
+        elif thrust < t_min:
             thrust = t_min
-        thrust_limited = 1
+            thrust_limited = -1
+        if thrust > self.thrust_cap_n:
+            thrust = max(self.thrust_cap_n, t_min)
+            thrust_limited = 1
 
-    # Velocity integrators: conditional integration (no growth into an active limit).
-    int_limited = False
-    if not tilt_limited or ex * ax < 0.0:
-        vi0 += vel_i_xy * ex * dt
-    if not tilt_limited or ey * ay < 0.0:
-        vi1 += vel_i_xy * ey * dt
-    pushing_up = vert_limited > 0 or thrust_limited > 0
-    pushing_down = vert_limited < 0 or thrust_limited < 0
-    if not ((pushing_up and ez > 0.0) or (pushing_down and ez < 0.0)):
-        vi2 += vel_i_z * ez * dt
-    i_xy = hypot(vi0, vi1)
-    if i_xy > vel_i_limit_xy:
-        vi0 *= vel_i_limit_xy / i_xy
-        vi1 *= vel_i_limit_xy / i_xy
-        int_limited = True
-    if abs(vi2) > vel_i_limit_z:
-        vi2 = math.copysign(vel_i_limit_z, vi2)
-        int_limited = True
+        # Velocity integrators: conditional integration (no growth into an active limit).
+        int_limited = False
+        if not tilt_limited or ex * ax < 0.0:
+            vi[0] += g.vel_i_xy * ex * dt
+        if not tilt_limited or ey * ay < 0.0:
+            vi[1] += g.vel_i_xy * ey * dt
+        pushing_up = vert_limited > 0 or thrust_limited > 0
+        pushing_down = vert_limited < 0 or thrust_limited < 0
+        if not ((pushing_up and ez > 0.0) or (pushing_down and ez < 0.0)):
+            vi[2] += g.vel_i_z * ez * dt
+        i_xy = math.hypot(vi[0], vi[1])
+        if i_xy > g.vel_i_limit_xy:
+            vi[0] *= g.vel_i_limit_xy / i_xy
+            vi[1] *= g.vel_i_limit_xy / i_xy
+            int_limited = True
+        if abs(vi[2]) > g.vel_i_limit_z:
+            vi[2] = math.copysign(g.vel_i_limit_z, vi[2])
+            int_limited = True
 
-    # ---- attitude: tilt error (body z -> desired body z) and heading error
-    norm = math.sqrt(fx * fx + fy * fy + fz * fz)
-    dzx = fx / norm
-    dzy = fy / norm
-    dzz = fz / norm
-    if has_axis:
-        dzx = axis_x
-        dzy = axis_y
-        dzz = axis_z
-    cx = r12 * dzz - r22 * dzy  # z_B x z_d, world frame
-    cyw = r22 * dzx - r02 * dzz
-    cz = r02 * dzy - r12 * dzx
-    sin_tilt = math.sqrt(cx * cx + cyw * cyw + cz * cz)
-    cos_tilt = r02 * dzx + r12 * dzy + r22 * dzz
-    tilt_err = math.atan2(sin_tilt, cos_tilt)
-    if sin_tilt > 1e-9:
-        k = att_p_rp * tilt_err / sin_tilt
-        # rotation axis in the body frame (R^T c); its body-z part is zero by construction
-        qx = k * (r00 * cx + r10 * cyw + r20 * cz)
-        qy = k * (r01 * cx + r11 * cyw + r21 * cz)
-    elif cos_tilt < 0.0:  # upside down: any horizontal axis will do
-        qx = att_p_rp * math.pi
-        qy = 0.0
-    else:
-        qx = 0.0
-        qy = 0.0
+        # ---- attitude: tilt error (body z -> desired body z) and heading error
+        norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+        dzx = fx / norm
+        dzy = fy / norm
+        dzz = fz / norm
+        if self.thrust_axis_w is not None:
+            dzx, dzy, dzz = self.thrust_axis_w
+        cx = r12 * dzz - r22 * dzy  # z_B x z_d, world frame
+        cyw = r22 * dzx - r02 * dzz
+        cz = r02 * dzy - r12 * dzx
+        sin_tilt = math.sqrt(cx * cx + cyw * cyw + cz * cz)
+        cos_tilt = r02 * dzx + r12 * dzy + r22 * dzz
+        tilt_err = math.atan2(sin_tilt, cos_tilt)
+        if sin_tilt > 1e-9:
+            k = g.att_p_rp * tilt_err / sin_tilt
+            # rotation axis in the body frame (R^T c); its body-z part is zero by construction
+            qx = k * (r00 * cx + r10 * cyw + r20 * cz)
+            qy = k * (r01 * cx + r11 * cyw + r21 * cz)
+        elif cos_tilt < 0.0:  # upside down: any horizontal axis will do
+            qx = g.att_p_rp * math.pi
+            qy = 0.0
+        else:
+            qx = 0.0
+            qy = 0.0
 
-    yaw_sp = yaw_setpoint + yaw_rate * dt
-    yaw_err = remainder(yaw_sp - yaw, math.tau)
-    if abs(yaw_err) > max_yaw_error:
-        yaw_err = math.copysign(max_yaw_error, yaw_err)
-        sp_limited = True
-    yaw_setpoint = remainder(yaw + yaw_err, math.tau)
-    # Yaw about world z (feedback + feed-forward), expressed in the body frame.
-    yaw_dot = att_p_yaw * yaw_err + yaw_rate
-    px_sp = qx + yaw_dot * r20
-    py_sp = qy + yaw_dot * r21
-    pz_sp = yaw_dot * r22
+        yaw_sp = self.yaw_setpoint + yaw_rate * dt
+        yaw_err = math.remainder(yaw_sp - yaw, math.tau)
+        if abs(yaw_err) > g.max_yaw_error:
+            yaw_err = math.copysign(g.max_yaw_error, yaw_err)
+            sp_limited = True
+        self.yaw_setpoint = math.remainder(yaw + yaw_err, math.tau)
+        # Yaw about world z (feedback + feed-forward), expressed in the body frame.
+        yaw_dot = g.att_p_yaw * yaw_err + yaw_rate
+        px_sp = qx + yaw_dot * r20
+        py_sp = qy + yaw_dot * r21
+        pz_sp = yaw_dot * r22
 
-    rate_limited = False
-    lim = max_rate_rp
-    if px_sp > lim:
-        px_sp, rate_limited = lim, True
-    elif px_sp < -lim:
-        px_sp, rate_limited = -lim, True
-    if py_sp > lim:
-        py_sp, rate_limited = lim, True
-    elif py_sp < -lim:
-        py_sp, rate_limited = -lim, True
-    lim = max_rate_yaw
-    if pz_sp > lim:
-        pz_sp, rate_limited = lim, True
-    elif pz_sp < -lim:
-        pz_sp, rate_limited = -lim, True
+        rate_limited = False
+        lim = g.max_rate_rp
+        if px_sp > lim:
+            px_sp, rate_limited = lim, True
+        elif px_sp < -lim:
+            px_sp, rate_limited = -lim, True
+        if py_sp > lim:
+            py_sp, rate_limited = lim, True
+        elif py_sp < -lim:
+            py_sp, rate_limited = -lim, True
+        lim = g.max_rate_yaw
+        if pz_sp > lim:
+            pz_sp, rate_limited = lim, True
+        elif pz_sp < -lim:
+            pz_sp, rate_limited = -lim, True
 
-    # ---- body-rate PID -> angular acceleration -> torque
-    beta = rate_beta
-    dw0 += beta * ((wx - pwx) / dt - dw0)
-    dw1 += beta * ((wy - pwy) / dt - dw1)
-    dw2 += beta * ((wz - pwz) / dt - dw2)
-    erx = px_sp - wx
-    ery = py_sp - wy
-    erz = pz_sp - wz
-    alpha_x = rate_p_rp * erx + ri0 - rate_d_rp * dw0
-    alpha_y = rate_p_rp * ery + ri1 - rate_d_rp * dw1
-    alpha_z = rate_p_yaw * erz + ri2 - rate_d_yaw * dw2
-    # tau = J alpha + omega x (J omega)
-    tau_x = jx * alpha_x + (jz - jy) * wy * wz
-    tau_y = jy * alpha_y + (jx - jz) * wz * wx
-    tau_z = jz * alpha_z + (jy - jx) * wx * wy
+        # ---- body-rate PID -> angular acceleration -> torque
+        beta = self._rate_beta
+        pwx, pwy, pwz = self._rate_prev
+        dw = self._rate_deriv
+        dw[0] += beta * ((wx - pwx) / dt - dw[0])
+        dw[1] += beta * ((wy - pwy) / dt - dw[1])
+        dw[2] += beta * ((wz - pwz) / dt - dw[2])
+        self._rate_prev = (wx, wy, wz)
+        erx = px_sp - wx
+        ery = py_sp - wy
+        erz = pz_sp - wz
+        ri = self._rate_int
+        alpha_x = g.rate_p_rp * erx + ri[0] - g.rate_d_rp * dw[0]
+        alpha_y = g.rate_p_rp * ery + ri[1] - g.rate_d_rp * dw[1]
+        alpha_z = g.rate_p_yaw * erz + ri[2] - g.rate_d_yaw * dw[2]
+        jx, jy, jz = self._inertia
+        # tau = J alpha + omega x (J omega)
+        tau_x = jx * alpha_x + (jz - jy) * wy * wz
+        tau_y = jy * alpha_y + (jx - jz) * wz * wx
+        tau_z = jz * alpha_z + (jy - jx) * wx * wy
+        self.last_torque_setpoint_b = (tau_x, tau_y, tau_z)
 
-    # ---- mixer with priorities: roll/pitch, then collective thrust, then yaw
-    # (written out per rotor: four named floats are much faster than lists here)
-    rp0 = b0 * tau_x + c0 * tau_y
-    rp1 = b1 * tau_x + c1 * tau_y
-    rp2 = b2 * tau_x + c2 * tau_y
-    rp3 = b3 * tau_x + c3 * tau_y
-    span = _largest(rp0, rp1, rp2, rp3) - _smallest(rp0, rp1, rp2, rp3)
-    room = f_max - f_min
-    rp_reduced = span > room
-    if rp_reduced:
-        scale = room / span
-        rp0 *= scale
-        rp1 *= scale
-        rp2 *= scale
-        rp3 *= scale
-    f0 = a0 * thrust + rp0
-    f1 = a1 * thrust + rp1
-    f2 = a2 * thrust + rp2
-    f3 = a3 * thrust + rp3
-    low = _smallest(f0, f1, f2, f3)
-    high = _largest(f0, f1, f2, f3)
-    shift = 0.0
-    if low < f_min:
-        shift = f_min - low
-    elif high > f_max:
-        shift = f_max - high
-    thrust_shifted = shift != 0.0
-    if thrust_shifted:
-        f0 += shift
-        f1 += shift
-        f2 += shift
-        f3 += shift
-    # per rotor: thrust without yaw, and the thrust change the full yaw torque asks for
-    y0 = d0 * tau_z
-    y1 = d1 * tau_z
-    y2 = d2 * tau_z
-    y3 = d3 * tau_z
-    rotors = ((f0, y0), (f1, y1), (f2, y2), (f3, y3))
-    # s: the largest share of the yaw torque (0..1) that keeps every rotor in range
-    s = 1.0
-    for fi, yi in rotors:
-        if yi != 0.0:
-            limit = ((f_max if yi > 0.0 else f_min) - fi) / yi
-            if limit < s:
-                s = limit
-    if s < 0.0:
-        s = 0.0
-    yaw_reduced = s < 1.0
+        # ---- mixer with priorities: roll/pitch, then collective thrust, then yaw
+        # (written out per rotor: four named floats are much faster than lists here)
+        f_min = self._f_min
+        f_max = self._f_max
+        (a0, b0, c0, d0), (a1, b1, c1, d1), (a2, b2, c2, d2), (a3, b3, c3, d3) = self._mix
+        rp0 = b0 * tau_x + c0 * tau_y
+        rp1 = b1 * tau_x + c1 * tau_y
+        rp2 = b2 * tau_x + c2 * tau_y
+        rp3 = b3 * tau_x + c3 * tau_y
+        span = max(rp0, rp1, rp2, rp3) - min(rp0, rp1, rp2, rp3)
+        room = f_max - f_min
+        rp_reduced = span > room
+        if rp_reduced:
+            scale = room / span
+            rp0 *= scale
+            rp1 *= scale
+            rp2 *= scale
+            rp3 *= scale
+        f0 = a0 * thrust + rp0
+        f1 = a1 * thrust + rp1
+        f2 = a2 * thrust + rp2
+        f3 = a3 * thrust + rp3
+        low = min(f0, f1, f2, f3)
+        high = max(f0, f1, f2, f3)
+        shift = 0.0
+        if low < f_min:
+            shift = f_min - low
+        elif high > f_max:
+            shift = f_max - high
+        thrust_shifted = shift != 0.0
+        if thrust_shifted:
+            f0 += shift
+            f1 += shift
+            f2 += shift
+            f3 += shift
+        # per rotor: thrust without yaw, and the thrust change the full yaw torque asks for
+        rotors = ((f0, d0 * tau_z), (f1, d1 * tau_z), (f2, d2 * tau_z), (f3, d3 * tau_z))
+        # s: the largest share of the yaw torque (0..1) that keeps every rotor in range
+        s = 1.0
+        for fi, yi in rotors:
+            if yi != 0.0:
+                limit = ((f_max if yi > 0.0 else f_min) - fi) / yi
+                if limit < s:
+                    s = limit
+        if s < 0.0:
+            s = 0.0
+        yaw_reduced = s < 1.0
 
-    # Rate integrators: frozen on an axis whose torque the mixer could not deliver.
-    if not rp_reduced:
-        ri0 += rate_i_rp * erx * dt
-        ri1 += rate_i_rp * ery * dt
-    if not yaw_reduced:
-        ri2 += rate_i_yaw * erz * dt
-    if abs(ri0) > rate_i_limit_rp:
-        ri0 = math.copysign(rate_i_limit_rp, ri0)
-        int_limited = True
-    if abs(ri1) > rate_i_limit_rp:
-        ri1 = math.copysign(rate_i_limit_rp, ri1)
-        int_limited = True
-    if abs(ri2) > rate_i_limit_yaw:
-        ri2 = math.copysign(rate_i_limit_yaw, ri2)
-        int_limited = True
+        # Rate integrators: frozen on an axis whose torque the mixer could not deliver.
+        if not rp_reduced:
+            ri[0] += g.rate_i_rp * erx * dt
+            ri[1] += g.rate_i_rp * ery * dt
+        if not yaw_reduced:
+            ri[2] += g.rate_i_yaw * erz * dt
+        for i, limit in ((0, g.rate_i_limit_rp), (1, g.rate_i_limit_rp), (2, g.rate_i_limit_yaw)):
+            if abs(ri[i]) > limit:
+                ri[i] = math.copysign(limit, ri[i])
+                int_limited = True
 
-    w0 = _rotor_speed(f0 + s * y0, k_f, omega_min, omega_max)
-    w1 = _rotor_speed(f1 + s * y1, k_f, omega_min, omega_max)
-    w2 = _rotor_speed(f2 + s * y2, k_f, omega_min, omega_max)
-    w3 = _rotor_speed(f3 + s * y3, k_f, omega_min, omega_max)
-    flags = (
-        sp_limited,
-        vert_limited != 0,
-        tilt_limited,
-        thrust_limited != 0,
-        int_limited,
-        rate_limited,
-        rp_reduced,
-        thrust_shifted,
-        yaw_reduced,
-    )
-    memory[0] = vi0
-    memory[1] = vi1
-    memory[2] = vi2
-    memory[3] = ri0
-    memory[4] = ri1
-    memory[5] = ri2
-    memory[6] = dv0
-    memory[7] = dv1
-    memory[8] = dv2
-    memory[9] = dw0
-    memory[10] = dw1
-    memory[11] = dw2
-    memory[12] = vx
-    memory[13] = vy
-    memory[14] = vz
-    memory[15] = wx
-    memory[16] = wy
-    memory[17] = wz
-    memory[18] = yaw_setpoint
-    return (w0, w1, w2, w3), flags, (tau_x, tau_y, tau_z)
+        k_f = self._k_f
+        omega_min = self._omega_min
+        omega_max = self._omega_max
+        omegas = []
+        for fi, yi in rotors:
+            w = math.sqrt(max(fi + s * yi, 0.0) / k_f)
+            # Guard against rounding only: f is already within [f_min, f_max].
+            omegas.append(omega_min if w < omega_min else omega_max if w > omega_max else w)
 
-
-def _largest(a: float, b: float, c: float, d: float) -> float:
-    """``max(a, b, c, d)`` as Python's builtin picks: the first unless a later one is larger."""
-    if b > a:
-        a = b
-    if c > a:
-        a = c
-    if d > a:
-        a = d
-    return a
-
-
-def _smallest(a: float, b: float, c: float, d: float) -> float:
-    """``min(a, b, c, d)`` as Python's builtin picks: the first unless a later one is smaller."""
-    if b < a:
-        a = b
-    if c < a:
-        a = c
-    if d < a:
-        a = d
-    return a
-
-
-def _rotor_speed(thrust: float, k_f: float, omega_min: float, omega_max: float) -> float:
-    """The rotor speed (rad/s) of ``thrust`` (N, none below 0) within the motors' range."""
-    if 0.0 > thrust:
-        thrust = 0.0
-    w = math.sqrt(thrust / k_f)
-    # Guard against rounding only: the thrust is already within [f_min, f_max].
-    return omega_min if w < omega_min else omega_max if w > omega_max else w
+        self._flags = [
+            sp_limited,
+            vert_limited != 0,
+            tilt_limited,
+            thrust_limited != 0,
+            int_limited,
+            rate_limited,
+            rp_reduced,
+            thrust_shifted,
+            yaw_reduced,
+        ]
+        return omegas

@@ -20,7 +20,6 @@ from pybullet_utils.bullet_client import BulletClient
 from scipy.spatial.transform import Rotation
 
 from landing_env.errors import ConfigError
-from landing_env.physics.compiled import compiled
 from landing_env.physics.drone_state import DroneState, StateFloats, rotation_from_quaternion
 from landing_env.physics.quadrotor_params import QuadrotorParams
 from landing_env.physics.wind import WindModel
@@ -85,10 +84,6 @@ class Quadrotor:
         prm = self.params
         self._zero3 = (0.0, 0.0, 0.0)
         self._nan4 = (math.nan, math.nan, math.nan, math.nan)
-        self._unit_gains = (1.0, 1.0, 1.0, 1.0)
-        #: the motors' and forces' arithmetic: compiled where Numba is installed
-        self._motor_step = compiled(motor_step)
-        self._motor_constants: tuple[float, ...] = ()
         # Plain-float copies of the parameters for the per-step path, refreshed by
         # _sync_constants whenever ``params`` is replaced or the step length changes.
         self._constants_for: tuple[QuadrotorParams, float] | None = None
@@ -261,18 +256,6 @@ class Quadrotor:
         self._ge_ray_length = float(prm.ground_effect_ray_length)
         # the lowest a ray reaches below the body origin: the farthest hub, then the ray
         self._ge_reach = self._ge_ray_length + max(math.hypot(*hub) for hub in self._rotors)
-        # motor_step's constants, in its order
-        lo, hi = self._omega_range
-        self._motor_constants = (
-            self._alpha,
-            lo,
-            hi,
-            self._k_f,
-            *(value for terms in self._rotor_terms for value in terms),
-            *self._drag,
-            self._drag_airframe,
-            self._drag_per_omega,
-        )
 
     def apply_rotor_commands(
         self, omega_cmd: np.ndarray | list[float], dt: float, state: DroneState | None = None
@@ -286,12 +269,28 @@ class Quadrotor:
         constants_for = self._constants_for
         if constants_for is None or constants_for[0] is not self.params or constants_for[1] != dt:
             self._sync_constants(dt)
-        armed = self.armed
-        if armed:
+        alpha = self._alpha
+        omega = self._omega
+        saturated = False
+        if self.armed:
+            lo, hi = self._omega_range
             commands = omega_cmd.tolist() if isinstance(omega_cmd, np.ndarray) else omega_cmd
-            c0, c1, c2, c3 = commands[0], commands[1], commands[2], commands[3]
+            for i in range(4):
+                c = commands[i]
+                if c < lo:
+                    c = lo
+                    saturated = True
+                elif c > hi:
+                    c = hi
+                    saturated = True
+                elif c != c:  # NaN: a broken controller; hold idle and say so
+                    c = lo
+                    saturated = True
+                omega[i] += (c - omega[i]) * alpha
         else:
-            c0 = c1 = c2 = c3 = 0.0
+            for i in range(4):
+                omega[i] -= omega[i] * alpha
+        self.last_saturated = saturated
 
         # Pose and velocity: the state read this step when given.
         if state is not None:
@@ -304,8 +303,24 @@ class Quadrotor:
             pos, quat = p.getBasePositionAndOrientation(self.body_id, physicsClientId=cid)
             vel = p.getBaseVelocity(self.body_id, physicsClientId=cid)[0]
             rot = rotation_from_quaternion(quat)
-        gains = self._ground_effect(pos, rot) if self._ground_effect_on else None
-        g0, g1, g2, g3 = self._unit_gains if gains is None else gains
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot
+
+        k_f = self._k_f
+        thrusts = [k_f * w * w for w in omega]
+        if self._ground_effect_on:
+            gains = self._ground_effect(pos, rot)
+            if gains is not None:
+                thrusts = [t * g for t, g in zip(thrusts, gains, strict=True)]
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for t, w, (x, y, yaw_coeff) in zip(thrusts, omega, self._rotor_terms, strict=True):
+            fz += t
+            tx += y * t  # r x (0, 0, T) = (y T, -x T, 0)
+            ty -= x * t
+            tz += yaw_coeff * w * w
+        self.last_thrusts = tuple(thrusts)
 
         # Linear drag against the air-relative velocity, in the body frame.
         self.time += dt
@@ -316,30 +331,18 @@ class Quadrotor:
             ox, oy, oz = outside.tolist() if isinstance(outside, np.ndarray) else outside
             wind = (float(ox), float(oy), float(oz))
         self.last_wind_w = wind
-        w0, w1, w2, w3 = self._omega
-        self.last_saturated, omega, self.last_thrusts, force, torque = self._motor_step(
-            self._motor_constants,
-            w0,
-            w1,
-            w2,
-            w3,
-            armed,
-            c0,
-            c1,
-            c2,
-            c3,
-            gains is not None,
-            g0,
-            g1,
-            g2,
-            g3,
-            rot,
-            vel,
-            wind[0],
-            wind[1],
-            wind[2],
+        ax = vel[0] - wind[0]
+        ay = vel[1] - wind[1]
+        az = vel[2] - wind[2]
+        d0, d1, d2 = self._drag
+        # the rotor drag grows with the rotor speed (Mahony, Kumar & Corke 2012), the
+        # airframe's does not: at hover the scale is 1
+        scale = self._drag_airframe + self._drag_per_omega * (
+            omega[0] + omega[1] + omega[2] + omega[3]
         )
-        self._omega = list(omega)
+        fx = -scale * d0 * (r00 * ax + r10 * ay + r20 * az)
+        fy = -scale * d1 * (r01 * ax + r11 * ay + r21 * az)
+        fz -= scale * d2 * (r02 * ax + r12 * ay + r22 * az)
 
         # The net force acts at the whole body's CoM (drag through the CoM, as modelled); the
         # thrusts' torques about it equal the torques computed above because the CoM lies on
@@ -347,9 +350,9 @@ class Quadrotor:
         # four per-rotor forces.
         cid = self._cid
         p.applyExternalForce(
-            self.body_id, -1, force, self.com_offset_b, p.LINK_FRAME, physicsClientId=cid
+            self.body_id, -1, (fx, fy, fz), self.com_offset_b, p.LINK_FRAME, physicsClientId=cid
         )
-        p.applyExternalTorque(self.body_id, -1, torque, p.LINK_FRAME, physicsClientId=cid)
+        p.applyExternalTorque(self.body_id, -1, (tx, ty, tz), p.LINK_FRAME, physicsClientId=cid)
 
     def ground_effect_gains(self, heights_m: np.ndarray) -> np.ndarray:
         """T_IGE/T_OGE of rotors whose hubs are ``heights_m`` above a surface (any shape; NaN
@@ -441,129 +444,3 @@ class Quadrotor:
         self.last_ground_effect_gains = tuple(gains)
         self.last_ground_effect_capped = capped
         return gains
-
-
-def motor_step(
-    constants: tuple[float, ...],
-    w0: float,
-    w1: float,
-    w2: float,
-    w3: float,
-    armed: bool,
-    c0: float,
-    c1: float,
-    c2: float,
-    c3: float,
-    has_gains: bool,
-    g0: float,
-    g1: float,
-    g2: float,
-    g3: float,
-    rotation_wb: tuple[float, ...],
-    velocity_w: tuple[float, ...],
-    wind_x: float,
-    wind_y: float,
-    wind_z: float,
-):
-    """One physics step of the motors and the forces in plain floats:
-    :meth:`Quadrotor.apply_rotor_commands`' arithmetic (compiled by
-    :func:`landing_env.physics.compiled.compiled` where Numba is installed).
-
-    ``constants``: the motor lag's alpha, the rotor speed range, ``k_f``, each rotor's hub x,
-    y and yaw torque per (rad/s)^2, the body drag's three coefficients, its airframe share and
-    its growth per rad/s; ``w*``: the rotor speeds (rad/s); ``c*``: the commands (read when
-    ``armed``); ``g*``: the ground effect's thrust gains (applied when ``has_gains``);
-    ``rotation_wb``: R_WB row-major; ``velocity_w`` and ``wind_*``: the velocity and the wind
-    (m/s, W).  Returns whether a command was clamped, the new rotor speeds, the rotor thrusts
-    (N), the force through the CoM and the torque (both in the body frame).
-    """
-    (
-        alpha,
-        lo,
-        hi,
-        k_f,
-        x0,
-        y0,
-        q0,
-        x1,
-        y1,
-        q1,
-        x2,
-        y2,
-        q2,
-        x3,
-        y3,
-        q3,
-        d0,
-        d1,
-        d2,
-        drag_airframe,
-        drag_per_omega,
-    ) = constants
-    if armed:
-        w0, s0 = _lag(w0, c0, alpha, lo, hi)
-        w1, s1 = _lag(w1, c1, alpha, lo, hi)
-        w2, s2 = _lag(w2, c2, alpha, lo, hi)
-        w3, s3 = _lag(w3, c3, alpha, lo, hi)
-        saturated = s0 or s1 or s2 or s3
-    else:
-        w0 -= w0 * alpha
-        w1 -= w1 * alpha
-        w2 -= w2 * alpha
-        w3 -= w3 * alpha
-        saturated = False
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_wb
-
-    t0 = k_f * w0 * w0
-    t1 = k_f * w1 * w1
-    t2 = k_f * w2 * w2
-    t3 = k_f * w3 * w3
-    if has_gains:
-        t0 = t0 * g0
-        t1 = t1 * g1
-        t2 = t2 * g2
-        t3 = t3 * g3
-    # r x (0, 0, T) = (y T, -x T, 0), summed rotor after rotor from 0
-    fz = 0.0 + t0
-    tx = 0.0 + y0 * t0
-    ty = 0.0 - x0 * t0
-    tz = 0.0 + q0 * w0 * w0
-    fz += t1
-    tx += y1 * t1
-    ty -= x1 * t1
-    tz += q1 * w1 * w1
-    fz += t2
-    tx += y2 * t2
-    ty -= x2 * t2
-    tz += q2 * w2 * w2
-    fz += t3
-    tx += y3 * t3
-    ty -= x3 * t3
-    tz += q3 * w3 * w3
-
-    ax = velocity_w[0] - wind_x
-    ay = velocity_w[1] - wind_y
-    az = velocity_w[2] - wind_z
-    # the rotor drag grows with the rotor speed (Mahony, Kumar & Corke 2012), the
-    # airframe's does not: at hover the scale is 1
-    scale = drag_airframe + drag_per_omega * (w0 + w1 + w2 + w3)
-    fx = -scale * d0 * (r00 * ax + r10 * ay + r20 * az)
-    fy = -scale * d1 * (r01 * ax + r11 * ay + r21 * az)
-    fz -= scale * d2 * (r02 * ax + r12 * ay + r22 * az)
-    return saturated, (w0, w1, w2, w3), (t0, t1, t2, t3), (fx, fy, fz), (tx, ty, tz)
-
-
-def _lag(w: float, c: float, alpha: float, lo: float, hi: float) -> tuple[float, bool]:
-    """A rotor's speed ``w`` one step of the motor lag (``alpha``) towards the command ``c``
-    within [lo, hi], and whether the command was clamped (NaN: a broken controller; idle)."""
-    clamped = True
-    if c < lo:
-        c = lo
-    elif c > hi:
-        c = hi
-    elif c != c:
-        c = lo
-    else:
-        clamped = False
-    w += (c - w) * alpha
-    return w, clamped

@@ -45,7 +45,6 @@ from pybullet_utils.bullet_client import BulletClient
 from estimation.frames import euler_zyx_from_matrix
 from estimation.limits import NON_NEGATIVE, POSITIVE, limited, require_limits
 from landing_env.errors import require_range
-from landing_env.physics.compiled import compiled
 from landing_env.stewart.kinematics import (
     StewartGeometry,
     StewartKinematics,
@@ -346,10 +345,17 @@ class StewartPlatform:
         clamped = self._command(t)
         (tx, ty, tz), target_q = self._target
         body, cid = self.top_plate_body_id, self._cid
-        position, q = pybullet.getBasePositionAndOrientation(body, physicsClientId=cid)
-        linear, angular = _plate_velocity(
-            tx, ty, tz, target_q, position, q, 1.0 / self._dt, self._gravity_step
-        )
+        (px, py, pz), q = pybullet.getBasePositionAndOrientation(body, physicsClientId=cid)
+        inv_dt = 1.0 / self._dt
+        # Required rotation over the step, in the world frame: q_rel = q_target * conj(q).
+        rx, ry, rz, rw = _quat_multiply(target_q, (-q[0], -q[1], -q[2], q[3]))
+        if rw < 0.0:
+            rx, ry, rz, rw = -rx, -ry, -rz, -rw
+        sin_half = math.sqrt(rx * rx + ry * ry + rz * rz)
+        gain = 2.0 * math.atan2(sin_half, rw) / sin_half if sin_half > 1e-12 else 2.0
+        angular = (rx * gain * inv_dt, ry * gain * inv_dt, rz * gain * inv_dt)
+        gx, gy, gz = self._gravity_step
+        linear = ((tx - px) * inv_dt - gx, (ty - py) * inv_dt - gy, (tz - pz) * inv_dt - gz)
         pybullet.resetBaseVelocity(body, linear, angular, physicsClientId=cid)
         return clamped
 
@@ -459,7 +465,7 @@ def _quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
     )
 
 
-def quat_from_euler_zyx(roll: float, pitch: float, yaw: float) -> Quaternion:
+def _quat_from_euler_zyx(roll: float, pitch: float, yaw: float) -> Quaternion:
     """(x, y, z, w) quaternion of Rz(yaw) Ry(pitch) Rx(roll)."""
     cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
     cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
@@ -478,34 +484,3 @@ def _quat_z_to(u: np.ndarray) -> Quaternion:
     w = 1.0 + uz
     norm = math.sqrt(uy * uy + ux * ux + w * w)
     return (-uy / norm, ux / norm, 0.0, w / norm)
-
-
-def plate_velocity(
-    tx: float,
-    ty: float,
-    tz: float,
-    target_q: Quaternion,
-    position: tuple[float, float, float],
-    q: Quaternion,
-    inv_dt: float,
-    gravity_step: tuple[float, float, float],
-) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """The plate's linear and angular velocity (W) that carry it from ``position``, ``q`` to
-    the target (``tx, ty, tz``, ``target_q``) in one step of ``1 / inv_dt`` s, the step's
-    gravity (``gravity_step``, m/s) taken out of the linear one."""
-    # Required rotation over the step, in the world frame: q_rel = q_target * conj(q).
-    rx, ry, rz, rw = _quat_multiply(target_q, (-q[0], -q[1], -q[2], q[3]))
-    if rw < 0.0:
-        rx, ry, rz, rw = -rx, -ry, -rz, -rw
-    sin_half = math.sqrt(rx * rx + ry * ry + rz * rz)
-    gain = 2.0 * math.atan2(sin_half, rw) / sin_half if sin_half > 1e-12 else 2.0
-    angular = (rx * gain * inv_dt, ry * gain * inv_dt, rz * gain * inv_dt)
-    px, py, pz = position
-    gx, gy, gz = gravity_step
-    linear = ((tx - px) * inv_dt - gx, (ty - py) * inv_dt - gy, (tz - pz) * inv_dt - gz)
-    return linear, angular
-
-
-#: the per-physics-step arithmetic, compiled where Numba is installed (the same floats)
-_plate_velocity = compiled(plate_velocity)
-_quat_from_euler_zyx = compiled(quat_from_euler_zyx)
