@@ -542,6 +542,86 @@ def test_the_predictive_policy_commits_over_a_level_deck_and_waits_over_a_tilted
         env.close()
 
 
+def _first_commit_s(roll_deg, pitch_deg, error_scale="default"):
+    """The wait (s) after which ``predictive`` (the bench's training-family predictor, 15 s
+    wait) first commits over a deck whose estimated roll and pitch (deg) are functions of time;
+    None when it waits out the limit.  Also the chance and the error scale then."""
+    from agents.policies.timing import PredictivePolicy
+    from landing_env.anticipation.deck_history import HISTORY_FEATURES
+    from landing_env.guidance_gains import GuidanceGains
+    from landing_env.timing.layout import timing_layout
+    from landing_env.timing_config import TimingConfig
+
+    timing = TimingConfig(
+        history_s=8.0,
+        contact_window_s=[1.2, 1.5],
+        guidance=GuidanceGains(descent_profile="timed"),
+    )
+    layout = timing_layout(timing, 1.0 / DT)
+    policy = PredictivePolicy(
+        layout,
+        DT,
+        tilt_predictor_path("bench-broad"),
+        5.0,
+        15.0,
+        1.0,
+        timing.contact_times_s,
+        error_scale=error_scale,
+    )
+    columns = [HISTORY_FEATURES.index(n) for n in ("roll", "pitch", "valid", "z")]
+    n = layout.n_history
+    tof = np.full(4, layout.hold_height_m)
+    for k in range(150):  # a decision every 0.1 s of the 15 s wait
+        times = (np.arange(n) + 2 * k) * DT
+        rows = np.zeros((n, len(HISTORY_FEATURES)))
+        rows[:, columns] = np.column_stack(
+            [
+                np.radians(roll_deg(times)),
+                np.radians(pitch_deg(times)),
+                np.ones(n),
+                np.full(n, layout.hold_height_m),
+            ]
+        )
+        observation, _ = layout.encode(rows, tof, np.ones(4, dtype=bool), 0.1 * k / 15.0)
+        if policy.act(observation):
+            scale = policy.error_scale.scale if policy.error_scale is not None else 1.0
+            return 0.1 * k, policy.last_probability, scale
+    return None, policy.last_probability, 1.0
+
+
+def _listed(list_deg):
+    return lambda t: list_deg + 0.3 * np.sin(2 * np.pi * t / 5.0)
+
+
+def _still(t):
+    return 0.2 * np.sin(t)
+
+
+@pytest.mark.parametrize("list_deg", [1.0, 2.0])
+def test_over_a_calm_listed_deck_predictive_commits_by_itself_long_before_the_wait_limit(list_deg):
+    # the predictor answers a steady list with a phantom tilt several times its size: the
+    # fitted error alone waits out the limit ...
+    assert _first_commit_s(_listed(list_deg), _still, error_scale=None)[0] is None
+    # ... the innovations find the bias, and the deck offers the chance it deserves
+    when, chance, scale = _first_commit_s(_listed(list_deg), _still)
+    assert when is not None and when < 4.0
+    assert chance > 0.98 and scale < 1.0
+
+
+def test_over_a_rough_deck_predictive_still_waits_for_a_level_contact():
+    def roll(t):
+        return 9.0 * np.sin(2 * np.pi * t / 5.0)
+
+    def pitch(t):
+        return 4.0 * np.sin(2 * np.pi * t / 3.7 + 1.0)
+
+    when, chance, _ = _first_commit_s(roll, pitch)
+    claimed = _first_commit_s(roll, pitch, error_scale=None)
+    # it waits past the first decisions for a level contact, no sooner than on the claim alone
+    assert when is not None and claimed[0] is not None and when >= claimed[0] > 0.0
+    assert chance > 0.9
+
+
 def test_the_required_chance_falls_from_near_the_best_to_the_forced_commit_s_as_the_wait_runs_out():
     from agents.policies.registry import make_policy
 
