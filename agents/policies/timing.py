@@ -24,7 +24,6 @@ from agents.common.cards import (
 from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.registry import MODEL_DIR, find_model
-from estimation.anticipation.innovation_scale import InnovationScale
 from estimation.anticipation.linear_predictors import LinearTiltPredictor
 from estimation.anticipation.stopping import predictor_stopping_values
 from landing_env.anticipation.deck_history import HISTORY_FEATURES
@@ -44,7 +43,6 @@ def shipped_timing_model(algo: str) -> Path:
 SHIPPED_TIMING_MODEL = shipped_timing_model("dqn")
 
 _Z, _ROLL, _PITCH = (HISTORY_FEATURES.index(n) for n in ("z", "roll", "pitch"))
-_TILT = [_ROLL, _PITCH]
 _VALID = HISTORY_FEATURES.index("valid")
 
 
@@ -98,17 +96,7 @@ class PredictivePolicy(Policy):
     (:class:`~estimation.anticipation.stopping.StoppingValues`) of the chances the predictor gave
     held-out examples, over the wait left (``wait_limit_s`` less the wait so far), one
     independent opportunity per ``opportunity_s`` (``timing.opportunity_s``).  Needs a
-    history at least as long as the predictor's window (``timing.history_s``).
-
-    The error is the deck's own (``error_scale``, on by default): each decision's prediction is
-    kept, and once the history holds the estimate of the time it was made for, the innovations
-    correct the prediction by their mean where it is significant and scale the claimed
-    covariance (:class:`~estimation.anticipation.innovation_scale.InnovationScale`, never wider
-    than the claim), so that a calm deck, which the predictor foresees far better than the
-    fitting seas (or misreads, listed or with the drone off its centre), offers the chances it
-    deserves.  The clock is the wait so far
-    (``wait_fraction`` times ``wait_limit_s``: the history runs on through wave-offs, which
-    count as waiting).  ``error_scale=None``: the claimed covariance throughout."""
+    history at least as long as the predictor's window (``timing.history_s``)."""
 
     name = "predictive"
 
@@ -121,7 +109,6 @@ class PredictivePolicy(Policy):
         wait_limit_s: float,
         opportunity_s: float,
         contact_times_s: tuple[float, ...] | None = None,
-        error_scale: InnovationScale | str | None = "default",
     ) -> None:
 
         if not isinstance(predictor, LinearTiltPredictor):
@@ -167,20 +154,12 @@ class PredictivePolicy(Policy):
         self.max_tilt_deg = max_tilt_deg
         self.wait_limit_s = wait_limit_s
         self.opportunity_s = opportunity_s
-        #: the deck's own prediction error (None: the claimed one)
-        self.error_scale = InnovationScale() if error_scale == "default" else error_scale
-        if self.error_scale is not None and not isinstance(self.error_scale, InnovationScale):
-            raise ConfigError(
-                "error_scale", f"is {error_scale!r}: give an InnovationScale, None or 'default'"
-            )
         self.last: Any = None
         self.last_probability = 0.0
 
     def reset(self) -> None:
         self.last = None
         self.last_probability = 0.0
-        if self.error_scale is not None:
-            self.error_scale.reset()
 
     def threshold(self, wait_fraction: float) -> float:
         """The chance a commit needs after ``wait_fraction`` of the wait limit: the value of
@@ -188,30 +167,16 @@ class PredictivePolicy(Policy):
         remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
         return self.values.threshold(remaining_s, self.opportunity_s)
 
-    def _chance(self, rows: np.ndarray, time_s: float = 0.0) -> float:
-        valid = rows[:, _VALID] > 0.5
-        scale, offset = 1.0, None
-        if self.error_scale is not None:
-            self.error_scale.update(time_s, rows[:, _TILT], valid, self.dt)
-            scale, offset = self.error_scale.scale, self.error_scale.bias
+    def _chance(self, rows: np.ndarray) -> float:
         self.last = self.predictor.best_within(
-            rows[:, self.columns], valid, self.contact_times_s, self.max_tilt_deg, scale, offset
+            rows[:, self.columns], rows[:, _VALID] > 0.5, self.contact_times_s, self.max_tilt_deg
         )
         self.last_probability = self.last.probability_within(self.max_tilt_deg)
-        if self.error_scale is not None and offset is not None and self.last.valid:
-            # the predictor's own prediction and claim: what the innovations judge
-            self.error_scale.record(
-                time_s,
-                self.last.horizon_s,
-                self.last.roll - offset[0],
-                self.last.pitch - offset[1],
-                self.last.covariance / scale,
-            )
         return self.last_probability
 
     def act(self, observation: np.ndarray) -> int:
         parts = self.layout.decode(observation)
-        chance = self._chance(parts.history, parts.wait_fraction * self.wait_limit_s)
+        chance = self._chance(parts.history)
         return int(self.last.valid and chance >= self.threshold(parts.wait_fraction))
 
 

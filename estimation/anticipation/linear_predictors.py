@@ -448,22 +448,14 @@ class LinearTiltPredictor(LinearMotionPredictor):
             return _invalid(phi, horizon_s)
         return self._from_features(phi, horizon_s)
 
-    def _from_features(
-        self,
-        phi: np.ndarray,
-        horizon_s: float,
-        covariance_scale: float = 1.0,
-        offset: np.ndarray | None = None,
-    ) -> TiltPrediction:
+    def _from_features(self, phi: np.ndarray, horizon_s: float) -> TiltPrediction:
         h = self.horizons_s
         if not (math.isfinite(horizon_s) and h[0] - 1e-9 <= horizon_s <= h[-1] + 1e-9):
             return _invalid(f"horizon {horizon_s} s outside the fitted {h[0]}-{h[-1]} s")
         k, j, w = self._bracket(horizon_s)
         coefficients = (1.0 - w) * self.coefficients[k] + w * self.coefficients[j]
-        covariance = covariance_scale * ((1.0 - w) * self.covariance[k] + w * self.covariance[j])
+        covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
         mean = phi @ coefficients
-        if offset is not None:
-            mean = mean + offset
         if not np.all(np.isfinite(mean)):
             return _invalid("non-finite prediction", horizon_s)
         return TiltPrediction(True, "", horizon_s, float(mean[0]), float(mean[1]), covariance)
@@ -474,22 +466,16 @@ class LinearTiltPredictor(LinearMotionPredictor):
         valid: np.ndarray,
         horizons_s: Sequence[float],
         limit_deg: float,
-        covariance_scale: float = 1.0,
-        offset: np.ndarray | None = None,
     ) -> TiltPrediction:
         """Of the predictions at ``horizons_s`` (the contact times a descent can be given),
         the one with the best chance that the tilt is within ``limit_deg`` (the earliest of
-        equal ones); invalid, with the reason, when none can be made.  ``covariance_scale``
-        multiplies the held-out covariance and ``offset`` (roll, pitch; rad) is added to the
-        predicted mean: the error measured on the deck flown over
-        (:class:`~estimation.anticipation.innovation_scale.InnovationScale`).  Never raises on
-        data."""
+        equal ones); invalid, with the reason, when none can be made.  Never raises on data."""
         phi = self.features(values, valid)
         if isinstance(phi, str):
             return _invalid(phi)
         best, best_chance = _invalid("no contact time given"), -1.0
         for horizon_s in horizons_s:
-            prediction = self._from_features(phi, float(horizon_s), covariance_scale, offset)
+            prediction = self._from_features(phi, float(horizon_s))
             if not prediction.valid:
                 best = best if best.valid else prediction
                 continue
