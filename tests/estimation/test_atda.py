@@ -208,6 +208,30 @@ def test_the_homography_poses_error_is_the_rms_distance_of_its_reprojected_corne
     assert np.allclose(estimate.rotation, r) and np.allclose(estimate.translation, t)
 
 
+def test_the_homography_pose_on_noisy_corners_is_olsons_decomposition_of_k_inverse_h() -> None:
+    """Olson 2011 (the AprilTag library's homography pose): with ``M = K⁻¹ H``, the scale
+    is the geometric mean of the norms of M's first two columns, ``t = m3 / s`` and R the
+    rotation nearest ``[m1/s, m2/s, m1/s x m2/s]``; on noisy corners the two columns are
+    neither orthogonal nor of one length, so each step shows."""
+    rng = np.random.default_rng(11)
+    rotation = matrix_from_euler_zyx(0.3, -0.25, 2.0)
+    translation = np.array([-0.08, 0.06, 0.9])
+    objects = tag_corners_in_tag_frame(TAG)
+    corners = CAMERA.project(objects @ rotation.T + translation) + rng.normal(0.0, 2.0, (4, 2))
+    h = cv2.getPerspectiveTransform(
+        objects[:, :2].astype(np.float32), corners.astype(np.float32)
+    ).astype(float)
+    m = np.linalg.solve(CAMERA.matrix, h / h[2, 2])
+    n1, n2 = np.linalg.norm(m[:, 0]), np.linalg.norm(m[:, 1])
+    assert abs(n1 / n2 - 1.0) > 1e-3  # the noise makes the columns' lengths differ
+    scale = math.sqrt(n1 * n2)
+    r1, r2 = m[:, 0] / scale, m[:, 1] / scale
+    u, _, vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    ((_, r, t),) = homography_pose(objects, corners, CAMERA.matrix)
+    assert np.allclose(t, m[:, 2] / scale, rtol=1e-4, atol=0.0)
+    assert _angle_deg(r, u @ vt) < 1e-3
+
+
 # ------------------------------------------------------------------------- joint ATDA
 class _Single:
     """A stand-in for the per-landmark ATDA: counts its calls and resets."""

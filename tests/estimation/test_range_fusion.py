@@ -147,8 +147,46 @@ def test_the_range_weighted_principal_point_is_refused_for_a_layout_not_centred(
         _crhf(shifted)
     rounded = SENSORS * (1.0 + 1e-12) + np.array([1e-13, -1e-13, 0.0])
     assert _crhf(rounded).config.principal_point == "range_weighted"
-    with pytest.raises(ConfigError, match="principal_point"):
+    with pytest.raises(ConfigError, match=r"^principal_point: 'mean' is not allowed"):
         CRHFConfig(principal_point="mean")
+
+
+def _calibration_off_by(offsets_px: np.ndarray) -> TofCameraCalibration:
+    """The exact calibration's samples with each sensor's pads found ``offsets_px`` away
+    (a calibration error): touch pixels that no single pinhole explains."""
+    exact = _calibration()
+    samples = [
+        s + np.array([0.0, *offset]) for s, offset in zip(exact.samples, offsets_px, strict=True)
+    ]
+    return TofCameraCalibration(samples, method="pchip")
+
+
+def test_crhfs_intrinsics_are_the_papers_range_weighted_mean_and_per_sensor_average() -> None:
+    """With touch pixels that disagree (pads found a few pixels off), CRHF's principal point
+    is Eq. 45, the range-weighted mean of the touch pixels, and its focal length Eq. 44, the
+    mean of the per-sensor ``(u_i - c_x) r_i / s_ix``; the joint least-squares fit gives
+    other values."""
+    offsets = np.array([[2.0, -1.0], [-0.5, 1.5], [1.0, 0.5], [-1.5, -2.0]])
+    cal = _calibration_off_by(offsets)
+    m = SyntheticScene(CAMERA, TAG_SIZE).measure(*_pose(9.0, 0.3, 0.2, 1.4, 0.05, -0.04))
+    ranges = m.ranges.ranges
+    touch = cal.lookup(ranges).pixels
+    centre = ranges @ touch / ranges.sum()  # Eq. 45
+    focal = ((touch - centre) * ranges[:, None] / SENSORS[:, :2]).mean(axis=0)  # Eq. 40-44
+    weighted, joint = (
+        CrhfEstimator(
+            tag_size=TAG_SIZE,
+            tag_id=0,
+            tof_calibration=cal,
+            config=CRHFConfig(principal_point=method, max_rigid_rms_rel=np.inf),
+        ).estimate(m.frame, m.ranges)
+        for method in ("range_weighted", "lstsq")
+    )
+    assert weighted.valid and joint.valid
+    expected = {"fx": focal[0], "fy": focal[1], "cx": centre[0], "cy": centre[1]}
+    for key, value in expected.items():
+        assert weighted.extras[key] == pytest.approx(value, abs=1e-9), key
+    assert max(abs(joint.extras[key] - value) for key, value in expected.items()) > 1e-3
 
 
 def _coincident_touch_points() -> TofCameraCalibration:
