@@ -286,7 +286,14 @@ def test_joint_atda_skips_detections_it_cannot_use_and_reports_the_largest_tag()
     assert estimate.extras["solver"] == "joint_ippe"
     assert estimate.extras["reprojection_error_px"] < 1e-6
     assert estimate.extras["chosen_by_history"] is False
-    assert 0.0 <= estimate.extras["ambiguity_ratio"] < 0.6
+    # the ratio of IPPE's two reprojection errors over every corner of the three tags
+    objects = np.vstack([lm.corners_d() for lm in LAYOUT.landmarks])
+    pixels = np.vstack([d.corners_px for d in good])
+    _, _, _, errors = cv2.solvePnPGeneric(
+        objects, pixels.reshape(-1, 1, 2), CAMERA.matrix, np.zeros(5), flags=cv2.SOLVEPNP_IPPE
+    )
+    best, second = sorted(np.asarray(errors, dtype=float).ravel())
+    assert estimate.extras["ambiguity_ratio"] == pytest.approx(best / second, rel=1e-6, abs=1e-12)
     assert np.allclose(estimate.rotation, R_CD, atol=1e-8)
     assert np.allclose(estimate.translation, T_CD, atol=1e-8)
     # the smallest tag just under min_side_px is left out

@@ -143,7 +143,11 @@ def test_the_range_weighted_principal_point_is_refused_for_a_layout_not_centred(
     off by a millimetre is refused naming ``principal_point`` and the alternative, one
     centred up to rounding is taken."""
     shifted = SENSORS + np.array([0.001, -0.001, 0.0])  # off along x and along y
-    with pytest.raises(ConfigError, match=r"principal_point: 'range_weighted'.*use 'lstsq'"):
+    with pytest.raises(
+        ConfigError,
+        match=r"principal_point: 'range_weighted' \(Eq\. 45\) is exact only for "
+        r".* use 'lstsq' for this layout$",
+    ):
         _crhf(shifted)
     rounded = SENSORS * (1.0 + 1e-12) + np.array([1e-13, -1e-13, 0.0])
     assert _crhf(rounded).config.principal_point == "range_weighted"
