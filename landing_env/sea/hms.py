@@ -37,6 +37,9 @@ _COLUMNS = [0, 1, 2, 3, 4]
 _CHUNK = 4096
 #: chunk offset, so that samples before the episode's start have non-negative chunk seeds
 _CHUNK_OFFSET = 1 << 32
+#: samples per chunk of the true motion, each sampled as one block: a block's values do not
+#: depend on which window reads them (a matrix product's rounding depends on its shape)
+_TRUTH_CHUNK = 64
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,7 @@ class HelideckMonitor:
             [position, np.full(2, math.radians(self.config.angle_noise_deg))]
         )
         self._chunks: dict[int, np.ndarray] = {}
+        self._truth_chunks: dict[int, np.ndarray] = {}
 
     def _noise(self, index: np.ndarray) -> np.ndarray:
         """Unit-variance errors (n, 5) of the samples ``index`` (a fixed function of each)."""
@@ -98,12 +102,24 @@ class HelideckMonitor:
             out[here] = block[index[here] - int(c) * _CHUNK]
         return out
 
+    def _truth(self, index: np.ndarray) -> np.ndarray:
+        """The true values (n, 5) of the samples ``index``, each sampled in its fixed block."""
+        out = np.empty((len(index), len(HMS_CHANNELS)))
+        chunk = np.floor_divide(index, _TRUTH_CHUNK)
+        for c in np.unique(chunk):
+            block = self._truth_chunks.get(int(c))
+            if block is None:
+                times = (int(c) * _TRUTH_CHUNK + np.arange(_TRUTH_CHUNK)) * self.dt_s
+                block = sample_poses(self.motion, times)[:, _COLUMNS]
+                self._truth_chunks[int(c)] = block
+            here = chunk == c
+            out[here] = block[index[here] - int(c) * _TRUTH_CHUNK]
+        return out
+
     def window(self, t_end_s: float, window_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The record's samples in (``t_end_s - window_s``, ``t_end_s``], oldest first: their
         times (n,) and values (n, 5) of :data:`HMS_CHANNELS`."""
         last = math.floor(t_end_s / self.dt_s + 1e-9)
         n = max(1, round(window_s / self.dt_s))
         index = np.arange(last - n + 1, last + 1)
-        times = index * self.dt_s
-        truth = sample_poses(self.motion, times)[:, _COLUMNS]
-        return times, truth + self._noise(index) * self.noise_std
+        return index * self.dt_s, self._truth(index) + self._noise(index) * self.noise_std
