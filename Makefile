@@ -18,8 +18,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/deck-landing demo
 
+# one BLAS thread a worker: two workers on two cores, each with a BLAS thread per core,
+# oversubscribe the cores and wait on each other's spinning threads
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist worksteal -q
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist worksteal -q
 
 # the documentation site in docs/_build/html; warnings (a broken reference) are errors
 docs: $(STAMP)
