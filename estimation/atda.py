@@ -380,21 +380,32 @@ class JointAtdaEstimator(GuardedEstimator):
         flip = np.array([-1.0, -1.0, 1.0])
         points = objects * flip if half_turn else objects
         image = pixels.reshape(-1, 1, 2)
-        count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
-            points, image, self._k, self._no_dist, flags=cv2.SOLVEPNP_IPPE
-        )
-        errors = np.asarray(errors, dtype=float).reshape(-1)
-        # (error, R_CD, rvec, tvec) of the finite solutions in front of the camera
-        solutions = []
-        for k in range(int(count)):
-            rvec, tvec = np.asarray(rvecs[k], dtype=float), np.asarray(tvecs[k], dtype=float)
-            finite = np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))
-            if finite and np.isfinite(errors[k]) and tvec.reshape(3)[2] > 0.0:
-                rotation, _ = cv2.Rodrigues(rvec)
-                solutions.append(
-                    (errors[k], rotation * flip if half_turn else rotation, rvec, tvec)
-                )
-        if not solutions:
+        # IPPE's two poses; on some exactly symmetric views (face-on, D's origin on the
+        # optical axis) it gives no finite pose, and SQPNP's one globally optimal pose is
+        # the last resort, as for a single tag
+        for solver, flag in (
+            ("joint_ippe", cv2.SOLVEPNP_IPPE),
+            ("joint_sqpnp", cv2.SOLVEPNP_SQPNP),
+        ):
+            count, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+                points, image, self._k, self._no_dist, flags=flag
+            )
+            errors = np.asarray(errors, dtype=float).reshape(-1)
+            # (error, R_CD, rvec, tvec) of the finite solutions in front of the camera
+            solutions = []
+            for k in range(int(count)):
+                rvec = np.asarray(rvecs[k], dtype=float)
+                tvec = np.asarray(tvecs[k], dtype=float)
+                finite = np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))
+                if finite and np.isfinite(errors[k]) and tvec.reshape(3)[2] > 0.0:
+                    rotation, _ = cv2.Rodrigues(rvec)
+                    solutions.append(
+                        (errors[k], rotation * flip if half_turn else rotation, rvec, tvec)
+                    )
+            if solutions:
+                used_solver = solver
+                break
+        else:
             return DeckPoseEstimate.invalid(self.name, timestamp, PNP_FAILED)
         chosen, ratio, by_history = self._pick(timestamp, solutions)
         rvec, tvec = cv2.solvePnPRefineLM(
@@ -415,7 +426,7 @@ class JointAtdaEstimator(GuardedEstimator):
             "ambiguity_ratio": ratio,
             "reprojection_error_px": rms,
             "chosen_by_history": by_history,
-            "solver": "joint_ippe",
+            "solver": used_solver,
             "landmark_id": ids[largest],
             "landmark_ids": tuple(ids),
             "landmark_side_px": sides[largest],

@@ -495,6 +495,26 @@ def test_joint_atda_is_exact_from_under_a_metre() -> None:
     assert np.allclose(estimate.translation, t_cd, atol=1e-8)
 
 
+@pytest.mark.parametrize("distance_m", [3.0, 5.0])
+def test_joint_atda_is_exact_face_on_over_the_decks_origin_at_every_yaw(distance_m: float) -> None:
+    """Face-on with D's origin on the optical axis OpenCV's IPPE gives no finite pose at some
+    yaws (3 m: 15, 45, 120, 165, 195, 225, 255 and 345 deg; 5 m: 75 deg); SQPNP's pose
+    answers there, named as the solver, and every yaw comes out exact."""
+    solvers = set()
+    for yaw_deg in range(0, 360, 15):
+        r_cd = matrix_from_euler_zyx(0.0, 0.0, math.radians(yaw_deg))
+        t_cd = np.array([0.0, 0.0, distance_m])
+        frame = CameraFrame(0.0, tuple(_detections(r_cd, t_cd)))
+        estimate = JointAtdaEstimator(intrinsics=CAMERA, layout=LAYOUT, single=_Single()).estimate(
+            frame, NO_RANGES
+        )
+        assert estimate.valid, (yaw_deg, estimate.reason)
+        assert _angle_deg(estimate.rotation, r_cd) < 1e-6
+        assert np.allclose(estimate.translation, t_cd, rtol=0.0, atol=1e-9)
+        solvers.add(estimate.extras["solver"])
+    assert solvers == {"joint_ippe", "joint_sqpnp"}
+
+
 DISTORTED = CameraIntrinsics(
     width=640,
     height=480,
