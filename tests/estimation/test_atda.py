@@ -95,7 +95,12 @@ def test_the_estimate_reports_ippes_ambiguity_ratio_its_solver_and_no_history_ch
     estimate = AtdaEstimator(intrinsics=CAMERA, tag_size=TAG, tag_id=0).estimate(m.frame, None)
     assert estimate.valid and (estimate.method, estimate.timestamp) == ("atda", 4.0)
     assert estimate.extras["ambiguity_ratio"] == pytest.approx(best / second, rel=1e-9)
-    assert estimate.extras["reprojection_error_px"] == pytest.approx(best, rel=1e-9)
+    # the RMS corner distance of the kept pose (OpenCV's error is the RMS over coordinates)
+    assert estimate.extras["reprojection_error_px"] == pytest.approx(
+        _rms_px(estimate.rotation, estimate.translation, tag_corners_in_tag_frame(TAG), corners),
+        rel=1e-6,
+    )
+    assert estimate.extras["reprojection_error_px"] == pytest.approx(math.sqrt(2) * best, rel=1e-9)
     assert estimate.extras["chosen_by_history"] is False
     assert estimate.extras["solver"] == "ippe_square"
     # the better-fitting of the two poses is kept
@@ -771,7 +776,9 @@ def _solved(monkeypatch: pytest.MonkeyPatch, script: dict) -> tuple[str, list, l
     asked = _scripted_solvers(monkeypatch, script)
     corners = CAMERA.project(tag_corners_in_tag_frame(TAG) @ R_A.T + T_AB)
     solver, solutions = ippe_solutions(tag_corners_in_tag_frame(TAG), corners, CAMERA.matrix)
-    return solver, [(e, r) for e, r, _ in solutions], asked
+    # the errors in the stand-in's units, OpenCV's RMS over coordinates: ippe_solutions
+    # reports the RMS corner distance, √2 times it
+    return solver, [(round(e / math.sqrt(2.0), 12), r) for e, r, _ in solutions], asked
 
 
 SQUARE, IPPE, SQPNP = cv2.SOLVEPNP_IPPE_SQUARE, cv2.SOLVEPNP_IPPE, cv2.SOLVEPNP_SQPNP
