@@ -9,7 +9,6 @@ functions here are its builders.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -221,13 +220,9 @@ class HelideckPredictivePolicy(Policy):
         opportunity_s: float,
         contact_times_s: tuple[float, ...] = SHIP_CONTACT_TIMES_S,
         seed: int = 0,
-        chance_ceiling: float = 1.0,
-        recent_s: float = 0.0,
     ) -> None:
         require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
         require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
-        self.chance_ceiling = chance_ceiling
-        self.recent_s = recent_s
         self.contact_times_s = tuple(float(c) for c in contact_times_s)
         if not self.contact_times_s:
             raise ConfigError("contact_times_s", "gives no contact time")
@@ -266,31 +261,9 @@ class HelideckPredictivePolicy(Policy):
         if key not in self._values:
             if len(self._values) > 8:
                 self._values.clear()
-            if self.recent_s > 0.0:
-                chances = self._recent_chances(forecast)
-            else:
-                chances = forecast.chances(self.contact_times_s, self.max_tilt_deg, combine="mean")
-            chances = np.minimum(chances, self.chance_ceiling)
+            chances = forecast.chances(self.contact_times_s, self.max_tilt_deg, combine="mean")
             self._values[key] = (forecast, StoppingValues.from_samples(chances))
         return self._values[key][1]
-
-    def _recent_chances(self, forecast: Any) -> np.ndarray:
-        """The chances ``forecast`` gives over the HMS record's last ``recent_s`` (one a
-        second): the distribution of this sea's opportunities of late."""
-        t_s = float(self.env.world.time)
-        monitor = self._episode_forecast.monitor
-        out = []
-        for k in range(1, int(self.recent_s) + 1):
-            _, measured = monitor.window(t_s - k, forecast.window_s)
-            chance, predictions = forecast.mean_within(
-                measured,
-                np.ones(len(measured), dtype=bool),
-                self.contact_times_s,
-                self.max_tilt_deg,
-            )
-            if predictions and all(p.valid for p in predictions):
-                out.append(chance)
-        return np.asarray(out)
 
     def chance(self, wait_fraction: float) -> float:
         """The chance a commit now meets a deck within the tilt limit (0 without a
@@ -311,7 +284,6 @@ class HelideckPredictivePolicy(Policy):
             self.contact_times_s,
             self.max_tilt_deg,
         )
-        chance = min(chance, self.chance_ceiling)
         self.last_probability = chance
         remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
         self.last_threshold = self._stopping_values(forecast).threshold(
@@ -489,8 +461,6 @@ def _build_helideck_predictive(base: Any, model_path: str | None) -> Any:
         base.config.touchdown.max_deck_tilt_deg,
         base.timing.wait_limit_s,
         base.timing.opportunity_s,
-        chance_ceiling=float(os.environ.get("DL_CEILING", "1.0")),
-        recent_s=float(os.environ.get("DL_RECENT_S", "0")),
     )
 
 

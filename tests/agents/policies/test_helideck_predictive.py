@@ -246,32 +246,3 @@ def test_without_a_fitted_forecast_each_episode_identifies_its_own_from_the_hms_
         assert policy.last_threshold >= np.mean(expected) - 1e-12
     finally:
         env.close()
-
-
-def test_chances_claimed_past_the_ceiling_tie_so_the_first_one_commits(small_forecast, monkeypatch):
-    from estimation.anticipation.linear_predictors import TiltPrediction
-
-    # a calm sea: most of its chances near 1, so waiting on is worth nearly 1
-    offered = np.concatenate([np.full(70, 0.99999), np.full(30, 0.9)])
-    monkeypatch.setattr(small_forecast, "chances", lambda *args, **kwargs: offered)
-    level = [TiltPrediction(True, "", 3.0, 0.0, 0.0, np.eye(2) * 1e-4)]
-    monkeypatch.setattr(small_forecast, "mean_within", lambda *args: (0.997, level))
-    env = _ship_env()
-    try:
-        observation, _ = env.reset(seed=2)
-        free = HelideckPredictivePolicy(
-            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0, chance_ceiling=1.0
-        )
-        assert free.act(observation) == 0  # 0.997 against a value of 0.99999: waits
-        assert free.last_threshold > 0.9999
-        capped = HelideckPredictivePolicy(
-            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0, chance_ceiling=0.99
-        )
-        assert capped.act(observation) == 1  # both worth the ceiling: the first commits
-        assert capped.last_probability == 0.99
-        assert 0.9 < capped.last_threshold <= 0.99
-        # a chance under the ceiling still waits for a better one
-        monkeypatch.setattr(small_forecast, "mean_within", lambda *args: (0.95, level))
-        assert capped.act(observation) == 0
-    finally:
-        env.close()
