@@ -9,7 +9,6 @@ functions here are its builders.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +25,7 @@ from agents.policies.base import Policy
 from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.deck_forecast import episode_monitor
 from agents.policies.registry import MODEL_DIR, find_model
-from estimation.anticipation.linear_predictors import (
-    RISE_TARGET,
-    LinearMotionPredictor,
-    LinearTiltPredictor,
-)
+from estimation.anticipation.linear_predictors import LinearMotionPredictor, LinearTiltPredictor
 from estimation.anticipation.stopping import (
     StoppingValues,
     predictor_stopping_values,
@@ -198,11 +193,6 @@ class PredictivePolicy(Policy):
 #: at ``ship-ss5`` by 2.77, 2.97, 3.09, 3.30 and 3.68 s, the time to land less the 1.95 s
 #: warm-up); the chance is their mean
 SHIP_CONTACT_TIMES_S = (2.75, 3.0, 3.25, 3.5, 4.5)
-#: the fastest the deck may rise at the contact, m/s (inf: no limit): a deck rising faster
-#: meets the descent too fast (``predictive`` at ``ship-ss6``, 200 seeds from 1 000 000:
-#: all 4 touchdowns too fast came at a deck rising 0.5 m/s or more, 8 failures in those 47
-#: contacts against 8 in the other 151)
-SHIP_MAX_DECK_RISE_M_S = math.inf
 
 
 class HelideckPredictivePolicy(Policy):
@@ -239,12 +229,9 @@ class HelideckPredictivePolicy(Policy):
         opportunity_s: float,
         contact_times_s: tuple[float, ...] = SHIP_CONTACT_TIMES_S,
         seed: int = 0,
-        max_rise_m_s: float = math.inf,
     ) -> None:
         require_range("wait_limit_s", wait_limit_s, 0.0, low_inclusive=False)
         require_range("opportunity_s", opportunity_s, 0.0, low_inclusive=False)
-        require_range("max_rise_m_s", max_rise_m_s, 0.0, low_inclusive=False)
-        self.max_rise_m_s = float(max_rise_m_s)
         self.contact_times_s = tuple(float(c) for c in contact_times_s)
         if not self.contact_times_s:
             raise ConfigError("contact_times_s", "gives no contact time")
@@ -255,12 +242,6 @@ class HelideckPredictivePolicy(Policy):
                     "contact_times_s",
                     f"{self.contact_times_s} lie outside the forecast's "
                     f"{horizons[0]:g}-{horizons[-1]:g} s",
-                )
-            if math.isfinite(self.max_rise_m_s) and RISE_TARGET not in forecast.targets:
-                raise ConfigError(
-                    "deck_forecast",
-                    f"a rise limit needs a forecast of the heave rate ({RISE_TARGET}): "
-                    "use deck_forecast=online",
                 )
         self.env = env.unwrapped
         self.layout = self.env.layout
@@ -289,9 +270,7 @@ class HelideckPredictivePolicy(Policy):
         if key not in self._values:
             if len(self._values) > 8:
                 self._values.clear()
-            chances = forecast.chances(
-                self.contact_times_s, self.max_tilt_deg, combine="mean", max_rise=self.max_rise_m_s
-            )
+            chances = forecast.chances(self.contact_times_s, self.max_tilt_deg, combine="mean")
             self._values[key] = (forecast, StoppingValues.from_samples(chances), chances)
         return self._values[key][1]
 
@@ -302,9 +281,7 @@ class HelideckPredictivePolicy(Policy):
         t_s = float(self.env.world.time)
         if self._episode_forecast is None:
             monitor = episode_monitor(self.env, self.seed, self.hms)
-            self._episode_forecast = EpisodeForecast(
-                self.forecast, monitor, rate=math.isfinite(self.max_rise_m_s)
-            )
+            self._episode_forecast = EpisodeForecast(self.forecast, monitor)
         forecast = self._episode_forecast.at(t_s)
         if forecast is None:
             self.last, self.last_probability = [], 0.0
@@ -315,7 +292,6 @@ class HelideckPredictivePolicy(Policy):
             np.ones(len(measured), dtype=bool),
             self.contact_times_s,
             self.max_tilt_deg,
-            self.max_rise_m_s,
         )
         self.last_probability = chance
         remaining_s = (1.0 - wait_fraction) * self.wait_limit_s
@@ -331,7 +307,6 @@ class HelideckPredictivePolicy(Policy):
                 np.ones(len(measured), dtype=bool),
                 forced_times,
                 self.max_tilt_deg,
-                self.max_rise_m_s,
             )
             if all(p.valid for p in predictions):
                 samples = self._values[id(forecast)][2]
@@ -510,7 +485,6 @@ def _build_helideck_predictive(base: Any, model_path: str | None) -> Any:
         base.config.touchdown.max_deck_tilt_deg,
         base.timing.wait_limit_s,
         base.timing.opportunity_s,
-        max_rise_m_s=SHIP_MAX_DECK_RISE_M_S,
     )
 
 

@@ -110,36 +110,6 @@ def _probabilities_within(
     return out
 
 
-#: the target a rise limit reads: the deck's heave rate (m/s, up positive)
-RISE_TARGET = "z_rate"
-_POINTS_3D: np.ndarray | None = None
-
-
-def _probabilities_within_below(
-    means: np.ndarray, covariance: np.ndarray, limit_deg: float, max_rise: float
-) -> np.ndarray:
-    """P(tilt <= ``limit_deg`` and heave rate <= ``max_rise``) for Gaussians of (roll,
-    pitch, heave rate) ``means`` (M, 3), rad and m/s, sharing ``covariance``; 0 for a
-    covariance that is not one."""
-    global _POINTS_3D
-    if _POINTS_3D is None:
-        from scipy.stats import norm, qmc
-
-        uniform = qmc.Sobol(d=3, scramble=True, seed=12345).random(_N_POINTS)
-        _POINTS_3D = np.asarray(norm.ppf(np.clip(uniform, 1e-12, 1.0 - 1e-12)))
-    try:
-        factor = np.linalg.cholesky(np.asarray(covariance, dtype=float) + 1e-14 * np.eye(3))
-    except np.linalg.LinAlgError:
-        return np.zeros(len(means))
-    offsets = _POINTS_3D @ factor.T
-    out = np.empty(len(means))
-    for start in range(0, len(means), 64):
-        samples = means[start : start + 64, None, :] + offsets[None]
-        level = tilt_deg(samples[..., 0], samples[..., 1]) <= limit_deg
-        out[start : start + 64] = np.mean(level & (samples[..., 2] <= max_rise), axis=1)
-    return out
-
-
 def _invalid(reason: str, horizon_s: float = math.nan) -> TiltPrediction:
     return TiltPrediction(False, reason, horizon_s)
 
@@ -314,55 +284,31 @@ class LinearMotionPredictor:
         valid: np.ndarray,
         horizons_s: Sequence[float],
         limit_deg: float,
-        max_rise: float = math.inf,
     ) -> tuple[float, list[TiltPrediction]]:
         """The chance that the tilt is within ``limit_deg`` at a contact equally likely to come
         at each of ``horizons_s`` (a descent whose contact time is not chosen but spread: the
         mean of the chances), and the predictions; 0 and the invalid predictions (with their
-        reasons) when any cannot be made.  With a finite ``max_rise`` (m/s), the chance that
-        the deck also rises no faster than that (its :data:`RISE_TARGET` predicted with the
-        tilt, their joint Gaussian error).  Never raises on data."""
+        reasons) when any cannot be made.  Never raises on data."""
         phi = self.features(values, valid)
         if isinstance(phi, str):
             return 0.0, [_invalid(phi)]
         predictions = [self._from_features(phi, float(h)) for h in horizons_s]
         if not predictions:
             return 0.0, [_invalid("no contact time given")]
-        if math.isfinite(max_rise) and RISE_TARGET not in self.targets:
-            return 0.0, [_invalid(f"the predictor predicts no {RISE_TARGET}")]
         if not all(p.valid for p in predictions):
             return 0.0, predictions
-        if not math.isfinite(max_rise):
-            chance = float(np.mean([p.probability_within(limit_deg) for p in predictions]))
-            return chance, predictions
-        columns = [*self._tilt_columns(), self.targets.index(RISE_TARGET)]
-        chances = []
-        for prediction in predictions:
-            k, j, w = self._bracket(prediction.horizon_s)
-            coefficients = (1.0 - w) * self.coefficients[k] + w * self.coefficients[j]
-            covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
-            mean = phi @ coefficients[:, columns]
-            chances.append(
-                _probabilities_within_below(
-                    mean[None], covariance[np.ix_(columns, columns)], limit_deg, max_rise
-                )[0]
-            )
-        return float(np.mean(chances)), predictions
+        chance = float(np.mean([p.probability_within(limit_deg) for p in predictions]))
+        return chance, predictions
 
     def chances(
-        self,
-        horizons_s: float | Sequence[float],
-        limit_deg: float,
-        combine: str = "best",
-        max_rise: float = math.inf,
+        self, horizons_s: float | Sequence[float], limit_deg: float, combine: str = "best"
     ) -> np.ndarray:
         """The chance that the tilt ``horizons_s`` ahead is within ``limit_deg`` for each of the
         held-out examples recorded at fitting: how such chances are distributed over the sea
         (empty when none were recorded, a horizon is outside the fitted ones or the predictor
         predicts no tilt).  With several horizons, ``combine`` says how they make one chance:
         ``best`` (a descent whose contact time is chosen among them) or ``mean`` (a contact
-        equally likely at each).  A finite ``max_rise``: the chance of a deck also rising no
-        faster than that, as :meth:`mean_within`."""
+        equally likely at each)."""
         if combine not in ("best", "mean"):
             raise ValueError(f"combine must be 'best' or 'mean', not {combine!r}")
         horizons = np.atleast_1d(np.asarray(horizons_s, dtype=float))
@@ -377,21 +323,13 @@ class LinearMotionPredictor:
             or horizons.max() > h[-1] + 1e-9
         ):
             return np.zeros(0)
-        rise = math.isfinite(max_rise)
-        if rise:
-            if RISE_TARGET not in self.targets:
-                return np.zeros(0)
-            columns = [*columns, self.targets.index(RISE_TARGET)]
         out = np.zeros(self.heldout_means.shape[1])
         for horizon_s in horizons:
             k, j, w = self._bracket(float(horizon_s))
             means = (1.0 - w) * self.heldout_means[k] + w * self.heldout_means[j]
             covariance = (1.0 - w) * self.covariance[k] + w * self.covariance[j]
-            block = covariance[np.ix_(columns, columns)]
-            chance = (
-                _probabilities_within_below(means[:, columns], block, limit_deg, max_rise)
-                if rise
-                else _probabilities_within(means[:, columns], block, limit_deg)
+            chance = _probabilities_within(
+                means[:, columns], covariance[np.ix_(columns, columns)], limit_deg
             )
             out = np.maximum(out, chance) if combine == "best" else out + chance
         return out if combine == "best" else out / len(horizons)
@@ -413,7 +351,6 @@ class LinearMotionPredictor:
         channels: tuple[str, ...] = ("roll", "pitch"),
         record: int = 1000,
         targets: tuple[str, ...] | None = None,
-        ridge_targets: tuple[str, ...] | None = None,
     ) -> _P:
         """Fit on examples: ``histories`` (N, n, C + 1) of the C ``channels`` and validity,
         ``futures`` (N, H, T) the true ``targets`` (the class's own by default) at each
@@ -423,9 +360,7 @@ class LinearMotionPredictor:
         ``holdout_fraction`` of the groups), the covariance is the held-out residuals' (an
         honest error), and the coefficients are then refitted on every example.  The
         predictions of ``record`` held-out examples (evenly spaced) are kept: the
-        distribution of predictions (:meth:`chances`).  ``ridge_targets``: the targets whose
-        held-out error chooses the ridge (all by default; a target added beside them then
-        leaves their fit as it was)."""
+        distribution of predictions (:meth:`chances`)."""
         histories = np.asarray(histories, dtype=float)
         futures = np.asarray(futures, dtype=float)
         groups = np.asarray(groups).reshape(-1)
@@ -443,9 +378,6 @@ class LinearMotionPredictor:
             )
         if len(groups) != len(histories):
             raise ValueError("groups needs one entry per example")
-        chooser = [targets.index(name) for name in (ridge_targets or targets) if name in targets]
-        if not chooser:
-            raise ValueError(f"ridge_targets {ridge_targets} are none of the targets {targets}")
         if block < 1:
             raise ValueError("block must be >= 1")
         ok = histories[..., c] > 0.5
@@ -501,7 +433,7 @@ class LinearMotionPredictor:
             for ridge in ridges:
                 a = _ridge(x[train], y[train, k], ridge * scale * train.sum(), gram)
                 residual = y[test, k] - x[test] @ a
-                error = float(np.mean(residual[:, chooser] ** 2))
+                error = float(np.mean(residual**2))
                 if best is None or error < best[0]:
                     best = (error, ridge, residual, a)
             assert best is not None

@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from estimation.anticipation.linear_predictors import RISE_TARGET, LinearMotionPredictor
+from estimation.anticipation.linear_predictors import LinearMotionPredictor
 from estimation.array_files import locked
 from landing_env.config import DeckLandingConfig, load_config
 from landing_env.errors import ConfigError, require_choice, require_range
@@ -68,10 +68,6 @@ REALIZATIONS = 8
 RECORD_S = 1200.0
 #: one example every this many seconds of a record
 EXAMPLE_EVERY_S = 1.0
-#: the heave rate a forecast with :data:`RISE_TARGET` predicts: the HMS's heave differenced
-#: over this long either side, seconds (its 5 cm error then adds 0.07 m/s; HCA asks the HMS
-#: for heave rate to 0.1 m/s RMS)
-RATE_HALF_S = 0.5
 #: the first seed of the fitting records (the evaluations' seeds are 1 000 000 on)
 FIT_SEED = 9000
 #: motion kinds whose sources are a fixed function of time with a past (sums of waves)
@@ -130,17 +126,10 @@ _FIT_SIGNATURE = inspect.signature(fit_deck_forecast)
 
 
 def _fit(
-    records: list[tuple[np.ndarray, np.ndarray]],
-    dt_s: float,
-    metadata: dict[str, float],
-    rate: bool = False,
+    records: list[tuple[np.ndarray, np.ndarray]], dt_s: float, metadata: dict[str, float]
 ) -> LinearMotionPredictor:
     """The forecast fitted on ``records`` (each the HMS's measurements and the targets, one
-    group of examples each; the last quarter of them held out); with ``rate``, the heave
-    rate (:data:`RISE_TARGET`) predicted too, the ridge still chosen on the five
-    :data:`HMS_CHANNELS` (so their forecast is the same with it or without)."""
-    if rate:
-        records = [(measured, _with_rate(targets, dt_s)) for measured, targets in records]
+    group of examples each; the last quarter of them held out)."""
     examples = [_examples(measured, targets, dt_s) for measured, targets in records]
     return LinearMotionPredictor.fit(
         np.concatenate([windows for windows, _ in examples]),
@@ -151,22 +140,9 @@ def _fit(
         dt_s,
         block=BLOCK,
         channels=HMS_CHANNELS,
-        targets=(*HMS_CHANNELS, RISE_TARGET) if rate else HMS_CHANNELS,
-        ridge_targets=HMS_CHANNELS,
+        targets=HMS_CHANNELS,
         metadata=metadata,
     )
-
-
-def _with_rate(targets: np.ndarray, dt_s: float) -> np.ndarray:
-    """``targets`` (n, 5) of :data:`HMS_CHANNELS` with the heave rate appended (m/s): the
-    heave's central difference over :data:`RATE_HALF_S` either side, one-sided at the ends."""
-    q = max(1, round(RATE_HALF_S / dt_s))
-    heave = targets[:, HMS_CHANNELS.index("z")]
-    index = np.arange(len(heave))
-    later = np.minimum(index + q, len(heave) - 1)
-    earlier = np.maximum(index - q, 0)
-    span = np.maximum(later - earlier, 1) * dt_s
-    return np.column_stack([targets, (heave[later] - heave[earlier]) / span])
 
 
 def _examples(
@@ -192,24 +168,20 @@ ONLINE_PARTS = 8
 
 
 def fit_online_forecast(
-    monitor: HelideckMonitor,
-    t_end_s: float,
-    record_s: float = ONLINE_RECORD_S,
-    rate: bool = False,
+    monitor: HelideckMonitor, t_end_s: float, record_s: float = ONLINE_RECORD_S
 ) -> LinearMotionPredictor:
     """The helideck forecast identified online: fitted on the HMS's own record of the
     ``record_s`` before ``t_end_s`` (its measurements as the targets too: the truth is not
     known on board), cut into :data:`ONLINE_PARTS` consecutive parts, the last quarter held
     out for the ridge and the error.  It needs no prior sea: a held-out sea is identified from
-    its own past, as a real ship's would be.  ``rate``: the heave rate predicted too
-    (:func:`_fit`)."""
+    its own past, as a real ship's would be."""
     require_range("record_s", record_s, ONLINE_PARTS * (WINDOW_S + HORIZONS_S[-1]), 1e6)
     _, measured = monitor.window(t_end_s, record_s)
     part = len(measured) // ONLINE_PARTS
     # each part keeps its own futures: no example reads past its part's end
     chunks = [measured[k * part : (k + 1) * part] for k in range(ONLINE_PARTS)]
     metadata = {"online_record_s": record_s, "t_end_s": t_end_s}
-    return _fit([(chunk, chunk) for chunk in chunks], monitor.dt_s, metadata, rate)
+    return _fit([(chunk, chunk) for chunk in chunks], monitor.dt_s, metadata)
 
 
 #: ``deck_forecast: online``: each episode identifies its forecast from its own HMS record
@@ -309,15 +281,11 @@ class EpisodeForecast:
     """The helideck forecast an episode flies with: ``fitted`` (:func:`deck_forecast_for`),
     or where that is None, the one identified online from the episode's own HMS record
     (:func:`fit_online_forecast` on the ``monitor``'s last :data:`ONLINE_RECORD_S`), refitted
-    once it is :data:`ONLINE_REFIT_S` old (with ``rate``, one that predicts the heave rate
-    too)."""
+    once it is :data:`ONLINE_REFIT_S` old."""
 
-    def __init__(
-        self, fitted: LinearMotionPredictor | None, monitor: HelideckMonitor, rate: bool = False
-    ) -> None:
+    def __init__(self, fitted: LinearMotionPredictor | None, monitor: HelideckMonitor) -> None:
         self.fitted = fitted
         self.monitor = monitor
-        self.rate = rate
         self._online: LinearMotionPredictor | None = None
         self._fitted_at = -math.inf
 
@@ -329,7 +297,7 @@ class EpisodeForecast:
         if not math.isfinite(t_s):
             return None
         if self._online is None or not (0.0 <= t_s - self._fitted_at < ONLINE_REFIT_S):
-            self._online = fit_online_forecast(self.monitor, t_s, rate=self.rate)
+            self._online = fit_online_forecast(self.monitor, t_s)
             self._fitted_at = t_s
         return self._online
 
