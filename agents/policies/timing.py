@@ -26,7 +26,11 @@ from agents.policies.calm_window import CalmConfig, CalmPrediction, predict_calm
 from agents.policies.deck_forecast import episode_monitor
 from agents.policies.registry import MODEL_DIR, find_model
 from estimation.anticipation.linear_predictors import LinearMotionPredictor, LinearTiltPredictor
-from estimation.anticipation.stopping import StoppingValues, predictor_stopping_values
+from estimation.anticipation.stopping import (
+    StoppingValues,
+    predictor_stopping_values,
+    value_before_forced,
+)
 from landing_env.anticipation.deck_history import HISTORY_FEATURES
 from landing_env.anticipation.hms_forecast import EpisodeForecast, deck_forecast_for
 from landing_env.errors import ConfigError, require_range
@@ -201,7 +205,12 @@ class HelideckPredictivePolicy(Policy):
     ship's descent is not timed: its contact comes 2.7-4.5 s after the commit, spread by the
     wind, so the chance is the mean over ``contact_times_s`` (:data:`SHIP_CONTACT_TIMES_S`).
     What waiting is worth: the optimal-stopping value of the chances the forecast gave its
-    held-out examples, over the wait left, one opportunity per ``opportunity_s``.
+    held-out examples, over the wait left, one opportunity per ``opportunity_s``; once the
+    forced commit at the wait limit is within the forecast's reach (its contact no more than
+    the last horizon ahead), that value is built on the chance the forecast gives the forced
+    commit itself rather than on the long-run mean
+    (:func:`~estimation.anticipation.stopping.value_before_forced`), so a rough spell that
+    will still be rough at the limit is not waited out.
 
     ``forecast``: the fitted forecast (the config's ``deck_forecast``: a training family such
     as ``ship-broad``, or the scenario's own sea); None: each episode identifies its own
@@ -262,7 +271,7 @@ class HelideckPredictivePolicy(Policy):
             if len(self._values) > 8:
                 self._values.clear()
             chances = forecast.chances(self.contact_times_s, self.max_tilt_deg, combine="mean")
-            self._values[key] = (forecast, StoppingValues.from_samples(chances))
+            self._values[key] = (forecast, StoppingValues.from_samples(chances), chances)
         return self._values[key][1]
 
     def chance(self, wait_fraction: float) -> float:
@@ -289,6 +298,21 @@ class HelideckPredictivePolicy(Policy):
         self.last_threshold = self._stopping_values(forecast).threshold(
             remaining_s, self.opportunity_s
         )
+        forced_times = [remaining_s + c for c in self.contact_times_s]
+        if remaining_s > 0.0 and max(forced_times) <= float(forecast.horizons_s[-1]):
+            # the forced commit is within the forecast's reach: the value of waiting is
+            # built on the chance the forecast gives it, not on the long-run mean
+            forced, predictions = forecast.mean_within(
+                measured,
+                np.ones(len(measured), dtype=bool),
+                forced_times,
+                self.max_tilt_deg,
+            )
+            if all(p.valid for p in predictions):
+                samples = self._values[id(forecast)][2]
+                self.last_threshold = value_before_forced(
+                    samples, forced, remaining_s, self.opportunity_s
+                )
         return chance
 
     def act(self, observation: np.ndarray) -> int:

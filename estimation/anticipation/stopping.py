@@ -75,6 +75,31 @@ class StoppingValues:
         return self.value(remaining_s / opportunity_s)
 
 
+def value_before_forced(
+    samples: np.ndarray, forced_chance: float, remaining_s: float, opportunity_s: float
+) -> float:
+    """The value of going on when the forced commit's own chance is known: the recursion
+    above from ``V_0 = forced_chance`` (a forecast that reaches past the wait limit predicts
+    the deck the forced commit will meet) instead of the long-run mean, with the chances
+    between distributed as ``samples``, one per ``opportunity_s`` of the ``remaining_s``
+    (interpolated between whole numbers); 0 once nothing is left, and ``forced_chance``
+    when it is not finite is taken as the long-run mean."""
+    if not (math.isfinite(remaining_s) and opportunity_s > 0.0) or remaining_s <= 0.0:
+        return 0.0
+    x = np.asarray(samples, dtype=float).reshape(-1)
+    x = x[np.isfinite(x)]
+    if not math.isfinite(forced_chance):
+        forced_chance = float(np.mean(x)) if x.size else 0.0
+    m = min(remaining_s / opportunity_s, float(MAX_OPPORTUNITIES))
+    values = [float(forced_chance)]
+    for _ in range(math.ceil(m)):
+        values.append(float(np.mean(np.maximum(x, values[-1]))) if x.size else values[-1])
+    low = math.floor(m)
+    high = min(low + 1, len(values) - 1)
+    w = m - low
+    return (1.0 - w) * values[low] + w * values[high]
+
+
 def predictor_stopping_values(
     predictor: Any, horizons_s: float | Sequence[float], limit_deg: float
 ) -> StoppingValues | None:

@@ -14,6 +14,7 @@ import pytest
 from agents.policies.registry import env_settings, make_env_and_policy
 from agents.policies.timing import SHIP_CONTACT_TIMES_S, HelideckPredictivePolicy
 from estimation.anticipation.linear_predictors import LinearTiltPredictor
+from estimation.anticipation.stopping import StoppingValues, value_before_forced
 from landing_env.errors import ConfigError
 from landing_env.sea.hms import HMS_CHANNELS, HelideckMonitorConfig
 
@@ -141,6 +142,44 @@ def test_the_policy_commits_when_its_chance_clears_the_value_of_waiting_on(
         assert policy.act(observation) == 1
         monkeypatch.setattr(policy, "chance", lambda fraction: _set(policy, 0.0, 0.9))
         assert policy.act(observation) == 0
+    finally:
+        env.close()
+
+
+def test_once_the_wait_limit_is_within_the_forecasts_reach_the_forced_commit_is_foreseen(
+    small_forecast,
+):
+    """Beyond the forecast's reach the bar is the long-run value of waiting; within it (the
+    forced commit's contact no more than the forecast's last horizon ahead) the value is
+    built on the chance the forecast gives the forced commit itself."""
+    env = _ship_env()
+    try:
+        policy = HelideckPredictivePolicy(
+            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0
+        )
+        env.reset(seed=2)
+        samples = small_forecast.chances(SHIP_CONTACT_TIMES_S, 5.0, combine="mean")
+        long_run = StoppingValues.from_samples(samples)
+        reach_s = float(small_forecast.horizons_s[-1]) - max(SHIP_CONTACT_TIMES_S)
+        t_s = float(env.unwrapped.world.time)
+        for remaining_s in (10.0, reach_s + 0.5):  # out of reach
+            policy.chance(1.0 - remaining_s / 15.0)
+            assert policy.last_threshold == pytest.approx(
+                long_run.threshold(remaining_s, 2.0), rel=1e-12
+            )
+        monitor = policy._episode_forecast.monitor
+        _, measured = monitor.window(t_s, small_forecast.window_s)
+        ok = np.ones(len(measured), dtype=bool)
+        seen = set()
+        for remaining_s in (reach_s, 2.0, 0.5):  # within reach
+            policy.chance(1.0 - remaining_s / 15.0)
+            forced, _ = small_forecast.mean_within(
+                measured, ok, [remaining_s + c for c in SHIP_CONTACT_TIMES_S], 5.0
+            )
+            expected = value_before_forced(samples, forced, remaining_s, 2.0)
+            assert policy.last_threshold == pytest.approx(expected, rel=1e-12)
+            seen.add(round(policy.last_threshold - long_run.threshold(remaining_s, 2.0), 9))
+        assert seen != {0.0}  # the foreseen commit moved the bar
     finally:
         env.close()
 

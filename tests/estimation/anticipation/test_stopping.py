@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimation.anticipation.stopping import StoppingValues
+from estimation.anticipation.stopping import StoppingValues, value_before_forced
 
 #: a uniform distribution on [0, 1], as evenly spaced quantiles
 UNIFORM = (np.arange(20000) + 0.5) / 20000
@@ -83,3 +83,41 @@ def test_the_value_rule_takes_better_chances_than_any_fixed_threshold():
 def test_the_values_never_raise_on_any_input(samples, remaining, opportunity):
     values = StoppingValues.from_samples(np.array(samples, dtype=float))
     assert isinstance(values.threshold(remaining, opportunity), float)
+
+
+# ------------------------------------------------------------- a forced commit foreseen
+def test_a_forced_commit_foreseen_at_the_long_run_mean_is_the_value_as_before():
+    rng = np.random.default_rng(5)
+    samples = rng.beta(3.0, 2.0, 4000)
+    values = StoppingValues.from_samples(samples)
+    for remaining_s in (0.3, 1.0, 2.0, 3.3, 7.0):
+        assert value_before_forced(
+            samples, float(np.mean(samples)), remaining_s, 2.0
+        ) == pytest.approx(values.threshold(remaining_s, 2.0), rel=1e-12)
+
+
+def test_a_forced_commit_foreseen_bad_lowers_the_bar_and_one_foreseen_good_raises_it():
+    samples = UNIFORM
+    # no whole opportunity left: the bar runs from the forced commit's own chance (nothing
+    # left before it) to E[max(X, forced)] (one chance drawn before it)
+    assert value_before_forced(samples, 0.1, 1e-9, 2.0) == pytest.approx(0.1, abs=1e-6)
+    one = (1.0 + 0.1**2) / 2.0  # E[max(U, 0.1)]
+    assert value_before_forced(samples, 0.1, 2.0, 2.0) == pytest.approx(one, abs=1e-4)
+    assert value_before_forced(samples, 0.1, 1.0, 2.0) == pytest.approx((0.1 + one) / 2, abs=1e-4)
+    long_run = StoppingValues.from_samples(samples).threshold(1.0, 2.0)
+    assert value_before_forced(samples, 0.1, 1.0, 2.0) < long_run
+    assert value_before_forced(samples, 0.95, 1.0, 2.0) > long_run
+    # the foreseen chance matters less the more opportunities come before it
+    near = value_before_forced(samples, 0.9, 2.0, 2.0) - value_before_forced(samples, 0.1, 2.0, 2.0)
+    far = value_before_forced(samples, 0.9, 8.0, 2.0) - value_before_forced(samples, 0.1, 8.0, 2.0)
+    assert 0.0 < far < near
+
+
+def test_a_forced_commit_foreseen_with_nothing_left_or_known_is_handled():
+    assert value_before_forced(UNIFORM, 0.3, 0.0, 2.0) == 0.0
+    assert value_before_forced(UNIFORM, 0.3, math.nan, 2.0) == 0.0
+    assert value_before_forced(UNIFORM, 0.3, 1.0, 0.0) == 0.0
+    # a forced chance not known: the long-run mean's
+    assert value_before_forced(UNIFORM, math.nan, 1e-9, 2.0) == pytest.approx(0.5, abs=1e-6)
+    # no samples: the forced chance alone
+    assert value_before_forced(np.array([]), 0.4, 5.0, 2.0) == pytest.approx(0.4)
