@@ -967,3 +967,100 @@ def test_corners_given_as_whole_pixels_are_taken_as_those_pixels() -> None:
     )
     assert as_int.valid and as_float.valid
     np.testing.assert_allclose(as_int.as_vector(), as_float.as_vector(), rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "reason",
+    [
+        "no_detection",
+        "bad_corners",
+        "no_initial_pose",
+        "non_finite_result",
+        "reprojection_error",
+        "singular_information",
+    ],
+)
+def test_each_invalid_estimate_is_tights_at_its_frames_time_with_its_reason(
+    reason: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    m, _, _ = _level_view()
+    frame, reading = _at(m.frame, m.ranges, 7.25)
+    estimator = tight("distorted")
+    if reason == "no_detection":
+        frame = CameraFrame(7.25, ())
+    elif reason == "bad_corners":
+        estimator._undistorter = _NanUndistorter()
+    elif reason == "no_initial_pose":
+        corners = m.frame.detections[0].corners_px.copy()
+        corners[0] = np.nan
+        frame = CameraFrame(7.25, (TagDetection(0, corners),))
+        reading = RangeReading(7.25, np.full(4, np.nan), np.zeros(4, bool))
+    elif reason == "non_finite_result":
+        monkeypatch.setattr(estimator, "_solve_all", lambda *args: None)
+    elif reason == "reprojection_error":
+        estimator = tight("distorted", max_reprojection_error_px=1e-3)
+        shifted = m.frame.detections[0].corners_px + np.array([[1.0, 0.0], [0, 0], [0, 0], [0, 0]])
+        frame = CameraFrame(7.25, (TagDetection(0, shifted),))
+    else:
+
+        def singular(matrix: np.ndarray) -> np.ndarray:
+            raise np.linalg.LinAlgError("singular matrix")
+
+        monkeypatch.setattr(np.linalg, "inv", singular)
+    estimate = estimator.estimate(frame, reading)
+    assert not estimate.valid
+    assert (estimate.method, estimate.timestamp, estimate.reason) == ("tight", 7.25, reason)
+
+
+class _NanUndistorter:
+    """A stand-in undistortion that hands back pixels that are not finite."""
+
+    active = True
+
+    def __call__(self, pixels: np.ndarray) -> np.ndarray:
+        return np.full_like(np.asarray(pixels, dtype=float), np.nan)
+
+
+def test_three_corners_are_degenerate_when_their_triangle_spans_less_than_the_minimum() -> None:
+    m, _, _ = _level_view()
+    corners = m.frame.detections[0].corners_px.copy()
+    corners[1] = np.nan
+    a, b, c = corners[[0, 2, 3]]
+    area = 0.5 * abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    frame = CameraFrame(0.0, (TagDetection(0, corners),))
+    assert tight(min_corner_area_px=0.999 * area).estimate(frame, m.ranges).valid
+    too_small = tight(min_corner_area_px=1.001 * area).estimate(frame, m.ranges)
+    assert too_small.reason == "degenerate_corners"
+
+
+def test_two_ranges_off_the_deck_are_both_dropped_and_counted() -> None:
+    m, _, translation = _level_view()
+    ranges = m.ranges.ranges.copy()
+    ranges[1] += 0.3
+    ranges[3] += 0.2
+    reading = RangeReading(0.0, ranges, m.ranges.valid)
+    estimate = tight().estimate(m.frame, reading)
+    assert estimate.valid
+    assert estimate.extras["ranges_dropped"] == 2 and estimate.extras["ranges_used"] == 2
+    assert np.linalg.norm(estimate.translation - translation) < 1e-6
+    # with three corners (no IPPE start), the pose solved before the drop is the start
+    corners = m.frame.detections[0].corners_px.copy()
+    corners[0] = np.nan
+    three = tight().estimate(CameraFrame(0.0, (TagDetection(0, corners),)), reading)
+    assert three.valid and three.extras["start"] == "gated"
+    assert three.extras["ranges_dropped"] == 2
+    assert np.linalg.norm(three.translation - translation) < 1e-6
+
+
+def test_the_reprojection_error_is_the_rms_pixel_distance_of_the_corners_alone() -> None:
+    scene = SyntheticScene(LENSES["distorted"], TAG_SIZE)
+    rng = np.random.default_rng(43)
+    rotation, translation = random_pose(rng, 1.5)
+    frame, reading = noisy(scene, rotation, translation, rng)
+    estimate = tight("distorted").estimate(frame, reading)
+    assert estimate.valid and estimate.extras["ranges_used"] == 4
+    model = tag_corners_in_tag_frame(TAG_SIZE)
+    projected = LENSES["distorted"].project((estimate.rotation @ model.T).T + estimate.translation)
+    distances = np.linalg.norm(projected - frame.detections[0].corners_px, axis=1)
+    rms = math.sqrt(float(np.mean(distances**2)))
+    assert estimate.extras["reprojection_error_px"] == pytest.approx(rms, rel=1e-9)
