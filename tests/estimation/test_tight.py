@@ -14,6 +14,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
+from estimation import geometry
 from estimation.atda import AtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.errors import ConfigError
@@ -978,6 +979,9 @@ def test_corners_given_as_whole_pixels_are_taken_as_those_pixels() -> None:
         "non_finite_result",
         "reprojection_error",
         "singular_information",
+        "covariance_not_finite",
+        "covariance_not_positive",
+        "refused_by_the_final_check",
     ],
 )
 def test_each_invalid_estimate_is_tights_at_its_frames_time_with_its_reason(
@@ -1001,15 +1005,27 @@ def test_each_invalid_estimate_is_tights_at_its_frames_time_with_its_reason(
         estimator = tight("distorted", max_reprojection_error_px=1e-3)
         shifted = m.frame.detections[0].corners_px + np.array([[1.0, 0.0], [0, 0], [0, 0], [0, 0]])
         frame = CameraFrame(7.25, (TagDetection(0, shifted),))
-    else:
+    elif reason == "singular_information":
 
         def singular(matrix: np.ndarray) -> np.ndarray:
             raise np.linalg.LinAlgError("singular matrix")
 
         monkeypatch.setattr(np.linalg, "inv", singular)
+    elif reason == "covariance_not_finite":
+        monkeypatch.setattr(np.linalg, "inv", lambda matrix: np.full((6, 6), np.nan))
+    elif reason == "covariance_not_positive":
+        monkeypatch.setattr(np.linalg, "inv", lambda matrix: np.zeros((6, 6)))
+    else:
+        # a stand-in determinant: the final check (finish_pose) refuses the rotation
+        monkeypatch.setattr(geometry, "det3", lambda matrix: 2.0)
+    expected = {
+        "covariance_not_finite": "singular_information",
+        "covariance_not_positive": "singular_information",
+        "refused_by_the_final_check": "non_finite_result",
+    }.get(reason, reason)
     estimate = estimator.estimate(frame, reading)
     assert not estimate.valid
-    assert (estimate.method, estimate.timestamp, estimate.reason) == ("tight", 7.25, reason)
+    assert (estimate.method, estimate.timestamp, estimate.reason) == ("tight", 7.25, expected)
 
 
 class _NanUndistorter:
@@ -1064,3 +1080,75 @@ def test_the_reprojection_error_is_the_rms_pixel_distance_of_the_corners_alone()
     distances = np.linalg.norm(projected - frame.detections[0].corners_px, axis=1)
     rms = math.sqrt(float(np.mean(distances**2)))
     assert estimate.extras["reprojection_error_px"] == pytest.approx(rms, rel=1e-9)
+
+
+def test_a_valid_estimate_reports_its_fit_and_its_covariance_is_the_inverse_information() -> None:
+    scene = SyntheticScene(LENSES["distorted"], TAG_SIZE)
+    rng = np.random.default_rng(44)
+    rotation, translation = random_pose(rng, 1.5)
+    frame, reading = noisy(scene, rotation, translation, rng)
+    estimate = tight("distorted").estimate(frame, reading)
+    assert estimate.valid
+    assert set(estimate.extras) == {
+        "cost",
+        "reprojection_error_px",
+        "pixel_sigma_px",
+        "ranges_used",
+        "ranges_dropped",
+        "corners_used",
+        "start",
+        "iterations",
+        "ambiguity_ratio",
+        "chosen_by_history",
+    }
+    problem = TightProblem(
+        tag_corners_in_tag_frame(TAG_SIZE),
+        frame.detections[0].corners_px,
+        LENSES["distorted"],
+        PIXEL_SIGMA,
+        tof_positions_in_camera_frame(),
+        reading.ranges,
+        TOF.sigma(reading.ranges),
+    )
+    residuals, jacobian = problem.linearise(estimate.rotation, estimate.translation)
+    assert estimate.extras["cost"] == pytest.approx(float(residuals @ residuals), rel=1e-12)
+    assert 1 <= estimate.extras["iterations"] <= 12
+    to_pose = np.eye(6)
+    to_pose[3:, 3:] = euler_jacobian(estimate.rotation)
+    covariance = to_pose @ np.linalg.inv(jacobian.T @ jacobian) @ to_pose.T
+    np.testing.assert_allclose(estimate.covariance, covariance, rtol=1e-9, atol=0.0)
+
+
+def test_bad_settings_are_refused_naming_the_argument() -> None:
+    k = LENSES["pinhole"]
+    with pytest.raises(ConfigError) as refused:
+        TightEstimator(intrinsics=k, tag_size=0.0)
+    assert refused.value.key == "tag_size"
+    assert refused.value.detail == "0.0 is out of range; allowed (0.0, inf]"
+    bad = tof_positions_in_camera_frame()
+    bad[1, 0] = np.nan
+    with pytest.raises(ConfigError) as refused:
+        TightEstimator(intrinsics=k, tag_size=TAG_SIZE, tof_positions_c=bad)
+    assert refused.value.key == "tof_positions_c"
+    assert refused.value.detail == "sensor positions must be finite"
+    three = TofCameraCalibration.exact(k, tof_positions_in_camera_frame()[:3], 0.04, 4.0)
+    with pytest.raises(ConfigError) as refused:
+        TightEstimator(intrinsics=k, tag_size=TAG_SIZE, tof_calibration=three)
+    assert refused.value.key == "tof_calibration"
+    # no calibration: the principal point stays where it is
+    alone = TightEstimator(intrinsics=k, tag_size=TAG_SIZE)
+    np.testing.assert_array_equal(alone.principal_point_offset_px, [0.0, 0.0])
+    assert (alone.intrinsics.cx, alone.intrinsics.cy) == (k.cx, k.cy)
+
+
+def test_sensors_in_a_line_give_no_plane_start_and_no_exception() -> None:
+    m, _, _ = _level_view()
+    line = np.array([[-0.06, 0.0, 0.0], [-0.02, 0.0, 0.0], [0.02, 0.0, 0.0], [0.06, 0.0, 0.0]])
+    estimator = TightEstimator(
+        intrinsics=LENSES["pinhole"], tag_size=TAG_SIZE, tof_positions_c=line
+    )
+    corners = m.frame.detections[0].corners_px.copy()
+    corners[0] = np.nan
+    ranges = RangeReading(0.0, np.full(4, 1.2), np.ones(4, bool))
+    estimate = estimator.estimate(CameraFrame(0.0, (TagDetection(0, corners),)), ranges)
+    assert estimate.reason == "no_initial_pose"
