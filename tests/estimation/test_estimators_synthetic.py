@@ -564,10 +564,12 @@ def test_range_fusion_refuses_reconstructed_corners_naming_the_method_time_and_r
     cases = {
         "non_finite_result": np.where(np.eye(4, 3) > 0, np.nan, square),
         "corner_behind_camera": square * np.array([1.0, 1.0, -1.0]),
+        "corner_at_the_camera": np.where(np.eye(4, 3, 2) > 0, 0.0, square),
         "degenerate_rigid": np.tile(square[0], (4, 1)),
         "rigid_residual": stretched,
     }
-    for reason, corners_c in cases.items():
+    for case, corners_c in cases.items():
+        reason = "corner_behind_camera" if case == "corner_at_the_camera" else case
         estimate = estimator._pose_from_corners(6.5, corners_c, inputs, {})
         assert (estimate.valid, estimate.method, estimate.timestamp, estimate.reason) == (
             False,
