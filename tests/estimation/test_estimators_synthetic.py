@@ -581,4 +581,8 @@ def test_range_fusion_refuses_reconstructed_corners_naming_the_method_time_and_r
     estimate = estimator._pose_from_corners(6.5, square, inputs, extras)
     assert estimate.valid and estimate.method == "ihrcf" and estimate.timestamp == 6.5
     np.testing.assert_allclose(estimate.translation, [0.1, -0.05, 1.5], atol=1e-12)
-    assert set(extras) == {"plane_rms_m", "rigid_rms_m", "touch_points_extrapolated"}
+    assert extras == {
+        "plane_rms_m": inputs.plane.rms_residual,
+        "rigid_rms_m": pytest.approx(0.0, abs=1e-12),
+        "touch_points_extrapolated": False,
+    }

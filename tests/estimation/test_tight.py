@@ -894,6 +894,11 @@ def test_without_ranges_a_recent_previous_estimate_picks_between_two_close_minim
         assert chosen.extras["ambiguity_ratio"] == pytest.approx(ratio, rel=1e-9)
         assert _angle_deg(chosen.rotation, rotation) < 10.0
         assert chosen.extras["cost"] > alone.extras["cost"]
+    # the better fit as the previous estimate: it stays, and history changed nothing
+    estimator._previous = (10.0, alone.rotation, alone.translation)
+    kept = estimator.estimate(*_at(frame, none, 10.2))
+    assert kept.extras["chosen_by_history"] is False and kept.extras["start"] == "ippe0"
+    np.testing.assert_allclose(kept.rotation, alone.rotation, atol=1e-12)
     # older than the timeout: the better fit again
     estimator._previous = (10.0, rotation, translation)
     late = estimator.estimate(*_at(frame, none, 10.6))
@@ -1152,3 +1157,18 @@ def test_sensors_in_a_line_give_no_plane_start_and_no_exception() -> None:
     ranges = RangeReading(0.0, np.full(4, 1.2), np.ones(4, bool))
     estimate = estimator.estimate(CameraFrame(0.0, (TagDetection(0, corners),)), ranges)
     assert estimate.reason == "no_initial_pose"
+
+
+def test_ranges_and_flags_given_as_a_column_are_read_as_the_four_readings() -> None:
+    m, _, translation = _level_view()
+    column = RangeReading(0.0, m.ranges.ranges.reshape(-1, 1), m.ranges.valid.reshape(-1, 1))
+    estimate = tight().estimate(m.frame, column)
+    assert estimate.valid and estimate.extras["ranges_used"] == 4
+    assert np.linalg.norm(estimate.translation - translation) < 1e-6
+
+
+def test_a_start_cost_margin_of_zero_refines_the_cheapest_start_alone() -> None:
+    m, _, translation = _level_view()
+    estimate = tight(start_cost_margin=0.0).estimate(m.frame, m.ranges)
+    assert estimate.valid, estimate.reason
+    assert np.linalg.norm(estimate.translation - translation) < 1e-6
