@@ -13,14 +13,14 @@ from scipy.spatial.transform import Rotation
 from estimation.atda import ATDAConfig, AtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.crhf import CRHFConfig, CrhfEstimator
-from estimation.estimator import DeckPoseEstimator
+from estimation.estimator import DeckPoseEstimator, RankedEstimator
 from estimation.frames import tof_positions_in_camera_frame
-from estimation.ihrcf import IHRCFConfig
+from estimation.ihrcf import IHRCFConfig, IhrcfEstimator
 from estimation.registry import FRAME_ESTIMATOR_NAMES as ESTIMATOR_NAMES
 from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticScene
 from estimation.tof_calibration import TofCameraCalibration
-from estimation.types import CameraFrame, RangeReading, TagDetection
+from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 from landing_env.errors import ConfigError
 
 TAG_SIZE = 0.12
@@ -401,3 +401,188 @@ def test_synthetic_measurements_follow_the_project_conventions() -> None:
     assert edge.frame.miss_reason and not edge.frame.detections
     with pytest.raises(ValueError, match="Generator"):
         scene.measure(np.eye(3), np.array([0.0, 0.0, 2.0]), pixel_noise_px=1.0)
+
+
+# -- the shared front end (estimation/estimator.py) ----------------------------------------
+
+
+def _exact_calibration(k: CameraIntrinsics, positions: np.ndarray | None = None):
+    layout = tof_positions_in_camera_frame() if positions is None else positions
+    return TofCameraCalibration.exact(k, layout, 0.2, 5.0)
+
+
+def test_the_range_fusion_front_end_refuses_bad_settings_naming_the_argument() -> None:
+    k = LENSES["pinhole"]
+    layout = tof_positions_in_camera_frame()
+    cases = [
+        ({"tag_size": 0.0}, "tag_size", "0.0 is out of range; allowed (0.0, inf]"),
+        (
+            {"tof_calibration": _exact_calibration(k, layout[:3])},
+            "tof_calibration",
+            "has 3 sensors, tof_positions_c has 4",
+        ),
+        (
+            {"tof_positions_c": layout[:3], "tof_calibration": _exact_calibration(k, layout[:3])},
+            "tof_positions_c",
+            "need at least 4 sensors, got 3",
+        ),
+        (
+            {"tof_positions_c": layout + np.array([0.0, 0.0, 0.01])},
+            "tof_positions_c",
+            "sensors must lie in the camera plane z = 0",
+        ),
+        (
+            {"tof_positions_c": layout * np.array([1.0, 0.0, 0.0])},
+            "tof_positions_c",
+            "the (x, y) sites are collinear: they do not fix a plane",
+        ),
+    ]
+    for change, key, detail in cases:
+        arguments = {
+            "tag_size": TAG_SIZE,
+            "tag_id": 0,
+            "tof_calibration": _exact_calibration(k),
+            "intrinsics": k,
+            **change,
+        }
+        with pytest.raises(ConfigError) as refused:
+            IhrcfEstimator(**arguments)
+        assert (refused.value.key, refused.value.detail) == (key, detail)
+    with pytest.raises(ConfigError) as refused:
+        IHRCFConfig(plane_fit="ransac")
+    assert refused.value.key == "plane_fit"
+
+
+def test_range_fusion_removes_the_lens_distortion_unless_told_not_to() -> None:
+    k = LENSES["distorted"]
+    rotation, translation = deck_pose(1.5, 10.0, 0.3, 0.5, 0.5, -0.4)
+    m = SCENES["distorted"].measure(rotation, translation, timestamp=2.0)
+    kept, dropped = [], []
+    for undistort in (True, False):
+        estimator = IhrcfEstimator(
+            tag_size=TAG_SIZE,
+            tag_id=0,
+            tof_calibration=_exact_calibration(k),
+            intrinsics=k,
+            config=IHRCFConfig(undistort=undistort),
+        )
+        estimate = estimator.estimate(m.frame, m.ranges)
+        assert estimate.valid
+        (kept if undistort else dropped).append(pose_errors(estimate, rotation, translation)[0])
+    assert kept[0] < 1e-6 < 1e-3 < dropped[0]
+
+
+def test_range_fusion_refuses_corners_far_outside_its_image() -> None:
+    k = LENSES["pinhole"]
+    frame, ranges = _valid_pair()
+    estimator = IhrcfEstimator(
+        tag_size=TAG_SIZE, tag_id=0, tof_calibration=_exact_calibration(k), intrinsics=k
+    )
+    assert estimator.image_size == (512, 512)
+    assert estimator.estimate(frame, ranges).valid
+    outside = frame.detections[0].corners_px + np.array([600.0, 0.0])
+    estimate = estimator.estimate(_frame_with(outside), ranges)
+    assert not estimate.valid and estimate.reason == "bad_corners"
+
+
+class _StandIn:
+    """A stand-in estimator that answers with a given estimate and counts its frames."""
+
+    def __init__(self, name: str, valid: bool, reason: str = "") -> None:
+        self.name = name
+        self.valid = valid
+        self.reason = reason
+        self.frames: list = []
+        self.resets = 0
+
+    def reset(self) -> None:
+        self.resets += 1
+
+    def estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        self.frames.append((frame, ranges))
+        if not self.valid:
+            return DeckPoseEstimate.invalid(self.name, frame.timestamp, self.reason)
+        return DeckPoseEstimate(
+            method=self.name,
+            timestamp=frame.timestamp,
+            valid=True,
+            rotation=np.eye(3),
+            translation=np.array([0.0, 0.0, 1.0 + len(self.name)]),
+            extras={"cost": 1.0},
+        )
+
+
+def test_the_ranked_estimator_reports_the_first_valid_estimate_and_its_source() -> None:
+    frame, ranges = _valid_pair()
+    first = _StandIn("first", valid=False, reason="range_invalid")
+    second = _StandIn("second", valid=True)
+    third = _StandIn("third", valid=True)
+    ranked = RankedEstimator("auto", (first, second, third))
+    assert (ranked.name, ranked.estimators) == ("auto", (first, second, third))
+    estimate = ranked.estimate(frame, ranges)
+    assert estimate.valid and estimate.method == "auto" and estimate.timestamp == 2.0
+    assert estimate.extras == {"cost": 1.0, "source": "second"}
+    assert estimate.translation[2] == 1.0 + len("second")
+    # every estimator sees every frame, so that its state stays current
+    for e in (first, second, third):
+        assert e.frames == [(frame, ranges)]
+    ranked.reset()
+    assert (first.resets, second.resets, third.resets) == (1, 1, 1)
+
+
+def test_the_ranked_estimator_without_a_valid_estimate_gives_the_last_ones_reason_and_all() -> None:
+    frame, ranges = _valid_pair()
+    ranked = RankedEstimator(
+        "auto",
+        (
+            _StandIn("a", False, "range_invalid"),
+            _StandIn("b", False, "plane_residual"),
+            _StandIn("c", False, "no_detection"),
+        ),
+    )
+    estimate = ranked.estimate(frame, ranges)
+    assert not estimate.valid and estimate.method == "auto" and estimate.timestamp == 2.0
+    assert estimate.reason == "no_detection"
+    assert estimate.extras == {
+        "reasons": {"a": "range_invalid", "b": "plane_residual", "c": "no_detection"}
+    }
+    with pytest.raises(ValueError, match=r"^a ranked estimator needs at least one estimator$"):
+        RankedEstimator("auto", ())
+
+
+def test_range_fusion_refuses_reconstructed_corners_naming_the_method_time_and_reason() -> None:
+    k = LENSES["pinhole"]
+    frame, ranges = _valid_pair()
+    estimator = IhrcfEstimator(
+        tag_size=TAG_SIZE, tag_id=0, tof_calibration=_exact_calibration(k), intrinsics=k
+    )
+    inputs = estimator._inputs(frame, ranges)
+    assert not isinstance(inputs, str)
+    square = estimator.tag_model + np.array([0.1, -0.05, 1.5])
+    # 60 % wider than the tag: an RMS misfit of 3.6 cm, above a quarter of its 12 cm
+    stretched = estimator.tag_model * np.array([1.6, 1.0, 1.0]) + np.array([0.1, -0.05, 1.5])
+    cases = {
+        "non_finite_result": np.where(np.eye(4, 3) > 0, np.nan, square),
+        "corner_behind_camera": square * np.array([1.0, 1.0, -1.0]),
+        "corner_at_the_camera": np.where(np.eye(4, 3, 2) > 0, 0.0, square),
+        "degenerate_rigid": np.tile(square[0], (4, 1)),
+        "rigid_residual": stretched,
+    }
+    for case, corners_c in cases.items():
+        reason = "corner_behind_camera" if case == "corner_at_the_camera" else case
+        estimate = estimator._pose_from_corners(6.5, corners_c, inputs, {})
+        assert (estimate.valid, estimate.method, estimate.timestamp, estimate.reason) == (
+            False,
+            "ihrcf",
+            6.5,
+            reason,
+        )
+    extras: dict = {}
+    estimate = estimator._pose_from_corners(6.5, square, inputs, extras)
+    assert estimate.valid and estimate.method == "ihrcf" and estimate.timestamp == 6.5
+    np.testing.assert_allclose(estimate.translation, [0.1, -0.05, 1.5], atol=1e-12)
+    assert extras == {
+        "plane_rms_m": inputs.plane.rms_residual,
+        "rigid_rms_m": pytest.approx(0.0, abs=1e-12),
+        "touch_points_extrapolated": False,
+    }
