@@ -101,17 +101,20 @@ def principal_point_offset(
 
     Both calibrations see the same image, but the pads' touch pixels are measured directly
     while the chessboard's principal point is a fitted parameter; their median disagreement
-    over every sample is the principal-point error (zero for consistent calibrations).
+    over every sample is the principal-point error (zero for consistent calibrations, and
+    where no sensor or no touch point in front of the camera gives one).
     """
     offsets = []
     for sensor, samples in zip(tof_positions_c, tof_calibration.samples, strict=False):
         points = np.tile(sensor, (len(samples), 1))
         points[:, 2] += samples[:, 0]
         offsets.append(samples[:, 1:3] - intrinsics.project(points))
-    stacked = np.vstack(offsets) if offsets else np.empty((0, 2))
+    if not offsets:
+        return np.zeros(2)  # no sensor: no touch pixel to compare
+    stacked = np.vstack(offsets)
     stacked = stacked[np.all(np.isfinite(stacked), axis=1)]
     if len(stacked) == 0:
-        return np.zeros(2)
+        return np.zeros(2)  # no touch point the camera sees
     return np.median(stacked, axis=0)
 
 
