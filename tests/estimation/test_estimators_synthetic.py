@@ -13,7 +13,13 @@ from scipy.spatial.transform import Rotation
 from estimation.atda import ATDAConfig, AtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.crhf import CRHFConfig, CrhfEstimator
-from estimation.estimator import DeckPoseEstimator, RankedEstimator
+from estimation.estimator import (
+    NON_FINITE_RESULT,
+    DeckPoseEstimator,
+    RankedEstimator,
+    checked_ranges,
+    finish_pose,
+)
 from estimation.frames import tof_positions_in_camera_frame
 from estimation.ihrcf import IHRCFConfig, IhrcfEstimator
 from estimation.registry import FRAME_ESTIMATOR_NAMES as ESTIMATOR_NAMES
@@ -586,3 +592,69 @@ def test_range_fusion_refuses_reconstructed_corners_naming_the_method_time_and_r
         "rigid_rms_m": pytest.approx(0.0, abs=1e-12),
         "touch_points_extrapolated": False,
     }
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["nan_rotation", "nan_translation", "reflection", "scaled", "behind", "at_the_camera"],
+)
+def test_the_final_check_refuses_a_bad_pose_naming_the_method_time_and_reason(case: str) -> None:
+    rotation = Rotation.from_euler("xyz", [0.1, -0.2, 0.3]).as_matrix()
+    translation_m = np.array([0.1, -0.2, 2.0])
+    if case == "nan_rotation":
+        rotation[0, 0] = math.nan
+    elif case == "nan_translation":
+        translation_m[0] = math.nan
+    elif case == "reflection":
+        rotation = -rotation
+    elif case == "scaled":
+        rotation = 1.2 * rotation
+    elif case == "behind":
+        translation_m[2] = -2.0
+    else:
+        translation_m[2] = 0.0
+    estimate = finish_pose("m", 1.5, rotation, translation_m, {"k": 1})
+    assert (estimate.valid, estimate.method, estimate.timestamp, estimate.reason) == (
+        False,
+        "m",
+        1.5,
+        NON_FINITE_RESULT,
+    )
+
+
+def test_the_final_check_passes_a_proper_pose_in_front_unchanged() -> None:
+    rotation = Rotation.from_euler("xyz", [0.1, -0.2, 0.3]).as_matrix()
+    translation_m = np.array([0.1, -0.2, 2.0])
+    estimate = finish_pose("m", 1.5, rotation, translation_m, {"k": 1})
+    assert (estimate.valid, estimate.method, estimate.timestamp, estimate.extras) == (
+        True,
+        "m",
+        1.5,
+        {"k": 1},
+    )
+    np.testing.assert_array_equal(estimate.rotation, rotation)
+    np.testing.assert_array_equal(estimate.translation, translation_m)
+
+
+@pytest.mark.parametrize(
+    ("ranges_m", "valid", "kept"),
+    [
+        ([2.0, 2.0, 2.0, 1000.0], [1, 1, 1, 1], True),
+        ([2.0, 2.0, 2.0, 2.0], [True] * 4, True),
+        ([2.0, 2.0, 2.0, 0.0], [True] * 4, False),
+        ([2.0, 2.0, 2.0, 1000.5], [True] * 4, False),
+        ([2.0, 2.0, 2.0, 2.0], [1, 1, 1, 0], False),
+        ([2.0, 2.0, 2.0, 2.0], [1, 1, 1, 2], False),
+        ([2.0, 2.0, 2.0], [1, 1, 1, 1], False),
+        ([2.0, 2.0, 2.0, 2.0], [1, 1, 1], False),
+    ],
+)
+def test_ranges_are_used_only_when_each_sensor_is_flagged_1_and_reads_above_0_up_to_1000_m(
+    ranges_m: list[float], valid: list, kept: bool
+) -> None:
+    reading = RangeReading(timestamp=2.0, ranges=np.asarray(ranges_m), valid=np.asarray(valid))
+    checked = checked_ranges(reading, 4)
+    if kept:
+        np.testing.assert_array_equal(checked, ranges_m)
+    else:
+        assert checked is None
