@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,8 +15,12 @@ from estimation.atda import ATDAConfig, AtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.crhf import CRHFConfig, CrhfEstimator
 from estimation.estimator import (
+    BAD_CORNERS,
+    BAD_TIMESTAMP,
     NON_FINITE_RESULT,
+    NUMERICAL_ERROR,
     DeckPoseEstimator,
+    GuardedEstimator,
     RankedEstimator,
     checked_ranges,
     finish_pose,
@@ -658,3 +663,138 @@ def test_ranges_are_used_only_when_each_sensor_is_flagged_1_and_reads_above_0_up
         np.testing.assert_array_equal(checked, ranges_m)
     else:
         assert checked is None
+
+
+class _RecordingEstimator(GuardedEstimator):
+    """A stand-in: records the checked frame and NumPy's error settings it runs under."""
+
+    name = "stand-in"
+    tag_id = 0
+
+    def __init__(self, raises: Exception | None = None) -> None:
+        self.frames: list = []
+        self.errstate: dict = {}
+        self.raises = raises
+
+    def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        self.frames.append(frame)
+        self.errstate = np.geterr()
+        if self.raises is not None:
+            raise self.raises
+        return DeckPoseEstimate.invalid(self.name, frame.timestamp, "reached")
+
+
+_GOOD_CORNERS_PX = np.array([[10.0, 10.0], [20.0, 10.0], [20.0, 20.0], [10.0, 20.0]])
+_BAD_CORNERS_PX = np.full((4, 2), np.inf)
+
+
+def test_the_guard_names_itself_the_time_and_the_reason_of_a_bad_time_or_a_numerical_error() -> (
+    None
+):
+    no_ranges = _ranges([2.0] * 4)
+    good = (TagDetection(0, _GOOD_CORNERS_PX),)
+    stamped = _RecordingEstimator().estimate(CameraFrame(math.nan, good), no_ranges)
+    assert (stamped.method, stamped.reason) == ("stand-in", BAD_TIMESTAMP)
+    assert math.isnan(stamped.timestamp)
+    failing = _RecordingEstimator(raises=np.linalg.LinAlgError("singular"))
+    failed = failing.estimate(CameraFrame(2.0, good), no_ranges)
+    assert (failed.valid, failed.method, failed.timestamp, failed.reason) == (
+        False,
+        "stand-in",
+        2.0,
+        NUMERICAL_ERROR,
+    )
+    assert failing.errstate == {
+        "divide": "ignore",
+        "over": "ignore",
+        "under": "ignore",
+        "invalid": "ignore",
+    }
+
+
+def test_a_frame_whose_own_tag_is_corrupt_is_refused_though_another_tag_is_fine() -> None:
+    estimator = _RecordingEstimator()
+    frame = CameraFrame(2.0, (TagDetection(0, _BAD_CORNERS_PX), TagDetection(1, _GOOD_CORNERS_PX)))
+    estimate = estimator.estimate(frame, _ranges([2.0] * 4))
+    assert (estimate.method, estimate.timestamp, estimate.reason) == ("stand-in", 2.0, BAD_CORNERS)
+    assert estimator.frames == []
+
+
+@pytest.mark.parametrize("kind", ["dataclass", "frame_like"])
+def test_the_estimate_gets_the_frame_with_a_float_time_its_image_and_only_usable_detections(
+    kind: str,
+) -> None:
+    image = np.zeros((4, 4))
+    good = TagDetection(0, _GOOD_CORNERS_PX)
+    detections = (good, TagDetection(1, _BAD_CORNERS_PX))
+    if kind == "dataclass":
+        frame = CameraFrame(2, detections, image, miss_reason="dropout")
+    else:
+        frame = SimpleNamespace(timestamp=2, detections=detections, image=image)
+    estimator = _RecordingEstimator()
+    estimate = estimator.estimate(frame, _ranges([2.0] * 4))
+    assert estimate.reason == "reached"
+    (checked,) = estimator.frames
+    assert isinstance(checked, CameraFrame)
+    assert type(checked.timestamp) is float and checked.timestamp == 2.0
+    assert len(checked.detections) == 1 and checked.detections[0] is good
+    assert checked.image is image
+    assert checked.miss_reason == ("dropout" if kind == "dataclass" else "")
+
+
+@pytest.mark.parametrize(
+    "detections",
+    [(), (TagDetection(1, _BAD_CORNERS_PX), TagDetection(2, _GOOD_CORNERS_PX))],
+    ids=["none", "other_tags_one_corrupt"],
+)
+def test_a_frame_without_the_estimators_tag_reaches_the_estimator_to_say_so(
+    detections: tuple,
+) -> None:
+    estimator = _RecordingEstimator()
+    estimate = estimator.estimate(CameraFrame(2.0, detections), _ranges([2.0] * 4))
+    assert estimate.reason == "reached"
+    (checked,) = estimator.frames
+    assert [d.tag_id for d in checked.detections] == [d.tag_id for d in detections][1:]
+
+
+class _UntaggedEstimator(GuardedEstimator):
+    """A stand-in without a ``tag_id``: it reports that the frame reached it."""
+
+    name = "untagged"
+
+    def _estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        return DeckPoseEstimate.invalid(self.name, frame.timestamp, "reached")
+
+
+def _malformed_cases() -> dict[str, tuple[GuardedEstimator, object, str]]:
+    good = TagDetection(0, _GOOD_CORNERS_PX)
+    corrupt = TagDetection(1, _BAD_CORNERS_PX)
+    return {
+        "no_detections": (_RecordingEstimator(), SimpleNamespace(timestamp=2.0), BAD_CORNERS),
+        "no_timestamp": (_RecordingEstimator(), SimpleNamespace(detections=(good,)), BAD_TIMESTAMP),
+        "detection_without_corners": (
+            _RecordingEstimator(),
+            CameraFrame(2.0, (SimpleNamespace(tag_id=0), good)),
+            "reached",
+        ),
+        "detection_without_id": (
+            _RecordingEstimator(),
+            CameraFrame(2.0, (SimpleNamespace(corners_px=_GOOD_CORNERS_PX), corrupt)),
+            "reached",
+        ),
+        "no_image": (
+            _RecordingEstimator(),
+            SimpleNamespace(timestamp=2.0, detections=(good, corrupt)),
+            "reached",
+        ),
+        "estimator_without_tag": (_UntaggedEstimator(), CameraFrame(2.0, (good,)), "reached"),
+    }
+
+
+@pytest.mark.parametrize("case", list(_malformed_cases()))
+def test_frames_detections_or_estimators_missing_an_attribute_give_estimates_not_exceptions(
+    case: str,
+) -> None:
+    estimator, frame, reason = _malformed_cases()[case]
+    estimate = estimator.estimate(frame, _ranges([2.0] * 4))
+    assert (estimate.valid, estimate.method, estimate.reason) == (False, estimator.name, reason)
