@@ -798,3 +798,39 @@ def test_frames_detections_or_estimators_missing_an_attribute_give_estimates_not
     estimator, frame, reason = _malformed_cases()[case]
     estimate = estimator.estimate(frame, _ranges([2.0] * 4))
     assert (estimate.valid, estimate.method, estimate.reason) == (False, estimator.name, reason)
+
+
+def _two_detections_of_the_tag(case: str, good_px: np.ndarray) -> tuple:
+    wrong_px = good_px + 25.0
+    if case == "fewer_bit_errors":
+        return (
+            TagDetection(0, wrong_px, decision_margin=100.0, hamming=1),
+            TagDetection(0, good_px, decision_margin=10.0, hamming=0),
+        )
+    if case == "larger_margin":
+        return (
+            TagDetection(0, wrong_px, decision_margin=10.0),
+            TagDetection(0, good_px, decision_margin=100.0),
+        )
+    if case == "a_margin_over_none":
+        return (TagDetection(0, wrong_px), TagDetection(0, good_px, decision_margin=10.0))
+    # a detection without the two attributes counts no bit errors
+    return (
+        TagDetection(0, wrong_px, decision_margin=100.0, hamming=1),
+        SimpleNamespace(tag_id=0, corners_px=good_px),
+    )
+
+
+@pytest.mark.parametrize(
+    "case", ["fewer_bit_errors", "larger_margin", "a_margin_over_none", "without_attributes"]
+)
+def test_of_two_detections_of_the_tag_range_fusion_uses_the_better_decoded(case: str) -> None:
+    frame, ranges = _valid_pair()
+    estimator = _estimators(LENSES["pinhole"])["ihrcf"]
+    clean = estimator.estimate(frame, ranges)
+    good_px = np.asarray(frame.detections[0].corners_px, dtype=float)
+    doubled = CameraFrame(2.0, _two_detections_of_the_tag(case, good_px))
+    estimate = estimator.estimate(doubled, ranges)
+    assert clean.valid and estimate.valid
+    np.testing.assert_allclose(estimate.translation, clean.translation, atol=1e-9)
+    np.testing.assert_allclose(estimate.rotation, clean.rotation, atol=1e-9)
