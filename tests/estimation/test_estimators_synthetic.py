@@ -23,6 +23,7 @@ from estimation.estimator import (
     GuardedEstimator,
     RankedEstimator,
     checked_ranges,
+    corners_degenerate,
     finish_pose,
 )
 from estimation.frames import tof_positions_in_camera_frame
@@ -834,3 +835,47 @@ def test_of_two_detections_of_the_tag_range_fusion_uses_the_better_decoded(case:
     assert clean.valid and estimate.valid
     np.testing.assert_allclose(estimate.translation, clean.translation, atol=1e-9)
     np.testing.assert_allclose(estimate.rotation, clean.rotation, atol=1e-9)
+
+
+def _shoelace_area_px2(corners_px: np.ndarray) -> float:
+    x, y = corners_px[:, 0], corners_px[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+_QUAD_PX = np.array([[100.0, 50.0], [112.0, 51.0], [110.0, 59.0], [101.0, 57.0]])
+_QUAD_AREA_PX2 = _shoelace_area_px2(_QUAD_PX)  # 79.5 px²; its smallest turn is 61 px²
+
+
+@pytest.mark.parametrize(
+    ("corners_px", "min_area_px", "degenerate"),
+    [
+        (_QUAD_PX, 0.99 * _QUAD_AREA_PX2, False),
+        (_QUAD_PX[::-1], 0.99 * _QUAD_AREA_PX2, False),
+        (np.roll(_QUAD_PX, 1, axis=0), 0.99 * _QUAD_AREA_PX2, False),
+        (_QUAD_PX, 1.01 * _QUAD_AREA_PX2, True),
+        (_QUAD_PX * 0.1, 0.001, False),
+        (_QUAD_PX[::-1] * 0.1, 0.001, False),
+        (_QUAD_PX[[0, 1, 3, 2]], 1.0, True),
+        (_QUAD_PX[[0, 1, 3, 2]] * 0.1, 0.001, True),
+        (np.array([[0.0, 0.0], [12.0, 1.0], [4.0, 3.0], [1.0, 7.0]]), 1.0, True),
+        (np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.5], [10.0, 10.0]]), 12.0, True),
+        (np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.5], [10.0, 10.0]]), 9.0, False),
+    ],
+    ids=[
+        "convex",
+        "clockwise",
+        "from_another_corner",
+        "below_the_minimum_area",
+        "sub_pixel_turns",
+        "sub_pixel_turns_clockwise",
+        "bow_tie",
+        "sub_pixel_bow_tie",
+        "dent",
+        "a_near_straight_corner",
+        "a_near_straight_corner_allowed",
+    ],
+)
+def test_only_convex_quadrilaterals_of_the_minimum_area_and_turn_are_not_degenerate(
+    corners_px: np.ndarray, min_area_px: float, degenerate: bool
+) -> None:
+    assert corners_degenerate(np.asarray(corners_px, dtype=float), min_area_px) is degenerate
