@@ -17,6 +17,7 @@ from estimation.crhf import CRHFConfig, CrhfEstimator
 from estimation.estimator import (
     BAD_CORNERS,
     BAD_TIMESTAMP,
+    MAX_OUTSIDE_IMAGE_FRAC,
     NON_FINITE_RESULT,
     NUMERICAL_ERROR,
     DeckPoseEstimator,
@@ -879,3 +880,57 @@ def test_only_convex_quadrilaterals_of_the_minimum_area_and_turn_are_not_degener
     corners_px: np.ndarray, min_area_px: float, degenerate: bool
 ) -> None:
     assert corners_degenerate(np.asarray(corners_px, dtype=float), min_area_px) is degenerate
+
+
+class _ImagedEstimator(_RecordingEstimator):
+    """The recording stand-in with a 640 x 480 image, so corners are checked against it."""
+
+    intrinsics = SimpleNamespace(width=640, height=480)
+
+
+def _corner_cases() -> dict[str, tuple[object, bool]]:
+    margin_x = MAX_OUTSIDE_IMAGE_FRAC * 640
+    far_x = 640 - 1.0 + margin_x
+
+    def moved(x: float) -> np.ndarray:
+        corners = _GOOD_CORNERS_PX.copy()
+        corners[1, 0] = x
+        return corners
+
+    nan_and_far = moved(2e6)
+    nan_and_far[0] = np.nan
+    return {
+        "not_numbers": ([["a", "b"]] * 4, False),
+        "three_corners": (_GOOD_CORNERS_PX[:3], False),
+        "beyond_any_camera": (moved(2e6), False),
+        "one_unseen_one_beyond_any_camera": (nan_and_far, False),
+        "just_left_of_the_image": (moved(-0.5 * margin_x), True),
+        "just_inside_the_far_margin": (moved(far_x - 0.5), True),
+        "just_outside_the_far_margin": (moved(far_x + 0.5), False),
+    }
+
+
+@pytest.mark.parametrize("case", list(_corner_cases()))
+def test_corners_reach_the_estimator_only_as_four_pixels_within_the_images_margin(
+    case: str,
+) -> None:
+    corners, usable = _corner_cases()[case]
+    estimator = _ImagedEstimator()
+    frame = CameraFrame(2.0, (TagDetection(0, corners),))
+    estimate = estimator.estimate(frame, _ranges([2.0] * 4))
+    assert estimate.reason == ("reached" if usable else BAD_CORNERS)
+
+
+def test_an_infinite_timestamp_is_refused() -> None:
+    frame = CameraFrame(math.inf, (TagDetection(0, _GOOD_CORNERS_PX),))
+    estimate = _RecordingEstimator().estimate(frame, _ranges([2.0] * 4))
+    assert estimate.reason == BAD_TIMESTAMP
+
+
+def test_range_fusion_refuses_a_tag_with_an_unseen_corner() -> None:
+    frame, ranges = _valid_pair()
+    corners = np.asarray(frame.detections[0].corners_px, dtype=float).copy()
+    corners[2] = np.nan
+    estimator = _estimators(LENSES["pinhole"])["ihrcf"]
+    estimate = estimator.estimate(CameraFrame(2.0, (TagDetection(0, corners),)), ranges)
+    assert (estimate.valid, estimate.reason) == (False, BAD_CORNERS)
