@@ -934,3 +934,26 @@ def test_range_fusion_refuses_a_tag_with_an_unseen_corner() -> None:
     estimator = _estimators(LENSES["pinhole"])["ihrcf"]
     estimate = estimator.estimate(CameraFrame(2.0, (TagDetection(0, corners),)), ranges)
     assert (estimate.valid, estimate.reason) == (False, BAD_CORNERS)
+
+
+def test_the_configured_plane_fit_is_the_one_used_on_noisy_ranges() -> None:
+    k = LENSES["pinhole"]
+    cal = TofCameraCalibration.exact(k, tof_positions_in_camera_frame(), 0.2, 5.0)
+    frame, ranges = _valid_pair()
+    noisy = RangeReading(
+        2.0, ranges.ranges + np.array([0.004, -0.003, 0.002, -0.004]), ranges.valid
+    )
+    poses = {}
+    for plane_fit in ("lstsq", "cross3"):
+        estimator = make_estimator(
+            "ihrcf",
+            intrinsics=k,
+            tag_size=TAG_SIZE,
+            tof_calibration=cal,
+            config=IHRCFConfig(plane_fit=plane_fit),
+        )
+        estimate = estimator.estimate(frame, noisy)
+        assert estimate.valid
+        poses[plane_fit] = estimate.as_vector()
+    # the papers' plane through the first three touch points is not the least-squares one
+    assert np.max(np.abs(poses["lstsq"] - poses["cross3"])) > 1e-4
