@@ -957,3 +957,16 @@ def test_the_configured_plane_fit_is_the_one_used_on_noisy_ranges() -> None:
         poses[plane_fit] = estimate.as_vector()
     # the papers' plane through the first three touch points is not the least-squares one
     assert np.max(np.abs(poses["lstsq"] - poses["cross3"])) > 1e-4
+
+
+@pytest.mark.parametrize(("high_m", "extrapolated"), [(5.0, False), (1.0, True)])
+def test_range_fusion_says_when_a_range_lies_beyond_its_calibrations_span(
+    high_m: float, extrapolated: bool
+) -> None:
+    k = LENSES["pinhole"]
+    exact = TofCameraCalibration.exact(k, tof_positions_in_camera_frame(), 0.2, high_m)
+    estimator = _estimators(k, exact.with_method("pchip", "hyperbola"))["ihrcf"]
+    frame, ranges = _valid_pair()
+    estimate = estimator.estimate(frame, ranges)
+    assert estimate.valid
+    assert estimate.extras["touch_points_extrapolated"] is extrapolated
