@@ -22,6 +22,7 @@ the same record, before the episode's start too (the ship was at sea before the 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,31 +91,21 @@ class HelideckMonitor:
 
     def _noise(self, index: np.ndarray) -> np.ndarray:
         """Unit-variance errors (n, 5) of the samples ``index`` (a fixed function of each)."""
-        out = np.empty((len(index), len(HMS_CHANNELS)))
-        chunk = np.floor_divide(index, _CHUNK)
-        for c in np.unique(chunk):
-            block = self._chunks.get(int(c))
-            if block is None:
-                rng = np.random.default_rng([self.seed, int(c) + _CHUNK_OFFSET])
-                block = rng.standard_normal((_CHUNK, len(HMS_CHANNELS)))
-                self._chunks[int(c)] = block
-            here = chunk == c
-            out[here] = block[index[here] - int(c) * _CHUNK]
-        return out
+
+        def block(c: int) -> np.ndarray:
+            rng = np.random.default_rng([self.seed, c + _CHUNK_OFFSET])
+            return rng.standard_normal((_CHUNK, len(HMS_CHANNELS)))
+
+        return _from_blocks(index, _CHUNK, self._chunks, block)
 
     def _truth(self, index: np.ndarray) -> np.ndarray:
         """The true values (n, 5) of the samples ``index``, each sampled in its fixed block."""
-        out = np.empty((len(index), len(HMS_CHANNELS)))
-        chunk = np.floor_divide(index, _TRUTH_CHUNK)
-        for c in np.unique(chunk):
-            block = self._truth_chunks.get(int(c))
-            if block is None:
-                times = (int(c) * _TRUTH_CHUNK + np.arange(_TRUTH_CHUNK)) * self.dt_s
-                block = sample_poses(self.motion, times)[:, _COLUMNS]
-                self._truth_chunks[int(c)] = block
-            here = chunk == c
-            out[here] = block[index[here] - int(c) * _TRUTH_CHUNK]
-        return out
+
+        def block(c: int) -> np.ndarray:
+            times = (c * _TRUTH_CHUNK + np.arange(_TRUTH_CHUNK)) * self.dt_s
+            return sample_poses(self.motion, times)[:, _COLUMNS]
+
+        return _from_blocks(index, _TRUTH_CHUNK, self._truth_chunks, block)
 
     def window(self, t_end_s: float, window_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The record's samples in (``t_end_s - window_s``, ``t_end_s``], oldest first: their
@@ -123,3 +114,19 @@ class HelideckMonitor:
         n = max(1, round(window_s / self.dt_s))
         index = np.arange(last - n + 1, last + 1)
         return index * self.dt_s, self._truth(index) + self._noise(index) * self.noise_std
+
+
+def _from_blocks(
+    index: np.ndarray, size: int, cache: dict[int, np.ndarray], make: Callable[[int], np.ndarray]
+) -> np.ndarray:
+    """The rows ``index`` of a record kept in blocks of ``size`` rows: block ``c`` holds rows
+    ``c * size`` on, made by ``make(c)`` when first read and kept in ``cache``."""
+    out = np.empty((len(index), len(HMS_CHANNELS)))
+    chunk = np.floor_divide(index, size)
+    for c in np.unique(chunk):
+        block = cache.get(int(c))
+        if block is None:
+            block = cache[int(c)] = make(int(c))
+        here = chunk == c
+        out[here] = block[index[here] - int(c) * size]
+    return out
