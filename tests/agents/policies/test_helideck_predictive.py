@@ -4,6 +4,7 @@ ahead), the deck's tilt and its chance read from a forecast of many targets."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 
@@ -119,14 +120,25 @@ def _ship_env(seed: int = 2):
     return env
 
 
+@contextlib.contextmanager
+def _ship_policy(forecast, opportunity_s: float = 2.0):
+    """A ship env and ``predictive`` over it (tilt limit 5 deg, wait limit 15 s), closed after."""
+    env = _ship_env()
+    try:
+        yield (
+            env,
+            HelideckPredictivePolicy(
+                env, forecast, HelideckMonitorConfig(), 5.0, 15.0, opportunity_s
+            ),
+        )
+    finally:
+        env.close()
+
+
 def test_the_policy_commits_when_its_chance_clears_the_value_of_waiting_on(
     small_forecast, monkeypatch
 ):
-    env = _ship_env()
-    try:
-        policy = HelideckPredictivePolicy(
-            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0
-        )
+    with _ship_policy(small_forecast) as (env, policy):
         observation, _ = env.reset(seed=2)
         chance = policy.chance(0.0)
         assert 0.0 <= chance <= 1.0 and len(policy.last) == len(SHIP_CONTACT_TIMES_S)
@@ -142,8 +154,6 @@ def test_the_policy_commits_when_its_chance_clears_the_value_of_waiting_on(
         assert policy.act(observation) == 1
         monkeypatch.setattr(policy, "chance", lambda fraction: _set(policy, 0.0, 0.9))
         assert policy.act(observation) == 0
-    finally:
-        env.close()
 
 
 def test_once_the_wait_limit_is_within_the_forecasts_reach_the_forced_commit_is_foreseen(
@@ -152,11 +162,7 @@ def test_once_the_wait_limit_is_within_the_forecasts_reach_the_forced_commit_is_
     """Beyond the forecast's reach the bar is the long-run value of waiting; within it (the
     forced commit's contact no more than the forecast's last horizon ahead) the value is
     built on the chance the forecast gives the forced commit itself."""
-    env = _ship_env()
-    try:
-        policy = HelideckPredictivePolicy(
-            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0
-        )
+    with _ship_policy(small_forecast) as (env, policy):
         env.reset(seed=2)
         samples = small_forecast.chances(SHIP_CONTACT_TIMES_S, 5.0, combine="mean")
         long_run = StoppingValues.from_samples(samples)
@@ -180,8 +186,6 @@ def test_once_the_wait_limit_is_within_the_forecasts_reach_the_forced_commit_is_
             assert policy.last_threshold == pytest.approx(expected, rel=1e-12)
             seen.add(round(policy.last_threshold - long_run.threshold(remaining_s, 2.0), 9))
         assert seen != {0.0}  # the foreseen commit moved the bar
-    finally:
-        env.close()
 
 
 def _set(policy: HelideckPredictivePolicy, chance: float, threshold: float) -> float:
@@ -196,17 +200,11 @@ def _set(policy: HelideckPredictivePolicy, chance: float, threshold: float) -> f
 def test_a_forecast_that_cannot_be_made_means_waiting_even_at_the_wait_limit(
     small_forecast, monkeypatch
 ):
-    env = _ship_env()
-    try:
-        policy = HelideckPredictivePolicy(
-            env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0
-        )
+    with _ship_policy(small_forecast) as (env, policy):
         monkeypatch.setattr(small_forecast, "features", lambda values, valid: "no HMS record")
         observation, _ = env.reset(seed=2)
         assert policy.act(observation) == 0
         assert policy.last[0].reason == "no HMS record"
-    finally:
-        env.close()
 
 
 @pytest.mark.parametrize(
@@ -231,11 +229,7 @@ def test_contact_times_the_forecast_cannot_reach_are_refused_naming_the_key(
 def test_a_seeded_episode_of_predictive_at_sea_repeats_and_decides_in_its_space(small_forecast):
     outcomes = []
     for _ in range(2):
-        env = _ship_env()
-        try:
-            policy = HelideckPredictivePolicy(
-                env, small_forecast, HelideckMonitorConfig(), 5.0, 15.0, 2.0
-            )
+        with _ship_policy(small_forecast) as (env, policy):
             observation, _ = env.reset(seed=11)
             policy.reset()
             actions = []
@@ -248,8 +242,6 @@ def test_a_seeded_episode_of_predictive_at_sea_repeats_and_decides_in_its_space(
                 if terminated or truncated:
                     break
             outcomes.append((actions, info["outcome"], round(info["wait_s"], 6)))
-        finally:
-            env.close()
     assert outcomes[0] == outcomes[1]
     assert math.isfinite(outcomes[0][2])
 
@@ -270,9 +262,7 @@ def test_the_registry_builds_predictive_over_a_ship_as_the_helideck_policy(monke
 
 
 def test_without_a_fitted_forecast_each_episode_identifies_its_own_from_the_hms_record():
-    env = _ship_env()
-    try:
-        policy = HelideckPredictivePolicy(env, None, HelideckMonitorConfig(), 5.0, 15.0, 1.0)
+    with _ship_policy(None, opportunity_s=1.0) as (env, policy):
         observation, _ = env.reset(seed=5)
         policy.reset()
         policy.act(observation)
@@ -283,5 +273,3 @@ def test_without_a_fitted_forecast_each_episode_identifies_its_own_from_the_hms_
         expected = online.chances(SHIP_CONTACT_TIMES_S, 5.0, combine="mean")
         assert policy.last_threshold <= expected.max() + 1e-12
         assert policy.last_threshold >= np.mean(expected) - 1e-12
-    finally:
-        env.close()
