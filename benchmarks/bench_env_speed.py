@@ -26,8 +26,9 @@ sub-steps, the same states), over the row's CPU time per step (1 would be a step
 its physics alone).  The timing task (``DeckLandingTiming-BenchSS4-v6``, ``step(0)`` in a loop,
 reset at each end) is a row of its own: its steps are wait decisions, each some two control
 periods of the hold, its CPU time is per decision, and its ceiling is its own physics.  When
-gym-pybullet-drones or PyFlyt is installed,
-their hover tasks run beside the rows; otherwise the output says they are not installed.
+gym-pybullet-drones or PyFlyt is importable, their hover tasks run beside the rows (at their
+own step rates: HoverAviary's 30 Hz, QuadX-Hover-v4's 40 Hz), each with its fraction of its
+own physics ceiling; otherwise the output says they are not installed.
 
 ``--profile`` prints, instead of the tables, the top functions by cumulative and by own CPU
 time of ``--seconds`` simulated seconds of `project` mode with the truth observed, with
@@ -42,40 +43,65 @@ cost, with CPU time as its clock, is several times the step's)::
 is estimated by ``tight`` as configured (``previous_start: fallback``: IPPE and ToF-plane
 starts) and with ``previous_start: first``, each timed by CPU, with the Levenberg–Marquardt
 iterations of every start refined, and each compared with the true pose.
+
+``--api-floor`` prints what PyBullet's API costs a step alone: the steps of each profiled
+case (and of a hover 0.5 m over the deck, and the timing task's wait decisions) are run as the
+env runs them (CPU time and physics), then run again with every PyBullet call recorded
+(:class:`ApiRecorder`), and the recorded calls replayed from the states saved before them
+(``saveState``/``restoreState``) with nothing between them: all of them, and each
+``stepSimulation`` of them timed alone.  Their ratio is the highest fraction of the physics
+ceiling a step making those calls from Python can reach; every replay must end in the
+recorded states, bit for bit::
+
+    .venv/bin/python -m benchmarks.bench_env_speed --api-floor --seconds 20 --repeats 5
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import cProfile
 import dataclasses
 import importlib.util
+import inspect
 import multiprocessing as mp
 import pstats
+import statistics
 import time
+from collections import Counter
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import pybullet as p
+from pybullet_utils.bullet_client import BulletClient
 from rich.console import Console
 from rich.table import Table
 
 import landing_env  # noqa: F401
 
 
-def _run(
-    mode: str, estimator: str, sim_seconds: float, seed: int, queue=None, sensors: str = "ideal"
-) -> tuple[int, float, float, float, float]:
-    """Steps, wall s, simulated s, CPU s and the CPU s of its ``stepSimulation`` calls."""
+def _env(mode: str, estimator: str, sensors: str, **overrides: Any) -> gym.Env:
+    """``DeckLanding-v2`` as the first table's rows run it (no end by time), with the camera
+    mode, observed estimator and sensor set named, and any further ``overrides``."""
     overrides = {
         "camera.mode": mode,
         "estimation.observed": estimator,
         "simulation.max_episode_s": 1e4,
         "sensors": sensors,
+        **overrides,
     }
-    env = gym.make("DeckLanding-v2", overrides=overrides)
+    return gym.make("DeckLanding-v2", overrides=overrides)
+
+
+def _run(
+    mode: str, estimator: str, sim_seconds: float, seed: int, queue=None, sensors: str = "ideal"
+) -> tuple[int, float, float, float, float]:
+    """Steps, wall s, simulated s, CPU s and the CPU s of its ``stepSimulation`` calls."""
+    env = _env(mode, estimator, sensors)
     env.reset(seed=seed)
     env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
     steps = int(sim_seconds / env_dt)
@@ -120,21 +146,52 @@ def _parallel(
     return steps, wall, sim, cpu, physics
 
 
+@contextlib.contextmanager
+def _pybullet_replaced(wrappers: dict[str, Callable[..., Any]]) -> Iterator[None]:
+    """Put ``wrappers`` in place of PyBullet's functions of the same names while inside.
+
+    Callers that go through the module (``pybullet.stepSimulation(physicsClientId=...)``)
+    find a wrapper at the call.  ``BulletClient`` injects its client id only into PyBullet's
+    built-in functions, not into a wrapper, so each wrapper is also set on the class as a
+    method that passes the client's id (PyFlyt's aviary steps through ``BulletClient``).
+    """
+    saved = {name: getattr(p, name) for name in wrappers}
+
+    def client_method(wrapper: Callable[..., Any]) -> Callable[..., Any]:
+        def method(client: BulletClient, *args: Any, **kwargs: Any) -> Any:
+            kwargs.setdefault("physicsClientId", client._client)
+            return wrapper(*args, **kwargs)
+
+        return method
+
+    for name, wrapper in wrappers.items():
+        setattr(p, name, wrapper)
+        setattr(BulletClient, name, client_method(wrapper))
+    try:
+        yield
+    finally:
+        for name, function in saved.items():
+            setattr(p, name, function)
+            delattr(BulletClient, name)
+
+
 class PhysicsClock:
     """Times every ``pybullet.stepSimulation`` call of this process (CPU seconds).
 
     The world calls ``pybullet.stepSimulation`` once per physics sub-step; while the clock is
     installed each call is timed, so a row's physics is measured in the row's own run: the
     same world, the same sub-steps, the same states.  Its total over the row's steps is the
-    physics ceiling: what a step would cost if nothing but the physics ran.
+    physics ceiling: what a step would cost if nothing but the physics ran.  Calls through a
+    ``BulletClient`` (the peers') are timed too; ``calls`` counts them all.
     """
 
     def __init__(self) -> None:
         self.cpu_s = 0.0
-        self._step = p.stepSimulation
+        self.calls = 0
+        self._replaced: contextlib.AbstractContextManager[None] | None = None
 
     def __enter__(self) -> PhysicsClock:
-        step, clock = self._step, time.process_time
+        step, clock = p.stepSimulation, time.process_time
 
         def timed(*args, **kwargs):
             start = clock()
@@ -142,12 +199,15 @@ class PhysicsClock:
                 return step(*args, **kwargs)
             finally:
                 self.cpu_s += clock() - start
+                self.calls += 1
 
-        p.stepSimulation = timed
+        self._replaced = _pybullet_replaced({"stepSimulation": timed})
+        self._replaced.__enter__()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        p.stepSimulation = self._step
+        assert self._replaced is not None
+        self._replaced.__exit__(None, None, None)
 
 
 #: the peers' hover tasks: (package to import, label, env id, module whose import registers it)
@@ -157,39 +217,55 @@ PEERS = (
 )
 
 
-def _peer_env(package: str, env_id: str, module: str | None) -> gym.Env:
+def _peer_env(package: str, env_id: str, module: str | None) -> tuple[gym.Env, float]:
+    """The peer's hover task and its steps a simulated second."""
     if package == "gym_pybullet_drones":
         from gym_pybullet_drones.envs.HoverAviary import HoverAviary
 
-        return HoverAviary()
+        env = HoverAviary()
+        return env, float(env.CTRL_FREQ)
     if module is not None:
         importlib.import_module(module)
-    return gym.make(env_id)
+    env = gym.make(env_id)
+    # PyFlyt's QuadX tasks step its 120 Hz loop ``env_step_ratio`` times (QuadX-Hover-v4:
+    # 3, a 40 Hz step; its ``render_fps`` of 30 is the viewer's)
+    return env, 120.0 / env.unwrapped.env_step_ratio
 
 
-def peer_rows(sim_seconds: float) -> tuple[list[tuple[str, int, float, float, float]], list[str]]:
-    """The installed peers' rows (label, steps, wall s, simulated s, CPU s) and the names of
-    those not installed."""
+def peer_rows(
+    sim_seconds: float,
+) -> tuple[list[tuple[str, int, float, float, float, float, int]], list[str]]:
+    """The installed peers' rows (label, steps, wall s, simulated s, CPU s, CPU s of their
+    ``stepSimulation`` calls, episode ends) and the names of those not installed; the
+    resets at the episodes' ends are not in the times."""
     rows, missing = [], []
     for package, label, env_id, module in PEERS:
         if importlib.util.find_spec(package) is None:
             missing.append(label)
             continue
-        env = _peer_env(package, env_id, module)
+        env, fps = _peer_env(package, env_id, module)
         env.reset(seed=0)
-        fps = float(env.metadata.get("render_fps") or getattr(env, "CTRL_FREQ", 30))
         steps = max(1, int(sim_seconds * fps))
         action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
         if np.issubdtype(env.action_space.dtype, np.floating):
             action = 0.5 * (env.action_space.low + env.action_space.high)
-        wall, cpu = time.perf_counter(), time.process_time()
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset(seed=0)
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        # the steps alone are timed: an episode's end (PyFlyt's drone leaves its bounds
+        # under the held action within seconds) resets outside the clocks
+        wall = cpu = resets_physics = 0.0
+        ends = 0
+        with PhysicsClock() as physics:
+            for _ in range(steps):
+                start_wall, start_cpu = time.perf_counter(), time.process_time()
+                _, _, terminated, truncated, _ = env.step(action)
+                wall += time.perf_counter() - start_wall
+                cpu += time.process_time() - start_cpu
+                if terminated or truncated:
+                    ends += 1
+                    before = physics.cpu_s
+                    env.reset(seed=0)
+                    resets_physics += physics.cpu_s - before
         env.close()
-        rows.append((label, steps, wall, steps / fps, cpu))
+        rows.append((label, steps, wall, steps / fps, cpu, physics.cpu_s - resets_physics, ends))
     return rows, missing
 
 
@@ -230,13 +306,7 @@ def profile(console: Console, sim_seconds: float, top: int) -> None:
     """Print the top functions by cumulative CPU time of each profiled case."""
     root = str(Path(__file__).resolve().parents[1]) + "/"
     for label, estimator, sensors in PROFILE_CASES:
-        overrides = {
-            "camera.mode": "project",
-            "estimation.observed": estimator,
-            "simulation.max_episode_s": 1e4,
-            "sensors": sensors,
-        }
-        env = gym.make("DeckLanding-v2", overrides=overrides)
+        env = _env("project", estimator, sensors)
         env.reset(seed=0)
         env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
         steps = max(1, int(sim_seconds / env_dt))
@@ -307,13 +377,7 @@ def tight_starts(console: Console, sim_seconds: float) -> None:
     TightProblem.solve = counted
     try:
         for sensors in ("ideal", "realistic"):
-            overrides = {
-                "camera.mode": "project",
-                "estimation.observed": "tight",
-                "simulation.max_episode_s": 1e4,
-                "sensors": sensors,
-            }
-            env = gym.make("DeckLanding-v2", overrides=overrides)
+            env = _env("project", "tight", sensors)
             env.reset(seed=0)
             env_dt = 1.0 / env.unwrapped.config.simulation.env_hz
             own = env.unwrapped.bank.estimators["tight"]
@@ -364,6 +428,271 @@ def tight_starts(console: Console, sim_seconds: float) -> None:
     finally:
         TightProblem.solve = solve
     console.print(table)
+
+
+class ApiRecorder:
+    """Records every call of a PyBullet function in this process while installed: PyBullet's
+    own function, its arguments and its keywords, in the order made (``calls``).
+
+    Each call goes on to PyBullet at once, so the recorded run is the run itself; replaying
+    ``calls`` from the state it started in makes exactly the API calls it made.
+    """
+
+    #: left alone: a connection's own calls, which no step makes
+    UNRECORDED = frozenset({"connect", "disconnect"})
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[Callable[..., Any], tuple[Any, ...], dict[str, Any]]] = []
+        self._replaced: contextlib.AbstractContextManager[None] | None = None
+
+    def __enter__(self) -> ApiRecorder:
+        calls = self.calls
+
+        def recording(function: Callable[..., Any]) -> Callable[..., Any]:
+            def record(*args: Any, **kwargs: Any) -> Any:
+                calls.append((function, args, kwargs))
+                return function(*args, **kwargs)
+
+            return record
+
+        functions = {
+            name: value
+            for name, value in vars(p).items()
+            if inspect.isbuiltin(value) and name not in self.UNRECORDED
+        }
+        self._replaced = _pybullet_replaced({n: recording(f) for n, f in functions.items()})
+        self._replaced.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        assert self._replaced is not None
+        self._replaced.__exit__(None, None, None)
+
+
+def _bodies_state(cid: int) -> tuple[tuple[Any, ...], ...]:
+    """Every body's base pose and velocities in client ``cid`` (PyBullet's tuples)."""
+    bodies = (p.getBodyUniqueId(i, physicsClientId=cid) for i in range(p.getNumBodies(cid)))
+    return tuple(
+        (
+            p.getBasePositionAndOrientation(body, physicsClientId=cid),
+            p.getBaseVelocity(body, physicsClientId=cid),
+        )
+        for body in bodies
+    )
+
+
+@dataclasses.dataclass
+class ApiFloor:
+    """What a run of steps costs in PyBullet's API alone, replayed from its recorded calls.
+
+    Per repeat, ``api_s`` holds the CPU seconds of all the replayed calls, in the recorded
+    order with nothing between them, and ``physics_s`` those of their ``stepSimulation``
+    calls, each timed alone in a second replay (as :class:`PhysicsClock` times a row's).
+    """
+
+    steps: int
+    calls: Counter[str]
+    physics_s: list[float] = dataclasses.field(default_factory=list)
+    api_s: list[float] = dataclasses.field(default_factory=list)
+    #: the replay loop's own dispatch: the same loop with a function that does nothing
+    dispatch_s: list[float] = dataclasses.field(default_factory=list)
+    #: per function but ``stepSimulation``: its own calls replayed alone, one after another
+    alone_s: dict[str, list[float]] = dataclasses.field(default_factory=dict)
+    #: every replay of every block ended in the state its recorded steps ended in, bit for bit
+    identical: bool = True
+
+
+def api_floor(
+    step: Callable[[], bool], reset: Callable[[], object], steps: int, repeats: int, block: int
+) -> ApiFloor:
+    """Record ``steps`` calls of ``step`` (true when the episode ended), then replay them.
+
+    The steps are recorded in blocks of up to ``block`` steps, the world's state saved
+    (``saveState``) before each; a step that ends an episode is left out, its block cut
+    before it, and ``reset`` called.  Each repeat, for each block: restores its state and
+    replays its calls once untimed (the first replay after a restore runs colder), then
+    restores it before each timed replay: all the calls as a whole, by CPU; the same calls
+    with each ``stepSimulation`` timed alone (the physics in the states the steps met:
+    ``stepSimulation`` replayed without the forces would meet others, the drone falling
+    onto the deck); and, for each other function, its own calls alone.
+    """
+    with ApiRecorder() as warm:
+        step()
+    cid = next(kw["physicsClientId"] for f, _, kw in warm.calls if f is p.stepSimulation)
+    blocks: list[tuple[int, list[Any], tuple[Any, ...]]] = []
+    recorded = 0
+    while recorded < steps:
+        state_id = p.saveState(physicsClientId=cid)
+        calls: list[Any] = []
+        end = _bodies_state(cid)
+        ended = False
+        for _ in range(min(block, steps - recorded)):
+            with ApiRecorder() as recorder:
+                ended = step()
+            if ended:
+                break
+            calls += recorder.calls
+            end = _bodies_state(cid)
+            recorded += 1
+        if calls:
+            blocks.append((state_id, calls, end))
+        else:
+            p.removeState(state_id, physicsClientId=cid)
+        if ended:
+            reset()
+    floor = ApiFloor(recorded, Counter(f.__name__ for _, c, _ in blocks for f, _, _ in c))
+    others = [name for name in floor.calls if name != p.stepSimulation.__name__]
+    clock, step_simulation = time.process_time, p.stepSimulation
+
+    def nothing(*args: Any, **kwargs: Any) -> None:
+        return None
+
+    def replay(calls: list[Any]) -> float:
+        start = clock()
+        for function, args, kwargs in calls:
+            function(*args, **kwargs)
+        return clock() - start
+
+    for _ in range(repeats):
+        physics = api = dispatch = 0.0
+        alone = dict.fromkeys(others, 0.0)
+        for state_id, calls, end in blocks:
+            p.restoreState(stateId=state_id, physicsClientId=cid)
+            replay(calls)
+            p.restoreState(stateId=state_id, physicsClientId=cid)
+            api += replay(calls)
+            floor.identical = floor.identical and _bodies_state(cid) == end
+            p.restoreState(stateId=state_id, physicsClientId=cid)
+            for function, args, kwargs in calls:
+                if function is step_simulation:
+                    start = clock()
+                    function(*args, **kwargs)
+                    physics += clock() - start
+                else:
+                    function(*args, **kwargs)
+            floor.identical = floor.identical and _bodies_state(cid) == end
+            for name in others:
+                p.restoreState(stateId=state_id, physicsClientId=cid)
+                alone[name] += replay([c for c in calls if c[0].__name__ == name])
+            dispatch += replay([(nothing, args, kwargs) for _, args, kwargs in calls])
+        floor.physics_s.append(physics)
+        floor.api_s.append(api)
+        floor.dispatch_s.append(dispatch)
+        for name in others:
+            floor.alone_s.setdefault(name, []).append(alone[name])
+    for state_id, _, _ in blocks:
+        p.removeState(state_id, physicsClientId=cid)
+    return floor
+
+
+#: the project rows' steps a simulated second (``simulation.env_hz``)
+ROW_HZ = 20
+
+
+def api_floor_table(console: Console, sim_seconds: float, repeats: int) -> None:
+    """The API floor of each profiled case and of the timing task's wait decisions, beside
+    what the same steps cost the env in the same process."""
+    table = Table(
+        title=f"PyBullet's API floor of a step: {sim_seconds:g} s a case, {repeats} replays"
+    )
+    for column in (
+        "case", "steps", "API calls/step", "env CPU ms/step", "env physics ms/step",
+        "replayed physics ms/step", "replayed API ms/step", "of which dispatch ms/step",
+        "max fraction", "env fraction", "env beyond the API ms/step", "replay identical",
+    ):  # fmt: skip
+        table.add_column(column, justify="left" if column == "case" else "right")
+    counts_table = Table(
+        title="PyBullet's calls a step (replayed steps): calls / CPU µs a step of the calls alone"
+    )
+    counts_table.add_column("function")
+    cases: list[tuple[str, Callable[[], gym.Env], Any]] = [
+        (label, lambda e=estimator, s=sensors: _env("project", e, s), None)
+        for label, estimator, sensors in PROFILE_CASES
+    ]
+    # low over the deck: the contacts and the ground effect's rays every sub-step
+    cases.append(
+        (
+            "project mode, truth observed, 0.5 m over the deck",
+            lambda: _env("project", "truth", "ideal", **{"start.height_m": (0.5, 0.5)}),
+            None,
+        )
+    )
+    cases += [
+        (f"{env_id}, wait decisions", lambda i=env_id: gym.make(i), 0) for env_id in TIMING_IDS
+    ]
+    floors: list[ApiFloor] = []
+    for label, make, held in cases:
+        env = make()
+        env.reset(seed=0)
+        if held is None:
+            held = np.zeros(env.action_space.shape, dtype=np.float32)
+        # as many steps a case (the timing task's are decisions) as the rows' 20 Hz steps
+        steps = max(1, int(sim_seconds * ROW_HZ))
+        episodes = 0
+
+        def step(env=env, held=held) -> bool:
+            _, _, terminated, truncated, _ = env.step(held)
+            return bool(terminated or truncated)
+
+        def reset(env=env) -> None:
+            nonlocal episodes
+            episodes += 1
+            env.reset(seed=episodes)
+
+        step()
+        # the steps as the env makes them, timed without the recorder
+        with PhysicsClock() as physics:
+            cpu = time.process_time()
+            for _ in range(steps):
+                if step():
+                    reset()
+            cpu = time.process_time() - cpu
+        env_ms, env_physics_ms = 1e3 * cpu / steps, 1e3 * physics.cpu_s / steps
+        episodes = 0
+        env.reset(seed=0)
+        step()
+        floor = api_floor(step, reset, steps, repeats, block=20)
+        env.close()
+        per_step = 1e3 / floor.steps
+        physics_ms = per_step * statistics.median(floor.physics_s)
+        api_ms = per_step * statistics.median(floor.api_s)
+        dispatch_ms = per_step * statistics.median(floor.dispatch_s)
+        # the highest fraction of the physics ceiling a step on these calls can reach
+        fraction = statistics.median(
+            b / a for b, a in zip(floor.physics_s, floor.api_s, strict=True)
+        )
+        calls = sum(floor.calls.values()) / floor.steps
+        console.print(
+            f"{label}: {floor.steps} steps replayed, {calls:.1f} API calls/step; physics "
+            f"{physics_ms:.3f} and API {api_ms:.3f} CPU ms/step replayed (best "
+            f"{per_step * min(floor.physics_s):.3f} and {per_step * min(floor.api_s):.3f}; "
+            f"dispatch {dispatch_ms:.3f}): at most {fraction:.2f} of the physics ceiling; the "
+            f"env {env_ms:.3f} CPU ms/step, physics {env_physics_ms:.3f}: "
+            f"{env_physics_ms / env_ms:.2f}; replay identical: {floor.identical}",
+            soft_wrap=True,
+        )
+        table.add_row(
+            label, str(floor.steps), f"{calls:.1f}", f"{env_ms:.3f}", f"{env_physics_ms:.3f}",
+            f"{physics_ms:.3f}", f"{api_ms:.3f}", f"{dispatch_ms:.3f}", f"{fraction:.2f}",
+            f"{env_physics_ms / env_ms:.2f}", f"{env_ms - api_ms:.3f}",
+            "yes" if floor.identical else "no",
+        )  # fmt: skip
+        counts_table.add_column(label, justify="right")
+        floors.append(floor)
+    names = sorted(
+        {name for floor in floors for name in floor.calls},
+        key=lambda n: (-max(f.calls[n] / f.steps for f in floors), n),
+    )
+    for name in names:
+        cells = []
+        for floor in floors:
+            cell = f"{floor.calls[name] / floor.steps:.2f}" if name in floor.calls else ""
+            if name in floor.alone_s:
+                cell += f" / {1e6 * statistics.median(floor.alone_s[name]) / floor.steps:.1f}"
+            cells.append(cell)
+        counts_table.add_row(name, *cells)
+    console.print(table)
+    console.print(counts_table)
 
 
 HEIGHTS_M = (4.0, 2.0, 1.0, 0.6, 0.3)
@@ -465,8 +794,17 @@ def main() -> None:
     parser.add_argument(
         "--tight-starts", action="store_true", help="print what each start of tight costs"
     )
+    parser.add_argument(
+        "--api-floor",
+        action="store_true",
+        help="print what PyBullet's API calls of a step cost alone (recorded, then replayed)",
+    )
+    parser.add_argument("--repeats", type=int, default=5, help="replays of --api-floor")
     args = parser.parse_args()
     console = Console(width=180)
+    if args.api_floor:
+        api_floor_table(console, args.seconds, args.repeats)
+        return
     if args.tight_starts:
         tight_starts(console, args.seconds)
         return
@@ -531,10 +869,15 @@ def main() -> None:
             f"{1e3 * cpu / decisions:.2f}", "", f"{physics / cpu:.2f}",
         )  # fmt: skip
     peers, missing = peer_rows(args.seconds)
-    for label, steps, wall, sim, cpu in peers:
+    for label, steps, wall, sim, cpu, physics, ends in peers:
+        console.print(
+            f"{label}: {steps} steps in {wall:.1f} s, {1e3 * cpu / steps:.3f} CPU ms/step, "
+            f"physics {1e3 * physics / steps:.3f} CPU ms/step: {physics / cpu:.2f} of the "
+            f"physics ceiling; {ends} episode ends (resets not timed)"
+        )
         table.add_row(
             "peer", label, "", "1", f"{steps / wall:.0f}", f"{sim / wall:.1f}x",
-            f"{1e3 * cpu / steps:.2f}", f"{sim / cpu:.1f}x", "",
+            f"{1e3 * cpu / steps:.2f}", f"{sim / cpu:.1f}x", f"{physics / cpu:.2f}",
         )  # fmt: skip
     console.print(table)
     if missing:

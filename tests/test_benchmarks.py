@@ -135,6 +135,31 @@ def test_env_speed_profiles_a_step_in_each_case(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+def test_env_speed_replays_the_pybullet_calls_of_each_step_as_recorded(tmp_path: Path) -> None:
+    out = run_benchmark(
+        "bench_env_speed", "--api-floor", "--seconds", "0.5", "--repeats", "1", cwd=tmp_path
+    )
+    cases = re.findall(
+        r"^(.+?): (\d+) steps replayed, ([\d.]+) API calls/step;.* at most ([\d.]+) of the "
+        r"physics ceiling;.*replay identical: (\w+)$",
+        out,
+        re.M,
+    )
+    labels = [case[0].strip() for case in cases]
+    assert len(cases) == 5, out[-3000:]
+    assert labels[-1] == "DeckLandingTiming-BenchSS4-v6, wait decisions"
+    for _, steps, calls, fraction, identical in cases:
+        # every call a step makes, replayed from the saved state, ends where the step ended
+        assert identical == "True" and int(steps) == 10
+        assert float(calls) > 12.0 and 0.0 < float(fraction) < 1.0
+    # a 20 Hz step is 12 physics sub-steps (a wait decision two control periods); low over
+    # the deck the contacts are queried every sub-step, at the start height never
+    assert re.search(r"│ stepSimulation +│ +12\.00 │ +12\.00 │ +12\.00 │ +12\.00 │ +24\.00 │", out)
+    contacts = re.search(r"│ getContactPoints +│ +│ +│ +│ +12\.00 / [\d.]+ │", out)
+    assert contacts is not None, out[-3000:]
+
+
+@pytest.mark.slow
 def test_env_speed_sets_each_start_rule_of_tight_against_the_truth(tmp_path: Path) -> None:
     out = run_benchmark("bench_env_speed", "--tight-starts", "--seconds", "0.5", cwd=tmp_path)
     for sensors in ("ideal", "realistic"):
