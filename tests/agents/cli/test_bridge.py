@@ -341,10 +341,14 @@ def _source(path: Path, align: str = "nearest", **topics: str) -> RecordingSourc
     return RecordingSource(args)
 
 
-def test_a_source_plays_as_recorded_from_its_first_frame_by_default(recording: Path) -> None:
-    source = _source(recording)
+def test_a_source_plays_as_recorded_from_its_first_frame_by_default(tmp_path: Path) -> None:
+    camera = load_config("default").camera
+    image = np.full((camera.height, camera.width), 128, np.uint8)
+    frames = [(1.7e9 + 0.05 * k, f"f{k}.png", image) for k in range(2)]  # stamps since 1970
+    folder = write_folder(tmp_path / "rec", frames, [(t, [1.0] * 4) for t, _, _ in frames])
+    source = _source(folder)
     assert source.pacer.speed == 1.0
-    assert source.pacer.origin_s == source.rec.frames[0].timestamp
+    assert source.pacer.origin_s == 1.7e9  # the first frame is played at the start
 
 
 def test_a_source_says_exactly_where_it_looked_for_the_vehicles_pose(

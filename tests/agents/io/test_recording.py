@@ -219,6 +219,10 @@ def test_a_folders_frames_and_ranges_name_the_file_line_and_column_of_a_bad_numb
             (folder / "ranges.csv").unlink(missing_ok=True)
         with pytest.raises(RecordingError, match=message):
             read_folder(folder)
+    folder = folder_with(tmp_path, "t_s,image\n0,f.png\n", "", IMU_HEADER + "0,0,0,0,0,0,0,q,,,\n")
+    with pytest.raises(RecordingError, match=r"imu.csv line 2: qx = 'q' is not a number"):
+        read_folder(folder)
+    (tmp_path / "imu.csv").unlink()
     (tmp_path / "frames.csv").write_bytes(b"t_s,image\n\x00\xff\xfe\n")
     with pytest.raises(RecordingError, match=r"frames.csv: not a CSV file \("):
         read_folder(tmp_path)

@@ -186,3 +186,27 @@ def test_a_stage_window_without_an_image_names_the_topic(
     code, err = _calibrate(capsys, *args)
     assert code == 2
     assert "stages[8] (1000.0 to 1001.0 s): no frame of /camera/image_raw in it" in err
+
+
+@pytest.mark.parametrize(
+    ("topics", "named"),
+    [
+        (Topics(), "/tof/ranges"),
+        (Topics(exact_ranges=""), "/tof/range"),
+        (Topics(exact_ranges="", ranges=FOUR), "/tof/a, /tof/b, /tof/c, /tof/d"),
+    ],
+)
+def test_a_stage_window_without_a_range_names_the_range_topics(
+    rig, tmp_path: Path, topics: Topics, named: str, capsys
+) -> None:
+    mcap = write_rig_mcap(tmp_path / "rig.mcap", rig.stages, rig.description, topics)
+    t_frame = rig.stages[0].frames[0].t_s
+    assert all(t_frame not in t for t in rig.stages[0].reading_t_s)  # the frame's instant alone
+    doc = json.loads((tmp_path / RIG_FILE).read_text())
+    doc["stages"][0] = {"t_start_s": t_frame, "t_end_s": t_frame}
+    (tmp_path / RIG_FILE).write_text(json.dumps(doc))
+    args = ["--recording", str(mcap), "--out", str(tmp_path / "o")]
+    args += ["--range-topics", ",".join(topics.ranges), "--exact-ranges-topic", topics.exact_ranges]
+    code, err = _calibrate(capsys, *args)
+    assert code == 2
+    assert f"s): no range sample of {named} in it\n" in err, err
