@@ -12,7 +12,13 @@ import pytest
 
 from agents.cli import main
 from agents.io.recording import RecordingError, write_folder
-from agents.io.tof_rig import intrinsics_file, read_rig_recording, rig_file, write_rig_recording
+from agents.io.tof_rig import (
+    calibrate_tof_recording,
+    intrinsics_file,
+    read_rig_recording,
+    rig_file,
+    write_rig_recording,
+)
 from estimation.camera_model import CameraIntrinsics
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
 from estimation.tof_calibration import PAD_COLOURS, TofCameraCalibration
@@ -357,7 +363,9 @@ def test_a_rig_folders_frames_and_rows_go_to_the_stages_whose_window_holds_them_
     image = np.full((4, 6, 3), 90, np.uint8)
     stamps = [0.0, 1.0, 2.0, 2.5, 3.0, 4.0, 5.0]  # windows [1, 2] and [3, 4]
     frames = [(t, f"f{k}.png", image) for k, t in enumerate(stamps)]
-    rows = [(t, [t, t + 0.1, t + 0.2, t + 0.3]) for t in sorted([0.5, *stamps, 6.0]) if t != 2.5]
+    rows = [
+        (t, [t, t + 0.1, t + 0.2, t + 0.3]) for t in sorted([0.5, *stamps, 6.0, 7.0]) if t != 2.5
+    ]
     folder = write_folder(tmp_path / "rig", frames, rows)
     windows = (StageWindow(1.0, 2.0), StageWindow(3.0, 4.0))
     TofRigDescription(stages=windows).save(folder / RIG_FILE)
@@ -372,8 +380,13 @@ def test_a_rig_folders_frames_and_rows_go_to_the_stages_whose_window_holds_them_
     assert stages[1].readings_m[2].tolist() == [3.2, 4.2]
     assert left_out == {
         "frames.csv: frame outside every stage": 3,
-        "ranges.csv: row outside every stage": 4,
+        "ranges.csv: row outside every stage": 5,
     }
+    # windows holding everything: nothing left out
+    TofRigDescription(stages=(StageWindow(-1.0, 2.2), StageWindow(2.4, 8.0))).save(
+        folder / RIG_FILE
+    )
+    assert read_rig_recording(folder)[2] == {}
     # a window with frames but no row, or no frame at all, is named exactly
     TofRigDescription(stages=(StageWindow(2.5, 2.6), StageWindow(3.0, 4.0))).save(folder / RIG_FILE)
     with pytest.raises(TofRigError) as refused:
@@ -406,3 +419,18 @@ def test_a_missing_rig_file_or_intrinsics_file_is_named_exactly(tmp_path: Path) 
     assert (
         str(refused.value) == f"--calibration {folder / 'intrinsics.json'}: no such intrinsics file"
     )
+
+
+def test_the_intrinsics_given_are_the_camera_the_calibration_records_over_the_rig_files(
+    rig_folder: Path, tmp_path: Path
+) -> None:
+    intrinsics = tmp_path / "intrinsics.json"
+    IntrinsicsCalibrationResult(
+        K=np.array([[110.0, 0, 79.5], [0, 110.0, 59.5], [0, 0, 1]]),
+        dist=np.zeros(5),
+        rms_reprojection_error=0.1,
+        per_view_errors=np.zeros(3),
+        image_size=(160, 120),
+    ).save(intrinsics)
+    result, _ = calibrate_tof_recording(rig_folder, intrinsics)
+    assert (result.calibration.metadata["camera"]["fx"], CAMERA.fx) == (110.0, 100.0)
