@@ -686,6 +686,7 @@ def test_the_same_seed_flies_the_same_episodes_and_the_summary_lists_each_outcom
             flown.append([estimate.translation.tolist() for _, estimate in source])
             outcomes = source.outcomes
             assert source.summary() == f"episodes: {outcomes[0]}, {outcomes[1]}"
+            assert outcomes == ["timeout", "timeout"]  # 0.1 s: no landing yet
     assert flown[0] == flown[1] and flown[0] != flown[2]
 
 
@@ -697,6 +698,30 @@ def test_the_vehicle_poses_of_the_last_256_captures_are_kept() -> None:
     ) as source:
         stamps = [stamp for stamp, _ in source]
         assert len(stamps) > POSE_HISTORY == 256
+        assert np.all(np.diff(stamps) > 0.0)  # on across all 60 episodes
         assert [source.vehicle_pose(t) is None for t in stamps[-POSE_HISTORY - 1 :]] == [
             True, *[False] * POSE_HISTORY,
         ]  # fmt: skip
+
+
+def test_a_paced_simulator_waits_for_each_captures_simulated_time() -> None:
+    from agents.io.pacing import StampPacer
+    from agents.io.sim_source import SimulatorSource
+
+    now = [0.0]
+    slept: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        now[0] += seconds
+
+    with SimulatorSource(
+        estimator="truth", episodes=2, speed=2.0, overrides={"simulation.max_episode_s": 0.2}
+    ) as source:
+        source.pacer = StampPacer(2.0, 0.0, lambda: now[0], sleep)
+        stamps = [stamp for stamp, _ in source]
+    # each capture after the first of each episode waited for its stamp, at twice real time
+    assert len(slept) == len(stamps) - 2
+    assert now[0] == pytest.approx(stamps[-1] / 2.0)
+    # 4 steps of 0.05 s an episode; the second's first step is a control period later
+    assert slept == pytest.approx([0.025] * 4 + [0.05] + [0.025] * 3)
