@@ -244,14 +244,15 @@ def test_a_rigs_ranges_are_written_with_its_frame_ids_and_maximum_and_read_as_th
     for max_range, maximum in ((None, float(np.finfo(np.float32).max)), (3.5, 3.5)):
         description = dataclasses.replace(rig.description, tof_max_range_m=max_range)
         topics = Topics(ranges=("/r",), range_frames=frames)
-        path = write_rig_mcap(tmp_path / "new" / "rig.mcap", stages, description, topics)
+        path = write_rig_mcap(tmp_path / "new" / "folder" / "rig.mcap", stages, description, topics)
         written = _ranges_written(path)
         assert {message.header.frame_id for _, message in written} == set(frames)
         assert {message.max_range for _, message in written} == {np.float32(maximum)}
         rec = read_rig_bag(path, topics)
         assert rec.sensors[0].valid[1] and rec.sensors[0].range_m[1] == 0.0
         assert not rec.sensors[1].valid[1] and math.isnan(rec.sensors[1].range_m[1])
-    path = write_rig_mcap(tmp_path / "four.mcap", stages, rig.description, Topics(ranges=FOUR))
+    four = Topics(ranges=FOUR, range_frames=frames)  # a topic per sensor: the sensors' own ids
+    path = write_rig_mcap(tmp_path / "four.mcap", stages, rig.description, four)
     assert {(t, msg.header.frame_id) for t, msg in _ranges_written(path)} == set(
         zip(FOUR, m.TOF_FRAME_IDS, strict=True)
     )
