@@ -725,3 +725,12 @@ def test_a_paced_simulator_waits_for_each_captures_simulated_time() -> None:
     assert now[0] == pytest.approx(stamps[-1] / 2.0)
     # 4 steps of 0.05 s an episode; the second's first step is a control period later
     assert slept == pytest.approx([0.025] * 4 + [0.05] + [0.025] * 3)
+
+
+def test_a_simulator_source_flies_the_config_it_is_given() -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    overrides = {"simulation.max_episode_s": 0.1}
+    with SimulatorSource(config="high-approach", estimator="truth", overrides=overrides) as source:
+        assert source.base.config.start.height_m == (20.0, 20.0)  # default.yaml's is not
+        assert source.base.config.simulation.arena_max_height_m == 30.0
