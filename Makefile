@@ -53,7 +53,8 @@ bench: $(STAMP)
 
 # mutation testing (mutmut) of the modules in tools/mutation.yaml, each against the test files
 # that import it, two mutants at a time; not part of make test. MODULES narrows it, e.g.
-# make mutation MODULES='agents/io/*'. The report: docs/reference/mutation.md
+# make mutation MODULES='agents/io/*'; run again, it tests only the mutants of the functions
+# changed since. The report: docs/reference/mutation.md
 MODULES ?=
 mutation: $(STAMP)
 	set -f; $(PY) tools/mutation.py run $(MODULES) --workers 2

@@ -11,6 +11,7 @@ the mutated function. The report of a run is ``docs/reference/mutation.md``.
     python tools/mutation.py map --check    # refuse a mapping that is out of date
     python tools/mutation.py run agents/io/timesync.py agents/io/mavlink.py --workers 2
     python tools/mutation.py run 'agents/io/*'            # every mapped module under agents/io
+    python tools/mutation.py run agents/io/pacing.py --survivors   # after new tests
     python tools/mutation.py summary 'agents/io/*'        # score and survivors with their diffs
     python tools/mutation.py run agents/policies/registry.py \
         --tests tests/agents/policies/test_registry.py        # a lower bound, from chosen tests
@@ -189,7 +190,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         test_files = chosen_tests(module, args.tests, tests[module])
         run_dir = prepare(module, test_files)
         started = time.monotonic()
-        names = args.mutants or [f"{module_name(module)}*"]
+        # without names mutmut tests the mutants that have no result yet: every one on the
+        # first run, then those of the functions changed since (it keeps the others' results)
+        names = args.mutants or []
+        if args.survivors:
+            found = statuses(run_dir) if (run_dir / "mutants").is_dir() else {}
+            names = [n for n, s in found.items() if s in ("survived", "no tests")]
+            if not names:
+                print(f"== {module}: no survivor to run again", flush=True)
+                continue
         what = "chosen tests" if args.tests else "test files"
         print(f"== {module}: mutmut over {len(test_files)} {what}", flush=True)
         result = mutmut(run_dir, "run", "--max-children", str(args.workers), *names)
@@ -244,7 +253,14 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("run", help="mutate the modules, each against its own test files")
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
     p.add_argument("--workers", type=int, default=2, help="mutants tested at once (default 2)")
-    p.add_argument("--mutants", nargs="+", help="only these mutant names (mutmut's, globs)")
+    p.add_argument(
+        "--mutants", nargs="+", help="only these mutant names (mutmut's, globs), run again"
+    )
+    p.add_argument(
+        "--survivors",
+        action="store_true",
+        help="run again the mutants that survived (or had no test) last time: after new tests",
+    )
     p.add_argument(
         "--tests",
         nargs="+",

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from agents.io.landing_target import quaternion_wxyz
-from agents.io.messages import quaternion_xyzw, rotation_of
+from agents.io.messages import pose, quaternion_xyzw, rotation_of, transform
 from estimation.frames import (
     R_BC,
     R_PD,
@@ -197,3 +197,20 @@ def test_a_ros_quaternion_round_trips_the_rotation(rotation: np.ndarray) -> None
     q = quaternion_xyzw(rotation)
     assert abs(np.linalg.norm(q) - 1.0) < 1e-12
     np.testing.assert_allclose(rotation_of(Quat(q)), rotation, atol=1e-9)
+
+
+@PROPERTY
+@given(rotation=rotations(), translation=vectors)
+def test_a_ros_pose_or_transform_holds_the_rotation_and_translation_it_was_made_of(
+    rotation: np.ndarray, translation: np.ndarray
+) -> None:
+    made = pose(rotation, translation)
+    p, q = made.position, made.orientation
+    assert [p.x, p.y, p.z] == translation.tolist()
+    np.testing.assert_allclose(rotation_of(q), rotation, atol=1e-9)
+    assert [q.x, q.y, q.z, q.w] == quaternion_xyzw(rotation).tolist()
+    stamped = transform(1.5, "world", "body", rotation, translation)
+    t, q = stamped.transform.translation, stamped.transform.rotation
+    assert (stamped.header.frame_id, stamped.child_frame_id) == ("world", "body")
+    assert [t.x, t.y, t.z] == translation.tolist()
+    assert [q.x, q.y, q.z, q.w] == quaternion_xyzw(rotation).tolist()

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from agents.cli import main
-from agents.io.tof_rig import write_rig_recording
+from agents.io.recording import RecordingError, write_folder
+from agents.io.tof_rig import (
+    calibrate_tof_recording,
+    intrinsics_file,
+    read_rig_recording,
+    rig_file,
+    write_rig_recording,
+)
 from estimation.camera_model import CameraIntrinsics
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
 from estimation.tof_calibration import PAD_COLOURS, TofCameraCalibration
@@ -348,3 +355,82 @@ def test_fuzzed_rig_files_give_a_named_error_or_load(rig_folder: Path) -> None:
             TofRigDescription.load(path)
         except TofRigError as exc:
             assert str(path) in str(exc)
+
+
+def test_a_rig_folders_frames_and_rows_go_to_the_stages_whose_window_holds_them_ends_included(
+    tmp_path: Path,
+) -> None:
+    image = np.full((4, 6, 3), 90, np.uint8)
+    stamps = [0.0, 1.0, 2.0, 2.5, 3.0, 4.0, 5.0]  # windows [1, 2] and [3, 4]
+    frames = [(t, f"f{k}.png", image) for k, t in enumerate(stamps)]
+    rows = [
+        (t, [t, t + 0.1, t + 0.2, t + 0.3]) for t in sorted([0.5, *stamps, 6.0, 7.0]) if t != 2.5
+    ]
+    folder = write_folder(tmp_path / "rig", frames, rows)
+    windows = (StageWindow(1.0, 2.0), StageWindow(3.0, 4.0))
+    TofRigDescription(stages=windows).save(folder / RIG_FILE)
+    stages, _, left_out = read_rig_recording(folder)
+    assert [[(f.t_s, f.name) for f in s.frames] for s in stages] == [
+        [(1.0, str(folder / "f1.png")), (2.0, str(folder / "f2.png"))],
+        [(3.0, str(folder / "f4.png")), (4.0, str(folder / "f5.png"))],
+    ]
+    assert [[t.tolist() for t in s.reading_t_s] for s in stages] == [
+        [[1.0, 2.0]] * 4, [[3.0, 4.0]] * 4,
+    ]  # fmt: skip
+    assert stages[1].readings_m[2].tolist() == [3.2, 4.2]
+    assert left_out == {
+        "frames.csv: frame outside every stage": 3,
+        "ranges.csv: row outside every stage": 5,
+    }
+    # windows holding everything: nothing left out
+    TofRigDescription(stages=(StageWindow(-1.0, 2.2), StageWindow(2.4, 8.0))).save(
+        folder / RIG_FILE
+    )
+    assert read_rig_recording(folder)[2] == {}
+    # a window with frames but no row, or no frame at all, is named exactly
+    TofRigDescription(stages=(StageWindow(2.5, 2.6), StageWindow(3.0, 4.0))).save(folder / RIG_FILE)
+    with pytest.raises(TofRigError) as refused:
+        read_rig_recording(folder)
+    assert (
+        str(refused.value)
+        == f"{folder / RIG_FILE}: stages[0] (2.5 to 2.6 s): no row of ranges.csv in it"
+    )
+    TofRigDescription(stages=(StageWindow(2.6, 2.7), StageWindow(3.0, 4.0))).save(folder / RIG_FILE)
+    with pytest.raises(TofRigError) as refused:
+        read_rig_recording(folder)
+    assert str(refused.value).endswith("(2.6 to 2.7 s): no frame of frames.csv in it")
+
+
+def test_a_missing_rig_file_or_intrinsics_file_is_named_exactly(tmp_path: Path) -> None:
+    folder = write_folder(tmp_path / "rig", [], [])
+    with pytest.raises(TofRigError) as refused:
+        rig_file(folder)
+    assert str(refused.value) == (
+        f"{folder}: no {RIG_FILE} in the folder and no --stages-file FILE given "
+        "(the rig's stage windows)"
+    )
+    mcap = tmp_path / "rig.mcap"
+    with pytest.raises(TofRigError, match=f"rig.mcap: no {RIG_FILE} beside it and no"):
+        rig_file(mcap)
+    (tmp_path / "intrinsics.json").write_text("{}")
+    assert intrinsics_file(tmp_path) == tmp_path / "intrinsics.json"
+    with pytest.raises(RecordingError) as refused:
+        intrinsics_file(folder)
+    assert (
+        str(refused.value) == f"--calibration {folder / 'intrinsics.json'}: no such intrinsics file"
+    )
+
+
+def test_the_intrinsics_given_are_the_camera_the_calibration_records_over_the_rig_files(
+    rig_folder: Path, tmp_path: Path
+) -> None:
+    intrinsics = tmp_path / "intrinsics.json"
+    IntrinsicsCalibrationResult(
+        K=np.array([[110.0, 0, 79.5], [0, 110.0, 59.5], [0, 0, 1]]),
+        dist=np.zeros(5),
+        rms_reprojection_error=0.1,
+        per_view_errors=np.zeros(3),
+        image_size=(160, 120),
+    ).save(intrinsics)
+    result, _ = calibrate_tof_recording(rig_folder, intrinsics)
+    assert (result.calibration.metadata["camera"]["fx"], CAMERA.fx) == (110.0, 100.0)

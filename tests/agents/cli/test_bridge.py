@@ -30,6 +30,7 @@ from agents.io.record import McapRecorder
 from agents.io.recording import PoseSeries, write_folder
 from agents.io.recording_source import RecordingSource
 from agents.policies.align_descend import AlignDescendPolicy
+from estimation.errors import ConfigError
 from estimation.frames import R_BC
 from landing_env.config import SHIPPED_INTRINSICS_FILE, load_config
 from landing_env.physics.quadrotor_params import QuadrotorParams
@@ -329,3 +330,123 @@ def test_the_vehicle_pose_is_a_recorded_one_within_the_tolerance_or_none(
     assert t_wb[0] == pytest.approx(-t_wb[1]) and t_wb[2] == pytest.approx(2.0 * t_wb[0])
     if mode == "nearest":
         assert abs(t_wb[0] - query) == pytest.approx(min(abs(t - query) for t in near))
+
+
+# ------------------------------------------------------------------ the recording as a source
+def _source(path: Path, align: str = "nearest", **topics: str) -> RecordingSource:
+    args = Namespace(
+        input=str(path), estimator="tight", config="default", calibration=None, set=[],
+        tolerance=0.03, align=align, **topics,
+    )  # fmt: skip
+    return RecordingSource(args)
+
+
+def test_a_source_plays_as_recorded_from_its_first_frame_by_default(tmp_path: Path) -> None:
+    camera = load_config("default").camera
+    image = np.full((camera.height, camera.width), 128, np.uint8)
+    frames = [(1.7e9 + 0.05 * k, f"f{k}.png", image) for k in range(2)]  # stamps since 1970
+    folder = write_folder(tmp_path / "rec", frames, [(t, [1.0] * 4) for t, _, _ in frames])
+    source = _source(folder)
+    assert source.pacer.speed == 1.0
+    assert source.pacer.origin_s == 1.7e9  # the first frame is played at the start
+
+
+def test_a_source_says_exactly_where_it_looked_for_the_vehicles_pose(
+    recording: Path, tmp_path: Path
+) -> None:
+    camera = load_config("default").camera
+    image = np.full((camera.height, camera.width), 128, np.uint8)
+    folder = write_folder(tmp_path / "rec", [(0.0, "f0.png", image)], [(0.0, [1.0] * 4)])
+    assert _source(folder).where_vehicle_poses() == "a plain folder holds no vehicle pose"
+    assert _source(recording, tf_topic="").where_vehicle_poses() == "no tf topic read"
+    assert (
+        _source(recording, tf_topic="/no_tf", tf_frames="map,base").where_vehicle_poses()
+        == "no map -> base transform on /no_tf (--tf-topic, --tf-frames)"
+    )
+
+
+def test_a_source_aligns_the_vehicles_pose_and_the_ranges_by_its_alignment(
+    recording: Path,
+) -> None:
+    """With the ranges and poses halfway between frames, interpolation and the nearest sample
+    differ: the source uses the alignment it was given for both."""
+    source = _source(recording, "interpolate")
+    rec = source.rec
+    for series in rec.sensors:  # the ranges 20 ms after the frames
+        series.t_s = [t + 0.02 for t in series.t_s]
+    t_s = rec.vehicle.t_s[10] + 0.02
+    between = rec.vehicle.at(t_s, 0.03, "interpolate")
+    nearest = rec.vehicle.at(t_s, 0.03, "nearest")
+    assert between is not None and nearest is not None
+    assert not np.allclose(between[1], nearest[1])
+    pose = source.vehicle_pose(t_s)
+    assert isinstance(pose, VehiclePose)
+    np.testing.assert_array_equal(
+        pose.position_ned_m, VehiclePose.from_world(*between[::-1]).position_ned_m
+    )
+    played = [estimate.translation for _, estimate in source]
+    interpolated = [e.translation for e, _ in source.runner.run(rec, 0.03, "interpolate")]
+    nearest_ones = [e.translation for e, _ in source.runner.run(rec, 0.03, "nearest")]
+    np.testing.assert_array_equal(played, interpolated)
+    assert not np.allclose(played, nearest_ones, equal_nan=True)
+
+
+# ------------------------------------------------------------------ the pace of the stamps
+def test_a_pacer_refuses_a_speed_or_origin_it_cannot_play_naming_it() -> None:
+    cases = [
+        ({"speed": "fast"}, "speed: 'fast' is not a number"),
+        ({"speed": None}, "speed: None is not a number"),
+        ({"speed": -0.5}, "speed: -0.5 is out of range; allowed [0, inf), 0: unpaced"),
+        ({"speed": float("inf")}, "speed: inf is out of range; allowed [0, inf), 0: unpaced"),
+        ({"speed": float("nan")}, "speed: nan is out of range; allowed [0, inf), 0: unpaced"),
+        ({"speed": 1.0, "origin_s": "x"}, "origin_s: 'x' is not a number"),
+        ({"speed": 1.0, "origin_s": float("nan")}, "origin_s: nan is not a finite stamp (seconds)"),
+        ({"speed": 1.0, "origin_s": -float("inf")}, "origin_s: -inf is not a finite stamp"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(ConfigError) as refused:
+            StampPacer(**kwargs)
+        assert str(refused.value).startswith(message), (kwargs, str(refused.value))
+    unpaced = StampPacer(0, origin_s="2.5")
+    assert (unpaced.speed, unpaced.origin_s) == (0.0, 2.5)
+    with pytest.raises(ConfigError) as refused:
+        unpaced.clock_s()
+    assert str(refused.value) == (
+        "speed: 0 (unpaced): the stamps follow no clock; pace the source (> 0)"
+    )
+    assert unpaced.wait_until(1e9) == 0.0
+    slept: list[float] = []
+    paced = StampPacer(1.0, wall_clock=lambda: 5.0, sleep=slept.append)
+    assert paced.origin_s == 0.0  # by default
+    assert paced.wait_until(0.0) == 0.0 and paced.wait_until(-1.0) == 0.0 and not slept
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    speed=st.floats(0.1, 10.0),
+    origin_s=st.floats(-100.0, 100.0),
+    start_s=st.floats(0.0, 1e4),
+    ahead_s=st.lists(st.integers(-2000, 2000).map(lambda ms: ms * 1e-3), min_size=1, max_size=6),
+)
+def test_a_pacer_sleeps_until_each_stamp_is_due_on_the_clock_started_at_its_first_use(
+    speed: float, origin_s: float, start_s: float, ahead_s: list[float]
+) -> None:
+    now = [start_s]
+    slept: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        now[0] += seconds
+
+    pacer = StampPacer(speed, origin_s, lambda: now[0], sleep)
+    assert pacer.clock_s() == origin_s  # the first use starts the clock
+    assert pacer.start() == start_s  # and only the first
+    for ahead in ahead_s:
+        stamp_s = pacer.clock_s() + ahead
+        waited = pacer.wait_until(stamp_s)
+        if ahead > 0.0:
+            assert waited == slept[-1] == pytest.approx(ahead / speed)
+            assert pacer.clock_s() == pytest.approx(stamp_s)
+        else:  # late or on time: no wait
+            assert waited == 0.0
+    assert sum(slept) == pytest.approx(now[0] - start_s)

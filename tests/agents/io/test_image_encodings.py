@@ -134,3 +134,41 @@ def test_any_raw_image_decodes_to_its_picture(
     image = decode_image(message, m.IMAGE, "/camera/image_raw")
     assert image.flags["C_CONTIGUOUS"]
     np.testing.assert_array_equal(image, expected(encoding, rgb))
+
+
+def raw_header(encoding: str, height: int, width: int, step: int, size: int) -> object:
+    return m.msg(
+        m.IMAGE, header=m.header(0.0, "camera"), height=height, width=width,
+        encoding=encoding, is_bigendian=0, step=step, data=np.zeros(size, np.uint8),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("encoding", "height", "width", "step", "size"),
+    [
+        ("rgb8", 2, 2, 5, 10),  # a row shorter than its pixels (and than its pixels / 3 not)
+        ("rgb8", 2, 2, 6, 11),  # fewer bytes than its rows
+        ("rgb8", 0, 2, 6, 12),  # no row
+        ("mono8", 2, 0, 2, 4),  # no column
+    ],
+)
+def test_a_raw_image_whose_size_and_data_disagree_is_refused_naming_its_bytes_and_rows(
+    encoding: str, height: int, width: int, step: int, size: int
+) -> None:
+    message = raw_header(encoding, height, width, step, size)
+    expected_text = f"/cam: data holds {size} bytes, not {height} rows of {step}"
+    with pytest.raises(ValueError, match=f"^{expected_text}$"):
+        decode_image(message, m.IMAGE, "/cam")
+
+
+def test_an_unknown_encoding_or_an_undecodable_compressed_image_is_refused_by_name() -> None:
+    known = "mono8, 8UC1, rgb8, bgr8, rgba8, bgra8"
+    with pytest.raises(ValueError, match=f"^/cam: encoding 'yuv422' unknown; known: {known}$"):
+        decode_image(raw_header("yuv422", 2, 2, 4, 8), m.IMAGE, "/cam")
+    for data in (b"", b"not a png"):
+        message = m.msg(
+            m.COMPRESSED, header=m.header(0.0, "camera"), format="png",
+            data=np.frombuffer(data, np.uint8),
+        )  # fmt: skip
+        with pytest.raises(ValueError, match=r"^/cam: format 'png' data cannot be decoded$"):
+            decode_image(message, m.COMPRESSED, "/cam")

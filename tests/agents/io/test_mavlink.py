@@ -649,3 +649,88 @@ def test_a_link_receiving_mavlink_2_leaves_pymavlinks_own_dialect_as_it_was() ->
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
     done = subprocess.run([sys.executable, "-c", program], env=env, timeout=120, check=False)
     assert done.returncode == 0
+
+
+def test_a_simulator_source_refuses_a_bad_choice_naming_it_and_keeps_its_defaults() -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    cases = [
+        ({"estimator": "nope"}, "estimator: 'nope' is not allowed; choose one of "),
+        ({"camera_mode": "x"}, "mode: 'x' is not allowed; choose one of 'project', 'render'"),
+        ({"episodes": 0}, "episodes: 0 is out of range; allowed [1, inf]"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(ConfigError) as refused:
+            SimulatorSource(**kwargs)
+        assert str(refused.value).startswith(message), str(refused.value)
+    with SimulatorSource(overrides={"simulation.max_episode_s": 0.1}) as source:
+        assert (source.estimator, source.seed, source.speed, source.pacer.speed) == (
+            "tight", 0, 1.0, 1.0,
+        )  # fmt: skip
+        assert source.base.config.estimation.observed == "tight"
+        assert source.policy.dt == source.base.env_dt
+    with SimulatorSource(camera_mode="render", scenario="bench-ss4", estimator="truth") as source:
+        config = source.base.config
+        assert (config.camera.mode, config.estimation.observed) == ("render", "truth")
+
+
+def test_the_same_seed_flies_the_same_episodes_and_the_summary_lists_each_outcome() -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    flown = []
+    for seed in (3, 3, 4):
+        with SimulatorSource(
+            estimator="truth", episodes=2, seed=seed, speed=0.0,
+            overrides={"simulation.max_episode_s": 0.1},
+        ) as source:  # fmt: skip
+            flown.append([estimate.translation.tolist() for _, estimate in source])
+            outcomes = source.outcomes
+            assert source.summary() == f"episodes: {outcomes[0]}, {outcomes[1]}"
+            assert outcomes == ["timeout", "timeout"]  # 0.1 s: no landing yet
+    assert flown[0] == flown[1] and flown[0] != flown[2]
+
+
+def test_the_vehicle_poses_of_the_last_256_captures_are_kept() -> None:
+    from agents.io.sim_source import POSE_HISTORY, SimulatorSource
+
+    with SimulatorSource(
+        estimator="truth", episodes=60, speed=0.0, overrides={"simulation.max_episode_s": 0.2}
+    ) as source:
+        stamps = [stamp for stamp, _ in source]
+        assert len(stamps) > POSE_HISTORY == 256
+        assert np.all(np.diff(stamps) > 0.0)  # on across all 60 episodes
+        assert [source.vehicle_pose(t) is None for t in stamps[-POSE_HISTORY - 1 :]] == [
+            True, *[False] * POSE_HISTORY,
+        ]  # fmt: skip
+
+
+def test_a_paced_simulator_waits_for_each_captures_simulated_time() -> None:
+    from agents.io.pacing import StampPacer
+    from agents.io.sim_source import SimulatorSource
+
+    now = [0.0]
+    slept: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        now[0] += seconds
+
+    with SimulatorSource(
+        estimator="truth", episodes=2, speed=2.0, overrides={"simulation.max_episode_s": 0.2}
+    ) as source:
+        source.pacer = StampPacer(2.0, 0.0, lambda: now[0], sleep)
+        stamps = [stamp for stamp, _ in source]
+    # each capture after the first of each episode waited for its stamp, at twice real time
+    assert len(slept) == len(stamps) - 2
+    assert now[0] == pytest.approx(stamps[-1] / 2.0)
+    # 4 steps of 0.05 s an episode; the second's first step is a control period later
+    assert slept == pytest.approx([0.025] * 4 + [0.05] + [0.025] * 3)
+
+
+def test_a_simulator_source_flies_the_config_it_is_given() -> None:
+    from agents.io.sim_source import SimulatorSource
+
+    overrides = {"simulation.max_episode_s": 0.1}
+    with SimulatorSource(config="high-approach", estimator="truth", overrides=overrides) as source:
+        assert source.base.config.start.height_m == (20.0, 20.0)  # default.yaml's is not
+        assert source.base.config.simulation.arena_max_height_m == 30.0

@@ -4,7 +4,9 @@ is named."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +18,9 @@ from rosbags.rosbag2 import Writer
 
 from agents.cli import main
 from agents.io import messages as m
-from agents.io.recording import Topics
+from agents.io.recording import RecordingError, Topics
 from agents.io.tof_rig import write_rig_recording
-from agents.io.tof_rig_bag import write_rig_mcap
+from agents.io.tof_rig_bag import read_rig_bag, rig_topics, write_rig_mcap
 from estimation.tof_calibration import TofCameraCalibration
 from estimation.tof_rig import RIG_FILE
 from landing_env.calibration.tof_camera_sim import TofRigConfig, record_tof_rig_in_sim
@@ -186,3 +188,90 @@ def test_a_stage_window_without_an_image_names_the_topic(
     code, err = _calibrate(capsys, *args)
     assert code == 2
     assert "stages[8] (1000.0 to 1001.0 s): no frame of /camera/image_raw in it" in err
+
+
+@pytest.mark.parametrize(
+    ("topics", "named"),
+    [
+        (Topics(), "/tof/ranges"),
+        (Topics(exact_ranges=""), "/tof/range"),
+        (Topics(exact_ranges="", ranges=FOUR), "/tof/a, /tof/b, /tof/c, /tof/d"),
+    ],
+)
+def test_a_stage_window_without_a_range_names_the_range_topics(
+    rig, tmp_path: Path, topics: Topics, named: str, capsys
+) -> None:
+    mcap = write_rig_mcap(tmp_path / "rig.mcap", rig.stages, rig.description, topics)
+    t_frame = rig.stages[0].frames[0].t_s
+    assert all(t_frame not in t for t in rig.stages[0].reading_t_s)  # the frame's instant alone
+    doc = json.loads((tmp_path / RIG_FILE).read_text())
+    doc["stages"][0] = {"t_start_s": t_frame, "t_end_s": t_frame}
+    (tmp_path / RIG_FILE).write_text(json.dumps(doc))
+    args = ["--recording", str(mcap), "--out", str(tmp_path / "o")]
+    args += ["--range-topics", ",".join(topics.ranges), "--exact-ranges-topic", topics.exact_ranges]
+    code, err = _calibrate(capsys, *args)
+    assert code == 2
+    assert f"s): no range sample of {named} in it\n" in err, err
+
+
+def test_a_rigs_run_is_read_from_its_images_and_ranges_alone() -> None:
+    topics = rig_topics(Topics(image="/cam", ranges=("/r",), range_frames=("a", "b", "c", "d")))
+    assert (topics.detections, topics.imu, topics.tf) == ("", "", "")
+    assert (topics.image, topics.ranges, topics.range_frames) == (
+        "/cam",
+        ("/r",),
+        ("a", "b", "c", "d"),
+    )
+    assert rig_topics() == dataclasses.replace(Topics(), detections="", imu="", tf="")
+
+
+def _ranges_written(path: Path) -> list:
+    with AnyReader([path], default_typestore=m.TYPESTORE) as reader:
+        ranges = [c for c in reader.connections if c.msgtype == m.RANGE]
+        return [
+            (c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages(ranges)
+        ]
+
+
+def test_a_rigs_ranges_are_written_with_its_frame_ids_and_maximum_and_read_as_the_folder(
+    rig, tmp_path: Path
+) -> None:
+    stage = rig.stages[0]
+    first = [np.array(r, dtype=float) for r in stage.readings_m]
+    first[0][1], first[1][1] = 0.0, -0.5  # a range of 0 m is a return, a negative one is not
+    stages = [dataclasses.replace(stage, readings_m=tuple(first)), *rig.stages[1:]]
+    frames = ("a", "b", "c", "d")
+    for max_range, maximum in ((None, float(np.finfo(np.float32).max)), (3.5, 3.5)):
+        description = dataclasses.replace(rig.description, tof_max_range_m=max_range)
+        topics = Topics(ranges=("/r",), range_frames=frames)
+        path = write_rig_mcap(tmp_path / "new" / "folder" / "rig.mcap", stages, description, topics)
+        written = _ranges_written(path)
+        assert {message.header.frame_id for _, message in written} == set(frames)
+        assert {message.max_range for _, message in written} == {np.float32(maximum)}
+        rec = read_rig_bag(path, topics)
+        assert rec.sensors[0].valid[1] and rec.sensors[0].range_m[1] == 0.0
+        assert not rec.sensors[1].valid[1] and math.isnan(rec.sensors[1].range_m[1])
+    four = Topics(ranges=FOUR, range_frames=frames)  # a topic per sensor: the sensors' own ids
+    path = write_rig_mcap(tmp_path / "four.mcap", stages, rig.description, four)
+    assert {(t, msg.header.frame_id) for t, msg in _ranges_written(path)} == set(
+        zip(FOUR, m.TOF_FRAME_IDS, strict=True)
+    )
+
+
+def test_a_rigs_missing_range_topic_or_sensor_is_named_exactly(rig, tmp_path: Path) -> None:
+    path = write_rig_mcap(
+        tmp_path / "rig.mcap", rig.stages, rig.description, Topics(ranges=FOUR, exact_ranges="")
+    )
+    with pytest.raises(RecordingError) as refused:
+        read_rig_bag(path, Topics(exact_ranges=""))
+    assert str(refused.value) == (
+        f"{path}: missing topic(s) /tof/range (sensor_msgs/Range of the ToF sensors; nor an "
+        "exact ranges topic)"
+    )
+    with pytest.raises(RecordingError) as refused:
+        read_rig_bag(path, Topics())
+    assert str(refused.value).endswith("ToF sensors; nor /tof/ranges)")
+    twice = ("/tof/a", "/tof/a", "/tof/c", "/tof/d")  # sensor 2's topic names sensor 1's
+    with pytest.raises(RecordingError) as refused:
+        read_rig_bag(path, Topics(ranges=twice, exact_ranges=""))
+    assert str(refused.value) == f"{path}: no range of sensor 2 (topic /tof/a)"
