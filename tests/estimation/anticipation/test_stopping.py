@@ -121,3 +121,42 @@ def test_a_forced_commit_foreseen_with_nothing_left_or_known_is_handled():
     assert value_before_forced(UNIFORM, math.nan, 1e-9, 2.0) == pytest.approx(0.5, abs=1e-6)
     # no samples: the forced chance alone
     assert value_before_forced(np.array([]), 0.4, 5.0, 2.0) == pytest.approx(0.4)
+
+
+def test_the_values_stop_at_their_cap_of_opportunities_and_interpolate_between_whole_ones():
+    samples = np.array([0.1, 0.5, 0.7])
+    expected = [np.mean(samples)]
+    for _ in range(3):
+        expected.append(np.mean(np.maximum(samples, expected[-1])))
+    values = StoppingValues.from_samples(samples, max_opportunities=3)
+    assert values.values == pytest.approx(expected, rel=1e-12) and len(values.values) == 4
+    # beyond the cap, the cap's value; between the last two, the straight line between them
+    assert values.value(3) == values.value(50.0) == pytest.approx(expected[3], rel=1e-12)
+    assert values.value(2.25) == pytest.approx(0.75 * expected[2] + 0.25 * expected[3])
+    none_left = StoppingValues.from_samples(samples, max_opportunities=0)
+    assert len(none_left.values) == 1 and none_left.value(7.0) == pytest.approx(expected[0])
+
+
+def test_an_opportunity_period_that_is_not_positive_gives_no_value_to_wait_for():
+    values = StoppingValues.from_samples(UNIFORM)
+    for period in (0.0, -1.0):
+        assert values.threshold(10.0, period) == 0.0
+        assert value_before_forced(UNIFORM, 0.3, 10.0, period) == 0.0
+
+
+def test_a_forced_commit_foreseen_counts_one_opportunity_per_period_below_a_second_too():
+    samples = np.array([0.2, 0.6, 0.8])
+    expected = [0.3]
+    for _ in range(3):
+        expected.append(np.mean(np.maximum(samples, expected[-1])))
+    # 1.5 s left at one opportunity per 0.5 s: three opportunities before the forced commit
+    assert value_before_forced(samples, 0.3, 1.5, 0.5) == pytest.approx(expected[3], rel=1e-12)
+    # 1.25 s: between two and three
+    assert value_before_forced(samples, 0.3, 1.25, 0.5) == pytest.approx(
+        0.5 * expected[2] + 0.5 * expected[3], rel=1e-12
+    )
+
+
+def test_with_no_chance_known_and_the_forced_commit_unknown_the_value_is_zero():
+    for samples in (np.array([]), np.array([math.nan, math.inf])):
+        assert value_before_forced(samples, math.nan, 5.0, 2.0) == 0.0
