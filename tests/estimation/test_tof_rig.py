@@ -174,17 +174,24 @@ def test_a_missing_csv_column_is_named(rig_folder: Path, capsys: pytest.CaptureF
     assert "ranges.csv: missing column(s) range_4_m" in err
 
 
-def test_images_of_another_size_than_the_intrinsics_are_refused(
-    rig_folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture
-) -> None:
-    intrinsics = tmp_path / "intrinsics.json"
+def _intrinsics_file(path: Path, focal_px: float, size: tuple[int, int]) -> Path:
+    """An intrinsics calibration file: focal length ``focal_px``, the principal point at the
+    centre of an image of ``size`` (width, height), no distortion."""
+    width, height = size
     IntrinsicsCalibrationResult(
-        K=np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]),
+        K=np.array([[focal_px, 0, (width - 1) / 2], [0, focal_px, (height - 1) / 2], [0, 0, 1]]),
         dist=np.zeros(5),
         rms_reprojection_error=0.1,
         per_view_errors=np.zeros(3),
-        image_size=(640, 480),
-    ).save(intrinsics)
+        image_size=size,
+    ).save(path)
+    return path
+
+
+def test_images_of_another_size_than_the_intrinsics_are_refused(
+    rig_folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    intrinsics = _intrinsics_file(tmp_path / "intrinsics.json", 500.0, (640, 480))
     args = ("--recording", str(rig_folder), "--calibration", str(intrinsics), "--out", "x")
     code, err = _calibrate(capsys, *args)
     assert code == 2
@@ -424,13 +431,6 @@ def test_a_missing_rig_file_or_intrinsics_file_is_named_exactly(tmp_path: Path) 
 def test_the_intrinsics_given_are_the_camera_the_calibration_records_over_the_rig_files(
     rig_folder: Path, tmp_path: Path
 ) -> None:
-    intrinsics = tmp_path / "intrinsics.json"
-    IntrinsicsCalibrationResult(
-        K=np.array([[110.0, 0, 79.5], [0, 110.0, 59.5], [0, 0, 1]]),
-        dist=np.zeros(5),
-        rms_reprojection_error=0.1,
-        per_view_errors=np.zeros(3),
-        image_size=(160, 120),
-    ).save(intrinsics)
+    intrinsics = _intrinsics_file(tmp_path / "intrinsics.json", 110.0, (160, 120))
     result, _ = calibrate_tof_recording(rig_folder, intrinsics)
     assert (result.calibration.metadata["camera"]["fx"], CAMERA.fx) == (110.0, 100.0)

@@ -122,24 +122,33 @@ def test_missing_camera_topic_lists_what_the_file_has(tmp_path: Path) -> None:
         read_bag(path)
 
 
-def test_ranges_out_of_time_order_name_the_topic(tmp_path: Path) -> None:
-    path = tmp_path / "order.mcap"
+def _bag_with_ranges_out_of_order(path: Path, write_range) -> Path:
+    """An MCAP with one tag detection and the ranges ``write_range(writer, t)`` writes, at
+    t = 0.2 s and then 0.1 s (both received at 0.3 s)."""
     with path.open("wb") as stream:
         writer = m.McapWriter(stream)
         det = m.msg(m.DETECTIONS, header=m.header(0.0, "camera"), miss_reason="", detections=[])
         writer.write("/camera/tag_detections", m.DETECTIONS, det, 0.0)
         for t in (0.2, 0.1):
-            message = m.msg(
-                m.RANGE,
-                header=m.header(t, "tof_2"),
-                radiation_type=1,
-                field_of_view=0.4,
-                min_range=0.04,
-                max_range=4.0,
-                range=1.0,
-            )
-            writer.write("/tof/range", m.RANGE, message, 0.3)
+            write_range(writer, t)
         writer.finish()
+    return path
+
+
+def test_ranges_out_of_time_order_name_the_topic(tmp_path: Path) -> None:
+    def write_range(writer, t: float) -> None:
+        message = m.msg(
+            m.RANGE,
+            header=m.header(t, "tof_2"),
+            radiation_type=1,
+            field_of_view=0.4,
+            min_range=0.04,
+            max_range=4.0,
+            range=1.0,
+        )
+        writer.write("/tof/range", m.RANGE, message, 0.3)
+
+    path = _bag_with_ranges_out_of_order(tmp_path / "order.mcap", write_range)
     with pytest.raises(RecordingError, match=r"/tof/range \(sensor 2\): ranges out of time order"):
         read_bag(path)
 
@@ -521,17 +530,13 @@ def test_a_path_that_is_no_recording_is_refused_saying_why(tmp_path: Path) -> No
 
 
 def test_float64_ranges_out_of_time_order_name_the_topic_and_sensor(tmp_path: Path) -> None:
-    path = tmp_path / "order.mcap"
-    with path.open("wb") as stream:
-        writer = m.McapWriter(stream)
-        det = m.msg(m.DETECTIONS, header=m.header(0.0, "camera"), miss_reason="", detections=[])
-        writer.write("/camera/tag_detections", m.DETECTIONS, det, 0.0)
-        for t in (0.2, 0.1):
-            _, exact = m.tof_messages(
-                t, np.ones(4), np.ones(4, bool), min_range_m=0.04, max_range_m=4.0
-            )
-            writer.write("/tof/ranges", m.TOF_RANGES, exact, 0.3)
-        writer.finish()
+    def write_range(writer, t: float) -> None:
+        _, exact = m.tof_messages(
+            t, np.ones(4), np.ones(4, bool), min_range_m=0.04, max_range_m=4.0
+        )
+        writer.write("/tof/ranges", m.TOF_RANGES, exact, 0.3)
+
+    path = _bag_with_ranges_out_of_order(tmp_path / "order.mcap", write_range)
     with pytest.raises(RecordingError, match=r"^/tof/ranges \(sensor 1\): ranges out of time"):
         read_bag(path)
 
