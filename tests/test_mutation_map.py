@@ -51,3 +51,23 @@ def test_a_run_on_chosen_tests_takes_only_the_modules_own_test_files_or_their_te
     assert tool.chosen_tests("m.py", picked, mapped) == picked
     with pytest.raises(SystemExit, match=r"^--tests: tests/b/test_z\.py not among .* of m\.py"):
         tool.chosen_tests("m.py", ["tests/a/test_x.py", "tests/b/test_z.py"], mapped)
+
+
+def test_a_name_taken_from_a_package_counts_as_importing_the_module_that_defines_it(
+    tmp_path: Path,
+) -> None:
+    tool = mutation_tool()
+    test_file = tmp_path / "test_x.py"
+    test_file.write_text("from estimation.fusion import DeckFusion, FusionConfig\n")
+    names = tool.imported_modules(test_file)
+    assert {"estimation.fusion.filter", "estimation.fusion.config"} <= names
+    assert "estimation.fusion.model" not in names
+
+
+def test_a_module_no_test_imports_takes_the_tests_of_the_modules_that_import_it() -> None:
+    tool = mutation_tool()
+    derived = tool.derive_tests(["agents/io/estimate.py", "agents/io/recording_source.py"])
+    assert derived["agents/io/estimate.py"]
+    assert set(derived["agents/io/estimate.py"]) <= set(derived["agents/io/recording_source.py"])
+    # a module a test imports keeps its own test files alone
+    assert "tests/agents/cli/test_bridge.py" in derived["agents/io/recording_source.py"]

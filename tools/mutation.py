@@ -49,8 +49,26 @@ def module_name(path: str) -> str:
     return path.removesuffix(".py").replace("/", ".")
 
 
+def reexports(package: str) -> dict[str, str]:
+    """What a package's ``__init__`` takes from its own modules, name -> module: so that
+    ``from estimation.fusion import DeckFusion`` imports ``estimation.fusion.filter``."""
+    init = ROOT / package.replace(".", "/") / "__init__.py"
+    if not init.is_file():
+        return {}
+    names: dict[str, str] = {}
+    for node in ast.parse(init.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.ImportFrom):
+            source = node.module or ""
+            if node.level:  # ``from .filter import X`` inside the package
+                source = ".".join(filter(None, (package, source)))
+            if source.startswith(f"{package}."):
+                names.update({alias.asname or alias.name: source for alias in node.names})
+    return names
+
+
 def imported_modules(test_file: Path) -> set[str]:
-    """Every module a test file imports, the ``from package import module`` form included."""
+    """Every module a test file imports: the ``from package import module`` form included, and
+    the module a package's ``__init__`` takes a name from, for ``from package import Name``."""
     tree = ast.parse(test_file.read_text(encoding="utf-8"))
     found: set[str] = set()
     for node in ast.walk(tree):
@@ -59,6 +77,8 @@ def imported_modules(test_file: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             found.add(node.module)
             found.update(f"{node.module}.{alias.name}" for alias in node.names)
+            taken = reexports(node.module)
+            found.update(taken[alias.name] for alias in node.names if alias.name in taken)
     return found
 
 
@@ -74,15 +94,28 @@ def selected_modules(paths: list[str]) -> list[str]:
 
 
 def derive_tests(paths: list[str]) -> dict[str, list[str]]:
-    """For each selected module, the test files that import it, sorted."""
+    """For each selected module, the test files that import it, sorted. A module no test
+    imports takes the test files that import a module of the packages that imports it (one
+    step: ``agents/io/estimate.py`` those of ``agents/io/recording_source.py``)."""
     imports = {
         f.relative_to(ROOT).as_posix(): imported_modules(f)
         for f in sorted((ROOT / "tests").rglob("test_*.py"))
     }
-    return {
-        module: [test for test, names in imports.items() if module_name(module) in names]
-        for module in selected_modules(paths)
-    }
+    importers: dict[str, set[str]] = {}
+    for source in SOURCES:
+        for code in sorted((ROOT / source).rglob("*.py")):
+            name = module_name(code.relative_to(ROOT).as_posix())
+            for imported in imported_modules(code):
+                importers.setdefault(imported, set()).add(name)
+    derived: dict[str, list[str]] = {}
+    for module in selected_modules(paths):
+        wanted = {module_name(module)}
+        tests = [test for test, names in imports.items() if wanted & names]
+        if not tests:
+            wanted = importers.get(module_name(module), set())
+            tests = [test for test, names in imports.items() if wanted & names]
+        derived[module] = tests
+    return derived
 
 
 def load_map() -> dict:
