@@ -35,7 +35,8 @@ ROOT = Path(__file__).resolve().parent.parent
 MAP_FILE = ROOT / "tools" / "mutation.yaml"
 RUNS = ROOT / "results" / "mutation"
 # what a module's tests need next to the mutated package: the code, the configs, the tests
-LINKED = ("agents", "estimation", "landing_env", "configs", "tests", "benchmarks")
+LINKED = ("agents", "estimation", "landing_env", "configs", "tests", "benchmarks", "docs")
+LINKED_FILES = ("README.md",)  # the docs' snippets are tested from the README too
 SOURCES = ("agents", "estimation", "landing_env")
 HEADER = """\
 # Mutation testing (tools/mutation.py, make mutation): the modules mutated and, for each, the
@@ -170,10 +171,14 @@ def prepare(module: str, test_files: list[str]) -> Path:
         link = run_dir / name
         if not link.is_symlink():
             link.symlink_to(ROOT / name, target_is_directory=True)
+    for name in LINKED_FILES:
+        link = run_dir / name
+        if not link.is_symlink():
+            link.symlink_to(ROOT / name)
     settings = {
         "source_paths": list(SOURCES),
         "only_mutate": [module],
-        "also_copy": ["configs", "benchmarks"],
+        "also_copy": ["configs", "benchmarks", "docs", *LINKED_FILES],
         "pytest_add_cli_args_test_selection": test_files,
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-x", "-q"],
         "use_git_change_detection": False,
