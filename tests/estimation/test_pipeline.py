@@ -71,7 +71,7 @@ class ProbeEstimator:
             valid=True,
             rotation=np.eye(3),
             translation=np.array([0.0, 0.0, 1.0]),
-            extras={"tag_size": self.inputs.tag_size},
+            extras={"tag_id": self.inputs.tag_id, "tag_size": self.inputs.tag_size},
         )
 
 
@@ -235,6 +235,7 @@ def test_on_nested_tags_the_range_estimators_take_the_one_at_the_landing_point_o
     assert estimate.extras["landmark_id"] == chosen_id
     landmark = NESTED.by_id(chosen_id)
     # each tag's own estimator, of its size; the pose moved from the tag to the deck frame
+    assert estimate.extras["tag_id"] == chosen_id
     assert estimate.extras["tag_size"] == landmark.size
     np.testing.assert_allclose(estimate.translation, [-landmark.x, -landmark.y, 1.0])
 

@@ -276,6 +276,12 @@ def test_a_tracker_built_without_arguments_has_the_configs_defaults() -> None:
     assert CornerTracker.from_config(CornerTrackerConfig()).config == CornerTrackerConfig()
 
 
+def test_integer_corners_come_out_as_float_pixels() -> None:
+    tracker = CornerTracker()
+    assert tracker.update(START.astype(int), 0.0).corners_px.dtype == float
+    assert tracker.update(START.astype(int) + 1, 0.05).corners_px.dtype == float
+
+
 def test_without_timestamps_the_first_frame_is_at_dt_and_the_next_ones_dt_apart() -> None:
     tracker = CornerTracker(dt=0.1, max_bridged_frames=1)
     tracker.update(START)  # at 0.1 s
