@@ -15,20 +15,28 @@ from estimation.atda import JointAtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.detection import AprilTagDetector
 from estimation.estimator import RankedEstimator
-from estimation.frames import R_PD, matrix_from_euler_zyx, tof_positions_in_camera_frame
+from estimation.frames import (
+    R_PD,
+    matrix_from_euler_zyx,
+    tag_corners_in_tag_frame,
+    tof_positions_in_camera_frame,
+)
 from estimation.landmarks import (
+    NO_LANDMARK,
     Landmark,
     LandmarkChoiceConfig,
     LandmarkEstimator,
     LandmarkLayout,
     choose_landmark,
     compose_deck_pose,
+    landmark_pose_w,
     layout_from_pairs,
+    shortest_side_px,
 )
 from estimation.registry import make_estimator
 from estimation.synthetic import SyntheticScene
 from estimation.tof_calibration import TofCameraCalibration
-from estimation.types import CameraFrame, RangeReading, TagDetection
+from estimation.types import CameraFrame, DeckPoseEstimate, RangeReading, TagDetection
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
 from landing_env.scene.deck import DeckSurfaceConfig, make_deck_texture, plate_to_texel
@@ -278,3 +286,211 @@ def test_start_offset_bounds_are_validated() -> None:
     with pytest.raises(ConfigError, match="min_offset_m"):
         load_config("default", overrides={"start.min_offset_m": 1.0})
     assert load_config("default").start.min_offset_m == 0.0
+
+
+# ------------------------------------------------------------------- the layout, exactly
+def _config_error(call, *args, **kwargs) -> ConfigError:
+    with pytest.raises(ConfigError) as error:
+        call(*args, **kwargs)
+    return error.value
+
+
+@pytest.mark.parametrize(("field", "value"), [("x", math.nan), ("y", math.inf), ("y", -math.inf)])
+def test_a_landmark_off_the_real_line_is_refused_naming_its_coordinate(
+    field: str, value: float
+) -> None:
+    error = _config_error(Landmark, 3, 0.2, **{field: value})
+    assert (error.key, error.detail) == (field, f"{value!r} is not finite")
+    assert _config_error(Landmark, 587, 0.2).key == "tag_id"
+
+
+def test_a_landmarks_corners_and_quiet_zone_are_its_size_about_its_centre() -> None:
+    landmark = Landmark(1, 0.4, 0.5, -0.25)
+    np.testing.assert_array_equal(
+        landmark.corners_d(), tag_corners_in_tag_frame(0.4) + np.array([0.5, -0.25, 0.0])
+    )
+    # half of the 8 cells of the tag and the quiet zone's cells on either side, 0.05 m each
+    assert landmark.outer_half_extent(0.0) == pytest.approx(0.2)
+    assert landmark.outer_half_extent(1.0) == pytest.approx(0.25)
+    assert landmark.outer_half_extent(2.0) == pytest.approx(0.3)
+
+
+def test_a_layout_names_what_is_wrong_with_it() -> None:
+    error = _config_error(LandmarkLayout, ())
+    assert (error.key, error.detail) == ("landmarks", "need at least one landmark")
+    error = _config_error(layout_from_pairs, [(4, 0.2, 0.0, 0.0), (4, 0.2, 1.0, 0.0)])
+    assert (error.key, error.detail) == ("landmarks", "tag ids [4, 4] must be distinct")
+    error = _config_error(layout_from_pairs, [(0, 0.2, 0.0, 0.0), (1, 0.2, 0.2, 0.0)])
+    assert error.key == "landmarks"
+    assert error.detail == (
+        "tags 0 and 1 overlap (with their quiet zones) by 0.050 m; move them apart or shrink them"
+    )
+    assert _config_error(LandmarkLayout, (Landmark(0, 0.2),), -1.0).key == "quiet_zone_cells"
+
+
+@pytest.mark.parametrize(
+    "pairs",
+    [
+        [(0, 0.2, 0.1, 0.1), (1, 0.2, 0.3, 0.1)],  # 0.2 m apart in x
+        [(0, 0.2, 0.1, 0.1), (1, 0.2, 0.1, 0.3)],  # in y
+        [(0, 0.2, 0.1, 0.1), (1, 0.2, 3.0, 3.0), (2, 0.2, 0.3, 0.1)],  # the first and the last
+        [(0, 0.2, 3.0, 3.0), (1, 0.2, 0.1, 0.1), (2, 0.2, 0.1, 0.3)],  # the last two
+    ],
+)
+def test_tags_whose_quiet_zones_overlap_in_either_direction_are_refused(pairs) -> None:
+    assert "overlap" in _config_error(layout_from_pairs, pairs).detail
+
+
+def test_quiet_zones_that_touch_are_allowed_and_nothing_but_the_gap_is_checked() -> None:
+    # 0.125 m of reach each, 0.25 m apart: they touch
+    layout = layout_from_pairs([(0, 0.2, 0.0, 0.0), (1, 0.2, 0.25, 0.0), (2, 0.2, 0.0, -0.25)])
+    assert layout.ids == (0, 1, 2) and layout.quiet_zone_cells == 1.0
+    assert layout.by_id(1) is layout.landmarks[1] and layout.by_id(9) is None
+    assert layout_from_pairs([(0, 0.2, 0.0, 0.0)], 2.0).quiet_zone_cells == 2.0
+    assert LandmarkLayout.single(4, 0.25) == LandmarkLayout((Landmark(4, 0.25),), 1.0)
+    assert LandmarkLayout.single(4, 0.25, 2.0) == LandmarkLayout((Landmark(4, 0.25),), 2.0)
+
+
+def test_the_layouts_extent_is_the_farthest_reach_of_a_quiet_zone_and_must_fit_the_deck() -> None:
+    # tag 1 reaches 0.5 + 0.25 m in x, tag 2 0.6 + 0.125 m in y
+    layout = layout_from_pairs([(0, 0.12, 0.0, 0.0), (1, 0.4, -0.5, 0.2), (2, 0.2, 0.1, -0.6)])
+    assert layout.extent() == pytest.approx(0.75)
+    layout.check_fits(1.5)  # exactly on the edge
+    error = _config_error(layout.check_fits, 1.4)
+    assert error.key == "landmarks"
+    assert error.detail == (
+        "tag 1 (size 0.4 m at (-0.5, 0.2)) reaches 0.750 m from the deck centre with its quiet "
+        "zone; the 1.4 m deck allows 0.700 m"
+    )
+    error = _config_error(layout_from_pairs([(2, 0.2, 0.1, -0.6)]).check_fits, 1.44)
+    assert "tag 2 (size 0.2 m at (0.1, -0.6)) reaches 0.725 m" in error.detail
+
+
+def test_a_choice_rule_names_what_is_wrong_with_it() -> None:
+    error = _config_error(LandmarkChoiceConfig, prefer="smallest")
+    assert error.key == "prefer"
+    assert error.detail == "'smallest' is not allowed; choose one of 'largest', 'nearest'"
+    error = _config_error(LandmarkChoiceConfig, min_side_px=20.0, max_side_px=20.0)
+    assert (error.key, error.detail) == ("max_side_px", "20.0 must exceed min_side_px = 20.0")
+    assert _config_error(LandmarkChoiceConfig, min_side_px=-1.0).key == "min_side_px"
+
+
+def test_the_shortest_side_of_a_quadrilateral_not_its_diagonal() -> None:
+    # a kite: sides 5, 5, sqrt(65), sqrt(65); diagonals 8 and 8.06
+    kite = np.array([[0.0, 0.0], [4.0, 3.0], [8.0, 0.0], [4.0, -4.0]])
+    assert shortest_side_px(kite) == pytest.approx(5.0)
+    assert shortest_side_px(kite.reshape(-1)) == pytest.approx(5.0)
+    assert shortest_side_px(np.array([[0, 0], [30, 0], [30, 10], [0, 10]])) == 10.0
+    assert math.isnan(shortest_side_px(np.where(kite == 8.0, np.nan, kite)))
+
+
+def test_the_choice_takes_its_band_ends_as_in_it_and_skips_what_it_cannot_use() -> None:
+    band = LandmarkChoiceConfig(min_side_px=20.0, max_side_px=80.0)
+    # exactly at either end of the band counts as in it
+    chosen = choose_landmark(_frame((0, 20.0), (1, 10.0)), LAYOUT, band)
+    assert chosen.landmark.tag_id == 0 and chosen.in_band and chosen.side_px == 20.0
+    chosen = choose_landmark(_frame((1, 80.0), (2, 90.0)), LAYOUT, band)
+    assert chosen.landmark.tag_id == 1 and chosen.in_band
+    # a tag not in the layout and a tag without finite corners are passed over
+    broken = TagDetection(2, np.full((4, 2), np.nan))
+    detections = (TagDetection(7, _square(50.0)), broken, TagDetection(1, _square(30.0)))
+    chosen = choose_landmark(CameraFrame(0.0, detections), LAYOUT, band)
+    assert chosen.landmark.tag_id == 1 and chosen.detection is detections[2]
+    assert choose_landmark(CameraFrame(0.0, (broken,)), LAYOUT, band) is None
+    # without a rule: the default band, 12 to 400 px
+    assert choose_landmark(_frame((2, 420.0), (1, 11.0), (0, 12.0)), LAYOUT).landmark.tag_id == 0
+
+
+def test_ties_go_to_the_larger_image_when_as_near_and_to_the_better_decoded_when_as_large() -> None:
+    layout = layout_from_pairs([(1, 0.2, 0.5, 0.0), (2, 0.2, -0.5, 0.0), (3, 0.2, 0.0, 0.9)])
+    nearest = LandmarkChoiceConfig(prefer="nearest")
+    frame = _frame((1, 40.0), (2, 60.0), (3, 90.0))
+    assert choose_landmark(frame, layout, nearest).landmark.tag_id == 2
+    decoded = CameraFrame(
+        0.0,
+        (
+            TagDetection(1, _square(50.0), hamming=1),
+            TagDetection(2, _square(50.0), hamming=0),
+            TagDetection(3, _square(50.0), hamming=2),
+        ),
+    )
+    assert choose_landmark(decoded, layout).landmark.tag_id == 2
+
+
+def test_a_landmarks_world_pose_is_the_deck_pose_moved_to_its_centre() -> None:
+    landmark = Landmark(3, 0.2, 0.5, -0.25)
+    r_wd = matrix_from_euler_zyx(0.1, -0.05, 1.0)
+    t_wd = np.array([10.0, -2.0, 0.5])
+    t_wl, r_wl = landmark_pose_w(t_wd, r_wd, landmark)
+    np.testing.assert_allclose(t_wl, t_wd + r_wd @ np.array([0.5, -0.25, 0.0]))
+    np.testing.assert_array_equal(r_wl, r_wd)
+    # and back: the deck frame from the landmark's pose
+    r, t = compose_deck_pose(r_wl, t_wl, landmark)
+    np.testing.assert_allclose(t, t_wd)
+    np.testing.assert_array_equal(r, r_wd)
+
+
+class _Stub:
+    """A per-landmark estimator that records its calls and answers the tag at 1 m."""
+
+    def __init__(self, landmark: Landmark, valid: bool = True) -> None:
+        self.landmark = landmark
+        self.valid = valid
+        self.calls: list[tuple[CameraFrame, RangeReading]] = []
+        self.resets = 0
+
+    def reset(self) -> None:
+        self.resets += 1
+
+    def estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        self.calls.append((frame, ranges))
+        if not self.valid:
+            invalid = DeckPoseEstimate.invalid("stub", frame.timestamp, "too_oblique")
+            return dataclasses.replace(invalid, extras={"inner": self.landmark.tag_id})
+        return DeckPoseEstimate(
+            "stub",
+            frame.timestamp,
+            True,
+            rotation=np.eye(3),
+            translation=np.array([0.0, 0.0, 1.0]),
+            extras={"inner": self.landmark.tag_id},
+        )
+
+
+def test_a_landmark_estimator_runs_the_chosen_tags_estimator_and_keeps_it_through_a_miss() -> None:
+    stubs: dict[int, _Stub] = {}
+
+    def make_one(landmark: Landmark) -> _Stub:
+        stubs[landmark.tag_id] = _Stub(landmark, valid=landmark.tag_id != 2)
+        return stubs[landmark.tag_id]
+
+    estimator = LandmarkEstimator("mine", LAYOUT, make_one)
+    ranges = RangeReading(0.0, np.full(4, 1.0), np.ones(4, dtype=bool))
+    # nothing seen yet: invalid, no estimator asked
+    nothing = estimator.estimate(CameraFrame(0.25, ()), ranges)
+    assert (nothing.valid, nothing.method, nothing.timestamp) == (False, "mine", 0.25)
+    assert nothing.reason == NO_LANDMARK
+    assert all(not stub.calls for stub in stubs.values())
+    frame = CameraFrame(0.5, (TagDetection(1, _square(60.0)),))
+    seen = estimator.estimate(frame, ranges)
+    assert seen.valid and seen.method == "mine" and seen.timestamp == 0.5
+    assert seen.extras == {"inner": 1, "landmark_id": 1, "landmark_side_px": 60.0}
+    assert stubs[1].calls == [(frame, ranges)]
+    landmark = LAYOUT.by_id(1)
+    np.testing.assert_allclose(seen.translation, [-landmark.x, -landmark.y, 1.0])
+    # a frame without the tag still goes to the last chosen tag's estimator (a tracker bridges)
+    missed = estimator.estimate(CameraFrame(0.55, ()), ranges)
+    assert (
+        missed.valid
+        and missed.extras["landmark_id"] == 1
+        and stubs[1].calls[-1][0].timestamp == 0.55
+    )
+    assert math.isnan(missed.extras["landmark_side_px"])
+    # an invalid estimate of the chosen tag: renamed, with the landmark, the pose left unset
+    invalid = estimator.estimate(CameraFrame(0.6, (TagDetection(2, _square(90.0)),)), ranges)
+    assert (invalid.valid, invalid.method, invalid.reason) == (False, "mine", "too_oblique")
+    assert invalid.extras == {"inner": 2, "landmark_id": 2, "landmark_side_px": 90.0}
+    assert np.all(np.isnan(invalid.translation))
+    estimator.reset()
+    assert all(stub.resets == 1 for stub in stubs.values())
+    assert estimator.estimate(CameraFrame(0.7, ()), ranges).reason == NO_LANDMARK

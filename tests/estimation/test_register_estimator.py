@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
+import importlib.metadata
+import types
+import warnings
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
 
+from estimation import registry
 from estimation.atda import ATDAConfig, AtdaEstimator
 from estimation.camera_model import CameraIntrinsics
 from estimation.fusion.config import FusionConfig
@@ -16,8 +20,11 @@ from estimation.pipeline import EstimationOptions, build_estimators
 from estimation.registry import (
     ESTIMATOR_NAMES,
     FRAME_ESTIMATOR_NAMES,
+    PLUGIN_GROUP,
     REGISTRY,
     BuildInputs,
+    EstimatorSpec,
+    load_plugins,
     register_estimator,
     unregister_estimator,
 )
@@ -152,3 +159,137 @@ def test_the_environment_observes_a_registered_estimator(tag_only: str) -> None:
         assert np.all(np.abs(observation["deck_pose"][:3] - info["deck_pose_true"][:3]) < 0.02)
     finally:
         env.close()
+
+
+def test_a_registered_estimator_needs_the_intrinsics_alone_by_default_and_comes_before_beacon() -> (
+    None
+):
+    spec = register_estimator("tag_only", TagOnlyEstimator, TagOnlyConfig)
+    try:
+        assert REGISTRY["tag_only"] is spec
+        assert spec == EstimatorSpec(
+            "tag_only",
+            TagOnlyConfig,
+            TagOnlyEstimator,
+            needs_intrinsics=True,
+            needs_tof_calibration=False,
+            uses_ranges=False,
+            wants_tof_calibration=False,
+        )
+        assert FRAME_ESTIMATOR_NAMES[-1] == "tag_only"
+        assert ESTIMATOR_NAMES[-4:] == ["tag_only", "beacon", "auto", "fused"]
+    finally:
+        unregister_estimator("tag_only")
+    flags = {
+        "needs_intrinsics": False,
+        "needs_tof_calibration": True,
+        "uses_ranges": True,
+        "wants_tof_calibration": True,
+    }
+    spec = register_estimator("tag_only", TagOnlyEstimator, TagOnlyConfig, **flags)
+    try:
+        assert dataclasses.asdict(spec) == {
+            "name": "tag_only",
+            "config_type": TagOnlyConfig,
+            "build": TagOnlyEstimator,
+            **flags,
+        }
+    finally:
+        unregister_estimator("tag_only")
+
+
+def test_a_taken_name_is_refused_listing_every_name_taken() -> None:
+    with pytest.raises(ValueError) as error:
+        register_estimator("crhf", TagOnlyEstimator, TagOnlyConfig)
+    assert str(error.value) == (
+        f"estimator name 'crhf' is taken; taken: {', '.join(ESTIMATOR_NAMES)}"
+    )
+    assert ", tight, beacon, auto, fused" in str(error.value)
+
+
+class _EntryPoint:
+    """An installed entry point as importlib.metadata gives it, loading by a function."""
+
+    def __init__(self, name: str, value: str, load: Callable[[], object]) -> None:
+        self.name = name
+        self.value = value
+        self.attr = value.partition(":")[2] or None
+        self._load = load
+        self.loads = 0
+
+    def load(self) -> object:
+        self.loads += 1
+        return self._load()
+
+
+def _register_tag_only_as(name: str) -> EstimatorSpec:
+    return register_estimator(name, TagOnlyEstimator, TagOnlyConfig)
+
+
+def _fail() -> object:
+    raise RuntimeError("boom")
+
+
+def _import_registering(name: str) -> types.ModuleType:
+    _register_tag_only_as(name)
+    return types.ModuleType(f"{name}_package.estimator")
+
+
+@pytest.fixture
+def entry_points(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[_EntryPoint]]:
+    """The installed entry points (fill the list), read afresh as in a new process."""
+    points: list[_EntryPoint] = []
+
+    def installed(*, group: str | None = None) -> list[_EntryPoint]:
+        return points if group == PLUGIN_GROUP else []
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", installed)
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    try:
+        yield points
+    finally:
+        for point in points:
+            if point.name in REGISTRY and point.name not in registry.BUILT_IN:
+                unregister_estimator(point.name)
+
+
+def test_plugins_register_by_function_import_or_object_and_a_broken_one_is_skipped_naming_it(
+    entry_points: list[_EntryPoint],
+) -> None:
+    entry_points += [
+        # a name already registered: not loaded at all
+        _EntryPoint("atda", "other_package.estimator:register", _fail),
+        _EntryPoint("broken", "broken_package.estimator:register", _fail),
+        _EntryPoint("silent", "silent_package.estimator", lambda: types.ModuleType("silent")),
+        _EntryPoint(
+            "by_function",
+            "function_package.estimator:register",
+            lambda: lambda: _register_tag_only_as("by_function"),
+        ),
+        _EntryPoint(
+            "by_import", "import_package.estimator", lambda: _import_registering("by_import")
+        ),
+        # an attribute that is not a function: its module's import registers
+        _EntryPoint(
+            "by_object",
+            "object_package.estimator:SPEC",
+            lambda: _import_registering("by_object") and REGISTRY["by_object"],
+        ),
+    ]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        added = load_plugins()
+    assert added == ["by_function", "by_import", "by_object"]
+    assert all(name in REGISTRY and name in ESTIMATOR_NAMES for name in added)
+    assert entry_points[0].loads == 0 and REGISTRY["atda"].build is not TagOnlyEstimator
+    assert [str(w.message) for w in caught] == [
+        "estimator plugin 'broken' (broken_package.estimator:register) skipped: RuntimeError: boom",
+        "estimator plugin 'silent' (silent_package.estimator) skipped: loading it did not "
+        "register 'silent' (register_estimator with the entry point's name)",
+    ]
+    assert all(w.category is UserWarning for w in caught)
+    # once per process: a second call loads nothing and warns of nothing again
+    with warnings.catch_warnings(record=True) as again:
+        warnings.simplefilter("always")
+        assert load_plugins() == []
+    assert again == [] and [p.loads for p in entry_points] == [0, 1, 1, 1, 1, 1]

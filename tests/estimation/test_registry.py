@@ -9,17 +9,24 @@ import sys
 import numpy as np
 import pytest
 
+from estimation import registry
+from estimation.atda import ATDAConfig
 from estimation.camera_model import CameraIntrinsics
+from estimation.crhf import CrhfEstimator
 from estimation.estimator import DeckPoseEstimator, RankedEstimator
 from estimation.frames import tof_positions_in_camera_frame
 from estimation.fusion.config import POSE_SOURCES, FusionConfig
+from estimation.ihrcf import IhrcfEstimator
 from estimation.landmarks import Landmark, LandmarkLayout
 from estimation.pipeline import EstimationOptions, build_estimators, names_to_build
 from estimation.registry import (
     ESTIMATOR_NAMES,
     FRAME_ESTIMATOR_NAMES,
     REGISTRY,
+    BuildInputs,
     make_estimator,
+    needs_intrinsics_names,
+    needs_tof_calibration_names,
 )
 from estimation.tight import TightEstimator
 from estimation.tight_config import TightConfig
@@ -160,3 +167,77 @@ def test_the_simulator_hands_fused_the_seas_wave_components_when_asked() -> None
     assert fusion_settings(load_config("paper-stewart")).deck_roll_periods_s == ()
     sea = load_config("bench-ss4", overrides={"estimation.fusion.deck_waves_from_motion": True})
     assert fusion_settings(sea).deck_roll_periods_s == ()
+
+
+def test_the_names_that_get_the_intrinsics_and_the_tof_calibration() -> None:
+    assert needs_intrinsics_names() == {"atda", "ihrcf", "crhf", "tight", "beacon"}
+    assert needs_tof_calibration_names() == {"ihrcf", "crhf"}
+    assert needs_tof_calibration_names(optional=True) == {"ihrcf", "crhf", "tight"}
+
+
+def test_make_estimator_refuses_what_it_cannot_build_saying_what_is_missing() -> None:
+    with pytest.raises(ValueError) as error:
+        make_estimator("apriltag", intrinsics=K, tag_size=0.15)
+    assert str(error.value) == "unknown estimator 'apriltag'; allowed: atda, ihrcf, crhf, tight"
+    with pytest.raises(ValueError) as error:
+        make_estimator("atda", intrinsics=None, tag_size=0.15)
+    assert str(error.value) == "atda needs the camera intrinsics"
+    with pytest.raises(ValueError) as error:
+        make_estimator("crhf", intrinsics=K, tag_size=0.15)
+    assert str(error.value) == "crhf needs a tof_calibration"
+    with pytest.raises(TypeError) as type_error:
+        make_estimator("atda", intrinsics=K, tag_size=0.15, config=TightConfig())
+    assert str(type_error.value) == "atda expects a ATDAConfig"
+    # IHRCF and CRHF only undistort with the intrinsics: they build without them
+    assert (
+        make_estimator("ihrcf", intrinsics=None, tag_size=0.15, tof_calibration=CAL).intrinsics
+        is None
+    )
+
+
+def test_make_estimator_builds_for_tag_0_with_the_config_given_or_the_defaults() -> None:
+    default = make_estimator("atda", intrinsics=K, tag_size=0.2)
+    assert default.tag_id == 0 and default.tag_size == 0.2 and default.config == ATDAConfig()
+    assert default.intrinsics is K
+    config = ATDAConfig(max_reprojection_error_px=3.0)
+    given = make_estimator("atda", intrinsics=K, tag_size=0.25, tag_id=9, config=config)
+    assert (given.tag_id, given.tag_size, given.config) == (9, 0.25, config)
+    assert given.config is config
+
+
+@pytest.mark.parametrize("name", ["ihrcf", "crhf", "tight"])
+def test_a_camera_and_tof_estimator_is_built_from_every_input_given(name: str) -> None:
+    positions = 1.5 * tof_positions_in_camera_frame()
+    calibration = TofCameraCalibration.exact(K, positions, 0.04, 4.0)
+    config = REGISTRY[name].config_type()
+    estimator = make_estimator(
+        name,
+        intrinsics=K,
+        tag_size=0.2,
+        tag_id=9,
+        tof_calibration=calibration,
+        tof_positions_c=positions,
+        config=config,
+    )
+    assert (estimator.tag_size, estimator.tag_id) == (0.2, 9) and estimator.config is config
+    np.testing.assert_array_equal(estimator.tof_positions_c, positions)
+
+
+def test_the_builder_of_the_camera_and_tof_estimators_hands_on_every_input() -> None:
+    # the builders are made when the registry is imported; this makes them again
+    positions = 1.5 * tof_positions_in_camera_frame()
+    calibration = TofCameraCalibration.exact(K, positions, 0.04, 4.0)
+    for cls in (IhrcfEstimator, CrhfEstimator):
+        config = cls.config_class()
+        inputs = BuildInputs(K, 0.2, 9, calibration, positions, config)
+        estimator = registry._camera_and_tof(cls, "tof_calibration")(inputs)
+        assert isinstance(estimator, cls)
+        assert (estimator.tag_size, estimator.tag_id) == (0.2, 9)
+        assert estimator.config is config and estimator.intrinsics is K
+        assert estimator.tof_calibration is calibration
+        np.testing.assert_array_equal(estimator.tof_positions_c, positions)
+    tight = registry._camera_and_tof(TightEstimator, "intrinsics")(
+        BuildInputs(K, 0.2, 9, None, positions, TightConfig(pixel_sigma_px=1.0))
+    )
+    assert isinstance(tight, TightEstimator) and tight.config.pixel_sigma_px == 1.0
+    assert tight.intrinsics is K
