@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
+from landing_env.waves.generator import SeaGeneratorConfig
 from landing_env.waves.ship import ShipMotion, ShipMotionConfig, helideck_poses, vessel_raos
 from landing_env.waves.spectrum import WaveComponents, dnv_gamma, jonswap_shape
 
@@ -416,3 +417,21 @@ def test_the_decks_reach_is_its_amplitude_in_a_regular_wave_and_six_sigma_in_a_s
     assert (sea.vertical_reach_m - drop) / np.std(poses[:, 2]) == pytest.approx(6.0, rel=0.05)
     tilt = np.abs(sea.vessel_poses(long)[:, 3]) + np.abs(sea.vessel_poses(long)[:, 4])
     assert sea.tilt_reach_rad > np.max(tilt)
+
+
+@pytest.mark.parametrize("speed_m_s", [0.0, 6.0])
+def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
+    speed_m_s: float,
+) -> None:
+    generator = SeaGeneratorConfig(speed_m_s=speed_m_s, swell_direction_deg=120.0)
+    config = ShipMotionConfig(wave_direction_deg=180.0, generator=generator)
+    ship = ShipMotion(config, np.random.default_rng(1))
+    assert ship.waves.steady
+    times = np.linspace(0.0, 40.0, 81)
+    h = 1e-4
+    numeric = (ship.poses(times + h) - ship.poses(times - h)) / (2 * h)
+    np.testing.assert_allclose(ship.velocities(times), numeric, atol=2e-5)
+    vessel = (ship.vessel_poses(times + h) - ship.vessel_poses(times - h)) / (2 * h)
+    np.testing.assert_allclose(ship.vessel_rates(times), vessel, atol=2e-5)
+    np.testing.assert_allclose(ship.velocity(times[7]), ship.velocities(times)[7], atol=1e-12)
+    np.testing.assert_allclose(ship.elevation(times), ship.waves.elevation(times), atol=0.0)
