@@ -266,7 +266,13 @@ def test_a_replay_config_refuses_a_bad_choice_or_lever_arm_naming_the_key(tmp_pa
             "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0,0,0\n",
             "line 3: expected 7 columns, got 8",
         ),
-        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n\n1,0,0,x,0,0,0\n", "line 3: not a number"),
+        # the file's own line, blank lines counted
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n\n1,0,0,x,0,0,0\n",
+            "bad.csv, line 4: not a number",
+        ),
+        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0,0 # late\n", "line 3: not a number"),
+        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0\n1,0,0,0,0,0\n", "line 2: expected 7 columns, got 6"),
         ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n", "bad.csv: needs at least two samples"),
         ("t,x,y,z,roll,pitch,yaw\n", "bad.csv: needs at least two samples"),
         (
