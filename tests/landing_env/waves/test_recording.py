@@ -422,14 +422,14 @@ def test_a_loaded_recording_is_kept_per_file_frame_and_lever_for_the_four_newest
     with pytest.raises(ConfigError) as info:
         load_recording(paths[0], "hull")
     assert info.value.key == "frame"
-    # a recording in use again is kept; the least recently used of five is read again
-    for path in paths[1:3]:
-        load_recording(path)
+    # four recordings are kept: one in use again stays, the least recently used goes
+    first = load_recording(paths[0])
+    kept = [load_recording(path) for path in paths[1:4]]
     assert load_recording(paths[0]) is first
-    load_recording(paths[3])
-    load_recording(paths[4])
+    assert [load_recording(path) for path in paths[2:4]] == kept[1:]
+    load_recording(paths[4])  # a fifth: the least recently used, paths[1], is dropped
     assert load_recording(paths[0]) is first
-    assert load_recording(paths[0], "vessel", (0.0, 2.0, 0.0)) is not port
+    assert load_recording(paths[1]) is not kept[0]
 
 
 def test_a_replay_holds_its_first_and_last_pose_still_or_loops_over_its_span() -> None:
@@ -471,3 +471,29 @@ def test_a_random_start_keeps_its_margin_unless_the_recording_is_shorter(tmp_pat
     source = csv_motion_from_config(vessel, np.random.default_rng(0))
     assert source.recording is load_recording(path, "vessel", (1.0, 2.0, 3.0))
     assert source.end == "hold" and source.offset_s == 0.0
+
+
+def test_a_csv_numpy_cannot_parse_at_once_is_read_row_by_row_to_the_same_samples(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "quoted.csv"
+    path.write_text('t,x,y,z,roll,pitch,yaw\n"0",1,2,3,90,0,0\n   \n"1",1,2,3,180,0,0\n')
+    times, poses = read_recording(path)
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_allclose(poses[:, 3], [math.pi / 2, math.pi])
+    with pytest.raises(FileNotFoundError, match=r"motion recording '.*none\.csv' does not exist"):
+        read_recording(tmp_path / "none.csv")
+
+
+def test_a_recording_path_may_start_at_the_home_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HOME", str(tmp_path))
+    write_motion_csv(tmp_path / "home.csv", np.array([0.0, 1.0]), np.full((2, 6), 0.25))
+    times, poses = read_recording("~/home.csv")
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    assert poses[1, 0] == 0.25
+    assert load_recording("~/home.csv").samples[0, 0] == 0.25
+    source = CsvMotion.from_file("~/home.csv", end="loop", offset_s=0.5)
+    assert source.offset_s == 0.5 and source.end == "loop"
+    np.testing.assert_allclose(source.pose(0.0)[0], 0.25)
