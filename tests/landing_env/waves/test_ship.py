@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -337,6 +338,7 @@ def test_the_length_filters_are_smooth_through_zero_and_long_waves_pass() -> Non
     k = 0.25 / 9.80665
     # x = k |cos mu| L / 2 either side of 1e-3 and at 0 (beam seas)
     cosines = np.array([0.0, 0.9e-3, 1.1e-3, 0.02]) / (0.5 * k * config.length_m)
+    cosines[3] = 0.999  # x = 0.19: the series 1 - x^2/10 would be off by 5e-5 there
     rao = vessel_raos(config, omega, np.arccos(cosines))
     x = 0.5 * k * cosines * config.length_m
     pitch_filter = rao["pitch"] / (rao["heave"] / np.sinc(x / math.pi))
@@ -409,6 +411,16 @@ def test_the_decks_reach_is_its_amplitude_in_a_regular_wave_and_six_sigma_in_a_s
     drop = 3.0 * (1.0 - math.cos(ship.tilt_reach_rad))
     assert np.max(np.abs(poses[:, 2])) == pytest.approx(ship.vertical_reach_m - drop, rel=2e-3)
     assert 0.0 < drop < 0.01 * ship.vertical_reach_m
+    # seas off the bow, the deck off the centre line: its heave adds the roll's and pitch's arms
+    bow = ShipMotion(
+        replace(config, wave_direction_deg=120.0, helideck_position_m=(-10.0, 3.0, 0.0)),
+        np.random.default_rng(0),
+    )
+    vessel = bow.vessel_poses(times)
+    roll, pitch = np.max(np.abs(vessel[:, 3])), np.max(np.abs(vessel[:, 4]))
+    assert roll > 0.1 * pitch and bow.tilt_reach_rad == pytest.approx(roll + pitch, rel=1e-3)
+    linear = vessel[:, 2] + 3.0 * vessel[:, 3] + 10.0 * vessel[:, 4]
+    assert bow.vertical_reach_m == pytest.approx(np.max(np.abs(linear)), rel=1e-3)
     # a short-crested sea of 200 components: six standard deviations
     sea = ShipMotion(ShipMotionConfig(sea_state=5), np.random.default_rng(1))
     long = np.arange(0.0, 7200.0, 0.5)
@@ -435,3 +447,49 @@ def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
     np.testing.assert_allclose(ship.vessel_rates(times), vessel, atol=2e-5)
     np.testing.assert_allclose(ship.velocity(times[7]), ship.velocities(times)[7], atol=1e-12)
     np.testing.assert_allclose(ship.elevation(times), ship.waves.elevation(times), atol=0.0)
+
+
+def test_at_rest_the_raos_are_jensen_mansour_olsens_closed_forms_and_the_roll_oscillator() -> None:
+    config = ShipMotionConfig(roll_period_s=6.0, roll_damping_ratio=0.2, roll_slope_factor=0.6)
+    omega = np.array([0.4, 0.9, 1.3, 1.8, 2.6, 1.1])
+    direction = np.radians([180.0, 160.0, 100.0, 30.0, 0.0, -120.0])
+    rao = vessel_raos(config, omega, direction)
+    length, breadth, draught = config.length_m, 0.45 * config.beam_m, config.draught_m
+    k = omega**2 / 9.80665
+    ke = np.abs(k * np.cos(direction))
+    x = 0.5 * ke * length
+    kappa = np.exp(-ke * draught)
+    a = 2.0 * np.sin(0.5 * k * breadth) * np.exp(-k * draught)
+    f = np.sqrt((1.0 - k * draught) ** 2 + (a**2 / (k * breadth)) ** 2)
+    eta = 1.0 / ((1.0 - 2.0 * k * draught) + 1j * a**2 / (k * breadth))
+    np.testing.assert_allclose(rao["heave"], eta * kappa * f * np.sin(x) / x, rtol=1e-10)
+    pitch_filter = 3.0 * (np.sin(x) - x * np.cos(x)) / x**3
+    np.testing.assert_allclose(rao["pitch"], eta * kappa * f * pitch_filter, rtol=1e-8)
+    ratio = omega / (2.0 * math.pi / 6.0)
+    roll = 0.6 * np.exp(-0.5 * k * draught) * np.sin(x) / x / (1.0 - ratio**2 + 0.4j * ratio)
+    np.testing.assert_allclose(rao["roll"], roll, rtol=1e-10)
+    # surge and sway: the surface's orbital motion, with the same length filter and depth decay
+    np.testing.assert_allclose(rao["surge"], kappa * np.sin(x) / x * np.cos(direction), rtol=1e-10)
+    np.testing.assert_allclose(rao["sway"], kappa * np.sin(x) / x * np.sin(direction), rtol=1e-10)
+
+
+def test_in_a_long_wave_the_hull_surges_and_sways_with_the_surfaces_orbital_velocity() -> None:
+    # u = w * elevation along the direction the wave travels (in phase with it: forward under
+    # a crest), as the water particles at the surface of a deep-water wave
+    times = np.linspace(0.0, 100.0, 4001)
+    for direction_deg, column, sign in ((0.0, 0, 1.0), (180.0, 0, -1.0), (90.0, 1, 1.0)):
+        config = ShipMotionConfig(
+            sea_state=None,
+            significant_height_m=1.0,
+            peak_period_s=25.0,
+            n_components=1,
+            band_low=0.999,
+            band_high=1.001,
+            wave_direction_deg=direction_deg,
+            direction_spread_deg=0.0,
+        )
+        ship = ShipMotion(config, np.random.default_rng(0))
+        rate = ship.vessel_rates(times)[:, column]
+        orbital = sign * ship.waves.omega[0] * ship.elevation(times)
+        assert np.corrcoef(rate, orbital)[0, 1] > 0.999, direction_deg
+        assert np.std(rate) / np.std(orbital) == pytest.approx(1.0, abs=0.02)
