@@ -411,6 +411,8 @@ def test_a_torsethaugen_ramp_on_one_side_of_the_fully_developed_period_is_taken(
     SeaGeneratorConfig(spectrum="torsethaugen", hs_end_m=3.0).check_sea(2.0, 6.0)
     # and from calm: a calm instant has no side (the next one is wind-dominated already)
     SeaGeneratorConfig(spectrum="torsethaugen", hs_end_m=16.0).check_sea(0.0, 2.5)
+    # Tp = Tf is wind-dominated, as torsethaugen_parts takes it (Tf = 6.6 s at Hs 1 m)
+    SeaGeneratorConfig(spectrum="torsethaugen", tp_end_s=5.0).check_sea(1.0, 6.6)
     # another spectrum may cross it; an unramped Torsethaugen sea has nothing to cross
     SeaGeneratorConfig(spectrum="ochi_hubble", tp_end_s=14.0).check_sea(2.0, 6.0)
     SeaGeneratorConfig(spectrum="torsethaugen").check_sea(2.0, 14.0)
@@ -453,12 +455,20 @@ def test_a_changing_seas_components_cover_the_band_of_every_instant_of_its_ramp(
     np.testing.assert_allclose(sea.bin_widths_hz[wind], np.diff(edges), rtol=1e-12)
     position = (sea.frequencies_hz[wind] - edges[:-1]) / np.diff(edges)
     assert np.all((position >= 0.0) & (position < 1.0))
+    assert position.min() < 0.05 and position.max() > 0.95
     # the swell's stays at 15 s
     np.testing.assert_allclose(sea.bin_widths_hz[~wind], np.full(100, 3.5 / 15.0 / 100), rtol=1e-12)
     np.testing.assert_allclose(sea.omega, 2.0 * math.pi * sea.frequencies_hz, rtol=1e-15)
     phase = np.mod(np.angle(sea.unit_phasors), 2.0 * math.pi)
     np.testing.assert_allclose(np.abs(sea.unit_phasors), 1.0, rtol=1e-12)
     assert phase.min() < 0.1 and phase.max() > 2.0 * math.pi - 0.1
+    assert np.mean(phase < math.pi) == pytest.approx(0.5, abs=0.1)
+    # each system's directions fill its own spread: the wind sea 150 +- 30, the swell with it
+    # (no swell_direction_deg) +- 10 deg
+    for system, half in ((wind, 30.0), (~wind, 10.0)):
+        offset = np.degrees(sea.directions[system]) - 150.0
+        assert np.all(np.abs(offset) <= half + 1e-9)
+        assert offset.min() < -0.9 * half and offset.max() > 0.9 * half
     # amplitudes at t = 0 (before the ramp) and the largest over the ramp
     instants = generator._ramp_instants()
     grid = sea.amplitudes(instants)

@@ -234,8 +234,9 @@ def test_the_jonswap_shape_is_pierson_moskowitz_times_the_peak_factor_of_its_two
             / jonswap_shape(np.array([f_hz]), tp, 1.0)[0]
         )
         assert ratio == pytest.approx(3.3 ** math.exp(-0.5), rel=1e-12)
-    # a list is taken as an array
+    # a list is taken as an array, of integers too
     assert jonswap_shape([fp], tp, 2.0)[0] == pytest.approx(fp**-5 * math.exp(-1.25) * 2.0)
+    np.testing.assert_allclose(jonswap_shape([1, 2], 1, 2), jonswap_shape([1.0, 2.0], 1.0, 2.0))
 
 
 def test_wave_components_draw_one_frequency_in_each_bin_a_phase_and_a_direction_in_the_spread() -> (
@@ -270,7 +271,9 @@ def test_wave_components_draw_one_frequency_in_each_bin_a_phase_and_a_direction_
 
 
 def test_the_elevation_is_the_sum_of_the_components_cosines_at_a_time_or_times() -> None:
-    waves = WaveComponents(1.0, 6.0, 1.0, 5, (0.5, 4.0), 0.0, 0.5, np.random.default_rng(2))
+    # (a count given as a float is taken as the whole number it is)
+    waves = WaveComponents(1.0, 6.0, 1.0, 5.0, (0.5, 4.0), 0.0, 0.5, np.random.default_rng(2))
+    assert len(waves.omega) == 5
     times = np.array([0.0, 1.3, 7.25])
     expected = [
         float(
