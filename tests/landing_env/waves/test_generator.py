@@ -226,8 +226,8 @@ def test_a_spectral_part_has_no_energy_at_or_below_zero_frequency_nor_when_calm(
 
 @pytest.mark.parametrize("gamma", [1.0, 3.3, 7.0])
 def test_a_plain_jonswap_part_is_the_jonswap_shape_holding_exactly_its_hs(gamma: float) -> None:
-    part = SpectralPart("wind", "jonswap", 2.0, 8.0, gamma, 5.0, 4.0)
-    assert m0_of([part]) == pytest.approx(2.0**2 / 16.0, rel=1e-4)
+    part = SpectralPart("wind", "jonswap", 1.5, 8.0, gamma, 5.0, 4.0)
+    assert m0_of([part]) == pytest.approx(1.5**2 / 16.0, rel=1e-4)
     f = np.linspace(0.05, 0.6, 200)
     ratio = part.density(f) / jonswap_shape(f, 8.0, gamma)
     np.testing.assert_allclose(ratio, ratio[0], rtol=1e-10)
@@ -284,7 +284,18 @@ def torsethaugen_reference(hs: float, tp: float) -> dict[str, tuple[float, float
 
 
 @pytest.mark.parametrize(
-    ("hs", "tp"), [(1.0, 4.0), (2.5, 6.0), (3.25, 9.7), (1.88, 8.8), (2.0, 14.0), (4.0, 18.0)]
+    ("hs", "tp"),
+    [
+        (1.0, 4.0),
+        (2.5, 6.0),
+        (3.25, 9.7),
+        (1.0, 6.6),  # Tp = Tf (6.6 Hs^(1/3)): wind-dominated
+        (1.88, 8.8),
+        (4.0, 11.0),  # just above Tf: a swell peak factor below 2
+        (1.5, 12.0),  # a wind sea below 1 m, its period above the 2.5 s floor
+        (2.0, 14.0),
+        (4.0, 18.0),
+    ],
 )
 def test_torsethaugen_parts_follow_the_dnv_formulas_of_their_regime(hs: float, tp: float) -> None:
     parts = torsethaugen_parts(hs, tp)
@@ -506,3 +517,22 @@ def test_a_steady_seas_amplitudes_stay_and_a_changing_seas_rates_are_their_deriv
     np.testing.assert_allclose(
         changing.elevation(t), np.real(changing.phasors(t) @ changing.unit_phasors)
     )
+
+
+def test_an_ochi_hubble_part_is_the_six_parameter_form_of_its_shape() -> None:
+    hs, tp = 1.5, 9.0
+    f = np.array([0.05, 0.09, 1.0 / tp, 0.14, 0.3])
+    w, wp = 2.0 * math.pi * f, 2.0 * math.pi / tp
+    for lam in (1.0, 2.5, 6.0):
+        c = (4.0 * lam + 1.0) / 4.0
+        s_w = (c * wp**4) ** lam / math.gamma(lam) * hs**2 / 4.0 / w ** (4.0 * lam + 1.0)
+        s_w *= np.exp(-c * (wp / w) ** 4)
+        part = SpectralPart("swell", "ochi_hubble", hs, tp, shape=lam)
+        np.testing.assert_allclose(part.density(f), 2.0 * math.pi * s_w, rtol=1e-12)
+
+
+def test_a_part_of_whole_number_settings_takes_whole_number_frequencies() -> None:
+    for form in ("jonswap", "torsethaugen", "ochi_hubble"):
+        whole = SpectralPart("wind", form, 2, 8, 3, 5, 4, 2).density([0, 1, 2])
+        real = SpectralPart("wind", form, 2.0, 8.0, 3.0, 5.0, 4.0, 2.0).density([0.0, 1.0, 2.0])
+        np.testing.assert_allclose(whole, real, rtol=1e-12)
