@@ -103,13 +103,14 @@ class CsvMotionConfig:
 def _scan_csv(path: Path) -> np.ndarray:
     """Row-by-row parse (N, 7) naming the first bad line: the slow path, for errors."""
     with path.open(newline="") as handle:
-        rows = [row for row in csv.reader(handle) if row and any(c.strip() for c in row)]
+        reader = csv.reader(handle)
+        # each row with the file's line it ends on (blank lines skipped, but counted)
+        rows = [(reader.line_num, row) for row in reader if row and any(c.strip() for c in row)]
     if not rows:
         raise CsvMotionError(f"{path}: empty file; expected header {','.join(CSV_HEADER)}")
-    _check_header(path, rows[0])
+    _check_header(path, rows[0][1])
     values = np.empty((len(rows) - 1, 7))
-    for i, row in enumerate(rows[1:]):
-        line = i + 2
+    for i, (line, row) in enumerate(rows[1:]):
         if len(row) != 7:
             raise CsvMotionError(f"{path}, line {line}: expected 7 columns, got {len(row)}")
         try:

@@ -256,7 +256,8 @@ class ShipMotion:
                 np.zeros_like(elevation),
             ]
         )
-        self._rate_coefficients = self._coefficients * (1j * omega)
+        # the motion oscillates at the encounter frequency (the wave's own at rest)
+        self._rate_coefficients = self._coefficients * (1j * self._omega)
         self.lever_arm = np.asarray(config.helideck_position_m, dtype=float)
         # the deck's vertical displacement, linearised (heave + y roll - x pitch), and tilt
         lx, ly, lz = self.lever_arm

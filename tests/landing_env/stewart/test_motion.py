@@ -12,9 +12,6 @@ from landing_env.errors import ConfigError
 from landing_env.stewart.kinematics import StewartGeometry, StewartKinematics
 from landing_env.stewart.motion import (
     BatchMotionSource,
-    CsvMotion,
-    CsvMotionConfig,
-    CsvMotionError,
     MotionConfig,
     MotionSource,
     SeaStateConfig,
@@ -25,8 +22,8 @@ from landing_env.stewart.motion import (
     StaticMotionConfig,
     make_motion_source,
     sample_poses,
-    write_motion_csv,
 )
+from landing_env.waves.recording import CsvMotion, CsvMotionConfig, CsvMotionError, write_motion_csv
 from landing_env.waves.spectrum import SEA_STATE_TABLE
 
 

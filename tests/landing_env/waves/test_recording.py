@@ -24,6 +24,7 @@ from landing_env.waves.recording import (
     CsvMotionError,
     csv_motion_from_config,
     load_recording,
+    read_recording,
     write_motion_csv,
     write_motion_npy,
 )
@@ -226,3 +227,273 @@ def test_a_ship_deck_env_plays_a_random_stretch_of_a_vessel_log_per_seed(tmp_pat
         assert not np.allclose(first[1], first[2])
     finally:
         env.close()
+
+
+def test_a_replay_config_refuses_a_bad_choice_or_lever_arm_naming_the_key(tmp_path: Path) -> None:
+    cases = {
+        "end": ({"end": "pause"}, "'pause' is not allowed; choose one of 'hold', 'loop'"),
+        "start": ({"start": "middle"}, "choose one of 'file_time', 'first_sample', 'random'"),
+        "frame": ({"frame": "hull"}, "choose one of 'deck', 'vessel'"),
+        "random_margin_s": ({"random_margin_s": -1.0}, "-1.0"),
+        "helideck_position_m": ({"helideck_position_m": (1.0, 2.0)}, "needs 3 values, got 2"),
+        "helideck_position_m[y]": ({"helideck_position_m": (0.0, 200.5, 0.0)}, "[-200.0, 200.0]"),
+    }
+    for key, (fields, text) in cases.items():
+        with pytest.raises(ConfigError) as info:
+            CsvMotionConfig("log.csv", **fields)
+        assert info.value.key == key and text in str(info.value), (key, str(info.value))
+    config = CsvMotionConfig(tmp_path / "log.csv", helideck_position_m=[-200, 200, 3])
+    assert config.path == str(tmp_path / "log.csv")
+    assert config.helideck_position_m == (-200.0, 200.0, 3.0)
+    assert all(isinstance(v, float) for v in config.helideck_position_m)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "bad.csv: empty file; expected header t,x,y,z,roll,pitch,yaw"),
+        ("\n\n", "bad.csv: empty file; expected header t,x,y,z,roll,pitch,yaw"),
+        (
+            "time,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n",
+            "bad.csv: header is 'time,x,y,z,roll,pitch,yaw'; expected 't,x,y,z,roll,pitch,yaw' "
+            "(seconds, metres, degrees)",
+        ),
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0\n",
+            "bad.csv, line 3: expected 7 columns, got 6",
+        ),
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0,0,0\n",
+            "line 3: expected 7 columns, got 8",
+        ),
+        # the file's own line, blank lines counted
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n\n1,0,0,x,0,0,0\n",
+            "bad.csv, line 4: not a number",
+        ),
+        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0,0 # late\n", "line 3: not a number"),
+        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0\n1,0,0,0,0,0\n", "line 2: expected 7 columns, got 6"),
+        ("t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n", "bad.csv: needs at least two samples"),
+        ("t,x,y,z,roll,pitch,yaw\n", "bad.csv: needs at least two samples"),
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,0,0,0,0\n1,0,0,0,0,0,0\n",
+            "bad.csv, line 4: time 1.0 does not increase (previous 1.0)",
+        ),
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,nan,0,0,0\n",
+            "non-finite values (sample 2)",
+        ),
+    ],
+)
+@pytest.mark.filterwarnings("ignore:loadtxt")  # a header alone: numpy warns of no data
+def test_a_malformed_recording_is_refused_naming_the_file_and_the_line(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(CsvMotionError) as info:
+        load_recording(path)
+    assert message in str(info.value)
+    with pytest.raises(
+        FileNotFoundError, match=r"motion recording '.*missing\.csv' does not exist"
+    ):
+        load_recording(tmp_path / "missing.csv")
+
+
+def test_a_csv_header_is_read_without_case_or_spaces_and_blank_rows_are_skipped(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "log.csv"
+    path.write_text(" T, X,y,z,Roll,pitch,YAW \n0,1,2,3,90,0,0\n\n1,1,2,3,180,0,0\n")
+    times, poses = read_recording(path)
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_allclose(
+        poses[:, :4], [[1.0, 2.0, 3.0, math.pi / 2], [1.0, 2.0, 3.0, math.pi]]
+    )
+    # a file numpy cannot read at once (a row of another length) is read row by row
+    path.write_text("t,x,y,z,roll,pitch,yaw\n0,1,2,3,0,0,0\n1,1,2,3,0,0,0\n2,1,2,3,0,0,0,\n")
+    with pytest.raises(CsvMotionError, match="line 4: expected 7 columns, got 8"):
+        read_recording(path)
+
+
+def test_npy_recordings_hold_seven_numeric_columns(tmp_path: Path) -> None:
+    np.save(tmp_path / "text.npy", np.array([["a"] * 7, ["b"] * 7]))
+    with pytest.raises(CsvMotionError) as info:
+        read_recording(tmp_path / "text.npy")
+    assert "text.npy: holds a <U1 array of shape (2, 7); expected (N, 7) numbers" in str(info.value)
+    np.save(tmp_path / "flat.npy", np.zeros(7))
+    with pytest.raises(CsvMotionError, match=r"flat\.npy: holds a float64 array of shape \(7,\)"):
+        read_recording(tmp_path / "flat.npy")
+    np.save(tmp_path / "objects.npy", np.array([{"t": 0}], dtype=object), allow_pickle=True)
+    with pytest.raises(CsvMotionError, match=r"objects\.npy: not a numpy array file"):
+        read_recording(tmp_path / "objects.npy")
+    # integers are numbers; the upper-case suffix is .npy too
+    table = np.array([[0, 1, 2, 3, 90, 0, 0], [1, 1, 2, 3, 0, 0, 180]])
+    with (tmp_path / "ints.NPY").open("wb") as handle:
+        np.save(handle, table)
+    times, poses = read_recording(tmp_path / "ints.NPY")
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_allclose(poses[:, 3], [math.pi / 2, 0.0])
+    np.testing.assert_allclose(poses[:, 5], [0.0, math.pi])
+
+
+def test_written_recordings_read_back_the_same_poses_in_degrees_on_file(tmp_path: Path) -> None:
+    times = np.array([0.5, 1.0, 1.7])
+    poses = np.random.default_rng(2).normal(0.0, 0.3, (3, 6))
+    write_motion_csv(tmp_path / "log.csv", times, poses)
+    write_motion_npy(tmp_path / "log.npy", times, poses)
+    rows = (tmp_path / "log.csv").read_text().splitlines()
+    assert rows[0] == "t,x,y,z,roll,pitch,yaw" and len(rows) == 4
+    first = [float(v) for v in rows[1].split(",")]
+    np.testing.assert_allclose(first[:4], [0.5, *poses[0, :3]], rtol=0.0, atol=0.0)
+    np.testing.assert_allclose(first[4:], np.degrees(poses[0, 3:]), rtol=1e-15)
+    stored = np.load(tmp_path / "log.npy")
+    np.testing.assert_allclose(stored[:, 4:], np.degrees(poses[:, 3:]), rtol=1e-15)
+    np.testing.assert_array_equal(stored[:, :4], np.column_stack([times, poses[:, :3]]))
+    for name in ("log.csv", "log.npy"):
+        read_times, read_poses = read_recording(tmp_path / name)
+        np.testing.assert_array_equal(read_times, times)
+        np.testing.assert_allclose(read_poses, poses, rtol=1e-14, atol=1e-16)
+    # the poses given are left as they were
+    again = poses.copy()
+    write_motion_csv(tmp_path / "again.csv", times, again)
+    write_motion_npy(tmp_path / "again.npy", times, again)
+    np.testing.assert_array_equal(again, poses)
+
+
+def test_recorded_samples_must_be_finite_increasing_pairs_of_time_and_pose() -> None:
+    cases = [
+        (np.array([0.0]), np.zeros((1, 6)), "need at least two samples"),
+        (np.array([[0.0, 1.0]]), np.zeros((2, 6)), "need at least two samples"),
+        (np.array([0.0, 1.0]), np.zeros((2, 5)), "need at least two samples"),
+        (np.array([0.0, 1.0, 1.0]), np.zeros((3, 6)), "it does not at sample 2"),
+        (np.array([0.0, 2.0, 1.0, 3.0]), np.zeros((4, 6)), "it does not at sample 2"),
+        (np.array([0.0, np.inf]), np.zeros((2, 6)), "samples must be finite"),
+        (np.array([0.0, 1.0]), np.full((2, 6), np.nan), "samples must be finite"),
+    ]
+    for times, poses, message in cases:
+        with pytest.raises(CsvMotionError, match=message):
+            CsvMotion(times, poses)
+    assert CsvMotion([0, 1, 3], np.zeros((3, 6))).duration == 3.0
+
+
+def test_the_chunked_interpolant_keeps_its_eight_newest_pieces_and_takes_a_chunk_of_one() -> None:
+    times = np.arange(0.0, 100.0, 1.0)
+    values = np.column_stack([np.sin(times / 7.0), np.cos(times / 5.0)])
+    chunked = ChunkedPchip(times, values, chunk=10)
+    for index in range(9):
+        chunked(np.array([10.0 * index + 5.0]))
+    assert list(chunked._pieces) == list(range(1, 9))  # the oldest dropped
+    chunked(np.array([15.0]))  # in use again: the newest
+    assert list(chunked._pieces) == [*range(2, 9), 1]
+    chunked(np.array([95.0]))
+    assert list(chunked._pieces) == [*range(3, 9), 1, 9]
+    whole = PchipInterpolator(times, values, axis=0)
+    ends = np.array([0.0, 99.0, 50.0])
+    np.testing.assert_allclose(chunked(ends), whole(ends), atol=1e-12)
+    assert np.all(np.isnan(chunked(np.array([-1e-9, 99.0 + 1e-9]))))
+    single = ChunkedPchip(times, values, chunk=0)
+    assert single.chunk == 1
+    probe = np.array([0.0, 3.3, 50.5, 99.0])
+    np.testing.assert_allclose(single(probe), whole(probe), atol=1e-12)
+    np.testing.assert_allclose(single(probe, derivative=True), whole.derivative()(probe), atol=1e-9)
+
+
+def test_a_loaded_recording_is_kept_per_file_frame_and_lever_for_the_four_newest(
+    tmp_path: Path,
+) -> None:
+    times = np.linspace(0.0, 2.0, 5)
+    poses = np.column_stack([np.zeros((5, 3)), np.full(5, 0.1), np.zeros((5, 2))])
+    paths = []
+    for i in range(5):
+        paths.append(tmp_path / f"log{i}.csv")
+        write_motion_csv(paths[-1], times, poses)
+    first = load_recording(paths[0])
+    assert load_recording(str(paths[0])) is first
+    port = load_recording(paths[0], "vessel", (0.0, 2.0, 0.0))
+    starboard = load_recording(paths[0], "vessel", (0.0, -2.0, 0.0))
+    assert port is not first and starboard is not port
+    # the deck 2 m to port rises as the vessel rolls port up; the one to starboard sinks
+    assert port.samples[0, 2] == pytest.approx(2.0 * math.sin(0.1))
+    assert starboard.samples[0, 2] == pytest.approx(-2.0 * math.sin(0.1))
+    assert first.samples[0, 2] == 0.0
+    # the lever arm of the deck frame is no part of its key
+    assert load_recording(paths[0], "deck", (5.0, 0.0, 0.0)) is first
+    with pytest.raises(ConfigError) as info:
+        load_recording(paths[0], "hull")
+    assert info.value.key == "frame"
+    # four recordings are kept: one in use again stays, the least recently used goes
+    first = load_recording(paths[0])
+    kept = [load_recording(path) for path in paths[1:4]]
+    assert load_recording(paths[0]) is first
+    assert [load_recording(path) for path in paths[2:4]] == kept[1:]
+    load_recording(paths[4])  # a fifth: the least recently used, paths[1], is dropped
+    assert load_recording(paths[0]) is first
+    assert load_recording(paths[1]) is not kept[0]
+
+
+def test_a_replay_holds_its_first_and_last_pose_still_or_loops_over_its_span() -> None:
+    times = np.array([10.0, 11.0, 12.0, 14.0])
+    poses = np.outer([0.0, 1.0, 4.0, 2.0], np.ones(6)) * 0.01
+    hold = CsvMotion(times, poses, "hold", offset_s=10.0)
+    local, held = hold.file_times(np.array([-5.0, 0.0, 1.0, 4.0, 9.0]))
+    np.testing.assert_array_equal(local, [10.0, 10.0, 11.0, 14.0, 14.0])
+    np.testing.assert_array_equal(held, [True, True, False, True, True])
+    rates = hold.velocities(np.array([-5.0, 0.5, 9.0]))
+    assert np.all(rates[[0, 2]] == 0.0) and np.all(rates[1] > 0.0)
+    loop = CsvMotion(times, poses, "loop", offset_s=10.0)
+    local, held = loop.file_times(np.array([0.0, 4.0, 5.0, 9.5, 13.0]))
+    np.testing.assert_allclose(local, [10.0, 10.0, 11.0, 11.5, 11.0])
+    np.testing.assert_array_equal(held, [True, False, False, False, False])
+    assert loop.velocity(5.5)[0] == pytest.approx(hold.velocity(1.5)[0])
+    with pytest.raises(ConfigError) as info:
+        CsvMotion(times, poses, "pause")
+    assert info.value.key == "end"
+    with pytest.raises(ValueError, match="offset_s must be finite, got nan"):
+        CsvMotion(times, poses, offset_s=float("nan"))
+    assert hold.offset_s == 10.0 and CsvMotion(times, poses).offset_s == 0.0
+
+
+def test_a_random_start_keeps_its_margin_unless_the_recording_is_shorter(tmp_path: Path) -> None:
+    path = tmp_path / "log.csv"
+    write_motion_csv(path, 100.0 + np.arange(0.0, 31.0), np.zeros((31, 6)))
+    short = CsvMotionConfig(str(path), start="random", random_margin_s=45.0)
+    assert csv_motion_from_config(short, np.random.default_rng(1)).offset_s == 100.0
+    config = CsvMotionConfig(str(path), start="random", random_margin_s=10.0)
+    draw = np.random.default_rng(4).uniform(0.0, 1.0)
+    offset = csv_motion_from_config(config, np.random.default_rng(4)).offset_s
+    assert offset == pytest.approx(100.0 + draw * 20.0, rel=1e-15)
+    looped = CsvMotionConfig(str(path), start="random", end="loop", random_margin_s=10.0)
+    offset = csv_motion_from_config(looped, np.random.default_rng(4)).offset_s
+    assert offset == pytest.approx(100.0 + draw * 30.0, rel=1e-15)
+    # a replay of a vessel's log carries it to the config's helideck
+    vessel = CsvMotionConfig(str(path), frame="vessel", helideck_position_m=(1.0, 2.0, 3.0))
+    source = csv_motion_from_config(vessel, np.random.default_rng(0))
+    assert source.recording is load_recording(path, "vessel", (1.0, 2.0, 3.0))
+    assert source.end == "hold" and source.offset_s == 0.0
+
+
+def test_a_csv_numpy_cannot_parse_at_once_is_read_row_by_row_to_the_same_samples(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "quoted.csv"
+    path.write_text('t,x,y,z,roll,pitch,yaw\n"0",1,2,3,90,0,0\n   \n"1",1,2,3,180,0,0\n')
+    times, poses = read_recording(path)
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_allclose(poses[:, 3], [math.pi / 2, math.pi])
+    with pytest.raises(FileNotFoundError, match=r"motion recording '.*none\.csv' does not exist"):
+        read_recording(tmp_path / "none.csv")
+
+
+def test_a_recording_path_may_start_at_the_home_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HOME", str(tmp_path))
+    write_motion_csv(tmp_path / "home.csv", np.array([0.0, 1.0]), np.full((2, 6), 0.25))
+    times, poses = read_recording("~/home.csv")
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    assert poses[1, 0] == 0.25
+    assert load_recording("~/home.csv").samples[0, 0] == 0.25
+    source = CsvMotion.from_file("~/home.csv", end="loop", offset_s=0.5)
+    assert source.offset_s == 0.5 and source.end == "loop"
+    np.testing.assert_allclose(source.pose(0.0)[0], 0.25)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -11,11 +12,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 from scipy.signal import welch
+from scipy.spatial.transform import Rotation
 
 import landing_env  # noqa: F401  (registers the environments)
 from landing_env.config import load_config
 from landing_env.errors import ConfigError
-from landing_env.waves.ship import ShipMotion, ShipMotionConfig, vessel_raos
+from landing_env.waves.generator import SeaGeneratorConfig
+from landing_env.waves.ship import ShipMotion, ShipMotionConfig, helideck_poses, vessel_raos
 from landing_env.waves.spectrum import WaveComponents, dnv_gamma, jonswap_shape
 
 
@@ -176,3 +179,320 @@ def test_any_valid_vessel_moves_finitely(
     poses, rates = source.poses(times), source.velocities(times)
     assert np.all(np.isfinite(poses)) and np.all(np.isfinite(rates))
     assert np.all(np.abs(poses[:, 2]) <= source.vertical_reach_m + 1e-9)
+
+
+def test_dnv_gamma_is_5_up_to_3_6_the_exponential_between_and_1_from_5_and_for_a_calm_sea() -> None:
+    # Tp / sqrt(Hs) = 3.6 and 5 exactly: each bound belongs to the constant beside it
+    assert dnv_gamma(1.0, 3.6) == 5.0
+    assert dnv_gamma(1.0, 5.0) == pytest.approx(1.0, abs=1e-12)
+    assert dnv_gamma(4.0, 10.0) == 1.0
+    # just inside the exponential branch, on both sides
+    assert dnv_gamma(1.0, 3.7) == pytest.approx(math.exp(5.75 - 1.15 * 3.7), rel=1e-12)
+    assert dnv_gamma(1.0, 4.9) == pytest.approx(math.exp(5.75 - 1.15 * 4.9), rel=1e-12)
+    # a calm sea, Hs = 0, has no ratio: 1
+    assert dnv_gamma(0.0, 3.0) == 1.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(hs=st.floats(0.05, 16.0), phi=st.floats(3.61, 4.99))
+def test_dnv_gamma_between_the_bounds_is_the_rules_exponential_of_tp_over_root_hs(
+    hs: float, phi: float
+) -> None:
+    tp = phi * math.sqrt(hs)
+    assert dnv_gamma(hs, tp) == pytest.approx(math.exp(5.75 - 1.15 * tp / math.sqrt(hs)))
+    # (the rule jumps at 3.6: its exponential is 5.003 there)
+    assert 1.0 < dnv_gamma(hs, tp) < 5.01
+
+
+def test_a_sea_takes_the_tabled_hs_and_tp_of_its_state_unless_given_and_gamma_by_the_rule() -> None:
+    tabled = ShipMotionConfig(sea_state=5)
+    assert (tabled.hs, tabled.tp) == (3.25, 9.7)
+    assert tabled.gamma_in_use == 1.0
+    given_sea = ShipMotionConfig(sea_state=5, significant_height_m=2.0, peak_period_s=6.0)
+    assert (given_sea.hs, given_sea.tp) == (2.0, 6.0)
+    assert given_sea.gamma_in_use == pytest.approx(math.exp(5.75 - 1.15 * 6.0 / math.sqrt(2.0)))
+    chosen = ShipMotionConfig(sea_state=None, significant_height_m=2.0, peak_period_s=6.0, gamma=3)
+    assert chosen.gamma_in_use == 3.0 and isinstance(chosen.gamma_in_use, float)
+
+
+def test_the_jonswap_shape_is_pierson_moskowitz_times_the_peak_factor_of_its_two_widths() -> None:
+    tp = 8.0
+    fp = 1.0 / tp
+    # at the peak: fp^-5 exp(-5/4) times the whole gamma
+    assert jonswap_shape(np.array([fp]), tp, 3.3)[0] == pytest.approx(
+        fp**-5 * math.exp(-1.25) * 3.3
+    )
+    # Pierson-Moskowitz (gamma 1): f^-5 exp(-5/4 (fp/f)^4)
+    f = np.array([0.5 * fp, 2.0 * fp, 3.0 * fp])
+    np.testing.assert_allclose(
+        jonswap_shape(f, tp, 1.0), f**-5 * np.exp(-1.25 * (fp / f) ** 4), rtol=1e-12
+    )
+    # one width below the peak (sigma 0.07) and one above (0.09): gamma^exp(-1/2)
+    for f_hz in (fp * (1.0 - 0.07), fp * (1.0 + 0.09)):
+        ratio = (
+            jonswap_shape(np.array([f_hz]), tp, 3.3)[0]
+            / jonswap_shape(np.array([f_hz]), tp, 1.0)[0]
+        )
+        assert ratio == pytest.approx(3.3 ** math.exp(-0.5), rel=1e-12)
+    # a list is taken as an array, of integers too
+    assert jonswap_shape([fp], tp, 2.0)[0] == pytest.approx(fp**-5 * math.exp(-1.25) * 2.0)
+    np.testing.assert_allclose(jonswap_shape([1, 2], 1, 2), jonswap_shape([1.0, 2.0], 1.0, 2.0))
+
+
+def test_wave_components_draw_one_frequency_in_each_bin_a_phase_and_a_direction_in_the_spread() -> (
+    None
+):
+    hs, tp, gamma, n = 2.0, 8.0, 3.3, 2000
+    band, direction, spread = (0.5, 4.0), 0.4, 0.3
+    waves = WaveComponents(hs, tp, gamma, n, band, direction, spread, np.random.default_rng(5))
+    edges = np.linspace(band[0] / tp, band[1] / tp, n + 1)
+    np.testing.assert_allclose(waves.bin_widths_hz, np.diff(edges), rtol=1e-12)
+    position = (waves.frequencies_hz - edges[:-1]) / waves.bin_widths_hz
+    assert np.all((position >= 0.0) & (position < 1.0))
+    assert position.min() < 0.01 and position.max() > 0.99 and abs(position.mean() - 0.5) < 0.03
+    np.testing.assert_allclose(waves.omega, 2.0 * math.pi * waves.frequencies_hz, rtol=1e-15)
+    # phases uniform over the circle
+    phase = np.mod(np.angle(waves.elevation_phasors), 2.0 * math.pi)
+    assert phase.min() < 0.05 and phase.max() > 2.0 * math.pi - 0.05
+    assert np.mean(phase < math.pi) == pytest.approx(0.5, abs=0.04)
+    # directions uniform within the spread of the mean direction
+    offset = waves.directions - direction
+    assert np.all(np.abs(offset) <= spread) and offset.min() < -0.99 * spread
+    assert offset.max() > 0.99 * spread and abs(offset.mean()) < 0.02
+    # amplitudes: sqrt(2 S(f) df), scaled so that m0 is Hs^2 / 16 exactly
+    density = jonswap_shape(waves.frequencies_hz, tp, gamma) * waves.bin_widths_hz
+    np.testing.assert_allclose(
+        waves.amplitudes_m, np.sqrt(2.0 * density * hs**2 / 16.0 / np.sum(density)), rtol=1e-12
+    )
+    np.testing.assert_allclose(np.abs(waves.elevation_phasors), waves.amplitudes_m, rtol=1e-12)
+    assert waves.m0 == pytest.approx(hs**2 / 16.0, rel=1e-12)
+    # a sea at rest: met at its own frequencies
+    assert waves.steady is True and waves.encounter_omega is waves.omega
+
+
+def test_the_elevation_is_the_sum_of_the_components_cosines_at_a_time_or_times() -> None:
+    # (a count given as a float is taken as the whole number it is)
+    waves = WaveComponents(1.0, 6.0, 1.0, 5.0, (0.5, 4.0), 0.0, 0.5, np.random.default_rng(2))
+    assert len(waves.omega) == 5
+    times = np.array([0.0, 1.3, 7.25])
+    expected = [
+        float(
+            np.sum(
+                np.abs(waves.elevation_phasors)
+                * np.cos(waves.omega * t + np.angle(waves.elevation_phasors))
+            )
+        )
+        for t in times
+    ]
+    np.testing.assert_allclose(waves.elevation(times), expected, atol=1e-12)
+    assert waves.elevation(1.3) == pytest.approx(expected[1], abs=1e-12)
+    assert waves.elevation(2) == pytest.approx(waves.elevation(2.0))
+
+
+def test_a_vessel_of_impossible_proportions_is_refused_naming_the_key_and_its_bounds() -> None:
+    cases = {
+        "beam_m": ({"beam_m": 15.1}, "allowed [3.0, 15.0] (set by length_m = 30.0)"),
+        "draught_m": ({"draught_m": 4.3}, "allowed [0.2, 4.2] (set by beam_m = 7.0)"),
+        "helideck_position_m": ({"helideck_position_m": (1.0, 2.0)}, "needs 3 values, got 2"),
+        "helideck_position_m[x]": (
+            {"helideck_position_m": (-15.1, 0.0, 3.0)},
+            "allowed [-15.0, 15.0] (set by half of length_m = 30.0 and of beam_m = 7.0)",
+        ),
+        "helideck_position_m[y]": (
+            {"helideck_position_m": (0.0, 3.6, 3.0)},
+            "allowed [-3.5, 3.5] (set by half of length_m = 30.0 and of beam_m = 7.0)",
+        ),
+        "helideck_position_m[z]": ({"helideck_position_m": (0.0, 0.0, 20.5)}, "[-20.0, 20.0]"),
+    }
+    for key, (fields, text) in cases.items():
+        with pytest.raises(ConfigError) as info:
+            ShipMotionConfig(**fields)
+        assert info.value.key == key and text in str(info.value), (key, str(info.value))
+    # the bounds themselves are proportions a hull can have
+    ShipMotionConfig(beam_m=15.0, draught_m=0.2)
+    ShipMotionConfig(beam_m=3.0, draught_m=1.5, helideck_position_m=(15.0, -1.5, -20.0))
+    deck = ShipMotionConfig(helideck_position_m=[-15, 3.5, 20]).helideck_position_m
+    assert deck == (-15.0, 3.5, 20.0) and all(isinstance(v, float) for v in deck)
+
+
+def test_the_vessels_own_periods_are_the_imo_roll_formula_and_the_draughts_heave() -> None:
+    config = ShipMotionConfig(length_m=20.0, beam_m=6.0, draught_m=1.5, metacentric_height_m=0.8)
+    c = 0.373 + 0.023 * 6.0 / 1.5 - 0.043 * 20.0 / 100.0
+    assert config.roll_period_in_use_s == pytest.approx(2.0 * c * 6.0 / math.sqrt(0.8), rel=1e-12)
+    assert ShipMotionConfig(roll_period_s=9.0).roll_period_in_use_s == 9.0
+    assert config.heave_period_s == pytest.approx(2.0 * math.pi * math.sqrt(3.0 / 9.80665))
+
+
+def test_the_helideck_moves_with_the_hull_as_a_rigid_body_for_any_attitude() -> None:
+    rng = np.random.default_rng(8)
+    vessel = np.column_stack([rng.normal(0.0, 1.0, (20, 3)), rng.uniform(-0.6, 0.6, (20, 3))])
+    arm = np.array([-10.0, 1.5, 3.0])
+    poses = helideck_poses(vessel, arm)
+    rotation = Rotation.from_euler("ZYX", vessel[:, [5, 4, 3]])
+    np.testing.assert_allclose(poses[:, :3], vessel[:, :3] + rotation.apply(arm) - arm, atol=1e-12)
+    np.testing.assert_array_equal(poses[:, 3:], vessel[:, 3:])
+    # one pose as a flat row, the arm as a list
+    np.testing.assert_allclose(helideck_poses(vessel[0], list(arm)), poses[:1], atol=1e-12)
+
+
+def test_the_length_filters_are_smooth_through_zero_and_long_waves_pass() -> None:
+    config = ShipMotionConfig()
+    omega = np.full(4, 0.5)
+    k = 0.25 / 9.80665
+    # x = k |cos mu| L / 2 either side of 1e-3 and at 0 (beam seas)
+    cosines = np.array([0.0, 0.9e-3, 1.1e-3, 0.02]) / (0.5 * k * config.length_m)
+    cosines[3] = 0.999  # x = 0.19: the series 1 - x^2/10 would be off by 5e-5 there
+    rao = vessel_raos(config, omega, np.arccos(cosines))
+    x = 0.5 * k * cosines * config.length_m
+    pitch_filter = rao["pitch"] / (rao["heave"] / np.sinc(x / math.pi))
+    expected = 3.0 * (np.sin(x[1:]) - x[1:] * np.cos(x[1:])) / x[1:] ** 3
+    np.testing.assert_allclose(pitch_filter[1:], expected, rtol=1e-6)
+    assert pitch_filter[0] == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(pitch_filter[:3], 1.0 - x[:3] ** 2 / 10.0, atol=1e-9)
+    # surge and sway: the orbital motion of the surface along and across the hull
+    mu = np.arccos(cosines)
+    np.testing.assert_allclose(
+        rao["surge"],
+        np.exp(-k * cosines * config.draught_m) * np.sinc(x / math.pi) * np.cos(mu),
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(
+        rao["sway"], np.exp(-k * cosines * config.draught_m) * np.sinc(x / math.pi) * np.sin(mu)
+    )
+
+
+def test_the_oscillators_take_the_encounter_frequency_with_damping_odd_in_it() -> None:
+    config = ShipMotionConfig()
+    omega = np.array([0.6, 1.0, 1.6, 2.2])
+    direction = np.radians([180.0, 150.0, 120.0, 90.0])
+    at_rest = vessel_raos(config, omega, direction)
+    met_as_at_rest = vessel_raos(config, omega, direction, omega)
+    for name in ("heave", "pitch", "roll", "surge", "sway"):
+        np.testing.assert_allclose(met_as_at_rest[name], at_rest[name], rtol=1e-12)
+    # a negative encounter frequency: the same oscillation with time reversed
+    encounter = np.array([0.3, 0.9, 1.4, 2.5])
+    ahead = vessel_raos(config, omega, direction, encounter)
+    behind = vessel_raos(config, omega, direction, -encounter)
+    for name in ("heave", "pitch", "roll"):
+        np.testing.assert_allclose(behind[name], np.conj(ahead[name]), rtol=1e-12)
+    # the oscillators at their own frequency; the excitation keeps the wave's geometry
+    k = omega**2 / 9.80665
+    ke = encounter**2 / 9.80665
+    breadth = config.block_coefficient * config.beam_m
+    a = 2.0 * np.sin(0.5 * k * breadth) * np.exp(-k * config.draught_m)
+    ae = 2.0 * np.sin(0.5 * ke * breadth) * np.exp(-ke * config.draught_m)
+    eta_e = 1.0 / ((1.0 - 2.0 * ke * config.draught_m) + 1j * ae**2 / (ke * breadth))
+    eta = 1.0 / ((1.0 - 2.0 * k * config.draught_m) + 1j * a**2 / (k * breadth))
+    np.testing.assert_allclose(ahead["heave"] / at_rest["heave"], eta_e / eta, rtol=1e-10)
+    ratio_e = encounter * config.roll_period_in_use_s / (2.0 * math.pi)
+    ratio = omega * config.roll_period_in_use_s / (2.0 * math.pi)
+    np.testing.assert_allclose(
+        ahead["roll"] / at_rest["roll"],
+        (1.0 - ratio**2 + 0.2j * ratio) / (1.0 - ratio_e**2 + 0.2j * ratio_e),
+        rtol=1e-10,
+    )
+    # met at zero frequency (the ship keeping pace with the wave): a static response
+    still = vessel_raos(config, omega, direction, np.zeros(4))
+    np.testing.assert_allclose(still["heave"] / at_rest["heave"], 1.0 / eta, rtol=1e-9)
+    np.testing.assert_allclose(still["roll"] / at_rest["roll"], 1.0 - ratio**2 + 0.2j * ratio)
+
+
+def test_the_decks_reach_is_its_amplitude_in_a_regular_wave_and_six_sigma_in_a_sea() -> None:
+    times = np.linspace(0.0, 200.0, 20001)
+    # one component in head seas: no roll; the deck's tilt is the pitch
+    config = ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=2.0,
+        peak_period_s=8.0,
+        n_components=1,
+        wave_direction_deg=180.0,
+        direction_spread_deg=0.0,
+    )
+    ship = ShipMotion(config, np.random.default_rng(0))
+    poses = ship.poses(times)
+    assert np.max(np.abs(poses[:, 4])) == pytest.approx(ship.tilt_reach_rad, rel=1e-3)
+    drop = 3.0 * (1.0 - math.cos(ship.tilt_reach_rad))
+    assert np.max(np.abs(poses[:, 2])) == pytest.approx(ship.vertical_reach_m - drop, rel=2e-3)
+    assert 0.0 < drop < 0.01 * ship.vertical_reach_m
+    # seas off the bow, the deck off the centre line: its heave adds the roll's and pitch's arms
+    bow = ShipMotion(
+        replace(config, wave_direction_deg=120.0, helideck_position_m=(-10.0, 3.0, 0.0)),
+        np.random.default_rng(0),
+    )
+    vessel = bow.vessel_poses(times)
+    roll, pitch = np.max(np.abs(vessel[:, 3])), np.max(np.abs(vessel[:, 4]))
+    assert roll > 0.1 * pitch and bow.tilt_reach_rad == pytest.approx(roll + pitch, rel=1e-3)
+    linear = vessel[:, 2] + 3.0 * vessel[:, 3] + 10.0 * vessel[:, 4]
+    assert bow.vertical_reach_m == pytest.approx(np.max(np.abs(linear)), rel=1e-3)
+    # a short-crested sea of 200 components: six standard deviations
+    sea = ShipMotion(ShipMotionConfig(sea_state=5), np.random.default_rng(1))
+    long = np.arange(0.0, 7200.0, 0.5)
+    poses = sea.poses(long)
+    drop = 3.0 * (1.0 - math.cos(min(sea.tilt_reach_rad, 1.5)))
+    assert (sea.vertical_reach_m - drop) / np.std(poses[:, 2]) == pytest.approx(6.0, rel=0.05)
+    tilt = np.abs(sea.vessel_poses(long)[:, 3]) + np.abs(sea.vessel_poses(long)[:, 4])
+    assert sea.tilt_reach_rad > np.max(tilt)
+
+
+@pytest.mark.parametrize("speed_m_s", [0.0, 6.0])
+def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
+    speed_m_s: float,
+) -> None:
+    generator = SeaGeneratorConfig(speed_m_s=speed_m_s, swell_direction_deg=120.0)
+    config = ShipMotionConfig(wave_direction_deg=180.0, generator=generator)
+    ship = ShipMotion(config, np.random.default_rng(1))
+    assert ship.waves.steady
+    times = np.linspace(0.0, 40.0, 81)
+    h = 1e-4
+    numeric = (ship.poses(times + h) - ship.poses(times - h)) / (2 * h)
+    np.testing.assert_allclose(ship.velocities(times), numeric, atol=2e-5)
+    vessel = (ship.vessel_poses(times + h) - ship.vessel_poses(times - h)) / (2 * h)
+    np.testing.assert_allclose(ship.vessel_rates(times), vessel, atol=2e-5)
+    np.testing.assert_allclose(ship.velocity(times[7]), ship.velocities(times)[7], atol=1e-12)
+    np.testing.assert_allclose(ship.elevation(times), ship.waves.elevation(times), atol=0.0)
+
+
+def test_at_rest_the_raos_are_jensen_mansour_olsens_closed_forms_and_the_roll_oscillator() -> None:
+    config = ShipMotionConfig(roll_period_s=6.0, roll_damping_ratio=0.2, roll_slope_factor=0.6)
+    omega = np.array([0.4, 0.9, 1.3, 1.8, 2.6, 1.1])
+    direction = np.radians([180.0, 160.0, 100.0, 30.0, 0.0, -120.0])
+    rao = vessel_raos(config, omega, direction)
+    length, breadth, draught = config.length_m, 0.45 * config.beam_m, config.draught_m
+    k = omega**2 / 9.80665
+    ke = np.abs(k * np.cos(direction))
+    x = 0.5 * ke * length
+    kappa = np.exp(-ke * draught)
+    a = 2.0 * np.sin(0.5 * k * breadth) * np.exp(-k * draught)
+    f = np.sqrt((1.0 - k * draught) ** 2 + (a**2 / (k * breadth)) ** 2)
+    eta = 1.0 / ((1.0 - 2.0 * k * draught) + 1j * a**2 / (k * breadth))
+    np.testing.assert_allclose(rao["heave"], eta * kappa * f * np.sin(x) / x, rtol=1e-10)
+    pitch_filter = 3.0 * (np.sin(x) - x * np.cos(x)) / x**3
+    np.testing.assert_allclose(rao["pitch"], eta * kappa * f * pitch_filter, rtol=1e-8)
+    ratio = omega / (2.0 * math.pi / 6.0)
+    roll = 0.6 * np.exp(-0.5 * k * draught) * np.sin(x) / x / (1.0 - ratio**2 + 0.4j * ratio)
+    np.testing.assert_allclose(rao["roll"], roll, rtol=1e-10)
+    # surge and sway: the surface's orbital motion, with the same length filter and depth decay
+    np.testing.assert_allclose(rao["surge"], kappa * np.sin(x) / x * np.cos(direction), rtol=1e-10)
+    np.testing.assert_allclose(rao["sway"], kappa * np.sin(x) / x * np.sin(direction), rtol=1e-10)
+
+
+def test_in_a_long_wave_the_hull_surges_and_sways_with_the_surfaces_orbital_velocity() -> None:
+    # u = w * elevation along the direction the wave travels (in phase with it: forward under
+    # a crest), as the water particles at the surface of a deep-water wave
+    times = np.linspace(0.0, 100.0, 4001)
+    for direction_deg, column, sign in ((0.0, 0, 1.0), (180.0, 0, -1.0), (90.0, 1, 1.0)):
+        config = ShipMotionConfig(
+            sea_state=None,
+            significant_height_m=1.0,
+            peak_period_s=25.0,
+            n_components=1,
+            band_low=0.999,
+            band_high=1.001,
+            wave_direction_deg=direction_deg,
+            direction_spread_deg=0.0,
+        )
+        ship = ShipMotion(config, np.random.default_rng(0))
+        rate = ship.vessel_rates(times)[:, column]
+        orbital = sign * ship.waves.omega[0] * ship.elevation(times)
+        assert np.corrcoef(rate, orbital)[0, 1] > 0.999, direction_deg
+        assert np.std(rate) / np.std(orbital) == pytest.approx(1.0, abs=0.02)
