@@ -214,3 +214,36 @@ def test_a_ros_pose_or_transform_holds_the_rotation_and_translation_it_was_made_
     assert (stamped.header.frame_id, stamped.child_frame_id) == ("world", "body")
     assert [t.x, t.y, t.z] == translation.tolist()
     assert [q.x, q.y, q.z, q.w] == quaternion_xyzw(rotation).tolist()
+
+
+@PROPERTY
+@given(direction=st.tuples(*[st.floats(-1.0, 1.0)] * 3).map(np.array))
+def test_a_rotation_vector_of_exactly_1_mrad_is_scipy_s_series_bit_for_bit(
+    direction: np.ndarray,
+) -> None:
+    assume(np.linalg.norm(direction) > 0.1)
+    rotvec = direction / np.linalg.norm(direction) * 1e-3
+    x, y, z = rotvec.tolist()
+    assume(math.sqrt(x * x + y * y + z * z) == 1e-3)
+    expected = Rotation.from_rotvec(rotvec).as_matrix()
+    assert matrix_from_rotvec(rotvec).tobytes() == expected.tobytes()
+
+
+def test_a_rotation_vector_as_a_row_or_a_column_is_the_same_rotation() -> None:
+    rotvec = np.array([0.3, -0.2, 0.9])
+    expected = matrix_from_rotvec(rotvec)
+    for shaped in (rotvec.reshape(1, 3), rotvec.reshape(3, 1), rotvec.tolist()):
+        assert matrix_from_rotvec(shaped).tobytes() == expected.tobytes()
+
+
+def test_a_quarter_turn_about_each_axis_has_the_known_quaternion_components() -> None:
+    half = math.sqrt(0.5)
+    for axis, angles in enumerate(((np.pi / 2, 0, 0), (0, np.pi / 2, 0), (0, 0, np.pi / 2))):
+        rotation = matrix_from_euler_zyx(*angles)
+        vector = [0.0, 0.0, 0.0]
+        vector[axis] = half
+        np.testing.assert_allclose(quaternion_xyzw(rotation), [*vector, half], atol=1e-15)
+        np.testing.assert_allclose(quaternion_wxyz(rotation), [half, *vector], atol=1e-15)
+    # a half turn about z: MAVLink's scalar kept non-negative, the axis +z or -z
+    w, x, y, z = quaternion_wxyz(matrix_from_euler_zyx(0.0, 0.0, np.pi))
+    assert w >= 0.0 and abs(w) < 1e-15 and (x, y) == (0.0, 0.0) and abs(abs(z) - 1.0) < 1e-15
