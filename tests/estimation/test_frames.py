@@ -15,6 +15,7 @@ from estimation.frames import (
     levelled_deck_pose,
     matrix_from_euler_zyx,
     tag_corners_in_tag_frame,
+    tilt_deg,
     tof_positions_in_camera_frame,
 )
 
@@ -149,3 +150,31 @@ def test_at_gimbal_lock_the_roll_reads_0_and_the_yaw_takes_what_is_left() -> Non
         np.testing.assert_allclose(
             matrix_from_euler_zyx(roll_read, pitch_read, yaw_read), rotation, atol=1e-15
         )
+
+
+def test_the_tilt_is_the_angle_of_the_z_axis_from_the_reference_whatever_the_yaw() -> None:
+    assert tilt_deg(0.0, 0.0) == 0.0
+    assert abs(tilt_deg(np.radians(3.0), 0.0) - 3.0) < 1e-12
+    assert abs(tilt_deg(0.0, np.radians(-4.0)) - 4.0) < 1e-12
+    assert abs(tilt_deg(np.pi, 0.0) - 180.0) < 1e-12
+    np.testing.assert_allclose(
+        tilt_deg(np.radians([3.0, 0.0, -30.0]), np.radians([4.0, 20.0, 40.0])),
+        np.degrees(
+            np.arccos(np.cos(np.radians([3.0, 0.0, -30.0])) * np.cos(np.radians([4.0, 20.0, 40.0])))
+        ),
+        atol=1e-12,
+    )
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    roll=st.floats(-3.1, 3.1),
+    pitch=st.floats(-1.55, 1.55),
+    yaw=st.floats(-3.1, 3.1),
+)
+def test_the_tilt_of_roll_and_pitch_is_their_frames_z_axis_from_the_reference_z(
+    roll: float, pitch: float, yaw: float
+) -> None:
+    z_axis = matrix_from_euler_zyx(roll, pitch, yaw)[:, 2]
+    expected = np.degrees(np.arccos(np.clip(z_axis[2], -1.0, 1.0)))
+    assert abs(float(tilt_deg(roll, pitch)) - expected) < 1e-5
