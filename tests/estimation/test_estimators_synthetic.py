@@ -27,7 +27,7 @@ from estimation.estimator import (
     corners_degenerate,
     finish_pose,
 )
-from estimation.frames import tof_positions_in_camera_frame
+from estimation.frames import tag_corners_in_tag_frame, tof_positions_in_camera_frame
 from estimation.ihrcf import IHRCFConfig, IhrcfEstimator
 from estimation.registry import FRAME_ESTIMATOR_NAMES as ESTIMATOR_NAMES
 from estimation.registry import make_estimator
@@ -414,6 +414,170 @@ def test_synthetic_measurements_follow_the_project_conventions() -> None:
     assert edge.frame.miss_reason and not edge.frame.detections
     with pytest.raises(ValueError, match="Generator"):
         scene.measure(np.eye(3), np.array([0.0, 0.0, 2.0]), pixel_noise_px=1.0)
+
+
+def _level_tag_with_a_corner_at(k: CameraIntrinsics, u_px: float, v_px: float, height_m: float):
+    """A level deck ``height_m`` below whose tag (0.2 m) has its outermost corner on the side
+    of ``u_px`` and ``v_px`` (beyond the image centre) at that pixel, to a few 1e-13 px."""
+    half = 0.1
+    corner_x = (u_px - k.cx) * height_m / k.fx
+    corner_y = (v_px - k.cy) * height_m / k.fy
+    return np.eye(3), np.array(
+        [
+            corner_x - math.copysign(half, corner_x),
+            corner_y - math.copysign(half, corner_y),
+            height_m,
+        ]
+    )
+
+
+@pytest.mark.parametrize(
+    ("u_px", "v_px", "seen"),
+    [
+        # within half a pixel of the outer pixels' centres: seen
+        (-0.5 + 0.3, 255.5, True),
+        (0.2, 255.5, True),
+        (511.5 - 0.3, 255.5, True),
+        (255.5, -0.5 + 0.3, True),
+        (255.5, 511.5 - 0.3, True),
+        (511.5 - 0.3, 511.5 - 0.3, True),
+        # beyond it on one side: out of view
+        (-0.5 - 0.3, 255.5, False),
+        (511.5 + 0.3, 255.5, False),
+        (255.5, -0.5 - 0.3, False),
+        (255.5, 511.5 + 0.3, False),
+        (511.5 + 0.3, 100.0, False),
+        (100.0, 511.5 + 0.3, False),
+    ],
+)
+def test_a_synthetic_tag_is_seen_exactly_while_its_corners_lie_on_the_image(
+    u_px: float, v_px: float, seen: bool
+) -> None:
+    k = LENSES["pinhole"]
+    scene = SyntheticScene(k, 0.2)
+    rotation, translation = _level_tag_with_a_corner_at(k, u_px, v_px, 2.0)
+    m = scene.measure(rotation, translation)
+    # the corner that was put there is there
+    corners = m.true_corners_px
+    assert np.min(np.abs(corners[:, 0] - u_px)) < 1e-9
+    assert np.min(np.abs(corners[:, 1] - v_px)) < 1e-9
+    if seen:
+        assert m.frame.miss_reason == "" and len(m.frame.detections) == 1
+    else:
+        assert m.frame.miss_reason == "out_of_view" and m.frame.detections == ()
+
+
+def test_a_synthetic_tag_behind_the_camera_or_too_oblique_is_missed_with_its_reason() -> None:
+    scene = SyntheticScene(LENSES["pinhole"], 0.2, tag_id=7)
+    behind = scene.measure(np.eye(3), np.array([0.0, 0.0, -2.0]))
+    assert (behind.frame.miss_reason, behind.frame.detections) == ("out_of_view", ())
+    # the deck behind the sensors gives no return either
+    assert not np.any(behind.ranges.valid) and np.all(np.isnan(behind.ranges.ranges))
+    # the line of sight 75 degrees off the tag's normal is seen, 85 degrees (beyond the
+    # scene's 80) and edge-on are not
+    for angle_deg, reason in ((75.0, ""), (85.0, "too_oblique"), (90.0, "too_oblique")):
+        tilt = Rotation.from_euler("x", angle_deg, degrees=True).as_matrix()
+        m = scene.measure(tilt, np.array([0.0, 0.0, 2.0]))
+        assert m.frame.miss_reason == reason, angle_deg
+        assert len(m.frame.detections) == (1 if reason == "" else 0)
+    # a tag half a metre below is seen, its ranges half a metre
+    near = scene.measure(np.eye(3), np.array([0.0, 0.0, 0.5]))
+    assert near.frame.miss_reason == "" and near.frame.detections[0].tag_id == 7
+    np.testing.assert_allclose(near.ranges.ranges, 0.5, atol=1e-15)
+    assert np.all(near.ranges.valid)
+
+
+def test_a_noise_free_synthetic_measurement_holds_the_truth_stamped_0_by_default() -> None:
+    k = LENSES["pinhole"]
+    scene = SyntheticScene(k, 0.2, tag_id=3)
+    rotation = Rotation.from_euler("xyz", [5.0, -8.0, 30.0], degrees=True).as_matrix()
+    translation = np.array([0.1, -0.05, 1.8])
+    m = scene.measure(rotation, translation)
+    assert m.frame.timestamp == 0.0 and m.ranges.timestamp == 0.0
+    corners_c = tag_corners_in_tag_frame(0.2) @ rotation.T + translation
+    np.testing.assert_allclose(m.corners_c, corners_c, atol=1e-15)
+    np.testing.assert_array_equal(m.true_corners_px, k.project(corners_c))
+    (detection,) = m.frame.detections
+    assert detection.tag_id == 3
+    np.testing.assert_array_equal(detection.corners_px, m.true_corners_px)
+    np.testing.assert_array_equal(m.true_ranges, scene.true_ranges(rotation, translation))
+    np.testing.assert_array_equal(m.ranges.ranges, m.true_ranges)
+    assert m.ranges.valid.dtype == bool and np.all(m.ranges.valid)
+    stamped = scene.measure(rotation, translation, timestamp=4.25)
+    assert stamped.frame.timestamp == 4.25 and stamped.ranges.timestamp == 4.25
+
+
+def test_synthetic_noise_is_the_callers_generators_draws_corners_first_then_valid_ranges() -> None:
+    scene = SyntheticScene(LENSES["pinhole"], 0.2, max_range_m=2.0)
+    # pitched so that two sensors range beyond 2 m: their ranges stay NaN, undrawn
+    tilt = Rotation.from_euler("x", 30.0, degrees=True).as_matrix()
+    translation = np.array([0.0, 0.0, 2.0])
+    truth = scene.measure(tilt, translation)
+    valid = truth.ranges.valid
+    np.testing.assert_array_equal(valid, [True, True, False, False])
+
+    both = scene.measure(
+        tilt, translation, pixel_noise_px=0.5, range_noise_m=0.01, rng=np.random.default_rng(3)
+    )
+    draws = np.random.default_rng(3)
+    pixel_noise = draws.normal(0.0, 0.5, size=(4, 2))
+    range_noise = draws.normal(0.0, 0.01, size=2)
+    np.testing.assert_array_equal(
+        both.frame.detections[0].corners_px, truth.true_corners_px + pixel_noise
+    )
+    np.testing.assert_array_equal(both.ranges.ranges[valid], truth.true_ranges[valid] + range_noise)
+    assert np.all(np.isnan(both.ranges.ranges[~valid]))
+    np.testing.assert_array_equal(both.ranges.valid, valid)
+    # the truth is kept beside the noisy measurements
+    np.testing.assert_array_equal(both.true_corners_px, truth.true_corners_px)
+    np.testing.assert_array_equal(both.true_ranges, truth.true_ranges)
+
+    # a std of 0 draws nothing: the other noise is the generator's first draws
+    ranges_only = scene.measure(tilt, translation, range_noise_m=0.01, rng=np.random.default_rng(3))
+    np.testing.assert_array_equal(ranges_only.frame.detections[0].corners_px, truth.true_corners_px)
+    expected = truth.true_ranges[valid] + np.random.default_rng(3).normal(0.0, 0.01, size=2)
+    np.testing.assert_array_equal(ranges_only.ranges.ranges[valid], expected)
+    pixels_only = scene.measure(tilt, translation, pixel_noise_px=0.5, rng=np.random.default_rng(3))
+    np.testing.assert_array_equal(
+        pixels_only.frame.detections[0].corners_px,
+        truth.true_corners_px + np.random.default_rng(3).normal(0.0, 0.5, size=(4, 2)),
+    )
+    np.testing.assert_array_equal(pixels_only.ranges.ranges, truth.true_ranges)
+    # no noise asked for: the generator is left alone
+    rng = np.random.default_rng(3)
+    quiet = scene.measure(tilt, translation, rng=rng)
+    np.testing.assert_array_equal(quiet.frame.detections[0].corners_px, truth.true_corners_px)
+    assert rng.normal() == np.random.default_rng(3).normal()
+
+    # either noise without a generator is refused
+    for noise in ({"pixel_noise_px": 0.5}, {"range_noise_m": 0.01}):
+        with pytest.raises(ValueError) as refused:
+            scene.measure(tilt, translation, **noise)
+        assert str(refused.value) == "noise needs a numpy.random.Generator (rng)"
+
+
+def test_a_synthetic_range_is_a_return_from_just_beyond_the_sensor_up_to_the_maximum() -> None:
+    sensors = np.array([[0.5, 0.0, 0.0], [-0.6, 0.0, 0.0], [0.0, -0.5, 0.0], [0.0, 0.0, 0.0]])
+    scene = SyntheticScene(
+        LENSES["pinhole"], 0.2, tof_positions_c=sensors, max_range_m=2.0, deck_half_size_m=0.5
+    )
+    # the deck's edge is on the deck; the maximum range is in range
+    level = scene.true_ranges(np.eye(3), np.array([0.0, 0.0, 2.0]))
+    np.testing.assert_array_equal(level, [2.0, np.nan, 2.0, 2.0])
+    # a deck through the sensors gives no return (a range of 0 is none)
+    through = scene.true_ranges(np.eye(3), np.zeros(3))
+    assert np.all(np.isnan(through))
+    # a pitched deck: each sensor's ray meets it where the plane is, on the deck or not
+    tilt = Rotation.from_euler("x", 30.0, degrees=True).as_matrix()
+    unbounded = SyntheticScene(LENSES["pinhole"], 0.2, tof_positions_c=sensors)
+    bounded = SyntheticScene(LENSES["pinhole"], 0.2, tof_positions_c=sensors, deck_half_size_m=0.5)
+    translation = np.array([0.0, 0.0, 1.5])
+    expected = 1.5 + sensors[:, 1] * math.tan(math.radians(30.0))
+    np.testing.assert_allclose(unbounded.true_ranges(tilt, translation), expected, atol=1e-12)
+    # on the pitched deck the third sensor lands 0.5/cos(30) m from the tag centre: off the deck
+    np.testing.assert_allclose(
+        bounded.true_ranges(tilt, translation), [1.5, np.nan, np.nan, 1.5], atol=1e-12
+    )
 
 
 # -- the shared front end (estimation/estimator.py) ----------------------------------------

@@ -15,6 +15,7 @@ from estimation.frames import (
     levelled_deck_pose,
     matrix_from_euler_zyx,
     tag_corners_in_tag_frame,
+    tilt_deg,
     tof_positions_in_camera_frame,
 )
 
@@ -99,3 +100,81 @@ def test_camera_offsets_map_to_forward_and_left_of_a_level_drone() -> None:
     # the same as rotating the full vector into the body frame
     v_c = np.array([0.4, -0.7, 2.0])
     np.testing.assert_allclose(camera_to_heading_xy(v_c[:2]), (R_BC @ v_c)[:2])
+
+
+def test_tag_corners_go_round_from_bottom_left_at_half_the_size_in_the_tags_plane() -> None:
+    corners = tag_corners_in_tag_frame(0.3)
+    np.testing.assert_array_equal(
+        corners,
+        [[-0.15, 0.15, 0.0], [0.15, 0.15, 0.0], [0.15, -0.15, 0.0], [-0.15, -0.15, 0.0]],
+    )
+
+
+def test_the_tof_sensors_sit_round_the_camera_from_its_upper_left_at_their_arm() -> None:
+    # sensor 1 up and left in the image (x_C < 0, y_C < 0), then right, down, left
+    d = 0.1 / np.sqrt(2.0)
+    np.testing.assert_allclose(
+        tof_positions_in_camera_frame(),
+        [[-d, -d, 0.0], [d, -d, 0.0], [d, d, 0.0], [-d, d, 0.0]],
+        atol=1e-17,
+    )
+    along_x = tof_positions_in_camera_frame(0.2, 0.0)
+    np.testing.assert_array_equal(along_x[:, 1:], 0.0)
+    np.testing.assert_array_equal(along_x[:, 0], [-0.2, 0.2, 0.2, -0.2])
+
+
+QUARTER = np.pi / 2
+
+
+def test_a_quarter_turn_of_roll_pitch_or_yaw_is_the_textbook_matrix_and_reads_back() -> None:
+    rx = [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]
+    ry = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
+    rz = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    for angles, expected in (((QUARTER, 0, 0), rx), ((0, QUARTER, 0), ry), ((0, 0, QUARTER), rz)):
+        rotation = matrix_from_euler_zyx(*angles)
+        np.testing.assert_allclose(rotation, expected, atol=1e-15)
+        if angles[1] == 0:
+            np.testing.assert_allclose(euler_zyx_from_matrix(rotation), angles, atol=1e-15)
+    # yaw is applied last: a yawed then pitched frame's x axis points along the yaw, tipped down
+    r = matrix_from_euler_zyx(0.0, np.radians(30.0), QUARTER)
+    np.testing.assert_allclose(r[:, 0], [0.0, np.cos(np.radians(30.0)), -0.5], atol=1e-15)
+
+
+def test_at_gimbal_lock_the_roll_reads_0_and_the_yaw_takes_what_is_left() -> None:
+    # pitch +90 degrees: only yaw - roll tells rotations apart; -90 degrees: yaw + roll
+    for pitch, yaw in ((QUARTER, -0.2 - 0.3), (-QUARTER, -0.2 + 0.3)):
+        rotation = matrix_from_euler_zyx(0.3, pitch, -0.2)
+        roll_read, pitch_read, yaw_read = euler_zyx_from_matrix(rotation)
+        assert roll_read == 0.0 and pitch_read == pitch
+        assert abs(yaw_read - yaw) < 1e-9
+        np.testing.assert_allclose(
+            matrix_from_euler_zyx(roll_read, pitch_read, yaw_read), rotation, atol=1e-15
+        )
+
+
+def test_the_tilt_is_the_angle_of_the_z_axis_from_the_reference_whatever_the_yaw() -> None:
+    assert tilt_deg(0.0, 0.0) == 0.0
+    assert abs(tilt_deg(np.radians(3.0), 0.0) - 3.0) < 1e-12
+    assert abs(tilt_deg(0.0, np.radians(-4.0)) - 4.0) < 1e-12
+    assert abs(tilt_deg(np.pi, 0.0) - 180.0) < 1e-12
+    np.testing.assert_allclose(
+        tilt_deg(np.radians([3.0, 0.0, -30.0]), np.radians([4.0, 20.0, 40.0])),
+        np.degrees(
+            np.arccos(np.cos(np.radians([3.0, 0.0, -30.0])) * np.cos(np.radians([4.0, 20.0, 40.0])))
+        ),
+        atol=1e-12,
+    )
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    roll=st.floats(-3.1, 3.1),
+    pitch=st.floats(-1.55, 1.55),
+    yaw=st.floats(-3.1, 3.1),
+)
+def test_the_tilt_of_roll_and_pitch_is_their_frames_z_axis_from_the_reference_z(
+    roll: float, pitch: float, yaw: float
+) -> None:
+    z_axis = matrix_from_euler_zyx(roll, pitch, yaw)[:, 2]
+    expected = np.degrees(np.arccos(np.clip(z_axis[2], -1.0, 1.0)))
+    assert abs(float(tilt_deg(roll, pitch)) - expected) < 1e-5
