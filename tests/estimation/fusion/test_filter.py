@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.integrate import quad
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
@@ -22,7 +23,15 @@ from estimation.frames import (
 )
 from estimation.fusion import DeckFusion, FusionConfig
 from estimation.fusion.config import nis_gate
-from estimation.fusion.model import N_STATE, TH, deck_normal, rotation_zyx, tof_model, wrap_angle
+from estimation.fusion.model import (
+    N_STATE,
+    TH,
+    deck_normal,
+    deck_spectrum_of,
+    rotation_zyx,
+    tof_model,
+    wrap_angle,
+)
 from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
 
 RATE = 240
@@ -266,6 +275,65 @@ def test_tof_model_matches_geometry_and_jacobian() -> None:
     np.testing.assert_allclose(h, numeric, atol=1e-6)
     normal, _ = deck_normal(x[TH])
     np.testing.assert_allclose(normal, matrix_from_euler_zyx(*x[TH])[:, 2], atol=1e-12)
+
+
+def test_a_tof_ray_reads_the_deck_from_any_height_above_it_but_not_grazing_or_from_on_it() -> None:
+    """A ray reads the range along it to the deck plane however short (0.5 m: half a metre),
+    and up to 78.5 degrees of incidence (cosine 0.2, exactly); a grazing ray, one pointing
+    away and a sensor on the plane read nothing."""
+    x = np.zeros(N_STATE)
+    origin = np.zeros(3)
+    x[2] = -0.5
+    predicted, h = tof_model(x, origin, np.eye(3))
+    assert predicted == pytest.approx(0.5, rel=1e-12)
+    np.testing.assert_allclose(h[0:3], [0.0, 0.0, -1.0], atol=1e-12)
+    x[2] = 0.0  # the sensor on the deck plane
+    assert tof_model(x, origin, np.eye(3)) is None
+    x[2] = -2.0
+    for cosine, reads in ((0.2, True), (0.15, False), (-0.5, False)):
+        sine = math.sqrt(1.0 - cosine * cosine)
+        r_wb = np.array([[1.0, 0.0, 0.0], [0.0, cosine, -sine], [0.0, sine, cosine]])
+        result = tof_model(x, origin, r_wb)
+        assert (result is not None) == reads, cosine
+        if reads:
+            assert result[0] == pytest.approx(2.0 / cosine, rel=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    w1=st.floats(0.2, 1.5),
+    ratio=st.floats(1.3, 4.0),
+    zeta1=st.floats(0.05, 1.2),
+    zeta2=st.floats(0.05, 1.2),
+    sigma_rad=st.floats(0.005, 0.2),
+    gain=st.floats(0.5, 4.0),
+)
+def test_the_two_component_model_has_its_factors_and_the_spread_asked_for_times_the_gain(
+    w1: float, ratio: float, zeta1: float, zeta2: float, sigma_rad: float, gain: float
+) -> None:
+    """Each factor keeps its own frequency and damping in the polynomial, and the driving
+    PSD gives the stationary spread asked for times the noise gain (default 1): the angle's,
+    the angular acceleration's and the jerk's variance are the integrals of the spectrum
+    ``q / |A(i w)|²`` times 1, ``w⁴`` and ``w⁶`` (against SciPy's quadrature, not the
+    Lyapunov equation the model solves)."""
+    w2 = ratio * w1
+    polynomial, q, (accel_sigma, jerk_sigma) = deck_spectrum_of(
+        w1, zeta1, w2, zeta2, sigma_rad, gain
+    )
+    product = np.polymul([1.0, 2.0 * zeta1 * w1, w1 * w1], [1.0, 2.0 * zeta2 * w2, w2 * w2])
+    np.testing.assert_allclose(polynomial, product[:0:-1], rtol=1e-12)
+
+    def variance(power: int) -> float:
+        def spectrum(w: float) -> float:
+            return q * w**power / abs(np.polyval(product, 1j * w)) ** 2
+
+        return quad(spectrum, 0.0, np.inf, epsabs=0.0, epsrel=1e-10, limit=500)[0] / math.pi
+
+    assert variance(0) == pytest.approx(gain * sigma_rad**2, rel=1e-6)
+    assert accel_sigma == pytest.approx(math.sqrt(variance(4)), rel=1e-6)
+    assert jerk_sigma == pytest.approx(math.sqrt(variance(6)), rel=1e-6)
+    _, q_default, _ = deck_spectrum_of(w1, zeta1, w2, zeta2, sigma_rad)
+    assert q_default == pytest.approx(q / gain, rel=1e-12)
 
 
 def test_tof_ranges_refine_height_and_tilt() -> None:
