@@ -31,6 +31,7 @@ from estimation.fusion.model import (
     TwoWaves,
     deck_normal,
     deck_spectrum_of,
+    ekf_update,
     predict,
     rotation_zyx,
     tof_model,
@@ -483,6 +484,22 @@ def test_without_a_deck_model_the_rates_stay_and_an_oscillator_alone_is_undamped
             swing, cov, _HOVER_B, np.eye(3), dt, 0.0, 0.0, 0.0, 0.0, deck_w0=2.0 * math.pi / period
         )
     np.testing.assert_allclose(swing[TH][:2], [-0.05, 0.04], rtol=0.02)
+
+
+def test_an_update_at_exactly_the_gate_is_fused_and_one_beyond_it_or_nan_is_not() -> None:
+    """The gate is the largest NIS accepted: an innovation of exactly 3 sigma passes a gate
+    of 9 (3 SD) and moves the state by the Kalman gain; a bit more, or a NaN, leaves it."""
+    x = np.array([1.0, 2.0])
+    cov = np.diag([3.0, 1.0])
+    h = np.array([[1.0, 0.0]])
+    noise = np.array([[1.0]])  # S = 4, so an innovation of 6 is 3 sigma
+    updated, new_cov, nis, accepted = ekf_update(x, cov, np.array([6.0]), h, noise, 9.0)
+    assert accepted and nis == 9.0
+    np.testing.assert_allclose(updated, [1.0 + 0.75 * 6.0, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(new_cov, np.diag([0.75, 1.0]), rtol=1e-12)
+    for innovation in (6.000001, math.nan):
+        kept, kept_cov, _, accepted = ekf_update(x, cov, np.array([innovation]), h, noise, 9.0)
+        assert not accepted and kept is x and kept_cov is cov
 
 
 def test_tof_ranges_refine_height_and_tilt() -> None:
