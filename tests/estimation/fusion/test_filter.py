@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.integrate import quad
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
@@ -22,7 +23,20 @@ from estimation.frames import (
 )
 from estimation.fusion import DeckFusion, FusionConfig
 from estimation.fusion.config import nis_gate
-from estimation.fusion.model import N_STATE, TH, deck_normal, rotation_zyx, tof_model, wrap_angle
+from estimation.fusion.model import (
+    N_COLOURED,
+    N_STATE,
+    N_STATE_4,
+    TH,
+    TwoWaves,
+    deck_normal,
+    deck_spectrum_of,
+    ekf_update,
+    predict,
+    rotation_zyx,
+    tof_model,
+    wrap_angle,
+)
 from estimation.types import DeckPoseEstimate, ImuSample, RangeReading
 
 RATE = 240
@@ -266,6 +280,226 @@ def test_tof_model_matches_geometry_and_jacobian() -> None:
     np.testing.assert_allclose(h, numeric, atol=1e-6)
     normal, _ = deck_normal(x[TH])
     np.testing.assert_allclose(normal, matrix_from_euler_zyx(*x[TH])[:, 2], atol=1e-12)
+
+
+def test_a_tof_ray_reads_the_deck_from_any_height_above_it_but_not_grazing_or_from_on_it() -> None:
+    """A ray reads the range along it to the deck plane however short (0.5 m: half a metre),
+    and up to 78.5 degrees of incidence (cosine 0.2, exactly); a grazing ray, one pointing
+    away and a sensor on the plane read nothing."""
+    x = np.zeros(N_STATE)
+    origin = np.zeros(3)
+    x[2] = -0.5
+    predicted, h = tof_model(x, origin, np.eye(3))
+    assert predicted == pytest.approx(0.5, rel=1e-12)
+    np.testing.assert_allclose(h[0:3], [0.0, 0.0, -1.0], atol=1e-12)
+    x[2] = 0.0  # the sensor on the deck plane
+    assert tof_model(x, origin, np.eye(3)) is None
+    x[2] = -2.0
+    for cosine, reads in ((0.2, True), (0.15, False), (-0.5, False)):
+        sine = math.sqrt(1.0 - cosine * cosine)
+        r_wb = np.array([[1.0, 0.0, 0.0], [0.0, cosine, -sine], [0.0, sine, cosine]])
+        result = tof_model(x, origin, r_wb)
+        assert (result is not None) == reads, cosine
+        if reads:
+            assert result[0] == pytest.approx(2.0 / cosine, rel=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    w1=st.floats(0.2, 1.5),
+    ratio=st.floats(1.3, 4.0),
+    zeta1=st.floats(0.05, 1.2),
+    zeta2=st.floats(0.05, 1.2),
+    sigma_rad=st.floats(0.005, 0.2),
+    gain=st.floats(0.5, 4.0),
+)
+def test_the_two_component_model_has_its_factors_and_the_spread_asked_for_times_the_gain(
+    w1: float, ratio: float, zeta1: float, zeta2: float, sigma_rad: float, gain: float
+) -> None:
+    """Each factor keeps its own frequency and damping in the polynomial, and the driving
+    PSD gives the stationary spread asked for times the noise gain (default 1): the angle's,
+    the angular acceleration's and the jerk's variance are the integrals of the spectrum
+    ``q / |A(i w)|²`` times 1, ``w⁴`` and ``w⁶`` (against SciPy's quadrature, not the
+    Lyapunov equation the model solves)."""
+    w2 = ratio * w1
+    polynomial, q, (accel_sigma, jerk_sigma) = deck_spectrum_of(
+        w1, zeta1, w2, zeta2, sigma_rad, gain
+    )
+    product = np.polymul([1.0, 2.0 * zeta1 * w1, w1 * w1], [1.0, 2.0 * zeta2 * w2, w2 * w2])
+    np.testing.assert_allclose(polynomial, product[:0:-1], rtol=1e-12)
+
+    def variance(power: int) -> float:
+        def spectrum(w: float) -> float:
+            return q * w**power / abs(np.polyval(product, 1j * w)) ** 2
+
+        return quad(spectrum, 0.0, np.inf, epsabs=0.0, epsrel=1e-10, limit=500)[0] / math.pi
+
+    assert variance(0) == pytest.approx(gain * sigma_rad**2, rel=1e-6)
+    assert accel_sigma == pytest.approx(math.sqrt(variance(4)), rel=1e-6)
+    assert jerk_sigma == pytest.approx(math.sqrt(variance(6)), rel=1e-6)
+    _, q_default, _ = deck_spectrum_of(w1, zeta1, w2, zeta2, sigma_rad)
+    assert q_default == pytest.approx(q / gain, rel=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(angles=st.tuples(*(st.floats(-4.0, 4.0),) * 3), turns=st.integers(-3, 3))
+def test_rotation_zyx_is_yaw_then_pitch_then_roll_and_wrapping_keeps_the_angle(
+    angles: tuple[float, float, float], turns: int
+) -> None:
+    """R_WP from (roll, pitch, yaw) is SciPy's intrinsic ZYX rotation (every entry, every
+    angle), and wrapping an angle moves it into [-pi, pi) by whole turns."""
+    roll, pitch, yaw = angles
+    expected = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    np.testing.assert_allclose(rotation_zyx(np.array(angles)), expected, atol=1e-12)
+    angle = roll + 2.0 * math.pi * turns
+    wrapped = float(wrap_angle(angle))
+    assert -math.pi <= wrapped < math.pi
+    assert wrapped == pytest.approx(
+        roll - 2.0 * math.pi * math.floor((roll + math.pi) / (2 * math.pi)), abs=1e-9
+    )
+
+
+_HOVER_B = np.array([0.0, 0.0, 9.81])
+
+
+def _euler_step(
+    x: np.ndarray,
+    accel_b: np.ndarray,
+    r_wb: np.ndarray,
+    dt: float,
+    deck4: tuple | None,
+    tilt_correlation_s: float,
+    deck_w0: float = 0.0,
+    deck_zeta: float = 0.0,
+) -> np.ndarray:
+    """One explicit Euler step of the documented continuous models, written out: the relative
+    position and velocity under the drone's acceleration, the Euler angles at their rates
+    (yaw's constant), and roll and pitch as the two-oscillator sum (TwoWaves) or the
+    fourth-order polynomial, or (deck4 None) the damped oscillator of ``deck_w0``; the
+    coloured errors decay."""
+    out = x.copy()
+    a_rel = -(r_wb @ (accel_b - x[12:15])) - np.array([0.0, 0.0, -9.81])
+    out[0:3] = x[0:3] + x[3:6] * dt + 0.5 * dt * dt * a_rel
+    out[3:6] = x[3:6] + a_rel * dt
+    out[6:9] = x[6:9] + x[9:12] * dt
+    for i in range(2 if deck4 is not None else 0):
+        th, w, third, fourth = x[6 + i], x[9 + i], x[15 + i], x[17 + i]
+        if isinstance(deck4[i], TwoWaves):
+            m = deck4[i]
+            accel2 = -(m.w2**2) * third - 2.0 * m.zeta2 * m.w2 * fourth
+            accel1 = -(m.w1**2) * (th - third) - 2.0 * m.zeta1 * m.w1 * (w - fourth)
+            out[9 + i] = w + (accel1 + accel2) * dt
+            out[15 + i] = third + fourth * dt
+            out[17 + i] = fourth + accel2 * dt
+        else:
+            a0, a1, a2, a3 = deck4[i][0]
+            out[9 + i] = w + third * dt
+            out[15 + i] = third + fourth * dt
+            out[17 + i] = fourth - (a0 * th + a1 * w + a2 * third + a3 * fourth) * dt
+    if deck4 is None:
+        out[9:11] = x[9:11] - (deck_w0**2 * x[6:8] + 2.0 * deck_zeta * deck_w0 * x[9:11]) * dt
+    if tilt_correlation_s > 0.0:
+        out[-N_COLOURED:] = x[-N_COLOURED:] * math.exp(-dt / tilt_correlation_s)
+    return out
+
+
+@pytest.mark.parametrize("model", ["two-waves", "fourth-order", "oscillator", "constant-rates"])
+@pytest.mark.parametrize("tilt_correlation_s", [0.0, 0.3])
+def test_a_prediction_is_one_euler_step_and_its_covariance_goes_through_the_same_map(
+    model: str, tilt_correlation_s: float
+) -> None:
+    """From a state with every entry set (a tilted, accelerating drone; a deck rolling and
+    pitching through both components), one step of 20 ms is the Euler step of the models,
+    entry by entry; and the covariance is carried by that same linear map, F P Fᵀ plus the
+    noise of a zero covariance (each axis driven by its own components' PSDs), for each deck
+    model (the two-oscillator sum, the fourth-order model, the oscillator, constant rates),
+    with and without the coloured tilt errors."""
+    if model == "two-waves":
+        deck4 = (
+            TwoWaves.matched(0.6, 0.1, 1.4, 0.3, 2e-3, 5e-4),
+            TwoWaves.matched(0.5, 0.2, 1.7, 0.15, 1e-3, 8e-4),
+        )
+    elif model == "fourth-order":
+        deck4 = (
+            (deck_spectrum_of(0.6, 0.1, 1.4, 0.3, 0.04)),
+            (deck_spectrum_of(0.5, 0.2, 1.7, 0.15, 0.03)),
+        )
+    else:
+        deck4 = None
+    oscillator = (0.7, 0.2) if model == "oscillator" else (0.0, 0.0)
+    n = (N_STATE if deck4 is None else N_STATE_4) + (N_COLOURED if tilt_correlation_s > 0.0 else 0)
+    rng = np.random.default_rng(3)
+    x = rng.normal(0.0, 0.3, n)
+    r_wb = matrix_from_euler_zyx(0.2, -0.15, 0.7)
+    accel_b = np.array([0.8, -0.5, 11.0])
+    dt = 0.02
+    args = (accel_b, r_wb, dt, 0.01, 0.002, 1e-3, 4e-4)
+    extra = {
+        "deck_w0": oscillator[0],
+        "deck_zeta": oscillator[1],
+        "deck4": deck4,
+        "tilt_correlation_s": tilt_correlation_s,
+    }
+    stepped, _ = predict(x, np.zeros((n, n)), *args, **extra)
+    expected = _euler_step(x, accel_b, r_wb, dt, deck4, tilt_correlation_s, *oscillator)
+    np.testing.assert_allclose(stepped, expected, rtol=1e-12, atol=1e-14)
+    # the map is affine in the state: its columns by differences of unit steps
+    jacobian = np.column_stack(
+        [predict(x + np.eye(n)[i], np.zeros((n, n)), *args, **extra)[0] - stepped for i in range(n)]
+    )
+    _, noise = predict(x, np.zeros((n, n)), *args, **extra)
+    d1, d2, d3 = dt, dt * dt / 2.0, dt**3 / 3.0
+    white = np.array([[d3, d2], [d2, d1]])
+    for i in range(2 if deck4 is not None else 0):
+        # each axis' own driving noise: roll's and pitch's PSDs, integrated over the step
+        block = noise[np.ix_([6 + i, 9 + i, 15 + i, 17 + i], [6 + i, 9 + i, 15 + i, 17 + i])]
+        if model == "two-waves":
+            expected_block = deck4[i].q1 * np.kron([[1.0, 0.0], [0.0, 0.0]], white)
+            expected_block += deck4[i].q2 * np.kron(np.ones((2, 2)), white)
+        else:
+            expected_block = np.zeros((4, 4))
+            expected_block[3, 3] = deck4[i][1] * dt
+        np.testing.assert_allclose(block, expected_block, rtol=1e-12, atol=1e-20)
+    root = rng.normal(0.0, 1.0, (n, n))
+    cov = root @ root.T
+    _, carried = predict(x, cov, *args, **extra)
+    np.testing.assert_allclose(carried - noise, jacobian @ cov @ jacobian.T, rtol=1e-9, atol=1e-12)
+
+
+def test_without_a_deck_model_the_rates_stay_and_an_oscillator_alone_is_undamped() -> None:
+    """Without deck_w0 the Euler rates stay as they are (constant rates); given deck_w0
+    alone, roll and pitch swing undamped: half a period later they are reversed."""
+    x = np.zeros(N_STATE)
+    x[TH] = [0.05, -0.04, 0.3]
+    x[9:12] = [0.01, -0.02, 0.03]
+    cov = np.zeros((N_STATE, N_STATE))
+    steady, _ = predict(x, cov, _HOVER_B, np.eye(3), 0.5, 0.0, 0.0, 0.0, 0.0)
+    np.testing.assert_allclose(steady[9:12], x[9:12], rtol=0, atol=0)
+    np.testing.assert_allclose(steady[TH], x[TH] + 0.5 * x[9:12], rtol=1e-12)
+    period, dt = 9.0, 1.0 / 240.0
+    swing = x.copy()
+    swing[9:12] = [0.0, 0.0, 0.0]
+    for _ in range(round(period / 2.0 / dt)):
+        swing, _ = predict(
+            swing, cov, _HOVER_B, np.eye(3), dt, 0.0, 0.0, 0.0, 0.0, deck_w0=2.0 * math.pi / period
+        )
+    np.testing.assert_allclose(swing[TH][:2], [-0.05, 0.04], rtol=0.02)
+
+
+def test_an_update_at_exactly_the_gate_is_fused_and_one_beyond_it_or_nan_is_not() -> None:
+    """The gate is the largest NIS accepted: an innovation of exactly 3 sigma passes a gate
+    of 9 (3 SD) and moves the state by the Kalman gain; a bit more, or a NaN, leaves it."""
+    x = np.array([1.0, 2.0])
+    cov = np.diag([3.0, 1.0])
+    h = np.array([[1.0, 0.0]])
+    noise = np.array([[1.0]])  # S = 4, so an innovation of 6 is 3 sigma
+    updated, new_cov, nis, accepted = ekf_update(x, cov, np.array([6.0]), h, noise, 9.0)
+    assert accepted and nis == 9.0
+    np.testing.assert_allclose(updated, [1.0 + 0.75 * 6.0, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(new_cov, np.diag([0.75, 1.0]), rtol=1e-12)
+    for innovation in (6.000001, math.nan):
+        kept, kept_cov, _, accepted = ekf_update(x, cov, np.array([innovation]), h, noise, 9.0)
+        assert not accepted and kept is x and kept_cov is cov
 
 
 def test_tof_ranges_refine_height_and_tilt() -> None:
