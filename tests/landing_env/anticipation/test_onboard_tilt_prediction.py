@@ -91,6 +91,7 @@ def test_no_predictor_is_loaded_unless_a_wave_off_a_contact_window_or_the_observ
         assert prediction.wave_off_values is None and prediction.observed_values is None
     for timing in (
         {"wave_off_tilt_deg": 5.0, "wave_off_predictor": "model"},
+        {"wave_off_tilt_deg": 0.5, "wave_off_predictor": "model"},
         {"contact_window_s": [1.2, 1.5]},
         {"observation": "prediction"},
     ):
@@ -239,6 +240,17 @@ def test_the_values_of_waiting_on_are_the_predictors_at_the_contact_times_and_th
     assert prediction.wave_off_values.threshold(3.0, 1.0) != pytest.approx(
         prediction.observed_values.threshold(3.0, 1.0)
     )
+    # a strict one (0.5 deg) has its own
+    strict = _prediction(
+        {
+            "tilt_model": path,
+            "wave_off_tilt_deg": 0.5,
+            "wave_off_predictor": "model",
+            "wave_off_rule": "value",
+        }
+    )
+    expected = predictor_stopping_values(predictor, (1.3,), 0.5)
+    assert strict.wave_off_values.threshold(3.0, 1.0) == pytest.approx(expected.threshold(3.0, 1.0))
     # a model wave-off off (0 deg) has no value to compare with
     off = _prediction(
         {
@@ -308,7 +320,7 @@ def test_the_prediction_values_are_each_contact_times_chance_the_value_of_waitin
     np.testing.assert_allclose(prediction.prediction_values(1.0), [0.0, 0.0, 0.0, value, 0.0])
 
 
-def _wave_off(tmp_path, **timing) -> DeckPrediction:
+def _wave_off(tmp_path, length: int = 20, **timing) -> DeckPrediction:
     settings = {
         "wave_off_tilt_deg": 3.0,
         "wave_off_from_s": 0.4,
@@ -316,7 +328,7 @@ def _wave_off(tmp_path, **timing) -> DeckPrediction:
         "steps_per_decision": 2,
     }
     settings.update(timing)
-    return _prediction(settings)
+    return _prediction(settings, length=length)
 
 
 def test_the_linear_wave_off_carries_the_newest_tilt_along_its_rate_to_the_contact(
@@ -340,6 +352,13 @@ def test_the_linear_wave_off_carries_the_newest_tilt_along_its_rate_to_the_conta
     pitched = _wave_off(tmp_path)
     _push_tilt(pitched, [0.0, 0.0], [0.8, 1.0])
     assert pitched.wave_off_due(0.5, 1.3, 0.0)
+    late_pitch = _wave_off(tmp_path, wave_off_until_s=2.0)
+    _push_tilt(late_pitch, [0.0, 0.0], [3.6, 3.1])
+    assert late_pitch.wave_off_due(1.5, 1.3, 0.0) and not late_pitch.wave_off_due(1.0, 1.3, 0.0)
+    # a strict limit: 0.8 deg, steady, is beyond 0.5 deg
+    strict = _wave_off(tmp_path, wave_off_tilt_deg=0.5)
+    _push_tilt(strict, [0.8, 0.8])
+    assert strict.wave_off_due(0.5, 1.3, 0.0)
 
 
 def test_the_wave_off_is_judged_only_in_its_window_and_with_a_valid_newest_row(tmp_path) -> None:
@@ -381,12 +400,17 @@ def test_the_quadratic_wave_off_fits_the_curve_of_its_window_once_five_samples_a
     # in the window's 10 samples, 4 valid: the line, 4.4 deg; 5 valid: the curve. (The level
     # samples before the window are not fitted.)
     for valid, due in ((4, True), (5, False)):
-        few = _wave_off(tmp_path, wave_off_predictor="quadratic", wave_off_window_s=0.5)
+        few = _wave_off(tmp_path, 30, wave_off_predictor="quadratic", wave_off_window_s=0.5)
         _push_tilt(few, [0.0] * 10)
         for _ in range(10 - valid):
             few.history.push(None)
         _push_tilt(few, curve[-valid:])
         assert few.wave_off_due(0.5, 0.7, 0.0) is due
+    # a parabola, not every bend: of r(t) = 4 + 300 t^3 deg the fit's -2.4 deg 0.1 s ahead
+    # (the line 4.1 deg, the cubic 4.3 deg)
+    cubic = _wave_off(tmp_path, wave_off_predictor="quadratic", wave_off_window_s=0.5)
+    _push_tilt(cubic, [4.0 + 300.0 * t**3 for t in times])
+    assert not cubic.wave_off_due(0.5, 0.6, 0.0)
 
 
 def test_the_model_wave_off_aborts_below_its_chance_or_the_value_of_waiting_on(tmp_path) -> None:
@@ -406,6 +430,11 @@ def test_the_model_wave_off_aborts_below_its_chance_or_the_value_of_waiting_on(t
     assert fixed.wave_off_due(0.5, 1.3, 0.0)
     _push_tilt(fixed, [2.0, 2.0])
     assert not fixed.wave_off_due(0.5, 1.3, 0.0)
+    # a chance of 0 is not below a required 0: it never aborts
+    never = _wave_off(tmp_path, **{**model, "wave_off_probability": 0.0})
+    _push_tilt(never, [60.0, 60.0])
+    assert never.wave_off_chance(0.5, 0.0) == 0.0
+    assert not never.wave_off_due(0.5, 1.3, 0.0)
     # the value rule: the value of waiting on after the climb back, with the wait left
     value = _wave_off(tmp_path, **model, wave_off_rule="value", wait_limit_s=10.0)
     remaining_s = 10.0 - 2.0 - 0.5 - 1.5
