@@ -77,6 +77,9 @@ def test_the_features_are_the_windows_block_means_over_the_scales_and_a_constant
     # a sample not finite is a gap too, even when flagged valid
     holed[4, 1] = math.nan
     np.testing.assert_allclose(predictor.features(holed, np.ones(7, bool)), phi)
+    # the flags as a column, or as numbers, are the same flags
+    np.testing.assert_allclose(predictor.features(holed, valid[:, None]), phi)
+    np.testing.assert_allclose(predictor.features(holed, valid.astype(float)), phi)
 
 
 def test_a_predictor_without_scales_divides_by_one_and_its_window_is_rounded() -> None:
@@ -115,11 +118,14 @@ def test_a_history_that_cannot_be_read_gives_the_reason_exactly() -> None:
     assert predictor.features(np.zeros((10, 2)), valid) == "no valid estimate in the newest samples"
     valid[-6] = True
     assert not isinstance(predictor.features(np.zeros((10, 2)), valid), str)
-    # a window of one valid sample is never enough, whatever the fraction
+    # a window of one valid sample is never enough, whatever the fraction; two are
     predictor.min_valid_fraction = 0.0
     valid = np.zeros(10, bool)
     valid[-1] = True
     assert predictor.features(np.zeros((10, 2)), valid) == "too few valid estimates in the window"
+    valid[0] = True
+    assert not isinstance(predictor.features(np.zeros((10, 2)), valid), str)
+    valid[0] = False
     # a max gap below one sample still reads the newest
     predictor.max_gap_s = 0.0
     valid[:-1] = True
@@ -201,6 +207,8 @@ def test_a_prediction_out_of_reach_is_invalid_with_its_horizon_and_reason() -> N
     assert np.isnan(short.covariance).all() and short.covariance.shape == (2, 2)
     far = predictor.predict(values, np.ones(6, bool), 3.5)
     assert far.reason == "horizon 3.5 s outside the fitted 0.0-3.0 s"
+    early = predictor.predict(values, np.ones(6, bool), -0.5)
+    assert early.reason == "horizon -0.5 s outside the fitted 0.0-3.0 s"
     assert predictor.predict(values, np.ones(6, bool), math.nan).reason.startswith("horizon nan")
     untilted = _predictor(targets=("x", "z"))
     assert untilted.predict(values, np.ones(6, bool), 1.0).reason == (
@@ -227,7 +235,18 @@ def test_the_normal_points_are_a_fixed_standard_normal_sample() -> None:
     np.testing.assert_array_equal(points, _normal_points())
     np.testing.assert_allclose(points.mean(axis=0), 0.0, atol=0.01)
     np.testing.assert_allclose(np.cov(points.T), np.eye(2), atol=0.02)
-    assert np.isfinite(points).all() and np.abs(points).max() < 7.1
+    # scrambled: no point at the clipped tails (an unscrambled Sobol set starts at 0)
+    assert np.isfinite(points).all() and np.abs(points).max() < 5.0
+
+
+def test_the_normal_points_are_drawn_once_at_the_first_chance(monkeypatch) -> None:
+    monkeypatch.setattr(linear_predictors, "_POINTS", None)
+    level = TiltPrediction(True, "", 1.0, 0.0, 0.0, np.eye(2) * 1e-4)
+    chance = level.probability_within(1.0)
+    assert linear_predictors._POINTS is not None
+    np.testing.assert_array_equal(linear_predictors._POINTS, _normal_points())
+    drawn = linear_predictors._POINTS
+    assert level.probability_within(1.0) == chance and linear_predictors._POINTS is drawn
 
 
 def test_the_chances_of_many_means_are_counted_over_the_points_in_chunks() -> None:
@@ -311,6 +330,8 @@ def test_the_held_out_chances_interpolate_the_means_and_combine_by_best_or_mean(
         assert predictor.chances(horizons, 2.0).size == 0
     assert predictor.chances([0.0, 3.0 + 5e-10], 2.0).size == 70
     assert _predictor().chances(1.0, 2.0).size == 0  # none recorded
+    untilted = _predictor(targets=("x", "z", "y"), heldout_means=means)
+    assert untilted.chances(1.0, 2.0).size == 0  # no tilt predicted
     with pytest.raises(ValueError) as error:
         predictor.chances(1.0, 2.0, combine="worst")
     assert str(error.value) == "combine must be 'best' or 'mean', not 'worst'"
@@ -370,6 +391,55 @@ def test_a_fit_of_noiseless_linear_futures_finds_their_map_and_records_how() -> 
     assert fitted.channels == ("roll", "pitch") and fitted.targets == ("roll", "pitch")
 
 
+def test_a_fit_is_the_ridge_regression_on_the_scaled_features_its_penalty_grown_with_them() -> None:
+    """Per horizon: the penalty is the ridge times the features' mean square (the constant
+    left out) times the examples; the covariance is that of the held-out residuals of the
+    fit on the others (the last quarter of the episodes: 3 and 4 of 5), and the coefficients
+    are refitted on every example."""
+    histories, futures, groups, _ = _linear_examples(episodes=5, per=20, seed=3)
+    futures = futures + np.random.default_rng(4).normal(0.0, 0.05, futures.shape)
+    ridge = 0.3
+    fitted = LinearTiltPredictor.fit(
+        histories,
+        futures,
+        groups[:, None],
+        np.array([0.0, 1.0]),
+        4 * DT,
+        DT,
+        block=2,
+        ridges=(ridge,),
+    )
+    x = np.array([fitted.features(h[:, :2], h[:, 2] > 0.5) for h in histories])
+    scale = float(np.mean(x[:, :-1] ** 2))
+    held = groups >= 3
+    for k in range(2):
+        y = futures[:, k]
+        np.testing.assert_allclose(
+            fitted.coefficients[k],
+            linear_predictors._ridge(x, y, ridge * scale * len(x)),
+            rtol=1e-9,
+            atol=1e-12,
+        )
+        train = linear_predictors._ridge(x[~held], y[~held], ridge * scale * (~held).sum())
+        residual = y[held] - x[held] @ train
+        np.testing.assert_allclose(fitted.covariance[k], np.cov(residual.T), rtol=1e-9)
+        np.testing.assert_allclose(fitted.heldout_means[k], x[held] @ train, rtol=1e-9)
+    assert fitted.block == 2 and fitted.coefficients.shape == (2, 5, 2)
+    # the default block is 2, the default targets roll and pitch
+    default = LinearMotionPredictor.fit(
+        histories, futures, groups, np.array([0.0, 1.0]), 4 * DT, DT
+    )
+    assert default.block == 2 and default.targets == ("roll", "pitch")
+
+
+def test_a_fit_keeps_at_most_1000_held_out_predictions_by_default() -> None:
+    histories, futures, groups, _ = _linear_examples(episodes=4, per=1001, seed=6)
+    fitted = LinearTiltPredictor.fit(
+        histories, futures, groups, np.array([0.0, 1.0]), 4 * DT, DT, block=1
+    )
+    assert fitted.heldout_means.shape == (2, 1000, 2)
+
+
 def test_a_fit_chooses_for_each_horizon_the_ridge_with_the_least_held_out_error() -> None:
     histories, futures, groups, _ = _linear_examples(per=30, seed=1)
     noisy = futures + np.random.default_rng(2).normal(0.0, [[0.0, 0.0], [3.0, 3.0]], futures.shape)
@@ -399,6 +469,20 @@ def test_a_fit_chooses_for_each_horizon_the_ridge_with_the_least_held_out_error(
     )
     rms_deg = np.degrees(np.sqrt(np.diag(angles.covariance[1]))).round(3)
     np.testing.assert_allclose(angles.metadata["heldout_rms_deg"][1], rms_deg)
+    # every angle is an angle: roll, pitch and yaw together are in degrees too
+    three = np.concatenate([noisy, noisy[..., :1]], axis=2)
+    all_angles = LinearMotionPredictor.fit(
+        histories,
+        three,
+        groups,
+        np.array([0.0, 1.0]),
+        4 * DT,
+        DT,
+        block=1,
+        ridges=ridges,
+        targets=("roll", "pitch", "yaw"),
+    )
+    assert "heldout_rms_deg" in all_angles.metadata
 
 
 def test_the_constant_is_never_penalised_by_the_ridge() -> None:
@@ -457,6 +541,26 @@ def test_a_fit_refuses_examples_it_cannot_use_saying_which() -> None:
         fit(futures=unknown)
     assert str(error.value) == "too few examples with a known future at 1.0 s"
     assert fit(block=1).metadata["examples"] == 40
+    # ten usable windows are enough to be judged by the next rule (here: too few to train)
+    ten = histories.copy()
+    ten[5:20, -1, 2] = 0.0
+    ten[25:, -1, 2] = 0.0
+    with pytest.raises(ValueError) as error:
+        fit(histories=ten)
+    assert str(error.value) == "too few examples with a known future at 0.0 s"
+    # as many training examples as features (9) and five held out are enough
+    edge = futures.copy()
+    edge[9:20, 1] = math.nan
+    edge[25:, 1] = math.nan
+    assert fit(futures=edge).metadata["examples"] == 40
+    edge[8, 1] = math.nan
+    with pytest.raises(ValueError) as error:
+        fit(futures=edge)
+    assert str(error.value) == "too few examples with a known future at 1.0 s"
+    # a channel that never moves is divided by 1
+    still = histories.copy()
+    still[..., 1] = 0.25
+    np.testing.assert_array_equal(fit(histories=still).scales[1], 1.0)
 
 
 # ---------------------------------------------------------------- files
@@ -484,6 +588,9 @@ def test_a_saved_predictor_loads_equal_and_exact_keeps_the_held_out_means_to_the
     motion = _predictor(targets=("z", "roll", "pitch"))
     loaded = LinearMotionPredictor.load(motion.save(tmp_path / "m.npz"))
     assert loaded.targets == ("z", "roll", "pitch") and loaded.heldout_means.shape == (0, 0, 3)
+    # a window that is not a whole number of blocks (5 samples, blocks of 2)
+    odd = _predictor(n=5, block=2)
+    assert LinearMotionPredictor.load(odd.save(tmp_path / "odd.npz")).n_window == 5
 
 
 def test_a_file_whose_arrays_do_not_fit_its_window_is_refused_naming_it(tmp_path) -> None:
@@ -505,6 +612,11 @@ def test_a_file_whose_arrays_do_not_fit_its_window_is_refused_naming_it(tmp_path
             str(error.value)
             == f"{broken}: coefficient or covariance shapes do not match its window"
         )
+    # a file that is none: named, as not a deck-tilt predictor file
+    missing = tmp_path / "missing.npz"
+    with pytest.raises(ValueError) as error:
+        LinearTiltPredictor.load(missing)
+    assert str(error.value).startswith(f"{missing} is not a deck-tilt predictor file: ")
     # an old file without targets is roll and pitch
     np.savez(tmp_path / "old.npz", **{k: v for k, v in arrays.items() if k != "targets"})
     assert LinearMotionPredictor.load(tmp_path / "old.npz").targets == ("roll", "pitch")
