@@ -819,6 +819,8 @@ def test_the_lean_is_low_passed_from_the_first_attitude_and_aims_the_camera_upwi
         ((-0.886, 0.0, 2.0), 2.0, 0.8 * 0.5),  # room 0.04: climbing at half the speed
         ((1.5, 1.5, 2.0), 2.0, 0.8),  # far out: climbing at the full speed
         ((1.5, 1.5, 2.0), 2.6, 0.0),  # but not above max_search_range_m (2.5 m)
+        ((0.0, 0.0, 2.6), 2.6, -0.8),  # where it still descends
+        ((0.0, 0.0, 0.9), 0.9, -0.8),  # a tag nearer than 1 m, well inside the view
         ((0.3, 0.0, 0.0), 2.0, 0.0),  # a tag at no depth: held
         ((0.3, 0.0, -1.0), 2.0, 0.0),
         ((1.5, 0.0, 2.0), 0.4, -0.6),  # below blind_range_m: no gate, on down at 1.5 x 0.4
@@ -859,9 +861,57 @@ def test_the_view_gate_is_off_at_a_zero_half_view_or_without_the_tag_and_climbs_
     guidance = _tracked(timed, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own)
     guidance.descend(_seen(0.0, 0.0, 2.0, tof_m=2.0), own)
     assert guidance._descent_clock_s == pytest.approx(DT)
+    # half way into the margin: half the timed speed, and its clock runs at half speed
+    reference, _ = timed_descent_reference(DT, 2.0, 1.2, 0.25, 0.05)
+    _, rate = timed_descent_reference(DT + 0.2, 2.0, 1.2, 0.25, 0.05)
+    timed_speed = float(np.clip(-rate + 3.0 * (2.0 - reference), 0.0, 0.8))
+    half = guidance.descend(_seen(0.0, -0.726, 2.0, tof_m=2.0), own).velocity_h[2]
+    assert half == pytest.approx(-0.5 * timed_speed, abs=2e-3)
+    assert guidance._descent_clock_s == pytest.approx(1.5 * DT, abs=1e-4)
+    # at the margin (a tag at no depth: held), the clock stops
+    assert guidance.descend(_seen(0.3, 0.0, 0.0, tof_m=2.0), own).velocity_h[2] == 0.0
+    assert guidance._descent_clock_s == pytest.approx(1.5 * DT, abs=1e-4)
     climb = guidance.descend(_seen(-0.886, 0.0, 2.0, tof_m=2.0), own).velocity_h[2]
     assert climb == pytest.approx(0.5 * timed.touchdown_speed, abs=2e-3)
     assert guidance._descent_clock_s is None
+    # the tag lost above the blind range: the climb restarts the timed descent too
+    guidance.descend(_seen(0.0, 0.0, 2.0, tof_m=2.0), own)
+    assert guidance._descent_clock_s == pytest.approx(DT)
+    for _ in range(7):
+        guidance.observe(_observation(None, tof_m=2.0), own)
+    lost = guidance.descend(_observation(None, tof_m=2.0), own).velocity_h[2]
+    assert lost == pytest.approx(timed.lost_tag_climb_speed)
+    assert guidance._descent_clock_s is None
+
+
+def test_near_the_deck_the_gust_wait_lasts_max_flare_wait_s_and_only_below_flare_range_m() -> None:
+    gains = GuidanceGains(
+        track_deck=True, blind_range_m=0.8, flare_range_m=0.5, max_touchdown_lean_deg=18.0
+    )
+    gusted = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.4, 0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=gusted)
+    # above the flare range a lean does not hold the descent
+    assert guidance.descend(_observation(None, tof_m=0.6), gusted).velocity_h[2] < -0.5
+    waits = [
+        guidance.descend(_observation(None, tof_m=0.4), gusted).velocity_h[2] for _ in range(62)
+    ]
+    # 3 s of waiting (60 control periods of 50 ms), then on down
+    assert all(w == pytest.approx(0.0, abs=1e-12) for w in waits[:59])
+    assert waits[-1] < -0.5
+    # upright again: no wait
+    upright = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=_level((0, 0, 0.4)))
+    assert upright.descend(_observation(None, tof_m=0.4), _level((0, 0, 0.4))).velocity_h[2] < -0.5
+
+
+def test_the_rate_gain_holds_the_relative_speed_to_a_moving_decks_track() -> None:
+    """A deck rising at 0.5 m/s, the drone near it (the plan: 0.25 m/s down relative to it)
+    rising at 0.25 m/s: on plan, no correction; rising with the deck: pushed down."""
+    gains = GuidanceGains(track_deck=True, touchdown_speed=0.25, descent_rate_gain=1.0)
+    for drone_vz, expected in ((0.25, 0.25), (0.5, 0.0)):
+        own = _level((0.0, 0.0, 0.1), velocity=(0.0, 0.0, drone_vz))
+        guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.5), own=own)
+        setpoint = guidance.descend(_observation(None, tof_m=0.1), own).velocity_h[2]
+        assert setpoint == pytest.approx(expected, abs=1e-9)
 
 
 @settings(max_examples=100, deadline=None, derandomize=True)
