@@ -978,3 +978,15 @@ def test_the_go_around_climbs_over_the_decks_last_height_aimed_along_its_coastin
     guidance.tracker.started[0] = False
     lost = guidance.descend(_observation(None), own).velocity_h
     np.testing.assert_allclose(lost, [0.0, 0.0, gains.lost_tag_climb_speed], atol=1e-12)
+
+
+def test_a_deck_tracked_by_its_ranges_alone_is_followed_in_height_at_its_heave_rate() -> None:
+    """No tag yet (the horizontal track never started): the set-point holds the drone's place
+    horizontally, and vertically follows the deck's heave rate plus the height's correction."""
+    gains = GuidanceGains(track_deck=True)
+    guidance = _tracked(gains, (0.0, 0.0, 0.2), (0.3, -0.2, 0.5))
+    guidance.tracker.started[:2] = False
+    own = OwnState(np.array([1.0, 2.0, 2.0]), np.zeros(3), matrix_from_euler_zyx(0.0, 0.0, 0.7))
+    setpoint = guidance.hold(_observation(None, tof_m=1.8), 1.5, own)
+    vz = 0.5 + gains.k_z * (1.5 - 1.8)
+    np.testing.assert_allclose(setpoint.velocity_h, [0.0, 0.0, vz], atol=1e-12)
