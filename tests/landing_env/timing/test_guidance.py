@@ -958,6 +958,12 @@ def test_the_go_around_climbs_over_the_decks_last_height_aimed_along_its_coastin
     own = OwnState(np.array([0.2, 0.1, 1.5]), np.zeros(3), attitude)
     guidance = _tracked(gains, (0.4, -0.3, 0.3), (0.2, 0.1, 0.5), own=own)
     lean = attitude[:2, 2] / attitude[2, 2]
+    # while the deck is tracked, the hold is the tracked hold, as without the search
+    plain = _tracked(GuidanceGains(track_deck=True), (0.4, -0.3, 0.3), (0.2, 0.1, 0.5), own=own)
+    np.testing.assert_array_equal(
+        guidance.hold(_observation(None), 2.0, own).velocity_h,
+        plain.hold(_observation(None), 2.0, own).velocity_h,
+    )
     guidance.tracker.started[2] = False  # the height track lost, its last height 0.3 m
     for setpoint in (
         guidance.hold(_observation(None), 2.0, own),
