@@ -339,10 +339,16 @@ def test_the_linear_wave_off_carries_the_newest_tilt_along_its_rate_to_the_conta
     _push_tilt(prediction, [0.8, 1.0])
     assert prediction.history.rows()[-1, 7] == pytest.approx(math.radians(4.0))
     assert prediction.wave_off_due(0.5, 1.3, 0.0)
-    # 0.4 + 4 x 0.6 = 2.8 deg: on
+    # 0.4 + 2 x 0.8 = 2.0 deg: on
     on = _wave_off(tmp_path)
     _push_tilt(on, [0.3, 0.4])
     assert not on.wave_off_due(0.5, 1.3, 0.0)
+    # a predictor loaded for the contact window does not replace the linear wave-off: 2 deg,
+    # steady, is within 3 deg (the model gives it a chance below the required 0.8)
+    windowed = _wave_off(tmp_path, tilt_model=_saved(tmp_path), contact_window_s=[1.2, 1.5])
+    assert windowed.tilt_predictor is not None
+    _push_tilt(windowed, [2.0, 2.0])
+    assert not windowed.wave_off_due(0.5, 1.3, 0.0)
     # past the contact the tilt is the newest one (no extrapolation backwards)
     late = _wave_off(tmp_path, wave_off_until_s=2.0)
     _push_tilt(late, [3.6, 3.1])
