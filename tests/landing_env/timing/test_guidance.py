@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
 from landing_env.config import load_config
@@ -17,6 +19,7 @@ from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import ControllerGains
 from landing_env.timing.deck_tracker import DeckTracker, OwnState
 from landing_env.timing.guidance import DeckGuidance
+from landing_env.timing.timed_descent import timed_descent_reference
 
 DT = 0.05
 
@@ -588,3 +591,408 @@ def test_a_warm_up_hold_that_ends_on_the_deck_is_reported_by_the_first_step_not_
     finally:
         env.close()
     assert result.outcome == "hold_failed" and not result.success
+
+
+# ---------------------------------------------------------------- the bench law, unit by unit
+_BENCH = GuidanceGains()
+
+
+def _seen(x_c: float, y_c: float, z_c: float, yaw: float = 0.0, tof_m=None):
+    """The tag at (x_c, y_c, z_c) in the camera frame, turned ``yaw`` from the drone."""
+    observation = _observation((x_c, y_c, z_c), tof_m=tof_m)
+    observation["deck_pose"][5] = yaw
+    return observation
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.floats(0.2, 4.0),
+    st.floats(-1.5, 1.5),
+    st.floats(0.2, 4.0),
+)
+def test_the_bench_hold_centres_at_k_xy_within_the_speed_limit_and_closes_the_height_at_k_z(
+    x_c: float, y_c: float, range_m: float, yaw: float, target_m: float
+) -> None:
+    g = _BENCH
+    observation = _seen(x_c, y_c, 1.0, yaw, tof_m=range_m)
+    setpoint = DeckGuidance(g, DT).hold(observation, target_m)
+    x32, y32, range32, yaw32 = (float(np.float32(v)) for v in (x_c, y_c, range_m, yaw))
+    # forward is up the image (-y_C), left is -x_C
+    forward, left = g.k_xy * -y32, g.k_xy * -x32
+    speed = math.hypot(forward, left)
+    if speed > g.max_horizontal_speed:
+        forward, left = (
+            forward * g.max_horizontal_speed / speed,
+            left * g.max_horizontal_speed / speed,
+        )
+    vz = float(np.clip(g.k_z * (target_m - range32), -g.max_vertical_speed, g.max_vertical_speed))
+    np.testing.assert_allclose(setpoint.velocity_h, [forward, left, vz], rtol=1e-9, atol=1e-12)
+    assert setpoint.yaw_rate == pytest.approx(-g.k_yaw * yaw32, rel=1e-9, abs=1e-12)
+
+
+def test_the_range_is_the_four_rays_mean_else_the_tags_depth_else_the_valid_rays_mean() -> None:
+    guidance = DeckGuidance(_BENCH, DT)
+    observation = _seen(0.1, 0.2, 1.7, tof_m=1.0)
+    observation["tof_range"][:] = [1.0, 1.2, 1.4, 1.8]
+    assert guidance.range_m(observation) == pytest.approx(1.35)
+    observation["tof_valid"][:] = [1, 0, 1, 0]
+    assert guidance.range_m(observation) == pytest.approx(1.7)  # the tag, over two rays
+    observation["deck_pose_valid"][0] = 0
+    assert guidance.range_m(observation) == pytest.approx(1.2)  # the two valid rays
+    observation["tof_valid"][:] = 0
+    assert math.isnan(guidance.range_m(observation))
+    assert guidance.horizontal_error(observation) is None
+    # seen: (forward, left) = (-y_C, -x_C), as floats
+    error = guidance.horizontal_error(_seen(0.25, -0.5, 1.0))
+    assert error == (pytest.approx(0.5), pytest.approx(-0.25))
+    assert all(type(e) is float for e in error)
+
+
+def test_aligned_is_within_the_tolerance_plus_its_growth_with_the_height_and_never_unseen() -> None:
+    gains = GuidanceGains(align_tolerance_m=0.1, align_tolerance_per_m=0.05)
+    guidance = DeckGuidance(gains, DT)
+    # at 2 m the tolerance is 0.1 + 0.05 x 2 = 0.2 m
+    assert guidance.aligned(_seen(0.0, -0.199, 2.0, tof_m=2.0))
+    assert not guidance.aligned(_seen(0.0, -0.201, 2.0, tof_m=2.0))
+    # both axes count: 0.192 m and 0.208 m off on the diagonal
+    assert guidance.aligned(_seen(-0.12, 0.15, 2.0, tof_m=2.0))
+    assert not guidance.aligned(_seen(-0.12, 0.17, 2.0, tof_m=2.0))
+    assert guidance.aligned(_seen(0.0, 0.19, 2.0, tof_m=2.0))
+    # a negative range (a bad ray) does not shrink it below the tolerance at the deck
+    assert guidance.aligned(_seen(0.099, 0.0, 1.0, tof_m=-1.0))
+    assert not guidance.aligned(_seen(0.101, 0.0, 1.0, tof_m=-1.0))
+    assert not guidance.aligned(_observation(None, tof_m=2.0))
+
+
+def test_a_planned_descent_keeps_its_duration_within_0_2_to_10_s_and_a_reset_forgets_it() -> None:
+    guidance = DeckGuidance(GuidanceGains(descent_time_s=1.5), DT)
+    assert guidance.descent_time_s == 1.5
+    for asked, kept in ((2.5, 2.5), (0.05, 0.2), (12.0, 10.0), (None, 1.5), (math.nan, 1.5)):
+        guidance.plan_descent(3.0)
+        guidance.plan_descent(asked)
+        assert guidance.descent_time_s == kept
+        assert type(guidance.descent_time_s) is float
+    guidance.plan_descent(math.inf)
+    assert guidance.descent_time_s == 1.5
+    guidance.plan_descent(4.0)
+    guidance.reset()
+    assert guidance.descent_time_s == 1.5
+
+
+def test_the_bench_hold_with_nothing_seen_holds_still_and_the_descent_falls_on_the_last_range() -> (
+    None
+):
+    g = _BENCH
+    guidance = DeckGuidance(g, DT)
+    still = guidance.hold(_observation(None), 2.0)
+    np.testing.assert_array_equal(still.velocity_h, [0.0, 0.0, 0.0])
+    assert still.yaw_rate == 0.0
+    # never a range: down at the touchdown speed
+    blind = guidance.descend(_observation(None))
+    np.testing.assert_array_equal(blind.velocity_h, [0.0, 0.0, -g.touchdown_speed])
+    # the range schedule: descent_gain x range, between touchdown_speed and descent_speed
+    for range_m, speed in ((0.1, g.touchdown_speed), (0.4, 0.6), (2.0, g.descent_speed)):
+        setpoint = guidance.descend(_seen(0.0, -0.1, range_m, 0.2, tof_m=range_m))
+        assert setpoint.velocity_h[2] == pytest.approx(-speed)
+        if range_m > g.blind_range_m:  # centring above the blind range
+            assert setpoint.velocity_h[0] == pytest.approx(g.k_xy * 0.1)
+            assert setpoint.yaw_rate == pytest.approx(-g.k_yaw * float(np.float32(0.2)))
+        else:  # straight down below it
+            assert setpoint.velocity_h[0] == 0.0 and setpoint.yaw_rate == 0.0
+    # everything lost: the last range's speed (2 m), and the hold's range is kept too
+    assert guidance.descend(_observation(None)).velocity_h[2] == pytest.approx(-g.descent_speed)
+    guidance.hold(_observation(None, tof_m=0.4), 2.0)
+    lost = guidance.descend(_observation(None))
+    assert lost.velocity_h[2] == pytest.approx(-0.6)
+    np.testing.assert_array_equal(lost.velocity_h[:2], [0.0, 0.0])
+
+
+# ---------------------------------------------------------------- the deck-frame law, unit by unit
+def _tracked(
+    gains: GuidanceGains,
+    deck_w: tuple[float, float, float],
+    deck_v_w: tuple[float, float, float],
+    deck_a_w: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    own: OwnState | None = None,
+) -> DeckGuidance:
+    """A guidance whose tracker holds the deck at ``deck_w`` moving at ``deck_v_w`` (and
+    accelerating at ``deck_a_w`` with the acceleration model), all three axes tracked; with
+    ``own``, one observation of the tag from it first (its lean taken whole)."""
+    guidance = DeckGuidance(gains, DT)
+    if own is not None:
+        guidance.observe(_observation((0.0, 0.0, 1.0)), own)
+    tracker = guidance.tracker
+    tracker.state[:, 0], tracker.state[:, 1] = deck_w, deck_v_w
+    if tracker.order == 3:
+        tracker.state[:, 2] = deck_a_w
+    tracker.started[:] = True
+    tracker.last_height_w = deck_w[2]
+    return guidance
+
+
+def _heading(v_w: np.ndarray, yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([c * v_w[0] + s * v_w[1], -s * v_w[0] + c * v_w[1], v_w[2]])
+
+
+_XY = st.floats(-3.0, 3.0)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(
+    st.tuples(_XY, _XY, st.floats(-1.0, 1.0)),
+    st.tuples(_XY, _XY, st.floats(-1.0, 1.0)),
+    st.tuples(_XY, _XY, _XY),
+    st.tuples(_XY, _XY, st.floats(0.5, 4.0)),
+    st.tuples(st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.floats(-3.1, 3.1)),
+    st.floats(0.0, 0.5),
+    st.floats(0.3, 3.0),
+)
+def test_the_deck_frame_hold_is_the_led_deck_velocity_plus_the_limited_corrections_by_heading(
+    deck_w, deck_v_w, deck_a_w, drone_w, attitude, lead_s: float, target_m: float
+) -> None:
+    """The set-point (world) is the deck's velocity ``deck_lead_s`` ahead, plus k_xy times the
+    offset to the aim point (the deck, moved upwind by the height times the lean) plus the
+    vertical speed times the lean, that sum held to max_horizontal_speed, plus the height's
+    correction at k_z; then turned into the heading frame."""
+    gains = GuidanceGains(track_deck=True, tracker_model="acceleration", deck_lead_s=lead_s)
+    roll, pitch, yaw = attitude
+    own = OwnState(np.array(drone_w), np.zeros(3), matrix_from_euler_zyx(roll, pitch, yaw))
+    guidance = _tracked(gains, deck_w, deck_v_w, deck_a_w, own)
+    lean = own.rotation_wb[:2, 2] / own.rotation_wb[2, 2]
+    np.testing.assert_allclose(guidance.lean, lean, rtol=1e-12)
+    setpoint = guidance.hold(_seen(0.0, 0.0, 1.0, 0.3), target_m, own)
+    height = drone_w[2] - deck_w[2]
+    vz = float(np.clip(gains.k_z * (target_m - height), -0.8, 0.8))
+    aim = np.array(deck_w[:2]) + max(height, 0.0) * lean
+    relative = gains.k_xy * (aim - np.array(drone_w[:2])) + vz * lean
+    speed = float(np.hypot(*relative))
+    if speed > gains.max_horizontal_speed:
+        relative *= gains.max_horizontal_speed / speed
+    v_w = np.array(deck_v_w) + lead_s * np.array(deck_a_w) + [*relative, vz]
+    np.testing.assert_allclose(setpoint.velocity_h, _heading(v_w, yaw), rtol=1e-9, atol=1e-9)
+    assert setpoint.yaw_rate == pytest.approx(-gains.k_yaw * float(np.float32(0.3)))
+    assert guidance.tracked_range_m(own) == pytest.approx(height)
+    # without the tag: no yaw rate; with the height track lost, no tracked range
+    assert guidance.hold(_observation(None), target_m, own).yaw_rate == 0.0
+    guidance.tracker.started[2] = False
+    assert math.isnan(guidance.tracked_range_m(own))
+
+
+def test_the_lean_is_low_passed_from_the_first_attitude_and_aims_the_camera_upwind() -> None:
+    gains = GuidanceGains(track_deck=True, lean_filter_s=0.45)
+    guidance = DeckGuidance(gains, DT)
+    guidance.observe(_observation((0.0, 0.0, 2.0)), None)  # no own state: nothing learned
+    assert not guidance.tracker.valid
+    np.testing.assert_array_equal(guidance.lean, [0.0, 0.0])
+    first = matrix_from_euler_zyx(0.0, 0.2, 0.0)  # nose down 0.2 rad: body z towards +x
+    own = OwnState(np.array([0.0, 0.0, 2.0]), np.zeros(3), first)
+    guidance.observe(_observation((0.0, 0.0, 2.0)), own)
+    # the first attitude is taken whole: tan 0.2 forward
+    np.testing.assert_allclose(guidance.lean, [math.tan(0.2), 0.0], atol=1e-12)
+    second = OwnState(own.position_w, np.zeros(3), matrix_from_euler_zyx(-0.3, 0.0, 0.0))
+    guidance.observe(_observation((0.0, 0.0, 2.0)), second)
+    # then low-passed towards the new lean with alpha = dt / (lean_filter_s + dt) = 0.1
+    z_b = second.rotation_wb[:, 2]
+    target = z_b[:2] / z_b[2]
+    np.testing.assert_allclose(
+        guidance.lean, [math.tan(0.2), 0.0] + 0.1 * (target - [math.tan(0.2), 0.0]), atol=1e-12
+    )
+    # leaning past 60 deg counts as 60 deg's slope over cos 60 (0.5): no blow-up
+    over = OwnState(own.position_w, np.zeros(3), matrix_from_euler_zyx(0.0, 1.4, 0.0))
+    fresh = DeckGuidance(gains, DT)
+    fresh.observe(_observation((0.0, 0.0, 2.0)), over)
+    np.testing.assert_allclose(fresh.lean, [math.sin(1.4) / 0.5, 0.0], atol=1e-12)
+    # the lean given out is a copy
+    fresh.lean[:] = 9.0
+    assert fresh.lean[0] == pytest.approx(math.sin(1.4) / 0.5)
+
+
+@pytest.mark.parametrize(
+    ("tag_c", "tof_m", "vertical"),
+    [
+        ((0.0, 0.0, 2.0), 2.0, -0.8),  # well inside the view: the full 0.8 m/s
+        ((0.8, 0.0, 2.0), 2.0, -0.8 * 0.0375),  # room 0.083 of a 0.08 margin: nearly stopped
+        ((0.0, -0.726, 2.0), 2.0, -0.8 * 0.5),  # the room 0.12, half the margin past it: half
+        ((-0.886, 0.0, 2.0), 2.0, 0.8 * 0.5),  # room 0.04: climbing at half the speed
+        ((1.5, 1.5, 2.0), 2.0, 0.8),  # far out: climbing at the full speed
+        ((1.5, 1.5, 2.0), 2.6, 0.0),  # but not above max_search_range_m (2.5 m)
+        ((0.0, 0.0, 2.6), 2.6, -0.8),  # where it still descends
+        ((0.0, 0.0, 0.9), 0.9, -0.8),  # a tag nearer than 1 m, well inside the view
+        ((0.3, 0.0, 0.0), 2.0, 0.0),  # a tag at no depth: held
+        ((0.3, 0.0, -1.0), 2.0, 0.0),
+        ((1.5, 0.0, 2.0), 0.4, -0.6),  # below blind_range_m: no gate, on down at 1.5 x 0.4
+    ],
+)
+def test_the_descent_slows_from_twice_the_view_margin_to_a_stop_at_it_and_climbs_beyond(
+    tag_c: tuple[float, float, float], tof_m: float, vertical: float
+) -> None:
+    """The gate's factor: the tag's farthest corner (its centre's larger tangent plus the
+    half size over the depth) against view_half_tan = 0.558, margin 0.08: 1 with twice the
+    margin to spare, down to 0 at the margin and -1 at the edge, times the range schedule's
+    speed (1.5 x range, at most 0.8 m/s)."""
+    gains = GuidanceGains(track_deck=True, view_half_tan=0.558, blind_range_m=0.8)
+    own = _level((0.0, 0.0, 2.0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own)
+    setpoint = guidance.descend(_seen(*tag_c, 0.2, tof_m=tof_m), own)
+    assert setpoint.velocity_h[2] == pytest.approx(vertical, abs=2e-3)
+    # turning towards the tag only above the blind range
+    expected_yaw = -gains.k_yaw * float(np.float32(0.2)) if tof_m > 0.8 else 0.0
+    assert setpoint.yaw_rate == pytest.approx(expected_yaw)
+
+
+def test_the_view_gate_is_off_at_a_zero_half_view_or_without_the_tag_and_climbs_timed_slowly() -> (
+    None
+):
+    own = _level((0.0, 0.0, 2.0))
+    off = _tracked(GuidanceGains(track_deck=True), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own)
+    assert off.descend(_seen(1.5, 1.5, 2.0, tof_m=2.0), own).velocity_h[2] == pytest.approx(-0.8)
+    gains = GuidanceGains(track_deck=True, view_half_tan=0.558, blind_range_m=0.8)
+    unseen = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own)
+    tag_lost = _observation(None, tof_m=2.0)
+    tag_lost["deck_pose"][:3] = (1.5, 1.5, 2.0)  # a stale pose, not valid
+    assert unseen.descend(tag_lost, own).velocity_h[2] == pytest.approx(-0.8)
+    # the timed profile climbs at the factor times the touchdown speed and restarts its clock
+    timed = GuidanceGains(
+        track_deck=True, view_half_tan=0.558, blind_range_m=0.8, descent_profile="timed"
+    )
+    guidance = _tracked(timed, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own)
+    guidance.descend(_seen(0.0, 0.0, 2.0, tof_m=2.0), own)
+    assert guidance._descent_clock_s == pytest.approx(DT)
+    # half way into the margin: half the timed speed, and its clock runs at half speed
+    reference, _ = timed_descent_reference(DT, 2.0, 1.2, 0.25, 0.05)
+    _, rate = timed_descent_reference(DT + 0.2, 2.0, 1.2, 0.25, 0.05)
+    timed_speed = float(np.clip(-rate + 3.0 * (2.0 - reference), 0.0, 0.8))
+    half = guidance.descend(_seen(0.0, -0.726, 2.0, tof_m=2.0), own).velocity_h[2]
+    assert half == pytest.approx(-0.5 * timed_speed, abs=2e-3)
+    assert guidance._descent_clock_s == pytest.approx(1.5 * DT, abs=1e-4)
+    # at the margin (a tag at no depth: held), the clock stops
+    assert guidance.descend(_seen(0.3, 0.0, 0.0, tof_m=2.0), own).velocity_h[2] == 0.0
+    assert guidance._descent_clock_s == pytest.approx(1.5 * DT, abs=1e-4)
+    climb = guidance.descend(_seen(-0.886, 0.0, 2.0, tof_m=2.0), own).velocity_h[2]
+    assert climb == pytest.approx(0.5 * timed.touchdown_speed, abs=2e-3)
+    assert guidance._descent_clock_s is None
+    # the tag lost above the blind range: the climb restarts the timed descent too
+    guidance.descend(_seen(0.0, 0.0, 2.0, tof_m=2.0), own)
+    assert guidance._descent_clock_s == pytest.approx(DT)
+    for _ in range(7):
+        guidance.observe(_observation(None, tof_m=2.0), own)
+    lost = guidance.descend(_observation(None, tof_m=2.0), own).velocity_h[2]
+    assert lost == pytest.approx(timed.lost_tag_climb_speed)
+    assert guidance._descent_clock_s is None
+
+
+def test_near_the_deck_the_gust_wait_lasts_max_flare_wait_s_and_only_below_flare_range_m() -> None:
+    gains = GuidanceGains(
+        track_deck=True, blind_range_m=0.8, flare_range_m=0.5, max_touchdown_lean_deg=18.0
+    )
+    gusted = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.4, 0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=gusted)
+    # above the flare range a lean does not hold the descent
+    assert guidance.descend(_observation(None, tof_m=0.6), gusted).velocity_h[2] < -0.5
+    waits = [
+        guidance.descend(_observation(None, tof_m=0.4), gusted).velocity_h[2] for _ in range(62)
+    ]
+    # 3 s of waiting (60 control periods of 50 ms), then on down
+    assert all(w == pytest.approx(0.0, abs=1e-12) for w in waits[:59])
+    assert waits[-1] < -0.5
+    # upright again: no wait
+    upright = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=_level((0, 0, 0.4)))
+    assert upright.descend(_observation(None, tof_m=0.4), _level((0, 0, 0.4))).velocity_h[2] < -0.5
+
+
+def test_the_rate_gain_holds_the_relative_speed_to_a_moving_decks_track() -> None:
+    """A deck rising at 0.5 m/s, the drone near it (the plan: 0.25 m/s down relative to it)
+    rising at 0.25 m/s: on plan, no correction; rising with the deck: pushed down."""
+    gains = GuidanceGains(track_deck=True, touchdown_speed=0.25, descent_rate_gain=1.0)
+    for drone_vz, expected in ((0.25, 0.25), (0.5, 0.0)):
+        own = _level((0.0, 0.0, 0.1), velocity=(0.0, 0.0, drone_vz))
+        guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.5), own=own)
+        setpoint = guidance.descend(_observation(None, tof_m=0.1), own).velocity_h[2]
+        assert setpoint == pytest.approx(expected, abs=1e-9)
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(
+    st.lists(st.floats(-0.2, 3.0), min_size=1, max_size=30),
+    st.floats(0.5, 3.0),
+    st.floats(0.0, 0.5),
+    st.floats(0.0, 8.0),
+)
+def test_the_timed_descent_feeds_the_references_rate_forward_by_its_lead_and_corrects_its_height(
+    heights_m: list[float], duration_s: float, lead_s: float, track_gain: float
+) -> None:
+    """From the first height (at least contact_range_m), the reference of
+    ``timed_descent_reference``: the speed is minus its rate ``descent_lead_s`` ahead plus
+    ``descent_track_gain`` times the height above it, between 0 and max_vertical_speed; its
+    clock runs one control period a call."""
+    gains = GuidanceGains(
+        descent_profile="timed",
+        descent_time_s=duration_s,
+        descent_lead_s=lead_s,
+        descent_track_gain=track_gain,
+        contact_range_m=0.05,
+        blind_range_m=5.0,  # no centring: the vertical speed alone
+    )
+    guidance = DeckGuidance(gains, DT)
+    start = max(float(np.float32(heights_m[0])), 0.05)
+    for k, height in enumerate(heights_m):
+        height32 = float(np.float32(height))
+        setpoint = guidance.descend(_observation(None, tof_m=height))
+        reference, _ = timed_descent_reference(k * DT, start, duration_s, 0.25, 0.05)
+        _, rate = timed_descent_reference(k * DT + lead_s, start, duration_s, 0.25, 0.05)
+        speed = float(np.clip(-rate + track_gain * (height32 - reference), 0.0, 0.8))
+        assert setpoint.velocity_h[2] == pytest.approx(-speed, abs=1e-9)
+        assert guidance._descent_clock_s == pytest.approx((k + 1) * DT)
+
+
+def test_the_go_around_climbs_over_the_decks_last_height_aimed_along_its_coasting_track() -> None:
+    """The height track lost above blind_range_m: the set-point is the deck's horizontal
+    velocity (its stale heave rate dropped) plus k_xy times the offset to the aim point
+    (upwind of the deck by the height over its last tracked height times the lean), and a
+    climb at lost_tag_climb_speed up to max_search_range_m over that height, by heading."""
+    gains = GuidanceGains(track_deck=True, lost_deck="search")
+    attitude = matrix_from_euler_zyx(0.1, -0.15, 0.5)
+    own = OwnState(np.array([0.2, 0.1, 1.5]), np.zeros(3), attitude)
+    guidance = _tracked(gains, (0.4, -0.3, 0.3), (0.2, 0.1, 0.5), own=own)
+    lean = attitude[:2, 2] / attitude[2, 2]
+    # while the deck is tracked, the hold is the tracked hold, as without the search
+    plain = _tracked(GuidanceGains(track_deck=True), (0.4, -0.3, 0.3), (0.2, 0.1, 0.5), own=own)
+    np.testing.assert_array_equal(
+        guidance.hold(_observation(None), 2.0, own).velocity_h,
+        plain.hold(_observation(None), 2.0, own).velocity_h,
+    )
+    guidance.tracker.started[2] = False  # the height track lost, its last height 0.3 m
+    for setpoint in (
+        guidance.hold(_observation(None), 2.0, own),
+        guidance.descend(_seen(0, 0, 1), own),
+    ):
+        above = 1.5 - 0.3
+        climb = gains.lost_tag_climb_speed
+        aim = np.array([0.4, -0.3]) + above * lean
+        relative = gains.k_xy * (aim - [0.2, 0.1]) + climb * lean
+        v_w = np.array([0.2 + relative[0], 0.1 + relative[1], climb])
+        np.testing.assert_allclose(setpoint.velocity_h, _heading(v_w, 0.5), atol=1e-12)
+        assert setpoint.yaw_rate == 0.0
+        assert guidance._descent_clock_s is None
+    # at max_search_range_m over the last height: no higher
+    high = OwnState(np.array([0.2, 0.1, 0.3 + gains.max_search_range_m]), np.zeros(3), attitude)
+    assert guidance.hold(_observation(None), 2.0, high).velocity_h[2] == pytest.approx(0.0)
+    # and the horizontal track lost too: the drone holds its place while it climbs
+    guidance.tracker.started[0] = False
+    lost = guidance.descend(_observation(None), own).velocity_h
+    np.testing.assert_allclose(lost, [0.0, 0.0, gains.lost_tag_climb_speed], atol=1e-12)
+
+
+def test_a_deck_tracked_by_its_ranges_alone_is_followed_in_height_at_its_heave_rate() -> None:
+    """No tag yet (the horizontal track never started): the set-point holds the drone's place
+    horizontally, and vertically follows the deck's heave rate plus the height's correction."""
+    gains = GuidanceGains(track_deck=True)
+    guidance = _tracked(gains, (0.0, 0.0, 0.2), (0.3, -0.2, 0.5))
+    guidance.tracker.started[:2] = False
+    own = OwnState(np.array([1.0, 2.0, 2.0]), np.zeros(3), matrix_from_euler_zyx(0.0, 0.0, 0.7))
+    setpoint = guidance.hold(_observation(None, tof_m=1.8), 1.5, own)
+    vz = 0.5 + gains.k_z * (1.5 - 1.8)
+    np.testing.assert_allclose(setpoint.velocity_h, [0.0, 0.0, vz], atol=1e-12)
