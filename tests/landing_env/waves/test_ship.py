@@ -315,6 +315,63 @@ def test_a_vessel_of_impossible_proportions_is_refused_naming_the_key_and_its_bo
     assert deck == (-15.0, 3.5, 20.0) and all(isinstance(v, float) for v in deck)
 
 
+def test_a_sea_outside_what_it_can_be_is_refused_naming_the_key_and_its_bounds() -> None:
+    codes = "choose one of 0, 1, 2, 3, 4, 5, 6"
+    needs = f"None needs both significant_height_m and peak_period_s; or {codes}"
+    cases = [
+        ("sea_state", {"sea_state": 7}, f"7 is not allowed; {codes}"),
+        ("sea_state", {"sea_state": None, "peak_period_s": 7.0}, needs),
+        ("sea_state", {"sea_state": None, "significant_height_m": 2.0}, needs),
+        ("significant_height_m", {"significant_height_m": 16.5}, "allowed [0.0, 16.0]"),
+        ("significant_height_m", {"significant_height_m": -0.1}, "allowed [0.0, 16.0]"),
+        ("peak_period_s", {"peak_period_s": 1.9}, "allowed [2.0, 25.0]"),
+        ("peak_period_s", {"peak_period_s": 25.5}, "allowed [2.0, 25.0]"),
+        ("gamma", {"gamma": 0.9}, "allowed [1.0, 10.0]"),
+        ("gamma", {"gamma": 10.5}, "allowed [1.0, 10.0]"),
+        ("n_components", {"n_components": 0}, "allowed [1, 10000]"),
+        ("n_components", {"n_components": 10_001}, "allowed [1, 10000]"),
+        ("band_low", {"band_low": 0.0}, "0.0 is out of range; allowed (0.0, 1.0]"),
+        ("band_low", {"band_low": 1.5}, "allowed (0.0, 1.0]"),
+        ("band_high", {"band_high": 1.0}, "1.0 is out of range; allowed (1.0, 20.0]"),
+        ("band_high", {"band_high": 20.5}, "allowed (1.0, 20.0]"),
+        ("direction_spread_deg", {"direction_spread_deg": 180.5}, "allowed [0.0, 180.0]"),
+        ("generator.spectrum", {"generator": {"spectrum": "pm"}}, "'pm' is not allowed"),
+        # the sea state 4 (1.88 m, 8.8 s) is swell-dominated; a ramp to Tp 4 s is not
+        (
+            "generator.tp_end_s",
+            {"generator": {"spectrum": "torsethaugen", "tp_end_s": 4.0}},
+            "the ramp from Hs 1.88 m, Tp 8.8 s to Hs 1.88 m, Tp 4 s crosses",
+        ),
+    ]
+    for key, fields, text in cases:
+        with pytest.raises(ConfigError) as info:
+            ShipMotionConfig(**fields)
+        assert info.value.key == key and text in str(info.value), (key, str(info.value))
+    # the bounds are seas it can be; a generator given as a mapping becomes its config
+    ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=0.0,
+        peak_period_s=2.0,
+        gamma=1.0,
+        n_components=1,
+        band_low=1.0,
+        band_high=20.0,
+        direction_spread_deg=0.0,
+    )
+    widest = ShipMotionConfig(
+        significant_height_m=16.0,
+        peak_period_s=25.0,
+        gamma=10.0,
+        n_components=10_000,
+        band_low=1e-3,
+        band_high=1.001,
+        direction_spread_deg=180.0,
+        generator={"speed_m_s": 3.0},
+    )
+    assert widest.generator == SeaGeneratorConfig(speed_m_s=3.0)
+    assert ShipMotionConfig(sea_state=0).hs == 0.0
+
+
 def test_the_vessels_own_periods_are_the_imo_roll_formula_and_the_draughts_heave() -> None:
     config = ShipMotionConfig(length_m=20.0, beam_m=6.0, draught_m=1.5, metacentric_height_m=0.8)
     c = 0.373 + 0.023 * 6.0 / 1.5 - 0.043 * 20.0 / 100.0
