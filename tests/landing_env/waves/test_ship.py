@@ -491,6 +491,26 @@ def test_the_decks_reach_is_its_amplitude_in_a_regular_wave_and_six_sigma_in_a_s
     assert sea.tilt_reach_rad > np.max(tilt)
 
 
+def test_the_decks_reach_adds_the_lever_arms_drop_at_the_tilt_reach_up_to_1_5_rad() -> None:
+    # the deck's height above the centre of rotation changes only that drop, not the sea
+    for sea, capped in (({"sea_state": 4}, False), ({"significant_height_m": 16.0}, True)):
+        fields = dict(sea, peak_period_s=3.0) if capped else sea
+        hull = {"length_m": 10.0, "beam_m": 4.0, "draught_m": 1.0}
+        level = ShipMotion(
+            ShipMotionConfig(**fields, **hull, helideck_position_m=(-4.0, 1.0, 0.0)),
+            np.random.default_rng(3),
+        )
+        assert (level.tilt_reach_rad > 1.5) == capped
+        drop = 1.0 - math.cos(min(level.tilt_reach_rad, 1.5))
+        for height_m in (12.0, -12.0):
+            high = ShipMotion(
+                ShipMotionConfig(**fields, **hull, helideck_position_m=(-4.0, 1.0, height_m)),
+                np.random.default_rng(3),
+            )
+            assert high.tilt_reach_rad == level.tilt_reach_rad
+            assert high.vertical_reach_m - level.vertical_reach_m == pytest.approx(12.0 * drop)
+
+
 @pytest.mark.parametrize("speed_m_s", [0.0, 6.0])
 def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
     speed_m_s: float,
@@ -507,6 +527,32 @@ def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
     np.testing.assert_allclose(ship.vessel_rates(times), vessel, atol=2e-5)
     np.testing.assert_allclose(ship.velocity(times[7]), ship.velocities(times)[7], atol=1e-12)
     np.testing.assert_allclose(ship.elevation(times), ship.waves.elevation(times), atol=0.0)
+
+
+@pytest.mark.parametrize("speed_m_s", [1.0, 6.0])
+def test_a_ship_under_way_heaves_by_the_rao_of_its_encounter_frequency(speed_m_s: float) -> None:
+    config = ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=1.0,
+        peak_period_s=6.0,
+        n_components=1,
+        band_low=0.999,
+        band_high=1.001,
+        wave_direction_deg=180.0,
+        direction_spread_deg=0.0,
+        generator=SeaGeneratorConfig(speed_m_s=speed_m_s),
+    )
+    ship = ShipMotion(config, np.random.default_rng(0))
+    waves = ship.waves
+    omega_e = float(waves.encounter_omega[0])
+    assert omega_e > float(waves.omega[0])  # head seas: met more often
+    # the complex heave of the one component: its real part now, a quarter period earlier
+    heave = ship.vessel_poses(np.array([0.0, -0.5 * math.pi / omega_e]))[:, 2]
+    response = (heave[0] + 1j * heave[1]) / waves.elevation_phasors[0]
+    under_way = vessel_raos(config, waves.omega, waves.directions, waves.encounter_omega)
+    at_rest = vessel_raos(config, waves.omega, waves.directions)
+    assert response == pytest.approx(complex(under_way["heave"][0]), rel=1e-9)
+    assert abs(response - at_rest["heave"][0]) > 1e-3 * abs(response)
 
 
 def test_at_rest_the_raos_are_jensen_mansour_olsens_closed_forms_and_the_roll_oscillator() -> None:
