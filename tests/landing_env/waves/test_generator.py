@@ -434,6 +434,27 @@ def test_a_torsethaugen_ramp_on_one_side_of_the_fully_developed_period_is_taken(
     assert "6.6 Hs^(1/3)" in str(info.value) and "ochi_hubble" in str(info.value)
 
 
+def test_a_small_seas_torsethaugen_ramp_across_the_fully_developed_period_is_refused() -> None:
+    # Hs 0.5 m: Tf = 6.6 * 0.5^(1/3) = 5.24 s, so Tp 3 s is a wind sea and 8 s a swell
+    with pytest.raises(ConfigError) as info:
+        SeaGeneratorConfig(spectrum="torsethaugen", tp_end_s=8.0).check_sea(0.5, 3.0)
+    assert info.value.key == "generator.tp_end_s"
+    assert "Hs 0.5 m, Tp 3.0 s to Hs 0.5 m, Tp 8 s" in str(info.value)
+    with pytest.raises(ConfigError):
+        SeaGeneratorConfig(spectrum="torsethaugen", hs_end_m=0.9, tp_end_s=3.0).check_sea(0.3, 8.0)
+
+
+@pytest.mark.parametrize("spectrum", ["jonswap", "torsethaugen", "ochi_hubble"])
+def test_a_generated_sea_below_a_metre_holds_its_variance_in_each_system(spectrum: str) -> None:
+    generator = SeaGeneratorConfig(spectrum=spectrum, speed_m_s=1.0)
+    sea = generated(generator, hs=0.8, tp=5.0, n=100)
+    assert 4.0 * math.sqrt(sea.m0) == pytest.approx(0.8, rel=1e-12)
+    for p, part in enumerate(generator.parts(0.8, 5.0, 1.0)):
+        in_part = sea.amplitudes_m[sea.part_index == p]
+        assert part.significant_height_m < 1.0
+        assert np.sum(in_part**2) / 2.0 == pytest.approx(part.significant_height_m**2 / 16.0)
+
+
 def test_a_generator_is_taken_from_a_mapping_and_refused_under_its_key() -> None:
     config = SeaGeneratorConfig(speed_m_s=3.0)
     assert require_generator(config) is config

@@ -315,6 +315,63 @@ def test_a_vessel_of_impossible_proportions_is_refused_naming_the_key_and_its_bo
     assert deck == (-15.0, 3.5, 20.0) and all(isinstance(v, float) for v in deck)
 
 
+def test_a_sea_outside_what_it_can_be_is_refused_naming_the_key_and_its_bounds() -> None:
+    codes = "choose one of 0, 1, 2, 3, 4, 5, 6"
+    needs = f"None needs both significant_height_m and peak_period_s; or {codes}"
+    cases = [
+        ("sea_state", {"sea_state": 7}, f"7 is not allowed; {codes}"),
+        ("sea_state", {"sea_state": None, "peak_period_s": 7.0}, needs),
+        ("sea_state", {"sea_state": None, "significant_height_m": 2.0}, needs),
+        ("significant_height_m", {"significant_height_m": 16.5}, "allowed [0.0, 16.0]"),
+        ("significant_height_m", {"significant_height_m": -0.1}, "allowed [0.0, 16.0]"),
+        ("peak_period_s", {"peak_period_s": 1.9}, "allowed [2.0, 25.0]"),
+        ("peak_period_s", {"peak_period_s": 25.5}, "allowed [2.0, 25.0]"),
+        ("gamma", {"gamma": 0.9}, "allowed [1.0, 10.0]"),
+        ("gamma", {"gamma": 10.5}, "allowed [1.0, 10.0]"),
+        ("n_components", {"n_components": 0}, "allowed [1, 10000]"),
+        ("n_components", {"n_components": 10_001}, "allowed [1, 10000]"),
+        ("band_low", {"band_low": 0.0}, "0.0 is out of range; allowed (0.0, 1.0]"),
+        ("band_low", {"band_low": 1.5}, "allowed (0.0, 1.0]"),
+        ("band_high", {"band_high": 1.0}, "1.0 is out of range; allowed (1.0, 20.0]"),
+        ("band_high", {"band_high": 20.5}, "allowed (1.0, 20.0]"),
+        ("direction_spread_deg", {"direction_spread_deg": 180.5}, "allowed [0.0, 180.0]"),
+        ("generator.spectrum", {"generator": {"spectrum": "pm"}}, "'pm' is not allowed"),
+        # the sea state 4 (1.88 m, 8.8 s) is swell-dominated; a ramp to Tp 4 s is not
+        (
+            "generator.tp_end_s",
+            {"generator": {"spectrum": "torsethaugen", "tp_end_s": 4.0}},
+            "the ramp from Hs 1.88 m, Tp 8.8 s to Hs 1.88 m, Tp 4 s crosses",
+        ),
+    ]
+    for key, fields, text in cases:
+        with pytest.raises(ConfigError) as info:
+            ShipMotionConfig(**fields)
+        assert info.value.key == key and text in str(info.value), (key, str(info.value))
+    # the bounds are seas it can be; a generator given as a mapping becomes its config
+    ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=0.0,
+        peak_period_s=2.0,
+        gamma=1.0,
+        n_components=1,
+        band_low=1.0,
+        band_high=20.0,
+        direction_spread_deg=0.0,
+    )
+    widest = ShipMotionConfig(
+        significant_height_m=16.0,
+        peak_period_s=25.0,
+        gamma=10.0,
+        n_components=10_000,
+        band_low=1e-3,
+        band_high=1.001,
+        direction_spread_deg=180.0,
+        generator={"speed_m_s": 3.0},
+    )
+    assert widest.generator == SeaGeneratorConfig(speed_m_s=3.0)
+    assert ShipMotionConfig(sea_state=0).hs == 0.0
+
+
 def test_the_vessels_own_periods_are_the_imo_roll_formula_and_the_draughts_heave() -> None:
     config = ShipMotionConfig(length_m=20.0, beam_m=6.0, draught_m=1.5, metacentric_height_m=0.8)
     c = 0.373 + 0.023 * 6.0 / 1.5 - 0.043 * 20.0 / 100.0
@@ -434,6 +491,26 @@ def test_the_decks_reach_is_its_amplitude_in_a_regular_wave_and_six_sigma_in_a_s
     assert sea.tilt_reach_rad > np.max(tilt)
 
 
+def test_the_decks_reach_adds_the_lever_arms_drop_at_the_tilt_reach_up_to_1_5_rad() -> None:
+    # the deck's height above the centre of rotation changes only that drop, not the sea
+    for sea, capped in (({"sea_state": 4}, False), ({"significant_height_m": 16.0}, True)):
+        fields = dict(sea, peak_period_s=3.0) if capped else sea
+        hull = {"length_m": 10.0, "beam_m": 4.0, "draught_m": 1.0}
+        level = ShipMotion(
+            ShipMotionConfig(**fields, **hull, helideck_position_m=(-4.0, 1.0, 0.0)),
+            np.random.default_rng(3),
+        )
+        assert (level.tilt_reach_rad > 1.5) == capped
+        drop = 1.0 - math.cos(min(level.tilt_reach_rad, 1.5))
+        for height_m in (12.0, -12.0):
+            high = ShipMotion(
+                ShipMotionConfig(**fields, **hull, helideck_position_m=(-4.0, 1.0, height_m)),
+                np.random.default_rng(3),
+            )
+            assert high.tilt_reach_rad == level.tilt_reach_rad
+            assert high.vertical_reach_m - level.vertical_reach_m == pytest.approx(12.0 * drop)
+
+
 @pytest.mark.parametrize("speed_m_s", [0.0, 6.0])
 def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
     speed_m_s: float,
@@ -450,6 +527,32 @@ def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
     np.testing.assert_allclose(ship.vessel_rates(times), vessel, atol=2e-5)
     np.testing.assert_allclose(ship.velocity(times[7]), ship.velocities(times)[7], atol=1e-12)
     np.testing.assert_allclose(ship.elevation(times), ship.waves.elevation(times), atol=0.0)
+
+
+@pytest.mark.parametrize("speed_m_s", [1.0, 6.0])
+def test_a_ship_under_way_heaves_by_the_rao_of_its_encounter_frequency(speed_m_s: float) -> None:
+    config = ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=1.0,
+        peak_period_s=6.0,
+        n_components=1,
+        band_low=0.999,
+        band_high=1.001,
+        wave_direction_deg=180.0,
+        direction_spread_deg=0.0,
+        generator=SeaGeneratorConfig(speed_m_s=speed_m_s),
+    )
+    ship = ShipMotion(config, np.random.default_rng(0))
+    waves = ship.waves
+    omega_e = float(waves.encounter_omega[0])
+    assert omega_e > float(waves.omega[0])  # head seas: met more often
+    # the complex heave of the one component: its real part now, a quarter period earlier
+    heave = ship.vessel_poses(np.array([0.0, -0.5 * math.pi / omega_e]))[:, 2]
+    response = (heave[0] + 1j * heave[1]) / waves.elevation_phasors[0]
+    under_way = vessel_raos(config, waves.omega, waves.directions, waves.encounter_omega)
+    at_rest = vessel_raos(config, waves.omega, waves.directions)
+    assert response == pytest.approx(complex(under_way["heave"][0]), rel=1e-9)
+    assert abs(response - at_rest["heave"][0]) > 1e-3 * abs(response)
 
 
 def test_at_rest_the_raos_are_jensen_mansour_olsens_closed_forms_and_the_roll_oscillator() -> None:
