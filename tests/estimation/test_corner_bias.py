@@ -189,3 +189,137 @@ def test_fuzzed_corners_never_raise_and_stay_finite_where_they_were(values) -> N
     assert np.array_equal(np.isfinite(corrected), finite) or not finite.all()
     if not finite.all():
         np.testing.assert_array_equal(corrected, corners)
+
+
+def _outward_normals(quad: np.ndarray) -> np.ndarray:
+    """Each edge's (corner i to i+1) unit normal pointing out of the quadrilateral."""
+    edge = np.roll(quad, -1, axis=0) - quad
+    area2 = np.sum(
+        quad[:, 0] * np.roll(quad, -1, axis=0)[:, 1] - np.roll(quad, -1, axis=0)[:, 0] * quad[:, 1]
+    )
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]]) / np.linalg.norm(edge, axis=1)[:, None]
+    return normal if area2 > 0.0 else -normal
+
+
+def _turned(quad: np.ndarray, degrees: float) -> np.ndarray:
+    angle = np.radians(degrees)
+    return quad @ np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]).T
+
+
+SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+#: a trapezoid turned a little: its edges' midpoints lie off their normals through the centre
+TRAPEZOID = _turned(np.array([[0.0, 0.0], [10.0, 0.0], [8.0, 6.0], [2.0, 6.0]]), 5.0)
+QUADRILATERALS = {
+    "square": SQUARE,
+    "diamond": _turned(SQUARE, 45.0),
+    "trapezoid": TRAPEZOID,
+    "trapezoid wound the other way": TRAPEZOID[::-1].copy(),
+    "half-pixel square": 0.05 * SQUARE,
+    "trapezoid off the image's diagonal": TRAPEZOID + np.array([450.0, 30.0]),
+}
+
+
+@pytest.mark.parametrize("name", QUADRILATERALS)
+def test_each_edge_moves_out_by_its_offset_for_any_winding_size_or_place_in_the_image(
+    name: str,
+) -> None:
+    quad = QUADRILATERALS[name]
+    design = corner_design(quad)
+    assert design is not None
+    normal = _outward_normals(quad)
+    edge = np.roll(quad, -1, axis=0) - quad
+    length = np.linalg.norm(edge, axis=1)
+    sin2 = (2.0 * edge[:, 0] * edge[:, 1] / length**2) ** 2
+    for theta, offset in (((1, 0, 0), np.ones(4)), ((0, 1, 0), sin2), ((0, 0, 1), 1.0 / length)):
+        moved = design @ np.array(theta, dtype=float)
+        # corner i is on edges i-1 and i: both lie `offset` further out along their normals
+        np.testing.assert_allclose(np.sum(normal * moved, axis=1), offset, atol=1e-9)
+        np.testing.assert_allclose(
+            np.sum(np.roll(normal, 1, axis=0) * moved, axis=1), np.roll(offset, 1), atol=1e-9
+        )
+        np.testing.assert_allclose(CornerBias(*theta).displacement(quad), moved, atol=1e-9)
+    assert edge_axis_alignment(0.05 * SQUARE) == pytest.approx(1.0)
+
+
+def test_corners_not_four_finite_points_or_three_in_a_line_have_no_offset() -> None:
+    line = _turned(np.array([[0.0, 0.0], [5.0, 0.0], [10.0, 0.0], [5.0, 8.0]]), 30.0)
+    for quad in (
+        line,
+        SQUARE[:3],
+        np.vstack([SQUARE, SQUARE[:1]]),
+        np.where(SQUARE > 5.0, np.inf, SQUARE),
+    ):
+        assert corner_design(quad) is None
+        np.testing.assert_array_equal(REALISTIC.displacement(quad), np.zeros((4, 2)))
+
+
+def test_an_offset_that_overflows_moves_no_corner() -> None:
+    diamond = 1e-3 * QUADRILATERALS["diamond"]
+    np.testing.assert_array_equal(CornerBias(c_px2=1e308).displacement(diamond), np.zeros((4, 2)))
+    far = 1.5e307 * SQUARE  # corners near the largest float, moved out past it
+    with np.errstate(over="ignore"):
+        np.testing.assert_array_equal(CornerBias(a_px=-1e308).correct(far), far)
+    # no offset: the corners come back as floats, as they do corrected
+    assert CornerBias().correct(SQUARE.astype(int).tolist()).dtype == np.float64
+
+
+def test_a_fit_file_without_the_angle_noise_model_loads_it_as_not_measured() -> None:
+    doc = CornerBiasFit(REALISTIC, 0.068, 0.19, 240, 0.062, 0.073).as_dict()
+    del doc["sigma_diagonal_px"], doc["sigma_axes_px"]
+    fit = CornerBiasFit.from_dict(doc)
+    assert (fit.sigma_diagonal_px, fit.sigma_axes_px) == (0.0, 0.0)
+    assert fit == CornerBiasFit(REALISTIC, 0.068, 0.19, 240)
+
+
+def _tilted_views(count: int) -> list[np.ndarray]:
+    """A tag tilted 35° at 1 m, turned a different way in each view: its corner offsets do
+    not average to zero over a view."""
+    views = []
+    for k in range(count):
+        rotation = Rotation.from_euler("zx", [0.7 * k, 0.6]).as_matrix()
+        translation = np.array([0.1 * np.cos(k), 0.1 * np.sin(k), 1.0])
+        views.append(CAMERA.project(tag_corners_in_tag_frame(TAG_SIZE) @ rotation.T + translation))
+    return views
+
+
+def test_three_noise_free_views_give_the_offset_back_exactly_and_an_unusable_view_is_skipped() -> (
+    None
+):
+    true = _tilted_views(3)
+    detected = [
+        p + REALISTIC.displacement(p) + shift
+        for p, shift in zip(true, ([0.4, -0.2], [0.0, 0.3], [-0.5, 0.1]), strict=True)
+    ]
+    line = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    fit = fit_corner_bias([detected[0], line, *detected[1:]], [true[0], line, *true[1:]])
+    assert fit.views == 3
+    np.testing.assert_allclose(
+        [fit.bias.a_px, fit.bias.b_px, fit.bias.c_px2],
+        [REALISTIC.a_px, REALISTIC.b_px, REALISTIC.c_px2],
+        atol=1e-6,
+    )
+    assert fit.sigma_px < 1e-6
+    with pytest.raises(ValueError, match="zip"):
+        fit_corner_bias(detected, true[:2])
+
+
+def test_the_fits_noise_is_what_the_model_leaves_over_its_degrees_of_freedom() -> None:
+    """sigma_px: per coordinate over 6 per view less the 3 parameters; uncorrected: over 6
+    per view; the angle model: a line through each view's mean square (over 6) against
+    the edges' alignment with the pixel axes."""
+    rng = np.random.default_rng(8)
+    true = _tilted_views(6)
+    detected = [p + REALISTIC.displacement(p) + rng.normal(0.0, 0.05, (4, 2)) for p in true]
+    fit = fit_corner_bias(detected, true)
+    raw = [q - p - (q - p).mean(axis=0) for q, p in zip(detected, true, strict=True)]
+    model = [fit.bias.displacement(p) - fit.bias.displacement(p).mean(axis=0) for p in true]
+    left = np.array([r - m for r, m in zip(raw, model, strict=True)])
+    assert fit.sigma_px == pytest.approx(np.sqrt(np.sum(left**2) / (6 * 6 - 3)), rel=1e-6)
+    assert fit.sigma_uncorrected_px == pytest.approx(
+        np.sqrt(np.sum(np.square(raw)) / (6 * 6)), rel=1e-9
+    )
+    slope, intercept = np.polyfit(
+        [edge_axis_alignment(p) for p in true], np.sum(left**2, axis=(1, 2)) / 6.0, 1
+    )
+    assert fit.sigma_diagonal_px == pytest.approx(np.sqrt(intercept), rel=1e-6)
+    assert fit.sigma_axes_px == pytest.approx(np.sqrt(intercept + slope), rel=1e-6)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 
 import pytest
@@ -114,3 +115,52 @@ def test_a_physical_range_is_checked_on_load_and_a_field_limit_always() -> None:
     for build in (lambda: CameraConfig(fx=0.0), lambda: load_config("default", camera={"fx": 0.0})):
         with pytest.raises(ConfigError, match=r"fx: 0\.0 is out of range; allowed \(0\.0,"):
             build()
+
+
+def test_the_named_limits_bound_zero_to_high_or_minus_to_plus_bound_with_their_note() -> None:
+    assert Limit.positive(5.0, "metres") == Limit(0.0, 5.0, low_inclusive=False, note="metres")
+    assert Limit.non_negative(5.0, "metres") == Limit(0.0, 5.0, note="metres")
+    assert Limit.symmetric(2.0, "radians") == Limit(-2.0, 2.0, note="radians")
+    for made in (Limit.positive(5.0), Limit.non_negative(5.0), Limit.symmetric(2.0)):
+        assert made.note == ""
+    with pytest.raises(ConfigError, match=r"^k: 0\.0 is out of range; allowed \(0\.0, 5\.0\]$"):
+        Limit.positive(5.0).check("k", 0.0)
+    Limit.non_negative(5.0).check("k", 0.0)
+    with pytest.raises(ConfigError, match=r"^k: -2\.5 is out of range; allowed \[-2\.0, 2\.0\]$"):
+        Limit.symmetric(2.0).check("k", -2.5)
+
+
+def test_infinity_passes_only_a_limit_that_allows_it_and_only_plus_infinity() -> None:
+    bounded = Limit(0.0, 10.0)
+    unbounded = Limit(0.0, 10.0, allow_inf=True)
+    unbounded.check("k", math.inf)
+    for value in (math.inf, -math.inf, 11.0):
+        with pytest.raises(ConfigError) as error:
+            bounded.check("k", value)
+        assert error.value.key == "k"
+    for value in (-math.inf, 11.0, -1.0):
+        with pytest.raises(ConfigError) as error:
+            unbounded.check("k", value)
+        assert error.value.key == "k"
+
+
+def test_a_limited_field_keeps_its_default_its_factory_and_only_the_bounds_given() -> None:
+    physical = Limit.positive(9.0, "datasheet")
+
+    @dataclasses.dataclass
+    class Rig(Limited):
+        speed_mps: float = limited(1.5, POSITIVE, physical=physical)
+        margin_m: float = limited(0.25, NON_NEGATIVE)
+        offsets_m: tuple[float, ...] = limited(default_factory=lambda: (0.5,), physical=physical)
+        free: float = limited(-3.0)
+
+    items = {item.name: item for item in dataclasses.fields(Rig)}
+    assert dict(items["speed_mps"].metadata) == {"limit": POSITIVE, "physical": physical}
+    assert dict(items["margin_m"].metadata) == {"limit": NON_NEGATIVE}
+    assert dict(items["offsets_m"].metadata) == {"physical": physical}
+    assert dict(items["free"].metadata) == {}
+    rig = Rig()
+    assert (rig.speed_mps, rig.margin_m, rig.offsets_m, rig.free) == (1.5, 0.25, (0.5,), -3.0)
+    with pytest.raises(ConfigError) as error:
+        Rig(margin_m=-0.5)
+    assert str(error.value) == "margin_m: -0.5 is out of range; allowed [0.0, inf]"

@@ -24,7 +24,7 @@ from estimation.frames import (
     tof_positions_in_camera_frame,
 )
 from estimation.ihrcf import IhrcfEstimator
-from estimation.noise import TofNoiseModel
+from estimation.noise import EXACT_RANGE_SIGMA_M, TofNoiseModel
 from estimation.synthetic import SyntheticScene
 from estimation.tight import TightEstimator, _same_basin, principal_point_offset
 from estimation.tight_config import TightConfig
@@ -236,6 +236,42 @@ def test_a_range_noise_floor_holds_sigma_up_to_where_the_linear_model_passes_it(
     assert TofNoiseModel().sigma_min_m == 0.0  # the VL53L1X model has no floor
     with pytest.raises(ValueError, match="sigma_min_m"):
         TofNoiseModel(sigma_min_m=-1.0)
+
+
+def test_a_ranges_sigma_adds_the_gaussian_and_the_steps_uniform_spread_in_quadrature() -> None:
+    """3 mm of Gaussian noise (1 + 1 mm/m at 2 m) and 4 mm of quantisation (a step of
+    4 mm x sqrt(12)) give 5 mm; a step alone gives step / sqrt(12)."""
+    both = TofNoiseModel(0.001, 0.001, 0.004 * math.sqrt(12.0))
+    steps = TofNoiseModel(0.0, 0.0, 0.012)
+    assert both.sigma_scalar(2.0) == pytest.approx(0.005, rel=1e-12)
+    np.testing.assert_allclose(both.sigma(np.array([2.0, 0.0])), [0.005, math.hypot(1e-3, 4e-3)])
+    assert steps.sigma_scalar(3.0) == pytest.approx(0.012 / math.sqrt(12.0), rel=1e-12)
+    np.testing.assert_allclose(steps.sigma([0.0, 3.0]), [0.012 / math.sqrt(12.0)] * 2, rtol=1e-12)
+    float32 = both.sigma(np.array([2.0, 0.0], dtype=np.float32))
+    assert float32.dtype == np.float64 and float32[0] == both.sigma(2.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(0.0, 0.05),
+    st.floats(0.0, 0.05),
+    st.floats(0.0, 0.01),
+    st.floats(0.0, 0.02),
+    st.floats(0.0, 10.0),
+)
+def test_a_single_ranges_sigma_is_the_arrays_sigma_at_that_range(
+    sigma_0_m: float, sigma_per_m: float, resolution_m: float, sigma_min_m: float, range_m: float
+) -> None:
+    model = TofNoiseModel(sigma_0_m, sigma_per_m, resolution_m, sigma_min_m)
+    assert model.sigma_scalar(range_m) == pytest.approx(float(model.sigma([range_m])[0]), rel=1e-12)
+
+
+def test_exact_ranges_have_no_noise_and_the_exact_floor_at_every_range() -> None:
+    exact = TofNoiseModel.exact()
+    assert exact == TofNoiseModel(0.0, 0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(exact.sigma([0.0, 1.0, 4.0]), [EXACT_RANGE_SIGMA_M] * 3)
+    np.testing.assert_array_equal(exact.gaussian_sigma([0.0, 4.0]), [0.0, 0.0])
+    assert exact.sigma_scalar(4.0) == EXACT_RANGE_SIGMA_M
 
 
 def test_the_covariance_is_consistent_nees_in_the_chi2_band(noisy_errors: dict) -> None:

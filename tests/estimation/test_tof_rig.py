@@ -4,6 +4,7 @@ calibration, the simulated rig through the same function, and bad input named.""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import cv2
@@ -30,6 +31,8 @@ from estimation.tof_rig import (
     TofRigDescription,
     TofRigError,
     calibrate_rig,
+    pad_centroid_in_image,
+    reading_rows,
 )
 from landing_env.calibration.tof_camera_sim import (
     TofRigConfig,
@@ -434,3 +437,276 @@ def test_the_intrinsics_given_are_the_camera_the_calibration_records_over_the_ri
     intrinsics = _intrinsics_file(tmp_path / "intrinsics.json", 110.0, (160, 120))
     result, _ = calibrate_tof_recording(rig_folder, intrinsics)
     assert (result.calibration.metadata["camera"]["fx"], CAMERA.fx) == (110.0, 100.0)
+
+
+def test_a_stages_range_is_the_mean_of_its_finite_non_negative_readings_if_half_or_more() -> None:
+    stages, description = _synthetic_rig()
+    nan, inf = np.nan, np.inf
+    five = {
+        0: [0.0, 0.75, 0.75, 0.0, nan],  # a range of 0 m is a return: four of five, mean 0.375
+        1: [-1.0, inf, 0.6, 0.6, 0.6],  # negative or infinite: no return
+        2: [0.9, 0.9, nan, nan, nan],  # two of five: fewer than half, skipped
+        3: [0.5, 0.7, 0.6, nan, nan],
+    }
+    stamps = np.arange(5.0) * 0.1 + 1.0
+    stages[1] = RigStage(
+        stages[1].frames, (stamps,) * 4, tuple(np.array(five[i]) for i in range(4))
+    )
+    # a stage of one reading per sensor keeps it (the third sensor has none there)
+    one = [np.array([0.95]), np.array([0.95]), np.array([nan]), np.array([0.95])]
+    stages[2] = RigStage(stages[2].frames, (np.array([2.0]),) * 4, tuple(one))
+    result = calibrate_rig(stages, description)
+    np.testing.assert_array_equal(result.ranges[1], [0.375, 0.6, nan, 0.6])
+    np.testing.assert_array_equal(result.ranges[2], [0.95, 0.95, nan, 0.95])
+    assert result.skipped["range_invalid"] == [0, 0, 2, 0]
+    # a skipped stage's pixels are NaN, as its range is
+    assert np.isnan(result.pixels[1, 2]).all() and np.isnan(result.pixels[2, 2]).all()
+
+
+def test_a_stages_pad_centroid_is_the_mean_over_the_frames_that_show_the_pad() -> None:
+    stages, description = _synthetic_rig()
+    base = calibrate_rig(stages, description).pixels
+    k = 1
+    shown = stages[k].frames[0]
+    no_red = shown.image.copy()
+    no_red[np.all(no_red == RGB["red"], axis=2)] = 128
+    moved = np.roll(shown.image, 2, axis=1)  # every pad 2 px to the right
+    frames = (
+        RigFrame(shown.t_s, "no_red.png", no_red),
+        shown,
+        RigFrame(shown.t_s + 0.2, "moved.png", moved),
+    )
+    stages[k] = RigStage(frames, stages[k].reading_t_s, stages[k].readings_m)
+    # and the blue pad (the first sensor's) painted over in the next stage's only frame
+    no_blue = stages[k + 1].frames[0].image.copy()
+    no_blue[np.all(no_blue == RGB["blue"], axis=2)] = 128
+    only = RigFrame(stages[k + 1].frames[0].t_s, "no_blue.png", no_blue)
+    stages[k + 1] = RigStage((only,), stages[k + 1].reading_t_s, stages[k + 1].readings_m)
+    result = calibrate_rig(stages, description)
+    pixels = result.pixels
+    # the red pad from two frames (1 px on average), the others from three (2/3 px)
+    np.testing.assert_allclose(pixels[k, :3], base[k, :3] + [2.0 / 3.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(pixels[k, 3], base[k, 3] + [1.0, 0.0], atol=1e-9)
+    assert np.isnan(pixels[k + 1, 0]).all() and np.isnan(result.ranges[k + 1, 0])
+    np.testing.assert_array_equal(pixels[k + 1, 1:], base[k + 1, 1:])
+    np.testing.assert_array_equal(pixels[[0, 3]], base[[0, 3]])
+    assert result.skipped["pad_not_found"] == [1, 0, 0, 0]
+
+
+def test_two_stages_calibrate_and_fewer_or_malformed_ones_are_refused_by_name() -> None:
+    stages, description = _synthetic_rig()
+    two = calibrate_rig(stages[:2], description)
+    assert [len(s) for s in two.calibration.samples] == [2, 2, 2, 2]
+    with pytest.raises(TofRigError) as refused:
+        calibrate_rig(stages[:1], description)
+    assert str(refused.value) == "1 stage(s); at least 2 are needed"
+    empty = [stages[0], RigStage((), stages[1].reading_t_s, stages[1].readings_m)]
+    with pytest.raises(TofRigError) as refused:
+        calibrate_rig(empty, description)
+    assert str(refused.value) == "stage 1: no camera frame"
+    three = [
+        stages[0],
+        RigStage(stages[1].frames, stages[1].reading_t_s[:3], stages[1].readings_m[:3]),
+    ]
+    with pytest.raises(TofRigError) as refused:
+        calibrate_rig(three, description)
+    assert str(refused.value) == "stage 1: 3 sensors; need 4"
+    # no camera model: every image the size of the first
+    small = CameraIntrinsics(width=80, height=60, fx=50.0, fy=50.0, cx=39.5, cy=29.5)
+    stages[3] = RigStage(
+        (RigFrame(3.0, "pads_3.png", _pad_image(RANGES_M[3], small)),),
+        stages[3].reading_t_s,
+        stages[3].readings_m,
+    )
+    with pytest.raises(TofRigError) as refused:
+        calibrate_rig(stages, TofRigDescription(stages=description.stages, min_pad_area_px=4.0))
+    assert str(refused.value) == "pads_3.png: image is 80x60, the first was 160x120"
+
+
+def test_sensors_short_of_two_stages_are_all_named_with_the_skips() -> None:
+    stages, description = _synthetic_rig()
+    image = stages[1].frames[0].image.copy()
+    for colour in ("green", "red"):
+        image[np.all(image == RGB[colour], axis=2)] = 128
+    stages[1] = RigStage(
+        (RigFrame(1.0, "grey.png", image),), stages[1].reading_t_s, stages[1].readings_m
+    )
+    with pytest.raises(TofRigError) as refused:
+        calibrate_rig(stages[:2], description)
+    assert str(refused.value) == (
+        "usable stages sensor 2 (green pad): 1, sensor 4 (red pad): 1; at least 2 are needed "
+        "per sensor (skipped: {'pad_not_found': [0, 1, 0, 1], 'pad_clipped': [0, 0, 0, 0], "
+        "'range_invalid': [0, 0, 0, 0]})"
+    )
+
+
+def test_the_calibration_records_the_rig_it_was_made_on_and_what_was_skipped() -> None:
+    stages, description = _synthetic_rig()
+    rig = TofRigDescription(
+        stages=description.stages,
+        min_pad_area_px=4.0,
+        camera=CAMERA,
+        tof_mount_offsets_c=description.tof_mount_offsets_c,
+        tof_max_range_m=4.0,
+        metadata={"source": "test"},
+    )
+    metadata = calibrate_rig(stages, rig).calibration.metadata
+    assert metadata == {
+        "source": "test",
+        "camera": CAMERA.as_dict(),
+        "tof_mount_offsets_c": MOUNTS_C.tolist(),
+        "tof_max_range_m": 4.0,
+        "stages": 4,
+        "min_pad_area_px": 4.0,
+        "skipped": {"pad_not_found": [0] * 4, "pad_clipped": [0] * 4, "range_invalid": [0] * 4},
+    }
+    # a rig file without a camera, mounts or maximum range: none recorded
+    bare = TofRigDescription(stages=description.stages, min_pad_area_px=4.0)
+    assert set(calibrate_rig(stages, bare).calibration.metadata) == {
+        "stages",
+        "min_pad_area_px",
+        "skipped",
+    }
+
+
+def test_a_rig_file_saved_loads_back_as_it_was_and_its_optional_fields_default(
+    tmp_path: Path,
+) -> None:
+    _, description = _synthetic_rig()
+    full = TofRigDescription(
+        stages=description.stages,
+        min_pad_area_px=1.0,  # the smallest allowed
+        camera=CAMERA,
+        tof_mount_offsets_c=description.tof_mount_offsets_c,
+        tof_max_range_m=4.0,
+        metadata={"source": "test"},
+    )
+    full.save(tmp_path / RIG_FILE)
+    assert TofRigDescription.load(tmp_path / RIG_FILE) == full
+    assert [s.nominal_range_m for s in full.stages] == list(RANGES_M)
+    doc = {
+        "format": "deck-landing/tof-rig",
+        "format_version": 1,
+        "stages": [{"t_start_s": 0.0, "t_end_s": 1.0}, {"t_start_s": 1.5, "t_end_s": 2.0}],
+    }
+    (tmp_path / RIG_FILE).write_text(json.dumps(doc))
+    bare = TofRigDescription.load(tmp_path / RIG_FILE)
+    assert bare == TofRigDescription(stages=(StageWindow(0.0, 1.0), StageWindow(1.5, 2.0)))
+    assert bare.min_pad_area_px == 12.0 and bare.camera is None and bare.metadata == {}
+    assert bare.tof_mount_offsets_c is None and bare.tof_max_range_m is None
+
+
+def test_a_bad_rig_file_is_refused_with_the_file_the_field_and_what_it_needs(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / RIG_FILE
+    good = {
+        "format": "deck-landing/tof-rig",
+        "format_version": 1,
+        "stages": [
+            {"t_start_s": 0.0, "t_end_s": 0.5},
+            {"t_start_s": 1.0, "t_end_s": 1.5},
+            {"t_start_s": 2.0, "t_end_s": 2.5},
+        ],
+    }
+
+    def refused(doc: object) -> str:
+        path.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+        with pytest.raises(TofRigError) as error:
+            TofRigDescription.load(path)
+        return str(error.value)
+
+    with pytest.raises(TofRigError) as error:
+        TofRigDescription.load(tmp_path / "nowhere" / RIG_FILE)
+    assert str(error.value) == (
+        f"{tmp_path / 'nowhere'}: no {RIG_FILE} (the rig's stage windows; see the "
+        "recorded-data how-to)"
+    )
+    assert refused("{no").startswith(f"{path}: not JSON (")
+    format_message = f"{path}: format must be 'deck-landing/tof-rig'"
+    assert refused([good]) == format_message
+    assert refused({**good, "format": "deck-landing/other"}) == format_message
+    assert refused({**good, "format_version": 3}) == (
+        f"{path}: unsupported format_version 3; readable: 1"
+    )
+    touching = json.loads(json.dumps(good))
+    touching["stages"][1]["t_start_s"] = 0.5  # starts as the one before ends
+    assert refused(touching) == (
+        f"{path}: stages[1] starts at 0.5 s, not after stages[0] ends (0.5 s): windows must "
+        "be in time order and not overlap"
+    )
+    assert (
+        refused({**good, "min_pad_area_px": "x"})
+        == f"{path}: min_pad_area_px = 'x' is not a number"
+    )
+    assert refused({**good, "min_pad_area_px": 0.5}) == f"{path}: min_pad_area_px 0.5 must be >= 1"
+    mounts = (
+        f"{path}: tof_mount_offsets_c must be 4 rows of [x, y, z] metres (the sensors in the "
+        "camera frame)"
+    )
+    assert refused({**good, "tof_mount_offsets_c": [[0, 0, 0]] * 3 + [[0, 0]]}) == mounts
+    assert (
+        refused({**good, "tof_max_range_m": "x"})
+        == f"{path}: tof_max_range_m = 'x' is not a number"
+    )
+
+
+@pytest.mark.parametrize(
+    ("box", "clipped"),
+    [
+        ((0, 5, 4, 5), True),  # touches the left border
+        ((1, 5, 4, 5), False),
+        ((10, 0, 4, 5), True),  # the top
+        ((10, 1, 4, 5), False),
+        ((26, 5, 4, 5), True),  # the right: its last column is the image's
+        ((25, 5, 4, 5), False),
+        ((10, 15, 4, 5), True),  # the bottom
+        ((10, 14, 4, 5), False),
+    ],
+)
+def test_a_pad_touching_an_image_border_is_clipped_and_one_a_pixel_inside_is_found(
+    box: tuple[int, int, int, int], clipped: bool
+) -> None:
+    x, y, w, h = box
+    mask = np.zeros((20, 30), bool)
+    mask[y : y + h, x : x + w] = True
+    # the hull through the pixel centres of a 4 x 5 block: 3 x 4 = 12 px², the minimum
+    centroid, reason = pad_centroid_in_image(mask, 12.0)
+    if clipped:
+        assert centroid is None and reason == "pad_clipped"
+    else:
+        assert reason == ""
+        np.testing.assert_allclose(centroid, [x + 1.5, y + 2.0])
+    assert pad_centroid_in_image(mask, 12.5) == (None, "pad_not_found")
+
+
+def test_a_window_must_be_finite_and_not_end_before_it_starts_and_none_writes_no_nominal(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / RIG_FILE
+    TofRigDescription(stages=(StageWindow(0.0, 1.0), StageWindow(2.0, 3.0))).save(path)
+    doc = json.loads(path.read_text())
+    assert doc["stages"] == [{"t_start_s": 0.0, "t_end_s": 1.0}, {"t_start_s": 2.0, "t_end_s": 3.0}]
+    for start, end in ((2.5, 2.0), (-math.inf, 3.0), (2.0, math.inf)):
+        doc["stages"][1] = {"t_start_s": start, "t_end_s": end}
+        path.write_text(json.dumps(doc))
+        with pytest.raises(TofRigError) as refused:
+            TofRigDescription.load(path)
+        assert str(refused.value) == (
+            f"{path}: stages[1]: need finite t_start_s <= t_end_s, got {start}, {end}"
+        )
+
+
+def test_readings_not_stamped_together_cannot_be_rows_of_a_recording() -> None:
+    stages, _ = _synthetic_rig()
+    rows = reading_rows(stages[:1])
+    assert [t for t, _ in rows] == stages[0].reading_t_s[0].tolist()
+    assert [ranges for _, ranges in rows][1:] == [[RANGES_M[0]] * 4] * (READINGS - 1)
+    late = stages[1].reading_t_s[0] + 0.01
+    stages[1] = RigStage(stages[1].frames, (*stages[1].reading_t_s[:3], late), stages[1].readings_m)
+    with pytest.raises(TofRigError) as refused:
+        reading_rows(stages)
+    assert str(refused.value) == (
+        "stage 1: the sensors' readings are not stamped together; a recording's row of ranges "
+        "holds the four sensors at one stamp"
+    )
