@@ -494,3 +494,50 @@ def test_a_landmark_estimator_runs_the_chosen_tags_estimator_and_keeps_it_throug
     estimator.reset()
     assert all(stub.resets == 1 for stub in stubs.values())
     assert estimator.estimate(CameraFrame(0.7, ()), ranges).reason == NO_LANDMARK
+
+
+def test_the_shortest_side_of_unsigned_integer_corners_is_measured_without_wrapping() -> None:
+    # sides 10, 100, 100 and 134.5 px; each corner minus the next is negative along the 10 px one
+    corners = np.array([[100, 110], [110, 110], [110, 10], [10, 10]], dtype=np.uint16)
+    assert shortest_side_px(corners) == 10.0
+
+
+#: a quarter turn about z and a half turn about x, in integers
+_INTEGER_ROTATIONS = ([[0, -1, 0], [1, 0, 0], [0, 0, 1]], [[1, 0, 0], [0, -1, 0], [0, 0, -1]])
+
+
+@pytest.mark.parametrize("rotation", _INTEGER_ROTATIONS)
+def test_a_pose_given_in_integers_comes_out_in_float_arrays(rotation: list[list[int]]) -> None:
+    landmark = Landmark(3, 0.2, 0.5, -0.25)
+    r = np.array(rotation, dtype=float)
+    r_cd, t_cd = compose_deck_pose(rotation, [1, 2, 3], landmark)
+    t_wl, r_wl = landmark_pose_w([1, 2, 3], rotation, landmark)
+    for out in (r_cd, t_cd, t_wl, r_wl):
+        assert isinstance(out, np.ndarray) and out.dtype == np.float64
+    np.testing.assert_array_equal(r_cd, r)
+    np.testing.assert_array_equal(r_wl, r)
+    np.testing.assert_allclose(t_cd, np.array([1.0, 2.0, 3.0]) - r @ [0.5, -0.25, 0.0])
+    np.testing.assert_allclose(t_wl, np.array([1.0, 2.0, 3.0]) + r @ [0.5, -0.25, 0.0])
+
+
+class _IntegerPose(_Stub):
+    """A per-landmark estimator that answers its pose in integer arrays."""
+
+    def estimate(self, frame: CameraFrame, ranges: RangeReading) -> DeckPoseEstimate:
+        estimate = super().estimate(frame, ranges)
+        rotation = np.array(_INTEGER_ROTATIONS[0])
+        return dataclasses.replace(estimate, rotation=rotation, translation=np.array([0, 0, 2]))
+
+
+def test_a_landmark_estimator_reports_the_deck_pose_in_floats_whatever_its_inner_one_gives() -> (
+    None
+):
+    estimator = LandmarkEstimator("mine", LAYOUT, _IntegerPose)
+    ranges = RangeReading(0.0, np.full(4, 1.0), np.ones(4, dtype=bool))
+    seen = estimator.estimate(CameraFrame(0.5, (TagDetection(1, _square(60.0)),)), ranges)
+    assert seen.valid and seen.rotation.dtype == np.float64
+    assert seen.translation.dtype == np.float64
+    rotation = np.array(_INTEGER_ROTATIONS[0], dtype=float)
+    np.testing.assert_array_equal(seen.rotation, rotation)
+    landmark = LAYOUT.by_id(1)
+    np.testing.assert_allclose(seen.translation, [0.0, 0.0, 2.0] - rotation @ landmark.offset_d)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.metadata
+import linecache
 import types
 import warnings
 from collections.abc import Callable, Iterator
@@ -293,3 +294,20 @@ def test_plugins_register_by_function_import_or_object_and_a_broken_one_is_skipp
         warnings.simplefilter("always")
         assert load_plugins() == []
     assert again == [] and [p.loads for p in entry_points] == [0, 1, 1, 1, 1, 1]
+
+
+def test_a_skipped_plugins_warning_points_past_the_registry_to_the_code_that_loaded_it(
+    entry_points: list[_EntryPoint],
+) -> None:
+    entry_points += [
+        _EntryPoint("broken", "broken_package.estimator:register", _fail),
+        _EntryPoint("silent", "silent_package.estimator", lambda: types.ModuleType("silent")),
+    ]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_plugins()
+    assert len(caught) == 2
+    for warning in caught:
+        # the line the warning names is a caller's (stacklevel 2), not the warning's own call
+        line = linecache.getline(warning.filename, warning.lineno)
+        assert line.strip() and "warnings.warn(" not in line, (warning.filename, line)
