@@ -440,12 +440,17 @@ def test_four_pairs_are_solved_by_the_eight_by_eight_system_unless_it_is_singula
     np.testing.assert_allclose(
         geometry._canonical_homography(direct), geometry._canonical_homography(h_true), atol=1e-12
     )
+    # a square about the origin is its own normalisation (scale exactly 1)
+    square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    for a, b in ((square, dst), (dst, square)):
+        solved = geometry._homography_four(a, b)
+        assert solved is not None
+        np.testing.assert_allclose(geometry.apply_homography(solved, a), b, atol=1e-9)
     line = np.array([[0.0, 0.0], [0.5, 0.5], [1.0, 1.0], [0.0, 1.0]])
     assert geometry._homography_four(line, dst) is None
     assert geometry._homography_four(src, line * 100.0) is None
     # a map sending the source centroid to infinity has h33 = 0 in normalised coordinates:
     # the system is singular and the SVD solves it
-    square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
     swap_xw = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
     image = geometry.apply_homography(swap_xw, square)
     assert geometry._homography_four(square, image) is None
@@ -490,3 +495,35 @@ def test_a_homography_of_a_grid_with_a_point_at_its_centre_is_found() -> None:
         h = geometry.homography_dlt(src, dst)
         assert h is not None
         np.testing.assert_allclose(h, geometry._canonical_homography(forward), atol=1e-12)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    log_eps=st.sampled_from([None, -14.0, -12.0, -10.0, -9.0, -8.0, -6.0, -3.0, 0.0]),
+)
+def test_a_homography_is_kept_unless_its_unit_norm_determinant_is_below_the_floor(
+    seed: int, log_eps: float | None
+) -> None:
+    rng = np.random.default_rng(seed)
+    # a rank-2 matrix plus a rank-1 part of size eps: |det| grows with eps
+    h = rng.normal(size=(3, 2)) @ rng.normal(size=(2, 3))
+    if log_eps is not None:
+        h = h + 10.0**log_eps * np.outer(rng.normal(size=3), rng.normal(size=3))
+    unit = h / np.linalg.norm(h)
+    det = abs(float(np.linalg.det(unit)))
+    if 0.5e-9 < det < 2e-9:
+        return  # too near the floor for rounding to decide
+    canonical = geometry._canonical_homography(h)
+    assert (canonical is None) is (det <= 1e-9)
+    if canonical is not None:
+        np.testing.assert_allclose(canonical, unit * math.copysign(1.0, h[2, 2]), atol=1e-15)
+
+
+def test_integer_pixels_are_undistorted_as_floats() -> None:
+    raw = np.array([[100, 80], [400, 420]])
+    for k in (CameraIntrinsics(dist=(-0.25, 0.0, 0.0, 0.0, 0.0)), CameraIntrinsics()):
+        expected = geometry.undistort_pixels(raw.astype(float), k)
+        for out in (geometry.undistort_pixels(raw, k), geometry.Undistorter(k)(raw)):
+            assert out.dtype == np.float64
+            np.testing.assert_array_equal(out, expected)
