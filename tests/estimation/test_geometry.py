@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -527,3 +528,62 @@ def test_integer_pixels_are_undistorted_as_floats() -> None:
         for out in (geometry.undistort_pixels(raw, k), geometry.Undistorter(k)(raw)):
             assert out.dtype == np.float64
             np.testing.assert_array_equal(out, expected)
+
+
+def test_a_point_at_or_within_1e_12_of_the_horizon_maps_to_nan_without_a_warning() -> None:
+    # the third row vanishes at x = 0.5; (0.5, -20) also zeroes the first coordinate
+    h = np.array([[200.0, 10.0, 100.0], [5.0, 180.0, 120.0], [1.0, 0.0, -0.5]])
+    points = np.array([[1.0, 0.0], [0.5, 0.75], [0.5 + 1e-12, 0.0], [0.5, -20.0], [0.5 + 1e-9, 0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mapped = geometry.apply_homography(h, points)
+    assert mapped.shape == (5, 2)
+    np.testing.assert_allclose(mapped[0], [600.0, 250.0])
+    assert np.isnan(mapped[1:4]).all()
+    # 1e-9 from the horizon is far but finite, alone or beside a point a million times farther
+    far = geometry.apply_homography(h, points[4:])
+    assert np.isfinite(far).all() and abs(far[0, 0]) > 1e11
+    beside = geometry.apply_homography(h, np.vstack([points[4:], [[1e6, 0.0]]]))
+    np.testing.assert_array_equal(beside[0], far[0])
+    np.testing.assert_array_equal(mapped[4], far[0])
+
+
+def test_single_precision_input_is_fitted_in_double_precision() -> None:
+    rng = np.random.default_rng(8)
+    model = rng.normal(size=(6, 3)).astype(np.float32)
+    rotation = Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix()
+    measured = (model @ rotation.T + [0.5, 0.1, 2.0]).astype(np.float32)
+    single = geometry.fit_rigid(model, measured)
+    double = geometry.fit_rigid(model.astype(float), measured.astype(float))
+    assert single is not None and double is not None
+    assert single.rotation.dtype == np.float64
+    np.testing.assert_array_equal(single.rotation, double.rotation)
+    assert single.rms_residual == double.rms_residual
+    h_true = _random_homography(rng)
+    grid = np.array([[x, y] for x in (-0.5, 0.1, 0.5) for y in (-0.5, 0.2, 0.5)])
+    image = geometry.apply_homography(h_true, grid).astype(np.float32)
+    h_single = geometry.homography_dlt(grid.astype(np.float32), image)
+    h_double = geometry.homography_dlt(grid.astype(np.float32).astype(float), image.astype(float))
+    assert h_single is not None and h_double is not None
+    np.testing.assert_array_equal(h_single, h_double)
+    fitter = geometry.ZPlaneFitter(grid)
+    column = fitter.fit(np.linspace(1.0, 1.8, 9).reshape(-1, 1))
+    assert column is not None
+    assert column.rms_residual == fitter.fit(np.linspace(1.0, 1.8, 9)).rms_residual
+
+
+def test_four_pairs_take_the_eight_by_eight_solution_and_five_the_svd() -> None:
+    rng = np.random.default_rng(9)
+    h_true = _random_homography(rng)
+    src = np.array([[-0.4, -0.3], [0.5, -0.2], [0.3, 0.45], [-0.35, 0.4]])
+    dst = geometry.apply_homography(h_true, src)
+    direct = geometry._homography_four(src, dst)
+    assert direct is not None
+    np.testing.assert_array_equal(
+        geometry.homography_dlt(src, dst), geometry._canonical_homography(direct)
+    )
+    # five points, the first three on a line: the SVD still fixes the map
+    five = np.array([[-0.5, -0.5], [-0.5, 0.0], [-0.5, 0.5], [0.0, -0.5], [0.0, 0.0]])
+    h = geometry.homography_dlt(five, geometry.apply_homography(h_true, five))
+    assert h is not None
+    np.testing.assert_allclose(h, geometry._canonical_homography(h_true), atol=1e-12)
