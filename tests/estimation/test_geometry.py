@@ -587,3 +587,13 @@ def test_four_pairs_take_the_eight_by_eight_solution_and_five_the_svd() -> None:
     h = geometry.homography_dlt(five, geometry.apply_homography(h_true, five))
     assert h is not None
     np.testing.assert_allclose(h, geometry._canonical_homography(h_true), atol=1e-12)
+
+
+def test_five_points_four_of_them_within_5e_9_of_a_line_fix_no_homography() -> None:
+    # 5e-9 off the line the DLT matrix's eighth singular value is 7e-10 of its first, under
+    # the 1e-9 floor; 1e-7 off it is 1.4e-8
+    h_true = np.array([[1.2, 0.1, 0.3], [0.05, 0.9, -0.2], [0.1, 0.2, 1.0]])
+    for offset, found in ((5e-9, False), (1e-7, True)):
+        src = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, offset], [1.0, 1.0]])
+        h = geometry.homography_dlt(src, geometry.apply_homography(h_true, src))
+        assert (h is not None) is found, offset
