@@ -602,3 +602,20 @@ def test_five_points_four_of_them_within_5e_9_of_a_line_fix_no_homography() -> N
         src = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, offset], [1.0, 1.0]])
         h = geometry.homography_dlt(src, geometry.apply_homography(h_true, src))
         assert (h is not None) is found, offset
+
+
+def test_a_rigid_fit_refuses_points_a_tenth_of_a_millimetre_off_a_ten_metre_line() -> None:
+    # the cross-covariance's second singular value (1.7e-9 m^2) is 3e-11 of its first
+    # (57 m^2), under the 1e-9 floor
+    line = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [10.0, 1e-4, 0.0], [2.0, 0.0, 0.0]])
+    assert geometry.fit_rigid(line, line + 1.0) is None
+    assert geometry.RigidFitter(line).fit(line + 1.0) is None
+    bent = line.copy()
+    bent[2, 1] = 0.1
+    assert geometry.fit_rigid(bent, bent + 1.0) is not None
+    # a one-metre tag moved without turning: the singular values are exactly 1, 1 and 0
+    tag = tag_corners_in_tag_frame(1.0)
+    fit = geometry.RigidFitter(tag).fit(tag + np.array([0.2, -0.1, 3.0]))
+    assert fit is not None
+    np.testing.assert_allclose(fit.rotation, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(fit.translation, [0.2, -0.1, 3.0], atol=1e-15)
