@@ -630,3 +630,26 @@ def test_a_tilt_predictor_of_other_targets_is_refused_naming_them() -> None:
     )
     assert LinearTiltPredictor.KIND == "deck-tilt predictor"
     assert LinearMotionPredictor.KIND == "deck-motion predictor"
+
+
+def test_an_invalid_prediction_gives_no_chance_of_a_level_deck() -> None:
+    invalid = TiltPrediction(False, "no window", 1.0)
+    assert invalid.probability_within(90.0) == 0.0
+
+
+def test_an_older_file_without_held_out_means_loads_with_none_and_a_save_halves_them(
+    tmp_path,
+) -> None:
+    """A file written before the held-out means were kept loads with none (shape (0, 0, 2));
+    a plain save keeps them as float32, not to the bit."""
+    means = np.full((3, 4, 2), 1.0 + 2.0**-40)
+    predictor = _predictor(heldout_means=means, cls=LinearTiltPredictor)
+    path = predictor.save(tmp_path / "plain.npz")
+    assert not bool((LinearTiltPredictor.load(path).heldout_means == means).all())
+    with np.load(path) as data:
+        arrays = {key: data[key] for key in data.files if key != "heldout_means"}
+    older = tmp_path / "older.npz"
+    np.savez(older, **arrays)
+    loaded = LinearTiltPredictor.load(older)
+    assert loaded.heldout_means.shape == (0, 0, 2)
+    np.testing.assert_array_equal(loaded.coefficients, predictor.coefficients)

@@ -448,3 +448,22 @@ def test_the_model_wave_off_aborts_below_its_chance_or_the_value_of_waiting_on(t
     assert value.wave_off_chance(0.5, 2.0) == pytest.approx(expected)
     assert 0.0 < expected < 1.0
     assert value.wave_off_chance(0.5, 9.0) == 0.0  # no time left for another try
+
+
+def test_the_value_wave_off_aborts_below_the_value_left_after_the_time_elapsed_and_waited(
+    tmp_path,
+) -> None:
+    """With the value rule the model wave-off compares the chance at the contact with the
+    value of waiting on for the time the descent (``elapsed_s``) and the wait (``wait_s``)
+    leave: with no time left the value is 0 and it never aborts."""
+    model = {"tilt_model": _saved(tmp_path), "wave_off_predictor": "model"}
+    value = _wave_off(tmp_path, **model, wave_off_rule="value", wait_limit_s=10.0)
+    _push_tilt(value, [3.0, 3.0])
+    rows = value.history.rows()
+    chance = value.tilt_predictor.predict(rows[:, [3, 4]], rows[:, 9] > 0.5, 0.8)
+    chance = chance.probability_within(3.0)
+    for elapsed_s, wait_s in ((0.5, 0.0), (0.5, 2.0), (0.6, 5.0), (0.5, 9.0)):
+        threshold = value.wave_off_chance(elapsed_s, wait_s)
+        due = value.wave_off_due(elapsed_s, 0.8 + elapsed_s, wait_s)
+        assert due == (chance < threshold)
+    assert not value.wave_off_due(0.5, 1.3, 9.0)

@@ -716,11 +716,12 @@ def _tracked(
     deck_v_w: tuple[float, float, float],
     deck_a_w: tuple[float, float, float] = (0.0, 0.0, 0.0),
     own: OwnState | None = None,
+    dt: float = DT,
 ) -> DeckGuidance:
     """A guidance whose tracker holds the deck at ``deck_w`` moving at ``deck_v_w`` (and
     accelerating at ``deck_a_w`` with the acceleration model), all three axes tracked; with
     ``own``, one observation of the tag from it first (its lean taken whole)."""
-    guidance = DeckGuidance(gains, DT)
+    guidance = DeckGuidance(gains, dt)
     if own is not None:
         guidance.observe(_observation((0.0, 0.0, 1.0)), own)
     tracker = guidance.tracker
@@ -901,6 +902,48 @@ def test_near_the_deck_the_gust_wait_lasts_max_flare_wait_s_and_only_below_flare
     # upright again: no wait
     upright = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=_level((0, 0, 0.4)))
     assert upright.descend(_observation(None, tof_m=0.4), _level((0, 0, 0.4))).velocity_h[2] < -0.5
+
+
+def test_the_gust_wait_and_the_lost_tag_pause_count_whole_periods_up_to_their_limits() -> None:
+    """With a control period that adds up exactly (0.25 s), the gust wait holds the descent for
+    max_flare_wait_s (four periods of 1 s), never a period more, and the tag unseen pauses the
+    descent only once unseen for longer than lost_tag_pause_s (the third period of 0.5 s)."""
+    gains = GuidanceGains(
+        track_deck=True,
+        blind_range_m=0.8,
+        flare_range_m=0.5,
+        max_flare_wait_s=1.0,
+        lost_tag_pause_s=0.5,
+    )
+    gusted = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.4, 0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=gusted, dt=0.25)
+    waits = [
+        guidance.descend(_observation(None, tof_m=0.4), gusted).velocity_h[2] for _ in range(5)
+    ]
+    assert waits[:4] == [pytest.approx(0.0, abs=1e-12)] * 4
+    assert waits[4] < -0.1
+    own = _level((0.0, 0.0, 2.0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=own, dt=0.25)
+    vertical = []
+    for _ in range(3):
+        guidance.observe(_observation(None, tof_m=2.0), own)
+        vertical.append(guidance.descend(_observation(None, tof_m=2.0), own).velocity_h[2])
+    assert vertical[0] < -0.5 and vertical[1] < -0.5
+    assert vertical[2] == pytest.approx(gains.lost_tag_climb_speed)
+
+
+def test_an_attitude_rounded_a_hair_past_level_or_upside_down_still_gives_a_setpoint() -> None:
+    """The lean's cosine (the rotation's z-z entry) is clipped to [-1, 1] before its arc
+    cosine: a rotation rounded to 1 + 2e-16 is level (no gust wait), one rounded to
+    -1 - 2e-16 is upside down (a lean of 180 deg: the wait holds)."""
+    gains = GuidanceGains(track_deck=True, blind_range_m=0.8, flare_range_m=0.5)
+    past = 1.0 + 2.0**-52
+    level = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), np.eye(3) * past)
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=_level((0, 0, 0.4)))
+    assert guidance.descend(_observation(None, tof_m=0.4), level).velocity_h[2] < -0.1
+    flipped = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), np.diag([1.0, -past, -past]))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=_level((0, 0, 0.4)))
+    assert guidance.descend(_observation(None, tof_m=0.4), flipped).velocity_h[2] == 0.0
 
 
 def test_the_rate_gain_holds_the_relative_speed_to_a_moving_decks_track() -> None:
