@@ -50,6 +50,11 @@ def _range(range_m: float, valid: bool = True) -> RangeReading:
     return RangeReading(timestamp=1.5, ranges=np.array([range_m]), valid=np.array([valid]))
 
 
+def _invalid_beacon(estimate: object) -> bool:
+    """An invalid estimate that still names its method and the frame's time."""
+    return not estimate.valid and estimate.method == "beacon" and estimate.timestamp == 1.5
+
+
 def _estimator(range_m: float, valid: bool = True, **config: float) -> BeaconEstimator:
     return BeaconEstimator(
         CameraIntrinsics(), TAG_ID, lambda: _range(range_m, valid), BeaconConfig(**config)
@@ -195,7 +200,7 @@ def test_estimate_is_invalid_without_the_tag() -> None:
     estimate = _estimator(2.0).estimate(
         _frame(_square((k.cx, k.cy), 20.0), tag_id=TAG_ID + 1), _range(2.0)
     )
-    assert not estimate.valid and estimate.reason == NO_DETECTION
+    assert _invalid_beacon(estimate) and estimate.reason == NO_DETECTION
 
 
 def test_estimate_is_invalid_for_a_tag_smaller_than_the_minimum_area() -> None:
@@ -203,7 +208,7 @@ def test_estimate_is_invalid_for_a_tag_smaller_than_the_minimum_area() -> None:
     frame = _frame(_square((k.cx, k.cy), 1.5))  # 9 px^2
     assert _estimator(2.0).estimate(frame, _range(2.0)).valid
     estimate = _estimator(2.0, min_corner_area_px=10.0).estimate(frame, _range(2.0))
-    assert not estimate.valid and estimate.reason == "degenerate_corners"
+    assert _invalid_beacon(estimate) and estimate.reason == "degenerate_corners"
 
 
 def test_estimate_is_invalid_when_the_range_source_is_invalid() -> None:
@@ -211,7 +216,7 @@ def test_estimate_is_invalid_when_the_range_source_is_invalid() -> None:
     estimate = _estimator(2.0, valid=False).estimate(
         _frame(_square((k.cx, k.cy), 20.0)), _range(2.0)
     )
-    assert not estimate.valid and estimate.reason == RANGE_INVALID
+    assert _invalid_beacon(estimate) and estimate.reason == RANGE_INVALID
 
 
 def test_estimate_is_invalid_when_the_range_gives_no_plane() -> None:
@@ -219,7 +224,7 @@ def test_estimate_is_invalid_when_the_range_gives_no_plane() -> None:
     estimate = _estimator(0.2, range_offset_m=-0.5).estimate(
         _frame(_square((k.cx, k.cy), 20.0)), _range(2.0)
     )
-    assert not estimate.valid and estimate.reason == BEARING_MISSES_PLANE
+    assert _invalid_beacon(estimate) and estimate.reason == BEARING_MISSES_PLANE
 
 
 def test_estimate_is_invalid_beyond_the_beacon_range_and_valid_at_it() -> None:
@@ -227,8 +232,53 @@ def test_estimate_is_invalid_beyond_the_beacon_range_and_valid_at_it() -> None:
     frame = _frame(_square((k.cx, k.cy), 20.0))
     assert _estimator(5.0, max_range_m=5.0).estimate(frame, _range(5.0)).valid
     estimate = _estimator(5.0, max_range_m=4.99).estimate(frame, _range(5.0))
-    assert not estimate.valid and estimate.reason == BEYOND_BEACON_RANGE
+    assert _invalid_beacon(estimate) and estimate.reason == BEYOND_BEACON_RANGE
     # the range is the distance to the beacon, not its depth
     off_axis = _frame(_square((k.cx + k.fx, k.cy), 20.0))  # 45 degrees: distance = depth * sqrt 2
     estimate = _estimator(3.0, max_range_m=4.0).estimate(off_axis, _range(3.0))
-    assert not estimate.valid and estimate.reason == BEYOND_BEACON_RANGE
+    assert _invalid_beacon(estimate) and estimate.reason == BEYOND_BEACON_RANGE
+
+
+def test_tag_centre_of_unsigned_integer_corners_is_exact() -> None:
+    corners = _square((100.0, 200.0), 10.0).astype(np.uint16)
+    np.testing.assert_allclose(tag_centre_pixel(corners), [100.0, 200.0], atol=1e-9)
+
+
+def test_bearing_uses_cx_for_u_and_cy_for_v() -> None:
+    k = CameraIntrinsics(cx=250.0, cy=262.0)
+    bearing = bearing_from_pixel(np.array([250.0, 262.0]), Undistorter(k), k.matrix)
+    np.testing.assert_allclose(bearing, [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_position_takes_a_column_bearing() -> None:
+    bearing = np.array([[0.3], [-0.2], [1.0]])
+    np.testing.assert_allclose(beacon_position(bearing, 2.0), [0.6, -0.4, 2.0], atol=1e-12)
+
+
+def test_no_position_at_the_one_nanoradian_margin_of_the_horizon() -> None:
+    # the bearing's component along the axis (or along gravity) must exceed 1e-9
+    assert beacon_position(np.array([1.0, 0.0, 1e-9]), 2.0) is None
+    assert beacon_position(np.array([1.0, 0.0, 1e-9]), 2.0, np.eye(3)) is None
+    # the optical axis tilted so that its cosine to gravity is exactly 1e-9
+    r_level_c = np.array([[1.0, 0.0, 0.0], [0.0, 1e-9, -1.0], [0.0, 1.0, 1e-9]])
+    assert beacon_position(np.array([0.0, 1.0, 0.0]), 2.0, r_level_c) is None
+    r_level_c[2, 2] = 0.75e-9
+    assert beacon_position(np.array([0.0, 1.0, 0.0]), 2.0, r_level_c) is None
+
+
+def test_estimate_reads_the_first_sensor_of_a_four_sensor_range_reading() -> None:
+    k = CameraIntrinsics()
+    frame = _frame(_square((k.cx, k.cy), 20.0))
+    for shape in [(4,), (1, 4)]:
+        reading = RangeReading(
+            1.5,
+            np.array([2.0, 9.0, 9.0, 9.0]).reshape(shape),
+            np.array([True, False, False, False]).reshape(shape),
+        )
+        estimator = BeaconEstimator(CameraIntrinsics(), TAG_ID, lambda r=reading: r)
+        estimate = estimator.estimate(frame, reading)
+        assert estimate.valid, shape
+        np.testing.assert_allclose(estimate.translation, [0.0, 0.0, 2.0], atol=1e-9)
+    reading = RangeReading(1.5, np.array([2.0, 9.0]), np.array([False, True]))
+    estimate = BeaconEstimator(CameraIntrinsics(), TAG_ID, lambda: reading).estimate(frame, reading)
+    assert _invalid_beacon(estimate) and estimate.reason == RANGE_INVALID
