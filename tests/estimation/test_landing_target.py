@@ -91,13 +91,13 @@ def test_predict_moves_the_target_against_the_vehicle_acceleration() -> None:
 
 
 def test_predict_grows_the_covariance_by_the_transition_and_acceleration_noise() -> None:
-    f = _initialised(accel_sigma=2.0)
+    f = _initialised(accel_sigma=3.0)
     p0 = f.covariance[0].copy()
     dt = 0.2
     f.predict(np.zeros(2), dt)
     tr = np.array([[1.0, dt], [0.0, 1.0]])
     b = np.array([-0.5 * dt * dt, -dt])
-    expected = tr @ p0 @ tr.T + 4.0 * np.outer(b, b)
+    expected = tr @ p0 @ tr.T + 9.0 * np.outer(b, b)
     for axis in range(2):
         np.testing.assert_allclose(f.covariance[axis], expected, rtol=1e-12)
 
@@ -237,3 +237,53 @@ def test_filter_tracks_a_target_moving_with_constant_relative_acceleration(
         assert f.update(np.array([pos, -pos]), 1.0) == ACCEPTED
     np.testing.assert_allclose(f.position_xy, [pos, -pos], atol=1e-3)
     np.testing.assert_allclose(f.velocity_xy, [v - a * t, -(v - a * t)], atol=2e-2)
+
+
+def test_validity_and_initialisation_are_booleans_before_and_after_the_timeout() -> None:
+    f = LandingTargetFilter(LandingTargetConfig(timeout_s=0.5))
+    assert f.valid is False and f.initialised is False
+    f.update(np.array([1.0, 2.0]), 1.0)
+    assert f.valid is True
+    f.predict(np.zeros(2), 1.0)
+    assert f.valid is False and f.initialised is False
+
+
+def test_predict_by_zero_seconds_is_a_usable_step_that_changes_nothing() -> None:
+    f = _initialised(1.0, -2.0)
+    before = f.state.copy(), f.covariance.copy()
+    assert f.predict(np.array([1.0, 1.0]), 0.0)
+    np.testing.assert_array_equal(f.state, before[0])
+    np.testing.assert_array_equal(f.covariance, before[1])
+
+
+def test_a_missing_time_step_or_distance_is_ignored_without_raising() -> None:
+    f = _initialised(1.0, -2.0)
+    assert not f.predict(np.zeros(2), None)
+    assert f.update(np.array([1.0, -2.0]), None) == INVALID_INPUT
+    assert LandingTargetFilter().update(np.array([1.0, -2.0]), None) == INVALID_INPUT
+
+
+def test_row_or_column_shaped_inputs_are_taken_as_x_y() -> None:
+    f = LandingTargetFilter()
+    assert f.update(np.array([[1.0, -2.0]]), 3.0) == INITIALISED
+    np.testing.assert_array_equal(f.position_xy, [1.0, -2.0])
+    f.predict(np.array([[2.0], [-4.0]]), 0.5)
+    np.testing.assert_allclose(f.position_xy, [0.75, -1.5])
+    np.testing.assert_allclose(f.velocity_xy, [-1.0, 2.0])
+    ratio = f.innovation_sd(np.array([[0.75], [-1.5]]), 3.0)
+    assert ratio.shape == (2,)
+    np.testing.assert_array_equal(ratio, [0.0, 0.0])
+
+
+def test_a_fix_exactly_at_the_gate_is_accepted() -> None:
+    # S = 0.75^2 + 1^2 = 1.25^2: an offset of 2.5 m is exactly 2 standard deviations
+    f = _initialised(
+        0.0,
+        0.0,
+        gate_sd=2.0,
+        initial_position_sigma_m=0.75,
+        measurement_sigma_m=1.0,
+        measurement_sigma_per_m=0.0,
+    )
+    assert f.update(np.array([2.5, 0.0]), 1.0) == ACCEPTED
+    assert f.last_innovation_sd == 2.0 and f.rejections == 0
