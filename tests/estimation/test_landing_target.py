@@ -265,9 +265,9 @@ def test_a_missing_time_step_or_distance_is_ignored_without_raising() -> None:
 
 def test_row_or_column_shaped_inputs_are_taken_as_x_y() -> None:
     f = LandingTargetFilter()
-    assert f.update(np.array([[1.0, -2.0]]), 3.0) == INITIALISED
+    assert f.update(np.array([[1.0], [-2.0]]), 3.0) == INITIALISED
     np.testing.assert_array_equal(f.position_xy, [1.0, -2.0])
-    f.predict(np.array([[2.0], [-4.0]]), 0.5)
+    f.predict(np.array([[2.0, -4.0]]), 0.5)
     np.testing.assert_allclose(f.position_xy, [0.75, -1.5])
     np.testing.assert_allclose(f.velocity_xy, [-1.0, 2.0])
     ratio = f.innovation_sd(np.array([[0.75], [-1.5]]), 3.0)
