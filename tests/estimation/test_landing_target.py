@@ -273,6 +273,9 @@ def test_row_or_column_shaped_inputs_are_taken_as_x_y() -> None:
     ratio = f.innovation_sd(np.array([[0.75], [-1.5]]), 3.0)
     assert ratio.shape == (2,)
     np.testing.assert_array_equal(ratio, [0.0, 0.0])
+    g = LandingTargetFilter()
+    assert g.update(np.array([[1.0, -2.0]]), 3.0) == INITIALISED
+    np.testing.assert_array_equal(g.position_xy, [1.0, -2.0])
 
 
 def test_a_fix_exactly_at_the_gate_is_accepted() -> None:
