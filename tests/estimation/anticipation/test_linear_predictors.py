@@ -653,3 +653,40 @@ def test_an_older_file_without_held_out_means_loads_with_none_and_a_save_halves_
     loaded = LinearTiltPredictor.load(older)
     assert loaded.heldout_means.shape == (0, 0, 2)
     np.testing.assert_array_equal(loaded.coefficients, predictor.coefficients)
+
+
+def test_the_ridge_penalises_every_coefficient_but_the_constant_at_its_optimum() -> None:
+    rng = np.random.default_rng(3)
+    x = np.column_stack([rng.normal(0.0, 1.0, (30, 3)), np.ones(30)])
+    y = rng.normal(0.0, 1.0, (30, 2))
+    penalty = 2.5
+    fit = linear_predictors._ridge(x, y, penalty)
+    # the gradient of |x b - y|^2 + penalty |b without its constant|^2 vanishes at the fit
+    shrink = fit.copy()
+    shrink[-1] = 0.0
+    np.testing.assert_allclose(x.T @ (x @ fit - y) + penalty * shrink, 0.0, atol=1e-9)
+    np.testing.assert_allclose(linear_predictors._ridge(x, y, penalty, x.T @ x), fit)
+
+
+def test_each_horizon_is_fitted_on_its_own_examples_whatever_the_other_horizons() -> None:
+    histories, futures, groups, _ = _linear_examples(episodes=6, per=30, seed=4)
+    rng = np.random.default_rng(5)
+    futures = futures + rng.normal(0.0, 0.01, futures.shape)
+    futures[::3, 1] = np.nan  # a third of the examples' second future is unknown
+
+    def fit(futures_h: np.ndarray, horizons: list[float]) -> LinearTiltPredictor:
+        return LinearTiltPredictor.fit(
+            histories,
+            futures_h,
+            groups,
+            np.array(horizons),
+            4 * DT,
+            DT,
+            block=1,
+            ridges=(1e-3, 1e-1),
+        )
+
+    both = fit(futures, [0.0, 1.0])
+    alone = fit(futures[:, 1:], [1.0])
+    np.testing.assert_allclose(both.coefficients[1], alone.coefficients[0], rtol=1e-9)
+    np.testing.assert_allclose(both.covariance[1], alone.covariance[0], rtol=1e-9)
