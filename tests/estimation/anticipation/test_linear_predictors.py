@@ -690,3 +690,26 @@ def test_each_horizon_is_fitted_on_its_own_examples_whatever_the_other_horizons(
     alone = fit(futures[:, 1:], [1.0])
     np.testing.assert_allclose(both.coefficients[1], alone.coefficients[0], rtol=1e-9)
     np.testing.assert_allclose(both.covariance[1], alone.covariance[0], rtol=1e-9)
+
+
+def test_the_chances_normal_points_are_a_balanced_set_with_no_point_beyond_six_sigma() -> None:
+    points = linear_predictors._normal_points()
+    assert points.shape == (linear_predictors._N_POINTS, 2)
+    # a scrambled Sobol set: no point at the unit square's corner (-7 sigma once clipped)
+    assert float(np.abs(points).max()) < 6.0
+    np.testing.assert_allclose(points.mean(axis=0), 0.0, atol=0.02)
+    np.testing.assert_allclose(points.std(axis=0), 1.0, atol=0.02)
+
+
+def test_a_fit_on_three_channels_reads_each_window_of_them_and_keeps_them() -> None:
+    histories, futures, groups, _ = _linear_examples(episodes=4, per=20, seed=6)
+    heave = np.random.default_rng(7).normal(0.0, 0.1, (*histories.shape[:2], 1))
+    with_heave = np.concatenate([histories[..., :2], heave, histories[..., 2:]], axis=-1)
+    channels = ("roll", "pitch", "heave")
+    fitted = LinearTiltPredictor.fit(
+        with_heave, futures, groups, np.array([0.0, 1.0]), 4 * DT, DT, block=1, channels=channels
+    )
+    assert fitted.channels == channels
+    assert fitted.coefficients.shape == (2, 3 * 4 + 1, 2)
+    # the futures are a map of roll and pitch alone: heave's coefficients are (near) zero
+    np.testing.assert_allclose(fitted.coefficients[:, 2:12:3], 0.0, atol=0.05)
