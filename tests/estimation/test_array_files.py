@@ -34,6 +34,19 @@ def test_a_write_that_fails_leaves_the_old_file_and_no_temporary(tmp_path: Path)
     assert [p.name for p in tmp_path.iterdir()] == ["file.bin"]
 
 
+def test_a_write_whose_temporary_cannot_be_made_raises_the_systems_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def refuse(*args: object) -> int:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "open", refuse)
+    with pytest.raises(OSError, match="No space left on device") as raised:
+        write_atomic(tmp_path / "file.bin", b"data")
+    assert raised.type is OSError  # not the FileNotFoundError of removing a file never made
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_second_process_waits_for_the_lock_and_then_holds_it(tmp_path: Path) -> None:
     path = tmp_path / "made.npz"
     script = (

@@ -42,3 +42,21 @@ def test_a_tof_calibration_of_an_unknown_version_is_refused_and_a_known_one_read
     refused = r"tof\.json: unsupported format_version 9; readable: \(1, 2\)"
     with pytest.raises(ValueError, match=refused):
         TofCameraCalibration.load(path)
+
+
+def test_a_tof_calibration_of_the_first_files_naming_its_version_as_version_is_read(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "tof.json"
+    calibration = TofCameraCalibration.exact(
+        CameraIntrinsics(), tof_positions_in_camera_frame(), 0.04, 4.0
+    )
+    calibration.save(path)
+    doc = json.loads(path.read_text())
+    doc["version"] = doc.pop("format_version")
+    path.write_text(json.dumps(doc))
+    assert TofCameraCalibration.load(path).n_sensors == calibration.n_sensors
+    doc["version"] = 9
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"tof\.json: unsupported format_version 9"):
+        TofCameraCalibration.load(path)

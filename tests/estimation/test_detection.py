@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import pickle
 
+import cv2
 import numpy as np
 import pytest
 
@@ -94,6 +95,42 @@ def test_detect_refuses_other_than_uint8_and_passes_over_images_too_thin_for_a_t
         assert detector.detect(np.full(shape, 255, dtype=np.uint8)) == ()
     with pytest.raises(ValueError, match="HxWx3"):
         detector.detect(np.zeros((2, 20, 20, 3), dtype=np.uint8))
+
+
+def test_an_image_thinner_than_the_smallest_side_never_reaches_the_native_detector(
+    detector, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reached: list[tuple[int, ...]] = []
+
+    def native(gray: np.ndarray) -> list:
+        reached.append(gray.shape)
+        return []
+
+    monkeypatch.setattr(detector._detector, "detect", native)
+    side = detector.min_side_px
+    for shape in ((side - 1, 200), (200, side - 1), (side - 1, 200, 3), (200, side - 1, 4)):
+        assert detector.detect(np.full(shape, 255, dtype=np.uint8)) == ()
+    assert reached == []
+    # from the smallest side on, grey or colour, the image is the native detector's
+    for shape in ((side, 200), (200, side, 3)):
+        detector.detect(np.full(shape, 255, dtype=np.uint8))
+    assert reached == [(side, 200), (200, side)]
+
+
+def test_a_detector_of_another_family_finds_that_familys_tags_alone() -> None:
+    aruco = cv2.aruco
+    marker = aruco.generateImageMarker(
+        aruco.getPredefinedDictionary(aruco.DICT_APRILTAG_25h9), 3, 9 * 16
+    )
+    image = np.full((300, 300), 255, dtype=np.uint8)
+    image[78:222, 78:222] = marker  # 9 modules of 16 px: the black border and the 5x5 bits
+    tag25, tag36 = AprilTagDetector(families="tag25h9"), AprilTagDetector()
+    try:
+        assert [d.tag_id for d in tag25.detect(image)] == [3]
+        assert tag36.detect(image) == ()
+    finally:
+        tag25.close()
+        tag36.close()
 
 
 def test_a_tag_decoded_with_a_bit_wrong_is_kept_only_when_that_many_are_allowed() -> None:
