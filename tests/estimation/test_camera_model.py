@@ -106,6 +106,11 @@ def test_undistorting_without_distortion_is_a_copy_of_the_pixels() -> None:
     undistorted[0, 0] = -1.0
     assert pixels[0, 0] == 10.0
     np.testing.assert_array_equal(pinhole.undistort_pixels([3.0, 4.0]), [[3.0, 4.0]])
+    # integer pixels are pixels like any other, with a lens or without
+    assert pinhole.undistort_pixels([[3, 4]]).dtype == np.float64
+    np.testing.assert_array_equal(
+        LENS.undistort_pixels([[100, 200]]), LENS.undistort_pixels([[100.0, 200.0]])
+    )
 
 
 def test_the_half_view_of_a_pinhole_is_its_nearest_edge_over_the_focal_length() -> None:
@@ -114,6 +119,23 @@ def test_the_half_view_of_a_pinhole_is_its_nearest_edge_over_the_focal_length() 
     assert pinhole.half_view_tan() == pytest.approx(300.0 / 500.0)
     tall = CameraIntrinsics(640, 480, 500.0, 600.0, 300.0, 250.0)
     assert tall.half_view_tan() == pytest.approx(229.0 / 600.0)  # the bottom edge
+
+
+@pytest.mark.parametrize(
+    ("cx", "cy", "expected"),
+    [
+        (250.0, 240.0, 250.0 / 500.0),  # the left edge
+        (390.0, 240.0, 249.0 / 500.0),  # the right edge: the last pixel is 639
+        (320.0, 200.0, 200.0 / 450.0),  # the top edge
+        (320.0, 260.0, 219.0 / 450.0),  # the bottom edge: the last pixel is 479
+    ],
+)
+def test_each_image_edge_bounds_the_half_view_when_it_is_the_nearest(
+    cx: float, cy: float, expected: float
+) -> None:
+    assert CameraIntrinsics(640, 480, 500.0, 450.0, cx, cy).half_view_tan() == pytest.approx(
+        expected, rel=1e-12
+    )
 
 
 def test_a_ray_within_the_half_view_lands_in_the_distorted_image_and_one_beyond_leaves_it() -> None:
