@@ -45,6 +45,7 @@ from agents.io.recording import (
     RecordingError,
     SensorSeries,
     Topics,
+    write_folder,
 )
 from estimation.frames import R_BC
 from estimation.intrinsics_calibration import IntrinsicsCalibrationResult
@@ -113,6 +114,15 @@ def _messages(path: Path) -> dict[str, list]:
     return found
 
 
+def _log_times(path: Path) -> dict[str, list[int]]:
+    """Each message's log time (ns), by topic in order."""
+    found: dict[str, list[int]] = {}
+    with AnyReader([path]) as reader:
+        for connection, log_time_ns, _ in reader.messages():
+            found.setdefault(connection.topic, []).append(log_time_ns)
+    return found
+
+
 def _stamp_ns(message) -> int:  # type: ignore[no-untyped-def]
     return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
 
@@ -172,7 +182,7 @@ def test_extrinsics_saved_load_back_as_floats_and_put_the_deck_in_the_body(tmp_p
 
 def test_a_rotation_within_a_micro_of_orthonormal_is_a_mount(tmp_path: Path) -> None:
     path = tmp_path / "extrinsics.json"
-    nearly = R_BC_TURNED + np.array([[0.0, 3e-7, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    nearly = R_BC_TURNED + np.array([[3e-7, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     path.write_text(json.dumps(_extrinsics_doc(nearly.tolist(), [0.0, 0.0, 0.0])))
     np.testing.assert_array_equal(Extrinsics.load(path).r_bc, nearly)
 
@@ -459,20 +469,46 @@ def test_fused_is_invalid_until_the_imu_gives_an_attitude_then_follows_the_simul
     assert reasons == {"no_attitude: no IMU orientation yet"}
 
 
+def test_each_imu_sample_reaches_the_fusion_once_with_the_first_frame_after_it(
+    episode: Path,
+) -> None:
+    rec = read_recording(episode)
+    runner = _runner("fused")
+    handed: list[tuple[float, list[float], np.ndarray]] = []
+    process = runner.stage.process
+
+    def spy(time, results, ranges, imu, r_wb):  # type: ignore[no-untyped-def]
+        handed.append((time, [s.timestamp for s in imu], r_wb))
+        return process(time, results, ranges, imu, r_wb)
+
+    runner.stage.process = spy  # type: ignore[method-assign]
+    assert len(list(runner.run(rec, 0.02, "nearest"))) == STEPS + 1
+    stamps = [f.timestamp for f in rec.frames]
+    assert [time for time, _, _ in handed] == stamps[1:]  # the first frame: no attitude yet
+    assert [t for _, samples, _ in handed for t in samples] == [
+        s.timestamp for s in rec.imu if s.timestamp <= stamps[-1] + 1e-9
+    ]
+    for (time, samples, r_wb), before in zip(handed, stamps, strict=False):
+        assert all(before + 1e-9 < t <= time + 1e-9 for t in samples) and samples
+        np.testing.assert_array_equal(r_wb, rec.attitude_at(time))
+
+
 def test_a_valid_estimate_with_a_nan_is_reported_invalid_as_non_finite() -> None:
     turn, place = np.eye(3), np.array([0.1, 0.2, 1.5])
     good = DeckPoseEstimate("tight", 1.5, True, turn, place)
     assert _checked(good) is good
     said = DeckPoseEstimate.invalid("tight", 1.5, "no_detection")  # NaN pose, invalid already
     assert _checked(said) is said
-    for rotation, translation in [(turn, place * np.nan), (turn * np.nan, place)]:
+    one_nan = turn.copy()
+    one_nan[1, 2] = np.nan
+    for rotation, translation in [(turn, place * np.nan), (turn * np.nan, place), (one_nan, place)]:
         checked = _checked(DeckPoseEstimate("crhf", 2.5, True, rotation, translation))
         assert (checked.method, checked.timestamp, checked.valid, checked.reason) == (
             "crhf", 2.5, False, "non_finite_result",
         )  # fmt: skip
-    one_nan = place.copy()
-    one_nan[2] = np.inf
-    assert not _checked(DeckPoseEstimate("crhf", 2.5, True, turn, one_nan)).valid
+    one_inf = place.copy()
+    one_inf[2] = np.inf
+    assert not _checked(DeckPoseEstimate("crhf", 2.5, True, turn, one_inf)).valid
 
 
 # ------------------------------------------------------------------ what is written
@@ -547,7 +583,7 @@ def test_estimate_writes_every_frame_to_the_csv_and_each_valid_pose_in_three_fra
         "t_s": "0.000000000", "method": "fused", "valid": "0",
         "reason": "no_attitude: no IMU orientation yet", "ranges_in_tolerance": "1",
     }  # fmt: skip
-    written = _messages(mcap_path)
+    written, logged = _messages(mcap_path), _log_times(mcap_path)
     assert sorted(written) == [
         "/deck_pose/body_flu", "/deck_pose/body_frd", "/deck_pose/camera", "/deck_pose/status",
     ]  # fmt: skip
@@ -556,6 +592,8 @@ def test_estimate_writes_every_frame_to_the_csv_and_each_valid_pose_in_three_fra
         ("fused", r["valid"] == "1", r["reason"], "camera") for r in rows
     ]
     assert [_stamp_ns(s) for s in statuses] == [m.to_ns(f.timestamp) for f in rec.frames]
+    # each message logged at its estimate's stamp
+    assert logged == {topic: [_stamp_ns(x) for x in written[topic]] for topic in written}
     for frame_id in ("camera", "body_flu", "body_frd"):
         poses = written[f"/deck_pose/{frame_id}"]
         assert [_stamp_ns(p) for p in poses] == [m.to_ns(f.timestamp) for f in rec.frames[1:]]
@@ -649,6 +687,33 @@ def test_without_a_mount_only_camera_poses_are_written_and_invalid_ones_counted_
     assert [r["qw_body_frd"] for r in _rows(csv_path)] == ["", ""]
 
 
+def test_the_command_aligns_the_ranges_as_asked_and_says_when_no_frame_was_invalid(
+    rendered: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A plain folder of the rendered images, its ranges 15 ms after the frames and 5 cm
+    longer at the second sample: the second frame's ranges interpolated are 3.5 cm longer
+    than the first sample's, the nearest 5 cm."""
+    rec = read_recording(rendered, Topics(detections=""))
+    first = [series.range_m[0] for series in rec.sensors]
+    folder = write_folder(
+        tmp_path / "rec",
+        [(f.timestamp, f"f{k}.png", f.image) for k, f in enumerate(rec.frames)],
+        [(0.015, first), (0.065, [r + 0.05 for r in first])],
+    )
+    heights = {}
+    for align in ("nearest", "interpolate"):
+        out = tmp_path / align
+        args = _args(folder, "ihrcf", out=str(out), tolerance=0.04, align=align)
+        summary = run_estimate(args)
+        assert (summary.frames, summary.valid, summary.reasons) == (2, 2, {})
+        assert capsys.readouterr().out.startswith(
+            "2 frames, 2 valid, 0 without ranges within 0.04 s; invalid by reason: none\n"
+        )
+        heights[align] = [float(row["z_camera_m"]) for row in _rows(out.with_suffix(".csv"))]
+    assert heights["nearest"][0] == heights["interpolate"][0]
+    assert heights["nearest"][1] - heights["interpolate"][1] == pytest.approx(0.015, abs=0.005)
+
+
 # ------------------------------------------------------------------ the recording read and checked
 def _folder(path: Path, frames: str, ranges: bool = True, imu: bool = False) -> Path:
     """A plain folder: ``frames`` the rows of frames.csv (f0.png is a grey 64x48 image)."""
@@ -710,6 +775,15 @@ def test_a_recording_without_a_frame_or_what_the_estimator_needs_is_refused_sayi
 
 
 def test_a_recording_missing_the_range_topics_names_them(episode: Path, tmp_path: Path) -> None:
+    path = tmp_path / "camera_only.mcap"
+    with path.open("wb") as stream:
+        writer = m.McapWriter(stream)
+        message = m.msg(m.DETECTIONS, header=m.header(0.0, "camera"), miss_reason="", detections=[])
+        writer.write("/camera/tag_detections", m.DETECTIONS, message, 0.0)
+        writer.finish()
+    with pytest.raises(RecordingError) as refused:
+        read_checked(_args(path, "crhf"))
+    assert str(refused.value) == f"{path}: crhf needs ranges; missing: /imu/data, /tof/range"
     args = _args(episode, "ihrcf", range_topics="/tof/r1,/tof/r2,/tof/r3,/tof/r4")
     args.exact_ranges_topic = ""
     with pytest.raises(RecordingError) as refused:
