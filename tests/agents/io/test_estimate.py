@@ -182,7 +182,7 @@ def test_extrinsics_saved_load_back_as_floats_and_put_the_deck_in_the_body(tmp_p
 
 def test_a_rotation_within_a_micro_of_orthonormal_is_a_mount(tmp_path: Path) -> None:
     path = tmp_path / "extrinsics.json"
-    nearly = R_BC_TURNED + np.array([[3e-7, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    nearly = R_BC_TURNED + np.array([[3e-7, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 3e-7]])
     path.write_text(json.dumps(_extrinsics_doc(nearly.tolist(), [0.0, 0.0, 0.0])))
     np.testing.assert_array_equal(Extrinsics.load(path).r_bc, nearly)
 
