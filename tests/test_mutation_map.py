@@ -64,10 +64,28 @@ def test_a_name_taken_from_a_package_counts_as_importing_the_module_that_defines
     assert "estimation.fusion.model" not in names
 
 
-def test_a_module_no_test_imports_takes_the_tests_of_the_modules_that_import_it() -> None:
+def test_a_module_no_test_imports_takes_the_tests_of_the_modules_that_import_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     tool = mutation_tool()
-    derived = tool.derive_tests(["agents/io/estimate.py", "agents/io/recording_source.py"])
-    assert derived["agents/io/estimate.py"]
-    assert set(derived["agents/io/estimate.py"]) <= set(derived["agents/io/recording_source.py"])
     # a module a test imports keeps its own test files alone
+    derived = tool.derive_tests(["agents/io/recording_source.py"])
     assert "tests/agents/cli/test_bridge.py" in derived["agents/io/recording_source.py"]
+    # a tree of its own: a module that a test may import directly some day stays no example
+    for path, text in {
+        "agents/io/work.py": "X = 1\n",
+        "agents/io/source.py": "from agents.io.work import X\n",
+        "agents/io/other.py": "Y = 2\n",
+        "tests/agents/io/test_source.py": "from agents.io.source import X\n",
+        "tests/agents/io/test_other.py": "from agents.io import other\n",
+    }.items():
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text(text)
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+    monkeypatch.setattr(tool, "SOURCES", ("agents",))
+    derived = tool.derive_tests(["agents/io/*.py"])
+    assert derived == {
+        "agents/io/other.py": ["tests/agents/io/test_other.py"],
+        "agents/io/source.py": ["tests/agents/io/test_source.py"],
+        "agents/io/work.py": ["tests/agents/io/test_source.py"],  # its importer's
+    }

@@ -97,7 +97,7 @@ def selected_modules(paths: list[str]) -> list[str]:
 def derive_tests(paths: list[str]) -> dict[str, list[str]]:
     """For each selected module, the test files that import it, sorted. A module no test
     imports takes the test files that import a module of the packages that imports it (one
-    step: ``agents/io/estimate.py`` those of ``agents/io/recording_source.py``)."""
+    step: not the importers of its importers)."""
     imports = {
         f.relative_to(ROOT).as_posix(): imported_modules(f)
         for f in sorted((ROOT / "tests").rglob("test_*.py"))

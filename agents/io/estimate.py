@@ -78,7 +78,11 @@ class Extrinsics:
             raise RecordingError(f"{path}: not a format_version 1 {EXTRINSICS_FORMAT} file")
         r_bc = np.asarray(doc.get("r_bc"), dtype=float)
         t_bc = np.asarray(doc.get("t_bc_m"), dtype=float)
-        if r_bc.shape != (3, 3) or not np.allclose(r_bc @ r_bc.T, np.eye(3), atol=1e-6):
+        if (
+            r_bc.shape != (3, 3)
+            or not np.allclose(r_bc @ r_bc.T, np.eye(3), atol=1e-6)
+            or np.linalg.det(r_bc) < 0.0  # a mirror, not a turn
+        ):
             raise RecordingError(f"{path}: r_bc must be a 3x3 rotation matrix")
         if t_bc.shape != (3,) or not np.all(np.isfinite(t_bc)):
             raise RecordingError(f"{path}: t_bc_m must be 3 finite numbers (metres)")
