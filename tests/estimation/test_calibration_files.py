@@ -218,3 +218,38 @@ def test_a_tof_calibrations_image_size_must_be_two_positive_pixel_counts(
     assert str(refused.value) == (
         f"{path}: image_size {image_size!r} must be [width, height] in pixels"
     )
+
+
+def test_image_sizes_given_as_floats_are_kept_and_named_as_whole_pixels(tmp_path: Path) -> None:
+    path = tmp_path / "tof.json"
+    samples = [np.array([[1.0, 10.0, 20.0], [2.0, 30.0, 40.0]])] * 4
+    TofCameraCalibration(samples, image_size=(640.0, 480.0)).save(path)
+    assert TofCameraCalibration.load(path).image_size == (640, 480)
+    TofCameraCalibration(samples, image_size=(1, 1)).save(path)
+    assert TofCameraCalibration.load(path).image_size == (1, 1)
+    tof = TofCameraCalibration(samples, image_size=(640, 480))
+    with pytest.raises(ValueError, match=r"but the images are 320x240$"):
+        tof.require_camera((320.0, 240.0))
+    with pytest.raises(ValueError, match=r"but the images are 320x240$"):
+        _intrinsics_result().require_camera((320.0, 240.0))
+
+
+def test_an_intrinsics_file_written_with_whole_numbers_loads_as_floats_and_pixels(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "intrinsics.json"
+    doc = {
+        "format": "deck-landing/camera-intrinsics",
+        "format_version": 2,
+        "image_size": [640.0, 480.0],
+        "camera_matrix": [[500, 0, 320], [0, 500, 240], [0, 0, 1]],
+        "dist": [0, 0, 0, 0, 0],
+        "rms_reprojection_error_px": 1,
+        "per_view_errors_px": [1, 1, 1],
+    }
+    path.write_text(json.dumps(doc))
+    loaded = IntrinsicsCalibrationResult.load(path)
+    for array in (loaded.K, loaded.dist, loaded.per_view_errors):
+        assert array.dtype == np.float64
+    assert isinstance(loaded.rms_reprojection_error, float)
+    assert loaded.image_size == (640, 480) and all(type(v) is int for v in loaded.image_size)

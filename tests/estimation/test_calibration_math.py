@@ -22,6 +22,7 @@ from estimation.intrinsics_calibration import (
     image_files,
 )
 from estimation.tof_calibration import (
+    OUT_OF_RANGE_POLICIES,
     PAD_COLOURS,
     TofCameraCalibration,
     fit_hyperbola,
@@ -279,8 +280,16 @@ def test_the_boards_object_points_run_along_each_row_then_down_the_rows() -> Non
     np.testing.assert_array_equal(grid, expected)
 
 
+#: the camera of :func:`_views`: 640x480, focal length 458 px
+VIEWS_CAMERA = CameraIntrinsics(
+    width=640, height=480, fx=458.5, fy=457.9, cx=319.5, cy=239.5,
+    dist=(-0.12, 0.05, 0.0005, -0.0003, 0.0),
+)  # fmt: skip
+
+
 def _views(n: int, pattern: tuple[int, int] = (7, 10)) -> list[np.ndarray]:
-    truth = CameraIntrinsics(dist=(-0.12, 0.05, 0.0005, -0.0003, 0.0))
+    """``n`` noisy views of the board of ``pattern`` by :data:`VIEWS_CAMERA`."""
+    truth = VIEWS_CAMERA
     board = chessboard_object_points(pattern, 0.03)
     board_centred = board - board.mean(axis=0)
     rng = np.random.default_rng(9)
@@ -293,22 +302,25 @@ def _views(n: int, pattern: tuple[int, int] = (7, 10)) -> list[np.ndarray]:
 
 def test_a_calibration_needs_three_views_each_of_the_whole_pattern() -> None:
     views = _views(4)
+    three = calibrate(views[:3], (640, 480), 0.03)
+    assert three.per_view_errors.shape == (3,) and three.image_size == (640, 480)
+    assert abs(three.K[0, 0] - VIEWS_CAMERA.fx) < 0.02 * VIEWS_CAMERA.fx
     with pytest.raises(ValueError) as two:
-        calibrate(views[:2], (512, 512), 0.03)
+        calibrate(views[:2], (640, 480), 0.03)
     assert str(two.value) == "need at least 3 views, got 2"
     views[1] = views[1][:-1]
     with pytest.raises(ValueError) as short:
-        calibrate(views, (512, 512), 0.03)
+        calibrate(views, (640, 480), 0.03)
     assert str(short.value) == "view 1 has 69 corners; pattern (7, 10) has 70"
 
 
 def test_the_calibrations_flags_reach_opencv() -> None:
     views = _views(6)
-    free = calibrate(views, (512, 512), 0.03)
+    free = calibrate(views, (640, 480), 0.03)
     assert free.dist.shape == (5,) and np.all(free.dist[2:] != 0.0)
-    held = calibrate(views, (512, 512), 0.03, flags=cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
+    held = calibrate(views, (640, 480), 0.03, flags=cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
     assert held.dist.shape == (5,) and np.all(held.dist[2:] == 0.0) and held.dist[0] != 0.0
-    assert held.image_size == (512, 512) and held.metadata == {} and held.tag_corners is None
+    assert held.image_size == (640, 480) and held.metadata == {} and held.tag_corners is None
 
 
 def test_a_colour_image_gives_the_grey_ones_corners_and_a_float_image_is_refused() -> None:
@@ -361,21 +373,23 @@ def test_photos_calibrate_and_the_result_records_the_board_and_every_photos_fate
     tmp_path: Path,
 ) -> None:
     pattern = (4, 3)
+    # the first photo unreadable, the size taken from the next; a rejection between the boards
     (tmp_path / "a_corrupt.png").write_bytes(b"not a png")
-    for i, tilt in enumerate([(0.0, 0.0), (25.0, 0.0), (0.0, 25.0), (-20.0, 20.0)]):
-        cv2.imwrite(str(tmp_path / f"b_view{i}.png"), _board_photo(pattern, tilt))
-    cv2.imwrite(str(tmp_path / "c_blank.png"), np.full((240, 320), 200, np.uint8))
-    cv2.imwrite(str(tmp_path / "d_small.png"), _board_photo(pattern, (0.0, 0.0))[:200])
+    cv2.imwrite(str(tmp_path / "b_view0.png"), _board_photo(pattern, (0.0, 0.0)))
+    cv2.imwrite(str(tmp_path / "c_small.png"), _board_photo(pattern, (0.0, 0.0))[:200])
+    cv2.imwrite(str(tmp_path / "d_blank.png"), np.full((240, 320), 200, np.uint8))
+    cv2.imwrite(str(tmp_path / "e_view1.png"), _board_photo(pattern, (25.0, 0.0)))
+    cv2.imwrite(str(tmp_path / "f_view2.png"), _board_photo(pattern, (-20.0, 20.0)))
     paths = image_files(tmp_path)
     run = calibrate_from_images(paths, pattern, 0.02)
-    used = ["b_view0.png", "b_view1.png", "b_view2.png", "b_view3.png"]
+    used = ["b_view0.png", "e_view1.png", "f_view2.png"]
     rejected = [
         ("a_corrupt.png", "cannot be read as an image"),
-        ("c_blank.png", "no 4x3 chessboard found"),
-        ("d_small.png", "size 320x200 differs from 320x240"),
+        ("c_small.png", "size 320x200 differs from 320x240"),
+        ("d_blank.png", "no 4x3 chessboard found"),
     ]
     assert run.used == tuple(used) and run.rejected == tuple(rejected)
-    assert run.result.image_size == (320, 240) and len(run.result.per_view_errors) == 4
+    assert run.result.image_size == (320, 240) and len(run.result.per_view_errors) == 3
     assert run.result.metadata == {
         "source": "photos",
         "pattern": [4, 3],
@@ -384,9 +398,10 @@ def test_photos_calibrate_and_the_result_records_the_board_and_every_photos_fate
         "photos_rejected": [{"photo": n, "reason": r} for n, r in rejected],
     }
     with pytest.raises(ValueError) as too_few:
-        calibrate_from_images(paths[:3], pattern, 0.02)
+        calibrate_from_images(paths[:5], pattern, 0.02)
     assert str(too_few.value) == (
-        "need at least 3 usable photos, got 2 (a_corrupt.png: cannot be read as an image)"
+        "need at least 3 usable photos, got 2 (a_corrupt.png: cannot be read as an image; "
+        "c_small.png: size 320x200 differs from 320x240; d_blank.png: no 4x3 chessboard found)"
     )
 
 
@@ -411,8 +426,9 @@ def test_a_pattern_not_two_counts_of_at_least_two_corners_is_refused(pattern: tu
 def test_no_photos_at_all_are_refused_as_no_image_files(tmp_path: Path) -> None:
     (tmp_path / "notes.txt").write_text("not an image")
     assert image_files(tmp_path) == []
+    # a 2x2 board is a board: the photos are what is missing
     with pytest.raises(ValueError) as refused:
-        calibrate_from_images(image_files(tmp_path), (4, 3), 0.02)
+        calibrate_from_images(image_files(tmp_path), (2, 2), 0.02)
     assert str(refused.value) == "need at least 3 usable photos, got 0 (no image files)"
 
 
@@ -531,3 +547,81 @@ def test_a_hyperbola_fit_evaluates_a_over_the_range_plus_c() -> None:
     fit = fit_hyperbola(r, 30.0 / r + 250.0)
     np.testing.assert_allclose(fit(np.array([0.25, 3])), [370.0, 260.0], rtol=1e-12)
     assert fit(2) == pytest.approx(265.0, rel=1e-12)
+
+
+def test_ycbcr_planes_are_opencvs_full_range_values_rescaled_to_the_studio_range() -> None:
+    greys = np.repeat(np.arange(256, dtype=np.uint8)[None, :, None], 3, axis=2)
+    y, cb, cr = ycbcr_studio(greys)
+    # a grey has no chroma; its luma runs from 16 (black) to 235 (white) in 219 equal steps
+    np.testing.assert_allclose(y[0], 16.0 + np.arange(256) * 219.0 / 255.0, rtol=1e-6)
+    assert np.all(cb == 128.0) and np.all(cr == 128.0)
+    image = np.random.default_rng(3).integers(0, 256, size=(16, 16, 3), dtype=np.uint8)
+    full = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(float)
+    y, cb, cr = ycbcr_studio(image)
+    np.testing.assert_allclose(y, 16.0 + full[..., 0] * 219.0 / 255.0, rtol=1e-6)
+    np.testing.assert_allclose(cb, 128.0 + (full[..., 2] - 128.0) * 224.0 / 255.0, rtol=1e-6)
+    np.testing.assert_allclose(cr, 128.0 + (full[..., 1] - 128.0) * 224.0 / 255.0, rtol=1e-6)
+
+
+def test_an_unknown_pad_colour_or_look_up_is_refused_naming_the_key_and_the_choices() -> None:
+    with pytest.raises(ConfigError) as colour:
+        segment_pad(np.zeros((4, 4, 3), dtype=np.uint8), "purple")
+    assert str(colour.value) == (
+        "colour: 'purple' is not allowed; choose one of 'blue', 'green', 'yellow', 'red'"
+    )
+    samples = [np.array([[1.0, 10.0, 20.0], [2.0, 30.0, 40.0]])]
+    with pytest.raises(ConfigError) as method:
+        TofCameraCalibration(samples, method="linear")
+    assert str(method.value) == (
+        "method: 'linear' is not allowed; choose one of 'pchip', 'hyperbola', 'exact'"
+    )
+
+
+#: two sensors' samples off any hyperbola: PCHIP and the fit tell apart
+BENT_SAMPLES = [
+    np.array([[0.5, 100.0, 50.0], [1.0, 60.0, 45.0], [2.0, 55.0, 20.0], [3.0, 10.0, 18.0]]),
+    np.array([[0.4, 200.0, 70.0], [1.5, 120.0, 66.0], [2.5, 110.0, 30.0]]),
+]
+
+
+def test_pchip_passes_through_its_samples_up_to_each_end_of_the_span() -> None:
+    cal = TofCameraCalibration(BENT_SAMPLES)
+    for k in range(3):
+        out = cal.lookup(np.array([BENT_SAMPLES[0][k, 0], BENT_SAMPLES[1][k, 0]]))
+        np.testing.assert_allclose(out.pixels, [BENT_SAMPLES[0][k, 1:], BENT_SAMPLES[1][k, 1:]])
+        assert out.valid.all() and not out.out_of_range.any()
+    ends = cal.lookup(np.array([3.0, 2.5]))
+    np.testing.assert_allclose(ends.pixels, [[10.0, 18.0], [110.0, 30.0]])
+    assert not ends.out_of_range.any()
+
+
+def test_a_hyperbola_calibration_looks_up_its_fit_in_and_out_of_its_span_under_either_policy() -> (
+    None
+):
+    ranges = np.array([1.2, 5.0])
+    for policy in OUT_OF_RANGE_POLICIES:
+        cal = TofCameraCalibration(BENT_SAMPLES, method="hyperbola", out_of_range=policy)
+        out = cal.lookup(ranges)
+        expected = [[cal.hyperbola_u[i](r), cal.hyperbola_v[i](r)] for i, r in enumerate(ranges)]
+        np.testing.assert_allclose(out.pixels, expected, rtol=1e-12)
+        assert out.valid.all()
+        np.testing.assert_array_equal(out.out_of_range, [False, True])
+    pchip = TofCameraCalibration(BENT_SAMPLES).lookup(ranges)
+    assert np.all(np.abs(pchip.pixels[0] - out.pixels[0]) > 1.0)
+
+
+def test_ranges_the_sensors_cannot_give_are_not_flagged_out_of_range() -> None:
+    cal = TofCameraCalibration(BENT_SAMPLES + BENT_SAMPLES)
+    out = cal.lookup(np.array([np.nan, -1.0, 0.0, np.inf]))
+    assert not out.valid.any() and not out.out_of_range.any()
+    # a reading for each sensor or nothing: another count has no pixels
+    wrong = cal.lookup(np.array([1.0, 1.0]))
+    assert wrong.pixels.shape == (4, 2) and np.all(np.isnan(wrong.pixels))
+    assert wrong.valid.dtype == bool and wrong.out_of_range.dtype == bool
+    assert not wrong.valid.any() and not wrong.out_of_range.any()
+
+
+def test_an_exact_look_up_at_a_range_too_short_to_project_is_not_valid() -> None:
+    out = _exact().lookup(np.array([1e-10, 1.0, 1.0, 1.0]))
+    np.testing.assert_array_equal(out.valid, [False, True, True, True])
+    assert np.all(np.isnan(out.pixels[0]))
