@@ -202,7 +202,8 @@ def test_an_exact_tof_calibration_saved_loads_back_exact(tmp_path: Path) -> None
 
 
 @pytest.mark.parametrize(
-    "image_size", [[640], [640, 480, 3], [0, 480], [640, -1], [640.0, 480], "640x480", {"w": 640}]
+    "image_size",
+    [[640], [640, 480, 3], [0, 480], [640, -1], [640.0, 480], "640x480", {"w": 640}, 640],
 )
 def test_a_tof_calibrations_image_size_must_be_two_positive_pixel_counts(
     image_size: object, tmp_path: Path

@@ -513,6 +513,7 @@ def test_an_exact_calibration_samples_its_span_and_knows_its_camera() -> None:
     out = cal.lookup(np.array([np.nan, -1.0, 0.0, 9.0]))
     np.testing.assert_array_equal(out.valid, [False, False, False, True])
     assert np.all(np.isnan(out.pixels[:3])) and not out.out_of_range.any()
+    assert out.out_of_range.dtype == bool
     for r_min, r_max in [(0.0, 1.0), (2.0, 1.0), (1.0, 1.0)]:
         with pytest.raises(ValueError) as refused:
             TofCameraCalibration.exact(k, tof_positions_in_camera_frame(), r_min, r_max)
@@ -557,6 +558,7 @@ def test_a_hyperbola_fit_evaluates_a_over_the_range_plus_c() -> None:
 def test_ycbcr_planes_are_opencvs_full_range_values_rescaled_to_the_studio_range() -> None:
     greys = np.repeat(np.arange(256, dtype=np.uint8)[None, :, None], 3, axis=2)
     y, cb, cr = ycbcr_studio(greys)
+    assert y.dtype == cb.dtype == cr.dtype == np.float32
     # a grey has no chroma; its luma runs from 16 (black) to 235 (white) in 219 equal steps
     np.testing.assert_allclose(y[0], 16.0 + np.arange(256) * 219.0 / 255.0, rtol=1e-6)
     assert np.all(cb == 128.0) and np.all(cr == 128.0)
@@ -579,6 +581,11 @@ def test_an_unknown_pad_colour_or_look_up_is_refused_naming_the_key_and_the_choi
         TofCameraCalibration(samples, method="linear")
     assert str(method.value) == (
         "method: 'linear' is not allowed; choose one of 'pchip', 'hyperbola', 'exact'"
+    )
+    with pytest.raises(ConfigError) as policy:
+        TofCameraCalibration(samples, out_of_range="clip")
+    assert str(policy.value) == (
+        "out_of_range: 'clip' is not allowed; choose one of 'hyperbola', 'nan'"
     )
 
 
@@ -670,3 +677,13 @@ def test_a_colour_photo_is_read_by_its_luminance(tmp_path: Path) -> None:
         cv2.imwrite(str(tmp_path / f"view{i}.png"), bgr.astype(np.uint8))
     run = calibrate_from_images(image_files(tmp_path), pattern, 0.02)
     assert run.used == ("view0.png", "view1.png", "view2.png") and not run.rejected
+
+
+def test_the_ranges_may_come_in_any_shape_holding_one_per_sensor() -> None:
+    cal = TofCameraCalibration(BENT_SAMPLES + BENT_SAMPLES)
+    ranges = np.array([0.7, 1.1, 2.6, 0.45])
+    flat = cal.lookup(ranges)
+    for shaped in (ranges.reshape(4, 1), ranges.reshape(2, 2), ranges.tolist()):
+        out = cal.lookup(shaped)
+        np.testing.assert_array_equal(out.pixels, flat.pixels)
+        np.testing.assert_array_equal(out.out_of_range, flat.out_of_range)
