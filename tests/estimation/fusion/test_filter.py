@@ -21,7 +21,7 @@ from estimation.frames import (
     matrix_from_euler_zyx,
     tof_positions_in_camera_frame,
 )
-from estimation.fusion import DeckFusion, FusionConfig
+from estimation.fusion import POSE_SOURCES, DeckFusion, FusionConfig
 from estimation.fusion.config import nis_gate
 from estimation.fusion.model import (
     N_COLOURED,
@@ -534,6 +534,111 @@ def test_config_errors_name_the_field() -> None:
     with pytest.raises(ConfigError, match="atda_sigma"):
         FusionConfig(atda_sigma=(0.1, 0.1))
     assert FusionConfig(ihrcf_sigma=(0.002, 0.002, math.inf, math.inf, math.inf, 0.3)).sources
+
+
+_WAVES = {"deck_roll_periods_s": (10.0, 4.0), "deck_pitch_periods_s": (9.0, 4.0)}
+_PERIODS = ": two periods in 0.5-1000 s, or [] for none"
+_RMS = "two values in (0, 90]: roll, pitch (deg)"
+_NOT_A_SOURCE = "'truth' is not allowed; choose one of " + ", ".join(map(repr, POSE_SOURCES))
+
+
+@pytest.mark.parametrize(
+    ("overrides", "key", "detail"),
+    [
+        ({"sources": ("truth",)}, "sources", _NOT_A_SOURCE),
+        ({"covariance_sources": ("truth",)}, "covariance_sources", _NOT_A_SOURCE),
+        (
+            {"atda_sigma": (0.1, 0.1)},
+            "atda_sigma",
+            "(0.1, 0.1) needs 6 values: x, y, z (m), roll, pitch, yaw (deg)",
+        ),
+        (
+            {"crhf_sigma": (0.1,) * 5 + (0.0,)},
+            "crhf_sigma",
+            "(0.1, 0.1, 0.1, 0.1, 0.1, 0.0): every sigma must be > 0 (or .inf: unused)",
+        ),
+        (
+            {"tight_sigma": (-0.1,) + (0.1,) * 5},
+            "tight_sigma",
+            "(-0.1, 0.1, 0.1, 0.1, 0.1, 0.1): every sigma must be > 0 (or .inf: unused)",
+        ),
+        (
+            {"deck_roll_periods_s": (10.0,), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(10.0,)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0, 3.0), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(10.0, 4.0, 3.0)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0), "deck_pitch_periods_s": (9.0, 0.49)},
+            "deck_pitch_periods_s",
+            "(9.0, 0.49)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (1000.5, 4.0), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(1000.5, 4.0)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0)},
+            "deck_pitch_periods_s",
+            "set with deck_roll_periods_s, or neither",
+        ),
+        ({"deck_attitude_rms_deg": (3.0,)}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (3.0,) * 3}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (0.0, 3.0)}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (3.0, 90.5)}, "deck_attitude_rms_deg", _RMS),
+        (
+            {**_WAVES, "deck_damping_ratio": 0.004},
+            "deck_damping_ratio",
+            "must be >= 0.005 with the wave periods",
+        ),
+    ],
+)
+def test_a_bad_fusion_setting_is_refused_naming_its_key_and_what_it_needs(
+    overrides: dict[str, object], key: str, detail: str
+) -> None:
+    with pytest.raises(ConfigError) as caught:
+        FusionConfig(**overrides)  # type: ignore[arg-type]
+    assert (caught.value.key, caught.value.detail) == (key, detail)
+
+
+def test_fusion_settings_at_the_ends_of_their_ranges_are_taken_as_tuples_of_floats() -> None:
+    """Lists and integers are taken as tuples of floats; periods of 0.5 s and 1000 s, an RMS
+    of 90 deg or half a degree and a damping ratio of 0.005 with the wave periods are
+    allowed, and so is no damping at all without them."""
+    config = FusionConfig(
+        sources=["atda", "tight"],  # type: ignore[arg-type]
+        covariance_sources=["tight"],  # type: ignore[arg-type]
+        deck_roll_periods_s=[0.5, 1000],  # type: ignore[arg-type]
+        deck_pitch_periods_s=(1000, 0.5),
+        deck_attitude_rms_deg=[90, 0.5],  # type: ignore[arg-type]
+        deck_damping_ratio=0.005,
+        atda_sigma=[1, 2, 3, 4, 5, math.inf],  # type: ignore[arg-type]
+    )
+    assert config.sources == ("atda", "tight") and config.covariance_sources == ("tight",)
+    for value, expected in (
+        (config.deck_roll_periods_s, (0.5, 1000.0)),
+        (config.deck_pitch_periods_s, (1000.0, 0.5)),
+        (config.deck_attitude_rms_deg, (90.0, 0.5)),
+        (config.atda_sigma, (1.0, 2.0, 3.0, 4.0, 5.0, math.inf)),
+    ):
+        assert type(value) is tuple and value == expected
+        assert all(type(v) is float for v in value)
+    assert config.pose_sigma("atda") == (1.0, 2.0, 3.0, 4.0, 5.0, math.inf)
+    assert config.pose_sigma("crhf") == config.crhf_sigma
+    assert FusionConfig(deck_damping_ratio=0.0).deck_damping_ratio == 0.0
+
+
+def test_the_gate_is_gate_sd_squared_when_set_else_the_chi_square_quantile() -> None:
+    paper = FusionConfig(gate_sd=10.0, gate_probability=0.99)
+    assert [paper.gate(dof) for dof in range(1, 7)] == [100.0] * 6
+    chi_square = FusionConfig(gate_probability=0.99)
+    for dof in range(1, 7):
+        assert chi_square.gate(dof) == pytest.approx(chi2.ppf(0.99, dof), rel=1e-12)
 
 
 @given(
