@@ -1025,6 +1025,19 @@ def test_a_pose_is_taken_with_the_drones_attitude_nearest_its_stamp(
     np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
 
 
+def test_the_last_attitude_before_the_horizon_is_kept_while_it_is_the_nearest_to_a_pose() -> None:
+    """Steps at 0, 0.1, 0.7, 0.98 and 1 s, a horizon of 0.25 s: a pose stamped 0.78 s
+    (inside the horizon) is nearer the attitude of 0.7 s (outside it) than that of 0.98 s."""
+    fusion = make_fusion(make_config(horizon_s=0.25))
+    times = (0.0, 0.1, 0.7, 0.98, 1.0)
+    attitudes = [matrix_from_euler_zyx(0.1 * k, -0.05 * k, 0.3 * k) for k in range(5)]
+    pose = _pose("atda", 0.78)
+    for k, (time, r_wb) in enumerate(zip(times, attitudes, strict=True)):
+        fusion.step(time, r_wb, (), None, [pose] if k == 4 else [])
+    z, _ = pose_measurement(pose, attitudes[2], T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+
+
 def _jacobian_of_the_pose(estimate: DeckPoseEstimate, r_wb: np.ndarray) -> np.ndarray:
     """d(p, th)/d(x, y, z, roll, pitch, yaw of T_CD) by central differences of 1e-5."""
     base = np.concatenate([estimate.translation, euler_zyx_from_matrix(estimate.rotation)])
@@ -1359,7 +1372,10 @@ def test_a_pose_holding_its_frames_ranges_supersedes_that_frames_reading_alone()
     fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
     ranges = np.array([tof_model(fusion.state, o, r_wb)[0] for o in fusion.tof_origins_b])
     for time in (0.0625, 0.125, 0.1875):
-        poses = [_pose("tight", 0.125, extras={"ranges_used": 4})] if time == 0.1875 else []
+        # a pose without the ranges (atda) at a reading's time leaves the reading fused
+        poses = [_pose("atda", time)] if time == 0.0625 else []
+        if time == 0.1875:
+            poses = [_pose("tight", 0.125, extras={"ranges_used": 4})]
         fusion.step(time, r_wb, (), RangeReading(time, ranges, np.ones(4, bool)), poses)
     diagnostics = fusion.diagnostics()
     assert diagnostics["tof_superseded"] == 1
