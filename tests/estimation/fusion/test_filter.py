@@ -1122,7 +1122,10 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
             expected[6:8, 15:] = -gain
             expected[15:, 6:8] = -gain.T
     np.testing.assert_allclose(fusion.covariance, expected, rtol=1e-6, atol=1e-14)
-    assert fusion.diagnostics()[f"{source}_initialised"] == 1
+    diagnostics = fusion.diagnostics()
+    assert diagnostics[f"{source}_initialised"] == 1
+    # nothing was innovated: no NIS
+    assert not any(key.startswith("nis") for key in diagnostics)
 
 
 @pytest.mark.parametrize(
@@ -1321,33 +1324,34 @@ def test_the_filter_resets_after_more_than_reset_timeout_s_and_restarts_keeping_
 
 def test_tof_ranges_are_fused_one_sensor_at_a_time_each_gated_alone() -> None:
     """Each valid range is one scalar update through the ray's model, with the range's own
-    sigma and the one-dimensional gate: an invalid one is skipped, an outlier rejected
-    alone; the NIS is the mean over the sensors.  Without use_tof, or with no valid range,
-    a reading changes nothing."""
-    config = make_config(
-        use_tof=True, tof_sigma_m=0.003, tof_sigma_per_m=0.01, tof_resolution_m=0.001
-    )
+    sigma and the one-dimensional gate: an invalid one is skipped, one with an NIS of 13.5
+    (beyond the gate of one degree of freedom, 12.1, not of two) rejected alone; the NIS is
+    the mean over the sensors.  Without use_tof, or with no valid range, a reading changes
+    nothing."""
+    config = make_config(use_tof=True, tof_sigma_m=0.003, tof_sigma_per_m=0.0)
     r_wb = matrix_from_euler_zyx(0.05, -0.03, 0.2)
     fusion = make_fusion(config)
     fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
     x, cov = fusion.state, fusion.covariance
     origins = fusion.tof_origins_b
     predicted = [tof_model(x, origin, r_wb)[0] for origin in origins]
-    measured = np.array([predicted[0] + 0.004, np.nan, predicted[2] - 0.003, predicted[3] + 0.5])
-    reading = RangeReading(0.0625, measured, np.array([True, False, True, True]))
-    fusion.step(0.0625, r_wb, (), reading)
+    measured = [predicted[0] + 0.004, math.nan, predicted[2] - 0.003, math.nan]
     gate = chi2.ppf(config.gate_probability, 1)
+    sigma = config.tof_noise.sigma_scalar(2.0)  # the same at every range here
     nis_values, accepted = [], []
-    for origin, value in zip(origins, measured, strict=True):
-        if not math.isfinite(value):
-            continue
+    for k, origin in enumerate(origins):
         model, h = tof_model(x, origin, r_wb)
-        sigma = config.tof_noise.sigma_scalar(value)
-        x, cov, nis, ok = ekf_update(
-            x, cov, np.array([value - model]), h[None, :], np.array([[sigma**2]]), gate
-        )
+        if k == 3:  # the outlier: an NIS of 13.5
+            measured[3] = model + math.sqrt(13.5 * (h @ cov @ h + sigma**2))
+        if not math.isfinite(measured[k]):
+            continue
+        innovation = np.array([measured[k] - model])
+        x, cov, nis, ok = ekf_update(x, cov, innovation, h[None, :], np.array([[sigma**2]]), gate)
         nis_values.append(nis)
         accepted.append(ok)
+    reading = RangeReading(0.0625, np.array(measured), np.array([True, False, True, True]))
+    fusion.step(0.0625, r_wb, (), reading)
+    assert nis_values[2] == pytest.approx(13.5, rel=1e-9)
     assert accepted == [True, True, False]
     np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
@@ -1441,3 +1445,30 @@ def test_poses_leaving_the_buffer_feed_the_identifier_and_its_model_drives_the_p
         np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(fusion.covariance, expected[1], rtol=1e-12, atol=1e-18)
     assert stand_in.resets == 1
+
+
+@pytest.mark.parametrize("model", ["identified", "wave-periods"])
+def test_with_a_deck_model_its_extra_states_start_at_the_seas_stationary_spread(
+    model: str,
+) -> None:
+    """The first pose starts the second wave component's angle and rate (the identified
+    two-oscillator model) or the deck's angular acceleration and jerk (the fourth-order
+    model of given wave periods) at their stationary sigmas, roll's and pitch's each."""
+    if model == "identified":
+        config = make_config(identify_deck_motion=True, deck_attitude_rms_deg=(3.0, 2.0))
+        deck4 = config.deck4_initial
+        sigmas = [waves.second_sigmas for waves in deck4]
+    else:
+        config = make_config(
+            deck_roll_periods_s=(11.0, 4.4),
+            deck_pitch_periods_s=(9.0, 4.0),
+            deck_attitude_rms_deg=(3.0, 2.0),
+        )
+        sigmas = [axis[2] for axis in config.deck4]
+    fusion = make_fusion(config)
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    cov = fusion.covariance
+    assert cov.shape == (N_STATE_4, N_STATE_4)
+    np.testing.assert_allclose(np.diag(cov)[15:19], [s[i] ** 2 for i in (0, 1) for s in sigmas])
+    np.testing.assert_array_equal(cov[15:19, :15], np.zeros((4, 15)))
+    np.testing.assert_array_equal(cov[15:19, 15:19], np.diag(np.diag(cov)[15:19]))
