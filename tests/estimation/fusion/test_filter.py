@@ -1472,3 +1472,26 @@ def test_with_a_deck_model_its_extra_states_start_at_the_seas_stationary_spread(
     np.testing.assert_allclose(np.diag(cov)[15:19], [s[i] ** 2 for i in (0, 1) for s in sigmas])
     np.testing.assert_array_equal(cov[15:19, :15], np.zeros((4, 15)))
     np.testing.assert_array_equal(cov[15:19, 15:19], np.diag(np.diag(cov)[15:19]))
+
+
+def test_the_gyro_turns_the_attitude_from_the_latest_event_in_the_buffer() -> None:
+    """A step's first IMU sample is turned by the gyro over the time since the latest event
+    in the buffer: here the previous step's ToF reading, after that step's last sample."""
+    config = make_config(use_tof=True)
+    fusion = make_fusion(config)
+    level = np.eye(3)
+    fusion.step(0.0, level, (), None, [_pose("atda", 0.0)])
+    ranges = np.array([tof_model(fusion.state, o, level)[0] for o in fusion.tof_origins_b])
+    fusion.step(0.05, level, _imu([0.02, 0.04]), RangeReading(0.05, ranges, np.ones(4, bool)))
+    x, cov = fusion.state, fusion.covariance
+    gyro = np.array([0.5, -0.3, 0.8])
+    sample = ImuSample(0.07, np.array([0.2, 0.1, 9.6]), gyro)
+    fusion.step(0.07, level, [sample])
+    r_wb = Rotation.from_rotvec(gyro * 0.02).as_matrix()
+    # the prediction itself runs from the last prediction (the sample at 0.04 s)
+    expected = predict(
+        x, cov, sample.accel, r_wb, 0.07 - 0.04, config.deck_accel_psd,
+        config.deck_angular_accel_psd, config.accel_noise_density,
+        config.accel_bias_random_walk,
+    )  # fmt: skip
+    np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)
