@@ -21,7 +21,7 @@ from estimation.frames import (
     matrix_from_euler_zyx,
     tof_positions_in_camera_frame,
 )
-from estimation.fusion import DeckFusion, FusionConfig
+from estimation.fusion import POSE_SOURCES, DeckFusion, FusionConfig, pose_measurement
 from estimation.fusion.config import nis_gate
 from estimation.fusion.model import (
     N_COLOURED,
@@ -536,6 +536,111 @@ def test_config_errors_name_the_field() -> None:
     assert FusionConfig(ihrcf_sigma=(0.002, 0.002, math.inf, math.inf, math.inf, 0.3)).sources
 
 
+_WAVES = {"deck_roll_periods_s": (10.0, 4.0), "deck_pitch_periods_s": (9.0, 4.0)}
+_PERIODS = ": two periods in 0.5-1000 s, or [] for none"
+_RMS = "two values in (0, 90]: roll, pitch (deg)"
+_NOT_A_SOURCE = "'truth' is not allowed; choose one of " + ", ".join(map(repr, POSE_SOURCES))
+
+
+@pytest.mark.parametrize(
+    ("overrides", "key", "detail"),
+    [
+        ({"sources": ("truth",)}, "sources", _NOT_A_SOURCE),
+        ({"covariance_sources": ("truth",)}, "covariance_sources", _NOT_A_SOURCE),
+        (
+            {"atda_sigma": (0.1, 0.1)},
+            "atda_sigma",
+            "(0.1, 0.1) needs 6 values: x, y, z (m), roll, pitch, yaw (deg)",
+        ),
+        (
+            {"crhf_sigma": (0.1,) * 5 + (0.0,)},
+            "crhf_sigma",
+            "(0.1, 0.1, 0.1, 0.1, 0.1, 0.0): every sigma must be > 0 (or .inf: unused)",
+        ),
+        (
+            {"tight_sigma": (-0.1,) + (0.1,) * 5},
+            "tight_sigma",
+            "(-0.1, 0.1, 0.1, 0.1, 0.1, 0.1): every sigma must be > 0 (or .inf: unused)",
+        ),
+        (
+            {"deck_roll_periods_s": (10.0,), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(10.0,)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0, 3.0), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(10.0, 4.0, 3.0)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0), "deck_pitch_periods_s": (9.0, 0.49)},
+            "deck_pitch_periods_s",
+            "(9.0, 0.49)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (1000.5, 4.0), "deck_pitch_periods_s": (9.0, 4.0)},
+            "deck_roll_periods_s",
+            "(1000.5, 4.0)" + _PERIODS,
+        ),
+        (
+            {"deck_roll_periods_s": (10.0, 4.0)},
+            "deck_pitch_periods_s",
+            "set with deck_roll_periods_s, or neither",
+        ),
+        ({"deck_attitude_rms_deg": (3.0,)}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (3.0,) * 3}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (0.0, 3.0)}, "deck_attitude_rms_deg", _RMS),
+        ({"deck_attitude_rms_deg": (3.0, 90.5)}, "deck_attitude_rms_deg", _RMS),
+        (
+            {**_WAVES, "deck_damping_ratio": 0.004},
+            "deck_damping_ratio",
+            "must be >= 0.005 with the wave periods",
+        ),
+    ],
+)
+def test_a_bad_fusion_setting_is_refused_naming_its_key_and_what_it_needs(
+    overrides: dict[str, object], key: str, detail: str
+) -> None:
+    with pytest.raises(ConfigError) as caught:
+        FusionConfig(**overrides)  # type: ignore[arg-type]
+    assert (caught.value.key, caught.value.detail) == (key, detail)
+
+
+def test_fusion_settings_at_the_ends_of_their_ranges_are_taken_as_tuples_of_floats() -> None:
+    """Lists and integers are taken as tuples of floats; periods of 0.5 s and 1000 s, an RMS
+    of 90 deg or half a degree and a damping ratio of 0.005 with the wave periods are
+    allowed, and so is no damping at all without them."""
+    config = FusionConfig(
+        sources=["atda", "tight"],  # type: ignore[arg-type]
+        covariance_sources=["tight"],  # type: ignore[arg-type]
+        deck_roll_periods_s=[0.5, 1000],  # type: ignore[arg-type]
+        deck_pitch_periods_s=(1000, 0.5),
+        deck_attitude_rms_deg=[90, 0.5],  # type: ignore[arg-type]
+        deck_damping_ratio=0.005,
+        atda_sigma=[1, 2, 3, 4, 5, math.inf],  # type: ignore[arg-type]
+    )
+    assert config.sources == ("atda", "tight") and config.covariance_sources == ("tight",)
+    for value, expected in (
+        (config.deck_roll_periods_s, (0.5, 1000.0)),
+        (config.deck_pitch_periods_s, (1000.0, 0.5)),
+        (config.deck_attitude_rms_deg, (90.0, 0.5)),
+        (config.atda_sigma, (1.0, 2.0, 3.0, 4.0, 5.0, math.inf)),
+    ):
+        assert type(value) is tuple and value == expected
+        assert all(type(v) is float for v in value)
+    assert config.pose_sigma("atda") == (1.0, 2.0, 3.0, 4.0, 5.0, math.inf)
+    assert config.pose_sigma("crhf") == config.crhf_sigma
+    assert FusionConfig(deck_damping_ratio=0.0).deck_damping_ratio == 0.0
+
+
+def test_the_gate_is_gate_sd_squared_when_set_else_the_chi_square_quantile() -> None:
+    paper = FusionConfig(gate_sd=10.0, gate_probability=0.99)
+    assert [paper.gate(dof) for dof in range(1, 7)] == [100.0] * 6
+    chi_square = FusionConfig(gate_probability=0.99)
+    for dof in range(1, 7):
+        assert chi_square.gate(dof) == pytest.approx(chi2.ppf(0.99, dof), rel=1e-12)
+
+
 @given(
     dof=st.integers(1, 12),
     probability=st.floats(1e-6, 1.0 - 1e-9, allow_nan=False),
@@ -835,3 +940,558 @@ def test_fuzzed_wave_components_are_refused_naming_their_key_or_never_raise(
         late = [_as_tight(frame, rng, sigma_cd)]
         if estimate.valid:
             assert np.all(np.isfinite(estimate.translation))
+
+
+def test_the_tof_sensors_sit_at_the_camera_plus_their_mounts_turned_into_the_body() -> None:
+    mounts_c = np.array([[0.02, 0.01, 0.0], [-0.03, 0.015, 0.005]])
+    fusion = DeckFusion(make_config(use_tof=True), mounts_c.ravel().tolist(), [0.01, 0.0, -0.03])
+    expected = np.array([[0.01, 0.0, -0.03] + R_BC @ mount for mount in mounts_c])
+    np.testing.assert_allclose(fusion.tof_origins_b, expected, rtol=0, atol=1e-15)
+
+
+def test_the_filters_identifier_and_states_follow_the_identification_and_tilt_settings() -> None:
+    """The identifier takes each identification setting; the coloured tilt errors add two
+    states only with both a correlation time and a share."""
+    config = make_config(
+        identify_deck_motion=True,
+        identify_window_s=60.0,
+        identify_sample_s=0.25,
+        identify_min_window_s=12.0,
+        identify_refit_s=3.0,
+        identify_period_range_s=(3.0, 25.0),
+        identify_damping_range=(0.04, 1.5),
+        identify_noise_gain=1.5,
+        identify_ar_order=6,
+    )
+    identifier = make_fusion(config).identifier
+    assert identifier is not None
+    assert (
+        identifier.window_s,
+        identifier.sample_s,
+        identifier.min_window_s,
+        identifier.refit_s,
+        identifier.period_range_s,
+        identifier.damping_range,
+        identifier.noise_gain,
+        identifier.order,
+    ) == (60.0, 0.25, 12.0, 3.0, (3.0, 25.0), (0.04, 1.5), 1.5, 6)
+    for correlation_s, share, n in ((0.3, 0.0, N_STATE), (0.0, 0.5, N_STATE), (0.3, 0.5, 17)):
+        config = make_config(
+            tilt_error_correlation_s=correlation_s, tilt_error_coloured_share=share
+        )
+        assert make_fusion(config).state.shape == (n,)
+
+
+def test_a_new_filter_is_not_initialised_and_knows_only_the_accelerometer_bias_prior() -> None:
+    config = make_config(initial_accel_bias_sigma=0.07)
+    fusion = make_fusion(config)
+    expected = np.zeros((N_STATE, N_STATE))
+    expected[12:15, 12:15] = 0.07**2 * np.eye(3)
+    np.testing.assert_array_equal(fusion.state, np.zeros(N_STATE))
+    np.testing.assert_allclose(fusion.covariance, expected, rtol=1e-15, atol=0)
+    estimate = fusion.step(0.2, np.eye(3))
+    assert not estimate.valid and estimate.reason == "fusion_not_initialised"
+    assert estimate.method == "fused" and estimate.timestamp == 0.2
+    assert estimate.extras == {"resets": 0, "initialised": False, "since_pose_s": math.inf}
+
+
+def _pose(method: str, time: float, **extra: object) -> DeckPoseEstimate:
+    """A pose of a deck 1.8 m below a camera, a little off centre, turned and tilted."""
+    return DeckPoseEstimate(
+        method,
+        time,
+        True,
+        matrix_from_euler_zyx(0.05, -0.03, 0.4),
+        np.array([0.1, -0.2, 1.8]),
+        **extra,  # type: ignore[arg-type]
+    )
+
+
+@pytest.mark.parametrize(
+    ("stamp", "nearest"),
+    [(-0.05, 0), (0.04, 0), (0.06, 1), (0.1, 1), (0.149, 1), (0.151, 2), (0.3, 3), (0.32, 3)],
+)
+def test_a_pose_is_taken_with_the_drones_attitude_nearest_its_stamp(
+    stamp: float, nearest: int
+) -> None:
+    """The drone turns between steps 0.1 s apart; a pose delivered late (or stamped a little
+    after the latest step) is placed with the attitude of the step nearest its stamp."""
+    fusion = make_fusion(make_config(horizon_s=1.0))
+    attitudes = [matrix_from_euler_zyx(0.1 * k, -0.05 * k, 0.3 * k) for k in range(4)]
+    for k, r_wb in enumerate(attitudes):
+        pose = _pose("atda", stamp)
+        fusion.step(0.1 * k, r_wb, (), None, [pose] if k == 3 else [])
+    z, _ = pose_measurement(pose, attitudes[nearest], T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+
+
+def test_the_last_attitude_before_the_horizon_is_kept_while_it_is_the_nearest_to_a_pose() -> None:
+    """Steps at 0, 0.1, 0.7, 0.98 and 1 s, a horizon of 0.25 s: a pose stamped 0.78 s
+    (inside the horizon) is nearer the attitude of 0.7 s (outside it) than that of 0.98 s."""
+    fusion = make_fusion(make_config(horizon_s=0.25))
+    times = (0.0, 0.1, 0.7, 0.98, 1.0)
+    attitudes = [matrix_from_euler_zyx(0.1 * k, -0.05 * k, 0.3 * k) for k in range(5)]
+    pose = _pose("atda", 0.78)
+    for k, (time, r_wb) in enumerate(zip(times, attitudes, strict=True)):
+        fusion.step(time, r_wb, (), None, [pose] if k == 4 else [])
+    z, _ = pose_measurement(pose, attitudes[2], T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+
+
+def _jacobian_of_the_pose(estimate: DeckPoseEstimate, r_wb: np.ndarray) -> np.ndarray:
+    """d(p, th)/d(x, y, z, roll, pitch, yaw of T_CD) by central differences of 1e-5."""
+    base = np.concatenate([estimate.translation, euler_zyx_from_matrix(estimate.rotation)])
+    columns = []
+    for k in range(6):
+        delta = np.zeros(6)
+        delta[k] = 1e-5
+        values = []
+        for sign in (1.0, -1.0):
+            moved = base + sign * delta
+            changed = DeckPoseEstimate(
+                "tight", 0.0, True, matrix_from_euler_zyx(*moved[3:]), moved[:3]
+            )
+            values.append(pose_measurement(changed, r_wb, T_BC)[0])
+        columns.append(wrap_angle(values[0] - values[1]) / 2e-5)
+    return np.column_stack(columns)
+
+
+@pytest.mark.parametrize("coloured", [False, True], ids=["white", "coloured"])
+@pytest.mark.parametrize("source", ["atda", "ihrcf", "tight"])
+def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_the_priors(
+    source: str, coloured: bool
+) -> None:
+    """The first pose sets the relative position and the deck's angles to what it measures,
+    with its noise (fixed sigmas in the camera frame turned into W, or the source's own
+    covariance through the measurement's Jacobian; roll and pitch times
+    tilt_error_sigma_scale), and a component the source does not give wide open (1 m, 0.5
+    rad); velocity, rates and the accelerometer bias start at their priors; the coloured
+    errors at unit variance, anticorrelated with the tilt they were measured in."""
+    tilt = {"tilt_error_correlation_s": 0.3, "tilt_error_coloured_share": 0.6} if coloured else {}
+    config = make_config(
+        sources=(source,),
+        tilt_error_sigma_scale=2.0,
+        initial_velocity_sigma=0.4,
+        initial_rate_sigma=0.1,
+        initial_accel_bias_sigma=0.03,
+        **tilt,
+    )
+    # a yawed drone (the masked z of IHRCF is W's z) or a tilted one
+    r_wb = (
+        matrix_from_euler_zyx(0.0, 0.0, 0.7)
+        if source == "ihrcf"
+        else matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    )
+    root = np.random.default_rng(4).normal(0.0, 0.01, (6, 6))
+    own = root @ root.T + np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-5])
+    extra = {"covariance": own} if source == "tight" else {}
+    pose = _pose(source, 0.0, **extra)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [pose])
+    z, r_wc = pose_measurement(pose, r_wb, T_BC)
+    n = N_STATE + (N_COLOURED if coloured else 0)
+    expected_x = np.zeros(n)
+    expected_x[[0, 1, 2, 6, 7, 8]] = z
+    np.testing.assert_allclose(fusion.state, expected_x, rtol=0, atol=1e-15)
+    if source == "tight":
+        jac = _jacobian_of_the_pose(pose, r_wb)
+        noise = jac @ own @ jac.T
+    else:
+        sigma = np.array(config.pose_sigma(source))
+        given = np.isfinite(sigma)
+        sigma = np.where(given, sigma, 1.0)
+        noise = np.zeros((6, 6))
+        noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
+        noise[3:, 3:] = np.diag(np.radians(sigma[3:]) ** 2)
+    scale = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 1.0])
+    noise = noise * np.outer(scale, scale)
+    expected = np.zeros((n, n))
+    expected[0:3, 0:3] = noise[:3, :3]
+    expected[6:9, 6:9] = noise[3:, 3:]
+    if source == "ihrcf":  # z, roll and pitch not given
+        for i, wide in ((2, 1.0), (6, 0.25), (7, 0.25)):
+            expected[i, :] = expected[:, i] = 0.0
+            expected[i, i] = wide
+    expected[3:6, 3:6] = 0.4**2 * np.eye(3)
+    expected[9:12, 9:12] = 0.1**2 * np.eye(3)
+    expected[12:15, 12:15] = 0.03**2 * np.eye(3)
+    if coloured:
+        expected[15:, 15:] = np.eye(2)
+        if source != "ihrcf":
+            gain = math.sqrt(0.6) * np.linalg.cholesky(noise[3:5, 3:5])
+            expected[6:8, 15:] = -gain
+            expected[15:, 6:8] = -gain.T
+    np.testing.assert_allclose(fusion.covariance, expected, rtol=1e-6, atol=1e-14)
+    diagnostics = fusion.diagnostics()
+    assert diagnostics[f"{source}_initialised"] == 1
+    # nothing was innovated: no NIS
+    assert not any(key.startswith("nis") for key in diagnostics)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {},
+        {
+            "deck_period_s": 9.0,
+            "deck_damping_ratio": 0.2,
+            "tilt_error_correlation_s": 0.3,
+            "tilt_error_coloured_share": 0.6,
+        },
+        {
+            "deck_roll_periods_s": (11.0, 4.4),
+            "deck_pitch_periods_s": (9.0, 4.0),
+            "deck_damping_ratio": 0.3,
+        },
+    ],
+    ids=["constant-rates", "oscillator-and-coloured-errors", "wave-periods"],
+)
+def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_turns_it_to(
+    overrides: dict[str, object],
+) -> None:
+    """After the first pose, each IMU sample is one prediction of the model over the time
+    since the sample (or event) before it, with its specific force and the drone's attitude
+    at the sample: the attitude given at the previous step turned by each gyro sample over
+    its interval (the attitude given with the samples is where the next step starts)."""
+    config = make_config(**overrides)
+    fusion = make_fusion(config)
+    start = matrix_from_euler_zyx(0.1, -0.05, 0.6)
+    fusion.step(0.0, start, (), None, [_pose("atda", 0.0)])
+    x, cov = fusion.state, fusion.covariance
+    r_wb, previous = start, 0.0
+    rng = np.random.default_rng(8)
+    for step, (t_end, ends) in enumerate(
+        ((0.05, matrix_from_euler_zyx(0.12, -0.04, 0.62)), (0.08, np.eye(3)))
+    ):
+        times = [0.01, 0.02, 0.03, 0.04, 0.05] if step == 0 else [0.065, 0.08]
+        samples = [
+            ImuSample(
+                t, np.array([0.3, -0.2, 9.9]) + rng.normal(0.0, 0.2, 3), rng.normal(0, 0.5, 3)
+            )
+            for t in times
+        ]
+        for sample in samples:
+            dt = sample.timestamp - previous
+            r_wb = r_wb @ Rotation.from_rotvec(sample.gyro * dt).as_matrix()
+            x, cov = predict(
+                x,
+                cov,
+                sample.accel,
+                r_wb,
+                dt,
+                config.deck_accel_psd,
+                config.deck_angular_accel_psd,
+                config.accel_noise_density,
+                config.accel_bias_random_walk,
+                config.deck_w0,
+                config.deck_damping_ratio,
+                config.deck4,
+                config.tilt_error_correlation_s,
+            )
+            previous = sample.timestamp
+        estimate = fusion.step(t_end, ends, samples)
+        r_wb = ends
+        np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
+    assert estimate.valid and not estimate.predicted
+
+
+def _pose_noise(config: FusionConfig, source: str, r_wc: np.ndarray) -> np.ndarray:
+    """A fixed-sigma source's pose noise in the state's axes (all components given)."""
+    sigma = np.array(config.pose_sigma(source))
+    noise = np.zeros((6, 6))
+    noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
+    noise[3:, 3:] = np.diag(np.radians(sigma[3:]) ** 2)
+    scale = np.array([1.0, 1.0, 1.0, *(config.tilt_error_sigma_scale,) * 2, 1.0])
+    return noise * np.outer(scale, scale)
+
+
+@pytest.mark.parametrize("coloured", [False, True], ids=["white", "coloured"])
+def test_a_pose_update_is_the_textbook_kalman_update_of_the_pose_and_its_coloured_tilt(
+    coloured: bool,
+) -> None:
+    """A second pose at the first one's time: the Kalman update of H = [I on (p, th)] (plus,
+    with coloured errors, the unit coloured states through the Cholesky factor of the tilt
+    noise times the square root of their share, the white rest of the noise scaled by the
+    square root of one less the share), its NIS and its roll/pitch NIS; with white errors
+    and equal noise it lands half way between the two poses with half their variance."""
+    tilt = {"tilt_error_correlation_s": 0.3, "tilt_error_coloured_share": 0.6} if coloured else {}
+    config = make_config(tilt_error_sigma_scale=1.3, **tilt)
+    fusion = make_fusion(config)
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    first = _pose("atda", 0.0)
+    second = DeckPoseEstimate(
+        "atda",
+        0.0,
+        True,
+        matrix_from_euler_zyx(0.07, -0.04, 0.403),
+        first.translation + np.array([0.002, -0.001, 0.004]),
+    )
+    fusion.step(0.0, r_wb, (), None, [first])
+    x, cov = fusion.state, fusion.covariance
+    fusion.step(0.0, r_wb, (), None, [second])
+    z1, r_wc = pose_measurement(first, r_wb, T_BC)
+    z2, _ = pose_measurement(second, r_wb, T_BC)
+    noise = _pose_noise(config, "atda", r_wc)
+    n = x.shape[0]
+    h = np.zeros((6, n))
+    h[0:3, 0:3] = np.eye(3)
+    h[3:6, 6:9] = np.eye(3)
+    if coloured:
+        gain = math.sqrt(0.6) * np.linalg.cholesky(noise[3:5, 3:5])
+        h[3:5, 15:17] = gain
+        white = np.array([1.0, 1.0, 1.0, math.sqrt(0.4), math.sqrt(0.4), 1.0])
+        noise = noise * np.outer(white, white)
+    innovation = z2 - h @ x
+    s = h @ cov @ h.T + noise
+    k = cov @ h.T @ np.linalg.inv(s)
+    np.testing.assert_allclose(fusion.state, x + k @ innovation, rtol=1e-9, atol=1e-13)
+    np.testing.assert_allclose(fusion.covariance, cov - k @ s @ k.T, rtol=1e-9, atol=1e-15)
+    diagnostics = fusion.diagnostics()
+    assert diagnostics["atda_initialised"] == 1 and diagnostics["atda_accepted"] == 1
+    nis = innovation @ np.linalg.solve(s, innovation)
+    nis_tilt = innovation[3:5] @ np.linalg.solve(s[3:5, 3:5], innovation[3:5])
+    assert diagnostics["nis_atda"] == pytest.approx(nis, rel=1e-9)
+    assert diagnostics["nis_tilt_atda"] == pytest.approx(nis_tilt, rel=1e-9)
+    if not coloured:
+        np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], 0.5 * (z1 + z2), atol=1e-12)
+        block = fusion.covariance[np.ix_([0, 1, 2, 6, 7, 8], [0, 1, 2, 6, 7, 8])]
+        np.testing.assert_allclose(block, 0.5 * noise, rtol=1e-9, atol=1e-18)
+
+
+def test_the_estimate_is_the_state_as_the_pose_of_the_deck_in_the_camera_and_says_its_age() -> None:
+    """Estimated at the attitude of the first pose, the fused T_CD is that pose, and its
+    covariance that pose's own (translation and angles; carried into the state and back
+    through the two Jacobians); beyond horizon_s since the last pose it is predicted, and
+    beyond reset_timeout_s it is no estimate (fusion_timed_out)."""
+    config = make_config(sources=("tight",), horizon_s=0.5, reset_timeout_s=1.0)
+    fusion = make_fusion(config)
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    root = np.random.default_rng(6).normal(0.0, 0.01, (6, 6))
+    own = root @ root.T + np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-5])
+    pose = _pose("tight", 0.0, covariance=own)
+    fusion.step(0.0, r_wb, (), None, [pose])
+    estimate = fusion.estimate(0.0, r_wb)
+    assert estimate.valid and estimate.method == "fused" and estimate.timestamp == 0.0
+    np.testing.assert_allclose(estimate.translation, pose.translation, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(estimate.rotation, pose.rotation, rtol=0, atol=1e-12)
+    assert estimate.covariance is not None
+    for block in (slice(0, 3), slice(3, 6)):
+        np.testing.assert_allclose(
+            estimate.covariance[block, block], own[block, block], rtol=1e-6, atol=1e-13
+        )
+    assert estimate.extras["initialised"] is True and estimate.extras["since_pose_s"] == 0.0
+    for time, predicted in ((0.5, False), (0.5000001, True), (1.0, True)):
+        later = fusion.estimate(time, r_wb)
+        assert later.valid and later.predicted is predicted and later.timestamp == time
+    late = fusion.estimate(1.0000001, r_wb)
+    assert not late.valid and late.reason == "fusion_timed_out"
+    assert late.method == "fused" and late.timestamp == 1.0000001 and late.extras["initialised"]
+
+
+def _imu(times: list[float]) -> list[ImuSample]:
+    """Hovering samples (level drone at rest) at these times."""
+    return [ImuSample(t, np.array([0.0, 0.0, 9.81]), np.zeros(3)) for t in times]
+
+
+def test_the_filter_resets_after_more_than_reset_timeout_s_and_restarts_keeping_the_bias() -> None:
+    """At exactly reset_timeout_s after the last pose the filter still runs; after it, it
+    resets (counted once, fusion_reset); the next pose starts it afresh with the velocity's
+    prior but the accelerometer bias' estimate and covariance as they were."""
+    config = make_config(reset_timeout_s=0.375, horizon_s=0.2)
+    fusion = make_fusion(config)
+    level = np.eye(3)
+    fusion.step(0.0, level, (), None, [_pose("atda", 0.0)])
+    moved = DeckPoseEstimate(
+        "atda", 0.125, True, _pose("atda", 0.0).rotation, np.array([0.104, -0.197, 1.805])
+    )
+    fusion.step(0.125, level, _imu([0.0625, 0.125]), None, [moved])
+    estimate = fusion.step(0.5, level, _imu([0.25, 0.5]))
+    assert estimate.valid and fusion.initialised
+    bias, bias_cov = fusion.state[12:15], fusion.covariance[12:15, 12:15]
+    assert np.all(bias != 0.0)
+    estimate = fusion.step(0.5625, level, _imu([0.5625]))
+    assert not estimate.valid and estimate.reason == "fusion_reset"
+    assert fusion.diagnostics()["resets"] == 1
+    estimate = fusion.step(0.625, level, _imu([0.625]), None, [_pose("atda", 0.625)])
+    assert estimate.valid and fusion.diagnostics()["atda_initialised"] == 2
+    np.testing.assert_array_equal(fusion.state[12:15], bias)
+    np.testing.assert_array_equal(fusion.covariance[12:15, 12:15], bias_cov)
+    np.testing.assert_array_equal(fusion.state[3:6], np.zeros(3))
+    np.testing.assert_allclose(fusion.covariance[3:6, 3:6], 0.3**2 * np.eye(3), rtol=1e-15)
+    assert fusion.diagnostics()["resets"] == 1
+
+
+def test_tof_ranges_are_fused_one_sensor_at_a_time_each_gated_alone() -> None:
+    """Each valid range is one scalar update through the ray's model, with the range's own
+    sigma and the one-dimensional gate: an invalid one is skipped, one with an NIS of 13.5
+    (beyond the gate of one degree of freedom, 12.1, not of two) rejected alone; the NIS is
+    the mean over the sensors.  Without use_tof, or with no valid range, a reading changes
+    nothing."""
+    config = make_config(use_tof=True, tof_sigma_m=0.003, tof_sigma_per_m=0.0)
+    r_wb = matrix_from_euler_zyx(0.05, -0.03, 0.2)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+    x, cov = fusion.state, fusion.covariance
+    origins = fusion.tof_origins_b
+    predicted = [tof_model(x, origin, r_wb)[0] for origin in origins]
+    measured = [predicted[0] + 0.004, math.nan, predicted[2] - 0.003, math.nan]
+    gate = chi2.ppf(config.gate_probability, 1)
+    sigma = config.tof_noise.sigma_scalar(2.0)  # the same at every range here
+    nis_values, accepted = [], []
+    for k, origin in enumerate(origins):
+        model, h = tof_model(x, origin, r_wb)
+        if k == 3:  # the outlier: an NIS of 13.5
+            measured[3] = model + math.sqrt(13.5 * (h @ cov @ h + sigma**2))
+        if not math.isfinite(measured[k]):
+            continue
+        innovation = np.array([measured[k] - model])
+        x, cov, nis, ok = ekf_update(x, cov, innovation, h[None, :], np.array([[sigma**2]]), gate)
+        nis_values.append(nis)
+        accepted.append(ok)
+    reading = RangeReading(0.0625, np.array(measured), np.array([True, False, True, True]))
+    fusion.step(0.0625, r_wb, (), reading)
+    assert nis_values[2] == pytest.approx(13.5, rel=1e-9)
+    assert accepted == [True, True, False]
+    np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
+    diagnostics = fusion.diagnostics()
+    assert (diagnostics["tof_accepted"], diagnostics["tof_rejected"]) == (2, 1)
+    assert diagnostics["nis_tof"] == pytest.approx(np.mean(nis_values), rel=1e-12)
+    for use_tof, valid in ((False, [True] * 4), (True, [False] * 4)):
+        other = make_fusion(make_config(use_tof=use_tof))
+        other.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+        before = other.state
+        other.step(0.0625, r_wb, (), RangeReading(0.0625, np.array(predicted), np.array(valid)))
+        np.testing.assert_array_equal(other.state, before)
+        assert not any(key.startswith(("tof", "nis_tof")) for key in other.diagnostics())
+
+
+def test_a_pose_holding_its_frames_ranges_supersedes_that_frames_reading_alone() -> None:
+    """A tight pose stamped at one frame, arriving a frame late, supersedes the ToF reading
+    of its own frame (its ranges are in it), not the frames before or after it."""
+    config = make_config(sources=("atda", "tight"), use_tof=True)
+    r_wb = np.eye(3)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+    ranges = np.array([tof_model(fusion.state, o, r_wb)[0] for o in fusion.tof_origins_b])
+    for time in (0.0625, 0.125, 0.1875):
+        # a pose without the ranges (atda) at a reading's time leaves the reading fused
+        poses = [_pose("atda", time)] if time == 0.0625 else []
+        if time == 0.1875:
+            poses = [_pose("tight", 0.125, extras={"ranges_used": 4})]
+        fusion.step(time, r_wb, (), RangeReading(time, ranges, np.ones(4, bool)), poses)
+    diagnostics = fusion.diagnostics()
+    assert diagnostics["tof_superseded"] == 1
+    assert diagnostics.get("tof_accepted", 0) + diagnostics.get("tof_rejected", 0) == 8
+
+
+class _Identifier:
+    """A stand-in for the filter's identifier: keeps what it is fed and, from the second
+    estimate on, hands out its own model."""
+
+    def __init__(self, deck4: tuple) -> None:
+        self.deck4, self.fed, self.resets = deck4, [], 0
+
+    def add(self, time: float, roll: float, pitch: float) -> bool:
+        self.fed.append((time, roll, pitch))
+        return len(self.fed) >= 2
+
+    def reset(self) -> None:
+        self.resets += 1
+
+
+def test_poses_leaving_the_buffer_feed_the_identifier_and_its_model_drives_the_prediction() -> None:
+    """Each pose update, once older than the horizon (final), gives the identifier its time
+    and the deck's roll and pitch after it; a refitted model drives the predictions that
+    follow; a reset restarts the identifier and the initial model."""
+    config = make_config(identify_deck_motion=True, horizon_s=0.25)
+    fusion = make_fusion(config)
+    model = (
+        TwoWaves.matched(0.6, 0.1, 1.4, 0.3, 2e-3, 5e-4),
+        TwoWaves.matched(0.5, 0.2, 1.7, 0.15, 1e-3, 8e-4),
+    )
+    stand_in = _Identifier(model)
+    fusion.identifier = stand_in  # type: ignore[assignment]
+    r_wb = np.eye(3)
+    after = []
+    for k in range(5):
+        time = 0.125 * k
+        pose = DeckPoseEstimate(
+            "atda",
+            time,
+            True,
+            matrix_from_euler_zyx(0.05 + 0.01 * k, -0.03 - 0.005 * k, 0.4),
+            np.array([0.1, -0.2, 1.8]),
+        )
+        fusion.step(time, r_wb, _imu([time]) if k else (), None, [pose])
+        after.append((time, *fusion.state[6:8]))
+    # at 0.5 s the poses before 0.25 s have left the buffer
+    np.testing.assert_allclose(np.array(stand_in.fed), np.array(after[:2]), rtol=1e-12)
+    assert all(type(v) is float for v in stand_in.fed[0])
+    for deck4, restart in ((model, False), (config.deck4_initial, True)):
+        if restart:
+            fusion.reset()
+            fusion.step(0.5, r_wb, (), None, [_pose("atda", 0.5)])
+        x, cov = fusion.state, fusion.covariance
+        sample = ImuSample(0.5625, np.array([0.1, -0.1, 9.9]), np.zeros(3))
+        fusion.step(0.5625, r_wb, [sample])
+        expected = predict(
+            x, cov, sample.accel, r_wb, 0.0625, config.deck_accel_psd,
+            config.deck_angular_accel_psd, config.accel_noise_density,
+            config.accel_bias_random_walk, deck4=deck4,
+            tilt_correlation_s=config.tilt_error_correlation_s,
+        )  # fmt: skip
+        np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(fusion.covariance, expected[1], rtol=1e-12, atol=1e-18)
+    assert stand_in.resets == 1
+
+
+@pytest.mark.parametrize("model", ["identified", "wave-periods"])
+def test_with_a_deck_model_its_extra_states_start_at_the_seas_stationary_spread(
+    model: str,
+) -> None:
+    """The first pose starts the second wave component's angle and rate (the identified
+    two-oscillator model) or the deck's angular acceleration and jerk (the fourth-order
+    model of given wave periods) at their stationary sigmas, roll's and pitch's each."""
+    if model == "identified":
+        config = make_config(identify_deck_motion=True, deck_attitude_rms_deg=(3.0, 2.0))
+        deck4 = config.deck4_initial
+        sigmas = [waves.second_sigmas for waves in deck4]
+    else:
+        config = make_config(
+            deck_roll_periods_s=(11.0, 4.4),
+            deck_pitch_periods_s=(9.0, 4.0),
+            deck_attitude_rms_deg=(3.0, 2.0),
+        )
+        sigmas = [axis[2] for axis in config.deck4]
+    fusion = make_fusion(config)
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    cov = fusion.covariance
+    assert cov.shape == (N_STATE_4, N_STATE_4)
+    np.testing.assert_allclose(np.diag(cov)[15:19], [s[i] ** 2 for i in (0, 1) for s in sigmas])
+    np.testing.assert_array_equal(cov[15:19, :15], np.zeros((4, 15)))
+    np.testing.assert_array_equal(cov[15:19, 15:19], np.diag(np.diag(cov)[15:19]))
+
+
+def test_the_gyro_turns_the_attitude_from_the_latest_event_in_the_buffer() -> None:
+    """A step's first IMU sample is turned by the gyro over the time since the latest event
+    in the buffer: here the previous step's ToF reading, after that step's last sample."""
+    config = make_config(use_tof=True)
+    fusion = make_fusion(config)
+    level = np.eye(3)
+    fusion.step(0.0, level, (), None, [_pose("atda", 0.0)])
+    ranges = np.array([tof_model(fusion.state, o, level)[0] for o in fusion.tof_origins_b])
+    fusion.step(0.05, level, _imu([0.02, 0.04]), RangeReading(0.05, ranges, np.ones(4, bool)))
+    x, cov = fusion.state, fusion.covariance
+    gyro = np.array([0.5, -0.3, 0.8])
+    sample = ImuSample(0.07, np.array([0.2, 0.1, 9.6]), gyro)
+    fusion.step(0.07, level, [sample])
+    r_wb = Rotation.from_rotvec(gyro * 0.02).as_matrix()
+    # the prediction itself runs from the last prediction (the sample at 0.04 s)
+    expected = predict(
+        x, cov, sample.accel, r_wb, 0.07 - 0.04, config.deck_accel_psd,
+        config.deck_angular_accel_psd, config.accel_noise_density,
+        config.accel_bias_random_walk,
+    )  # fmt: skip
+    np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)

@@ -291,6 +291,81 @@ def test_bad_identification_settings_are_refused_naming_their_key(key: str, valu
     assert caught.value.key == key
 
 
+@pytest.mark.parametrize(
+    ("overrides", "key", "detail"),
+    [
+        ({"identify_ar_order": 5}, "identify_ar_order", "5: 4, 6, ..., 16"),
+        ({"identify_ar_order": 18}, "identify_ar_order", "18: 4, 6, ..., 16"),
+        (
+            {"identify_window_s": 15.0, "identify_min_window_s": 20.0},
+            "identify_min_window_s",
+            "must be <= identify_window_s",
+        ),
+        (
+            {"identify_min_window_s": 11.9},
+            "identify_min_window_s",
+            "needs 3 * identify_ar_order samples (identify_sample_s apart) or more",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 1000.5)},
+            "identify_period_range_s",
+            "(2.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_initial_periods_s": (10.0, 1000.5)},
+            "identify_initial_periods_s",
+            "(10.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_damping_range": (0.05, 10.5)},
+            "identify_damping_range",
+            "(0.05, 10.5): two values in [0.005, 10]",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 2.0)},
+            "identify_period_range_s",
+            "(2.0, 2.0): the low end first, below the high end",
+        ),
+        (
+            {"identify_damping_range": (0.5, 0.5)},
+            "identify_damping_range",
+            "(0.5, 0.5): the low end first, below the high end",
+        ),
+    ],
+)
+def test_bad_identification_settings_are_refused_saying_what_they_need(
+    overrides: dict[str, object], key: str, detail: str
+) -> None:
+    """The AR order is even, 4 to 16; the shortest window fits in the window and holds three
+    samples per AR coefficient; the bands are two values, the low end first."""
+    with pytest.raises(ConfigError) as caught:
+        make_config(**overrides)
+    assert (caught.value.key, caught.value.detail) == (key, detail)
+
+
+def test_identification_settings_at_the_ends_of_their_ranges_are_taken_as_floats() -> None:
+    """Orders 4 and 16; a shortest window equal to the window, or to exactly three samples
+    per AR coefficient (8 x 3 x 0.5 s = 12 s); bands from 0.5 s to 1000 s and damping from
+    0.005 to 10, given as lists of integers or floats; the initial periods in either order."""
+    assert make_config(identify_ar_order=4).identify_ar_order == 4
+    assert make_config(identify_ar_order=16, identify_min_window_s=24.0).identify_ar_order == 16
+    assert make_config(identify_window_s=15.0, identify_min_window_s=15.0).identifies
+    assert make_config(identify_min_window_s=12.0).identify_min_window_s == 12.0
+    config = make_config(
+        identify_period_range_s=[1, 1000],
+        identify_initial_periods_s=[0.5, 1000],
+        identify_damping_range=[0.005, 10],
+    )
+    for value, expected in (
+        (config.identify_period_range_s, (1.0, 1000.0)),
+        (config.identify_initial_periods_s, (0.5, 1000.0)),
+        (config.identify_damping_range, (0.005, 10.0)),
+    ):
+        assert type(value) is tuple and value == expected
+        assert all(type(v) is float for v in value)
+    assert make_config(identify_period_range_s=(0.5, 30.0)).identify_period_range_s[0] == 0.5
+
+
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     values=st.lists(

@@ -18,11 +18,15 @@ from scipy.linalg import expm, solve_continuous_lyapunov
 from estimation.fusion import identify
 from estimation.fusion.identify import (
     ORDER,
+    AxisModel,
+    DeckMotionIdentifier,
     component_variances,
     factors_from_ar,
+    fit_ar,
     oscillator_correlation,
     refine_components,
 )
+from estimation.fusion.model import TwoWaves
 
 SAMPLE_S = 0.5
 PERIOD_RANGE_S = (2.0, 30.0)
@@ -342,3 +346,267 @@ def test_a_pole_at_zero_is_taken_at_a_millionth() -> None:
     a, b = math.log(0.999) / SAMPLE_S, math.log(1e-6) / SAMPLE_S
     assert w == pytest.approx(math.sqrt(a * b), rel=1e-9)
     assert zeta == DAMPING_RANGE[1]  # -(a + b) / 2w is far above the band
+
+
+def peak(period_s: float, radius: float) -> tuple[float, float]:
+    """The factor ``(w, zeta)`` of a discrete pole pair: ``s = ln(z) / T``."""
+    s = cmath.log(pole_pair(period_s, radius)[0]) / SAMPLE_S
+    return abs(s), -s.real / abs(s)
+
+
+def real_pair(one: float, two: float) -> tuple[float, float]:
+    """The overdamped factor ``(w, zeta)`` of two real discrete poles."""
+    a, b = math.log(one) / SAMPLE_S, math.log(two) / SAMPLE_S
+    w = math.sqrt(a * b)
+    return w, -(a + b) / (2.0 * w)
+
+
+def test_of_three_distinct_peaks_the_two_highest_are_the_components() -> None:
+    coefficients = ar_coefficients(
+        [*pole_pair(20.0, 0.99), *pole_pair(8.0, 0.97), *pole_pair(3.0, 0.6)]
+    )
+    found = factors_from_ar(coefficients, SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    assert np.array(found) == pytest.approx(np.array([peak(20.0, 0.99), peak(8.0, 0.97)]))
+
+
+def test_one_peak_takes_the_slowest_two_real_poles_as_its_second_factor() -> None:
+    # a 12 s pair and four real poles: the second factor is the two slowest (nearest 1), not
+    # the fastest, and the complex pair's own real parts are not real poles
+    coefficients = ar_coefficients([*pole_pair(12.0, 0.95), 0.9, 0.8, 0.3, 0.2])
+    found = factors_from_ar(coefficients, SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    assert np.array(found) == pytest.approx(np.array([real_pair(0.9, 0.8), peak(12.0, 0.95)]))
+
+
+def test_real_poles_alone_pair_up_slowest_first_into_two_overdamped_factors() -> None:
+    coefficients = ar_coefficients([0.9, 0.8, 0.3, 0.2])
+    found = factors_from_ar(coefficients, SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    assert np.array(found) == pytest.approx(np.array([real_pair(0.9, 0.8), real_pair(0.3, 0.2)]))
+
+
+def test_no_peak_in_the_band_and_no_real_pole_give_the_longest_period_and_an_octave_up() -> None:
+    # one sharp pair at 1.5 s, outside the band: a critically damped factor at 30 s, and the
+    # second component an octave up with damping 0.3
+    found = factors_from_ar(
+        ar_coefficients(pole_pair(1.5, 0.9)), SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE
+    )
+    w_low = 2.0 * math.pi / PERIOD_RANGE_S[1]
+    assert np.array(found) == pytest.approx(np.array([(w_low, 1.0), (2.0 * w_low, 0.3)]), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("period_s", "octave"),
+    [(5.0, 2.0), (3.0, 0.5)],
+    ids=["up-inside-the-band", "down-when-up-leaves-it"],
+)
+def test_a_single_peaks_second_component_starts_an_octave_away_inside_the_band(
+    period_s: float, octave: float
+) -> None:
+    w, zeta = peak(period_s, 0.9)
+    found = factors_from_ar(
+        ar_coefficients(pole_pair(period_s, 0.9)), SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE
+    )
+    expected = sorted([(w, zeta), (octave * w, 0.3)])
+    assert np.array(found) == pytest.approx(np.array(expected), rel=1e-12)
+
+
+def test_an_octave_up_at_exactly_the_bands_top_is_inside_it() -> None:
+    # the band 2-4 s is one octave: real poles give a factor held at 4 s, the second one
+    # exactly at 2 s
+    (slow_w, _), (other_w, other_zeta) = factors_from_ar(
+        ar_coefficients([0.999, 0.998]), SAMPLE_S, (2.0, 4.0), DAMPING_RANGE
+    )
+    assert (slow_w, other_w, other_zeta) == (math.pi / 2.0, math.pi, 0.3)
+
+
+def ar_samples(coefficients: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
+    """``n`` samples that follow ``y[n] = sum_k c[k] y[n-1-k]`` exactly, from random values."""
+    y = list(np.random.default_rng(seed).standard_normal(len(coefficients)))
+    while len(y) < n:
+        y.append(float(np.dot(coefficients, y[-1 : -len(coefficients) - 1 : -1])))
+    return np.array(y[:n])
+
+
+def test_the_ar_fit_gives_the_coefficients_that_samples_follow_from_three_per_coefficient() -> None:
+    """Samples that follow an AR model exactly give its coefficients back, from three samples
+    per coefficient on; fewer, or a table of samples, give none."""
+    coefficients = ar_coefficients([*pole_pair(12.0, 0.98), *pole_pair(5.0, 0.95)])
+    for n in (12, 200):
+        assert fit_ar(ar_samples(coefficients, n), 4) == pytest.approx(coefficients, rel=1e-6)
+    assert fit_ar([int(v) for v in 100 * ar_samples(coefficients, 40)], 4) is not None
+    assert fit_ar(ar_samples(coefficients, 11), 4) is None
+    table = np.random.default_rng(1).standard_normal((60, 2))
+    assert fit_ar(table, 4) is None
+
+
+class Recorder:
+    """Stand-ins for the identifier's three fits: they keep what they are given and return
+    fixed results (``fit_ar`` None when ``coefficients`` is None)."""
+
+    def __init__(self, coefficients: np.ndarray | None = np.zeros(4)) -> None:
+        self.coefficients = coefficients
+        self.fits: list[tuple[np.ndarray, int]] = []
+        self.factors: list[tuple] = []
+        self.refinements: list[tuple] = []
+        self.first, self.second = (0.5, 0.1), (1.2, 0.2)
+        self.refined = ((0.6, 0.15, 0.004), (1.3, 0.25, 0.001))
+
+    def fit_ar(self, y: np.ndarray, order: int) -> np.ndarray | None:
+        self.fits.append((np.array(y), order))
+        return self.coefficients
+
+    def factors_from_ar(self, *args: object) -> list[tuple[float, float]]:
+        self.factors.append(args)
+        return [self.first, self.second]
+
+    def refine_components(self, *args: object) -> tuple:
+        self.refinements.append(args)
+        return self.refined
+
+    def install(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        for name in ("fit_ar", "factors_from_ar", "refine_components"):
+            monkeypatch.setattr(identify, name, getattr(self, name))
+
+
+BANDS = ((2.0, 30.0), (0.05, 2.0))
+
+
+def feed(identifier: DeckMotionIdentifier, times: np.ndarray) -> list[bool]:
+    """Roll ``sin(t)`` and pitch ``0.5 cos(t)`` at each time; each call's result."""
+    return [identifier.add(float(t), math.sin(t), 0.5 * math.cos(t)) for t in times]
+
+
+def block_means(times: np.ndarray, sample_s: float) -> np.ndarray:
+    """The roll and pitch of ``feed`` averaged over each whole block of ``sample_s``."""
+    values = np.column_stack([np.sin(times), 0.5 * np.cos(times)])
+    blocks = np.floor(times / sample_s)
+    return np.array([values[blocks == b].mean(axis=0) for b in np.unique(blocks)])
+
+
+def test_the_identifier_fits_block_means_once_the_shortest_window_is_full_then_every_refit_s(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Estimates every 0.125 s are averaged over blocks of 0.5 s; the first fit comes as
+    the tenth block (5 s, the shortest window) closes, on the block means of each axis with
+    the AR order; the next exactly refit_s (2 s) later, and none in between."""
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4)
+    assert identifier.models is None
+    times = np.arange(0, 73) * 0.125  # 0 to 9 s
+    fitted = feed(identifier, times)
+    # block k closes at the first estimate of block k + 1: ten blocks at t = 5 s
+    assert [float(t) for t, f in zip(times, fitted, strict=True) if f] == [5.0, 7.0, 9.0]
+    means = block_means(times[times < 5.0], 0.5)
+    (roll, order), (pitch, _) = recorder.fits[:2]
+    assert order == 4
+    np.testing.assert_allclose(roll, means[:, 0], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(pitch, means[:, 1], rtol=1e-12, atol=1e-15)
+    assert identifier.span_s == 9.0
+
+
+def test_the_identifier_keeps_the_last_window_s_of_blocks_or_three_per_ar_coefficient(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    times = np.arange(0, 241) * 0.125  # 30 s
+    identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 1.0, *BANDS, order=4)
+    feed(identifier, times)
+    # 20 blocks of 0.5 s: the last closed at 30 s, so blocks 40 to 59
+    np.testing.assert_allclose(
+        recorder.fits[-2][0], block_means(times[times < 30.0], 0.5)[-20:, 0], rtol=1e-12
+    )
+    # a 2 s window holds three samples per coefficient of an order-4 AR: 12 blocks
+    identifier = DeckMotionIdentifier(2.0, 0.5, 1.0, 2.0, *BANDS, order=4)
+    feed(identifier, times)
+    assert len(recorder.fits[-1][0]) == 12 and identifier.span_s == 6.0
+
+
+def test_the_identified_model_is_the_refined_components_with_their_variances_times_the_gain(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each axis: the AR's peaks from its coefficients at the sample spacing in the bands,
+    refined on its block means; the model holds the refined periods, damping and the
+    axis' RMS, its deck4 the two oscillators with the refined variances times the noise
+    gain (1 unless given)."""
+    times = np.arange(0, 41) * 0.125
+    for gain in (None, 3.0):
+        recorder = Recorder(np.array([0.1, 0.2, 0.3, 0.4]))
+        recorder.install(monkeypatch)
+        extra = {} if gain is None else {"noise_gain": gain}
+        identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4, **extra)
+        assert feed(identifier, times)[-1]
+        means = block_means(times[times < 5.0], 0.5)
+        (w1, z1, v1), (w2, z2, v2) = recorder.refined
+        expected = []
+        for axis in range(2):
+            coefficients, sample_s, *bands = recorder.factors[axis]
+            assert list(coefficients) == [0.1, 0.2, 0.3, 0.4]
+            assert (sample_s, *bands) == (0.5, *BANDS)
+            y, sample_s, first, second, *bands = recorder.refinements[axis]
+            np.testing.assert_allclose(y, means[:, axis], rtol=1e-12, atol=1e-15)
+            assert (sample_s, first, second, *bands) == (0.5, (0.5, 0.1), (1.2, 0.2), *BANDS)
+            rms = math.sqrt(np.mean(means[:, axis] ** 2))
+            g = 1.0 if gain is None else gain
+            waves = TwoWaves.matched(w1, z1, w2, z2, g * v1, g * v2)
+            expected.append(
+                AxisModel((2.0 * math.pi / w1, 2.0 * math.pi / w2), (z1, z2), rms, waves)
+            )
+        assert identifier.models is not None
+        for found, model in zip(identifier.models, expected, strict=True):
+            assert found.periods_s == pytest.approx(model.periods_s, rel=1e-12)
+            assert found.damping == model.damping and found.deck4 == model.deck4
+            assert found.rms_rad == pytest.approx(model.rms_rad, rel=1e-12)
+        assert identifier.deck4 == (expected[0].deck4, expected[1].deck4)
+
+
+def test_a_window_without_an_ar_fit_or_without_motion_gives_no_model(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    times = np.arange(0, 41) * 0.125
+    for coefficients, scale in ((None, 1.0), (np.zeros(4), 0.0)):
+        recorder = Recorder(coefficients)
+        recorder.install(monkeypatch)
+        identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4)
+        results = [identifier.add(float(t), scale * math.sin(t), 0.0 * t) for t in times]
+        assert recorder.fits and not any(results)
+        assert identifier.models is None and identifier.deck4 is None
+
+
+def test_estimates_that_are_not_angles_are_skipped_and_angles_up_to_pi_are_taken(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A roll or pitch beyond pi, or a time not finite, is not an estimate: it is skipped
+    (False, nothing raised); pi itself is an angle."""
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4)
+    for k in range(41):
+        t = 0.125 * k
+        assert identifier.add(t, 3.5, 0.0) is False
+        assert identifier.add(t, 0.0, -3.5) is False
+        assert identifier.add(math.nan, 0.0, 0.0) is False
+        assert identifier.add(math.inf, 0.0, 0.0) is False
+        identifier.add(t, math.pi if k % 2 else 0.0, -math.pi if k % 2 else 0.0)
+    roll, _ = recorder.fits[0]
+    pitch, _ = recorder.fits[1]
+    # each block holds two estimates at pi and two at 0
+    np.testing.assert_allclose(roll, np.full(10, 0.5 * math.pi), rtol=1e-12)
+    np.testing.assert_allclose(pitch, np.full(10, -0.5 * math.pi), rtol=1e-12)
+
+
+def test_a_gap_of_two_blocks_joins_on_and_one_of_three_restarts_the_window(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    recorder = Recorder()
+    recorder.install(monkeypatch)
+    identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 100.0, *BANDS, order=4)
+    for t in (0.0, 0.5, 1.0):
+        identifier.add(t, 0.1, 0.1)
+    assert identifier.span_s == 1.0  # blocks 0 and 1 closed
+    identifier.add(2.0, 0.1, 0.1)  # block 4 after block 2: block 3 empty
+    assert identifier.span_s == 1.5
+    identifier.add(3.5, 0.1, 0.1)  # block 7 after block 4: two empty blocks
+    assert identifier.span_s == 0.5
+    identifier.reset()
+    assert identifier.span_s == 0.0 and identifier.models is None
