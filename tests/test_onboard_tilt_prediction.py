@@ -14,6 +14,7 @@ from hypothesis.extra.numpy import arrays
 from agents.training.tilt_predictor_fit import CHANNELS, HORIZONS_S, futures
 from estimation.anticipation.linear_predictors import LinearTiltPredictor, TiltPrediction
 from estimation.anticipation.stopping import predictor_stopping_values
+from estimation.frames import euler_zyx_from_matrix, level_from_body, levelled_deck_pose
 from landing_env.config import load_config
 from landing_env.config_loading import nested_to_dotted
 from landing_env.errors import ConfigError
@@ -412,6 +413,89 @@ def test_a_certainty_demanding_model_wave_off_aborts_every_chosen_descent():
             _, _, terminated, _, info = env.step(1)
         # only a commit at or past the wait limit is never waved off
         assert info["wait_s"] >= 6.0 and info["wave_offs"] >= 2
+    finally:
+        env.close()
+
+
+def test_a_recorded_wave_off_step_holds_every_control_period_of_the_descent_and_the_climb():
+    env = _env(
+        wave_off_tilt_deg=0.5,
+        wave_off_predictor="model",
+        wave_off_probability=1.0,
+        history_s=8.0,
+        wait_limit_s=6.0,
+    )
+    try:
+        env.reset(seed=3)
+        base = env.unwrapped
+        _, _, _, _, info = env.step(0)
+        waited_s = info["wait_s"]
+        assert waited_s > 0.0
+        base.record_periods = True
+        start_s = base.world.time
+        _, reward, _, _, info = env.step(1)
+        periods = base.periods_of_last_step
+        times = np.array([p["time_s"] for p in periods])
+        np.testing.assert_allclose(np.diff(times), base.env_dt, rtol=1e-9)
+        assert times[0] == pytest.approx(start_s + base.env_dt) and times[-1] == base.world.time
+        # the descent, then the climb back to the hold: within 5 cm of it, or for 1.5 s at most
+        committed = [p["committed"] for p in periods]
+        climb = committed.index(False)
+        assert climb > 0 and not any(committed[climb:])
+        climb_s = times[-1] - times[climb - 1]
+        height_m = base.guidance.range_m(base._base_observation)
+        assert climb_s < 1.5 + base.env_dt
+        assert abs(height_m - base.timing.hold_height_m) < 0.05 or climb_s >= 1.5 - 1e-9
+        # the whole go-around is waiting, added to the wait before it, and costs its time
+        go_around_s = times[-1] - start_s
+        assert info["wave_offs"] == 1 and info["wait_s"] == pytest.approx(waited_s + go_around_s)
+        assert reward == pytest.approx(-base.config.reward.time_cost * go_around_s)
+        # each record is the world at its period: the last one is the world now
+        world, last = base.world, periods[-1]
+        deck = world.deck_state()
+        np.testing.assert_array_equal(last["drone_position_w"], world.drone_state().position_w)
+        np.testing.assert_array_equal(last["deck_position_w"], deck.position_w)
+        np.testing.assert_array_equal(last["deck_euler_w"], euler_zyx_from_matrix(deck.rotation_wp))
+        r_cd, t_cd = world.true_deck_pose_c(deck)
+        true_pose = np.concatenate([t_cd, euler_zyx_from_matrix(r_cd)])
+        np.testing.assert_array_equal(last["deck_pose_true"], true_pose)
+        observation = base._base_observation
+        np.testing.assert_array_equal(last["deck_pose_observed"], observation["deck_pose"])
+        assert last["deck_pose_valid"] is bool(observation["deck_pose_valid"][0])
+        assert not np.array_equal(periods[0]["drone_position_w"], last["drone_position_w"])
+        assert base.frames_of_last_step == []  # camera images only when rendering
+        _, _, _, _, info = env.step(1)
+        assert info["wave_offs"] == 2 and not info["committed"]
+    finally:
+        env.close()
+
+
+def test_a_descent_past_its_timeout_ends_the_episode_as_a_timeout_of_that_length():
+    env = _env(descent_timeout_s=0.5)
+    try:
+        env.reset(seed=3)
+        start_s = env.unwrapped.world.time
+        _, _, terminated, _, info = env.step(1)
+        assert terminated and info["outcome"] == "timeout" and not info["is_success"]
+        assert info["descent_s"] == pytest.approx(0.5, abs=1e-9)
+        assert env.unwrapped.world.time - start_s == pytest.approx(info["descent_s"], abs=1e-12)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("level", [True, False])
+def test_the_history_holds_the_deck_pose_levelled_by_the_drones_attitude_if_set(
+    level: bool,
+):
+    env = _env(level_history=level)
+    try:
+        env.reset(seed=3)
+        base = env.unwrapped
+        pose = base._base_observation["deck_pose"].astype(float)
+        levelled = levelled_deck_pose(pose, level_from_body(base.world.drone_state().rotation_wb))
+        assert np.max(np.abs(levelled - pose)) > 1e-6  # the drone's tilt makes a difference
+        newest = base.history.rows()[-1]
+        np.testing.assert_allclose(newest[:6], levelled if level else pose, rtol=0.0, atol=1e-12)
     finally:
         env.close()
 

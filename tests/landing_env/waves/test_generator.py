@@ -557,3 +557,59 @@ def test_a_part_of_whole_number_settings_takes_whole_number_frequencies() -> Non
         whole = SpectralPart("wind", form, 2, 8, 3, 5, 4, 2).density([0, 1, 2])
         real = SpectralPart("wind", form, 2.0, 8.0, 3.0, 5.0, 4.0, 2.0).density([0.0, 1.0, 2.0])
         np.testing.assert_allclose(whole, real, rtol=1e-12)
+
+
+def test_a_refused_torsethaugen_ramp_names_the_sea_at_its_end_and_the_way_out() -> None:
+    # Hs 0.3 m, Tp 8 s (swell-dominated) to Hs 0.9 m, Tp 3 s (wind-dominated): Hs changes too
+    with pytest.raises(ConfigError) as info:
+        SeaGeneratorConfig(spectrum="torsethaugen", hs_end_m=0.9, tp_end_s=3.0).check_sea(0.3, 8.0)
+    assert str(info.value) == (
+        "generator.tp_end_s: the ramp from Hs 0.3 m, Tp 8.0 s to Hs 0.9 m, Tp 3 s crosses "
+        "Tp = 6.6 Hs^(1/3) (wind- to swell-dominated Torsethaugen sea); keep the ramp on one "
+        "side, or use spectrum: ochi_hubble"
+    )
+
+
+def test_the_amplitudes_and_phasors_take_a_time_or_times_of_any_shape_one_row_each() -> None:
+    steady = generated(SeaGeneratorConfig(speed_m_s=2.0), n=20)
+    changing = generated(
+        SeaGeneratorConfig(hs_end_m=3.0, ramp_start_s=10.0, ramp_duration_s=20.0), n=20
+    )
+    times = np.array([12.0, 21.0])
+    for sea in (steady, changing):
+        for method in (sea.amplitudes, sea.amplitude_rates, sea.phasors, sea.phasor_rates):
+            rows = method(times)
+            assert rows.shape == (2, 20)
+            np.testing.assert_array_equal(method(12.0), rows[:1])
+            np.testing.assert_array_equal(method(times.reshape(2, 1)), rows)
+            np.testing.assert_array_equal(method(times.reshape(1, 2)), rows)
+
+
+def test_times_in_single_precision_are_taken_at_their_value() -> None:
+    generator = SeaGeneratorConfig(hs_end_m=3.0, ramp_start_s=600.0, ramp_duration_s=40.0)
+    times = np.array([610.3, 620.7, 633.1], dtype=np.float32)
+    exact = times.astype(float)
+    weight = generator.ramp_weight(times)
+    assert weight.dtype == np.float64
+    np.testing.assert_array_equal(weight, generator.ramp_weight(exact))
+    # the rates' central difference is 2 ms wide whatever the times' precision
+    sea = generated(generator, n=20)
+    np.testing.assert_array_equal(sea.amplitude_rates(times), sea.amplitude_rates(exact))
+
+
+def test_a_system_whose_only_component_misses_its_spectrums_energy_stays_finite() -> None:
+    # one component drawn at 0.18 of the peak frequency, where exp(-1.25 (fp/f)^4) is 0 in
+    # double precision: no component of the system holds any of its energy
+    config = ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=2.0,
+        peak_period_s=8.0,
+        n_components=1,
+        band_low=0.1,
+        band_high=1.001,
+        generator=SeaGeneratorConfig(speed_m_s=1.0),
+    )
+    sea = make_sea(config, np.random.default_rng(3))
+    assert sea.frequencies_hz[0] * 8.0 < 0.2
+    assert np.all(np.isfinite(sea.amplitudes_m)) and math.isfinite(sea.m0)
+    assert np.all(np.isfinite(sea.elevation(np.array([0.0, 5.0]))))

@@ -4,6 +4,7 @@ long files, .npy recordings, and a vessel's log carried to the helideck."""
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -22,6 +23,7 @@ from landing_env.waves.recording import (
     CsvMotion,
     CsvMotionConfig,
     CsvMotionError,
+    Recording,
     csv_motion_from_config,
     load_recording,
     read_recording,
@@ -497,3 +499,119 @@ def test_a_recording_path_may_start_at_the_home_folder(
     source = CsvMotion.from_file("~/home.csv", end="loop", offset_s=0.5)
     assert source.offset_s == 0.5 and source.end == "loop"
     np.testing.assert_allclose(source.pose(0.0)[0], 0.25)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # a blank first line: the header is checked on the row-by-row path, naming the file
+        (
+            "\nT,x,y,z\n0,0,0,0\n",
+            "bad.csv: header is 't,x,y,z'; expected 't,x,y,z,roll,pitch,yaw' "
+            "(seconds, metres, degrees)",
+        ),
+        # rows numpy reads at once, but of another width than seven
+        ("t,x,y,z,roll,pitch,yaw\n5\n", "bad.csv, line 2: expected 7 columns, got 1"),
+        (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0,0\n1,0,0,0,0,0,0,0\n",
+            "bad.csv, line 2: expected 7 columns, got 8",
+        ),
+    ],
+)
+def test_a_recording_of_another_width_or_after_a_blank_line_is_refused_by_file_and_line(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(CsvMotionError) as info:
+        read_recording(path)
+    assert str(info.value) == f"{path}{message[len('bad.csv') :]}"
+
+
+def test_an_npy_recording_of_another_shape_is_told_the_columns_it_needs(tmp_path: Path) -> None:
+    np.save(tmp_path / "six.npy", np.zeros((3, 6)))
+    with pytest.raises(CsvMotionError) as info:
+        read_recording(tmp_path / "six.npy")
+    assert str(info.value).endswith(
+        "expected (N, 7) numbers, columns t,x,y,z,roll,pitch,yaw (seconds, metres, degrees)"
+    )
+
+
+def test_whole_number_poses_are_written_at_their_value_and_unpaired_ones_refused(
+    tmp_path: Path,
+) -> None:
+    poses = np.array([[0, 0, 1, 1, 0, 0], [1, 2, 3, 0, 1, -1]])
+    write_motion_csv(tmp_path / "whole.csv", [0, 1], poses)
+    times, read = read_recording(tmp_path / "whole.csv")
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_allclose(read, poses, rtol=1e-15, atol=0.0)
+    # three times and two poses: refused, not cut to two samples
+    with pytest.raises(ValueError, match="zip"):
+        write_motion_csv(tmp_path / "unpaired.csv", [0.0, 1.0, 2.0], poses)
+
+
+def test_samples_are_held_in_double_precision_and_refused_with_what_they_need() -> None:
+    recording = Recording.from_samples([0, 1, 3], np.ones((3, 6), dtype=np.float32))
+    assert recording.times.dtype == np.float64 and recording.samples.dtype == np.float64
+    np.testing.assert_array_equal(recording.times, [0.0, 1.0, 3.0])
+    np.testing.assert_array_equal(recording.samples, np.ones((3, 6)))
+    for times, poses, message in (
+        ([0.0], np.zeros((1, 6)), "need at least two samples of (t, x, y, z, roll, pitch, yaw)"),
+        ([0.0, 1.0], np.full((2, 6), np.nan), "samples must be finite"),
+    ):
+        with pytest.raises(CsvMotionError) as info:
+            Recording.from_samples(np.array(times), poses)
+        assert str(info.value) == message
+
+
+def test_recordings_of_one_size_and_time_stamp_are_told_apart_by_their_path(
+    tmp_path: Path,
+) -> None:
+    paths = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for path, height_m in zip(paths, (0.25, 0.75), strict=True):
+        write_motion_csv(path, np.array([0.0, 1.0]), np.full((2, 6), height_m))
+        os.utime(path, ns=(1_700_000_000_000_000_000, 1_700_000_000_000_000_000))
+    assert paths[0].stat().st_size == paths[1].stat().st_size
+    assert load_recording(paths[0]).samples[0, 0] == 0.25
+    assert load_recording(paths[1]).samples[0, 0] == 0.75
+
+
+def test_a_replay_from_a_file_carries_a_vessels_log_to_the_helideck_given(tmp_path: Path) -> None:
+    path = tmp_path / "vessel.csv"
+    write_motion_csv(
+        path, np.array([0.0, 1.0]), np.column_stack([np.zeros((2, 3)), np.full((2, 3), 0.1)])
+    )
+    source = CsvMotion.from_file(path, frame="vessel", helideck_position_m=(1.0, 2.0, 3.0))
+    assert source.recording is load_recording(path, "vessel", (1.0, 2.0, 3.0))
+    assert source.recording is not load_recording(path, "vessel")
+
+
+def test_a_loop_wraps_over_the_files_span_whatever_its_first_stamp() -> None:
+    # stamped from 3 s, 10 s long: episode time 15.5 s plays file time 3 + 12.5 mod 10
+    times = np.array([3.0, 8.0, 13.0])
+    loop = CsvMotion(times, np.zeros((3, 6)), "loop")
+    local, held = loop.file_times(np.array([15.5, 24.0]))
+    np.testing.assert_allclose(local, [5.5, 4.0], rtol=1e-15)
+    assert not held.any()
+
+
+def test_a_replay_takes_a_time_or_times_of_any_shape_and_precision() -> None:
+    # a log stamped in Unix time: float32 episode times are taken at their value
+    times, poses = smooth_log(1.7e9, 20.0, 10.0)
+    source = CsvMotion(times, poses, "loop", offset_s=1.7e9)
+    episode = np.array([0.25, 12.5], dtype=np.float32)
+    local, held = source.file_times(episode)
+    np.testing.assert_array_equal(local, 1.7e9 + episode.astype(float))
+    local, held = source.file_times(3.0)
+    assert local.shape == (1,) and held.shape == (1,) and local[0] == 1.7e9 + 3.0
+    # episode times for the replay, file times for its interpolant: one row each, any shape
+    for method, shift_s in (
+        (source.poses, 0.0),
+        (source.velocities, 0.0),
+        (source.recording.interpolant, 1.7e9),
+    ):
+        column = np.array([[0.25], [12.5]]) + shift_s
+        rows = method(column.reshape(-1))
+        assert rows.shape == (2, 6)
+        np.testing.assert_array_equal(method(column), rows)
+        np.testing.assert_array_equal(method(column[0, 0]), rows[:1])

@@ -599,3 +599,91 @@ def test_in_a_long_wave_the_hull_surges_and_sways_with_the_surfaces_orbital_velo
         orbital = sign * ship.waves.omega[0] * ship.elevation(times)
         assert np.corrcoef(rate, orbital)[0, 1] > 0.999, direction_deg
         assert np.std(rate) / np.std(orbital) == pytest.approx(1.0, abs=0.02)
+
+
+def test_near_zero_the_pitch_filter_is_its_series_to_the_series_own_error() -> None:
+    # x below 1e-3 (components within a milliradian-order angle of beam seas): 1 - x^2/10, whose
+    # next term x^4/280 is below 3e-15 there
+    config = ShipMotionConfig()
+    omega = np.full(3, 0.5)
+    k = 0.25 / 9.80665
+    direction = np.arccos(np.array([0.3e-3, 0.6e-3, 0.9e-3]) / (0.5 * k * config.length_m))
+    rao = vessel_raos(config, omega, direction)
+    x = 0.5 * k * np.abs(np.cos(direction)) * config.length_m
+    assert np.all(x < 1e-3)
+    pitch_filter = rao["pitch"] / (rao["heave"] / np.sinc(x / math.pi))
+    np.testing.assert_allclose(pitch_filter, 1.0 - x**2 / 10.0, rtol=0.0, atol=1e-13)
+
+
+def test_encounter_frequencies_in_single_precision_give_the_raos_of_their_value() -> None:
+    config = ShipMotionConfig()
+    omega = np.array([0.6, 1.0, 1.6])
+    direction = np.radians([180.0, 150.0, 120.0])
+    encounter = np.array([0.7, 1.3, -0.4], dtype=np.float32)
+    single = vessel_raos(config, omega, direction, encounter)
+    double = vessel_raos(config, omega, direction, encounter.astype(float))
+    for name, value in double.items():
+        np.testing.assert_array_equal(single[name], value, err_msg=name)
+
+
+def test_the_helideck_takes_single_precision_poses_at_their_value_and_an_arm_of_any_shape() -> None:
+    rng = np.random.default_rng(8)
+    vessel = np.column_stack([rng.normal(0.0, 1.0, (5, 3)), rng.uniform(-0.6, 0.6, (5, 3))])
+    vessel = vessel.astype(np.float32)
+    arm = np.array([-10.0, 1.5, 3.0])
+    poses = helideck_poses(vessel.astype(float), arm)
+    np.testing.assert_array_equal(helideck_poses(vessel, arm), poses)
+    for shape in ((1, 3), (3, 1)):
+        np.testing.assert_array_equal(helideck_poses(vessel, arm.reshape(shape)), poses)
+
+
+def test_the_decks_poses_and_velocities_take_a_time_or_times_of_any_shape_one_row_each() -> None:
+    for generator in (SeaGeneratorConfig(), SeaGeneratorConfig(hs_end_m=3.0, ramp_duration_s=20.0)):
+        ship = ShipMotion(
+            ShipMotionConfig(n_components=20, generator=generator), np.random.default_rng(0)
+        )
+        times = np.array([3.0, 12.5])
+        for method in (ship.poses, ship.velocities):
+            rows = method(times)
+            assert rows.shape == (2, 6)
+            # (to the rounding of a product over one row or two)
+            np.testing.assert_allclose(method(3.0), rows[:1], rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(method(times.reshape(2, 1)), rows, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(method(times.reshape(1, 2)), rows, rtol=1e-12, atol=1e-15)
+
+
+def test_in_a_changing_sea_the_hull_follows_the_sea_of_the_moment_and_reaches_its_largest() -> None:
+    # one component in head seas, its height doubling from 100 s to 150 s
+    config = ShipMotionConfig(
+        sea_state=None,
+        significant_height_m=1.0,
+        peak_period_s=6.0,
+        n_components=1,
+        band_low=0.999,
+        band_high=1.001,
+        wave_direction_deg=180.0,
+        direction_spread_deg=0.0,
+        generator=SeaGeneratorConfig(hs_end_m=2.0, ramp_start_s=100.0, ramp_duration_s=50.0),
+    )
+    ship = ShipMotion(config, np.random.default_rng(0))
+    waves = ship.waves
+    assert not waves.steady
+    omega = float(waves.omega[0])
+    quarter_s = 0.5 * math.pi / omega
+    heave_rao = complex(vessel_raos(config, waves.omega, waves.directions)["heave"][0])
+    # the complex heave over the complex elevation, before the ramp and after it
+    for t, hs in ((0.0, 1.0), (300.0, 2.0)):
+        heave = ship.vessel_poses(np.array([t, t - quarter_s]))[:, 2]
+        amplitude = hs / (2.0 * math.sqrt(2.0))
+        elevation = amplitude * waves.unit_phasors[0] * np.exp(1j * omega * t)
+        assert (heave[0] + 1j * heave[1]) / elevation == pytest.approx(heave_rao, rel=1e-9)
+    # the reach is that of the largest sea, the one after the ramp: twice the first one's
+    before = ship.poses(np.linspace(0.0, 100.0, 10001))
+    after = ship.poses(np.linspace(150.0, 350.0, 20001))
+    assert np.max(np.abs(after[:, 4])) == pytest.approx(ship.tilt_reach_rad, rel=1e-3)
+    assert np.max(np.abs(before[:, 4])) == pytest.approx(0.5 * ship.tilt_reach_rad, rel=1e-3)
+    # the deck 10 m aft and 3 m up: its linearised height, heave + 10 pitch, and the arm's drop
+    vessel = ship.vessel_poses(np.linspace(150.0, 350.0, 20001))
+    linear = vessel[:, 2] + 10.0 * vessel[:, 4]
+    drop = 3.0 * (1.0 - math.cos(ship.tilt_reach_rad))
+    assert np.max(np.abs(linear)) == pytest.approx(ship.vertical_reach_m - drop, rel=1e-3)
