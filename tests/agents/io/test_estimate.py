@@ -263,6 +263,17 @@ def test_the_mount_is_the_vehicles_camera_and_the_estimator_alone_is_built(tmp_p
     )
 
 
+def test_the_estimator_named_is_built_whatever_the_config_observes_or_compares(
+    tmp_path: Path,
+) -> None:
+    config = load_config("default", {"estimation.compare": ["crhf", "tight"]})
+    assert config.estimation.observed == "ihrcf"
+    assert list(RecordingEstimator("atda", config, None, None).estimators) == ["atda"]
+    # nor is a ToF calibration asked of the folder for the config's ihrcf
+    folder = _calibration(tmp_path / "cal", "intrinsics.json")
+    assert list(RecordingEstimator("atda", config, folder, None).estimators) == ["atda"]
+
+
 def test_a_calibration_gives_the_intrinsics_the_tof_calibration_and_the_mount_of_its_files(
     tmp_path: Path,
 ) -> None:
@@ -366,6 +377,15 @@ def test_the_command_builds_its_estimator_alone_with_the_settings_given(tmp_path
     assert runner.name == "atda" and list(runner.estimators) == ["atda"]
     with pytest.raises(ValueError, match=r"estimation\.tof_calibration_file: '/nowhere/tof\.json'"):
         recording_estimator(_args("rec", "crhf", set=[nowhere]), Recording())
+    # --config: the config named, its intrinsics those of the paper's setup
+    paper = recording_estimator(_args("rec", "ihrcf", config="paper-setup-ihrcf"), Recording())
+    intrinsics = paper.estimators["ihrcf"].intrinsics
+    expected = _runner("ihrcf").estimators["ihrcf"].intrinsics
+    assert intrinsics != expected
+    config = load_config("paper-setup-ihrcf", {"estimation.observed": "ihrcf"})
+    assert (
+        intrinsics == RecordingEstimator("ihrcf", config, None, None).estimators["ihrcf"].intrinsics
+    )
     # the recording's image size is checked against the config's camera
     images = Recording(frames=[RecordedFrame(0.0, "f0", image=np.zeros((48, 64), np.uint8))])
     wide = ["camera.width=640", "estimation.intrinsics=exact", "estimation.tof_calibration=exact"]
