@@ -466,6 +466,11 @@ def test_a_recorded_wave_off_step_holds_every_control_period_of_the_descent_and_
         assert base.frames_of_last_step == []  # camera images only when rendering
         _, _, _, _, info = env.step(1)
         assert info["wave_offs"] == 2 and not info["committed"]
+        # a new episode starts without them, its descent not yet planned
+        _, info = env.reset(seed=4)
+        assert info["wave_offs"] == 0 and info["wait_s"] == 0.0 and not info["committed"]
+        assert info["descent_s"] == 0.0
+        assert info["planned_contact_s"] == base.timing.expected_contact_s
     finally:
         env.close()
 
@@ -477,6 +482,9 @@ def test_a_descent_past_its_timeout_ends_the_episode_as_a_timeout_of_that_length
         start_s = env.unwrapped.world.time
         _, _, terminated, _, info = env.step(1)
         assert terminated and info["outcome"] == "timeout" and not info["is_success"]
+        # unasked, the control periods are not recorded
+        assert env.unwrapped.record_periods is False
+        assert env.unwrapped.periods_of_last_step == []
         assert info["descent_s"] == pytest.approx(0.5, abs=1e-9)
         assert env.unwrapped.world.time - start_s == pytest.approx(info["descent_s"], abs=1e-12)
     finally:
@@ -496,6 +504,22 @@ def test_the_history_holds_the_deck_pose_levelled_by_the_drones_attitude_if_set(
         assert np.max(np.abs(levelled - pose)) > 1e-6  # the drone's tilt makes a difference
         newest = base.history.rows()[-1]
         np.testing.assert_allclose(newest[:6], levelled if level else pose, rtol=0.0, atol=1e-12)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(("rate_window_s", "samples"), [(0.5, 10), (0.1, 2)])
+def test_the_historys_rates_are_fitted_over_its_rate_window_of_at_least_two_samples(
+    rate_window_s: float, samples: int
+):
+    # at 20 Hz: 0.5 s is ten samples, and the shortest window allowed, 0.1 s, two
+    env = _env(rate_window_s=rate_window_s)
+    try:
+        env.reset(seed=3)
+        rows = env.unwrapped.history.rows()
+        times = np.arange(samples) * env.unwrapped.env_dt
+        slopes = np.polyfit(times, rows[-samples:, 2:5], 1)[0]
+        np.testing.assert_allclose(rows[-1, 6:9], slopes, rtol=1e-9, atol=1e-12)
     finally:
         env.close()
 
