@@ -568,6 +568,30 @@ def test_the_descent_is_timed_on_the_environments_own_control_period():
         env.close()
 
 
+def test_the_value_wave_off_weighs_the_wait_so_far_during_a_descent():
+    # the value rule's demanded chance reads the wait so far: each check of the descent passes it
+    env = _env(
+        wave_off_tilt_deg=5.0, wave_off_predictor="model", wave_off_rule="value", history_s=8.0
+    )
+    try:
+        env.reset(seed=3)
+        base = env.unwrapped
+        asked = []
+        chance = base.deck_prediction.wave_off_chance
+
+        def asking(elapsed_s: float, wait_s: float) -> float:
+            asked.append(wait_s)
+            return chance(elapsed_s, wait_s)
+
+        base.deck_prediction.wave_off_chance = asking
+        env.step(0)
+        waited_s = base._wait_s
+        env.step(1)
+        assert asked and all(wait_s == waited_s for wait_s in asked)
+    finally:
+        env.close()
+
+
 def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
     env = _env(
         wave_off_tilt_deg=5.0, wave_off_predictor="model", wave_off_probability=0.0, history_s=8.0
