@@ -592,6 +592,35 @@ def test_the_value_wave_off_weighs_the_wait_so_far_during_a_descent():
         env.close()
 
 
+def test_a_late_wave_offs_climb_back_stops_after_1_5_s_short_of_the_hold():
+    # waved off 1.0-1.2 s into the descent, close to the deck: 1.5 s of climb do not regain
+    # the 2 m hold to 5 cm, and the agent decides again then
+    env = _env(
+        wave_off_tilt_deg=0.5,
+        wave_off_predictor="model",
+        wave_off_probability=1.0,
+        history_s=8.0,
+        wait_limit_s=6.0,
+        hold_height_m=2.0,
+        wave_off_from_s=1.0,
+        wave_off_until_s=1.2,
+    )
+    try:
+        env.reset(seed=3)
+        base = env.unwrapped
+        base.record_periods = True
+        _, _, terminated, _, info = env.step(1)
+        assert not terminated and info["wave_offs"] == 1
+        periods = base.periods_of_last_step
+        climb = [p["committed"] for p in periods].index(False)
+        climb_s = periods[-1]["time_s"] - periods[climb - 1]["time_s"]
+        assert 1.5 - 1e-9 <= climb_s < 1.5 + base.env_dt
+        height_m = base.guidance.range_m(base._base_observation)
+        assert abs(height_m - 2.0) >= 0.05
+    finally:
+        env.close()
+
+
 def test_a_model_wave_off_that_accepts_any_chance_never_aborts():
     env = _env(
         wave_off_tilt_deg=5.0, wave_off_predictor="model", wave_off_probability=0.0, history_s=8.0
