@@ -132,7 +132,7 @@ class AlignDescendPolicy(Policy):
         directions = camera_to_heading_xy(mounts[:, :2])
         norms = np.linalg.norm(directions, axis=1, keepdims=True)
         self._tof_directions = directions / np.where(norms > 0.0, norms, 1.0)
-        self.guidance = DeckGuidance(self.config.guidance)
+        self.guidance = DeckGuidance(self.config.guidance, dt)
         self.history = DeckMotionHistory(
             max(1, round(self.config.history_s / dt)),
             max(2, round(self.config.rate_window_s / dt)),

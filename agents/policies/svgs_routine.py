@@ -304,7 +304,7 @@ class SvgsRoutinePolicy(ApproachStateMachine):
     ) -> None:
         super().__init__(action, config or RoutineConfig(), dt)
         c = self.config
-        self.guidance = DeckGuidance(c.guidance)
+        self.guidance = DeckGuidance(c.guidance, dt)
         t = c.timing
         n_history = max(1, round(t.history_s / dt))
         self.history = DeckMotionHistory(n_history, max(2, round(t.rate_window_s / dt)), dt)

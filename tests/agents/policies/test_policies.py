@@ -14,6 +14,7 @@ from agents.evaluation.summary import markdown_table, summarise, wilson_interval
 from agents.policies.align_descend import AlignDescendPolicy, Phase
 from agents.policies.calm_window import CalmConfig, predict_calm
 from agents.policies.registry import make_env_and_policy, make_policy
+from agents.policies.svgs_routine import SvgsRoutinePolicy
 from agents.policies.timing import LandNowPolicy
 from estimation.frames import tilt_deg
 from landing_env.anticipation.deck_history import HISTORY_FEATURES
@@ -246,3 +247,9 @@ def test_every_landing_policy_built_by_the_registry_acts_inside_its_scenarios_ac
                 break
     finally:
         env.close()
+
+
+def test_a_scripted_policys_guidance_runs_at_the_policys_own_control_period() -> None:
+    # at 40 Hz a timed descent's clock advances 25 ms a period, not the default 50 ms
+    assert AlignDescendPolicy(dt=0.025).guidance.dt == 0.025
+    assert SvgsRoutinePolicy(dt=0.025, timing_model=None).guidance.dt == 0.025

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimation.frames import R_BC, matrix_from_euler_zyx
-from landing_env.config import load_config
+from landing_env.config import SimulationConfig, load_config
 from landing_env.errors import ConfigError
 from landing_env.guidance_gains import GuidanceGains
 from landing_env.physics.controller import ControllerGains
@@ -1039,3 +1039,37 @@ def test_a_deck_tracked_by_its_ranges_alone_is_followed_in_height_at_its_heave_r
     setpoint = guidance.hold(_observation(None, tof_m=1.8), 1.5, own)
     vz = 0.5 + gains.k_z * (1.5 - 1.8)
     np.testing.assert_allclose(setpoint.velocity_h, [0.0, 0.0, vz], atol=1e-12)
+
+
+def test_a_guidance_built_without_a_period_runs_at_the_simulations_default_rate() -> None:
+    assert DeckGuidance().dt == 1.0 / SimulationConfig().env_hz
+
+
+def test_the_deck_tracker_takes_the_guidances_jerk_density() -> None:
+    gains = GuidanceGains(track_deck=True, tracker_model="acceleration", tracker_jerk_psd=7.5)
+    assert DeckGuidance(gains, DT).tracker.jerk_psd == 7.5
+    assert DeckGuidance(GuidanceGains(), DT).tracker.jerk_psd == GuidanceGains().tracker_jerk_psd
+
+
+@pytest.mark.parametrize("limit_m_s", [0.4, 2.5])
+def test_the_bench_centring_keeps_the_tags_direction_at_any_speed_limit(limit_m_s: float) -> None:
+    gains = GuidanceGains(max_horizontal_speed=limit_m_s)
+    # the tag 3 m forward and 1.5 m right of the camera: (forward, left) = (3, -1.5)
+    setpoint = DeckGuidance(gains, DT).hold(_seen(1.5, -3.0, 1.0, tof_m=2.0), 2.0)
+    forward, left = setpoint.velocity_h[:2]
+    assert math.hypot(forward, left) == pytest.approx(limit_m_s)
+    assert left / forward == pytest.approx(-0.5)
+
+
+def test_with_no_lean_allowed_a_level_drone_still_descends_and_any_lean_waits() -> None:
+    gains = GuidanceGains(
+        track_deck=True, blind_range_m=0.8, flare_range_m=0.5, max_touchdown_lean_deg=0.0
+    )
+    level = _level((0.0, 0.0, 0.4))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=level)
+    assert guidance.descend(_observation(None, tof_m=0.4), level).velocity_h[2] < -0.5
+    tipped = OwnState(np.array([0.0, 0.0, 0.4]), np.zeros(3), matrix_from_euler_zyx(0, 0.01, 0))
+    guidance = _tracked(gains, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), own=tipped)
+    assert guidance.descend(_observation(None, tof_m=0.4), tipped).velocity_h[2] == pytest.approx(
+        0.0, abs=1e-12
+    )
