@@ -49,7 +49,7 @@ from landing_env.waves.bimodal import (
     ochi_hubble_parts,
     torsethaugen_parts,
 )
-from landing_env.waves.spectrum import WaveComponents
+from landing_env.waves.spectrum import WaveComponents, underflowed_amplitudes
 
 GRAVITY = 9.80665
 SPECTRA: tuple[str, ...] = ("jonswap", "torsethaugen", "ochi_hubble")
@@ -238,9 +238,13 @@ class GeneratedSea:
             mask = self.part_index == p
             density = part.density(self.frequencies_hz[mask]) * self.bin_widths_hz[mask]
             total = float(np.sum(density))
-            if total > 0.0 and part.significant_height_m > 0.0:
-                target = part.significant_height_m**2 / 16.0
+            if part.significant_height_m <= 0.0:
+                continue
+            target = part.significant_height_m**2 / 16.0
+            if total > 0.0:
                 amplitudes[mask] = np.sqrt(2.0 * density * target / total)
+            else:
+                amplitudes[mask] = underflowed_amplitudes(self.frequencies_hz[mask], target)
         return amplitudes
 
     def amplitudes(self, times: np.ndarray) -> np.ndarray:

@@ -92,6 +92,23 @@ def jonswap_shape(frequency_hz: np.ndarray, peak_period_s: float, gamma: float) 
     return f**-5 * np.exp(-1.25 * (fp / f) ** 4) * peak
 
 
+def underflowed_amplitudes(frequency_hz: np.ndarray, m0_m2: float) -> np.ndarray:
+    """The amplitudes (m) of components whose spectral densities all underflow to 0, so that
+    their m0 (the sum of a^2 / 2) is ``m0_m2``.
+
+    The density of a spectrum with the Pierson-Moskowitz factor exp(-5/4 (fp/f)^4) is below
+    the smallest double under about 0.2 fp, so a system of a few components can draw them all
+    there (one component in a band from 0.1 fp: one seed in nine).  Their shares are then the
+    limit of vanishing densities: the component nearest the peak (the highest frequency; 1 %
+    lower in frequency is some 30 e-folds weaker there) takes the whole energy, as it does
+    while the densities are still representable."""
+    frequency_hz = np.asarray(frequency_hz, dtype=float)
+    amplitudes = np.zeros(len(frequency_hz))
+    if len(frequency_hz):
+        amplitudes[int(np.argmax(frequency_hz))] = math.sqrt(2.0 * m0_m2)
+    return amplitudes
+
+
 class WaveComponents:
     """A seeded discrete JONSWAP sea: one cosine per frequency bin of the band.
 
@@ -122,7 +139,11 @@ class WaveComponents:
         direction = direction_rad + rng.uniform(-spread_rad, spread_rad, n)
         density = jonswap_shape(frequency, peak_period_s, gamma) * width
         m0_target = significant_height_m**2 / 16.0
-        amplitude = np.sqrt(2.0 * density * (m0_target / float(np.sum(density))))
+        total = float(np.sum(density))
+        if total > 0.0:
+            amplitude = np.sqrt(2.0 * density * (m0_target / total))
+        else:
+            amplitude = underflowed_amplitudes(frequency, m0_target)
         self.frequencies_hz = frequency
         self.bin_widths_hz = width
         self.amplitudes_m = amplitude

@@ -25,7 +25,7 @@ from landing_env.waves.generator import (
     require_generator,
 )
 from landing_env.waves.ship import GRAVITY, ShipMotion, ShipMotionConfig
-from landing_env.waves.spectrum import WaveComponents, jonswap_shape
+from landing_env.waves.spectrum import WaveComponents, jonswap_shape, underflowed_amplitudes
 
 
 def m0_of(parts) -> float:
@@ -597,9 +597,13 @@ def test_times_in_single_precision_are_taken_at_their_value() -> None:
     np.testing.assert_array_equal(sea.amplitude_rates(times), sea.amplitude_rates(exact))
 
 
-def test_a_system_whose_only_component_misses_its_spectrums_energy_stays_finite() -> None:
+@pytest.mark.parametrize("generated", [False, True])
+def test_a_system_whose_components_all_lie_where_its_density_underflows_keeps_its_energy(
+    generated: bool,
+) -> None:
     # one component drawn at 0.18 of the peak frequency, where exp(-1.25 (fp/f)^4) is 0 in
-    # double precision: no component of the system holds any of its energy
+    # double precision: the sea still holds Hs^2 / 16, in that component (the limit of
+    # vanishing densities), at rest or met by a ship under way
     config = ShipMotionConfig(
         sea_state=None,
         significant_height_m=2.0,
@@ -607,9 +611,17 @@ def test_a_system_whose_only_component_misses_its_spectrums_energy_stays_finite(
         n_components=1,
         band_low=0.1,
         band_high=1.001,
-        generator=SeaGeneratorConfig(speed_m_s=1.0),
+        generator=SeaGeneratorConfig(speed_m_s=1.0) if generated else SeaGeneratorConfig(),
     )
     sea = make_sea(config, np.random.default_rng(3))
+    assert isinstance(sea, GeneratedSea) == generated
     assert sea.frequencies_hz[0] * 8.0 < 0.2
-    assert np.all(np.isfinite(sea.amplitudes_m)) and math.isfinite(sea.m0)
+    assert sea.m0 == pytest.approx(2.0**2 / 16.0, rel=1e-12)
+    np.testing.assert_allclose(sea.amplitudes_m, [math.sqrt(2.0 * 0.25)], rtol=1e-12)
     assert np.all(np.isfinite(sea.elevation(np.array([0.0, 5.0]))))
+
+
+def test_of_components_all_in_the_underflow_the_one_nearest_the_peak_takes_the_energy() -> None:
+    amplitudes = underflowed_amplitudes(np.array([0.010, 0.014, 0.012]), 0.5)
+    np.testing.assert_array_equal(amplitudes, [0.0, 1.0, 0.0])
+    assert underflowed_amplitudes(np.array([]), 0.5).shape == (0,)
