@@ -100,12 +100,16 @@ class CsvMotionConfig:
 
 
 # ------------------------------------------------------------------------------- reading
-def _scan_csv(path: Path) -> np.ndarray:
-    """Row-by-row parse (N, 7) naming the first bad line: the slow path, for errors."""
+def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
+    """Each row but the blank ones, with the file's line it ends on (blank lines counted)."""
     with path.open(newline="") as handle:
         reader = csv.reader(handle)
-        # each row with the file's line it ends on (blank lines skipped, but counted)
-        rows = [(reader.line_num, row) for row in reader if row and any(c.strip() for c in row)]
+        return [(reader.line_num, row) for row in reader if row and any(c.strip() for c in row)]
+
+
+def _scan_csv(path: Path) -> np.ndarray:
+    """Row-by-row parse (N, 7) naming the first bad line: the slow path, for errors."""
+    rows = _csv_rows(path)
     if not rows:
         raise CsvMotionError(f"{path}: empty file; expected header {','.join(CSV_HEADER)}")
     _check_header(path, rows[0][1])
@@ -172,9 +176,15 @@ def read_recording(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise CsvMotionError(f"{path}: needs at least two samples")
     bad = np.flatnonzero(np.diff(values[:, 0]) <= 0.0)
     if len(bad):
+        k = int(bad[0]) + 1  # the first sample whose time does not increase
+        # a CSV's own line (after its header, blank lines counted); an array's sample
+        where = (
+            f"sample {k + 1}"
+            if path.suffix.lower() == ".npy"
+            else f"line {_csv_rows(path)[k + 1][0]}"
+        )
         raise CsvMotionError(
-            f"{path}, line {bad[0] + 3}: time {values[bad[0] + 1, 0]} does not increase "
-            f"(previous {values[bad[0], 0]})"
+            f"{path}, {where}: time {values[k, 0]} does not increase (previous {values[k - 1, 0]})"
         )
     # in place: the table is this function's own (no copies of a long recording)
     np.deg2rad(values[:, 4:], out=values[:, 4:])

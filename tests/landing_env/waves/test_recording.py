@@ -282,6 +282,10 @@ def test_a_replay_config_refuses_a_bad_choice_or_lever_arm_naming_the_key(tmp_pa
             "bad.csv, line 4: time 1.0 does not increase (previous 1.0)",
         ),
         (
+            "t,x,y,z,roll,pitch,yaw\n\n0,0,0,0,0,0,0\n\n1,0,0,0,0,0,0\n\n0.5,0,0,0,0,0,0\n",
+            "bad.csv, line 7: time 0.5 does not increase (previous 1.0)",
+        ),
+        (
             "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,nan,0,0,0\n",
             "non-finite values (sample 2)",
         ),
@@ -615,3 +619,13 @@ def test_a_replay_takes_a_time_or_times_of_any_shape_and_precision() -> None:
         assert rows.shape == (2, 6)
         np.testing.assert_array_equal(method(column), rows)
         np.testing.assert_array_equal(method(column[0, 0]), rows[:1])
+
+
+def test_an_array_file_whose_time_goes_back_is_refused_naming_the_sample(tmp_path: Path) -> None:
+    values = np.zeros((4, 7))
+    values[:, 0] = [0.0, 0.1, 0.2, 0.15]
+    path = tmp_path / "back.npy"
+    np.save(path, values)
+    with pytest.raises(CsvMotionError) as info:
+        load_recording(path)
+    assert str(info.value) == f"{path}, sample 4: time 0.15 does not increase (previous 0.2)"
