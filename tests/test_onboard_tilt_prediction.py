@@ -1179,3 +1179,34 @@ def test_the_scenario_predictor_is_each_bench_scenarios_own_and_refused_where_no
                 ),
             },
         )
+
+
+def test_on_a_ship_the_hold_and_the_descent_fly_on_the_drones_own_state() -> None:
+    """With the deck tracked (the ship ids), the guidance reads the drone's navigation state at
+    the episode's first observation, in the hold and in the descent: without it the tracker
+    stays empty and the set-points fall back to the camera's range."""
+    import inspect
+
+    import gymnasium as gym
+
+    env = gym.make("DeckLandingTiming-ShipSS5-v8")
+    try:
+        guidance = env.unwrapped.guidance
+        owns: dict[str, list] = {"observe": [], "hold": [], "descend": []}
+        for name, calls in owns.items():
+            flown = getattr(guidance, name)
+
+            def spy(*args, _flown=flown, _calls=calls, **kwargs):
+                bound = inspect.signature(_flown).bind(*args, **kwargs)
+                _calls.append(bound.arguments.get("own"))
+                return _flown(*args, **kwargs)
+
+            setattr(guidance, name, spy)
+        env.reset(seed=1)  # the first observation, then the warm-up's holds
+        assert guidance.gains.track_deck and guidance.tracker.valid
+        env.step(0)  # wait: a step of holds
+        env.step(1)  # commit: the descent to its end
+        assert owns["observe"] and owns["hold"] and owns["descend"]
+        assert all(own is not None for calls in owns.values() for own in calls)
+    finally:
+        env.close()
