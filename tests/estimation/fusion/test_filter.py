@@ -1495,3 +1495,48 @@ def test_the_gyro_turns_the_attitude_from_the_latest_event_in_the_buffer() -> No
         config.accel_bias_random_walk,
     )  # fmt: skip
     np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)
+
+
+def test_poses_not_fused_are_dropped_and_those_older_than_the_horizon_counted() -> None:
+    """A pose of a source the filter does not fuse, or an invalid one, is dropped; one older
+    than horizon_s is counted as too old (each one), even before anything has left the
+    buffer; one exactly horizon_s old is fused."""
+    fusion = make_fusion(make_config(horizon_s=0.5))
+    attitudes = [matrix_from_euler_zyx(0.0, 0.0, 0.2 * k) for k in range(3)]
+    for k in range(2):
+        fusion.step(0.5 * k, attitudes[k])
+    poses = [
+        _pose("crhf", 1.0),
+        DeckPoseEstimate.invalid("atda", 1.0, "no tag"),
+        _pose("atda", 0.49),
+        _pose("atda", 0.3),
+    ]
+    fusion.step(1.0, attitudes[2], (), None, poses)
+    assert fusion.diagnostics() == {
+        "atda_too_old": 2,
+        "resets": 0,
+        "initialised": False,
+        "since_pose_s": math.inf,
+    }
+    fusion.step(1.0, attitudes[2], (), None, [_pose("atda", 0.5)])
+    assert fusion.initialised and fusion.diagnostics()["atda_too_old"] == 2
+    z, _ = pose_measurement(_pose("atda", 0.5), attitudes[1], T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "covariance",
+    [np.eye(3) * 1e-4, np.full((6, 6), np.nan), None],
+    ids=["not-6x6", "not-finite", "none"],
+)
+def test_a_covariance_source_without_a_finite_6x6_covariance_is_fused_with_its_sigmas(
+    covariance: np.ndarray | None,
+) -> None:
+    config = make_config(sources=("tight",))
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("tight", 0.0, covariance=covariance)])
+    _, r_wc = pose_measurement(_pose("tight", 0.0), r_wb, T_BC)
+    noise = _pose_noise(config, "tight", r_wc)
+    np.testing.assert_allclose(fusion.covariance[0:3, 0:3], noise[:3, :3], rtol=1e-12)
+    np.testing.assert_allclose(fusion.covariance[6:9, 6:9], noise[3:, 3:], rtol=1e-12)
