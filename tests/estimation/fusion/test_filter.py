@@ -633,6 +633,81 @@ def test_fusion_settings_at_the_ends_of_their_ranges_are_taken_as_tuples_of_floa
     assert FusionConfig(deck_damping_ratio=0.0).deck_damping_ratio == 0.0
 
 
+@pytest.mark.parametrize(
+    ("overrides", "key", "detail"),
+    [
+        ({"identify_ar_order": 5}, "identify_ar_order", "5: 4, 6, ..., 16"),
+        ({"identify_ar_order": 18}, "identify_ar_order", "18: 4, 6, ..., 16"),
+        (
+            {"identify_window_s": 15.0, "identify_min_window_s": 20.0},
+            "identify_min_window_s",
+            "must be <= identify_window_s",
+        ),
+        (
+            {"identify_min_window_s": 11.9},
+            "identify_min_window_s",
+            "needs 3 * identify_ar_order samples (identify_sample_s apart) or more",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 1000.5)},
+            "identify_period_range_s",
+            "(2.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_initial_periods_s": (10.0, 1000.5)},
+            "identify_initial_periods_s",
+            "(10.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_damping_range": (0.05, 10.5)},
+            "identify_damping_range",
+            "(0.05, 10.5): two values in [0.005, 10]",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 2.0)},
+            "identify_period_range_s",
+            "(2.0, 2.0): the low end first, below the high end",
+        ),
+        (
+            {"identify_damping_range": (0.5, 0.5)},
+            "identify_damping_range",
+            "(0.5, 0.5): the low end first, below the high end",
+        ),
+    ],
+)
+def test_bad_identification_settings_are_refused_saying_what_they_need(
+    overrides: dict[str, object], key: str, detail: str
+) -> None:
+    """The AR order is even, 4 to 16; the shortest window fits in the window and holds three
+    samples per AR coefficient; the bands are two values, the low end first."""
+    with pytest.raises(ConfigError) as caught:
+        FusionConfig(**overrides)  # type: ignore[arg-type]
+    assert (caught.value.key, caught.value.detail) == (key, detail)
+
+
+def test_identification_settings_at_the_ends_of_their_ranges_are_taken_as_floats() -> None:
+    """Orders 4 and 16; a shortest window equal to the window, or to exactly three samples
+    per AR coefficient (8 x 3 x 0.5 s = 12 s); bands from 0.5 s to 1000 s and damping from
+    0.005 to 10, given as lists of integers or floats; the initial periods in either order."""
+    assert FusionConfig(identify_ar_order=4).identify_ar_order == 4
+    assert FusionConfig(identify_ar_order=16, identify_min_window_s=24.0).identify_ar_order == 16
+    assert FusionConfig(identify_window_s=15.0, identify_min_window_s=15.0).identifies
+    assert FusionConfig(identify_min_window_s=12.0).identify_min_window_s == 12.0
+    config = FusionConfig(
+        identify_period_range_s=[1, 1000],  # type: ignore[arg-type]
+        identify_initial_periods_s=[0.5, 1000],  # type: ignore[arg-type]
+        identify_damping_range=[0.005, 10],  # type: ignore[arg-type]
+    )
+    for value, expected in (
+        (config.identify_period_range_s, (1.0, 1000.0)),
+        (config.identify_initial_periods_s, (0.5, 1000.0)),
+        (config.identify_damping_range, (0.005, 10.0)),
+    ):
+        assert type(value) is tuple and value == expected
+        assert all(type(v) is float for v in value)
+    assert FusionConfig(identify_period_range_s=(0.5, 30.0)).identify_period_range_s[0] == 0.5
+
+
 def test_the_gate_is_gate_sd_squared_when_set_else_the_chi_square_quantile() -> None:
     paper = FusionConfig(gate_sd=10.0, gate_probability=0.99)
     assert [paper.gate(dof) for dof in range(1, 7)] == [100.0] * 6
