@@ -654,3 +654,13 @@ def test_the_refinements_residual_is_relative_to_a_windows_variance_below_one(
         - covariance / np.mean(y * y)
     )
     assert fit.call["fun"](np.array([0.6, 0.1, 1.3, 0.3, 0.7, 0.3])) == pytest.approx(expected)
+
+
+def test_the_components_are_the_sharp_peaks_not_a_broad_pair_beside_them() -> None:
+    # the AR spectrum 1 / |A(e^{iwT})|² is highest at the two sharp pairs (20 s and 12 s),
+    # far above the broad pair at 8 s
+    coefficients = ar_coefficients(
+        [*pole_pair(20.0, 0.98), *pole_pair(12.0, 0.98), *pole_pair(8.0, 0.5)]
+    )
+    found = factors_from_ar(coefficients, SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    assert np.array(found) == pytest.approx(np.array([peak(20.0, 0.98), peak(12.0, 0.98)]))
