@@ -1615,3 +1615,19 @@ def test_a_covariance_source_without_a_finite_6x6_covariance_is_fused_with_its_s
     noise = _pose_noise(config, "tight", r_wc)
     np.testing.assert_allclose(fusion.covariance[0:3, 0:3], noise[:3, :3], rtol=1e-12)
     np.testing.assert_allclose(fusion.covariance[6:9, 6:9], noise[3:, 3:], rtol=1e-12)
+
+
+def test_a_late_pose_within_the_horizon_is_fused_before_the_newer_events() -> None:
+    """Only the events older than now - horizon_s leave the buffer: a pose delivered late,
+    stamped inside the horizon but before newer IMU samples, is fused at its time."""
+    fusion = make_fusion(make_config(horizon_s=0.15))
+    level = np.eye(3)
+    fusion.step(0.0, level, (), None, [_pose("atda", 0.0)])
+    for time in (0.1, 0.2, 0.3, 0.4):
+        fusion.step(time, level, _imu([time]))
+    late = DeckPoseEstimate(
+        "atda", 0.27, True, _pose("atda", 0.0).rotation, np.array([0.1, -0.2, 1.8])
+    )
+    fusion.step(0.41, level, _imu([0.41]), None, [late])
+    diagnostics = fusion.diagnostics()
+    assert diagnostics.get("atda_too_old", 0) == 0 and diagnostics["atda_accepted"] == 1
