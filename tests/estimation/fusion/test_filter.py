@@ -1459,6 +1459,10 @@ def test_a_pose_holding_its_frames_ranges_supersedes_that_frames_reading_alone()
     diagnostics = fusion.diagnostics()
     assert diagnostics["tof_superseded"] == 1
     assert diagnostics.get("tof_accepted", 0) + diagnostics.get("tof_rejected", 0) == 8
+    # on time, the latest event: its own frame's reading is superseded too
+    pose = _pose("tight", 0.25, extras={"ranges_used": 4})
+    fusion.step(0.25, r_wb, (), RangeReading(0.25, ranges, np.ones(4, bool)), [pose])
+    assert fusion.diagnostics()["tof_superseded"] == 2
 
 
 class _Identifier:
@@ -1631,3 +1635,29 @@ def test_a_late_pose_within_the_horizon_is_fused_before_the_newer_events() -> No
     fusion.step(0.41, level, _imu([0.41]), None, [late])
     diagnostics = fusion.diagnostics()
     assert diagnostics.get("atda_too_old", 0) == 0 and diagnostics["atda_accepted"] == 1
+
+
+def test_the_first_steps_samples_turn_from_its_own_attitude_the_first_by_nothing() -> None:
+    """A filter's first step brings a pose and IMU samples after it: the attitude starts at
+    the one given with the step, the first sample turns it by nothing (no event before it),
+    and each sample after the pose is a prediction."""
+    config = make_config()
+    start = matrix_from_euler_zyx(0.1, -0.05, 0.6)
+    gyro = np.array([0.4, -0.2, 0.6])
+    samples = [ImuSample(t, np.array([0.3, -0.2, 9.9]), gyro) for t in (0.01, 0.02)]
+    fusion = make_fusion(config)
+    fusion.step(0.02, start, samples, None, [_pose("atda", 0.0)])
+    twin = make_fusion(config)
+    twin.step(0.0, start, (), None, [_pose("atda", 0.0)])
+    x, cov = twin.state, twin.covariance
+    for sample, r_wb in (
+        (samples[0], start),
+        (samples[1], start @ Rotation.from_rotvec(gyro * 0.01).as_matrix()),
+    ):
+        x, cov = predict(
+            x, cov, sample.accel, r_wb, 0.01, config.deck_accel_psd,
+            config.deck_angular_accel_psd, config.accel_noise_density,
+            config.accel_bias_random_walk,
+        )  # fmt: skip
+    np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
