@@ -1218,8 +1218,9 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
             "deck_pitch_periods_s": (9.0, 4.0),
             "deck_damping_ratio": 0.3,
         },
+        {"tilt_error_correlation_s": 0.3, "tilt_error_coloured_share": 0.0},
     ],
-    ids=["constant-rates", "oscillator-and-coloured-errors", "wave-periods"],
+    ids=["constant-rates", "oscillator-and-coloured-errors", "wave-periods", "no-coloured-share"],
 )
 def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_turns_it_to(
     overrides: dict[str, object],
@@ -1261,7 +1262,8 @@ def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_t
                 config.deck_w0,
                 config.deck_damping_ratio,
                 config.deck4,
-                config.tilt_error_correlation_s,
+                # no coloured states without a share: nothing decays as one
+                config.tilt_error_correlation_s if config.tilt_error_coloured_share else 0.0,
             )
             previous = sample.timestamp
         estimate = fusion.step(t_end, ends, samples)
@@ -1387,7 +1389,7 @@ def test_the_filter_resets_after_more_than_reset_timeout_s_and_restarts_keeping_
     assert np.all(bias != 0.0)
     estimate = fusion.step(0.5625, level, _imu([0.5625]))
     assert not estimate.valid and estimate.reason == "fusion_reset"
-    assert fusion.diagnostics()["resets"] == 1
+    assert fusion.diagnostics()["resets"] == 1 and fusion.diagnostics()["initialised"] is False
     estimate = fusion.step(0.625, level, _imu([0.625]), None, [_pose("atda", 0.625)])
     assert estimate.valid and fusion.diagnostics()["atda_initialised"] == 2
     np.testing.assert_array_equal(fusion.state[12:15], bias)
