@@ -1274,8 +1274,9 @@ def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_t
 
 
 def _pose_noise(config: FusionConfig, source: str, r_wc: np.ndarray) -> np.ndarray:
-    """A fixed-sigma source's pose noise in the state's axes (all components given)."""
+    """A fixed-sigma source's pose noise in the state's axes (a component not given: 1)."""
     sigma = np.array(config.pose_sigma(source))
+    sigma = np.where(np.isfinite(sigma), sigma, 1.0)  # a component not given: unused
     noise = np.zeros((6, 6))
     noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
     noise[3:, 3:] = np.diag(np.radians(sigma[3:]) ** 2)
@@ -1663,3 +1664,81 @@ def test_the_first_steps_samples_turn_from_its_own_attitude_the_first_by_nothing
         )  # fmt: skip
     np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
+
+
+@pytest.mark.parametrize(
+    "sigma",
+    [
+        (0.003, 0.003, 0.008, 2.0, 2.0, 0.5),
+        (0.003, 0.003, 0.008, 2.0, 2.0, math.inf),
+        (0.003, 0.003, 0.008, math.inf, 2.0, 0.5),
+        (0.003, 0.003, 0.008, 2.0, math.inf, 0.5),
+    ],
+    ids=["all-given", "no-yaw", "no-roll", "no-pitch"],
+)
+def test_the_coloured_tilt_errors_enter_with_a_poses_roll_and_pitch_both_and_carry_over(
+    sigma: tuple[float, ...],
+) -> None:
+    """Only a pose giving both roll and pitch starts the coloured errors anticorrelated with
+    its tilt and sees them in its update (and has a roll/pitch NIS); each later update, after
+    a prediction, is the textbook one of the components given, the coloured states as the
+    updates before left them."""
+    config = make_config(
+        atda_sigma=sigma,
+        tilt_error_sigma_scale=1.3,
+        tilt_error_correlation_s=0.3,
+        tilt_error_coloured_share=0.6,
+    )
+    mask = np.isfinite(np.array(sigma))
+    both = bool(mask[3] and mask[4])
+    fusion = make_fusion(config)
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+    _, r_wc = pose_measurement(_pose("atda", 0.0), r_wb, T_BC)
+    noise = _pose_noise(config, "atda", r_wc)
+    gain = math.sqrt(0.6) * np.linalg.cholesky(noise[3:5, 3:5])
+    np.testing.assert_allclose(
+        fusion.covariance[6:8, 15:17], -gain if both else np.zeros((2, 2)), rtol=1e-12
+    )
+    h = np.zeros((6, 17))
+    h[0:3, 0:3] = np.eye(3)
+    h[3:6, 6:9] = np.eye(3)
+    white = noise
+    if both:
+        h[3:5, 15:17] = gain
+        scale = np.array([1.0, 1.0, 1.0, math.sqrt(0.4), math.sqrt(0.4), 1.0])
+        white = noise * np.outer(scale, scale)
+    h, white = h[mask], white[np.ix_(mask, mask)]
+    for k, (tilt, shift) in enumerate(((0.02, 0.002), (-0.015, -0.001))):
+        time = 0.05 * (k + 1)
+        pose = DeckPoseEstimate(
+            "atda",
+            time,
+            True,
+            matrix_from_euler_zyx(0.05 + tilt, -0.03 - tilt, 0.4 + 0.1 * tilt),
+            np.array([0.1 + shift, -0.2 - shift, 1.8 + shift]),
+        )
+        # predicted to the pose's time first: the coloured errors decay, their gain grows
+        fusion.step(time, r_wb, [ImuSample(time, r_wb.T @ np.array([0, 0, 9.81]), np.zeros(3))])
+        x, cov = fusion.state, fusion.covariance
+        fusion.step(time, r_wb, (), None, [pose])
+        z, _ = pose_measurement(pose, r_wb, T_BC)
+        innovation = z[mask] - h @ x
+        s = h @ cov @ h.T + white
+        gain_k = cov @ h.T @ np.linalg.inv(s)
+        np.testing.assert_allclose(fusion.state, x + gain_k @ innovation, rtol=1e-9, atol=1e-13)
+        np.testing.assert_allclose(
+            fusion.covariance, cov - gain_k @ s @ gain_k.T, rtol=1e-9, atol=1e-15
+        )
+        assert fusion.diagnostics()["atda_accepted"] == k + 1
+        assert ("nis_tilt_atda" in fusion.diagnostics()) is both
+    assert bool(np.all(fusion.state[15:17] != 0.0)) is both
+
+
+def test_a_pose_giving_no_component_starts_every_one_wide_open() -> None:
+    """1 m on each axis of the position, 0.5 rad of roll and pitch, pi of yaw."""
+    fusion = make_fusion(make_config(atda_sigma=(math.inf,) * 6))
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    np.testing.assert_array_equal(
+        np.diag(fusion.covariance)[[0, 1, 2, 6, 7, 8]], [1.0, 1.0, 1.0, 0.25, 0.25, math.pi**2]
+    )
