@@ -1742,3 +1742,20 @@ def test_a_pose_giving_no_component_starts_every_one_wide_open() -> None:
     np.testing.assert_array_equal(
         np.diag(fusion.covariance)[[0, 1, 2, 6, 7, 8]], [1.0, 1.0, 1.0, 0.25, 0.25, math.pi**2]
     )
+
+
+def test_a_tilt_noise_not_positive_definite_couples_the_coloured_errors_by_its_sigmas() -> None:
+    """A source covariance whose roll/pitch block is not positive definite (a variance
+    rounded below 0) has no Cholesky factor: the coloured errors then enter through the
+    square roots of its roll and pitch variances, a negative one taken as 0."""
+    config = make_config(
+        sources=("tight",), tilt_error_correlation_s=0.3, tilt_error_coloured_share=0.6
+    )
+    own = np.diag([1e-6, 1e-6, 4e-6, -1e-8, 1e-4, 1e-5])
+    r_wb = matrix_from_euler_zyx(0.0, 0.0, 0.7)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("tight", 0.0, covariance=own)])
+    tilt = fusion.covariance[6:8, 6:8]  # the pose's tilt noise, as it starts
+    assert np.min(np.linalg.eigvalsh(tilt)) < 0.0
+    gain = math.sqrt(0.6) * np.diag(np.sqrt(np.clip(np.diag(tilt), 0.0, None)))
+    np.testing.assert_allclose(fusion.covariance[6:8, 15:17], -gain, rtol=1e-9, atol=1e-15)
