@@ -1462,9 +1462,10 @@ def test_a_pose_holding_its_frames_ranges_supersedes_that_frames_reading_alone()
     diagnostics = fusion.diagnostics()
     assert diagnostics["tof_superseded"] == 1
     assert diagnostics.get("tof_accepted", 0) + diagnostics.get("tof_rejected", 0) == 8
-    # on time, the latest event: its own frame's reading is superseded too
+    # on time, the latest event, after an IMU sample of the same stamp: its own frame's
+    # reading is superseded too
     pose = _pose("tight", 0.25, extras={"ranges_used": 4})
-    fusion.step(0.25, r_wb, (), RangeReading(0.25, ranges, np.ones(4, bool)), [pose])
+    fusion.step(0.25, r_wb, _imu([0.25]), RangeReading(0.25, ranges, np.ones(4, bool)), [pose])
     assert fusion.diagnostics()["tof_superseded"] == 2
 
 
@@ -1759,3 +1760,17 @@ def test_a_tilt_noise_not_positive_definite_couples_the_coloured_errors_by_its_s
     assert np.min(np.linalg.eigvalsh(tilt)) < 0.0
     gain = math.sqrt(0.6) * np.diag(np.sqrt(np.clip(np.diag(tilt), 0.0, None)))
     np.testing.assert_allclose(fusion.covariance[6:8, 15:17], -gain, rtol=1e-9, atol=1e-15)
+
+
+def test_of_two_poses_stamped_alike_the_one_delivered_first_is_fused_first() -> None:
+    """The first initialises the filter; an outlier delivered after it is gated out, not
+    the other way round."""
+    fusion = make_fusion(make_config())
+    good = _pose("atda", 0.0)
+    outlier = DeckPoseEstimate(
+        "atda", 0.0, True, good.rotation, good.translation + np.array([0.0, 0.0, 0.3])
+    )
+    fusion.step(0.0, np.eye(3), (), None, [good, outlier])
+    z, _ = pose_measurement(good, np.eye(3), T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+    assert fusion.diagnostics()["atda_rejected"] == 1
