@@ -1025,8 +1025,9 @@ def test_the_tof_sensors_sit_at_the_camera_plus_their_mounts_turned_into_the_bod
 
 
 def test_the_filters_identifier_and_states_follow_the_identification_and_tilt_settings() -> None:
-    """The identifier takes each identification setting; the coloured tilt errors add two
-    states only with both a correlation time and a share."""
+    """The identifier takes each identification setting (and there is none without the
+    identification, or with wave periods given); the coloured tilt errors add two states
+    only with both a correlation time and a share."""
     config = make_config(
         identify_deck_motion=True,
         identify_window_s=60.0,
@@ -1050,6 +1051,12 @@ def test_the_filters_identifier_and_states_follow_the_identification_and_tilt_se
         identifier.noise_gain,
         identifier.order,
     ) == (60.0, 0.25, 12.0, 3.0, (3.0, 25.0), (0.04, 1.5), 1.5, 6)
+    # no identifier when the motion is not identified, or when wave periods are given
+    assert make_fusion(make_config(identify_deck_motion=False)).identifier is None
+    prior = make_config(
+        identify_deck_motion=True, deck_roll_periods_s=(11.0, 4.4), deck_pitch_periods_s=(9.0, 4.0)
+    )
+    assert make_fusion(prior).identifier is None
     for correlation_s, share, n in ((0.3, 0.0, N_STATE), (0.0, 0.5, N_STATE), (0.3, 0.5, 17)):
         config = make_config(
             tilt_error_correlation_s=correlation_s, tilt_error_coloured_share=share
