@@ -1781,3 +1781,17 @@ def test_of_two_poses_stamped_alike_the_one_delivered_first_is_fused_first() -> 
     z, _ = pose_measurement(good, np.eye(3), T_BC)
     np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
     assert fusion.diagnostics()["atda_rejected"] == 1
+
+
+def test_each_ray_that_misses_the_deck_is_counted_rejected() -> None:
+    """Rolled 80 degrees, every ray grazes the deck plane (beyond 78.5 degrees of incidence):
+    no update, and each of the four readings counted as rejected."""
+    fusion = make_fusion(make_config(use_tof=True))
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    before = fusion.state
+    rolled = matrix_from_euler_zyx(math.radians(80.0), 0.0, 0.0)
+    reading = RangeReading(0.0625, np.full(4, 2.0), np.ones(4, bool))
+    fusion.step(0.0625, rolled, (), reading)
+    np.testing.assert_allclose(fusion.state, before, rtol=0, atol=1e-15)  # angles re-wrapped
+    diagnostics = fusion.diagnostics()
+    assert diagnostics["tof_rejected"] == 4 and "tof_accepted" not in diagnostics
