@@ -1072,7 +1072,7 @@ def test_a_new_filter_is_not_initialised_and_knows_only_the_accelerometer_bias_p
     np.testing.assert_array_equal(fusion.state, np.zeros(N_STATE))
     np.testing.assert_allclose(fusion.covariance, expected, rtol=1e-15, atol=0)
     estimate = fusion.step(0.2, np.eye(3))
-    assert not estimate.valid and estimate.reason == "fusion_not_initialised"
+    assert estimate.valid is False and estimate.reason == "fusion_not_initialised"
     assert estimate.method == "fused" and estimate.timestamp == 0.2
     assert estimate.extras == {"resets": 0, "initialised": False, "since_pose_s": math.inf}
 
@@ -1354,24 +1354,24 @@ def test_the_estimate_is_the_state_as_the_pose_of_the_deck_in_the_camera_and_say
     r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
     root = np.random.default_rng(6).normal(0.0, 0.01, (6, 6))
     own = root @ root.T + np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-5])
-    pose = _pose("tight", 0.0, covariance=own)
-    fusion.step(0.0, r_wb, (), None, [pose])
-    estimate = fusion.estimate(0.0, r_wb)
-    assert estimate.valid and estimate.method == "fused" and estimate.timestamp == 0.0
+    pose = _pose("tight", 0.25, covariance=own)
+    fusion.step(0.25, r_wb, (), None, [pose])
+    estimate = fusion.estimate(0.25, r_wb)
+    assert estimate.valid is True and estimate.method == "fused" and estimate.timestamp == 0.25
     np.testing.assert_allclose(estimate.translation, pose.translation, rtol=0, atol=1e-12)
     np.testing.assert_allclose(estimate.rotation, pose.rotation, rtol=0, atol=1e-12)
-    assert estimate.covariance is not None
+    assert estimate.covariance is not None and estimate.covariance.shape == (6, 6)
     for block in (slice(0, 3), slice(3, 6)):
         np.testing.assert_allclose(
             estimate.covariance[block, block], own[block, block], rtol=1e-6, atol=1e-13
         )
     assert estimate.extras["initialised"] is True and estimate.extras["since_pose_s"] == 0.0
-    for time, predicted in ((0.5, False), (0.5000001, True), (1.0, True)):
+    for time, predicted in ((0.75, False), (0.7500001, True), (1.25, True)):
         later = fusion.estimate(time, r_wb)
-        assert later.valid and later.predicted is predicted and later.timestamp == time
-    late = fusion.estimate(1.0000001, r_wb)
-    assert not late.valid and late.reason == "fusion_timed_out"
-    assert late.method == "fused" and late.timestamp == 1.0000001 and late.extras["initialised"]
+        assert later.valid is True and later.predicted is predicted and later.timestamp == time
+    late = fusion.estimate(1.2500001, r_wb)
+    assert late.valid is False and late.reason == "fusion_timed_out"
+    assert late.method == "fused" and late.timestamp == 1.2500001 and late.extras["initialised"]
 
 
 def _imu(times: list[float]) -> list[ImuSample]:
