@@ -633,6 +633,81 @@ def test_fusion_settings_at_the_ends_of_their_ranges_are_taken_as_tuples_of_floa
     assert FusionConfig(deck_damping_ratio=0.0).deck_damping_ratio == 0.0
 
 
+@pytest.mark.parametrize(
+    ("overrides", "key", "detail"),
+    [
+        ({"identify_ar_order": 5}, "identify_ar_order", "5: 4, 6, ..., 16"),
+        ({"identify_ar_order": 18}, "identify_ar_order", "18: 4, 6, ..., 16"),
+        (
+            {"identify_window_s": 15.0, "identify_min_window_s": 20.0},
+            "identify_min_window_s",
+            "must be <= identify_window_s",
+        ),
+        (
+            {"identify_min_window_s": 11.9},
+            "identify_min_window_s",
+            "needs 3 * identify_ar_order samples (identify_sample_s apart) or more",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 1000.5)},
+            "identify_period_range_s",
+            "(2.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_initial_periods_s": (10.0, 1000.5)},
+            "identify_initial_periods_s",
+            "(10.0, 1000.5): two values in [0.5, 1000]",
+        ),
+        (
+            {"identify_damping_range": (0.05, 10.5)},
+            "identify_damping_range",
+            "(0.05, 10.5): two values in [0.005, 10]",
+        ),
+        (
+            {"identify_period_range_s": (2.0, 2.0)},
+            "identify_period_range_s",
+            "(2.0, 2.0): the low end first, below the high end",
+        ),
+        (
+            {"identify_damping_range": (0.5, 0.5)},
+            "identify_damping_range",
+            "(0.5, 0.5): the low end first, below the high end",
+        ),
+    ],
+)
+def test_bad_identification_settings_are_refused_saying_what_they_need(
+    overrides: dict[str, object], key: str, detail: str
+) -> None:
+    """The AR order is even, 4 to 16; the shortest window fits in the window and holds three
+    samples per AR coefficient; the bands are two values, the low end first."""
+    with pytest.raises(ConfigError) as caught:
+        FusionConfig(**overrides)  # type: ignore[arg-type]
+    assert (caught.value.key, caught.value.detail) == (key, detail)
+
+
+def test_identification_settings_at_the_ends_of_their_ranges_are_taken_as_floats() -> None:
+    """Orders 4 and 16; a shortest window equal to the window, or to exactly three samples
+    per AR coefficient (8 x 3 x 0.5 s = 12 s); bands from 0.5 s to 1000 s and damping from
+    0.005 to 10, given as lists of integers or floats; the initial periods in either order."""
+    assert FusionConfig(identify_ar_order=4).identify_ar_order == 4
+    assert FusionConfig(identify_ar_order=16, identify_min_window_s=24.0).identify_ar_order == 16
+    assert FusionConfig(identify_window_s=15.0, identify_min_window_s=15.0).identifies
+    assert FusionConfig(identify_min_window_s=12.0).identify_min_window_s == 12.0
+    config = FusionConfig(
+        identify_period_range_s=[1, 1000],  # type: ignore[arg-type]
+        identify_initial_periods_s=[0.5, 1000],  # type: ignore[arg-type]
+        identify_damping_range=[0.005, 10],  # type: ignore[arg-type]
+    )
+    for value, expected in (
+        (config.identify_period_range_s, (1.0, 1000.0)),
+        (config.identify_initial_periods_s, (0.5, 1000.0)),
+        (config.identify_damping_range, (0.005, 10.0)),
+    ):
+        assert type(value) is tuple and value == expected
+        assert all(type(v) is float for v in value)
+    assert FusionConfig(identify_period_range_s=(0.5, 30.0)).identify_period_range_s[0] == 0.5
+
+
 def test_the_gate_is_gate_sd_squared_when_set_else_the_chi_square_quantile() -> None:
     paper = FusionConfig(gate_sd=10.0, gate_probability=0.99)
     assert [paper.gate(dof) for dof in range(1, 7)] == [100.0] * 6
@@ -950,8 +1025,9 @@ def test_the_tof_sensors_sit_at_the_camera_plus_their_mounts_turned_into_the_bod
 
 
 def test_the_filters_identifier_and_states_follow_the_identification_and_tilt_settings() -> None:
-    """The identifier takes each identification setting; the coloured tilt errors add two
-    states only with both a correlation time and a share."""
+    """The identifier takes each identification setting (and there is none without the
+    identification, or with wave periods given); the coloured tilt errors add two states
+    only with both a correlation time and a share."""
     config = make_config(
         identify_deck_motion=True,
         identify_window_s=60.0,
@@ -975,6 +1051,12 @@ def test_the_filters_identifier_and_states_follow_the_identification_and_tilt_se
         identifier.noise_gain,
         identifier.order,
     ) == (60.0, 0.25, 12.0, 3.0, (3.0, 25.0), (0.04, 1.5), 1.5, 6)
+    # no identifier when the motion is not identified, or when wave periods are given
+    assert make_fusion(make_config(identify_deck_motion=False)).identifier is None
+    prior = make_config(
+        identify_deck_motion=True, deck_roll_periods_s=(11.0, 4.4), deck_pitch_periods_s=(9.0, 4.0)
+    )
+    assert make_fusion(prior).identifier is None
     for correlation_s, share, n in ((0.3, 0.0, N_STATE), (0.0, 0.5, N_STATE), (0.3, 0.5, 17)):
         config = make_config(
             tilt_error_correlation_s=correlation_s, tilt_error_coloured_share=share
@@ -990,7 +1072,7 @@ def test_a_new_filter_is_not_initialised_and_knows_only_the_accelerometer_bias_p
     np.testing.assert_array_equal(fusion.state, np.zeros(N_STATE))
     np.testing.assert_allclose(fusion.covariance, expected, rtol=1e-15, atol=0)
     estimate = fusion.step(0.2, np.eye(3))
-    assert not estimate.valid and estimate.reason == "fusion_not_initialised"
+    assert estimate.valid is False and estimate.reason == "fusion_not_initialised"
     assert estimate.method == "fused" and estimate.timestamp == 0.2
     assert estimate.extras == {"resets": 0, "initialised": False, "since_pose_s": math.inf}
 
@@ -1143,8 +1225,9 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
             "deck_pitch_periods_s": (9.0, 4.0),
             "deck_damping_ratio": 0.3,
         },
+        {"tilt_error_correlation_s": 0.3, "tilt_error_coloured_share": 0.0},
     ],
-    ids=["constant-rates", "oscillator-and-coloured-errors", "wave-periods"],
+    ids=["constant-rates", "oscillator-and-coloured-errors", "wave-periods", "no-coloured-share"],
 )
 def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_turns_it_to(
     overrides: dict[str, object],
@@ -1186,7 +1269,8 @@ def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_t
                 config.deck_w0,
                 config.deck_damping_ratio,
                 config.deck4,
-                config.tilt_error_correlation_s,
+                # no coloured states without a share: nothing decays as one
+                config.tilt_error_correlation_s if config.tilt_error_coloured_share else 0.0,
             )
             previous = sample.timestamp
         estimate = fusion.step(t_end, ends, samples)
@@ -1197,8 +1281,9 @@ def test_between_poses_each_imu_sample_is_predicted_with_the_attitude_the_gyro_t
 
 
 def _pose_noise(config: FusionConfig, source: str, r_wc: np.ndarray) -> np.ndarray:
-    """A fixed-sigma source's pose noise in the state's axes (all components given)."""
+    """A fixed-sigma source's pose noise in the state's axes (a component not given: 1)."""
     sigma = np.array(config.pose_sigma(source))
+    sigma = np.where(np.isfinite(sigma), sigma, 1.0)  # a component not given: unused
     noise = np.zeros((6, 6))
     noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
     noise[3:, 3:] = np.diag(np.radians(sigma[3:]) ** 2)
@@ -1269,24 +1354,24 @@ def test_the_estimate_is_the_state_as_the_pose_of_the_deck_in_the_camera_and_say
     r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
     root = np.random.default_rng(6).normal(0.0, 0.01, (6, 6))
     own = root @ root.T + np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-5])
-    pose = _pose("tight", 0.0, covariance=own)
-    fusion.step(0.0, r_wb, (), None, [pose])
-    estimate = fusion.estimate(0.0, r_wb)
-    assert estimate.valid and estimate.method == "fused" and estimate.timestamp == 0.0
+    pose = _pose("tight", 0.25, covariance=own)
+    fusion.step(0.25, r_wb, (), None, [pose])
+    estimate = fusion.estimate(0.25, r_wb)
+    assert estimate.valid is True and estimate.method == "fused" and estimate.timestamp == 0.25
     np.testing.assert_allclose(estimate.translation, pose.translation, rtol=0, atol=1e-12)
     np.testing.assert_allclose(estimate.rotation, pose.rotation, rtol=0, atol=1e-12)
-    assert estimate.covariance is not None
+    assert estimate.covariance is not None and estimate.covariance.shape == (6, 6)
     for block in (slice(0, 3), slice(3, 6)):
         np.testing.assert_allclose(
             estimate.covariance[block, block], own[block, block], rtol=1e-6, atol=1e-13
         )
     assert estimate.extras["initialised"] is True and estimate.extras["since_pose_s"] == 0.0
-    for time, predicted in ((0.5, False), (0.5000001, True), (1.0, True)):
+    for time, predicted in ((0.75, False), (0.7500001, True), (1.25, True)):
         later = fusion.estimate(time, r_wb)
-        assert later.valid and later.predicted is predicted and later.timestamp == time
-    late = fusion.estimate(1.0000001, r_wb)
-    assert not late.valid and late.reason == "fusion_timed_out"
-    assert late.method == "fused" and late.timestamp == 1.0000001 and late.extras["initialised"]
+        assert later.valid is True and later.predicted is predicted and later.timestamp == time
+    late = fusion.estimate(1.2500001, r_wb)
+    assert late.valid is False and late.reason == "fusion_timed_out"
+    assert late.method == "fused" and late.timestamp == 1.2500001 and late.extras["initialised"]
 
 
 def _imu(times: list[float]) -> list[ImuSample]:
@@ -1312,7 +1397,7 @@ def test_the_filter_resets_after_more_than_reset_timeout_s_and_restarts_keeping_
     assert np.all(bias != 0.0)
     estimate = fusion.step(0.5625, level, _imu([0.5625]))
     assert not estimate.valid and estimate.reason == "fusion_reset"
-    assert fusion.diagnostics()["resets"] == 1
+    assert fusion.diagnostics()["resets"] == 1 and fusion.diagnostics()["initialised"] is False
     estimate = fusion.step(0.625, level, _imu([0.625]), None, [_pose("atda", 0.625)])
     assert estimate.valid and fusion.diagnostics()["atda_initialised"] == 2
     np.testing.assert_array_equal(fusion.state[12:15], bias)
@@ -1384,6 +1469,11 @@ def test_a_pose_holding_its_frames_ranges_supersedes_that_frames_reading_alone()
     diagnostics = fusion.diagnostics()
     assert diagnostics["tof_superseded"] == 1
     assert diagnostics.get("tof_accepted", 0) + diagnostics.get("tof_rejected", 0) == 8
+    # on time, the latest event, after an IMU sample of the same stamp: its own frame's
+    # reading is superseded too
+    pose = _pose("tight", 0.25, extras={"ranges_used": 4})
+    fusion.step(0.25, r_wb, _imu([0.25]), RangeReading(0.25, ranges, np.ones(4, bool)), [pose])
+    assert fusion.diagnostics()["tof_superseded"] == 2
 
 
 class _Identifier:
@@ -1495,3 +1585,213 @@ def test_the_gyro_turns_the_attitude_from_the_latest_event_in_the_buffer() -> No
         config.accel_bias_random_walk,
     )  # fmt: skip
     np.testing.assert_allclose(fusion.state, expected[0], rtol=1e-12, atol=1e-15)
+
+
+def test_poses_not_fused_are_dropped_and_those_older_than_the_horizon_counted() -> None:
+    """A pose of a source the filter does not fuse, or an invalid one, is dropped; one older
+    than horizon_s is counted as too old (each one), even before anything has left the
+    buffer; one exactly horizon_s old is fused."""
+    fusion = make_fusion(make_config(horizon_s=0.5))
+    attitudes = [matrix_from_euler_zyx(0.0, 0.0, 0.2 * k) for k in range(3)]
+    for k in range(2):
+        fusion.step(0.5 * k, attitudes[k])
+    poses = [
+        _pose("crhf", 1.0),
+        DeckPoseEstimate.invalid("atda", 1.0, "no tag"),
+        _pose("atda", 0.49),
+        _pose("atda", 0.3),
+    ]
+    fusion.step(1.0, attitudes[2], (), None, poses)
+    assert fusion.diagnostics() == {
+        "atda_too_old": 2,
+        "resets": 0,
+        "initialised": False,
+        "since_pose_s": math.inf,
+    }
+    fusion.step(1.0, attitudes[2], (), None, [_pose("atda", 0.5)])
+    assert fusion.initialised and fusion.diagnostics()["atda_too_old"] == 2
+    z, _ = pose_measurement(_pose("atda", 0.5), attitudes[1], T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "covariance",
+    [np.eye(3) * 1e-4, np.full((6, 6), np.nan), None],
+    ids=["not-6x6", "not-finite", "none"],
+)
+def test_a_covariance_source_without_a_finite_6x6_covariance_is_fused_with_its_sigmas(
+    covariance: np.ndarray | None,
+) -> None:
+    config = make_config(sources=("tight",))
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("tight", 0.0, covariance=covariance)])
+    _, r_wc = pose_measurement(_pose("tight", 0.0), r_wb, T_BC)
+    noise = _pose_noise(config, "tight", r_wc)
+    np.testing.assert_allclose(fusion.covariance[0:3, 0:3], noise[:3, :3], rtol=1e-12)
+    np.testing.assert_allclose(fusion.covariance[6:9, 6:9], noise[3:, 3:], rtol=1e-12)
+
+
+def test_a_late_pose_within_the_horizon_is_fused_before_the_newer_events() -> None:
+    """Only the events older than now - horizon_s leave the buffer: a pose delivered late,
+    stamped inside the horizon but before newer IMU samples, is fused at its time."""
+    fusion = make_fusion(make_config(horizon_s=0.15))
+    level = np.eye(3)
+    fusion.step(0.0, level, (), None, [_pose("atda", 0.0)])
+    for time in (0.1, 0.2, 0.3, 0.4):
+        fusion.step(time, level, _imu([time]))
+    late = DeckPoseEstimate(
+        "atda", 0.27, True, _pose("atda", 0.0).rotation, np.array([0.1, -0.2, 1.8])
+    )
+    fusion.step(0.41, level, _imu([0.41]), None, [late])
+    diagnostics = fusion.diagnostics()
+    assert diagnostics.get("atda_too_old", 0) == 0 and diagnostics["atda_accepted"] == 1
+
+
+def test_the_first_steps_samples_turn_from_its_own_attitude_the_first_by_nothing() -> None:
+    """A filter's first step brings a pose and IMU samples after it: the attitude starts at
+    the one given with the step, the first sample turns it by nothing (no event before it),
+    and each sample after the pose is a prediction."""
+    config = make_config()
+    start = matrix_from_euler_zyx(0.1, -0.05, 0.6)
+    gyro = np.array([0.4, -0.2, 0.6])
+    samples = [ImuSample(t, np.array([0.3, -0.2, 9.9]), gyro) for t in (0.01, 0.02)]
+    fusion = make_fusion(config)
+    fusion.step(0.02, start, samples, None, [_pose("atda", 0.0)])
+    twin = make_fusion(config)
+    twin.step(0.0, start, (), None, [_pose("atda", 0.0)])
+    x, cov = twin.state, twin.covariance
+    for sample, r_wb in (
+        (samples[0], start),
+        (samples[1], start @ Rotation.from_rotvec(gyro * 0.01).as_matrix()),
+    ):
+        x, cov = predict(
+            x, cov, sample.accel, r_wb, 0.01, config.deck_accel_psd,
+            config.deck_angular_accel_psd, config.accel_noise_density,
+            config.accel_bias_random_walk,
+        )  # fmt: skip
+    np.testing.assert_allclose(fusion.state, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(fusion.covariance, cov, rtol=1e-12, atol=1e-18)
+
+
+@pytest.mark.parametrize(
+    "sigma",
+    [
+        (0.003, 0.003, 0.008, 2.0, 2.0, 0.5),
+        (0.003, 0.003, 0.008, 2.0, 2.0, math.inf),
+        (0.003, 0.003, 0.008, math.inf, 2.0, 0.5),
+        (0.003, 0.003, 0.008, 2.0, math.inf, 0.5),
+    ],
+    ids=["all-given", "no-yaw", "no-roll", "no-pitch"],
+)
+def test_the_coloured_tilt_errors_enter_with_a_poses_roll_and_pitch_both_and_carry_over(
+    sigma: tuple[float, ...],
+) -> None:
+    """Only a pose giving both roll and pitch starts the coloured errors anticorrelated with
+    its tilt and sees them in its update (and has a roll/pitch NIS); each later update, after
+    a prediction, is the textbook one of the components given, the coloured states as the
+    updates before left them."""
+    config = make_config(
+        atda_sigma=sigma,
+        tilt_error_sigma_scale=1.3,
+        tilt_error_correlation_s=0.3,
+        tilt_error_coloured_share=0.6,
+    )
+    mask = np.isfinite(np.array(sigma))
+    both = bool(mask[3] and mask[4])
+    fusion = make_fusion(config)
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)
+    fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+    _, r_wc = pose_measurement(_pose("atda", 0.0), r_wb, T_BC)
+    noise = _pose_noise(config, "atda", r_wc)
+    gain = math.sqrt(0.6) * np.linalg.cholesky(noise[3:5, 3:5])
+    np.testing.assert_allclose(
+        fusion.covariance[6:8, 15:17], -gain if both else np.zeros((2, 2)), rtol=1e-12
+    )
+    h = np.zeros((6, 17))
+    h[0:3, 0:3] = np.eye(3)
+    h[3:6, 6:9] = np.eye(3)
+    white = noise
+    if both:
+        h[3:5, 15:17] = gain
+        scale = np.array([1.0, 1.0, 1.0, math.sqrt(0.4), math.sqrt(0.4), 1.0])
+        white = noise * np.outer(scale, scale)
+    h, white = h[mask], white[np.ix_(mask, mask)]
+    for k, (tilt, shift) in enumerate(((0.02, 0.002), (-0.015, -0.001))):
+        time = 0.05 * (k + 1)
+        pose = DeckPoseEstimate(
+            "atda",
+            time,
+            True,
+            matrix_from_euler_zyx(0.05 + tilt, -0.03 - tilt, 0.4 + 0.1 * tilt),
+            np.array([0.1 + shift, -0.2 - shift, 1.8 + shift]),
+        )
+        # predicted to the pose's time first: the coloured errors decay, their gain grows
+        fusion.step(time, r_wb, [ImuSample(time, r_wb.T @ np.array([0, 0, 9.81]), np.zeros(3))])
+        x, cov = fusion.state, fusion.covariance
+        fusion.step(time, r_wb, (), None, [pose])
+        z, _ = pose_measurement(pose, r_wb, T_BC)
+        innovation = z[mask] - h @ x
+        s = h @ cov @ h.T + white
+        gain_k = cov @ h.T @ np.linalg.inv(s)
+        np.testing.assert_allclose(fusion.state, x + gain_k @ innovation, rtol=1e-9, atol=1e-13)
+        np.testing.assert_allclose(
+            fusion.covariance, cov - gain_k @ s @ gain_k.T, rtol=1e-9, atol=1e-15
+        )
+        assert fusion.diagnostics()["atda_accepted"] == k + 1
+        assert ("nis_tilt_atda" in fusion.diagnostics()) is both
+    assert bool(np.all(fusion.state[15:17] != 0.0)) is both
+
+
+def test_a_pose_giving_no_component_starts_every_one_wide_open() -> None:
+    """1 m on each axis of the position, 0.5 rad of roll and pitch, pi of yaw."""
+    fusion = make_fusion(make_config(atda_sigma=(math.inf,) * 6))
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    np.testing.assert_array_equal(
+        np.diag(fusion.covariance)[[0, 1, 2, 6, 7, 8]], [1.0, 1.0, 1.0, 0.25, 0.25, math.pi**2]
+    )
+
+
+def test_a_tilt_noise_not_positive_definite_couples_the_coloured_errors_by_its_sigmas() -> None:
+    """A source covariance whose roll/pitch block is not positive definite (a variance
+    rounded below 0) has no Cholesky factor: the coloured errors then enter through the
+    square roots of its roll and pitch variances, a negative one taken as 0."""
+    config = make_config(
+        sources=("tight",), tilt_error_correlation_s=0.3, tilt_error_coloured_share=0.6
+    )
+    own = np.diag([1e-6, 1e-6, 4e-6, -1e-8, 1e-4, 1e-5])
+    r_wb = matrix_from_euler_zyx(0.0, 0.0, 0.7)
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("tight", 0.0, covariance=own)])
+    tilt = fusion.covariance[6:8, 6:8]  # the pose's tilt noise, as it starts
+    assert np.min(np.linalg.eigvalsh(tilt)) < 0.0
+    gain = math.sqrt(0.6) * np.diag(np.sqrt(np.clip(np.diag(tilt), 0.0, None)))
+    np.testing.assert_allclose(fusion.covariance[6:8, 15:17], -gain, rtol=1e-9, atol=1e-15)
+
+
+def test_of_two_poses_stamped_alike_the_one_delivered_first_is_fused_first() -> None:
+    """The first initialises the filter; an outlier delivered after it is gated out, not
+    the other way round."""
+    fusion = make_fusion(make_config())
+    good = _pose("atda", 0.0)
+    outlier = DeckPoseEstimate(
+        "atda", 0.0, True, good.rotation, good.translation + np.array([0.0, 0.0, 0.3])
+    )
+    fusion.step(0.0, np.eye(3), (), None, [good, outlier])
+    z, _ = pose_measurement(good, np.eye(3), T_BC)
+    np.testing.assert_allclose(fusion.state[[0, 1, 2, 6, 7, 8]], z, rtol=0, atol=1e-12)
+    assert fusion.diagnostics()["atda_rejected"] == 1
+
+
+def test_each_ray_that_misses_the_deck_is_counted_rejected() -> None:
+    """Rolled 80 degrees, every ray grazes the deck plane (beyond 78.5 degrees of incidence):
+    no update, and each of the four readings counted as rejected."""
+    fusion = make_fusion(make_config(use_tof=True))
+    fusion.step(0.0, np.eye(3), (), None, [_pose("atda", 0.0)])
+    before = fusion.state
+    rolled = matrix_from_euler_zyx(math.radians(80.0), 0.0, 0.0)
+    reading = RangeReading(0.0625, np.full(4, 2.0), np.ones(4, bool))
+    fusion.step(0.0625, rolled, (), reading)
+    np.testing.assert_allclose(fusion.state, before, rtol=0, atol=1e-15)  # angles re-wrapped
+    diagnostics = fusion.diagnostics()
+    assert diagnostics["tof_rejected"] == 4 and "tof_accepted" not in diagnostics

@@ -428,12 +428,15 @@ def ar_samples(coefficients: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
 
 def test_the_ar_fit_gives_the_coefficients_that_samples_follow_from_three_per_coefficient() -> None:
     """Samples that follow an AR model exactly give its coefficients back, from three samples
-    per coefficient on; fewer, or a table of samples, give none."""
+    per coefficient on; fewer, a table of samples, or a constant window give none."""
     coefficients = ar_coefficients([*pole_pair(12.0, 0.98), *pole_pair(5.0, 0.95)])
     for n in (12, 200):
         assert fit_ar(ar_samples(coefficients, n), 4) == pytest.approx(coefficients, rel=1e-6)
     assert fit_ar([int(v) for v in 100 * ar_samples(coefficients, 40)], 4) is not None
     assert fit_ar(ar_samples(coefficients, 11), 4) is None
+    # a window without motion, or holding a constant, determines nothing
+    assert fit_ar(np.zeros(40), 4) is None
+    assert fit_ar(np.full(40, 0.1), 4) is None
     table = np.random.default_rng(1).standard_normal((60, 2))
     assert fit_ar(table, 4) is None
 
@@ -442,7 +445,7 @@ class Recorder:
     """Stand-ins for the identifier's three fits: they keep what they are given and return
     fixed results (``fit_ar`` None when ``coefficients`` is None)."""
 
-    def __init__(self, coefficients: np.ndarray | None = np.zeros(4)) -> None:
+    def __init__(self, coefficients: np.ndarray | None) -> None:
         self.coefficients = coefficients
         self.fits: list[tuple[np.ndarray, int]] = []
         self.factors: list[tuple] = []
@@ -488,7 +491,7 @@ def test_the_identifier_fits_block_means_once_the_shortest_window_is_full_then_e
     """Estimates every 0.125 s are averaged over blocks of 0.5 s; the first fit comes as
     the tenth block (5 s, the shortest window) closes, on the block means of each axis with
     the AR order; the next exactly refit_s (2 s) later, and none in between."""
-    recorder = Recorder()
+    recorder = Recorder(np.zeros(4))
     recorder.install(monkeypatch)
     identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4)
     assert identifier.models is None
@@ -507,7 +510,7 @@ def test_the_identifier_fits_block_means_once_the_shortest_window_is_full_then_e
 def test_the_identifier_keeps_the_last_window_s_of_blocks_or_three_per_ar_coefficient(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    recorder = Recorder()
+    recorder = Recorder(np.zeros(4))
     recorder.install(monkeypatch)
     times = np.arange(0, 241) * 0.125  # 30 s
     identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 1.0, *BANDS, order=4)
@@ -578,7 +581,7 @@ def test_estimates_that_are_not_angles_are_skipped_and_angles_up_to_pi_are_taken
 ) -> None:
     """A roll or pitch beyond pi, or a time not finite, is not an estimate: it is skipped
     (False, nothing raised); pi itself is an angle."""
-    recorder = Recorder()
+    recorder = Recorder(np.zeros(4))
     recorder.install(monkeypatch)
     identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 2.0, *BANDS, order=4)
     for k in range(41):
@@ -598,7 +601,7 @@ def test_estimates_that_are_not_angles_are_skipped_and_angles_up_to_pi_are_taken
 def test_a_gap_of_two_blocks_joins_on_and_one_of_three_restarts_the_window(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    recorder = Recorder()
+    recorder = Recorder(np.zeros(4))
     recorder.install(monkeypatch)
     identifier = DeckMotionIdentifier(10.0, 0.5, 5.0, 100.0, *BANDS, order=4)
     for t in (0.0, 0.5, 1.0):
@@ -610,3 +613,54 @@ def test_a_gap_of_two_blocks_joins_on_and_one_of_three_restarts_the_window(
     assert identifier.span_s == 0.5
     identifier.reset()
     assert identifier.span_s == 0.0 and identifier.models is None
+
+
+def test_fast_real_poles_give_a_factor_held_at_the_shortest_period_and_one_an_octave_down() -> None:
+    # two real poles far from 1: an overdamped factor at 5.2 rad/s, above the band's top
+    # (pi rad/s, 2 s), held there; the second component an octave below it
+    (other_w, other_zeta), (fast_w, fast_zeta) = factors_from_ar(
+        ar_coefficients([0.1, 0.05]), SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE
+    )
+    a, b = math.log(0.1) / SAMPLE_S, math.log(0.05) / SAMPLE_S
+    assert fast_w == pytest.approx(math.pi, rel=1e-12)
+    assert fast_zeta == pytest.approx(-(a + b) / (2.0 * math.sqrt(a * b)), rel=1e-9)
+    assert (other_w, other_zeta) == pytest.approx((0.5 * math.pi, 0.3), rel=1e-12)
+
+
+def test_a_refinement_of_two_distinct_components_is_kept_slowest_first(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    y = two_tones(600)
+    total = float(np.mean(y * y))
+    fit = LeastSquares([0.5, 0.1, 1.0, 0.2, 0.6, 0.4])
+    slow, fast = refine(monkeypatch, fit, y, SWELL, WIND_SEA)
+    assert slow == pytest.approx((0.5, 0.1, 0.6 * total))
+    assert fast == pytest.approx((1.0, 0.2, 0.4 * total))
+
+
+def test_the_refinements_residual_is_relative_to_a_windows_variance_below_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A deck's roll in radians has a variance far below 1: the residual is still the
+    autocovariance relative to it (the two oscillators' shares of it)."""
+    y = 0.05 * two_tones(600)
+    fit = LeastSquares([0.5, 0.1, 1.0, 0.2, 0.5, 0.5])
+    refine(monkeypatch, fit, y, SWELL, WIND_SEA)
+    tau = np.arange(int(2.0 * 12.0 / SAMPLE_S) + 1) * SAMPLE_S
+    covariance = np.array([np.mean(y[: 600 - k] * y[k:]) for k in range(len(tau))])
+    expected = (
+        0.7 * oscillator_correlation(tau, 0.6, 0.1)
+        + 0.3 * oscillator_correlation(tau, 1.3, 0.3)
+        - covariance / np.mean(y * y)
+    )
+    assert fit.call["fun"](np.array([0.6, 0.1, 1.3, 0.3, 0.7, 0.3])) == pytest.approx(expected)
+
+
+def test_the_components_are_the_sharp_peaks_not_a_broad_pair_beside_them() -> None:
+    # the AR spectrum 1 / |A(e^{iwT})|² is highest at the two sharp pairs (20 s and 12 s),
+    # far above the broad pair at 8 s
+    coefficients = ar_coefficients(
+        [*pole_pair(20.0, 0.98), *pole_pair(12.0, 0.98), *pole_pair(8.0, 0.5)]
+    )
+    found = factors_from_ar(coefficients, SAMPLE_S, PERIOD_RANGE_S, DAMPING_RANGE)
+    assert np.array(found) == pytest.approx(np.array([peak(20.0, 0.98), peak(12.0, 0.98)]))
