@@ -625,3 +625,31 @@ def test_of_components_all_in_the_underflow_the_one_nearest_the_peak_takes_the_e
     amplitudes = underflowed_amplitudes(np.array([0.010, 0.014, 0.012]), 0.5)
     np.testing.assert_array_equal(amplitudes, [0.0, 1.0, 0.0])
     assert underflowed_amplitudes(np.array([]), 0.5).shape == (0,)
+
+
+def test_a_short_sea_whose_densities_sum_below_one_keeps_the_shape_of_its_spectrum() -> None:
+    # a 1 s peak period: the densities times their bins sum to about 0.3 (in Hz^-5 units)
+    sea = WaveComponents(0.2, 1.0, 3.3, 200, (0.5, 3.0), 0.0, 0.0, np.random.default_rng(0))
+    density = jonswap_shape(sea.frequencies_hz, 1.0, 3.3) * sea.bin_widths_hz
+    assert float(np.sum(density)) < 1.0
+    np.testing.assert_allclose(
+        sea.amplitudes_m**2, 2.0 * (0.2**2 / 16.0) * density / np.sum(density), rtol=1e-9
+    )
+
+
+def test_an_ochi_hubble_sea_all_swell_or_all_wind_sea_holds_its_height_in_that_system() -> None:
+    for fraction in (1.0, 0.0):
+        generator = SeaGeneratorConfig(
+            spectrum="ochi_hubble", swell_energy_fraction=fraction, speed_m_s=1.0
+        )
+        config = ShipMotionConfig(
+            sea_state=None, significant_height_m=2.0, peak_period_s=8.0, generator=generator
+        )
+        sea = make_sea(config, np.random.default_rng(0))
+        held = {p: float(np.sum(sea.amplitudes_m[sea.part_index == p] ** 2) / 2.0) for p in (0, 1)}
+        swell, wind = held[1], held[0]  # the parts: the wind sea, then the swell
+        assert sea.m0 == pytest.approx(0.25, rel=1e-9)
+        assert (swell, wind) == (
+            pytest.approx(0.25 * fraction),
+            pytest.approx(0.25 * (1 - fraction)),
+        )
