@@ -286,6 +286,10 @@ def test_a_replay_config_refuses_a_bad_choice_or_lever_arm_naming_the_key(tmp_pa
             "bad.csv, line 7: time 0.5 does not increase (previous 1.0)",
         ),
         (
+            "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n   \n1,0,0,0,0,0,0\n0.5,0,0,0,0,0,0\n",
+            "bad.csv, line 5: time 0.5 does not increase (previous 1.0)",
+        ),
+        (
             "t,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,0,nan,0,0,0\n",
             "non-finite values (sample 2)",
         ),
