@@ -20,6 +20,7 @@ from landing_env.errors import ConfigError
 from landing_env.waves.generator import SeaGeneratorConfig
 from landing_env.waves.ship import ShipMotion, ShipMotionConfig, helideck_poses, vessel_raos
 from landing_env.waves.spectrum import WaveComponents, dnv_gamma, jonswap_shape
+from tests.landing_env.waves.regular import regular_ship
 
 
 def test_dnv_gamma_follows_the_rule_of_dnv_rp_c205() -> None:
@@ -531,26 +532,15 @@ def test_a_ship_under_way_in_a_steady_sea_moves_at_the_derivative_of_its_poses(
 
 @pytest.mark.parametrize("speed_m_s", [1.0, 6.0])
 def test_a_ship_under_way_heaves_by_the_rao_of_its_encounter_frequency(speed_m_s: float) -> None:
-    config = ShipMotionConfig(
-        sea_state=None,
-        significant_height_m=1.0,
-        peak_period_s=6.0,
-        n_components=1,
-        band_low=0.999,
-        band_high=1.001,
-        wave_direction_deg=180.0,
-        direction_spread_deg=0.0,
-        generator=SeaGeneratorConfig(speed_m_s=speed_m_s),
-    )
-    ship = ShipMotion(config, np.random.default_rng(0))
+    ship = regular_ship(6.0, 180.0, generator=SeaGeneratorConfig(speed_m_s=speed_m_s))
     waves = ship.waves
     omega_e = float(waves.encounter_omega[0])
     assert omega_e > float(waves.omega[0])  # head seas: met more often
     # the complex heave of the one component: its real part now, a quarter period earlier
     heave = ship.vessel_poses(np.array([0.0, -0.5 * math.pi / omega_e]))[:, 2]
     response = (heave[0] + 1j * heave[1]) / waves.elevation_phasors[0]
-    under_way = vessel_raos(config, waves.omega, waves.directions, waves.encounter_omega)
-    at_rest = vessel_raos(config, waves.omega, waves.directions)
+    under_way = vessel_raos(ship.config, waves.omega, waves.directions, waves.encounter_omega)
+    at_rest = vessel_raos(ship.config, waves.omega, waves.directions)
     assert response == pytest.approx(complex(under_way["heave"][0]), rel=1e-9)
     assert abs(response - at_rest["heave"][0]) > 1e-3 * abs(response)
 
@@ -584,17 +574,7 @@ def test_in_a_long_wave_the_hull_surges_and_sways_with_the_surfaces_orbital_velo
     # a crest), as the water particles at the surface of a deep-water wave
     times = np.linspace(0.0, 100.0, 4001)
     for direction_deg, column, sign in ((0.0, 0, 1.0), (180.0, 0, -1.0), (90.0, 1, 1.0)):
-        config = ShipMotionConfig(
-            sea_state=None,
-            significant_height_m=1.0,
-            peak_period_s=25.0,
-            n_components=1,
-            band_low=0.999,
-            band_high=1.001,
-            wave_direction_deg=direction_deg,
-            direction_spread_deg=0.0,
-        )
-        ship = ShipMotion(config, np.random.default_rng(0))
+        ship = regular_ship(25.0, direction_deg)
         rate = ship.vessel_rates(times)[:, column]
         orbital = sign * ship.waves.omega[0] * ship.elevation(times)
         assert np.corrcoef(rate, orbital)[0, 1] > 0.999, direction_deg
@@ -654,23 +634,13 @@ def test_the_decks_poses_and_velocities_take_a_time_or_times_of_any_shape_one_ro
 
 def test_in_a_changing_sea_the_hull_follows_the_sea_of_the_moment_and_reaches_its_largest() -> None:
     # one component in head seas, its height doubling from 100 s to 150 s
-    config = ShipMotionConfig(
-        sea_state=None,
-        significant_height_m=1.0,
-        peak_period_s=6.0,
-        n_components=1,
-        band_low=0.999,
-        band_high=1.001,
-        wave_direction_deg=180.0,
-        direction_spread_deg=0.0,
-        generator=SeaGeneratorConfig(hs_end_m=2.0, ramp_start_s=100.0, ramp_duration_s=50.0),
-    )
-    ship = ShipMotion(config, np.random.default_rng(0))
+    ramp = SeaGeneratorConfig(hs_end_m=2.0, ramp_start_s=100.0, ramp_duration_s=50.0)
+    ship = regular_ship(6.0, 180.0, generator=ramp)
     waves = ship.waves
     assert not waves.steady
     omega = float(waves.omega[0])
     quarter_s = 0.5 * math.pi / omega
-    heave_rao = complex(vessel_raos(config, waves.omega, waves.directions)["heave"][0])
+    heave_rao = complex(vessel_raos(ship.config, waves.omega, waves.directions)["heave"][0])
     # the complex heave over the complex elevation, before the ramp and after it
     for t, hs in ((0.0, 1.0), (300.0, 2.0)):
         heave = ship.vessel_poses(np.array([t, t - quarter_s]))[:, 2]

@@ -24,23 +24,8 @@ import numpy as np
 import pytest
 
 from landing_env.stewart.motion import SeaStateConfig, SeaStateMotion
-from landing_env.waves.ship import GRAVITY, ShipMotion, ShipMotionConfig
-
-
-def regular_ship(period_s: float, direction_deg: float, **hull) -> ShipMotion:
-    """One wave component of period ~``period_s`` (a 0.2 % band) and one direction."""
-    config = ShipMotionConfig(
-        sea_state=None,
-        significant_height_m=1.0,
-        peak_period_s=period_s,
-        n_components=1,
-        band_low=0.999,
-        band_high=1.001,
-        wave_direction_deg=direction_deg,
-        direction_spread_deg=0.0,
-        **hull,
-    )
-    return ShipMotion(config, np.random.default_rng(0))
+from landing_env.waves.ship import GRAVITY, ShipMotionConfig
+from tests.landing_env.waves.regular import regular_ship
 
 
 def surface(waves, times: np.ndarray, x_m: float, y_m: float) -> np.ndarray:
