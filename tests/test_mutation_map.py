@@ -27,6 +27,68 @@ def test_the_map_names_for_each_module_the_test_files_that_import_it() -> None:
     assert "tests/agents/io/test_mavlink_autopilot.py" in mapping["tests"]["agents/io/timesync.py"]
 
 
+def test_every_chosen_test_is_a_test_of_the_modules_mapped_files() -> None:
+    tool = mutation_tool()
+    mapping = tool.load_map()
+    assert tool.check_chosen(mapping["chosen"], mapping["tests"]) == []
+    # the fusion's model runs on its unit tests, not on the filter's Monte-Carlo ones
+    model = mapping["chosen"]["estimation/fusion/model.py"]
+    assert (
+        "tests/estimation/fusion/test_filter_identification.py"
+        in (mapping["tests"]["estimation/fusion/model.py"])
+    )
+    assert "tests/estimation/fusion/test_filter_identification.py" not in model
+
+
+def test_a_bad_choice_of_tests_is_refused_naming_the_module_and_the_test(tmp_path: Path) -> None:
+    tool = mutation_tool()
+    test_file = "tests/estimation/test_limits.py"
+    mapped = {"estimation/limits.py": [test_file]}
+    assert tool.check_chosen({"estimation/limits.py": [test_file]}, mapped) == []
+    name = sorted(tool.test_names(ROOT / test_file))[0]
+    assert tool.check_chosen({"estimation/limits.py": [f"{test_file}::{name}"]}, mapped) == []
+    assert tool.check_chosen({"estimation/nowhere.py": [test_file]}, mapped) == [
+        "chosen: estimation/nowhere.py is not a mapped module"
+    ]
+    assert tool.check_chosen({"estimation/limits.py": []}, mapped) == [
+        "chosen: estimation/limits.py chooses no test (leave it out to run all)"
+    ]
+    assert tool.check_chosen({"estimation/limits.py": ["tests/test_fuzz.py"]}, mapped) == [
+        "chosen: estimation/limits.py: tests/test_fuzz.py is not among its mapped test files"
+    ]
+    assert tool.check_chosen({"estimation/limits.py": [f"{test_file}::test_gone"]}, mapped) == [
+        f"chosen: estimation/limits.py: {test_file} has no test test_gone"
+    ]
+
+
+def test_a_run_takes_the_chosen_tests_unless_told_its_own_or_all(tmp_path: Path) -> None:
+    tool = mutation_tool()
+    mapped = ["tests/a/test_x.py", "tests/a/test_y.py"]
+    kept = ["tests/a/test_x.py::test_one"]
+    assert tool.chosen_tests("m.py", None, mapped, kept) == kept
+    assert tool.chosen_tests("m.py", None, mapped, None) == mapped
+    assert tool.chosen_tests("m.py", ["tests/a/test_y.py"], mapped, kept) == ["tests/a/test_y.py"]
+    # a module's run folder goes under the folder asked for, with that selection
+    run_dir = tool.prepare("estimation/limits.py", kept, tmp_path / "runs")
+    assert run_dir == tmp_path / "runs" / "estimation.limits"
+    text = (run_dir / "pyproject.toml").read_text()
+    assert 'pytest_add_cli_args_test_selection = ["tests/a/test_x.py::test_one"]' in text
+    assert 'only_mutate = ["estimation/limits.py"]' in text
+    assert (run_dir / "estimation").resolve() == ROOT / "estimation"
+
+
+def test_map_keeps_the_hand_kept_choice(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tool = mutation_tool()
+    mapping = tool.load_map()
+    monkeypatch.setattr(tool, "MAP_FILE", tmp_path / "mutation.yaml")
+    tool.write_map(mapping["paths"], mapping["tests"], mapping["chosen"])
+    assert tool.load_map() == mapping
+    bad = {**mapping["chosen"], "estimation/limits.py": ["tests/test_fuzz.py"]}
+    tool.write_map(mapping["paths"], mapping["tests"], bad)
+    assert tool.main(["map"]) == 1
+    assert tool.load_map()["chosen"] == bad  # refused: the file is left as it was
+
+
 def test_a_test_file_imports_a_module_by_either_form_of_import(tmp_path: Path) -> None:
     tool = mutation_tool()
     test_file = tmp_path / "test_x.py"

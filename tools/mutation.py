@@ -1,11 +1,14 @@
 """Mutation testing of the modules a user relies on beyond the simulator, with mutmut.
 
-``tools/mutation.yaml`` keeps the one mapping: the modules to mutate (``paths``, globs) and,
-for each module, the test files that import it (``tests``, derived by ``map``). Each module
-runs in its own folder ``results/mutation/<module>/`` (links to the packages, a
-``pyproject.toml`` with the module's ``[tool.mutmut]`` section), so that mutmut collects its
-coverage from that module's tests alone and runs each mutant against the tests that reached
-the mutated function. The report of a run is ``docs/reference/mutation.md``.
+``tools/mutation.yaml`` keeps the one mapping: the modules to mutate (``paths``, globs); for
+each module, the test files that import it (``tests``, derived by ``map``); and, for the
+modules whose mapped files fly episodes or run a filter over minutes of sea, the quick unit
+tests a run takes instead (``chosen``, kept by hand: files or pytest node ids among the mapped
+files, so that the score is a lower bound of the score on all of them). Each module runs in its
+own folder ``results/mutation/<module>/`` (links to the packages, a ``pyproject.toml`` with the
+module's ``[tool.mutmut]`` section), so that mutmut collects its coverage from that module's
+tests alone and runs each mutant against the tests that reached the mutated function. The
+report of a run is ``docs/reference/mutation.md``.
 
     python tools/mutation.py map            # derive tests: from the imports in tests/
     python tools/mutation.py map --check    # refuse a mapping that is out of date
@@ -13,8 +16,8 @@ the mutated function. The report of a run is ``docs/reference/mutation.md``.
     python tools/mutation.py run 'agents/io/*'            # every mapped module under agents/io
     python tools/mutation.py run agents/io/pacing.py --survivors   # after new tests
     python tools/mutation.py summary 'agents/io/*'        # score and survivors with their diffs
-    python tools/mutation.py run agents/policies/registry.py \
-        --tests tests/agents/policies/test_registry.py        # a lower bound, from chosen tests
+    python tools/mutation.py run estimation/fusion/model.py --all-tests   # every mapped file
+    python tools/mutation.py run --runs results/mutation-full   # every module, a fresh folder
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ HEADER = """\
 # Mutation testing (tools/mutation.py, make mutation): the modules mutated and, for each, the
 # test files that import it. `paths` is kept by hand; `tests` is derived from the imports in
 # tests/ by `python tools/mutation.py map` (tests/test_mutation_map.py checks it is current).
+# `chosen` is kept by hand: for a module whose mapped files fly episodes or run the filter over
+# minutes of sea, the quick ones among them (files or pytest node ids) that a run takes.
 """
 
 
@@ -123,14 +128,50 @@ def load_map() -> dict:
     return yaml.safe_load(MAP_FILE.read_text(encoding="utf-8"))
 
 
-def write_map(paths: list[str], tests: dict[str, list[str]]) -> None:
-    body = yaml.safe_dump({"paths": paths, "tests": tests}, sort_keys=False, width=100)
+def write_map(paths: list[str], tests: dict[str, list[str]], picked: dict[str, list[str]]) -> None:
+    body = yaml.safe_dump(
+        {"paths": paths, "tests": tests, "chosen": picked}, sort_keys=False, width=100
+    )
     MAP_FILE.write_text(HEADER + body, encoding="utf-8")
+
+
+def check_chosen(picked: dict[str, list[str]], tests: dict[str, list[str]]) -> list[str]:
+    """What is wrong with the hand-kept ``chosen`` section: a module not mapped, an empty
+    choice, a test outside the module's mapped files or a file that does not exist."""
+    problems = []
+    for module, choice in picked.items():
+        if module not in tests:
+            problems.append(f"chosen: {module} is not a mapped module")
+            continue
+        if not choice:
+            problems.append(f"chosen: {module} chooses no test (leave it out to run all)")
+        for test in choice:
+            path, _, name = test.partition("::")
+            if path not in tests[module]:
+                problems.append(f"chosen: {module}: {test} is not among its mapped test files")
+            elif name and name not in test_names(ROOT / path):
+                problems.append(f"chosen: {module}: {path} has no test {name}")
+    return problems
+
+
+def test_names(test_file: Path) -> set[str]:
+    """The test functions a test file defines at its top level."""
+    tree = ast.parse(test_file.read_text(encoding="utf-8"))
+    return {
+        node.name
+        for node in tree.body
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.name.startswith("test")
+    }
 
 
 def cmd_map(args: argparse.Namespace) -> int:
     mapping = load_map()
     derived = derive_tests(mapping["paths"])
+    picked = mapping.get("chosen") or {}
+    problems = check_chosen(picked, derived)
+    if problems:
+        print("tools/mutation.yaml: " + "; ".join(problems))
+        return 1
     if args.check:
         if derived != mapping["tests"]:
             stale = sorted(
@@ -144,7 +185,7 @@ def cmd_map(args: argparse.Namespace) -> int:
             )
             return 1
         return 0
-    write_map(mapping["paths"], derived)
+    write_map(mapping["paths"], derived, picked)
     untested = [m for m, tests in derived.items() if not tests]
     print(f"{len(derived)} modules, {len(untested)} imported by no test: {', '.join(untested)}")
     return 0
@@ -163,9 +204,10 @@ def chosen(patterns: list[str], tests: dict[str, list[str]]) -> list[str]:
     return picked
 
 
-def prepare(module: str, test_files: list[str]) -> Path:
-    """The module's run folder: links to the packages and its own ``[tool.mutmut]`` section."""
-    run_dir = RUNS / module_name(module)
+def prepare(module: str, test_files: list[str], runs: Path = RUNS) -> Path:
+    """The module's run folder under ``runs``: links to the packages and its own
+    ``[tool.mutmut]`` section."""
+    run_dir = runs / module_name(module)
     run_dir.mkdir(parents=True, exist_ok=True)
     for name in LINKED:
         link = run_dir / name
@@ -203,12 +245,14 @@ def mutmut(run_dir: Path, *argv: str, capture: bool = False) -> subprocess.Compl
     )
 
 
-def chosen_tests(module: str, picked: list[str] | None, mapped: list[str]) -> list[str]:
-    """The tests ``--tests`` picks (files or pytest node ids of the module's mapped files), or
-    the mapped files; a test outside them is refused, so that a run on a choice stays a lower
-    bound of the run on all of them."""
+def chosen_tests(
+    module: str, picked: list[str] | None, mapped: list[str], kept: list[str] | None = None
+) -> list[str]:
+    """The tests ``--tests`` picks (files or pytest node ids of the module's mapped files), else
+    the module's ``chosen`` tests of the map (``kept``), else the mapped files; a test outside
+    them is refused, so that a run on a choice stays a lower bound of the run on all of them."""
     if not picked:
-        return mapped
+        return kept or mapped
     outside = [test for test in picked if test.split("::")[0] not in mapped]
     if outside:
         raise SystemExit(
@@ -219,14 +263,18 @@ def chosen_tests(module: str, picked: list[str] | None, mapped: list[str]) -> li
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    tests = load_map()["tests"]
+    mapping = load_map()
+    tests = mapping["tests"]
+    kept = {} if args.all_tests else (mapping.get("chosen") or {})
+    runs = args.runs.resolve()
     failed = 0
+    started_all = time.monotonic()
     for module in chosen(args.modules, tests):
         if not tests[module]:
             print(f"{module}: no test imports it; not run")
             continue
-        test_files = chosen_tests(module, args.tests, tests[module])
-        run_dir = prepare(module, test_files)
+        test_files = chosen_tests(module, args.tests, tests[module], kept.get(module))
+        run_dir = prepare(module, test_files, runs)
         started = time.monotonic()
         # without names mutmut tests the mutants that have no result yet: every one on the
         # first run, then those of the functions changed since (it keeps the others' results)
@@ -237,14 +285,22 @@ def cmd_run(args: argparse.Namespace) -> int:
             if not names:
                 print(f"== {module}: no survivor to run again", flush=True)
                 continue
-        what = "chosen tests" if args.tests else "test files"
+        what = "test files" if test_files == tests[module] else "chosen tests"
         print(f"== {module}: mutmut over {len(test_files)} {what}", flush=True)
         result = mutmut(run_dir, "run", "--max-children", str(args.workers), *names)
         failed += result.returncode != 0
-        print(f"== {module}: {time.monotonic() - started:.0f} s", flush=True)
+        print(
+            f"== {module}: {time.monotonic() - started:.0f} s "
+            f"({time.monotonic() - started_all:.0f} s in all)",
+            flush=True,
+        )
     return 1 if failed else 0
 
 
+RUNS_HELP = (
+    "the folder of the modules' run folders (default results/mutation): another one for a "
+    "run from scratch that keeps the results of the default"
+)
 STATUS = re.compile(r"^\s*(\S+): (.+)$")
 
 
@@ -257,7 +313,7 @@ def cmd_summary(args: argparse.Namespace) -> int:
     tests = load_map()["tests"]
     total: dict[str, int] = {}
     for module in chosen(args.modules, tests):
-        run_dir = RUNS / module_name(module)
+        run_dir = args.runs.resolve() / module_name(module)
         if not (run_dir / "mutants").is_dir():
             print(f"## {module}: not run")
             continue
@@ -292,6 +348,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
     p.add_argument("--workers", type=int, default=2, help="mutants tested at once (default 2)")
     p.add_argument(
+        "--all-tests",
+        action="store_true",
+        help="run each module against all its mapped test files, not its chosen ones",
+    )
+    p.add_argument(
         "--mutants", nargs="+", help="only these mutant names (mutmut's, globs), run again"
     )
     p.add_argument(
@@ -307,9 +368,11 @@ def main(argv: list[str] | None = None) -> int:
         "files kill too (quicker where the mapped files run episodes); a module's folder "
         "keeps one selection, so remove results/mutation/<module>/ before changing it",
     )
+    p.add_argument("--runs", type=Path, default=RUNS, help=RUNS_HELP)
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("summary", help="score and the diff of each mutant not killed")
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
+    p.add_argument("--runs", type=Path, default=RUNS, help=RUNS_HELP)
     p.set_defaults(func=cmd_summary)
     args = parser.parse_args(argv)
     return args.func(args)
