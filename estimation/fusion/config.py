@@ -173,7 +173,8 @@ class FusionConfig:
     #: per-source pose sigmas: x, y, z (m, camera frame), roll, pitch, yaw (deg).  IHRCF's
     #: and CRHF's z, roll and pitch are the plane through the same ToF ranges the filter
     #: fuses itself (undelayed): using them again would count that noise twice; .inf drops a
-    #: component of that source's pose measurement
+    #: component of that source's pose measurement (x, y, z along the camera's axes: the
+    #: filter takes the measurement along them)
     atda_sigma: tuple[float, ...] = limited(
         (0.003, 0.003, 0.008, 3.0, 3.0, 0.3),
         physical=Limit(0.0, 1e3, low_inclusive=False, allow_inf=True),

@@ -75,7 +75,10 @@ class _Event:
     r_wb: np.ndarray
     #: imu: specific force (3); tof: ranges (NaN = invalid); pose: z (6)
     data: np.ndarray
-    #: pose: measurement covariance (6x6) in the state's axes and the used-components mask
+    #: pose: the measurement's axes (6x6, rows in the state's axes: R_WC's columns for a
+    #: translation given in the camera frame, else the state's own), its covariance (6x6) in
+    #: those axes and the mask of the components used
+    axes: np.ndarray | None = None
     noise: np.ndarray | None = None
     mask: np.ndarray | None = None
     after: _Snapshot | None = None
@@ -97,7 +100,7 @@ def pose_measurement(
     estimate: DeckPoseEstimate, r_wb: np.ndarray, t_bc: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """A T_CD estimate as the state's (p, th): the deck origin relative to the body's centre
-    in W, and the deck's ZYX Euler angles in W; also R_WC (to rotate the noise)."""
+    in W, and the deck's ZYX Euler angles in W; also R_WC (the camera's axes in W)."""
     r_wc = r_wb @ R_BC
     p = r_wc @ estimate.translation + r_wb @ t_bc
     th = euler_zyx_from_matrix(r_wc @ estimate.rotation @ R_PD.T)
@@ -279,21 +282,24 @@ class DeckFusion:
             jac = _measurement_jacobian(estimate, r_wb, self.t_bc, z)
             noise = jac @ own @ jac.T
             mask = np.ones(6, dtype=bool)
+            axes = np.eye(6)
         else:
             sigma = np.asarray(self.config.pose_sigma(source), dtype=float)
             mask = np.isfinite(sigma)
             sigma = np.where(mask, sigma, 1.0)
             sigma[3:] = np.deg2rad(sigma[3:])
-            noise = np.zeros((6, 6))
-            # the translation noise is given in the camera frame: rotate it into W
-            noise[:3, :3] = r_wc @ np.diag(sigma[:3] ** 2) @ r_wc.T
-            noise[3:, 3:] = np.diag(sigma[3:] ** 2)
+            # the translation's sigmas are along the camera's axes: the measurement is taken
+            # along them, so that a component dropped (IHRCF's and CRHF's depth) is the
+            # camera's and lends none of its stand-in sigma to the others
+            noise = np.diag(sigma**2)
+            axes = np.eye(6)
+            axes[:3, :3] = r_wc.T
         if self.config.tilt_error_sigma_scale != 1.0:
             scale = np.ones(6)
             scale[3:5] = self.config.tilt_error_sigma_scale
             noise = noise * np.outer(scale, scale)
         event = self._event(time, "pose", source, r_wb, z)
-        event.noise, event.mask = noise, mask
+        event.axes, event.noise, event.mask = axes, noise, mask
         event.includes_ranges = bool(estimate.extras.get("ranges_used", 0))
         return event
 
@@ -398,7 +404,7 @@ class DeckFusion:
         self, event: _Event, x: np.ndarray, cov: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
-        assert event.noise is not None and event.mask is not None
+        assert event.noise is not None and event.mask is not None and event.axes is not None
         new_x = np.zeros(self._n)
         new_x[P], new_x[TH] = event.data[:3], event.data[3:]
         new_x[BA] = x[BA]  # the IMU's bias does not depend on the vision
@@ -409,6 +415,7 @@ class DeckFusion:
         noise[:, ~event.mask] = 0.0
         wide = np.array([1.0, 1.0, 1.0, 0.5, 0.5, math.pi]) ** 2
         noise[~event.mask, ~event.mask] = wide[~event.mask]
+        noise = event.axes.T @ noise @ event.axes  # from the measurement's axes into W
         new_cov[:3, :3] = noise[:3, :3]
         new_cov[TH, TH] = noise[3:, 3:]
         new_cov[V, V] = np.eye(3) * cfg.initial_velocity_sigma**2
@@ -432,13 +439,15 @@ class DeckFusion:
     def _update_pose(
         self, event: _Event, x: np.ndarray, cov: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, bool]:
-        assert event.noise is not None and event.mask is not None
+        assert event.noise is not None and event.mask is not None and event.axes is not None
         mask = event.mask
         h_full = np.zeros((6, self._n))
         h_full[0:3, P] = np.eye(3)
         h_full[3:6, TH] = np.eye(3)
         innovation = event.data - np.concatenate([x[P], x[TH]])
         innovation[3:] = wrap_angle(innovation[3:])
+        # along the measurement's axes (the angles' rows are the state's own)
+        innovation, h_full = event.axes @ innovation, event.axes @ h_full
         noise = event.noise
         if self._coloured is not None and mask[3] and mask[4]:
             # the tilt = the deck's + the coloured error (its share of the variance) + white

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -28,6 +29,7 @@ from estimation.fusion.model import (
     N_STATE,
     N_STATE_4,
     TH,
+    P,
     TwoWaves,
     deck_normal,
     deck_spectrum_of,
@@ -792,6 +794,34 @@ def test_a_pose_that_holds_its_frames_ranges_supersedes_their_tof_update() -> No
     assert counts.get("tof_accepted", 0) + counts.get("tof_rejected", 0) <= 4 * 2
 
 
+@pytest.mark.parametrize("source", ["ihrcf", "crhf"])
+def test_a_pose_without_depth_is_fused_along_the_cameras_x_and_y_on_a_tilted_drone(
+    source: str,
+) -> None:
+    """IHRCF and CRHF give x and y along the camera's axes and no depth. On a drone tilted
+    10 degrees, a depth 0.3 m off moves nothing (the camera's x and y agree with the state),
+    and each pose narrows the deck's position along the camera's x and y to its own 2 mm:
+    the depth it does not give lends its stand-in sigma to neither."""
+    config = make_config(sources=("atda", source))
+    r_wb = matrix_from_euler_zyx(math.radians(10.0), math.radians(-4.0), 0.7)
+    r_wc = r_wb @ R_BC
+    fusion = make_fusion(config)
+    fusion.step(0.0, r_wb, (), None, [_pose("atda", 0.0)])
+    wrong_depth = _pose(source, 0.0)
+    wrong_depth = dataclasses.replace(wrong_depth, translation=np.array([0.1, -0.2, 2.1]))
+    for k in range(1, 11):
+        pose = dataclasses.replace(wrong_depth, timestamp=0.05 * k)
+        fusion.step(0.05 * k, r_wb, (), None, [pose])
+    assert fusion.diagnostics()[f"{source}_accepted"] == 10
+    in_camera = r_wc.T @ (fusion.state[P] - r_wb @ T_BC)
+    np.testing.assert_allclose(in_camera, [0.1, -0.2, 1.8], rtol=0, atol=1e-9)
+    spread = r_wc.T @ fusion.covariance[P, P] @ r_wc
+    # ten 2-mm measurements of x and y: their variance is a tenth of 2 mm squared or less
+    assert spread[0, 0] <= 0.002**2 / 10 and spread[1, 1] <= 0.002**2 / 10
+    # the depth is ATDA's alone: its 8 mm, spread over the 10 steps' velocity prior
+    assert spread[2, 2] >= 0.008**2
+
+
 def test_the_drones_own_rotation_does_not_enter_the_deck_attitude() -> None:
     """A hovering drone that rolls and yaws by several degrees over a deck at rest: the camera
     sees the deck tilt and turn, the filter (drone attitude from the autopilot and the gyro)
@@ -1146,9 +1176,10 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
     """The first pose sets the relative position and the deck's angles to what it measures,
     with its noise (fixed sigmas in the camera frame turned into W, or the source's own
     covariance through the measurement's Jacobian; roll and pitch times
-    tilt_error_sigma_scale), and a component the source does not give wide open (1 m, 0.5
-    rad); velocity, rates and the accelerometer bias start at their priors; the coloured
-    errors at unit variance, anticorrelated with the tilt they were measured in."""
+    tilt_error_sigma_scale), and a component the source does not give wide open (1 m along
+    the camera's z, 0.5 rad); velocity, rates and the accelerometer bias start at their
+    priors; the coloured errors at unit variance, anticorrelated with the tilt they were
+    measured in."""
     tilt = {"tilt_error_correlation_s": 0.3, "tilt_error_coloured_share": 0.6} if coloured else {}
     config = make_config(
         sources=(source,),
@@ -1158,12 +1189,7 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
         initial_accel_bias_sigma=0.03,
         **tilt,
     )
-    # a yawed drone (the masked z of IHRCF is W's z) or a tilted one
-    r_wb = (
-        matrix_from_euler_zyx(0.0, 0.0, 0.7)
-        if source == "ihrcf"
-        else matrix_from_euler_zyx(0.1, -0.2, 0.7)
-    )
+    r_wb = matrix_from_euler_zyx(0.1, -0.2, 0.7)  # tilted: the camera's z is not W's
     root = np.random.default_rng(4).normal(0.0, 0.01, (6, 6))
     own = root @ root.T + np.diag([1e-6, 1e-6, 4e-6, 1e-4, 1e-4, 1e-5])
     extra = {"covariance": own} if source == "tight" else {}
@@ -1190,8 +1216,8 @@ def test_the_first_pose_starts_the_state_at_its_measurement_with_its_noise_and_t
     expected = np.zeros((n, n))
     expected[0:3, 0:3] = noise[:3, :3]
     expected[6:9, 6:9] = noise[3:, 3:]
-    if source == "ihrcf":  # z, roll and pitch not given
-        for i, wide in ((2, 1.0), (6, 0.25), (7, 0.25)):
+    if source == "ihrcf":  # z (1 m along the camera's z, above), roll and pitch not given
+        for i, wide in ((6, 0.25), (7, 0.25)):
             expected[i, :] = expected[:, i] = 0.0
             expected[i, i] = wide
     expected[3:6, 3:6] = 0.4**2 * np.eye(3)
