@@ -738,7 +738,7 @@ def test_every_request_is_counted_and_a_reply_to_one_long_forgotten_is_not_ours(
     assert listener.handle(remembered, received_ns=sent[1] + 1000) == "used"
 
 
-@pytest.mark.parametrize("period", [0, -0.05, math.inf, "fast"])
+@pytest.mark.parametrize("period", [0, -0.05, 1e6, math.inf, "fast"])
 def test_a_bad_request_period_is_refused_naming_it(period) -> None:
     with pytest.raises(ConfigError, match="request_period_s") as refused:
         AutopilotListener(FakeLink(), request_period_s=period)
@@ -757,17 +757,28 @@ def test_the_summary_line_gives_the_offset_round_trip_samples_state_and_requests
 
 
 def test_a_link_error_is_counted_once_and_the_listener_goes_on_listening() -> None:
-    link = FakeLink(OSError("link down"), Message("TIMESYNC", (1, 1), tc1=0, ts1=77))
+    error = OSError("link down")
+    link = FakeLink(error, error, Message("TIMESYNC", (1, 1), tc1=0, ts1=77))
     with AutopilotListener(link, request_period_s=1e3) as listener:
         wait_for(lambda: listener.handled["answered TIMESYNC request"] == 1)
-    assert listener.skipped == {"link error: link down": 1}
+    assert listener.skipped == {"link error: link down": 2}
 
 
 def test_on_a_quiet_link_requests_go_out_every_request_period() -> None:
     link = FakeLink()
     with AutopilotListener(link, request_period_s=0.01):
         wait_for(lambda: len(link.sent) >= 20)
-    assert all(tc1 == 0 for tc1, *_ in link.sent)
+    # each a request (tc1 0) addressed to the autopilot: system 1, component 1
+    assert all((tc1, *target) == (0, 1, 1) for tc1, _, *target in link.sent)
+
+
+def test_the_companions_clock_reads_at_least_one_nanosecond_and_the_history_is_passed_on() -> None:
+    """tc1 = 0 marks a request, so a clock at 0 (or before) reads 1 ns; the history asked for
+    is the length the autopilot's poses are kept."""
+    assert AutopilotListener(FakeLink(), clock_s=lambda: 0.0).now_ns() == 1
+    assert AutopilotListener(FakeLink(), clock_s=lambda: 2e-9).now_ns() == 2
+    listener = AutopilotListener(FakeLink(), history_s=3.5)
+    assert listener.poses.positions.history_s == listener.poses.attitudes.history_s == 3.5
 
 
 def test_a_listener_stopped_can_start_again_and_one_never_started_stops_quietly() -> None:
