@@ -52,12 +52,13 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.fuzz_soak
 
 # mutation testing (mutmut) of the modules in tools/mutation.yaml, each against the test files
-# that import it, two mutants at a time; not part of make test. MODULES narrows it, e.g.
+# that import it (or the quick ones chosen among them), eight mutants at a time (many wait on
+# a socket or a thread rather than compute); not part of make test. MODULES narrows it, e.g.
 # make mutation MODULES='agents/io/*'; run again, it tests only the mutants of the functions
 # changed since. The report: docs/reference/mutation.md
 MODULES ?=
 mutation: $(STAMP)
-	set -f; $(PY) tools/mutation.py run $(MODULES) --workers 2
+	set -f; $(PY) tools/mutation.py run $(MODULES) --workers 8
 	set -f; $(PY) tools/mutation.py summary $(MODULES)
 
 # both calibrations in the simulator; rewrites the shipped files in configs/calibration/

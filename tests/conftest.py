@@ -41,6 +41,44 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     ]
 
 
+#: mutmut's first pass (``MUTANT_UNDER_TEST=stats``) credits the functions a test calls to
+#: that test, its fixtures' setup included; a module- or session-scoped fixture is set up
+#: for the first test that asks for it alone, so each later test that asks for it is
+#: credited with what the fixture's setup called too, or no mutant there would run it
+_SHARED_SETUP_HITS: dict[int, set[str]] = {}
+
+
+def _collecting_mutation_stats() -> bool:
+    return os.environ.get("MUTANT_UNDER_TEST") == "stats"
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_fixture_setup(fixturedef: pytest.FixtureDef, request: pytest.FixtureRequest):
+    if fixturedef.scope == "function" or not _collecting_mutation_stats():
+        return (yield)
+    from mutmut.state import state
+
+    before, state()._stats = state()._stats, set()
+    try:
+        return (yield)
+    finally:
+        hits = state()._stats
+        _SHARED_SETUP_HITS.setdefault(id(fixturedef), set()).update(hits)
+        state()._stats = before | hits
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_teardown(item: pytest.Item) -> None:
+    if not (_SHARED_SETUP_HITS and _collecting_mutation_stats()):
+        return
+    from mutmut.state import state
+
+    info = getattr(item, "_fixtureinfo", None)
+    for definitions in info.name2fixturedefs.values() if info is not None else ():
+        for fixturedef in definitions:
+            state()._stats.update(_SHARED_SETUP_HITS.get(id(fixturedef), ()))
+
+
 @pytest.fixture(scope="session")
 def small_forecast():
     """A helideck forecast of ship-ss4's sea fitted on three short records (seconds to fit),

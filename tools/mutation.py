@@ -346,7 +346,9 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(func=cmd_map)
     p = sub.add_parser("run", help="mutate the modules, each against its own test files")
     p.add_argument("modules", nargs="*", help="module paths or globs (default: every module)")
-    p.add_argument("--workers", type=int, default=2, help="mutants tested at once (default 2)")
+    p.add_argument(
+        "--workers", type=int, default=8, help="mutants tested at once (default 8: many wait)"
+    )
     p.add_argument(
         "--all-tests",
         action="store_true",
