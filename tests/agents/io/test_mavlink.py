@@ -117,12 +117,15 @@ def test_ardupilots_parameters_enable_mavlink_precision_landing_at_the_cameras_o
     )
 
 
+PROPER = ": must be a proper rotation (R^T R = I, det +1)"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "key", "allowed"),
     [
         ({"r_bc": np.eye(2)}, "camera mount r_bc", "must be a finite 3x3 rotation"),
-        ({"r_bc": np.diag([1.0, 1.0, 1.3])}, "camera mount r_bc", "must be a proper rotation"),
-        ({"r_bc": -np.eye(3)}, "camera mount r_bc", "must be a proper rotation"),
+        ({"r_bc": np.diag([1.0, 1.0, 1.3])}, "camera mount r_bc", PROPER),
+        ({"r_bc": -np.eye(3)}, "camera mount r_bc", PROPER),
         ({"t_bc": np.array([0.1, math.nan, 0.0])}, "camera mount t_bc", "must be 3 finite metres"),
         ({"t_bc": np.zeros(2)}, "camera mount t_bc", "must be 3 finite metres"),
     ],
@@ -487,6 +490,7 @@ def test_ports_1_to_65535_and_serial_devices_with_or_without_a_baud_are_taken() 
         "/dev/ttyACM0:921600", "/dev/ttyACM0", 921600
     )
     assert parse_connection_url("COM3:115200") == ConnectionUrl("COM3:115200", "COM3", 115200)
+    assert parse_connection_url("/dev/ttyS1:1").baud == 1  # the lowest positive baud
     with pytest.raises(UserError, match=r"--to: baud 0 in '/dev/ttyUSB0:0' must be positive"):
         parse_connection_url("/dev/ttyUSB0:0")
 

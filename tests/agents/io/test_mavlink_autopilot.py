@@ -111,6 +111,7 @@ def test_a_clock_jump_restarts_the_filter_after_five_far_samples() -> None:
     [
         ("convergence_window", {"convergence_window": 0}),
         ("max_rtt_s", {"max_rtt_s": math.nan}),
+        ("max_rtt_s", {"max_rtt_s": 0.0}),
         ("max_deviation_s", {"max_deviation_s": -1.0}),
     ],
 )

@@ -203,6 +203,20 @@ def test_a_policy_brings_its_sensing_unless_the_run_names_one(
     assert "sensors" not in overrides
 
 
+def test_a_policy_flies_its_own_id_and_settings_where_it_names_them_for_a_scenario() -> None:
+    """The lookahead DQN was trained on v7 of the ship timing ids, not the newest; over a
+    ship's helideck `predictive` takes the HMS forecast identified online, on the bench its
+    own settings."""
+    assert env_settings("timing-dqn-lookahead", "ship-ss6")[0] == "DeckLandingTiming-ShipSS6-v7"
+    assert scenario_id("ship-ss6", policy_spec("timing-dqn-lookahead").task) != (
+        "DeckLandingTiming-ShipSS6-v7"
+    )
+    _, ship = env_settings("predictive", "ship-ss5")
+    _, bench = env_settings("predictive", "bench-ss4")
+    assert ship["deck_forecast"] == "online" and ship["timing.opportunity_s"] == 2.0
+    assert "deck_forecast" not in bench
+
+
 def test_the_callers_overrides_are_laid_over_the_policys(monkeypatch: pytest.MonkeyPatch) -> None:
     _, own = env_settings("predictive", "bench-ss4")
     assert own["timing.wave_off_rule"] == "value"
