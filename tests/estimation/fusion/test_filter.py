@@ -343,6 +343,20 @@ def test_the_two_component_model_has_its_factors_and_the_spread_asked_for_times_
     assert q_default == pytest.approx(q / gain, rel=1e-12)
 
 
+def test_two_waves_matched_to_variances_hold_those_variances_when_stationary() -> None:
+    """Each component, theta'' = -w² theta - 2 zeta w theta' + n with n of PSD q, settles at
+    the variance asked for: the stationary covariance solves A P + P A^T + Q = 0."""
+    from scipy.linalg import solve_continuous_lyapunov
+
+    waves = TwoWaves.matched(0.9, 0.05, 1.7, 0.12, 0.02, 0.005)
+    for w, zeta, q, variance in ((0.9, 0.05, waves.q1, 0.02), (1.7, 0.12, waves.q2, 0.005)):
+        a = np.array([[0.0, 1.0], [-(w**2), -2.0 * zeta * w]])
+        spread = solve_continuous_lyapunov(a, -np.diag([0.0, q]))
+        assert spread[0, 0] == pytest.approx(variance, rel=1e-9)
+        assert spread[1, 1] == pytest.approx(w**2 * variance, rel=1e-9)
+    assert waves.second_sigmas == pytest.approx((math.sqrt(0.005), 1.7 * math.sqrt(0.005)))
+
+
 @settings(max_examples=60, deadline=None)
 @given(angles=st.tuples(*(st.floats(-4.0, 4.0),) * 3), turns=st.integers(-3, 3))
 def test_rotation_zyx_is_yaw_then_pitch_then_roll_and_wrapping_keeps_the_angle(
