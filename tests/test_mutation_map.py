@@ -74,6 +74,7 @@ def test_a_run_takes_the_chosen_tests_unless_told_its_own_or_all(tmp_path: Path)
     text = (run_dir / "pyproject.toml").read_text()
     assert 'pytest_add_cli_args_test_selection = ["tests/a/test_x.py::test_one"]' in text
     assert 'only_mutate = ["estimation/limits.py"]' in text
+    assert f"timeout_multiplier = {tool.TIMEOUT_MULTIPLIER}" in text
     assert (run_dir / "estimation").resolve() == ROOT / "estimation"
 
 

@@ -41,6 +41,8 @@ RUNS = ROOT / "results" / "mutation"
 LINKED = ("agents", "estimation", "landing_env", "configs", "tests", "benchmarks", "docs")
 LINKED_FILES = ("README.md",)  # the docs' snippets are tested from the README too
 SOURCES = ("agents", "estimation", "landing_env")
+#: mutmut's wall-clock limit of a mutant: this many times its tests' measured time (plus 1 s)
+TIMEOUT_MULTIPLIER = 60.0
 HEADER = """\
 # Mutation testing (tools/mutation.py, make mutation): the modules mutated and, for each, the
 # test files that import it. `paths` is kept by hand; `tests` is derived from the imports in
@@ -225,11 +227,17 @@ def prepare(module: str, test_files: list[str], runs: Path = RUNS) -> Path:
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-x", "-q"],
         "use_git_change_detection": False,
         "mutate_only_covered_lines": False,
+        # mutmut stops a mutant's tests after 15 times their measured time plus 1 s, wall
+        # clock; eight workers on two cores run each test about four times slower than the
+        # measuring pass did, so a mutant whose tests merely ran slow would count as killed
+        "timeout_multiplier": TIMEOUT_MULTIPLIER,
     }
     lines = ["", "[tool.mutmut]"]
     for key, value in settings.items():
         if isinstance(value, bool):
             lines.append(f"{key} = {'true' if value else 'false'}")
+        elif isinstance(value, float):
+            lines.append(f"{key} = {value}")
         else:
             lines.append(f"{key} = [{', '.join(repr(v).replace(chr(39), chr(34)) for v in value)}]")
     text = (ROOT / "pyproject.toml").read_text(encoding="utf-8") + "\n".join(lines) + "\n"
