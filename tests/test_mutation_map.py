@@ -78,6 +78,14 @@ def test_a_run_takes_the_chosen_tests_unless_told_its_own_or_all(tmp_path: Path)
     assert (run_dir / "estimation").resolve() == ROOT / "estimation"
 
 
+def test_a_module_without_a_function_is_not_run(capsys: pytest.CaptureFixture) -> None:
+    tool = mutation_tool()
+    assert not tool.has_functions(ROOT / "landing_env/sea/heldout.py")
+    assert tool.has_functions(ROOT / "estimation/limits.py")
+    assert tool.main(["run", "landing_env/sea/heldout.py"]) == 0
+    assert "landing_env/sea/heldout.py: no function to mutate; not run" in capsys.readouterr().out
+
+
 def test_map_keeps_the_hand_kept_choice(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     tool = mutation_tool()
     mapping = tool.load_map()

@@ -156,6 +156,12 @@ def check_chosen(picked: dict[str, list[str]], tests: dict[str, list[str]]) -> l
     return problems
 
 
+def has_functions(module: Path) -> bool:
+    """Whether a module defines a function or method: what mutmut mutates."""
+    tree = ast.parse(module.read_text(encoding="utf-8"))
+    return any(isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef) for n in ast.walk(tree))
+
+
 def test_names(test_file: Path) -> set[str]:
     """The test functions a test file defines at its top level."""
     tree = ast.parse(test_file.read_text(encoding="utf-8"))
@@ -280,6 +286,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     for module in chosen(args.modules, tests):
         if not tests[module]:
             print(f"{module}: no test imports it; not run")
+            continue
+        if not has_functions(ROOT / module):
+            # mutmut mutates code inside functions only, and stops with an error on a
+            # module without any after running its tests
+            print(f"{module}: no function to mutate; not run")
             continue
         test_files = chosen_tests(module, args.tests, tests[module], kept.get(module))
         run_dir = prepare(module, test_files, runs)
