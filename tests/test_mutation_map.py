@@ -111,7 +111,7 @@ def test_a_test_file_imports_a_module_by_either_form_of_import(tmp_path: Path) -
 def test_a_module_not_in_the_map_is_refused_naming_it() -> None:
     tool = mutation_tool()
     with pytest.raises(SystemExit, match=r"agents/io/nowhere\.py"):
-        tool.chosen(["agents/io/nowhere.py"], {"agents/io/timesync.py": []})
+        tool.named_modules(["agents/io/nowhere.py"], {"agents/io/timesync.py": []})
 
 
 def test_a_run_on_chosen_tests_takes_only_the_modules_own_test_files_or_their_tests() -> None:

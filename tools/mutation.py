@@ -199,7 +199,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     return 0
 
 
-def chosen(patterns: list[str], tests: dict[str, list[str]]) -> list[str]:
+def named_modules(patterns: list[str], tests: dict[str, list[str]]) -> list[str]:
     """The mapped modules the command-line patterns name; a pattern naming none is refused."""
     if not patterns:
         return list(tests)
@@ -283,7 +283,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     runs = args.runs.resolve()
     failed = 0
     started_all = time.monotonic()
-    for module in chosen(args.modules, tests):
+    for module in named_modules(args.modules, tests):
         if not tests[module]:
             print(f"{module}: no test imports it; not run")
             continue
@@ -331,7 +331,7 @@ def statuses(run_dir: Path) -> dict[str, str]:
 def cmd_summary(args: argparse.Namespace) -> int:
     tests = load_map()["tests"]
     total: dict[str, int] = {}
-    for module in chosen(args.modules, tests):
+    for module in named_modules(args.modules, tests):
         run_dir = args.runs.resolve() / module_name(module)
         if not (run_dir / "mutants").is_dir():
             print(f"## {module}: not run")
@@ -385,9 +385,9 @@ def main(argv: list[str] | None = None) -> int:
         "--tests",
         nargs="+",
         help="run against these of the module's mapped test files (or pytest node ids in "
-        "them) alone: a lower bound of the score, since a mutant they kill all the mapped "
-        "files kill too (quicker where the mapped files run episodes); a module's folder "
-        "keeps one selection, so remove results/mutation/<module>/ before changing it",
+        "them) alone, instead of its chosen ones: a lower bound of the score, since a "
+        "mutant they kill all the mapped files kill too; a module's folder keeps one "
+        "selection: another resets that folder's results",
     )
     p.add_argument("--runs", type=Path, default=RUNS, help=RUNS_HELP)
     p.set_defaults(func=cmd_run)
